@@ -11,10 +11,12 @@ recording). A matching's cost is the sum over its nodes and joins.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 from .graph import SearchGraph
 
@@ -64,9 +66,75 @@ class Ranking:
             self._cache[key] = self.node_costs(self.graph.nodes_with_label(label), position, label)
         return self._cache[key]
 
+    def summaries_of(self, start: int, length: int) -> np.ndarray:
+        """The audio summaries (length, D) of query positions start..start+length-1, float64;
+        (0, 0) without audio."""
+        if self.query_summaries is None:
+            return np.zeros((0, 0))
+        if isinstance(self.query_summaries, np.ndarray):
+            rows = self.query_summaries[start : start + length]
+        else:
+            rows = np.stack([self.query_summaries[p] for p in range(start, start + length)])
+        return np.asarray(rows, dtype=np.float64)
+
     def join_costs(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
         """Cost of each join left[i] -> right[i] between graph nodes."""
         left, right = np.broadcast_arrays(np.asarray(left), np.asarray(right))
         if self.query_summaries is not None:
             return np.zeros(left.shape)
         return self.poses.discontinuity(self.graph.motion_of(left), self.graph.motion_of(right))
+
+
+@njit(cache=True, fastmath=True)
+def audio_cost(node: int, label: int, target: np.ndarray, n_labels: int,
+                entry_offsets: np.ndarray, entry_members: np.ndarray,
+                summaries: np.ndarray) -> float:
+    """Distance from ``target`` (D,) to the nearest member of ``node`` that has ``label``."""
+    best = math.inf
+    key = node * n_labels + label
+    for entry in range(entry_offsets[key], entry_offsets[key + 1]):
+        member = entry_members[entry]
+        total = 0.0
+        for dim in range(len(target)):
+            difference = summaries[member, dim] - target[dim]
+            total += difference * difference
+        best = min(best, math.sqrt(total))
+    return best
+
+
+@njit(cache=True, fastmath=True)
+def pose_jump(before: int, after: int, last: np.ndarray, first: np.ndarray,
+              successor: np.ndarray) -> float:
+    """``Poses.discontinuity`` of one join, anime ``before`` -> anime ``after``."""
+    if successor[before] == after:
+        return 0.0
+    total = 0.0
+    for dim in range(last.shape[1]):
+        difference = last[before, dim] - first[after, dim]
+        total += difference * difference
+    return math.sqrt(total)
+
+
+@njit(cache=True)
+def run_costs(starts: np.ndarray, length: int, previous: int, use_audio: bool,
+              query_summaries: np.ndarray, summaries: np.ndarray, last: np.ndarray,
+              first: np.ndarray, successor: np.ndarray) -> np.ndarray:
+    """Cost (S,) of showing the recording run starts[s] .. starts[s] + length - 1 (anime
+    ids) at ``length`` query positions with audio summaries (length, D): the audio
+    distances, or without audio the discontinuity of the join from ``previous`` (>= 0)."""
+    costs = np.zeros(len(starts))
+    for index in range(len(starts)):
+        start = starts[index]
+        total = 0.0
+        if use_audio:
+            for offset in range(length):
+                anime = start + offset
+                distance = 0.0
+                for dim in range(query_summaries.shape[1]):
+                    difference = summaries[anime, dim] - query_summaries[offset, dim]
+                    distance += difference * difference
+                total += math.sqrt(distance)
+        elif previous >= 0:
+            total = pose_jump(previous, start, last, first, successor)
+        costs[index] = total
+    return costs

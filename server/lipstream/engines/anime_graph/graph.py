@@ -61,6 +61,10 @@ class SearchGraph(Protocol):
     def edge_list(self) -> tuple[np.ndarray, np.ndarray]:
         """Every edge among the graph's nodes: (sources, targets)."""
 
+    def label_pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every node's (label, member anime) pairs, by node then label then anime: offsets
+        (n_nodes + 1,) over labels (P,) and members (P,)."""
+
     def is_edge(self, sources: np.ndarray, targets: np.ndarray) -> np.ndarray:
         """Elementwise: is there an edge sources[i] -> targets[i]?"""
 
@@ -123,6 +127,12 @@ class AnimeGraph:
         sources = np.sort(self.label_nodes)
         sources = sources[self.successor[sources] >= 0]
         return sources, self.successor[sources]
+
+    def label_pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        members = np.sort(self.label_nodes).astype(np.int64)
+        offsets = np.zeros(self.n_nodes + 1, dtype=np.int64)
+        np.cumsum(np.bincount(members, minlength=self.n_nodes), out=offsets[1:])
+        return offsets, np.asarray(self.labels)[members], members
 
     def is_edge(self, sources: np.ndarray, targets: np.ndarray) -> np.ndarray:
         return np.asarray(self.successor[sources] == targets)
@@ -216,6 +226,12 @@ class ClusterGraph:
 
     def edge_list(self) -> tuple[np.ndarray, np.ndarray]:
         return self.edge_keys // self.n_nodes, self.edge_keys % self.n_nodes
+
+    def label_pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        counts = np.diff(self.entry_offsets)
+        labels = np.repeat(np.tile(np.arange(self.n_labels), self.n_nodes), counts)
+        offsets = np.ascontiguousarray(self.entry_offsets[:: self.n_labels])
+        return offsets, labels, self.entry_members
 
     def is_edge(self, sources: np.ndarray, targets: np.ndarray) -> np.ndarray:
         keys = np.asarray(sources, dtype=np.int64) * self.n_nodes + np.asarray(targets)

@@ -34,9 +34,10 @@ from typing import Protocol
 
 import numpy as np
 
-from .costs import Ranking
+from .costs import Ranking, run_costs
 from .graph import AnimeGraph, SearchGraph
 from .index import SuffixIndex
+from .layered import cheapest, reach
 
 
 @dataclass(frozen=True)
@@ -86,12 +87,11 @@ class SuffixMatcher:
         if match.continuation >= 0:
             return match.continuation + steps
         starts = self.index.occurrences(match.state, match.length, self.limit)
-        costs = np.zeros(len(starts))
-        for offset in range(match.length):
-            position = match.start + offset
-            costs += ranking.node_costs(starts + offset, position, int(query[position]))
-        if previous is not None:
-            costs += ranking.join_costs(np.full(len(starts), previous), starts)
+        poses = ranking.poses
+        costs = run_costs(np.asarray(starts, dtype=np.int64), match.length,
+                          -1 if previous is None else previous, ranking.uses_audio,
+                          ranking.summaries_of(match.start, match.length),
+                          ranking.anime_summaries, poses.last, poses.first, poses.successor)
         return int(starts[int(np.argmin(costs))]) + steps
 
 
@@ -107,166 +107,80 @@ def _spelled(graph: AnimeGraph, anime: int, query: Sequence[int], start: int, st
 
 
 class LayeredMatcher:
-    """LongestMatching by a layered reachability pass: layer d is the mask of nodes that end
-    a path spelling Q_i..Q_i+d, stepped by the edges into the next label only; the optimal
-    path by dynamic programming over the layers' survivors."""
+    """LongestMatching by a layered reachability pass (``layered.reach``) and the optimal
+    path among the longest by dynamic programming over its survivors
+    (``layered.cheapest``), both compiled; the graph is flattened once into CSR arrays
+    keyed by (node, label): the node's members with the label, and its successors that
+    carry the label."""
 
     def __init__(self, graph: SearchGraph) -> None:
         self.graph = graph
+        n_nodes = graph.n_nodes
+        offsets, labels, members = graph.label_pairs()
+        owners = np.repeat(np.arange(n_nodes, dtype=np.int64), np.diff(offsets))
+        labels = np.asarray(labels, dtype=np.int64)
+        self.n_labels = int(labels.max()) + 1 if len(labels) else 1
+        keys = owners * self.n_labels + labels
+        self.entry_offsets = _csr_offsets(keys, n_nodes * self.n_labels)
+        self.entry_members = np.asarray(members, dtype=np.int64)[np.argsort(keys, kind="stable")]
+        self.carries = np.zeros((n_nodes, self.n_labels), dtype=np.bool_)
+        self.carries[owners, labels] = True
+        self.step_offsets, self.step_targets = self._steps(graph)
+        self.motion = np.asarray(graph.motion_of(np.arange(n_nodes)), dtype=np.int64)
+        self._slot = np.full(n_nodes, -1, dtype=np.int64)
+
+    def _steps(self, graph: SearchGraph) -> tuple[np.ndarray, np.ndarray]:
+        """CSR keyed by source * n_labels + label over the edges' targets with that label,
+        ascending."""
         sources, targets = (np.asarray(a, dtype=np.int64) for a in graph.edge_list())
-        order = np.lexsort((sources, targets))
-        self.sources, self.targets = sources[order], targets[order]
-        self._masks: dict[int, np.ndarray] = {}
-        self._incoming: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        edge, label = np.nonzero(self.carries[targets])
+        keys = sources[edge] * self.n_labels + label
+        order = np.lexsort((targets[edge], keys))
+        return (_csr_offsets(keys, graph.n_nodes * self.n_labels),
+                targets[edge][order])
 
-    def _label_mask(self, label: int) -> np.ndarray:
-        if label not in self._masks:
-            self._masks[label] = self.graph.label_mask(label)
-        return self._masks[label]
-
-    def _into(self, label: int) -> tuple[np.ndarray, np.ndarray]:
-        """The edges (sources, targets) whose target carries ``label``, by target then source."""
-        if label not in self._incoming:
-            entering = self._label_mask(label)[self.targets]
-            self._incoming[label] = (self.sources[entering], self.targets[entering])
-        return self._incoming[label]
+    def _first(self, label: int, previous: int | None) -> np.ndarray:
+        """Start nodes: those carrying ``label``, only the ones ``previous`` links to when
+        there are any."""
+        if label >= self.n_labels:
+            return np.zeros(0, dtype=np.int64)
+        if previous is not None:
+            key = previous * self.n_labels + label
+            linked = self.step_targets[self.step_offsets[key] : self.step_offsets[key + 1]]
+            if len(linked):
+                return linked
+        return np.flatnonzero(self.carries[:, label])
 
     def match(self, query: Sequence[int], start: int, stop: int, cap: int | None,
               previous: int | None = None) -> Match:
         if start >= stop:
             return Match(start, 0)
-        first = self._label_mask(int(query[start]))
-        if previous is not None:
-            linked = np.zeros(self.graph.n_nodes, dtype=bool)
-            linked[self.graph.successors_of(np.array([previous]))[1]] = True
-            if np.any(linked & first):
-                first = linked & first
-        if not first.any():
+        first = self._first(int(query[start]), previous)
+        if not len(first):
             return Match(start, 0)
-        layers = [first]
-        steps: list[tuple[np.ndarray, np.ndarray]] = []
-        while start + len(layers) < stop and (cap is None or len(layers) < cap):
-            sources, targets = self._into(int(query[start + len(layers)]))
-            taken = layers[-1][sources]
-            reached = targets[taken]
-            if not len(reached):
-                break
-            steps.append((sources[taken], reached))
-            following = np.zeros(self.graph.n_nodes, dtype=bool)
-            following[reached] = True
-            layers.append(following)
-        return Match(start, len(layers), layers=tuple(layers), steps=tuple(steps))
-
-    def _survivors(self, match: Match) -> tuple[list[np.ndarray], list[np.ndarray],
-                                                 list[np.ndarray]]:
-        """Per layer, the nodes (ascending) from which the run can be completed; per step,
-        the edges (sources, targets) between survivors, by target then source."""
-        alive = match.layers[-1]
-        nodes = [np.flatnonzero(alive)]
-        sources: list[np.ndarray] = []
-        targets: list[np.ndarray] = []
-        for step_sources, step_targets in reversed(match.steps):
-            kept = alive[step_targets]
-            sources.append(step_sources[kept])
-            targets.append(step_targets[kept])
-            alive = np.zeros(self.graph.n_nodes, dtype=bool)
-            alive[sources[-1]] = True
-            nodes.append(np.flatnonzero(alive))
-        return nodes[::-1], sources[::-1], targets[::-1]
+        labels = np.asarray(query[start:stop], dtype=np.int64)
+        states, offsets, sources, targets = reach(labels, cap or 0, first, self.n_labels,
+                                                  self.step_offsets, self.step_targets,
+                                                  self._slot)
+        return Match(start, len(offsets) - 1, layers=(states, offsets),
+                     steps=((sources, targets),))
 
     def choose(self, match: Match, query: Sequence[int], previous: int | None,
                ranking: Ranking) -> np.ndarray:
-        layers, step_sources, step_targets = self._survivors(match)
-        trellis = _Trellis.build(self.graph.n_nodes, layers, step_sources, step_targets)
-        labels = [int(query[match.start + depth]) for depth in range(match.length)]
-        node_costs = _node_costs(ranking, trellis.nodes, trellis.depth_of_node, match.start,
-                                 labels)
-        join_costs = ranking.join_costs(trellis.nodes[trellis.edge_sources],
-                                        trellis.nodes[trellis.edge_targets])
-        costs = np.full(len(trellis.nodes), np.inf)
-        starts = np.arange(len(layers[0]))
-        if previous is not None:
-            linked = starts[self.graph.is_edge(np.full(len(starts), previous), layers[0])]
-            if len(linked):
-                starts = linked
-        costs[starts] = node_costs[starts]
-        if previous is not None:
-            costs[starts] += ranking.join_costs(np.full(len(starts), previous),
-                                                trellis.nodes[starts])
-        return trellis.cheapest_path(costs, node_costs, join_costs)
+        (states, offsets), ((sources, targets),) = match.layers, match.steps
+        labels = np.asarray(query[match.start : match.start + match.length], dtype=np.int64)
+        poses = ranking.poses
+        return np.asarray(cheapest(
+            labels, states, offsets, sources, targets, -1 if previous is None else previous,
+            ranking.uses_audio, ranking.summaries_of(match.start, match.length),
+            self.n_labels, self.entry_offsets, self.entry_members, ranking.anime_summaries,
+            self.motion, poses.last, poses.first, poses.successor))
 
 
-@dataclass(frozen=True)
-class _Trellis:
-    """The survivors of a run as one graph: ``nodes`` (N,) graph ids laid out layer after
-    layer (ascending inside a layer), ``layer_offsets`` (L + 1,); edges (M,) between
-    consecutive layers as positions in ``nodes``, by layer, then target, then source;
-    ``first_edge`` (N + 1,): the edges into node j are first_edge[j]:first_edge[j + 1]."""
-
-    nodes: np.ndarray
-    depth_of_node: np.ndarray
-    layer_offsets: np.ndarray
-    edge_sources: np.ndarray
-    edge_targets: np.ndarray
-    first_edge: np.ndarray
-
-    @classmethod
-    def build(cls, n_nodes: int, layers: list[np.ndarray], sources: list[np.ndarray],
-              targets: list[np.ndarray]) -> _Trellis:
-        sizes = [len(layer) for layer in layers]
-        layer_offsets = np.concatenate(([0], np.cumsum(sizes))).astype(np.int64)
-        depth_of_node = np.repeat(np.arange(len(layers)), sizes)
-        nodes = np.concatenate(layers)
-        # (depth, graph id) -> trellis position; L x n_nodes int32 is small for the graphs
-        # searched layer by layer (clustered, k nodes).
-        where = np.full((len(layers), n_nodes), -1, dtype=np.int32)
-        where[depth_of_node, nodes] = np.arange(len(nodes), dtype=np.int32)
-        edge_depth = np.repeat(np.arange(len(sources)), [len(s) for s in sources])
-        empty = np.zeros(0, dtype=np.int64)
-        edge_sources = where[edge_depth, np.concatenate(sources)] if sources else empty
-        edge_targets = where[edge_depth + 1, np.concatenate(targets)] if targets else empty
-        first_edge = np.zeros(len(nodes) + 1, dtype=np.int64)
-        np.cumsum(np.bincount(edge_targets, minlength=len(nodes)), out=first_edge[1:])
-        return cls(nodes, depth_of_node, layer_offsets, edge_sources.astype(np.int64),
-                   edge_targets.astype(np.int64), first_edge)
-
-    def cheapest_path(self, costs: np.ndarray, node_costs: np.ndarray,
-                      join_costs: np.ndarray) -> np.ndarray:
-        """Graph ids of the cheapest path from the first layer (entry ``costs`` (N,), inf
-        off the allowed starts) to the last; ties go to the lowest predecessor id, then to
-        the lowest final node id."""
-        totals = np.empty(len(join_costs))
-        offsets = self.layer_offsets.tolist()
-        first_edge = self.first_edge.tolist()
-        heads = self.first_edge[:-1] - self.first_edge[self.layer_offsets[self.depth_of_node]]
-        for depth in range(1, len(offsets) - 1):
-            low, high = offsets[depth], offsets[depth + 1]
-            begin, end = first_edge[low], first_edge[high]
-            reaching = costs[self.edge_sources[begin:end]]
-            reaching += join_costs[begin:end]
-            totals[begin:end] = reaching
-            best = np.minimum.reduceat(reaching, heads[low:high])
-            best += node_costs[low:high]
-            costs[low:high] = best
-        current = int(offsets[-2] + np.argmin(costs[offsets[-2]:]))
-        path = [current]
-        for _ in range(len(offsets) - 2):
-            begin, end = first_edge[current], first_edge[current + 1]
-            current = int(self.edge_sources[begin + int(np.argmin(totals[begin:end]))])
-            path.append(current)
-        return self.nodes[np.array(path[::-1])]
-
-
-def _node_costs(ranking: Ranking, nodes: np.ndarray, depths: np.ndarray, start: int,
-                labels: list[int]) -> np.ndarray:
-    """``ranking.node_costs`` of every trellis node at once: node i shown at query position
-    start + depths[i], which has label labels[depths[i]]."""
-    if ranking.query_summaries is None:
-        return np.zeros(len(nodes))
-    summaries = np.stack([np.asarray(ranking.query_summaries[start + depth])
-                          for depth in range(len(labels))])
-    return ranking.graph.audio_costs_at(nodes, np.asarray(labels)[depths], summaries[depths],
-                                        ranking.anime_summaries)
+def _csr_offsets(keys: np.ndarray, n_keys: int) -> np.ndarray:
+    offsets = np.zeros(n_keys + 1, dtype=np.int64)
+    np.cumsum(np.bincount(keys, minlength=n_keys), out=offsets[1:])
+    return offsets
 
 
 def greedy_matching(matcher: Matcher, query: Sequence[int], ranking: Ranking,

@@ -126,7 +126,7 @@ class _Samples:
             times: np.ndarray | None = None) -> None:
         if weight is None or times is None:
             return
-        self.weight[chunk] = np.clip(weight, 0.0, 1.0)
+        self.weight[chunk] = np.minimum(np.maximum(weight, 0.0), 1.0)
         self.anime[chunk] = anime
         self.time[chunk] = times
 

@@ -15,7 +15,14 @@ from lipstream.engines.anime_graph.smoothing import (
     lowpass_kernels,
     transition_width,
 )
-from lipstream.engines.anime_graph.warp import Alignment, accumulated_costs, dtw_warp, dtw_warps
+from lipstream.engines.anime_graph.warp import (
+    Alignment,
+    accumulated_costs,
+    dtw_warp,
+    dtw_warps,
+    frame_costs,
+    matched_means,
+)
 from tests.lipstream.engines.anime_graph.anime_synthetic import make_corpus, make_spans
 
 FPS = 120.0
@@ -76,33 +83,54 @@ def test_dtw_recovers_a_known_time_warp() -> None:
 
 
 def test_dtw_table_matches_the_recurrence_cell_by_cell() -> None:
-    cost = np.random.default_rng(3).uniform(0.0, 1.0, (2, 5, 7))
-    expected = np.full((2, 6, 8), np.inf)
-    expected[:, 0, 0] = 0.0
+    cost = np.random.default_rng(3).uniform(0.0, 1.0, (5, 7))
+    expected = np.full((6, 8), np.inf)
+    expected[0, 0] = 0.0
     for i in range(5):
         for j in range(7):
-            best = np.minimum(np.minimum(expected[:, i, j], expected[:, i, j + 1]),
-                              expected[:, i + 1, j])
-            expected[:, i + 1, j + 1] = cost[:, i, j] + best
-    np.testing.assert_allclose(accumulated_costs(cost), expected[:, 1:, 1:], rtol=1e-12)
+            best = min(expected[i, j], expected[i, j + 1], expected[i + 1, j])
+            expected[i + 1, j + 1] = cost[i, j] + best
+    np.testing.assert_allclose(accumulated_costs(cost), expected[1:, 1:], rtol=1e-12)
 
 
-def test_a_batch_of_dtw_problems_gives_each_problem_its_own_warp_exactly() -> None:
+def _monotone_paths(n: int, m: int) -> list[list[tuple[int, int]]]:
+    """Every DTW path from (0, 0) to (n-1, m-1) with steps (1,0), (0,1), (1,1)."""
+    if n == 1 and m == 1:
+        return [[(0, 0)]]
+    paths = []
+    for di, dj in ((1, 0), (0, 1), (1, 1)):
+        if n - di >= 1 and m - dj >= 1:
+            paths += [p + [(n - 1, m - 1)] for p in _monotone_paths(n - di, m - dj)]
+    return paths
+
+
+@pytest.mark.parametrize("shape", [(2, 2), (3, 5), (5, 3), (4, 4)])
+def test_dtw_matches_each_target_frame_along_the_cheapest_of_all_paths(shape: tuple) -> None:
+    n, m = shape
+    rng = np.random.default_rng(n * 10 + m)
+    target, source = rng.normal(size=(n, 3)), rng.normal(size=(m, 3))
+    source_times = 2.0 + np.arange(m) / 100.0
+    cost = np.linalg.norm(target[:, None] - source[None], axis=2)
+    best = min(_monotone_paths(n, m), key=lambda path: sum(cost[i, j] for i, j in path))
+    expected = [np.mean([source_times[j] for i, j in best if i == row]) for row in range(n)]
+    table = accumulated_costs(frame_costs(target, source))
+    np.testing.assert_allclose(matched_means(table, source_times), expected, rtol=1e-12)
+    problem = Alignment(target, 0.1 + np.arange(n) / 100.0, source, source_times,
+                        (0.1, 0.1 + n / 100.0), (2.0, 2.0 + m / 100.0))
+    alone = dtw_warps([problem])[0]
+    inside = [(t, s) for t, s in zip(problem.target_times, expected) if 0.1 < t < 0.1 + n / 100.0]
+    assert alone.target.tolist() == [0.1] + [t for t, _ in inside] + [0.1 + n / 100.0]
+    np.testing.assert_allclose(alone.source[1:-1], np.maximum.accumulate(
+        np.clip([s for _, s in inside], 2.0, 2.0 + m / 100.0)), rtol=1e-12)
+
+
+def test_short_problems_are_warped_linearly() -> None:
     rng = np.random.default_rng(4)
-
-    def problem(n: int, m: int) -> Alignment:
-        return Alignment(rng.normal(size=(n, 3)), 0.1 + np.arange(n) / 100.0,
-                         rng.normal(size=(m, 3)), 2.0 + np.arange(m) / 100.0,
-                         (0.1, 0.1 + n / 100.0), (2.0, 2.0 + m / 100.0))
-
-    problems = [problem(9, 4), problem(1, 5), problem(3, 12), problem(17, 6)]
-    together = dtw_warps(problems)
-    assert len(together) == 4
-    assert together[1].target.tolist() == [0.1, 0.11]
-    for warp, single in zip(together, problems):
-        alone = dtw_warps([single])[0]
-        np.testing.assert_array_equal(warp.target, alone.target)
-        np.testing.assert_array_equal(warp.source, alone.source)
+    problem = Alignment(rng.normal(size=(1, 3)), np.array([0.1]), rng.normal(size=(5, 3)),
+                        2.0 + np.arange(5) / 100.0, (0.1, 0.11), (2.0, 2.05))
+    warp = dtw_warps([problem])[0]
+    assert warp.target.tolist() == [0.1, 0.11]
+    assert warp.source.tolist() == [2.0, 2.05]
 
 
 @pytest.fixture(scope="module")
