@@ -1,6 +1,6 @@
 """Training the anime-graph engine: corpus in, ``AnimeGraphModel`` out.
 
-Sketch: PCA of every frame (95% of the variance); the corpus cut into
+Sketch: PCA of every frame (95% of every channel's variance); the corpus cut into
 animes with MFCC curves when every utterance has audio; per view (the whole
 corpus, and each emotion's recordings) the suffix automaton over the
 recordings' phoneme strings, K-means clustering of the duration-normalized
@@ -37,18 +37,20 @@ def _invalid(name: str, message: str) -> LipstreamError:
 
 
 class AnimeGraphEngine(Engine):
-    """Hyperparameters: ``variance`` kept by PCA; ``graph`` served by default; ``clusters``
-    k of K-means (0: no clustered graph); ``max_tile`` phonemes per tile (bounds the
-    streaming lookahead); ``max_candidates`` occurrences ranked per tile; ``energy`` share
-    under the smoothing cutoff; ``smoothing_window`` FIR half-length (s); ``use_audio``
-    (MFCC features when the corpus has audio); ``seed`` for K-means."""
+    """Hyperparameters: ``variance`` kept by PCA, of every channel's own variance when
+    ``variance_per_channel`` (else of the total, as in the paper); ``graph`` served by
+    default; ``clusters`` k of K-means (0: no clustered graph); ``max_tile`` phonemes per
+    tile (bounds the streaming lookahead); ``max_candidates`` occurrences ranked per tile;
+    ``energy`` share under the smoothing cutoff; ``smoothing_window`` FIR half-length (s);
+    ``use_audio`` (MFCC features when the corpus has audio); ``seed`` for K-means."""
 
     name = "anime-graph"
     model_class = AnimeGraphModel
 
     def __init__(self, variance: float = 0.95, graph: str = "unclustered", clusters: int = 1000,
                  max_tile: int = 10, max_candidates: int = 128, energy: float = 0.99,
-                 smoothing_window: float = 0.1, use_audio: bool = True, seed: int = 0) -> None:
+                 smoothing_window: float = 0.1, use_audio: bool = True, seed: int = 0,
+                 variance_per_channel: bool = True) -> None:
         if not 0.0 < variance <= 1.0:
             raise _invalid("variance", f"variance must be in (0, 1], got {variance!r}")
         if graph not in GRAPHS:
@@ -65,6 +67,7 @@ class AnimeGraphEngine(Engine):
             raise _invalid("smoothing_window",
                            f"smoothing_window must be in [0, 1] s, got {smoothing_window!r}")
         self.variance = float(variance)
+        self.variance_per_channel = bool(variance_per_channel)
         self.graph = graph
         self.clusters = clusters
         self.max_tile = max_tile
@@ -81,7 +84,7 @@ class AnimeGraphEngine(Engine):
         bar = tqdm(total=len(STAGES), desc="anime-graph", unit="stage", file=sys.stderr,
                    disable=not progress)
         all_frames = np.concatenate([u.frames for u in utterances])
-        basis, explained = fit_basis(all_frames, self.variance)
+        basis, explained = fit_basis(all_frames, self.variance, self.variance_per_channel)
         bar.update()
         use_audio = self.use_audio and all(u.audio is not None for u in utterances)
         animes = segment_corpus(corpus, basis, DEFAULT_MFCC, use_audio)

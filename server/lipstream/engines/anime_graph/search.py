@@ -8,14 +8,12 @@ find the longest run:
 - ``SuffixMatcher`` (unclustered graph, beyond the paper): the corpus suffix
   automaton reads the query one transition per phoneme, O(m) for a run of
   length m whatever the corpus size; the run's occurrences are one slice.
+  Its ``tiles`` runs the whole loop compiled (``suffix_search``).
 - ``LayeredMatcher`` (any graph; the clustered graph's LongestMatching): the
   paper's degree-bounded depth-first search from every start node at once, as
-  a layered reachability pass: layer d is the mask of nodes ending a path that
-  spells Q_i..Q_i+d, stepped along only the edges into Q_i+d+1's label (cached
-  per label), so each (node, depth) state is visited once. A backward pass
-  keeps the survivors (nodes on some path of the longest length) and the edges
-  between them, and the tie-break runs on those alone as one trellis: node
-  costs of all layers in one batch, then one vectorized relaxation per layer.
+  a layered reachability pass over (node, depth) states, each visited once,
+  then dynamic programming over the survivors (states on some path of the
+  longest length) for the tie-break (``layered``, compiled).
 
 Among the longest paths the lowest ``Ranking`` cost wins, then the lowest
 node ids. ``cap`` bounds a tile's length so that streaming needs bounded
@@ -38,6 +36,7 @@ from .costs import Ranking, run_costs
 from .graph import AnimeGraph, SearchGraph
 from .index import SuffixIndex
 from .layered import cheapest, reach
+from .suffix_search import greedy_tiles
 
 
 @dataclass(frozen=True)
@@ -61,6 +60,10 @@ class Matcher(Protocol):
     def choose(self, match: Match, query: Sequence[int], previous: int | None,
                ranking: Ranking) -> np.ndarray:
         """The best path spelling the run, as node ids (match.length,)."""
+
+    def tiles(self, query: Sequence[int], start: int, stop: int, cap: int | None,
+              previous: int | None, ranking: Ranking) -> list[np.ndarray]:
+        """GreedyMatching of ``query[start:stop]``: the tiles' node ids, in order."""
 
 
 @dataclass
@@ -93,6 +96,25 @@ class SuffixMatcher:
                           ranking.summaries_of(match.start, match.length),
                           ranking.anime_summaries, poses.last, poses.first, poses.successor)
         return int(starts[int(np.argmin(costs))]) + steps
+
+    def tiles(self, query: Sequence[int], start: int, stop: int, cap: int | None,
+              previous: int | None, ranking: Ranking) -> list[np.ndarray]:
+        labels = np.asarray(query[start:stop], dtype=np.int64)
+        index, poses = self.index, ranking.poses
+        nodes, ends = greedy_tiles(
+            labels, cap or 0, -1 if previous is None else previous, self.limit or 0,
+            index.transitions, index.low, index.high, index.ends, index.text_anime,
+            self.graph.labels, self.graph.successor, ranking.uses_audio,
+            ranking.summaries_of(start, stop - start), ranking.anime_summaries, poses.last,
+            poses.first, poses.successor)
+        if len(nodes) < len(labels):
+            _missing(query, start + len(nodes))
+        return np.split(nodes, ends[:-1])
+
+
+def _missing(query: Sequence[int], position: int) -> None:
+    raise ValueError(f"phoneme {query[position]} at query position {position} "
+                     "is not in the graph")
 
 
 def _spelled(graph: AnimeGraph, anime: int, query: Sequence[int], start: int, stop: int,
@@ -177,27 +199,37 @@ class LayeredMatcher:
             self.motion, poses.last, poses.first, poses.successor))
 
 
+    def tiles(self, query: Sequence[int], start: int, stop: int, cap: int | None,
+              previous: int | None, ranking: Ranking) -> list[np.ndarray]:
+        return tiles_by_matches(self, query, start, stop, cap, previous, ranking)
+
+
 def _csr_offsets(keys: np.ndarray, n_keys: int) -> np.ndarray:
     offsets = np.zeros(n_keys + 1, dtype=np.int64)
     np.cumsum(np.bincount(keys, minlength=n_keys), out=offsets[1:])
     return offsets
 
 
-def greedy_matching(matcher: Matcher, query: Sequence[int], ranking: Ranking,
-                    cap: int | None = None, previous: int | None = None) -> list[np.ndarray]:
-    """GreedyMatching over the whole query: the tiles' node ids, in order."""
+def tiles_by_matches(matcher: Matcher, query: Sequence[int], start: int, stop: int,
+                     cap: int | None, previous: int | None, ranking: Ranking) -> list[np.ndarray]:
+    """Algorithm 2's loop, one ``match`` and ``choose`` per tile."""
     tiles: list[np.ndarray] = []
-    position = 0
-    while position < len(query):
-        match = matcher.match(query, position, len(query), cap, previous)
+    position = start
+    while position < stop:
+        match = matcher.match(query, position, stop, cap, previous)
         if match.length == 0:
-            raise ValueError(f"phoneme {query[position]} at query position {position} "
-                             "is not in the graph")
+            _missing(query, position)
         nodes = matcher.choose(match, query, previous, ranking)
         tiles.append(nodes)
         previous = int(nodes[-1])
         position += match.length
     return tiles
+
+
+def greedy_matching(matcher: Matcher, query: Sequence[int], ranking: Ranking,
+                    cap: int | None = None, previous: int | None = None) -> list[np.ndarray]:
+    """GreedyMatching over the whole query: the tiles' node ids, in order."""
+    return matcher.tiles(query, 0, len(query), cap, previous, ranking)
 
 
 def count_jumps(graph: SearchGraph, nodes: np.ndarray) -> int:

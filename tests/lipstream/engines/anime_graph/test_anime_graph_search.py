@@ -5,6 +5,7 @@ from __future__ import annotations
 from itertools import pairwise, product
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -16,6 +17,7 @@ from lipstream.engines.anime_graph.search import (
     SuffixMatcher,
     count_jumps,
     greedy_matching,
+    tiles_by_matches,
 )
 
 ALPHABET = 4
@@ -321,3 +323,33 @@ def test_clustered_audio_costs_at_are_each_nodes_nearest_member_per_label() -> N
     assert costs.tolist() == [2.5, 0.5, 1.0, np.inf]
     single = graph.audio_costs(np.array([0, 1]), 0, np.array([4.0]), summaries)
     assert single.tolist() == [4.0, 1.0]
+
+
+@settings(max_examples=150, deadline=None)
+@given(databases(), st.integers(0, 3), st.booleans(), st.integers(0, 2**16), st.data())
+def test_compiled_tiles_equal_the_match_and_choose_loop(database: tuple, cap: int, audio: bool,
+                                                        seed: int, data: st.DataObject) -> None:
+    labels, utterance, query = database
+    successor = _successor(utterance)
+    graph = AnimeGraph.build(labels, successor, ALPHABET)
+    limit = data.draw(st.sampled_from([None, 1, 2]))
+    matcher = SuffixMatcher(SuffixIndex.build(labels, utterance, ALPHABET), graph, limit)
+    rng = np.random.default_rng(seed)
+    poses = Poses(rng.normal(size=(len(labels), 2)), rng.normal(size=(len(labels), 2)), successor)
+    summaries = rng.normal(size=(len(labels), 3))
+    ranking = Ranking(graph, poses, summaries,
+                      rng.normal(size=(len(query), 3)) if audio else None)
+    previous = data.draw(st.none() | st.integers(0, len(labels) - 1))
+    compiled = matcher.tiles(query, 0, len(query), cap or None, previous, ranking)
+    reference = tiles_by_matches(matcher, query, 0, len(query), cap or None, previous, ranking)
+    assert [t.tolist() for t in compiled] == [t.tolist() for t in reference]
+
+
+def test_a_phoneme_missing_from_the_corpus_is_reported_by_position() -> None:
+    labels = np.array([0, 1, 2], dtype=np.int16)
+    utterance = np.zeros(3, dtype=np.int32)
+    graph = AnimeGraph.build(labels, _successor(utterance), ALPHABET)
+    matcher = SuffixMatcher(SuffixIndex.build(labels, utterance, ALPHABET), graph)
+    ranking = _ranking(graph, 3, _successor(utterance))
+    with pytest.raises(ValueError, match="phoneme 3 at query position 2"):
+        greedy_matching(matcher, [0, 1, 3], ranking)

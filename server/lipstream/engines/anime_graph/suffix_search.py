@@ -1,0 +1,90 @@
+"""GreedyMatching on the unclustered graph, compiled (numba): every tile in one call.
+
+Sketch: the loop of ``search.greedy_matching`` with ``SuffixMatcher``, run
+without returning to Python between tiles. At query position i, a tile that
+the previous tile's recording continues (same labels onward) is taken as it
+is; otherwise the suffix automaton is read from its root one transition per
+phoneme, giving the longest run and the automaton state whose end-position
+range lists every occurrence. At most ``limit`` occurrences, spread evenly
+over the range, are ranked by ``costs.run_costs`` (audio distance, or the
+pose jump from the previous tile); the cheapest, then the lowest anime id,
+wins. A query of l phonemes costs O(l + tiles x ranked occurrences), whatever
+the corpus size, and one interpreter round trip.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .costs import run_costs
+
+
+@njit(cache=True)
+def _continued(previous: int, query: np.ndarray, position: int, stop: int, cap: int,
+               labels: np.ndarray, successor: np.ndarray) -> int:
+    """How far the recording after anime ``previous`` reads query[position:stop]."""
+    length = 0
+    anime = successor[previous] if previous >= 0 else -1
+    while anime >= 0 and position + length < stop and (cap <= 0 or length < cap):
+        if labels[anime] != query[position + length]:
+            break
+        anime = successor[anime]
+        length += 1
+    return length
+
+
+@njit(cache=True)
+def _occurrences(state: int, length: int, limit: int, low: np.ndarray, high: np.ndarray,
+                 ends: np.ndarray, text_anime: np.ndarray) -> np.ndarray:
+    """``SuffixIndex.occurrences``: first animes of the run's occurrences, ascending."""
+    first, count = low[state], high[state] - low[state]
+    taken = count if limit <= 0 or count <= limit else limit
+    starts = np.empty(taken, dtype=np.int64)
+    for index in range(taken):
+        pick = first + index if taken == count else first + (index * count) // limit
+        starts[index] = text_anime[ends[pick] - length + 1]
+    starts.sort()
+    return starts
+
+
+@njit(cache=True)
+def greedy_tiles(query: np.ndarray, cap: int, previous: int, limit: int,
+                 transitions: np.ndarray, low: np.ndarray, high: np.ndarray, ends: np.ndarray,
+                 text_anime: np.ndarray, labels: np.ndarray, successor: np.ndarray,
+                 use_audio: bool, query_summaries: np.ndarray, summaries: np.ndarray,
+                 last: np.ndarray, first: np.ndarray,
+                 pose_successor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Tile ``query`` (l,) labels: (anime per position (l,), tile end positions (T,)).
+
+    ``cap`` <= 0 leaves tiles uncapped; ``previous`` (-1: none) is the anime before the
+    query; ``query_summaries`` (l, D) are used when ``use_audio``; ``successor`` is the
+    graph's, ``last``/``first``/``pose_successor`` the ``costs.Poses``. Stops early, with the
+    last end short of l, at a phoneme the corpus never says."""
+    nodes = np.empty(len(query), dtype=np.int64)
+    tile_ends = np.empty(len(query), dtype=np.int64)
+    position = n_tiles = 0
+    while position < len(query):
+        length = _continued(previous, query, position, len(query), cap, labels, successor)
+        chosen = successor[previous] if length else -1
+        if length == 0:
+            state = 0
+            while position + length < len(query) and (cap <= 0 or length < cap):
+                following = transitions[state, query[position + length]]
+                if following < 0:
+                    break
+                state, length = following, length + 1
+            if length == 0:
+                break
+            starts = _occurrences(state, length, limit, low, high, ends, text_anime)
+            costs = run_costs(starts, length, previous, use_audio,
+                              query_summaries[position : position + length], summaries, last,
+                              first, pose_successor)
+            chosen = starts[np.argmin(costs)]
+        for offset in range(length):
+            nodes[position + offset] = chosen + offset
+        position += length
+        tile_ends[n_tiles] = position
+        n_tiles += 1
+        previous = chosen + length - 1
+    return nodes[:position], tile_ends[:n_tiles]
