@@ -1,8 +1,10 @@
 """Phoneme spans: the timeline every step of the pipeline consumes.
 
-A span is ``(phoneme, start, end)`` in seconds on the utterance clock. Callers
-may pass tuples or mappings; ``coerce_spans`` turns them into validated
-``PhonemeSpan`` objects with canonical ARPAbet labels.
+A span is ``(phoneme, start, end)`` in seconds on the utterance clock, with an
+optional ``emotion`` that overrides the request's for that span. Callers may
+pass tuples ``(phoneme, start, end[, emotion])`` or mappings with those keys;
+``coerce_spans`` turns them into validated ``PhonemeSpan`` objects with
+canonical ARPAbet labels.
 """
 
 from __future__ import annotations
@@ -16,15 +18,18 @@ from .errors import InvalidRequestError
 from .phonemes import normalize_phoneme
 
 SpanLike = Union["PhonemeSpan", Sequence[Any], Mapping[str, Any]]
+EMOTIONS = ("neutral", "happy", "angry", "sad")
 
 
 @dataclass(frozen=True, slots=True)
 class PhonemeSpan:
-    """One phoneme occurrence: canonical label and [start, end) in seconds."""
+    """One phoneme occurrence: canonical label, [start, end) in seconds, and the emotion it
+    is spoken with (None: the request's)."""
 
     phoneme: str
     start: float
     end: float
+    emotion: str | None = None
 
     @property
     def duration(self) -> float:
@@ -35,24 +40,34 @@ class PhonemeSpan:
         return 0.5 * (self.start + self.end)
 
 
-def _fields(span: SpanLike, where: str) -> tuple[Any, Any, Any]:
+def _fields(span: SpanLike, where: str) -> tuple[Any, Any, Any, Any]:
     if isinstance(span, PhonemeSpan):
-        return span.phoneme, span.start, span.end
+        return span.phoneme, span.start, span.end, span.emotion
     if isinstance(span, Mapping):
         try:
-            return span["phoneme"], span["start"], span["end"]
+            return span["phoneme"], span["start"], span["end"], span.get("emotion")
         except KeyError as missing:
             raise InvalidRequestError(f"span lacks key {missing}", where=where) from None
-    if isinstance(span, Sequence) and not isinstance(span, str) and len(span) == 3:
-        return span[0], span[1], span[2]
+    if isinstance(span, Sequence) and not isinstance(span, str) and len(span) in (3, 4):
+        return span[0], span[1], span[2], span[3] if len(span) == 4 else None
     raise InvalidRequestError(
-        "span must be (phoneme, start, end) or a mapping with those keys", where=where
+        "span must be (phoneme, start, end[, emotion]) or a mapping with those keys",
+        where=where,
     )
+
+
+def check_emotion(emotion: Any, where: str) -> str | None:
+    """``emotion`` if it is None or one of ``EMOTIONS``; else InvalidRequestError
+    (code ``unknown_emotion``) at ``where``."""
+    if emotion is not None and emotion not in EMOTIONS:
+        raise InvalidRequestError(f"unknown emotion {emotion!r}; known: {', '.join(EMOTIONS)}",
+                                  where=where, code="unknown_emotion")
+    return None if emotion is None else str(emotion)
 
 
 def coerce_span(span: SpanLike, where: str = "span", source: str = "request") -> PhonemeSpan:
     """Validate one span and normalize its label (see ``phonemes.normalize_phoneme``)."""
-    label, start, end = _fields(span, where)
+    label, start, end, emotion = _fields(span, where)
     if not isinstance(label, str):
         raise InvalidRequestError("phoneme must be a string", where=where)
     try:
@@ -65,7 +80,8 @@ def coerce_span(span: SpanLike, where: str = "span", source: str = "request") ->
         raise InvalidRequestError(
             f"span must satisfy 0 <= start < end, got start={start_s} end={end_s}", where=where
         )
-    return PhonemeSpan(normalize_phoneme(label, source=source, where=where), start_s, end_s)
+    return PhonemeSpan(normalize_phoneme(label, source=source, where=where), start_s, end_s,
+                       check_emotion(emotion, f"{where}.emotion"))
 
 
 def coerce_spans(

@@ -10,7 +10,18 @@ covers t plus the model's declared ``Lookahead``. Feeding the input in any
 chunking yields the same frames as one offline call, because every frame is
 computed from the spans known when it becomes final, and those spans never
 change afterwards. Frame i is at time i / fps seconds; gaps in the input are
-silence.
+silence, spoken with the emotion of the span after the gap.
+
+Fidelity: ``Model.fidelity_ladder`` lists the ``Rung``s an engine serves at,
+best first, each with the engine options that select it and the
+``Lookahead`` those options need; a server takes the best rung that fits a
+latency budget. Engines with one fidelity inherit a one-rung ladder.
+
+Emotion: ``SynthesisRequest.emotion`` is the request's; a span's own
+``PhonemeSpan.emotion`` overrides it for that span (``emotion_of``). Engines
+that model emotion honour both (anime-graph searches each run of equal
+emotion among that emotion's recordings); the ``viseme-lerp`` baseline has
+one key pose per viseme and ignores emotion altogether.
 """
 
 from __future__ import annotations
@@ -29,9 +40,8 @@ from ..audio import Audio
 from ..errors import InvalidRequestError, ModelStoreError
 from ..phonemes import PHONEMES, SILENCE
 from ..store import ModelManifest, load_arrays, read_manifest, save_model_dir
-from ..timeline import PhonemeSpan, SpanLike, coerce_spans
+from ..timeline import EMOTIONS, PhonemeSpan, SpanLike, coerce_spans
 
-EMOTIONS = ("neutral", "happy", "angry", "sad")
 MAX_FPS = 1000.0
 _EPS = 1e-9
 
@@ -67,7 +77,8 @@ class Rung:
 
 @dataclass(frozen=True)
 class SynthesisRequest:
-    """Per-request settings: output ``fps`` (Hz), ``emotion`` and engine options."""
+    """Per-request settings: output ``fps`` (Hz), ``emotion`` (of every span that names
+    none) and engine options."""
 
     fps: float = 60.0
     emotion: str | None = None
@@ -81,6 +92,10 @@ class SynthesisRequest:
             raise InvalidRequestError(
                 f"emotion must be one of {EMOTIONS}, got {self.emotion!r}", where="emotion"
             )
+
+    def emotion_of(self, span: PhonemeSpan) -> str | None:
+        """The emotion ``span`` is spoken with: its own, else the request's."""
+        return span.emotion if span.emotion is not None else self.emotion
 
 
 @dataclass(frozen=True)
@@ -110,12 +125,13 @@ def frames_before(t_s: float, fps: float) -> int:
 
 
 def fill_gaps(spans: Sequence[PhonemeSpan], start: float = 0.0) -> list[PhonemeSpan]:
-    """Make the timeline contiguous from ``start``: every gap becomes a silence span."""
+    """Make the timeline contiguous from ``start``: every gap becomes a silence span with
+    the emotion of the span after it (the pause leads into that span)."""
     filled: list[PhonemeSpan] = []
     cursor = start
     for span in spans:
         if span.start > cursor + _EPS:
-            filled.append(PhonemeSpan(SILENCE, cursor, span.start))
+            filled.append(PhonemeSpan(SILENCE, cursor, span.start, span.emotion))
         filled.append(span)
         cursor = span.end
     return filled
@@ -192,7 +208,10 @@ class Model(ABC):
         return Lookahead()
 
     def fidelity_ladder(self) -> tuple[Rung, ...]:
-        """Fidelity levels, best first; a server picks the best that fits a latency budget."""
+        """Fidelity levels, best first; a server picks the best that fits a latency budget.
+
+        Each rung's ``options`` must pin every option its ``lookahead`` depends on, since a
+        server lets them override the client's; rungs further down should wait less."""
         return (Rung("default", self.lookahead),)
 
     def start(self, request: SynthesisRequest | None = None, **settings: Any) -> Synthesizer:

@@ -3,7 +3,8 @@
 Sketch: an ``ActiveRequest`` owns one engine ``Synthesizer``. Each
 ``phonemes`` message is checked against what came before (order, phoneme
 set, emotions, the server's limits), normalised to canonical phonemes and
-fed; the frames the engine declares final go through the request's output
+fed, each item's own emotion riding on its span (it overrides the request's
+for that phoneme); the frames the engine declares final go through the request's output
 profile and leave as ``frames`` blocks of at most ``values_per_message``
 values. ``Coverage`` remembers when the input first covered each time, so
 every block carries the receipt time its lag is measured from.
@@ -172,7 +173,7 @@ class ActiveRequest:
                 f"ends at {item.end} s, beyond the server's limit of {self.limits.max_frames} "
                 f"frames per request at {self.spec.fps:g} fps", code=INVALID_TIMES,
                 where=f"{where}.end", details={"max_frames": self.limits.max_frames})
-        return PhonemeSpan(phoneme, item.start, item.end)
+        return PhonemeSpan(phoneme, item.start, item.end, item.emotion)
 
     def add_audio(self, chunk: AudioChunk, now: float) -> list[Outgoing]:
         if self.audio_rate is not None and chunk.sample_rate != self.audio_rate:

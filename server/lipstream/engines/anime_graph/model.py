@@ -17,11 +17,11 @@ from typing import Any
 import numpy as np
 
 from ...audio import Audio
-from ...errors import ModelStoreError
+from ...errors import InvalidRequestError, ModelStoreError
 from ...features import MfccConfig
 from ...store import ModelManifest, require_arrays
 from ...timeline import PhonemeSpan
-from ..base import Lookahead, Model, SynthesisRequest, make_request
+from ..base import Lookahead, Model, Rung, SynthesisRequest, make_request
 from .animes import AnimeTable, Curves
 from .basis import MotionBasis
 from .costs import Poses
@@ -37,6 +37,7 @@ REQUIRED_ARRAYS = [
     "anime_utterance", "anime_start", "anime_end", "motion", "motion_offsets", "features",
     "feature_offsets", "anime_summary", "cutoffs",
 ]  # fmt: skip
+LADDER_TILES = (10, 4, 2, 1)
 
 
 class AnimeGraphModel(Model):
@@ -83,12 +84,39 @@ class AnimeGraphModel(Model):
     @property
     def lookahead(self) -> Lookahead:
         """A frame at t waits for the span containing t + seconds to have ``phonemes`` whole
-        spans after it (the tile cap, or a PQ window)."""
+        spans after it (the tile cap, or a PQ window): the worst over every request option
+        but an uncapped tile; ``fidelity_ladder`` gives each greedy rung's own."""
         return Lookahead(seconds=(self.half_width + 1) / self.fps,
                          phonemes=max(self.max_tile, MAX_PQ_WINDOW))
 
+    def greedy_lookahead(self, max_tile: int, smooth: bool) -> Lookahead:
+        """What a frame waits for under GreedyMatching with tiles of at most ``max_tile``
+        phonemes: the next model-grid sample past t plus the smoothing half-width (when
+        ``smooth``), then ``max_tile`` spans, which decide the fragment after it."""
+        if max_tile < 1:
+            raise InvalidRequestError(f"a bounded lookahead needs max_tile >= 1, got "
+                                      f"{max_tile}", where="options.max_tile")
+        half_width = self.half_width if smooth else 0
+        return Lookahead(seconds=(half_width + 1) / self.fps, phonemes=max_tile)
+
+    def fidelity_ladder(self) -> tuple[Rung, ...]:
+        """GreedyMatching with ever shorter tiles, the model's ``max_tile`` first (fewest
+        jumps), then 10, 4, 2 and 1 phonemes below it; last, one-phoneme tiles without the
+        low-pass filter, which waits H frames. A rung pins ``search`` and ``max_tile`` (and
+        ``smooth`` off on the last), the options its lookahead depends on."""
+        tiles = sorted({self.max_tile, *(t for t in LADDER_TILES if t < self.max_tile)},
+                       reverse=True)
+        rungs = [Rung(f"greedy_tile{tile}", self.greedy_lookahead(tile, smooth=True),
+                      {"search": "greedy", "max_tile": tile}) for tile in tiles]
+        if self.half_width > 0:
+            rungs.append(Rung("greedy_tile1_unsmoothed", self.greedy_lookahead(1, smooth=False),
+                              {"search": "greedy", "max_tile": 1, "smooth": False}))
+        return tuple(rungs)
+
     def view_for(self, emotion: str | None, options: SearchOptions) -> GraphView:
-        """The emotion's view when the request names a recorded emotion, else the whole."""
+        """The view searched for a span spoken with ``emotion`` (its own, else the
+        request's): that emotion's when it was recorded and ``match_emotion`` is on, else
+        the whole corpus."""
         if options.match_emotion and emotion is not None and emotion in self.views:
             return self.views[emotion]
         return self.views[WHOLE]

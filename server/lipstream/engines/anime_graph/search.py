@@ -62,8 +62,11 @@ class Matcher(Protocol):
         """The best path spelling the run, as node ids (match.length,)."""
 
     def tiles(self, query: Sequence[int], start: int, stop: int, cap: int | None,
-              previous: int | None, ranking: Ranking) -> list[np.ndarray]:
-        """GreedyMatching of ``query[start:stop]``: the tiles' node ids, in order."""
+              previous: int | None, ranking: Ranking,
+              ranked_from: int | None = None) -> list[np.ndarray]:
+        """GreedyMatching of ``query[start:stop]``: the tiles' node ids, in order. The first
+        tile may continue ``previous``; its join is ranked from ``ranked_from`` when given
+        (a node shown before in another view), else from ``previous``."""
 
 
 @dataclass
@@ -98,11 +101,14 @@ class SuffixMatcher:
         return int(starts[int(np.argmin(costs))]) + steps
 
     def tiles(self, query: Sequence[int], start: int, stop: int, cap: int | None,
-              previous: int | None, ranking: Ranking) -> list[np.ndarray]:
+              previous: int | None, ranking: Ranking,
+              ranked_from: int | None = None) -> list[np.ndarray]:
         labels = np.asarray(query[start:stop], dtype=np.int64)
         index, poses = self.index, ranking.poses
+        joined = previous if ranked_from is None else ranked_from
         nodes, ends = greedy_tiles(
-            labels, cap or 0, -1 if previous is None else previous, self.limit or 0,
+            labels, cap or 0, -1 if previous is None else previous,
+            -1 if joined is None else joined, self.limit or 0,
             index.transitions, index.low, index.high, index.ends, index.text_anime,
             self.graph.labels, self.graph.successor, ranking.uses_audio,
             ranking.summaries_of(start, stop - start), ranking.anime_summaries, poses.last,
@@ -200,8 +206,9 @@ class LayeredMatcher:
 
 
     def tiles(self, query: Sequence[int], start: int, stop: int, cap: int | None,
-              previous: int | None, ranking: Ranking) -> list[np.ndarray]:
-        return tiles_by_matches(self, query, start, stop, cap, previous, ranking)
+              previous: int | None, ranking: Ranking,
+              ranked_from: int | None = None) -> list[np.ndarray]:
+        return tiles_by_matches(self, query, start, stop, cap, previous, ranking, ranked_from)
 
 
 def _csr_offsets(keys: np.ndarray, n_keys: int) -> np.ndarray:
@@ -211,17 +218,19 @@ def _csr_offsets(keys: np.ndarray, n_keys: int) -> np.ndarray:
 
 
 def tiles_by_matches(matcher: Matcher, query: Sequence[int], start: int, stop: int,
-                     cap: int | None, previous: int | None, ranking: Ranking) -> list[np.ndarray]:
+                     cap: int | None, previous: int | None, ranking: Ranking,
+                     ranked_from: int | None = None) -> list[np.ndarray]:
     """Algorithm 2's loop, one ``match`` and ``choose`` per tile."""
     tiles: list[np.ndarray] = []
     position = start
+    joined = previous if ranked_from is None else ranked_from
     while position < stop:
         match = matcher.match(query, position, stop, cap, previous)
         if match.length == 0:
             _missing(query, position)
-        nodes = matcher.choose(match, query, previous, ranking)
+        nodes = matcher.choose(match, query, joined, ranking)
         tiles.append(nodes)
-        previous = int(nodes[-1])
+        previous = joined = int(nodes[-1])
         position += match.length
     return tiles
 

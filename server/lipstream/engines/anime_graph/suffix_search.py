@@ -49,7 +49,7 @@ def _occurrences(state: int, length: int, limit: int, low: np.ndarray, high: np.
 
 
 @njit(cache=True)
-def greedy_tiles(query: np.ndarray, cap: int, previous: int, limit: int,
+def greedy_tiles(query: np.ndarray, cap: int, previous: int, joined: int, limit: int,
                  transitions: np.ndarray, low: np.ndarray, high: np.ndarray, ends: np.ndarray,
                  text_anime: np.ndarray, labels: np.ndarray, successor: np.ndarray,
                  use_audio: bool, query_summaries: np.ndarray, summaries: np.ndarray,
@@ -58,9 +58,11 @@ def greedy_tiles(query: np.ndarray, cap: int, previous: int, limit: int,
     """Tile ``query`` (l,) labels: (anime per position (l,), tile end positions (T,)).
 
     ``cap`` <= 0 leaves tiles uncapped; ``previous`` (-1: none) is the anime before the
-    query; ``query_summaries`` (l, D) are used when ``use_audio``; ``successor`` is the
-    graph's, ``last``/``first``/``pose_successor`` the ``costs.Poses``. Stops early, with the
-    last end short of l, at a phoneme the corpus never says."""
+    query, which the first tile may continue, and ``joined`` the one its join is ranked
+    from (they differ only when the query enters a view that lacks the anime shown
+    last); ``query_summaries`` (l, D) are used when ``use_audio``; ``successor`` is the
+    graph's, ``last``/``first``/``pose_successor`` the ``costs.Poses``. Stops early, with
+    the last end short of l, at a phoneme the corpus never says."""
     nodes = np.empty(len(query), dtype=np.int64)
     tile_ends = np.empty(len(query), dtype=np.int64)
     position = n_tiles = 0
@@ -77,7 +79,7 @@ def greedy_tiles(query: np.ndarray, cap: int, previous: int, limit: int,
             if length == 0:
                 break
             starts = _occurrences(state, length, limit, low, high, ends, text_anime)
-            costs = run_costs(starts, length, previous, use_audio,
+            costs = run_costs(starts, length, joined, use_audio,
                               query_summaries[position : position + length], summaries, last,
                               first, pose_successor)
             chosen = starts[np.argmin(costs)]
@@ -86,5 +88,5 @@ def greedy_tiles(query: np.ndarray, cap: int, previous: int, limit: int,
         position += length
         tile_ends[n_tiles] = position
         n_tiles += 1
-        previous = chosen + length - 1
+        previous = joined = chosen + length - 1
     return nodes[:position], tile_ends[:n_tiles]

@@ -15,13 +15,25 @@ interpolated linearly onto the requested frame times. So a frame at t waits
 for the span containing t + (H + 1) / fps_model to have ``max_tile`` whole
 spans after it, and every frame is computed from final inputs only: any
 chunking of the input gives the offline frames.
+
+Per-phoneme emotion: each span is searched in the view of its own emotion
+(else the request's). The query splits into runs of positions with the same
+view, and tiles never cross a run's end: a tile that reaches the end of a
+run the next span has closed is final too, so the lookahead is unchanged.
+The first tile of a run continues from the anime shown last when the new
+view holds it (unclustered node ids are anime ids in every view); the join
+across the change of view is blended with the whole corpus's recorded pairs,
+since no one emotion's recordings hold it.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from bisect import bisect_right
 from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from itertools import groupby
 from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
@@ -32,13 +44,15 @@ from ...phonemes import PHONEME_INDEX, SILENCE
 from ...timeline import PhonemeSpan, SpanLike, coerce_spans
 from ..base import SynthesisRequest, Synthesizer, fill_gaps, frame_count
 from .animes import summarize
-from .blending import Join, plan_join
+from .blending import Join, PairIndex, plan_join
 from .costs import Ranking
+from .graph import SearchGraph
 from .options import SearchOptions
 from .pq import pq_window
 from .request_audio import RequestAudio
-from .search import count_jumps
+from .search import Matcher, count_jumps
 from .track import MotionTrack, Placement
+from .views import WHOLE, GraphView
 from .warp import Alignment, Warp, dtw_warps, linear_warp
 
 if TYPE_CHECKING:
@@ -68,18 +82,34 @@ class _Rows:
         return self.data[: self.count]
 
 
+@dataclass(frozen=True, eq=False)
+class _Searcher:
+    """One view, the graph searched in it and that graph's matcher."""
+
+    view: GraphView
+    graph: SearchGraph
+    matcher: Matcher
+
+
 class AnimeGraphSynthesizer(Synthesizer):
-    """One request: feed spans (and audio), take final frames."""
+    """One request: feed spans (and audio), take final frames.
+
+    ``view``, ``graph`` and ``matcher`` are the request emotion's; ``searchers[j]`` holds
+    those of query position j, whose ``query`` label and ``nodes`` id are in its view.
+    """
 
     def __init__(self, model: AnimeGraphModel, request: SynthesisRequest,
                  options: SearchOptions) -> None:
         self.model = model
+        self.request = request
         self.fps = float(request.fps)
         self.options = options
-        self.view = model.view_for(request.emotion, options)
-        self.graph = model.graph_of(self.view, options.graph)
-        self.matcher = model.matcher_of(self.view, options.graph)
+        self._by_view: dict[str, _Searcher] = {}
+        own = self._searcher_for(request.emotion)
+        self.view, self.graph, self.matcher = own.view, own.graph, own.matcher
         self.spans: list[PhonemeSpan] = []
+        self.searchers: list[_Searcher] = []
+        self.run_starts: list[int] = []
         self.query: list[int] = []
         self.nodes: list[int] = []
         self.audio: RequestAudio | None = None
@@ -108,8 +138,20 @@ class AnimeGraphSynthesizer(Synthesizer):
         self._take_audio(audio)
         new = coerce_spans(spans, after=self.covered_until, first_index=len(self.spans))
         for span in fill_gaps(new, self.covered_until):
+            searcher = self._searcher_for(self.request.emotion_of(span))
+            if self.searchers and searcher is not self.searchers[-1]:
+                self.run_starts.append(len(self.searchers))
             self.spans.append(span)
-            self.query.append(int(self.view.substitution[PHONEME_INDEX[span.phoneme]]))
+            self.searchers.append(searcher)
+            self.query.append(int(searcher.view.substitution[PHONEME_INDEX[span.phoneme]]))
+
+    def _searcher_for(self, emotion: str | None) -> _Searcher:
+        view = self.model.view_for(emotion, self.options)
+        if view.name not in self._by_view:
+            self._by_view[view.name] = _Searcher(
+                view, self.model.graph_of(view, self.options.graph),
+                self.model.matcher_of(view, self.options.graph))
+        return self._by_view[view.name]
 
     def _take_audio(self, audio: Audio | None) -> None:
         if self.audio_mode is None:
@@ -137,10 +179,11 @@ class AnimeGraphSynthesizer(Synthesizer):
     def _audio_ready(self, until_s: float) -> bool:
         return self.audio is None or self.audio.ready(until_s, self.finished)
 
-    def _ranking(self, start: int, stop: int) -> Ranking:
-        """Costs for query positions ``start:stop`` (audio summaries computed once each)."""
+    def _ranking(self, graph: SearchGraph, start: int, stop: int) -> Ranking:
+        """Costs over ``graph`` for query positions ``start:stop`` (audio summaries computed
+        once each)."""
         if self.audio is None:
-            return Ranking(self.graph, self.model.poses, self.model.summaries)
+            return Ranking(graph, self.model.poses, self.model.summaries)
         fresh = [position for position in range(start, stop) if position not in self.summaries]
         if fresh:
             curves = self.audio.curves(self.spans[stop - 1].end)
@@ -148,37 +191,89 @@ class AnimeGraphSynthesizer(Synthesizer):
             ends = np.array([self.spans[position].end for position in fresh])
             rows = summarize(curves, np.zeros(len(fresh), dtype=np.int64), starts, ends)
             self.summaries.update(zip(fresh, rows))
-        return Ranking(self.graph, self.model.poses, self.model.summaries, self.summaries)
+        return Ranking(graph, self.model.poses, self.model.summaries, self.summaries)
 
-    def _next_tile(self) -> list[int] | None:
-        """The next final run of nodes, or None while it may still change."""
+    def _run_stop(self, start: int) -> int:
+        """One past the last position of the run holding ``start``, as far as it is known."""
+        index = bisect_right(self.run_starts, start)
+        return self.run_starts[index] if index < len(self.run_starts) else len(self.query)
+
+    def _previous(self, start: int) -> tuple[int | None, int | None]:
+        """For a tile at ``start``, in its searcher's graph: the node it may continue from,
+        and the node its first join is ranked from."""
+        if start == 0:
+            return None, None
+        searcher, before = self.searchers[start], self.searchers[start - 1]
+        node = self.nodes[start - 1]
+        if before is searcher:
+            return node, node
+        anime = int(before.graph.motion_of(np.array([node]))[0])
+        held = searcher.view.node_of(anime, searcher.graph)
+        # Anime ids name the same nodes in every view's anime graph, so a join from an anime
+        # outside the view can still be ranked there.
+        return held, anime if searcher.graph is searcher.view.anime_graph else held
+
+    def _next_tiles(self) -> list[list[int]] | None:
+        """The next final tiles (runs of nodes), or None while they may still change."""
         start = len(self.nodes)
-        previous = self.nodes[-1] if self.nodes else None
+        searcher = self.searchers[start]
+        stop = self._run_stop(start)
+        closed = stop < len(self.query) or self.finished
+        continuing, ranked = self._previous(start)
         if self.options.search == "pq":
-            stop = min(len(self.query), start + self.options.pq_window)
-            if stop - start < self.options.pq_window and not self.finished:
+            end = min(stop, start + self.options.pq_window)
+            if end - start < self.options.pq_window and not closed:
                 return None
-            if not self._audio_ready(self.spans[stop - 1].end):
+            if not self._audio_ready(self.spans[end - 1].end):
                 return None
-            ranking = self._ranking(start, stop)
+            ranking = self._ranking(searcher.graph, start, end)
             budget = self.options.pq_budget_s
             deadline = None if budget is None else \
                 time.perf_counter() + budget - self.stats["search_ms"] / 1000.0
-            result = self._timed(lambda: pq_window(self.graph, ranking, self.query, start, stop,
-                                                   previous, deadline))
-            last_window = self.finished and stop == len(self.query)
+            result = self._timed(lambda: pq_window(searcher.graph, ranking, self.query, start,
+                                                   end, ranked, deadline))
+            last_window = closed and end == stop
             keep = len(result.nodes) if last_window else self.options.pq_advance
-            return [int(node) for node in result.nodes[:keep]]
-        cap = self.options.max_tile
-        match = self._timed(lambda: self.matcher.match(self.query, start, len(self.query), cap,
-                                                       previous))
-        growing = start + match.length == len(self.query) and match.length != cap
-        if (growing and not self.finished) or not self._audio_ready(
-                self.spans[start + match.length - 1].end):
+            return [[int(node) for node in result.nodes[:keep]]]
+        return self._greedy_tiles(start, stop, closed, continuing, ranked)
+
+    def _greedy_tiles(self, start: int, stop: int, closed: bool, continuing: int | None,
+                      ranked: int | None) -> list[list[int]] | None:
+        """GreedyMatching of the run from ``start`` as far as the audio covers it; every tile
+        but a last one that may still grow (it ends where the known input ends, below the
+        cap) is final."""
+        searcher = self.searchers[start]
+        ready = self._audio_ready_stop(start, stop)
+        if ready == start:
             return None
-        ranking = self._ranking(start, start + match.length)
-        chosen = self._timed(lambda: self.matcher.choose(match, self.query, previous, ranking))
-        return [int(node) for node in chosen]
+        ranking = self._ranking(searcher.graph, start, ready)
+        cap = self.options.max_tile
+        tiles = self._timed(lambda: searcher.matcher.tiles(self.query, start, ready, cap,
+                                                           continuing, ranking, ranked))
+        if not (ready == stop and closed) and len(tiles[-1]) != cap:
+            tiles.pop()
+        return [[int(node) for node in tile] for tile in tiles] or None
+
+    def _audio_ready_stop(self, start: int, stop: int) -> int:
+        """The largest p in [start, stop] such that the audio covers spans start..p-1."""
+        if self.audio is None:
+            return stop
+        low, high = start, stop
+        while low < high:
+            middle = (low + high + 1) // 2
+            if self._audio_ready(self.spans[middle - 1].end):
+                low = middle
+            else:
+                high = middle - 1
+        return low
+
+    def _jumps(self, start: int, tile: list[int]) -> int:
+        """Jumps into and inside a tile placed at ``start``; entering a view that does not
+        hold the previous anime is one."""
+        continuing, _ = self._previous(start)
+        lead = [] if continuing is None else [continuing]
+        entered = int(start > 0 and continuing is None)
+        return entered + count_jumps(self.searchers[start].graph, np.asarray(lead + tile))
 
     def _timed(self, call: Callable[[], _Result]) -> _Result:
         """Run one search step, adding its time to ``stats["search_ms"]``."""
@@ -193,21 +288,27 @@ class AnimeGraphSynthesizer(Synthesizer):
             self.audio.curves(self.covered_until)
         placed = len(self.nodes)
         while len(self.nodes) < len(self.query):
-            tile = self._next_tile()
-            if tile is None:
+            tiles = self._next_tiles()
+            if tiles is None:
                 break
-            before = len(self.nodes)
-            self.nodes.extend(tile)
-            self.stats["tiles"] += 1
-            tail = np.asarray(self.nodes[max(0, before - 1):])
-            self.stats["jumps"] += count_jumps(self.graph, tail)
+            for tile in tiles:
+                self.stats["jumps"] += self._jumps(len(self.nodes), tile)
+                self.nodes.extend(tile)
+                self.stats["tiles"] += 1
         if self.options.search == "pq":
             self.stats["tiles"] = self.stats["jumps"] + 1 if self.nodes else 0
         positions = range(placed, len(self.nodes))
-        animes = [int(anime) for anime in self.graph.motion_of(np.asarray(self.nodes[placed:],
-                                                                           dtype=np.int64))]
+        animes = self._animes(positions)
         for position, anime, warp in zip(positions, animes, self._warps(positions, animes)):
             self._place(position, anime, warp)
+
+    def _animes(self, positions: range) -> list[int]:
+        """The anime each decided node at ``positions`` shows, one batch per run."""
+        animes: list[int] = []
+        for searcher, run in groupby(positions, key=lambda position: self.searchers[position]):
+            nodes = np.asarray([self.nodes[position] for position in run], dtype=np.int64)
+            animes.extend(int(anime) for anime in searcher.graph.motion_of(nodes))
+        return animes
 
     # ---- post-processing -----------------------------------------------------------------
 
@@ -241,10 +342,21 @@ class AnimeGraphSynthesizer(Synthesizer):
         join: Join | None = None
         if position > 0:
             left = self.track.placements[position - 1].anime
-            join = plan_join(left, anime, (self.query[position - 1], self.query[position]),
-                             self.model.poses, self.view.pairs, self.model.max_candidates,
-                             self.options.blend)
+            labels, pairs = self._join_pairs(position)
+            join = plan_join(left, anime, labels, self.model.poses, pairs,
+                             self.model.max_candidates, self.options.blend)
         self.track.append(Placement(span.start, span.end, anime, warp), join)
+
+    def _join_pairs(self, position: int) -> tuple[tuple[int, int], PairIndex]:
+        """The labels of the join into ``position`` and the recorded pairs to blend it with:
+        its view's, or across a change of view the whole corpus's."""
+        view = self.searchers[position].view
+        if self.searchers[position - 1].view is view:
+            return (self.query[position - 1], self.query[position]), view.pairs
+        whole = self.model.views[WHOLE]
+        left, right = (int(whole.substitution[PHONEME_INDEX[self.spans[index].phoneme]])
+                       for index in (position - 1, position))
+        return (left, right), whole.pairs
 
     def _track_final_until(self) -> float:
         """Time (s) before which the track is final; +inf once everything is decided."""

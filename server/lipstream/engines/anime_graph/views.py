@@ -1,14 +1,20 @@
 """Graph views: the whole corpus, and each emotion's recordings on their own.
 
 Sketch: in an expressive corpus each recording has one emotion, and much of
-the face (brows, smile, squint) follows the emotion, not the phonemes. A
-request that names an emotion is searched in the view holding only that
-emotion's recordings: the emotion joins the phoneme label in the match
-criterion, so Theorem 1 still holds inside the view (the paper's §8 leaves
-emotion to future work). A request without an emotion, or naming one the
-corpus never recorded, uses the whole corpus. Every view has its own Anime
-Array, suffix automaton, clustered graph (k shared out in proportion to the
-view's size), recorded neighbour pairs and stand-ins for missing phonemes.
+the face (brows, smile, squint) follows the emotion, not the phonemes. A span
+spoken with an emotion (its own, else the request's) is searched in the view
+holding only that emotion's recordings: the emotion joins the phoneme label
+in the match criterion, so Theorem 1 still holds inside the view (the
+paper's §8 leaves emotion to future work). A span without an emotion, or
+with one the corpus never recorded, uses the whole corpus. Every view has
+its own Anime Array, suffix automaton, clustered graph (k shared out in
+proportion to the view's size), recorded neighbour pairs and stand-ins for
+missing phonemes.
+
+Node ids: an unclustered node is an anime, whose id is the same in every
+view; a clustered node is a cluster of one view only. ``node_of`` maps an
+anime to the node holding it in a view, so a search can continue across a
+change of view (per-phoneme emotions).
 """
 
 from __future__ import annotations
@@ -24,7 +30,7 @@ from ...phonemes import PHONEME_INDEX, PHONEMES, SILENCE
 from ...visemes import get_scheme
 from .blending import PairIndex
 from .clustering import cluster_animes
-from .graph import AnimeGraph, ClusterGraph
+from .graph import AnimeGraph, ClusterGraph, SearchGraph
 from .index import SuffixIndex
 
 WHOLE = "all"
@@ -34,7 +40,9 @@ VIEW_ARRAYS = ("members", "substitution", "index_transitions", "index_low", "ind
 
 @dataclass(frozen=True)
 class GraphView:
-    """The search structures over the animes ``members`` (ascending ids)."""
+    """The search structures over the animes ``members`` (ascending ids); ``cluster_of``
+    (n_animes,) is each anime's node in ``cluster_graph``, -1 outside the view or without
+    clusters."""
 
     name: str
     members: np.ndarray
@@ -43,6 +51,20 @@ class GraphView:
     index: SuffixIndex
     pairs: PairIndex
     cluster_graph: ClusterGraph | None
+    cluster_of: np.ndarray
+
+    def holds(self, anime: int) -> bool:
+        """Is ``anime`` one of the view's members?"""
+        spot = int(np.searchsorted(self.members, anime))
+        return spot < len(self.members) and int(self.members[spot]) == anime
+
+    def node_of(self, anime: int, graph: SearchGraph) -> int | None:
+        """The node of ``graph`` (this view's anime or cluster graph) that holds ``anime``;
+        None when the anime is outside the view."""
+        if graph is self.cluster_graph:
+            node = int(self.cluster_of[anime])
+            return node if node >= 0 else None
+        return anime if self.holds(anime) else None
 
 
 def view_members(
@@ -105,8 +127,8 @@ def load_view(name: str, arrays: Mapping[str, np.ndarray], labels: np.ndarray,
     part = {key: np.asarray(arrays[f"{name}_{key}"]) for key in VIEW_ARRAYS}
     members = part["members"]
     cluster_graph = None
+    assignment = np.full(len(labels), -1, dtype=np.int64)
     if len(part["cluster_representative"]):
-        assignment = np.full(len(labels), -1, dtype=np.int64)
         assignment[members] = part["cluster_assignment"]
         cluster_graph = ClusterGraph.build(assignment, part["cluster_representative"], labels,
                                            successor, len(PHONEMES))
@@ -116,7 +138,7 @@ def load_view(name: str, arrays: Mapping[str, np.ndarray], labels: np.ndarray,
         index=SuffixIndex(arrays[f"{name}_index_transitions"], part["index_low"],
                           part["index_high"], part["index_ends"], part["index_text_anime"]),
         pairs=PairIndex.build(labels, successor, len(PHONEMES), members),
-        cluster_graph=cluster_graph,
+        cluster_graph=cluster_graph, cluster_of=assignment,
     )
 
 

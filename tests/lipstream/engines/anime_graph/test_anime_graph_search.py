@@ -340,8 +340,10 @@ def test_compiled_tiles_equal_the_match_and_choose_loop(database: tuple, cap: in
     ranking = Ranking(graph, poses, summaries,
                       rng.normal(size=(len(query), 3)) if audio else None)
     previous = data.draw(st.none() | st.integers(0, len(labels) - 1))
-    compiled = matcher.tiles(query, 0, len(query), cap or None, previous, ranking)
-    reference = tiles_by_matches(matcher, query, 0, len(query), cap or None, previous, ranking)
+    ranked_from = data.draw(st.none() | st.integers(0, len(labels) - 1))
+    compiled = matcher.tiles(query, 0, len(query), cap or None, previous, ranking, ranked_from)
+    reference = tiles_by_matches(matcher, query, 0, len(query), cap or None, previous, ranking,
+                                 ranked_from)
     assert [t.tolist() for t in compiled] == [t.tolist() for t in reference]
 
 

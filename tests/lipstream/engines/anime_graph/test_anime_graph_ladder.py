@@ -1,0 +1,144 @@
+"""anime-graph's fidelity ladder: each rung's declared lookahead is what its options need."""
+
+from __future__ import annotations
+
+from itertools import pairwise
+
+import numpy as np
+import pytest
+
+from lipstream.engines.anime_graph import AnimeGraphEngine, AnimeGraphModel
+from lipstream.engines.base import Lookahead, Rung, final_until, frames_before
+from lipstream.errors import InvalidRequestError
+from lipstream.server.budget import lookahead_ms
+from lipstream.timeline import PhonemeSpan
+from tests.lipstream.engines.anime_graph.anime_synthetic import make_corpus, make_spans
+
+FPS = 120.0  # the corpus's rate, so output frames sit on the model grid
+OFF_GRID_FPS = 97.0  # frames between model samples, which interpolation waits one more for
+H = 12  # smoothing half-width in model frames: round(0.1 s * 120 fps)
+
+
+@pytest.fixture(scope="module")
+def corpus_and_model() -> tuple[list[list[PhonemeSpan]], AnimeGraphModel]:
+    corpus = make_corpus(seed=3, n_utterances=16, length=(10, 14), with_audio=False)
+    model = AnimeGraphEngine(clusters=20).fit(corpus)
+    return [utterance.phones for utterance in corpus.utterances], model
+
+
+@pytest.fixture(scope="module")
+def model(corpus_and_model: tuple[list[list[PhonemeSpan]], AnimeGraphModel]) -> AnimeGraphModel:
+    return corpus_and_model[1]
+
+
+def test_the_ladder_shortens_tiles_then_drops_smoothing(model: AnimeGraphModel) -> None:
+    smoothed, raw = (H + 1) / FPS, 1 / FPS
+    assert model.half_width == H
+    assert model.fidelity_ladder() == (
+        Rung("greedy_tile10", Lookahead(smoothed, 10), {"search": "greedy", "max_tile": 10}),
+        Rung("greedy_tile4", Lookahead(smoothed, 4), {"search": "greedy", "max_tile": 4}),
+        Rung("greedy_tile2", Lookahead(smoothed, 2), {"search": "greedy", "max_tile": 2}),
+        Rung("greedy_tile1", Lookahead(smoothed, 1), {"search": "greedy", "max_tile": 1}),
+        Rung("greedy_tile1_unsmoothed", Lookahead(raw, 1),
+             {"search": "greedy", "max_tile": 1, "smooth": False}),
+    )
+
+
+def test_each_rung_waits_less_than_the_one_above(model: AnimeGraphModel) -> None:
+    ladder = model.fidelity_ladder()
+    for upper, lower in pairwise(ladder):
+        assert lower.lookahead.seconds <= upper.lookahead.seconds
+        assert lower.lookahead.phonemes <= upper.lookahead.phonemes
+        assert lower.lookahead != upper.lookahead
+        for longest_phoneme_ms in (50.0, 200.0):
+            assert lookahead_ms(lower, longest_phoneme_ms) < lookahead_ms(upper, longest_phoneme_ms)
+
+
+@pytest.mark.parametrize(("max_tile", "expected"), [
+    (6, ["greedy_tile6", "greedy_tile4", "greedy_tile2", "greedy_tile1"]),
+    (12, ["greedy_tile12", "greedy_tile10", "greedy_tile4", "greedy_tile2", "greedy_tile1"]),
+    (1, ["greedy_tile1"]),
+])
+def test_the_top_rung_is_the_models_own_tile_cap(max_tile: int, expected: list[str]) -> None:
+    lean = AnimeGraphEngine(clusters=0, max_tile=max_tile, smoothing_window=0.0).fit(
+        make_corpus(seed=2, n_utterances=4, with_audio=False))
+    ladder = lean.fidelity_ladder()
+    assert [rung.name for rung in ladder] == expected  # no smoothing: no unsmoothed rung
+    assert all(rung.lookahead.seconds == 1 / lean.fps for rung in ladder)
+
+
+def _stream_one_by_one(model: AnimeGraphModel, spans: list[PhonemeSpan], options: dict,
+                       fps: float = FPS) -> tuple[np.ndarray, list[int]]:
+    """All frames, and how many had come out after each span was fed."""
+    synthesizer = model.start(fps=fps, **options)
+    pieces, emitted = [], []
+    for span in spans:
+        synthesizer.feed([span])
+        pieces.append(synthesizer.frames())
+        emitted.append(sum(len(piece) for piece in pieces))
+    pieces.append(synthesizer.finish())
+    return np.concatenate(pieces), emitted
+
+
+@pytest.mark.parametrize("fps", [FPS, OFF_GRID_FPS])
+@pytest.mark.parametrize("graph", ["unclustered", "clustered"])
+@pytest.mark.parametrize("rung_index", range(5))
+def test_a_rung_emits_every_frame_its_lookahead_promises(model: AnimeGraphModel, graph: str,
+                                                         rung_index: int, fps: float) -> None:
+    rung = model.fidelity_ladder()[rung_index]
+    options = {**rung.options, "graph": graph}
+    for seed in (1, 2):
+        spans = make_spans(np.random.default_rng(seed), 30)
+        streamed, emitted = _stream_one_by_one(model, spans, options, fps)
+        for index, count in enumerate(emitted):
+            promised = frames_before(final_until(spans[: index + 1], rung.lookahead), fps)
+            assert count >= promised, f"{rung.name}: held back after span {index}"
+        offline = model.synthesize(spans, fps=fps, **options).frames
+        np.testing.assert_array_equal(streamed, offline)
+
+
+@pytest.mark.parametrize("rung_index", range(5))
+def test_a_rung_needs_all_the_phonemes_it_declares(
+        corpus_and_model: tuple[list[list[PhonemeSpan]], AnimeGraphModel],
+        rung_index: int) -> None:
+    """A long pause, then a recorded line said again: the line is one tile, cut at the cap,
+    so the frames in the pause wait for exactly ``max_tile`` phonemes of the line."""
+    recordings, model = corpus_and_model
+    rung = model.fidelity_ladder()[rung_index]
+    line = max(recordings, key=len)
+    assert len(line) > 10
+    pause = 0.5
+    spans = [PhonemeSpan("sil", 0.0, pause)] + [
+        PhonemeSpan(span.phoneme, span.start + pause, span.end + pause) for span in line]
+    _, emitted = _stream_one_by_one(model, spans, dict(rung.options))
+    shorter = Lookahead(rung.lookahead.seconds, rung.lookahead.phonemes - 1)
+    assert any(count < frames_before(final_until(spans[: index + 1], shorter), FPS)
+               for index, count in enumerate(emitted)), rung.name
+
+
+@pytest.mark.parametrize("rung_index", [3, 4])
+def test_one_phoneme_tiles_need_the_whole_declared_seconds(model: AnimeGraphModel,
+                                                           rung_index: int) -> None:
+    """With one-phoneme tiles every fragment but the last is decided, so the smoothing
+    half-width and the interpolation sample are the whole wait."""
+    rung = model.fidelity_ladder()[rung_index]
+    spans = make_spans(np.random.default_rng(5), 30)
+    _, emitted = _stream_one_by_one(model, spans, dict(rung.options), OFF_GRID_FPS)
+    sooner = Lookahead(rung.lookahead.seconds - 1 / FPS, rung.lookahead.phonemes)
+    assert any(count < frames_before(final_until(spans[: index + 1], sooner), OFF_GRID_FPS)
+               for index, count in enumerate(emitted)), rung.name
+
+
+def test_the_synthesizer_takes_max_tile_and_smoothing_from_the_request(
+        model: AnimeGraphModel) -> None:
+    spans = make_spans(np.random.default_rng(7), 20)
+    for rung in model.fidelity_ladder():
+        synthesizer = model.start(fps=FPS, **rung.options)
+        assert synthesizer.options.max_tile == rung.options["max_tile"]
+        assert synthesizer.half_width == (H if rung.options.get("smooth", True) else 0)
+        synthesizer.feed(spans)
+        synthesizer.finish()
+        tile = rung.options["max_tile"]
+        assert synthesizer.stats["tiles"] >= -(-len(synthesizer.nodes) // tile)
+    with pytest.raises(InvalidRequestError):
+        model.greedy_lookahead(0, smooth=True)

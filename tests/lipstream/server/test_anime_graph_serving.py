@@ -1,0 +1,120 @@
+"""The server with the real anime-graph model: its fidelity ladder under latency budgets, and
+per-phoneme emotion carried from the wire to the engine."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from lipstream.engines.base import frames_before
+from lipstream.server.budget import lookahead_ms
+from lipstream.server.catalog import Catalog
+from lipstream_client import End, ErrorMessage, PhonemeItem, Phonemes, Ready, Start, decode, encode
+from tests.lipstream.server.test_session import frames_of, new_session, play
+
+ENGINE = "anime-graph"
+WORDS = [("sil", 0.0, 0.12), ("HH", 0.12, 0.2), ("AH0", 0.2, 0.27), ("L", 0.27, 0.35),
+         ("OW1", 0.35, 0.55), ("W", 0.55, 0.63), ("ER1", 0.63, 0.78), ("L", 0.78, 0.85),
+         ("D", 0.85, 0.92), ("sil", 0.92, 1.1), ("M", 1.1, 1.2), ("AA1", 1.2, 1.45),
+         ("M", 1.45, 1.55), ("sil", 1.55, 1.8)]
+
+
+def test_the_catalog_measures_every_rung_of_the_declared_ladder(catalog: Catalog) -> None:
+    model = catalog.model(ENGINE, "demo")
+    ladder = catalog.ladder(model)
+    assert [estimate.rung for estimate in ladder] == list(model.fidelity_ladder())
+    assert len(ladder) >= 4
+    max_phoneme_ms = catalog.settings.max_phoneme_ms
+    for estimate in ladder:
+        assert estimate.lookahead_ms == pytest.approx(lookahead_ms(estimate.rung, max_phoneme_ms))
+    worst = [estimate.worst_case_ms for estimate in ladder]
+    assert worst == sorted(worst, reverse=True) and len(set(worst)) == len(worst)
+
+
+@pytest.mark.parametrize("lower", [1, 2, 3, 4])
+def test_a_budget_between_two_rungs_gets_the_lower_one(catalog: Catalog, lower: int) -> None:
+    model = catalog.model(ENGINE, "demo")
+    ladder = catalog.ladder(model)
+    if lower >= len(ladder):
+        pytest.skip(f"the demo model's ladder has {len(ladder)} rungs")
+    chosen = ladder[lower]
+    budget = 0.5 * (ladder[lower - 1].worst_case_ms + chosen.worst_case_ms)
+    session = new_session(catalog)
+    out = play(session, Start("a", ENGINE, "demo", fps=60, latency_budget_ms=budget,
+                              options={"max_tile": 50, "graph": "unclustered"}),
+               Phonemes("a", tuple(PhonemeItem(*word) for word in WORDS)), End("a"))
+    ready = out[0]
+    assert isinstance(ready, Ready)
+    assert (ready.fidelity, ready.lookahead_ms) == (chosen.rung.name, chosen.lookahead_ms)
+    # The rung's options override the client's (max_tile), the client's others stay.
+    assert ready.options == {"graph": "unclustered", **chosen.rung.options}
+    expected = model.synthesize(WORDS, fps=60, **ready.options).frames
+    np.testing.assert_array_equal(frames_of(out), expected)
+
+
+def test_without_a_budget_the_top_rung_serves(catalog: Catalog) -> None:
+    model = catalog.model(ENGINE, "demo")
+    top = catalog.ladder(model)[0]
+    [ready] = play(new_session(catalog), Start("a", ENGINE, "demo"))
+    assert isinstance(ready, Ready)
+    assert (ready.fidelity, ready.lookahead_ms) == (top.rung.name, top.lookahead_ms)
+    assert ready.options == dict(top.rung.options)
+
+
+def test_a_budget_below_the_lowest_rung_names_the_smallest_feasible_one(
+        catalog: Catalog) -> None:
+    model = catalog.model(ENGINE, "demo")
+    lowest = catalog.ladder(model)[-1]
+    smallest = math.ceil(lowest.worst_case_ms)
+    session = new_session(catalog)
+    [error] = play(session, Start("a", ENGINE, "demo", latency_budget_ms=smallest - 1.0))
+    assert isinstance(error, ErrorMessage)
+    assert (error.code, error.fatal, error.details) == ("budget_infeasible", True,
+                                                        {"min_budget_ms": smallest})
+    [ready] = play(session, Start("a", ENGINE, "demo", latency_budget_ms=float(smallest)))
+    assert isinstance(ready, Ready) and ready.fidelity == lowest.rung.name
+
+
+def test_each_phonemes_emotion_reaches_the_engine(catalog: Catalog) -> None:
+    model = catalog.model(ENGINE, "demo")
+    emotions = ["happy"] * 5 + [None] * 4 + ["sad"] * 5
+    items = tuple(PhonemeItem(*word, emotion) for word, emotion in zip(WORDS, emotions))
+    # Over the wire and back, in three messages, with the request's own emotion angry.
+    messages = [decode(encode(Phonemes("a", items[low:high]), "msgpack"), "msgpack",
+                       sender="client") for low, high in [(0, 3), (3, 10), (10, 14)]]
+    out = play(new_session(catalog), Start("a", ENGINE, "demo", fps=50, emotion="angry"),
+               *messages, End("a"))
+    spans = [(*word, emotion) for word, emotion in zip(WORDS, emotions)]
+    expected = model.synthesize(spans, fps=50, emotion="angry").frames
+    streamed = frames_of(out)
+    np.testing.assert_array_equal(streamed, expected)
+    all_angry = model.synthesize(WORDS, fps=50, emotion="angry").frames
+    assert not np.allclose(streamed, all_angry, atol=1e-3)
+    # The middle phonemes name no emotion, so they are angry, like the request.
+    views = model.start(fps=50, emotion="angry")
+    views.feed(spans)
+    assert [searcher.view.name for searcher in views.searchers] == \
+        ["happy"] * 5 + ["angry"] * 4 + ["sad"] * 5
+
+
+def test_the_emotion_of_each_phoneme_changes_the_frames_of_its_run_only(
+        catalog: Catalog) -> None:
+    model = catalog.model(ENGINE, "demo")
+    first = len(WORDS) - 5
+    spans = [(*word, "happy" if index >= first else None) for index, word in enumerate(WORDS)]
+    out = play(new_session(catalog), Start("a", ENGINE, "demo", fps=60, emotion="sad"),
+               Phonemes("a", tuple(PhonemeItem(*span) for span in spans)), End("a"))
+    assert not [message for message in out if isinstance(message, ErrorMessage)]
+    mixed = frames_of(out)
+    # The sad run is what sad alone gives, up to its last fragment (which the join into the
+    # happy run reshapes) less the smoothing and interpolation reach.
+    sad_alone = model.synthesize(WORDS[:first], fps=60, emotion="sad").frames
+    reach = (model.half_width + 1) / model.fps
+    settled = frames_before(WORDS[first - 1][1] - reach, 60.0)
+    assert settled > 20
+    np.testing.assert_array_equal(mixed[:settled], sad_alone[:settled])
+    all_sad = model.synthesize(WORDS, fps=60, emotion="sad").frames
+    assert not np.allclose(mixed[frames_before(WORDS[first][2], 60.0):],
+                           all_sad[frames_before(WORDS[first][2], 60.0):], atol=1e-3)
