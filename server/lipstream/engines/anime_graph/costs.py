@@ -115,7 +115,7 @@ def pose_jump(before: int, after: int, last: np.ndarray, first: np.ndarray,
     return math.sqrt(total)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=True)
 def run_costs(starts: np.ndarray, length: int, previous: int, use_audio: bool,
               query_summaries: np.ndarray, summaries: np.ndarray, last: np.ndarray,
               first: np.ndarray, successor: np.ndarray) -> np.ndarray:

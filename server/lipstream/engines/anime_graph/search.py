@@ -115,7 +115,8 @@ class SuffixMatcher:
             poses.first, poses.successor)
         if len(nodes) < len(labels):
             _missing(query, start + len(nodes))
-        return np.split(nodes, ends[:-1])
+        bounds = [0, *ends.tolist()]
+        return [nodes[low:high] for low, high in zip(bounds, bounds[1:])]
 
 
 def _missing(query: Sequence[int], position: int) -> None:

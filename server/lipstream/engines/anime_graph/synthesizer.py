@@ -114,7 +114,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         self.nodes: list[int] = []
         self.audio: RequestAudio | None = None
         self.audio_mode: bool | None = None
-        self.summaries: dict[int, np.ndarray] = {}
+        self.summaries: _Rows | None = None
         self.track = MotionTrack(model.animes)
         self.half_width = model.half_width if options.smooth else 0
         self.kernels = model.kernels if options.smooth else np.ones((model.n_components, 1))
@@ -180,18 +180,20 @@ class AnimeGraphSynthesizer(Synthesizer):
         return self.audio is None or self.audio.ready(until_s, self.finished)
 
     def _ranking(self, graph: SearchGraph, start: int, stop: int) -> Ranking:
-        """Costs over ``graph`` for query positions ``start:stop`` (audio summaries computed
-        once each)."""
+        """Costs over ``graph`` for query positions ``start:stop``: audio summaries are computed
+        once each, in order, so those known are always positions 0..count-1."""
         if self.audio is None:
             return Ranking(graph, self.model.poses, self.model.summaries)
-        fresh = [position for position in range(start, stop) if position not in self.summaries]
-        if fresh:
+        if self.summaries is None:
+            self.summaries = _Rows(self.model.summaries.shape[1])
+        have = self.summaries.count
+        if stop > have:
             curves = self.audio.curves(self.spans[stop - 1].end)
-            starts = np.array([self.spans[position].start for position in fresh])
-            ends = np.array([self.spans[position].end for position in fresh])
-            rows = summarize(curves, np.zeros(len(fresh), dtype=np.int64), starts, ends)
-            self.summaries.update(zip(fresh, rows))
-        return Ranking(graph, self.model.poses, self.model.summaries, self.summaries)
+            starts = np.array([span.start for span in self.spans[have:stop]])
+            ends = np.array([span.end for span in self.spans[have:stop]])
+            self.summaries.extend(summarize(curves, np.zeros(stop - have, dtype=np.int64),
+                                            starts, ends))
+        return Ranking(graph, self.model.poses, self.model.summaries, self.summaries.view())
 
     def _run_stop(self, start: int) -> int:
         """One past the last position of the run holding ``start``, as far as it is known."""
