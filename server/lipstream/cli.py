@@ -54,6 +54,7 @@ def _synth(args: argparse.Namespace, settings: Settings) -> None:
 
 def _serve(args: argparse.Namespace, settings: Settings) -> None:
     from .models import model_dirs
+    from .server.metrics import multiprocess_directory
     from .server.runner import serve
     from .training import DEMO_MODELS_DIR, build_demo
 
@@ -67,8 +68,9 @@ def _serve(args: argparse.Namespace, settings: Settings) -> None:
         workers=args.workers or settings.server.workers,
         log_level=args.log_level or settings.server.log_level,
     )
-    serve(models.resolve(), args.host or settings.host,
-          settings.port if args.port is None else args.port, server)
+    with multiprocess_directory(server.workers):
+        serve(models.resolve(), args.host or settings.host,
+              settings.port if args.port is None else args.port, server)
 
 
 def _inspect(args: argparse.Namespace, settings: Settings) -> None:

@@ -55,11 +55,14 @@ class Lookahead:
     The frame at time t is final once the input covers ``t + seconds`` and
     holds at least ``phonemes`` whole spans after the span containing
     ``t + seconds``. With a phoneme count the wait is bounded by phoneme
-    durations, so servers budget it with a maximum phoneme duration.
+    durations, so servers budget it with a maximum phoneme duration. A request
+    that carries audio also waits until the audio reaches ``audio_seconds``
+    past the end of that input (feature windows centred near the end).
     """
 
     seconds: float = 0.0
     phonemes: int = 0
+    audio_seconds: float = 0.0
 
 
 @dataclass(frozen=True)

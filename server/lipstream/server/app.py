@@ -29,7 +29,7 @@ from ..models import ModelRegistry
 from . import openapi
 from .catalog import Catalog
 from .lifecycle import Lifecycle, install_drain_on_signals
-from .metrics import Metrics
+from .metrics import Metrics, forget_this_process
 from .rest import synthesize
 from .state import ServerState
 from .websocket import stream_endpoint
@@ -51,7 +51,7 @@ def create_app(models_path: Path, settings: ServerSettings | None = None) -> Fas
     the ``LIPSTREAM_*`` environment)."""
     settings = settings or load_server_settings()
     metrics = Metrics()
-    lifecycle = Lifecycle(settings.max_sessions)
+    lifecycle = Lifecycle(settings.max_sessions, on_drain=lambda: metrics.draining.set(1))
 
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[LifespanState]:
@@ -71,6 +71,7 @@ def create_app(models_path: Path, settings: ServerSettings | None = None) -> Fas
             restore_signals()
             server.loaded = False
             executor.shutdown(wait=False, cancel_futures=True)
+            forget_this_process()
 
     app = FastAPI(title="lipstream", version=__version__, lifespan=lifespan,
                   description="Real-time lip sync: phoneme-aligned speech in, facial control "
@@ -117,7 +118,6 @@ def create_app(models_path: Path, settings: ServerSettings | None = None) -> Fas
     @app.get("/metrics", response_class=Response)
     async def metrics_route(request: Request) -> Response:
         """Prometheus text exposition."""
-        metrics.draining.set(1 if lifecycle.draining else 0)
         body, content_type = metrics.render()
         return Response(body, media_type=content_type)
 

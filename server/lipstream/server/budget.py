@@ -55,8 +55,11 @@ class BudgetInfeasible(LipstreamError):
 
 
 def lookahead_ms(rung: Rung, max_phoneme_ms: float) -> float:
-    """The longest time a frame of ``rung`` waits for input arriving in real time."""
-    return 1000.0 * rung.lookahead.seconds + rung.lookahead.phonemes * max_phoneme_ms
+    """The longest time a frame of ``rung`` waits for input arriving in real time (audio
+    included: ``start`` does not say whether audio will follow)."""
+    lookahead = rung.lookahead
+    return (1000.0 * (lookahead.seconds + lookahead.audio_seconds)
+            + lookahead.phonemes * max_phoneme_ms)
 
 
 def estimate(rung: Rung, max_phoneme_ms: float, compute_ms: float, margin_ms: float,

@@ -39,8 +39,10 @@ class Drainable(Protocol):
 class Lifecycle:
     """The open connections of a process, the session cap, and the drain."""
 
-    def __init__(self, max_sessions: int) -> None:
+    def __init__(self, max_sessions: int, on_drain: Callable[[], None] | None = None) -> None:
+        """``on_drain`` runs once, when the drain begins (e.g. to publish it as a metric)."""
         self.max_sessions = max_sessions
+        self.on_drain = on_drain
         self.connections: set[Drainable] = set()
         self.draining = False
         self._empty = asyncio.Event()
@@ -64,6 +66,8 @@ class Lifecycle:
         if self.draining:
             return
         self.draining = True
+        if self.on_drain is not None:
+            self.on_drain()
         logger.info("draining %d connection(s) for shutdown", len(self.connections))
         for connection in list(self.connections):
             connection.drain()

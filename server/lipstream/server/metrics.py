@@ -3,14 +3,30 @@
 Sketch: each app owns a ``CollectorRegistry`` (so several apps in one
 process, as in tests, do not collide). Labels have bounded values only: the
 loaded engines, the protocol's error codes, the ten message types and the
-request outcomes. With ``--workers N`` each worker counts its own traffic;
-set ``PROMETHEUS_MULTIPROC_DIR`` (prometheus_client's multiprocess mode) to
-have every worker's ``/metrics`` serve the sum over all workers.
+request outcomes.
+
+Several workers (``--workers N``) share one sum through prometheus_client's
+multiprocess mode: with ``PROMETHEUS_MULTIPROC_DIR`` set before the workers
+import prometheus_client, every worker writes its values to memory-mapped
+files named by its pid there, and each ``/metrics`` merges all files.
+Counters and histograms add up over every worker that ever ran (so totals
+never go back when a worker is replaced); the gauges are ``live*`` modes,
+which count only workers still running. ``multiprocess_directory`` (for the
+process that starts the workers) empties a given directory, or makes a
+private one when several workers need it and none is given; a worker
+forgets its own gauges when it stops (``forget_this_process``), and
+``render`` forgets those of workers that died without stopping (killed, or
+crashed).
 """
 
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 from prometheus_client import (
@@ -22,11 +38,12 @@ from prometheus_client import (
     generate_latest,
 )
 from prometheus_client.metrics import MetricWrapperBase
-from prometheus_client.multiprocess import MultiProcessCollector
+from prometheus_client.multiprocess import MultiProcessCollector, mark_process_dead
 
 LATENCY_BUCKETS_S = (0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0,
                      10.0)
 MULTIPROCESS_ENV = "PROMETHEUS_MULTIPROC_DIR"
+LIVE_GAUGE_FILES = "gauge_live*_*.db"
 
 
 class Metrics:
@@ -41,8 +58,9 @@ class Metrics:
         self.requests_active = Gauge("lipstream_requests_active",
                                      "Requests between ready and done.", registry=registry,
                                      multiprocess_mode="livesum")
-        self.draining = Gauge("lipstream_draining", "1 while the process drains for shutdown.",
-                              registry=registry, multiprocess_mode="max")
+        self.draining = Gauge("lipstream_draining", "1 while the process (with several "
+                              "workers: any worker) drains for shutdown.",
+                              registry=registry, multiprocess_mode="livemax")
         self.requests = Counter("lipstream_requests", "Finished requests by how they ended "
                                 "(end, cancel, interrupt, error).", ["engine", "outcome"],
                                 registry=registry)
@@ -72,9 +90,72 @@ class Metrics:
         return child
 
     def render(self) -> tuple[bytes, str]:
-        """The exposition text and its content type."""
-        if os.environ.get(MULTIPROCESS_ENV):
-            combined = CollectorRegistry()
-            MultiProcessCollector(combined)
-            return generate_latest(combined), CONTENT_TYPE_LATEST
-        return generate_latest(self.registry), CONTENT_TYPE_LATEST
+        """The exposition text and its content type: with a multiprocess directory, the sum
+        over every worker's files; else this process's registry."""
+        directory = multiprocess_dir()
+        if directory is None:
+            return generate_latest(self.registry), CONTENT_TYPE_LATEST
+        forget_dead_processes(directory)
+        combined = CollectorRegistry()
+        MultiProcessCollector(combined, path=str(directory))
+        return generate_latest(combined), CONTENT_TYPE_LATEST
+
+
+def multiprocess_dir() -> Path | None:
+    """``PROMETHEUS_MULTIPROC_DIR``, or None when metrics stay in the process."""
+    value = os.environ.get(MULTIPROCESS_ENV)
+    return Path(value) if value else None
+
+
+def forget_this_process() -> None:
+    """Drop this process's live gauges from the shared sum (when it stops serving)."""
+    directory = multiprocess_dir()
+    if directory is not None:
+        mark_process_dead(os.getpid(), str(directory))
+
+
+def forget_dead_processes(directory: Path) -> None:
+    """Drop the live gauges of processes that no longer exist (killed or crashed workers
+    never ran ``forget_this_process``; their sessions would count forever)."""
+    for path in directory.glob(LIVE_GAUGE_FILES):
+        pid = path.stem.rsplit("_", 1)[-1]
+        if pid.isdigit() and not _running(int(pid)):
+            mark_process_dead(int(pid), str(directory))
+
+
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True  # exists, owned by someone else
+    return True
+
+
+@contextmanager
+def multiprocess_directory(workers: int) -> Iterator[Path | None]:
+    """Prepare the multiprocess directory before the workers start, for the block's length.
+
+    A ``PROMETHEUS_MULTIPROC_DIR`` that is set is created if missing and emptied of its
+    ``*.db`` files (values of an earlier run would add to this one's). Unset, with
+    ``workers`` > 1, a private temporary directory is made, exported for the workers
+    (which inherit the environment) and removed afterwards. Unset with one worker: None,
+    the metrics stay in the process."""
+    given = multiprocess_dir()
+    if given is not None:
+        given.mkdir(parents=True, exist_ok=True)
+        for stale in given.glob("*.db"):
+            stale.unlink(missing_ok=True)
+        yield given
+        return
+    if workers <= 1:
+        yield None
+        return
+    private = Path(tempfile.mkdtemp(prefix="lipstream-metrics-"))
+    os.environ[MULTIPROCESS_ENV] = str(private)
+    try:
+        yield private
+    finally:
+        os.environ.pop(MULTIPROCESS_ENV, None)
+        shutil.rmtree(private, ignore_errors=True)

@@ -87,7 +87,8 @@ class AnimeGraphModel(Model):
         spans after it (the tile cap, or a PQ window): the worst over every request option
         but an uncapped tile; ``fidelity_ladder`` gives each greedy rung's own."""
         return Lookahead(seconds=(self.half_width + 1) / self.fps,
-                         phonemes=max(self.max_tile, MAX_PQ_WINDOW))
+                         phonemes=max(self.max_tile, MAX_PQ_WINDOW),
+                         audio_seconds=self.audio_wait_s)
 
     def greedy_lookahead(self, max_tile: int, smooth: bool) -> Lookahead:
         """What a frame waits for under GreedyMatching with tiles of at most ``max_tile``
@@ -97,7 +98,17 @@ class AnimeGraphModel(Model):
             raise InvalidRequestError(f"a bounded lookahead needs max_tile >= 1, got "
                                       f"{max_tile}", where="options.max_tile")
         half_width = self.half_width if smooth else 0
-        return Lookahead(seconds=(half_width + 1) / self.fps, phonemes=max_tile)
+        return Lookahead(seconds=(half_width + 1) / self.fps, phonemes=max_tile,
+                         audio_seconds=self.audio_wait_s)
+
+    @property
+    def audio_wait_s(self) -> float:
+        """How far past a span's end the audio must reach before the span's MFCC frames are
+        final (``RequestAudio.ready``): two frame steps plus half a window; 0 without audio
+        features."""
+        if not self.has_audio:
+            return 0.0
+        return 2.0 / self.mfcc.rate + self.mfcc.window_s / 2.0
 
     def fidelity_ladder(self) -> tuple[Rung, ...]:
         """GreedyMatching with ever shorter tiles, the model's ``max_tile`` first (fewest

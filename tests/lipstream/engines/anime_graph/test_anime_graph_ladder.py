@@ -7,12 +7,17 @@ from itertools import pairwise
 import numpy as np
 import pytest
 
+from lipstream.audio import Audio
 from lipstream.engines.anime_graph import AnimeGraphEngine, AnimeGraphModel
 from lipstream.engines.base import Lookahead, Rung, final_until, frames_before
 from lipstream.errors import InvalidRequestError
 from lipstream.server.budget import lookahead_ms
 from lipstream.timeline import PhonemeSpan
-from tests.lipstream.engines.anime_graph.anime_synthetic import make_corpus, make_spans
+from tests.lipstream.engines.anime_graph.anime_synthetic import (
+    make_corpus,
+    make_spans,
+    render_audio,
+)
 
 FPS = 120.0  # the corpus's rate, so output frames sit on the model grid
 OFF_GRID_FPS = 97.0  # frames between model samples, which interpolation waits one more for
@@ -142,3 +147,41 @@ def test_the_synthesizer_takes_max_tile_and_smoothing_from_the_request(
         assert synthesizer.stats["tiles"] >= -(-len(synthesizer.nodes) // tile)
     with pytest.raises(InvalidRequestError):
         model.greedy_lookahead(0, smooth=True)
+
+
+@pytest.fixture(scope="module")
+def audio_model() -> AnimeGraphModel:
+    return AnimeGraphEngine(clusters=0).fit(make_corpus(seed=4, n_utterances=16,
+                                                        length=(10, 14)))
+
+
+def _stream_with_audio(model: AnimeGraphModel, spans: list[PhonemeSpan], audio: Audio,
+                       reach_s: float, options: dict) -> list[int]:
+    """Frames out after each span is fed with the audio up to its end + ``reach_s``."""
+    synthesizer = model.start(fps=FPS, **options)
+    rate, sent, emitted = audio.sample_rate, 0, [0]
+    for span in spans:
+        until = min(len(audio.samples), round((span.end + reach_s) * rate))
+        synthesizer.feed([span], Audio(audio.samples[sent:until], rate))
+        sent = until
+        emitted.append(emitted[-1] + len(synthesizer.frames()))
+    return emitted[1:]
+
+
+@pytest.mark.parametrize("rung_index", [0, 3, 4])
+def test_audio_that_reaches_the_declared_wait_releases_every_promised_frame(
+        audio_model: AnimeGraphModel, rung_index: int) -> None:
+    rung = audio_model.fidelity_ladder()[rung_index]
+    wait = rung.lookahead.audio_seconds
+    assert wait == pytest.approx(2 / 100 + 0.025 / 2)  # MFCC: two 10 ms steps, half a window
+    spans = make_spans(np.random.default_rng(8), 30)
+    audio = render_audio(spans + [PhonemeSpan("sil", spans[-1].end, spans[-1].end + 1.0)],
+                         np.random.default_rng(9))
+    emitted = _stream_with_audio(audio_model, spans, audio, wait, dict(rung.options))
+    for index, count in enumerate(emitted):
+        assert count >= frames_before(final_until(spans[: index + 1], rung.lookahead), FPS)
+    if rung.name == "greedy_tile1_unsmoothed":
+        # Its frames wait for the very next one-phoneme tile, which waits for its audio.
+        short = _stream_with_audio(audio_model, spans, audio, wait - 0.011, dict(rung.options))
+        assert any(count < frames_before(final_until(spans[: index + 1], rung.lookahead), FPS)
+                   for index, count in enumerate(short)), "the declared audio wait is not needed"
