@@ -7,7 +7,10 @@ to warm up and then ``CALIBRATION_PASSES`` times measured. The slowest
 single call over the measured passes is the rung's compute time (it enters
 the latency estimate), and the total time divided by the phonemes is its
 per-phoneme cost (which decides whether a message is synthesized inline or
-in the thread pool).
+in the thread pool). An engine that uses audio is measured a second time
+with a calibration signal fed alongside the phonemes (audio features, DTW),
+and the costlier of the two counts: ``start`` does not say whether audio
+will follow.
 """
 
 from __future__ import annotations
@@ -15,6 +18,9 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
+import numpy as np
+
+from ..audio import Audio
 from ..engines.base import Model, Rung, SynthesisRequest
 from ..phonemes import ARPABET
 from ..timeline import PhonemeSpan
@@ -23,6 +29,7 @@ CALIBRATION_PHONEMES = 48
 CALIBRATION_PASSES = 2
 CALIBRATION_FPS = 60.0
 PHONEME_S = 0.08
+CALIBRATION_RATE = 16_000
 
 
 @dataclass(frozen=True)
@@ -38,27 +45,57 @@ def calibration_spans() -> list[PhonemeSpan]:
             for index in range(CALIBRATION_PHONEMES)]
 
 
+def calibration_audio(spans: list[PhonemeSpan]) -> Audio:
+    """A voiced-like signal under ``spans``: each span a tone with a harmonic, its pitch
+    cycling with the phoneme, over faint noise (fixed seed)."""
+    n_samples = round(spans[-1].end * CALIBRATION_RATE)
+    times = np.arange(n_samples) / CALIBRATION_RATE
+    owner = np.minimum((times / PHONEME_S).astype(np.int64), len(spans) - 1)
+    pitch = 110.0 + 15.0 * (owner % 12)
+    tone = 0.3 * np.sin(2 * np.pi * pitch * times) + 0.1 * np.sin(2 * np.pi * 2.7 * pitch * times)
+    noise = np.random.default_rng(0).normal(0.0, 0.003, n_samples)
+    return Audio((tone + noise).astype(np.float32), CALIBRATION_RATE)
+
+
 def measure(model: Model, rung: Rung) -> ComputeCost:
-    """Stream the calibration utterance through ``rung`` and time every call."""
+    """Stream the calibration utterance through ``rung`` and time every call (with the
+    calibration audio too when the engine uses audio; the costlier run counts)."""
     spans = calibration_spans()
+    audio = calibration_audio(spans) if model.uses_audio else None
+    costs = [_measure_stream(model, rung, spans, None)]
+    if audio is not None:
+        costs.append(_measure_stream(model, rung, spans, audio))
+    return ComputeCost(max(cost.max_call_ms for cost in costs),
+                       max(cost.per_phoneme_ms for cost in costs))
+
+
+def _measure_stream(model: Model, rung: Rung, spans: list[PhonemeSpan],
+                    audio: Audio | None) -> ComputeCost:
     request = SynthesisRequest(fps=CALIBRATION_FPS, options=dict(rung.options))
-    _stream(model, request, spans)
+    _stream(model, request, spans, audio)
     slowest, total = 0.0, 0.0
     for _ in range(CALIBRATION_PASSES):
-        calls = _stream(model, request, spans)
+        calls = _stream(model, request, spans, audio)
         slowest = max(slowest, max(calls))
         total += sum(calls)
     per_phoneme = total / (CALIBRATION_PASSES * len(spans))
     return ComputeCost(1000.0 * slowest, 1000.0 * per_phoneme)
 
 
-def _stream(model: Model, request: SynthesisRequest, spans: list[PhonemeSpan]) -> list[float]:
-    """Seconds spent in each call of one streamed pass."""
+def _stream(model: Model, request: SynthesisRequest, spans: list[PhonemeSpan],
+            audio: Audio | None) -> list[float]:
+    """Seconds spent in each call of one streamed pass; with ``audio``, each call also
+    feeds the audio up to its span's end."""
     synthesizer = model.start(request)
     calls: list[float] = []
+    sent = 0
     for span in spans:
+        chunk = None
+        if audio is not None:
+            until = min(len(audio.samples), round(span.end * audio.sample_rate))
+            chunk, sent = Audio(audio.samples[sent:until], audio.sample_rate), until
         started = time.perf_counter()
-        synthesizer.feed([span])
+        synthesizer.feed([span], chunk)
         synthesizer.frames()
         calls.append(time.perf_counter() - started)
     started = time.perf_counter()

@@ -88,3 +88,42 @@ def test_rest_pose_of_viseme_lerp_is_its_silence_key_pose(catalog: Catalog) -> N
     expected = model.poses_[silence_row]  # type: ignore[attr-defined]
     for emotion in (None, "happy"):
         np.testing.assert_allclose(catalog.rest_pose(model, emotion), expected, atol=1e-7)
+
+
+class _RecordingSynthesizer:
+    def __init__(self, fed: list) -> None:  # type: ignore[type-arg]
+        self.fed = fed
+
+    def feed(self, spans: list, audio: object = None) -> None:  # type: ignore[type-arg]
+        self.fed.append((spans[0], audio))
+
+    def frames(self) -> None:
+        return None
+
+    def finish(self) -> None:
+        return None
+
+
+class _AudioEngineModel:
+    """Just what ``measure`` touches of a model whose engine uses audio."""
+
+    uses_audio = True
+
+    def __init__(self) -> None:
+        self.passes: list[list] = []  # type: ignore[type-arg]
+
+    def start(self, request: object) -> _RecordingSynthesizer:
+        self.passes.append([])
+        return _RecordingSynthesizer(self.passes[-1])
+
+
+def test_an_engine_that_uses_audio_is_also_calibrated_with_audio_under_each_span() -> None:
+    model = _AudioEngineModel()
+    measure(model, Rung("default", Lookahead(phonemes=1)))  # type: ignore[arg-type]
+    with_audio = [fed for fed in model.passes if fed[0][1] is not None]
+    without = [fed for fed in model.passes if fed[0][1] is None]
+    assert len(with_audio) == len(without) == 3  # warm-up + CALIBRATION_PASSES each
+    for fed in with_audio:
+        ends = [round(span.end * audio.sample_rate) for span, audio in fed]
+        assert [len(audio.samples) for _, audio in fed] == np.diff([0, *ends]).tolist()
+        assert all(np.abs(audio.samples).max() > 0.2 for _, audio in fed)  # voiced, not silence
