@@ -12,13 +12,16 @@ recording). A matching's cost is the sum over its nodes and joins.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
 
 from .graph import SearchGraph
+
+Labels = Sequence[int] | np.ndarray
+"""A query: phoneme labels, (l,)."""
 
 
 @dataclass(frozen=True)
@@ -116,13 +119,16 @@ def pose_jump(before: int, after: int, last: np.ndarray, first: np.ndarray,
 
 
 @njit(cache=True, fastmath=True)
-def run_costs(starts: np.ndarray, length: int, previous: int, use_audio: bool,
-              query_summaries: np.ndarray, summaries: np.ndarray, last: np.ndarray,
-              first: np.ndarray, successor: np.ndarray) -> np.ndarray:
-    """Cost (S,) of showing the recording run starts[s] .. starts[s] + length - 1 (anime
-    ids) at ``length`` query positions with audio summaries (length, D): the audio
-    distances, or without audio the discontinuity of the join from ``previous`` (>= 0)."""
-    costs = np.zeros(len(starts))
+def cheapest_run(starts: np.ndarray, length: int, previous: int, use_audio: bool,
+                 query_summaries: np.ndarray, summaries: np.ndarray, last: np.ndarray,
+                 first: np.ndarray, successor: np.ndarray) -> int:
+    """Index into ``starts`` of the cheapest recording run starts[s] .. starts[s] + length - 1
+    (anime ids) shown at ``length`` query positions with audio summaries (length, D): the
+    least sum of audio distances, or without audio the least pose jump from ``previous``
+    (>= 0; none: every run costs 0); the first such on ties. A run is dropped as soon as
+    its partial sum exceeds the best total (distances are never negative), which leaves
+    the answer unchanged and skips most summary rows."""
+    best, best_cost = 0, math.inf
     for index in range(len(starts)):
         start = starts[index]
         total = 0.0
@@ -134,7 +140,10 @@ def run_costs(starts: np.ndarray, length: int, previous: int, use_audio: bool,
                     difference = summaries[anime, dim] - query_summaries[offset, dim]
                     distance += difference * difference
                 total += math.sqrt(distance)
+                if total > best_cost:
+                    break
         elif previous >= 0:
             total = pose_jump(previous, start, last, first, successor)
-        costs[index] = total
-    return costs
+        if total < best_cost:
+            best, best_cost = index, total
+    return best

@@ -49,7 +49,7 @@ class SuffixIndex:
     def n_states(self) -> int:
         return int(self.transitions.shape[0])
 
-    def match(self, query: Sequence[int], start: int, stop: int,
+    def match(self, query: Sequence[int] | np.ndarray, start: int, stop: int,
               cap: int | None = None) -> tuple[int, int]:
         """Longest prefix of ``query[start:stop]`` (at most ``cap`` long) that occurs in the
         corpus: (length, automaton state after reading it)."""

@@ -16,13 +16,12 @@ memory stays O(h * candidates).
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ...errors import LipstreamError
-from .costs import Ranking
+from .costs import Labels, Ranking
 from .graph import SearchGraph
 
 _TOLERANCE = 1e-9
@@ -84,7 +83,7 @@ def _dive(graph: SearchGraph, ranking: Ranking, candidates: list[np.ndarray],
     return path, jumps, cost
 
 
-def pq_window(graph: SearchGraph, ranking: Ranking, query: Sequence[int], start: int,
+def pq_window(graph: SearchGraph, ranking: Ranking, query: Labels, start: int,
               stop: int, anchor: int | None = None, deadline: float | None = None) -> WindowResult:
     """PQ-DFS over ``query[start:stop]`` after the committed node ``anchor``; raises
     ``SearchTimeout`` past ``deadline`` (a ``time.perf_counter`` value)."""
@@ -133,7 +132,7 @@ def pq_window(graph: SearchGraph, ranking: Ranking, query: Sequence[int], start:
     return WindowResult(np.asarray(best_path, dtype=np.int64), best_jumps, best_cost, expanded)
 
 
-def pq_matching(graph: SearchGraph, ranking: Ranking, query: Sequence[int], window: int,
+def pq_matching(graph: SearchGraph, ranking: Ranking, query: Labels, window: int,
                 advance: int, anchor: int | None = None,
                 deadline: float | None = None) -> tuple[np.ndarray, int]:
     """PQ-Matching(h=window, h_q=advance) over the whole query: (nodes, partial paths

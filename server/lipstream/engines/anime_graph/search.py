@@ -26,13 +26,12 @@ exactly, while with a cap the jumps can exceed the minimum.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 
-from .costs import Ranking, run_costs
+from .costs import Labels, Ranking
 from .graph import AnimeGraph, SearchGraph
 from .index import SuffixIndex
 from .layered import cheapest, reach
@@ -52,16 +51,16 @@ class Match:
 
 
 class Matcher(Protocol):
-    def match(self, query: Sequence[int], start: int, stop: int, cap: int | None,
+    def match(self, query: Labels, start: int, stop: int, cap: int | None,
               previous: int | None = None) -> Match:
         """The run of ``query[start:stop]`` from ``start`` (at most ``cap`` long): the one
         continuing node ``previous`` when an edge allows, else the longest."""
 
-    def choose(self, match: Match, query: Sequence[int], previous: int | None,
+    def choose(self, match: Match, query: Labels, previous: int | None,
                ranking: Ranking) -> np.ndarray:
         """The best path spelling the run, as node ids (match.length,)."""
 
-    def tiles(self, query: Sequence[int], start: int, stop: int, cap: int | None,
+    def tiles(self, query: Labels, start: int, stop: int, cap: int | None,
               previous: int | None, ranking: Ranking,
               ranked_from: int | None = None) -> list[np.ndarray]:
         """GreedyMatching of ``query[start:stop]``: the tiles' node ids, in order. The first
@@ -77,7 +76,7 @@ class SuffixMatcher:
     graph: AnimeGraph
     limit: int | None = None
 
-    def match(self, query: Sequence[int], start: int, stop: int, cap: int | None,
+    def match(self, query: Labels, start: int, stop: int, cap: int | None,
               previous: int | None = None) -> Match:
         if previous is not None:
             following = int(self.graph.successor[previous])
@@ -87,20 +86,21 @@ class SuffixMatcher:
         length, state = self.index.match(query, start, stop, cap)
         return Match(start, length, state)
 
-    def choose(self, match: Match, query: Sequence[int], previous: int | None,
+    def choose(self, match: Match, query: Labels, previous: int | None,
                ranking: Ranking) -> np.ndarray:
         steps = np.arange(match.length)
         if match.continuation >= 0:
             return match.continuation + steps
         starts = self.index.occurrences(match.state, match.length, self.limit)
-        poses = ranking.poses
-        costs = run_costs(np.asarray(starts, dtype=np.int64), match.length,
-                          -1 if previous is None else previous, ranking.uses_audio,
-                          ranking.summaries_of(match.start, match.length),
-                          ranking.anime_summaries, poses.last, poses.first, poses.successor)
+        costs = np.zeros(len(starts))
+        for offset in range(match.length):
+            position = match.start + offset
+            costs += ranking.node_costs(starts + offset, position, int(query[position]))
+        if previous is not None:
+            costs += ranking.join_costs(np.full(len(starts), previous), starts)
         return int(starts[int(np.argmin(costs))]) + steps
 
-    def tiles(self, query: Sequence[int], start: int, stop: int, cap: int | None,
+    def tiles(self, query: Labels, start: int, stop: int, cap: int | None,
               previous: int | None, ranking: Ranking,
               ranked_from: int | None = None) -> list[np.ndarray]:
         labels = np.asarray(query[start:stop], dtype=np.int64)
@@ -119,12 +119,12 @@ class SuffixMatcher:
         return [nodes[low:high] for low, high in zip(bounds, bounds[1:])]
 
 
-def _missing(query: Sequence[int], position: int) -> None:
+def _missing(query: Labels, position: int) -> None:
     raise ValueError(f"phoneme {query[position]} at query position {position} "
                      "is not in the graph")
 
 
-def _spelled(graph: AnimeGraph, anime: int, query: Sequence[int], start: int, stop: int,
+def _spelled(graph: AnimeGraph, anime: int, query: Labels, start: int, stop: int,
              cap: int | None) -> int:
     """How far the recording from ``anime`` on reads ``query[start:stop]`` (at most ``cap``)."""
     length = 0
@@ -180,7 +180,7 @@ class LayeredMatcher:
                 return linked
         return np.flatnonzero(self.carries[:, label])
 
-    def match(self, query: Sequence[int], start: int, stop: int, cap: int | None,
+    def match(self, query: Labels, start: int, stop: int, cap: int | None,
               previous: int | None = None) -> Match:
         if start >= stop:
             return Match(start, 0)
@@ -194,7 +194,7 @@ class LayeredMatcher:
         return Match(start, len(offsets) - 1, layers=(states, offsets),
                      steps=((sources, targets),))
 
-    def choose(self, match: Match, query: Sequence[int], previous: int | None,
+    def choose(self, match: Match, query: Labels, previous: int | None,
                ranking: Ranking) -> np.ndarray:
         (states, offsets), ((sources, targets),) = match.layers, match.steps
         labels = np.asarray(query[match.start : match.start + match.length], dtype=np.int64)
@@ -206,7 +206,7 @@ class LayeredMatcher:
             self.motion, poses.last, poses.first, poses.successor))
 
 
-    def tiles(self, query: Sequence[int], start: int, stop: int, cap: int | None,
+    def tiles(self, query: Labels, start: int, stop: int, cap: int | None,
               previous: int | None, ranking: Ranking,
               ranked_from: int | None = None) -> list[np.ndarray]:
         return tiles_by_matches(self, query, start, stop, cap, previous, ranking, ranked_from)
@@ -218,7 +218,7 @@ def _csr_offsets(keys: np.ndarray, n_keys: int) -> np.ndarray:
     return offsets
 
 
-def tiles_by_matches(matcher: Matcher, query: Sequence[int], start: int, stop: int,
+def tiles_by_matches(matcher: Matcher, query: Labels, start: int, stop: int,
                      cap: int | None, previous: int | None, ranking: Ranking,
                      ranked_from: int | None = None) -> list[np.ndarray]:
     """Algorithm 2's loop, one ``match`` and ``choose`` per tile."""
@@ -236,7 +236,7 @@ def tiles_by_matches(matcher: Matcher, query: Sequence[int], start: int, stop: i
     return tiles
 
 
-def greedy_matching(matcher: Matcher, query: Sequence[int], ranking: Ranking,
+def greedy_matching(matcher: Matcher, query: Labels, ranking: Ranking,
                     cap: int | None = None, previous: int | None = None) -> list[np.ndarray]:
     """GreedyMatching over the whole query: the tiles' node ids, in order."""
     return matcher.tiles(query, 0, len(query), cap, previous, ranking)

@@ -6,7 +6,7 @@ the previous tile's recording continues (same labels onward) is taken as it
 is; otherwise the suffix automaton is read from its root one transition per
 phoneme, giving the longest run and the automaton state whose end-position
 range lists every occurrence. At most ``limit`` occurrences, spread evenly
-over the range, are ranked by ``costs.run_costs`` (audio distance, or the
+over the range, are ranked by ``costs.cheapest_run`` (audio distance, or the
 pose jump from the previous tile); the cheapest, then the lowest anime id,
 wins. A query of l phonemes costs O(l + tiles x ranked occurrences), whatever
 the corpus size, and one interpreter round trip.
@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .costs import run_costs
+from .costs import cheapest_run
 
 
 @njit(cache=True)
@@ -79,10 +79,9 @@ def greedy_tiles(query: np.ndarray, cap: int, previous: int, joined: int, limit:
             if length == 0:
                 break
             starts = _occurrences(state, length, limit, low, high, ends, text_anime)
-            costs = run_costs(starts, length, joined, use_audio,
-                              query_summaries[position : position + length], summaries, last,
-                              first, pose_successor)
-            chosen = starts[np.argmin(costs)]
+            chosen = starts[cheapest_run(starts, length, joined, use_audio,
+                                         query_summaries[position : position + length],
+                                         summaries, last, first, pose_successor)]
         for offset in range(length):
             nodes[position + offset] = chosen + offset
         position += length

@@ -110,7 +110,8 @@ class AnimeGraphSynthesizer(Synthesizer):
         self.spans: list[PhonemeSpan] = []
         self.searchers: list[_Searcher] = []
         self.run_starts: list[int] = []
-        self.query: list[int] = []
+        self._labels = np.zeros(64, dtype=np.int64)
+        self._n_labels = 0
         self.nodes: list[int] = []
         self.audio: RequestAudio | None = None
         self.audio_mode: bool | None = None
@@ -143,7 +144,18 @@ class AnimeGraphSynthesizer(Synthesizer):
                 self.run_starts.append(len(self.searchers))
             self.spans.append(span)
             self.searchers.append(searcher)
-            self.query.append(int(searcher.view.substitution[PHONEME_INDEX[span.phoneme]]))
+            self._append_label(int(searcher.view.substitution[PHONEME_INDEX[span.phoneme]]))
+
+    @property
+    def query(self) -> np.ndarray:
+        """The searched label of every span so far (n,) int64, each in its span's view."""
+        return self._labels[: self._n_labels]
+
+    def _append_label(self, label: int) -> None:
+        if self._n_labels == len(self._labels):
+            self._labels = np.concatenate([self._labels, np.zeros_like(self._labels)])
+        self._labels[self._n_labels] = label
+        self._n_labels += 1
 
     def _searcher_for(self, emotion: str | None) -> _Searcher:
         view = self.model.view_for(emotion, self.options)
@@ -354,7 +366,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         its view's, or across a change of view the whole corpus's."""
         view = self.searchers[position].view
         if self.searchers[position - 1].view is view:
-            return (self.query[position - 1], self.query[position]), view.pairs
+            return (int(self.query[position - 1]), int(self.query[position])), view.pairs
         whole = self.model.views[WHOLE]
         left, right = (int(whole.substitution[PHONEME_INDEX[self.spans[index].phoneme]])
                        for index in (position - 1, position))
