@@ -69,20 +69,29 @@ def _run(model: AnimeGraphModel, utterance: Utterance, audio: bool,
 
 def _greedy(model: AnimeGraphModel, utterance: Utterance, graph: str, audio: bool,
             repeats: int) -> dict[str, Any]:
-    """Uncapped greedy (the paper's algorithm) on ``graph``; search time as a median."""
+    """Uncapped greedy (the paper's algorithm) on ``graph``. ``search_ms``: the median of
+    ``repeats`` back-to-back searches of the sentence; ``search_ms_in_synthesis``: the
+    median search time inside ``repeats`` whole syntheses, where the rest of the work has
+    evicted the search's data from the CPU caches."""
     greedy = _run(model, utterance, audio, graph=graph, max_tile=0)
-    greedy["search_ms"] = _median_ms(
+    greedy["search_ms_in_synthesis"] = _median_ms(
         lambda: float(_run(model, utterance, audio, graph=graph, max_tile=0)["search_ms"]),
         repeats)
+    synthesizer = model.start(fps=model.fps, graph=graph, max_tile=0)
+    synthesizer.feed(utterance.phones, utterance.audio if audio else None)
+    synthesizer.finish()
+    greedy["search_ms"] = statistics.median(synthesizer.search_times_ms(repeats))
     return greedy
 
 
 def _table_row(model: AnimeGraphModel, utterance: Utterance, graph: str, audio: bool,
-               windows: Sequence[int], advance: int, budget_s: float, repeats: int,
-               unclustered_ms: float) -> dict[str, Any]:
-    """Greedy and PQ(h) on ``graph``; each PQ's speed-up over greedy on the same graph and,
-    as in the paper's Table 1, over greedy on the unclustered graph (``unclustered_ms``)."""
-    greedy = _greedy(model, utterance, graph, audio, repeats)
+               windows: Sequence[int], advance: int, budget_s: float,
+               greedy: dict[str, Any], unclustered: dict[str, Any]) -> dict[str, Any]:
+    """PQ(h) on ``graph`` beside ``greedy`` (``_greedy`` on that graph); each PQ's speed-up
+    over greedy on the same graph and, as in the paper's Table 1, over greedy on the
+    unclustered graph (``unclustered``)."""
+    unclustered_ms = unclustered["search_ms"]
+    unclustered_in_synthesis_ms = unclustered["search_ms_in_synthesis"]
     row: dict[str, Any] = {"phonemes": len(utterance.phones), "stem": utterance.stem,
                            "graph": graph, "greedy": greedy, "pq": {}}
     for window in windows:
@@ -95,6 +104,8 @@ def _table_row(model: AnimeGraphModel, utterance: Utterance, graph: str, audio: 
                      "rms": None}
         found["speedup"] = found["search_ms"] / max(greedy["search_ms"], 1e-9)
         found["speedup_over_unclustered_greedy"] = found["search_ms"] / max(unclustered_ms, 1e-9)
+        found["speedup_over_unclustered_greedy_in_synthesis"] = \
+            found["search_ms"] / max(unclustered_in_synthesis_ms, 1e-9)
         row["pq"][str(window)] = found
     return row
 
@@ -107,10 +118,10 @@ def paper_table(model: AnimeGraphModel, heldout: Corpus, windows: Sequence[int] 
     graphs = ["unclustered"] + (["clustered"] if model.has_clusters else [])
     rows = []
     for utterance in pick_sentences(heldout, count):
-        unclustered_ms = _greedy(model, utterance, "unclustered", model.has_audio,
-                                 repeats)["search_ms"]
+        greedy = {graph: _greedy(model, utterance, graph, model.has_audio, repeats)
+                  for graph in graphs}
         rows += [_table_row(model, utterance, graph, model.has_audio, windows, advance,
-                            budget_s, repeats, unclustered_ms) for graph in graphs]
+                            budget_s, greedy[graph], greedy["unclustered"]) for graph in graphs]
     finished = [(row["greedy"]["jumps"], pq["jumps"]) for row in rows
                 for pq in row["pq"].values() if not pq["timed_out"]]
     pq4 = [row["pq"]["4"] for row in rows if "4" in row["pq"]]
@@ -119,6 +130,8 @@ def paper_table(model: AnimeGraphModel, heldout: Corpus, windows: Sequence[int] 
         "greedy_never_more_jumps": all(greedy <= pq for greedy, pq in finished),
         "min_speedup_over_pq4": min((pq["speedup_over_unclustered_greedy"] for pq in pq4),
                                     default=None),
+        "min_speedup_over_pq4_in_synthesis": min(
+            (pq["speedup_over_unclustered_greedy_in_synthesis"] for pq in pq4), default=None),
         "min_speedup_over_pq4_same_graph": {
             graph: min((row["pq"]["4"]["speedup"] for row in rows
                         if row["graph"] == graph and "4" in row["pq"]), default=None)
@@ -284,7 +297,8 @@ def format_anime_graph_bench(results: dict[str, Any]) -> str:
     for row in results["table"]["rows"]:
         greedy = row["greedy"]
         lines.append(f"{row['phonemes']:>5} {row['graph']:<12} {'greedy':<10} "
-                     f"{greedy['search_ms']:>10.3f} {greedy['jumps']:>6} {greedy['rms']:>7.4f}")
+                     f"{greedy['search_ms']:>10.3f} {greedy['jumps']:>6} {greedy['rms']:>7.4f} "
+                     f"(in synthesis {greedy['search_ms_in_synthesis']:.3f} ms)")
         for window, pq in row["pq"].items():
             mark = ">" if pq["timed_out"] else ""
             lines.append(f"{'':>5} {'':<12} {'PQ(' + window + ')':<10} "
@@ -294,7 +308,9 @@ def format_anime_graph_bench(results: dict[str, Any]) -> str:
                          f"{mark + format(pq['speedup_over_unclustered_greedy'], '.0f') + 'x':>22}")
     table = results["table"]
     lines.append(f"min PQ(4) speed-up over unclustered greedy (paper's Table 1): "
-                 f"{_number(table['min_speedup_over_pq4'], '.0f')}x; same graph: "
+                 f"{_number(table['min_speedup_over_pq4'], '.0f')}x (greedy timed inside a "
+                 f"synthesis: {_number(table['min_speedup_over_pq4_in_synthesis'], '.0f')}x); "
+                 "same graph: "
                  + ", ".join(f"{graph} {_number(value, '.0f')}x" for graph, value
                              in table["min_speedup_over_pq4_same_graph"].items()))
     lines.append("")

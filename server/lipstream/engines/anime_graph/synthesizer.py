@@ -268,6 +268,23 @@ class AnimeGraphSynthesizer(Synthesizer):
             tiles.pop()
         return [[int(node) for node in tile] for tile in tiles] or None
 
+    def search_times_ms(self, repeats: int) -> list[float]:
+        """Times (ms) of ``repeats`` back-to-back GreedyMatching runs over the whole finished
+        query of one view, as the benchmark's warm search time: the search alone, without
+        the cache misses the rest of a synthesis leaves behind."""
+        if not self.finished or len(self.nodes) < len(self.query) or self.run_starts:
+            raise InvalidRequestError("only a finished single-view request can be re-timed",
+                                      code="request_unfinished")
+        searcher = self.searchers[0]
+        ranking = self._ranking(searcher.graph, 0, len(self.query))
+        cap = self.options.max_tile
+        times = []
+        for _ in range(repeats):
+            started = time.perf_counter()
+            searcher.matcher.tiles(self.query, 0, len(self.query), cap, None, ranking)
+            times.append(1000.0 * (time.perf_counter() - started))
+        return times
+
     def _audio_ready_stop(self, start: int, stop: int) -> int:
         """The largest p in [start, stop] such that the audio covers spans start..p-1."""
         if self.audio is None:

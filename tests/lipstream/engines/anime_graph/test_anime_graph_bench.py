@@ -1,0 +1,46 @@
+"""The anime-graph benchmark's paper table is assembled from what it measured."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from lipstream.engines.anime_graph import AnimeGraphEngine
+from lipstream.engines.anime_graph.bench import paper_table
+from lipstream.errors import InvalidRequestError
+from tests.lipstream.engines.anime_graph.anime_synthetic import make_corpus, make_spans
+
+
+def test_the_paper_table_rows_agree_with_their_own_measurements() -> None:
+    corpus = make_corpus(seed=11, n_utterances=14, length=(8, 12))
+    train = replace(corpus, utterances=corpus.utterances[:12])
+    heldout = replace(corpus, utterances=corpus.utterances[12:])
+    model = AnimeGraphEngine(clusters=10).fit(train)
+    table = paper_table(model, heldout, windows=(2, 3), repeats=3, count=2)
+    assert [row["graph"] for row in table["rows"]] == ["unclustered", "clustered"] * 2
+    for row in table["rows"]:
+        greedy = row["greedy"]
+        unclustered = next(other["greedy"] for other in table["rows"]
+                           if other["stem"] == row["stem"] and other["graph"] == "unclustered")
+        assert 0 < greedy["search_ms"] and 0 < greedy["search_ms_in_synthesis"]
+        for pq in row["pq"].values():
+            assert not pq["timed_out"] and greedy["jumps"] <= pq["jumps"]
+            assert pq["speedup"] == pytest.approx(pq["search_ms"] / greedy["search_ms"])
+            assert pq["speedup_over_unclustered_greedy"] == pytest.approx(
+                pq["search_ms"] / unclustered["search_ms"])
+    assert table["greedy_never_more_jumps"] is True
+    assert table["min_speedup_over_pq4"] is None  # no PQ(4) was run
+    assert set(table["min_speedup_over_pq4_same_graph"]) == {"unclustered", "clustered"}
+
+
+def test_only_a_finished_request_can_be_re_timed() -> None:
+    model = AnimeGraphEngine(clusters=0).fit(make_corpus(seed=12, n_utterances=8))
+    synthesizer = model.start(fps=60.0, max_tile=0)
+    synthesizer.feed(make_spans(np.random.default_rng(0), 10))
+    with pytest.raises(InvalidRequestError):
+        synthesizer.search_times_ms(2)
+    synthesizer.finish()
+    times = synthesizer.search_times_ms(4)
+    assert len(times) == 4 and all(time > 0 for time in times)
