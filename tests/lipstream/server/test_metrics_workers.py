@@ -30,6 +30,7 @@ from lipstream.engines.base import Model
 from lipstream.server.metrics import MULTIPROCESS_ENV, multiprocess_directory
 from lipstream_client import AsyncClient, StreamResult
 from tests.helpers import free_port
+from tests.live_server import stop_process
 
 FPS = 60.0
 LINE = [("sil", 0.0, 0.1), ("HH", 0.1, 0.17), ("AH", 0.17, 0.24), ("L", 0.24, 0.31),
@@ -89,13 +90,7 @@ def lipstream_serve(models: Path, workers: int, environ: dict[str, str],
             raise RuntimeError(f"lipstream serve did not start: {log.read_text()[-2000:]}")
         yield process, base
     finally:
-        if process.poll() is None:
-            process.terminate()
-        try:
-            process.wait(timeout=15)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait(timeout=5)
+        stop_process(process)
 
 
 def started(log: Path) -> int:
