@@ -164,7 +164,9 @@ ENV_SETTINGS: tuple[EnvSetting, ...] = (
                "seconds without a message or active request before `idle_timeout`, close 1000"),
     EnvSetting("LIPSTREAM_SEND_TIMEOUT_S", "send_timeout_s", _number(0.0, 3600.0, above=True),
                "deadline of every WebSocket send; missing it closes the `slow_consumer` (1008); "
-               "a closed connection whose unsent bytes do not shrink for this long is reset"),
+               "a connection whose unsent bytes do not shrink for this long while the app is "
+               "not writing (a closed WebSocket, an HTTP response the client stopped reading) "
+               "is reset"),
     EnvSetting("LIPSTREAM_AUTH_TOKENS", "auth_tokens", _words,
                "comma-separated bearer tokens; empty = no authentication"),
     EnvSetting("LIPSTREAM_ALLOWED_ORIGINS", "allowed_origins", _words,

@@ -4,9 +4,10 @@ Sketch: per-message deflate is off (it doubles memory per connection and
 invites decompression bombs), the WebSocket frame limit is twice the
 protocol's message limit (so a message between the two gets a
 ``message_too_large`` error before the 1009 close, and anything larger is
-cut off by the WebSocket layer itself), the WebSocket protocol is uvicorn's
-own with a bound on how long a closed connection may hold its socket
-(``closing.BoundedCloseProtocol``), and uvicorn's ``limit_concurrency``
+cut off by the WebSocket layer itself), the WebSocket and HTTP protocols are
+uvicorn's own with a bound on how long a client that stops reading may hold
+its socket (``closing.BoundedCloseProtocol``,
+``http_flush.BoundedFlushHTTPProtocol``), and uvicorn's ``limit_concurrency``
 stays unset: it does not cap WebSockets and would make plain HTTP answer 503
 while sessions are open; the app keeps its own session cap. With one worker
 the app object is served directly; with ``--workers N`` uvicorn's supervisor
@@ -27,6 +28,7 @@ from fastapi import FastAPI
 from ..config import ServerSettings, load_settings
 from .app import create_app
 from .closing import BoundedCloseProtocol
+from .http_flush import BoundedFlushHTTPProtocol
 
 APP_FACTORY = "lipstream.server.runner:app_from_environment"
 GRACEFUL_EXIT_S = 5.0
@@ -42,6 +44,7 @@ def uvicorn_options(server: ServerSettings) -> dict[str, Any]:
     """Keyword arguments for ``uvicorn.Config`` that every way of serving shares."""
     return {
         "log_level": server.log_level,
+        "http": BoundedFlushHTTPProtocol,
         "ws": BoundedCloseProtocol,
         "ws_max_size": 2 * server.max_message_bytes,
         "ws_per_message_deflate": False,
