@@ -210,6 +210,11 @@ class Model(ABC):
         """The input a frame waits for (see ``Lookahead``); engines override it."""
         return Lookahead()
 
+    def lookahead_for(self, options: Mapping[str, Any]) -> Lookahead | None:
+        """The lookahead of a request with these engine ``options`` (None: a frame may wait
+        for the end of the input); engines whose options change it override this."""
+        return self.lookahead
+
     def fidelity_ladder(self) -> tuple[Rung, ...]:
         """Fidelity levels, best first; a server picks the best that fits a latency budget.
 

@@ -52,10 +52,10 @@ from lipstream_client.errors import (
 )
 from lipstream_client.messages import DoneReason, JsonValue
 
-from ..engines.base import EMOTIONS, SynthesisRequest
+from ..engines.base import EMOTIONS, Model, Rung, SynthesisRequest
 from ..errors import LipstreamError
 from ..phonemes import SOURCES
-from .budget import BudgetInfeasible, RungEstimate, choose_rung
+from .budget import BudgetInfeasible, RungEstimate, choose_rung, lookahead_ms
 from .calibration import PHONEME_S
 from .catalog import Catalog
 from .outgoing import Outgoing, RequestClock
@@ -65,6 +65,8 @@ from .request import ActiveRequest, RequestError, RequestLimits, RequestSpec, pr
 logger = logging.getLogger("lipstream.server")
 
 DEFAULT_PHONEME_SOURCE = "auto"
+CUSTOM_FIDELITY = "custom"
+_LONGEST_WAIT_MS = 86_400_000.0  # the protocol's bound on ready.lookahead_ms: a day
 REMEMBERED_IDS = 256
 _MAX_TEXT = 4096
 _CLIPPED = "..."
@@ -251,13 +253,30 @@ class Session:
         clock = RequestClock(model.manifest.engine, now, start.latency_budget_ms)
         spec = RequestSpec(start.id, model.manifest.engine, start.fps, source, model.uses_audio,
                            profile, rest, clock)
+        fidelity, lookahead = self._fidelity(model, estimate, options)
         ready = Ready(
             id=start.id, engine=model.manifest.engine, character=model.name, fps=start.fps,
-            channels=profile.channels, lookahead_ms=estimate.lookahead_ms,
-            fidelity=estimate.rung.name, emotion=start.emotion,
+            channels=profile.channels, lookahead_ms=lookahead,
+            fidelity=fidelity, emotion=start.emotion,
             latency_budget_ms=start.latency_budget_ms, options=options, phoneme_source=source,
         )
         return ActiveRequest(spec, synthesizer, self.limits.request), ready, estimate
+
+    def _fidelity(self, model: Model, estimate: RungEstimate,
+                  options: Mapping[str, JsonValue]) -> tuple[str, float]:
+        """The rung's name and lookahead (ms), or, when the client's options change one the
+        rung pins (possible without a budget), ``custom`` and the lookahead of those options
+        (a frame that may wait for the end of the input: the longest request)."""
+        if all(options.get(key) == _json_value(value)
+               for key, value in estimate.rung.options.items()):
+            return estimate.rung.name, estimate.lookahead_ms
+        settings = self.catalog.settings
+        lookahead = model.lookahead_for(options)
+        if lookahead is None:
+            return CUSTOM_FIDELITY, min(_LONGEST_WAIT_MS, float(
+                settings.max_phonemes_per_request * settings.max_phoneme_ms))
+        return CUSTOM_FIDELITY, lookahead_ms(Rung(CUSTOM_FIDELITY, lookahead),
+                                             settings.max_phoneme_ms)
 
 
 _REASONS: dict[type, DoneReason] = {End: "end", Cancel: "cancel", Interrupt: "interrupt"}

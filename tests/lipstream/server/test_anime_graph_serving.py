@@ -63,6 +63,34 @@ def test_without_a_budget_the_top_rung_serves(catalog: Catalog) -> None:
     assert ready.options == dict(top.rung.options)
 
 
+@pytest.mark.parametrize(("options", "phonemes", "smooth"), [
+    ({"max_tile": 3}, 3, True),
+    ({"search": "pq", "pq_window": 2, "pq_advance": 1, "smooth": False}, 2, False)])
+def test_options_that_leave_every_rung_are_served_as_custom_with_their_own_lookahead(
+        catalog: Catalog, options: dict, phonemes: int, smooth: bool) -> None:  # type: ignore[type-arg]
+    model = catalog.model(ENGINE, "demo")
+    [ready] = play(new_session(catalog), Start("a", ENGINE, "demo", options=options))
+    assert isinstance(ready, Ready) and ready.fidelity == "custom"
+    reach_ms = 1000.0 * ((model.half_width if smooth else 0) + 1) / model.fps
+    expected = reach_ms + 32.5 + phonemes * catalog.settings.max_phoneme_ms
+    assert ready.lookahead_ms == pytest.approx(expected)
+
+
+def test_an_uncapped_tile_may_wait_for_the_longest_request(catalog: Catalog) -> None:
+    [ready] = play(new_session(catalog), Start("a", ENGINE, "demo", options={"max_tile": 0}))
+    assert isinstance(ready, Ready) and ready.fidelity == "custom"
+    settings = catalog.settings
+    assert ready.lookahead_ms == settings.max_phonemes_per_request * settings.max_phoneme_ms
+
+
+def test_a_client_repeating_the_top_rungs_options_gets_that_rung(catalog: Catalog) -> None:
+    top = catalog.ladder(catalog.model(ENGINE, "demo"))[0]
+    [ready] = play(new_session(catalog), Start("a", ENGINE, "demo",
+                                               options={**top.rung.options, "blend": True}))
+    assert isinstance(ready, Ready)
+    assert (ready.fidelity, ready.lookahead_ms) == (top.rung.name, top.lookahead_ms)
+
+
 def test_a_budget_below_the_lowest_rung_names_the_smallest_feasible_one(
         catalog: Catalog) -> None:
     model = catalog.model(ENGINE, "demo")

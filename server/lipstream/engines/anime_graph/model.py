@@ -101,6 +101,19 @@ class AnimeGraphModel(Model):
         return Lookahead(seconds=(half_width + 1) / self.fps, phonemes=max_tile,
                          audio_seconds=self.audio_wait_s)
 
+    def lookahead_for(self, options: Mapping[str, Any]) -> Lookahead | None:
+        """Greedy with tiles of at most ``max_tile`` (none when uncapped: a tile may wait for
+        the end of the input), or PQ, whose window of h phonemes decides its first
+        fragments; the filter's reach only when ``smooth``."""
+        parsed = parse_options(options, self.default_graph, self.has_clusters, self.max_tile)
+        if parsed.search == "pq":
+            smoothing = self.half_width if parsed.smooth else 0
+            return Lookahead(seconds=(smoothing + 1) / self.fps, phonemes=parsed.pq_window,
+                             audio_seconds=self.audio_wait_s)
+        if parsed.max_tile is None:
+            return None
+        return self.greedy_lookahead(parsed.max_tile, parsed.smooth)
+
     @property
     def audio_wait_s(self) -> float:
         """How far past a span's end the audio must reach before the span's MFCC frames are

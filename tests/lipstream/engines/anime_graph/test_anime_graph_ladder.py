@@ -185,3 +185,24 @@ def test_audio_that_reaches_the_declared_wait_releases_every_promised_frame(
         short = _stream_with_audio(audio_model, spans, audio, wait - 0.011, dict(rung.options))
         assert any(count < frames_before(final_until(spans[: index + 1], rung.lookahead), FPS)
                    for index, count in enumerate(short)), "the declared audio wait is not needed"
+
+
+@pytest.mark.parametrize("options", [
+    {"max_tile": 3},
+    {"search": "pq", "pq_window": 3, "pq_advance": 1},
+    {"search": "pq", "pq_window": 2, "pq_advance": 2, "smooth": False},
+    {"search": "pq", "pq_window": 4, "pq_advance": 3, "graph": "clustered"}])
+def test_the_lookahead_of_any_options_is_kept(model: AnimeGraphModel, options: dict) -> None:  # type: ignore[type-arg]
+    lookahead = model.lookahead_for(options)
+    assert lookahead is not None
+    for seed in (3, 4):
+        spans = make_spans(np.random.default_rng(seed), 24)
+        _, emitted = _stream_one_by_one(model, spans, options, OFF_GRID_FPS)
+        for index, count in enumerate(emitted):
+            assert count >= frames_before(final_until(spans[: index + 1], lookahead), OFF_GRID_FPS)
+
+
+def test_an_uncapped_tile_has_no_bounded_lookahead(model: AnimeGraphModel) -> None:
+    assert model.lookahead_for({"max_tile": 0}) is None
+    assert model.lookahead_for({}) == model.fidelity_ladder()[0].lookahead
+
