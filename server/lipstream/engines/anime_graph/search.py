@@ -70,7 +70,9 @@ class Matcher(Protocol):
 
 @dataclass
 class SuffixMatcher:
-    """Longest runs from the suffix automaton; ``limit`` caps the occurrences ranked."""
+    """Longest runs from the suffix automaton; ``limit`` caps the occurrences ranked.
+    ``match``/``choose`` take one tile at a time with numpy costs: the reference that the
+    compiled ``tiles`` is tested against."""
 
     index: SuffixIndex
     graph: AnimeGraph
