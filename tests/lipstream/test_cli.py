@@ -39,18 +39,19 @@ def livelink_corpus(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return root
 
 
-def test_train_inspect_synth_on_livelink_textgrid_corpus(livelink_corpus: Path,
-                                                         tmp_path: Path) -> None:
+@pytest.mark.parametrize("engine", ["viseme-lerp", "anime-graph"])
+def test_train_inspect_synth_on_livelink_textgrid_corpus(livelink_corpus: Path, tmp_path: Path,
+                                                         engine: str) -> None:
     model_dir = tmp_path / "model"
-    trained = run_cli("train", "--corpus", str(livelink_corpus), "--engine", "viseme-lerp",
+    trained = run_cli("train", "--corpus", str(livelink_corpus), "--engine", engine,
                       "--out", str(model_dir))
     assert trained.returncode == 0, trained.stderr
     manifest = json.loads((model_dir / "model.json").read_text())
-    assert manifest["engine"] == "viseme-lerp" and manifest["fps"] == 60.0
+    assert manifest["engine"] == engine and manifest["fps"] == 60.0
     assert "jawOpen" in manifest["channels"] and "JawOpen" not in manifest["channels"]
 
     inspected = run_cli("inspect", str(model_dir))
-    assert inspected.returncode == 0 and "engine viseme-lerp" in inspected.stdout
+    assert inspected.returncode == 0 and f"engine {engine}" in inspected.stdout
 
     phones = tmp_path / "hello.json"
     phones.write_text(json.dumps([{"phoneme": "HH", "start": 0.1, "end": 0.2},
