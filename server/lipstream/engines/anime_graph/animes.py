@@ -69,19 +69,27 @@ def _interpolate(values: np.ndarray, offsets: np.ndarray, utterance: np.ndarray,
     its fixed cost dwarfed the few rows it reads."""
     out = np.empty((len(times), values.shape[1]))
     for row in range(len(times)):
-        first = offsets[utterance[row]]
-        last = offsets[utterance[row] + 1] - 1 - first
-        position = times[row] * rate
-        if not extrapolate:
-            position = min(max(position, 0.0), float(last))
-        low = int(min(max(math.floor(position), 0.0), float(max(last - 1, 0))))
-        high = min(low + 1, last)
-        fraction = position - low if high > low else 0.0
-        for column in range(values.shape[1]):
-            a = np.float64(values[first + low, column])
-            b = np.float64(values[first + high, column])
-            out[row, column] = a + fraction * (b - a)
+        sample_into(out[row], values, offsets, utterance[row], times[row], rate, extrapolate)
     return out
+
+
+@njit(cache=True)
+def sample_into(out: np.ndarray, values: np.ndarray, offsets: np.ndarray, utterance: int,
+                time: float, rate: float, extrapolate: bool) -> None:
+    """One row of ``Curves.sample``: utterance ``utterance`` at ``time`` (s) into ``out``
+    (dim,)."""
+    first = offsets[utterance]
+    last = offsets[utterance + 1] - 1 - first
+    position = time * rate
+    if not extrapolate:
+        position = min(max(position, 0.0), float(last))
+    low = int(min(max(math.floor(position), 0.0), float(max(last - 1, 0))))
+    high = min(low + 1, last)
+    fraction = position - low if high > low else 0.0
+    for column in range(values.shape[1]):
+        a = np.float64(values[first + low, column])
+        b = np.float64(values[first + high, column])
+        out[column] = a + fraction * (b - a)
 
 
 @dataclass(frozen=True)

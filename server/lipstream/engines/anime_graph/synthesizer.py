@@ -430,12 +430,22 @@ class AnimeGraphSynthesizer(Synthesizer):
         self._extend_raw(raw_final)
         self._extend_smoothed(max(0, raw_final - self.half_width))
 
+    def _emittable(self, total: int) -> int:
+        """One past the last frame (of ``total``) the smoothed samples so far can interpolate:
+        the samples a frame needs grow with the frame, so a binary search finds it."""
+        low, high = self.emitted, total
+        available = self.smoothed.count
+        while low < high:
+            middle = (low + high) // 2
+            if _samples_needed(middle, self.model.fps, self.fps) <= available:
+                low = middle + 1
+            else:
+                high = middle
+        return low
+
     def _emit(self) -> np.ndarray:
         total = frame_count(self.covered_until, self.fps) if self.spans else 0
-        stop = self.emitted
-        available = self.smoothed.count
-        while stop < total and _samples_needed(stop, self.model.fps, self.fps) <= available:
-            stop += 1
+        stop = self._emittable(total)
         if stop <= self.emitted:
             return np.zeros((0, len(self.model.channels)), dtype=np.float32)
         positions = np.arange(self.emitted, stop) * (self.model.fps / self.fps)

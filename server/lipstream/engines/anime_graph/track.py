@@ -6,6 +6,9 @@ fragment's value is the recording's PCA curve there. Each join adds the
 corrections planned by ``blending`` (pair example or extension), so the
 track is a continuous function of time, evaluated wherever the synthesizer
 needs samples. Evaluating position j needs the joins on both of its sides.
+Placements and joins are also kept as flat, growing arrays, so one compiled
+call (``_evaluate``) samples any stretch of the track: it runs on every
+streamed message, where per-fragment numpy calls cost more than the samples.
 """
 
 from __future__ import annotations
@@ -13,10 +16,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
-from .animes import AnimeTable
+from .animes import AnimeTable, sample_into
 from .blending import Join, JoinKind
 from .warp import Warp
+
+_NO_CORRECTION, _PAIR, _EXTEND = 0, 1, 2
+_KIND_CODES = {JoinKind.PAIR: _PAIR, JoinKind.EXTEND: _EXTEND}
 
 
 @dataclass(frozen=True)
@@ -29,6 +36,33 @@ class Placement:
     warp: Warp
 
 
+class _Column:
+    """A growable 1-D array."""
+
+    def __init__(self, dtype: type) -> None:
+        self.data: np.ndarray = np.zeros(16, dtype=dtype)
+        self.count = 0
+
+    def extend(self, values: np.ndarray | list[float] | list[int]) -> None:
+        needed = self.count + len(values)
+        if needed > len(self.data):
+            grown = np.zeros(max(needed, 2 * len(self.data)), dtype=self.data.dtype)
+            grown[: self.count] = self.data[: self.count]
+            self.data = grown
+        self.data[self.count : needed] = values
+        self.count = needed
+
+    def append(self, value: float) -> None:
+        if self.count == len(self.data):
+            self.extend([value])
+            return
+        self.data[self.count] = value
+        self.count += 1
+
+    def view(self) -> np.ndarray:
+        return self.data[: self.count]
+
+
 class MotionTrack:
     """Placements in timeline order and the joins between neighbours."""
 
@@ -36,7 +70,15 @@ class MotionTrack:
         self.animes = animes
         self.placements: list[Placement] = []
         self.joins: list[Join] = []
-        self._starts: list[float] = []
+        self._starts = _Column(np.float64)
+        self._ends = _Column(np.float64)
+        self._animes = _Column(np.int64)
+        self._knot_offsets = _Column(np.int64)
+        self._knot_offsets.append(0)
+        self._knot_targets = _Column(np.float64)
+        self._knot_sources = _Column(np.float64)
+        self._join_kinds = _Column(np.int64)
+        self._join_examples = (_Column(np.int64), _Column(np.int64))
 
     def __len__(self) -> int:
         return len(self.placements)
@@ -47,93 +89,81 @@ class MotionTrack:
             if join is None:
                 raise ValueError("a placement after the first needs its join")
             self.joins.append(join)
+            self._join_kinds.append(_KIND_CODES.get(join.kind, _NO_CORRECTION))
+            self._join_examples[0].append(join.left_example)
+            self._join_examples[1].append(join.right_example)
         self.placements.append(placement)
         self._starts.append(placement.start)
-
-    def _stretched(self, anime: int, place: Placement, times: np.ndarray) -> np.ndarray:
-        """Recording times of ``anime`` linearly time-warped onto ``place``'s span."""
-        relative = (times - place.start) / (place.end - place.start)
-        start, end = float(self.animes.start[anime]), float(self.animes.end[anime])
-        return start + relative * (end - start)
-
-    def _left_target(self, index: int, times: np.ndarray) -> _Target | None:
-        """Blend weight, anime and recording times of the correction from the left join."""
-        join = self.joins[index - 1]
-        place = self.placements[index]
-        if join.kind is JoinKind.PAIR:
-            weight = 1.0 - (times - place.start) / (place.end - place.start)
-            return weight, join.right_example, self._stretched(join.right_example, place, times)
-        if join.kind is JoinKind.EXTEND:
-            before = self.placements[index - 1]
-            weight = 1.0 - (times - before.start) / (place.end - before.start)
-            return weight, before.anime, float(self.animes.end[before.anime]) + times - before.end
-        return None
-
-    def _right_target(self, index: int, times: np.ndarray) -> _Target | None:
-        """Blend weight, anime and recording times of the correction from the right join."""
-        join = self.joins[index]
-        place = self.placements[index]
-        if join.kind is JoinKind.PAIR:
-            weight = (times - place.start) / (place.end - place.start)
-            return weight, join.left_example, self._stretched(join.left_example, place, times)
-        if join.kind is JoinKind.EXTEND:
-            after = self.placements[index + 1]
-            weight = (times - place.start) / (after.end - place.start)
-            recording_times = float(self.animes.start[after.anime]) - (after.start - times)
-            return weight, after.anime, recording_times
-        return None
+        self._ends.append(placement.end)
+        self._animes.append(placement.anime)
+        self._knot_targets.extend(placement.warp.target)
+        self._knot_sources.extend(placement.warp.source)
+        self._knot_offsets.append(self._knot_targets.count)
 
     def evaluate(self, times: np.ndarray) -> np.ndarray:
         """Track values (n, n_pc) at ascending ``times``; a time belongs to the last
         placement starting at or before it."""
-        owners = np.maximum(np.searchsorted(np.asarray(self._starts), times, side="right") - 1, 0)
-        base = _Samples(len(times))
-        corrections = [_Samples(len(times)), _Samples(len(times))]
-        bounds = np.flatnonzero(np.diff(owners)) + 1
-        chunk_starts = np.concatenate(([0], bounds))
-        chunk_stops = np.concatenate((bounds, [len(times)]))
-        for first, stop in zip(chunk_starts, chunk_stops):
-            index = int(owners[first])
-            chunk = slice(int(first), int(stop))
-            place = self.placements[index]
-            base.put(chunk, np.ones(stop - first), place.anime, place.warp(times[chunk]))
-            if index > 0:
-                corrections[0].put(chunk, *(self._left_target(index, times[chunk]) or ()))
-            if index < len(self.joins):
-                corrections[1].put(chunk, *(self._right_target(index, times[chunk]) or ()))
-        values = base.sample(self.animes)
-        out = values.copy()
-        for correction in corrections:
-            active = correction.active()
-            if len(active):
-                out[active] += correction.weight[active, None] * (
-                    correction.sample(self.animes, active) - values[active])
-        return out
+        animes, motion = self.animes, self.animes.motion
+        return _evaluate(
+            np.asarray(times, dtype=np.float64), self._starts.view(), self._ends.view(),
+            self._animes.view(), self._knot_offsets.view(), self._knot_targets.view(),
+            self._knot_sources.view(), self._join_kinds.view(), self._join_examples[0].view(),
+            self._join_examples[1].view(), np.asarray(animes.start, dtype=np.float64),
+            np.asarray(animes.end, dtype=np.float64),
+            np.asarray(animes.utterance, dtype=np.int64), motion.values,
+            np.asarray(motion.offsets, dtype=np.int64), float(motion.rate))
 
 
-_Target = tuple[np.ndarray, int, np.ndarray]
+@njit(cache=True)
+def _evaluate(times: np.ndarray, starts: np.ndarray, ends: np.ndarray, animes: np.ndarray,
+              knot_offsets: np.ndarray, knot_targets: np.ndarray, knot_sources: np.ndarray,
+              join_kinds: np.ndarray, left_examples: np.ndarray, right_examples: np.ndarray,
+              anime_start: np.ndarray, anime_end: np.ndarray, utterance: np.ndarray,
+              values: np.ndarray, offsets: np.ndarray, rate: float) -> np.ndarray:
+    """Each time's fragment value plus the corrections of the joins on either side:
+    out = base + w_left (left - base) + w_right (right - base), w clipped to [0, 1]."""
+    out = np.empty((len(times), values.shape[1]))
+    base = np.empty(values.shape[1])
+    other = np.empty(values.shape[1])
+    for row in range(len(times)):
+        time = times[row]
+        index = max(np.searchsorted(starts, time, side="right") - 1, 0)
+        low, high = knot_offsets[index], knot_offsets[index + 1]
+        recording = np.interp(time, knot_targets[low:high], knot_sources[low:high])
+        sample_into(base, values, offsets, utterance[animes[index]], recording, rate, True)
+        out[row] = base
+        for side in range(2):
+            join = index - 1 if side == 0 else index
+            if join < 0 or join >= len(join_kinds) or join_kinds[join] == _NO_CORRECTION:
+                continue
+            weight, anime, recording = _correction(
+                side, join_kinds[join], time, index, starts, ends, animes,
+                right_examples[join] if side == 0 else left_examples[join],
+                anime_start, anime_end)
+            weight = min(max(weight, 0.0), 1.0)
+            if weight > 0.0:
+                sample_into(other, values, offsets, utterance[anime], recording, rate, True)
+                for column in range(values.shape[1]):
+                    out[row, column] += weight * (other[column] - base[column])
+    return out
 
 
-class _Samples:
-    """Where to read the recordings for n track samples: weight, anime, recording time."""
-
-    def __init__(self, count: int) -> None:
-        self.weight = np.zeros(count)
-        self.anime = np.zeros(count, dtype=np.int64)
-        self.time = np.zeros(count)
-
-    def put(self, chunk: slice, weight: np.ndarray | None = None, anime: int = 0,
-            times: np.ndarray | None = None) -> None:
-        if weight is None or times is None:
-            return
-        self.weight[chunk] = np.minimum(np.maximum(weight, 0.0), 1.0)
-        self.anime[chunk] = anime
-        self.time[chunk] = times
-
-    def active(self) -> np.ndarray:
-        return np.flatnonzero(self.weight > 0.0)
-
-    def sample(self, animes: AnimeTable, rows: np.ndarray | None = None) -> np.ndarray:
-        chosen = slice(None) if rows is None else rows
-        owners = animes.utterance[self.anime[chosen]]
-        return animes.motion.sample(owners, self.time[chosen], extrapolate=True)
+@njit(cache=True)
+def _correction(side: int, kind: int, time: float, index: int, starts: np.ndarray,
+                ends: np.ndarray, animes: np.ndarray, example: int, anime_start: np.ndarray,
+                anime_end: np.ndarray) -> tuple[float, int, float]:
+    """(weight, anime, recording time) of the correction from the left (``side`` 0) or
+    right (1) join of placement ``index``: a pair example stretched onto the span, or the
+    neighbour's recording extended across it."""
+    start, end = starts[index], ends[index]
+    if kind == _PAIR:
+        relative = (time - start) / (end - start)
+        recording = anime_start[example] + relative * (anime_end[example] - anime_start[example])
+        return (1.0 - relative if side == 0 else relative), example, recording
+    if side == 0:
+        before = animes[index - 1]
+        weight = 1.0 - (time - starts[index - 1]) / (end - starts[index - 1])
+        return weight, before, anime_end[before] + time - ends[index - 1]
+    after = animes[index + 1]
+    weight = (time - start) / (ends[index + 1] - start)
+    return weight, after, anime_start[after] - (starts[index + 1] - time)
