@@ -355,3 +355,18 @@ def test_a_phoneme_missing_from_the_corpus_is_reported_by_position() -> None:
     ranking = _ranking(graph, 3, _successor(utterance))
     with pytest.raises(ValueError, match="phoneme 3 at query position 2"):
         greedy_matching(matcher, [0, 1, 3], ranking)
+
+
+@pytest.mark.parametrize("label", [ALPHABET + 3, -1])
+def test_a_label_outside_the_alphabet_stops_every_matcher_where_it_stands(label: int) -> None:
+    labels = np.array([0, 1, 2, 0, 1], dtype=np.int16)
+    utterance = np.zeros(5, dtype=np.int32)
+    successor = _successor(utterance)
+    graph = AnimeGraph.build(labels, successor, ALPHABET)
+    clustered = ClusterGraph.build(np.arange(5), np.arange(5), labels, successor, ALPHABET)
+    for matcher, searched in ((SuffixMatcher(SuffixIndex.build(labels, utterance, ALPHABET),
+                                             graph), graph),
+                              (LayeredMatcher(clustered), clustered)):
+        ranking = _ranking(searched, 5, successor)
+        with pytest.raises(ValueError, match=f"phoneme {label} at query position 2"):
+            greedy_matching(matcher, [0, 1, label, 0], ranking)
