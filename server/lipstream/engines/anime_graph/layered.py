@@ -59,6 +59,8 @@ def reach(query: np.ndarray, cap: int, first: np.ndarray, n_labels: int,
     n_states, n_edges, depth = len(first), 0, 1
     while depth < len(query) and (cap <= 0 or depth < cap):
         label = query[depth]
+        if label < 0 or label >= n_labels:
+            break  # no phoneme: the tables are not indexed with it
         low, high = layer_offsets[depth - 1], layer_offsets[depth]
         bound = 0
         for state in range(low, high):

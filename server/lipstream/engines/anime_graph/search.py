@@ -105,8 +105,7 @@ class SuffixMatcher:
     def tiles(self, query: Labels, start: int, stop: int, cap: int | None,
               previous: int | None, ranking: Ranking,
               ranked_from: int | None = None) -> list[np.ndarray]:
-        labels = _known(np.asarray(query[start:stop], dtype=np.int64),
-                        self.index.transitions.shape[1] - 1)
+        labels = np.asarray(query[start:stop], dtype=np.int64)
         index, poses = self.index, ranking.poses
         joined = previous if ranked_from is None else ranked_from
         nodes, ends = greedy_tiles(
@@ -120,13 +119,6 @@ class SuffixMatcher:
             _missing(query, start + len(nodes))
         bounds = [0, *ends.tolist()]
         return [nodes[low:high] for low, high in zip(bounds, bounds[1:])]
-
-
-def _known(labels: np.ndarray, n_labels: int) -> np.ndarray:
-    """``labels`` up to the first outside [0, n_labels): no run reads past it, and the
-    compiled kernels index their tables with labels unchecked."""
-    outside = np.flatnonzero((labels < 0) | (labels >= n_labels))
-    return labels[: outside[0]] if len(outside) else labels
 
 
 def _missing(query: Labels, position: int) -> None:
@@ -197,7 +189,7 @@ class LayeredMatcher:
         first = self._first(int(query[start]), previous)
         if not len(first):
             return Match(start, 0)
-        labels = _known(np.asarray(query[start:stop], dtype=np.int64), self.n_labels)
+        labels = np.asarray(query[start:stop], dtype=np.int64)
         states, offsets, sources, targets = reach(labels, cap or 0, first, self.n_labels,
                                                   self.step_offsets, self.step_targets,
                                                   self._slot)

@@ -72,7 +72,10 @@ def greedy_tiles(query: np.ndarray, cap: int, previous: int, joined: int, limit:
         if length == 0:
             state = 0
             while position + length < len(query) and (cap <= 0 or length < cap):
-                following = transitions[state, query[position + length]]
+                label = query[position + length]
+                if label < 0 or label >= transitions.shape[1] - 1:
+                    break  # no phoneme: the run (and, first in a tile, the search) ends here
+                following = transitions[state, label]
                 if following < 0:
                     break
                 state, length = following, length + 1
