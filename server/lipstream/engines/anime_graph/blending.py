@@ -25,6 +25,7 @@ from enum import Enum
 import numpy as np
 
 from .costs import Poses
+from .graph import csr_offsets
 
 
 class JoinKind(Enum):
@@ -61,8 +62,7 @@ class PairIndex:
         linked = chosen[successor[chosen] >= 0]
         keys = labels[linked].astype(np.int64) * n_labels + labels[successor[linked]]
         order = np.argsort(keys, kind="stable")
-        offsets = np.zeros(n_labels * n_labels + 1, dtype=np.int64)
-        np.cumsum(np.bincount(keys, minlength=n_labels * n_labels), out=offsets[1:])
+        offsets = csr_offsets(keys, n_labels * n_labels)
         return cls(offsets, linked[order].astype(np.int32), n_labels)
 
     def pairs(self, left_label: int, right_label: int, limit: int | None = None) -> np.ndarray:

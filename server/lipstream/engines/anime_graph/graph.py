@@ -17,7 +17,7 @@ from typing import Protocol
 import numpy as np
 
 
-def _csr(keys: np.ndarray, n_keys: int) -> np.ndarray:
+def csr_offsets(keys: np.ndarray, n_keys: int) -> np.ndarray:
     """Offsets (n_keys + 1,) of rows sorted by ``keys``."""
     offsets = np.zeros(n_keys + 1, dtype=np.int64)
     np.cumsum(np.bincount(keys, minlength=n_keys), out=offsets[1:])
@@ -54,9 +54,6 @@ class SearchGraph(Protocol):
 
     def has_label(self, nodes: np.ndarray, label: int) -> np.ndarray:
         """(len(nodes),) bool: the node carries ``label``."""
-
-    def label_mask(self, label: int) -> np.ndarray:
-        """(n_nodes,) bool: the Anime Array row of ``label`` as a mask."""
 
     def edge_list(self) -> tuple[np.ndarray, np.ndarray]:
         """Every edge among the graph's nodes: (sources, targets)."""
@@ -101,7 +98,7 @@ class AnimeGraph:
         keys = np.asarray(labels, dtype=np.int64)[chosen]
         order = chosen[np.argsort(keys, kind="stable")].astype(np.int32)
         return cls(np.asarray(labels), np.asarray(successor, dtype=np.int32),
-                   _csr(keys, n_labels), order)
+                   csr_offsets(keys, n_labels), order)
 
     @property
     def n_nodes(self) -> int:
@@ -118,11 +115,6 @@ class AnimeGraph:
     def has_label(self, nodes: np.ndarray, label: int) -> np.ndarray:
         return np.asarray(self.labels[nodes] == label)
 
-    def label_mask(self, label: int) -> np.ndarray:
-        mask = np.zeros(self.n_nodes, dtype=bool)
-        mask[self.nodes_with_label(label)] = True
-        return mask
-
     def edge_list(self) -> tuple[np.ndarray, np.ndarray]:
         sources = np.sort(self.label_nodes)
         sources = sources[self.successor[sources] >= 0]
@@ -130,9 +122,7 @@ class AnimeGraph:
 
     def label_pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         members = np.sort(self.label_nodes).astype(np.int64)
-        offsets = np.zeros(self.n_nodes + 1, dtype=np.int64)
-        np.cumsum(np.bincount(members, minlength=self.n_nodes), out=offsets[1:])
-        return offsets, np.asarray(self.labels)[members], members
+        return csr_offsets(members, self.n_nodes), np.asarray(self.labels)[members], members
 
     def is_edge(self, sources: np.ndarray, targets: np.ndarray) -> np.ndarray:
         return np.asarray(self.successor[sources] == targets)
@@ -184,12 +174,12 @@ class ClusterGraph:
         pairs = np.unique(entry)
         return cls(
             representative=np.asarray(representative, dtype=np.int32),
-            entry_offsets=_csr(entry, k * n_labels),
+            entry_offsets=csr_offsets(entry, k * n_labels),
             entry_members=members,
-            edge_offsets=_csr(edges // k, k),
+            edge_offsets=csr_offsets(edges // k, k),
             edge_targets=(edges % k).astype(np.int32),
             edge_keys=edges,
-            label_offsets=_csr(pairs % n_labels, n_labels),
+            label_offsets=csr_offsets(pairs % n_labels, n_labels),
             label_nodes=(pairs[np.argsort(pairs % n_labels, kind="stable")] // n_labels)
             .astype(np.int32),
         )
@@ -220,9 +210,6 @@ class ClusterGraph:
     def has_label(self, nodes: np.ndarray, label: int) -> np.ndarray:
         entry = np.asarray(nodes, dtype=np.int64) * self.n_labels + label
         return np.asarray(self.entry_offsets[entry + 1] > self.entry_offsets[entry])
-
-    def label_mask(self, label: int) -> np.ndarray:
-        return self.has_label(np.arange(self.n_nodes), label)
 
     def edge_list(self) -> tuple[np.ndarray, np.ndarray]:
         return self.edge_keys // self.n_nodes, self.edge_keys % self.n_nodes

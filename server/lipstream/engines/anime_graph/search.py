@@ -32,7 +32,7 @@ from typing import Protocol
 import numpy as np
 
 from .costs import Labels, Ranking
-from .graph import AnimeGraph, SearchGraph
+from .graph import AnimeGraph, SearchGraph, csr_offsets
 from .index import SuffixIndex
 from .layered import cheapest, reach
 from .suffix_search import greedy_tiles
@@ -152,7 +152,7 @@ class LayeredMatcher:
         labels = np.asarray(labels, dtype=np.int64)
         self.n_labels = int(labels.max()) + 1 if len(labels) else 1
         keys = owners * self.n_labels + labels
-        self.entry_offsets = _csr_offsets(keys, n_nodes * self.n_labels)
+        self.entry_offsets = csr_offsets(keys, n_nodes * self.n_labels)
         self.entry_members = np.asarray(members, dtype=np.int64)[np.argsort(keys, kind="stable")]
         self.carries = np.zeros((n_nodes, self.n_labels), dtype=np.bool_)
         self.carries[owners, labels] = True
@@ -167,7 +167,7 @@ class LayeredMatcher:
         edge, label = np.nonzero(self.carries[targets])
         keys = sources[edge] * self.n_labels + label
         order = np.lexsort((targets[edge], keys))
-        return (_csr_offsets(keys, graph.n_nodes * self.n_labels),
+        return (csr_offsets(keys, graph.n_nodes * self.n_labels),
                 targets[edge][order])
 
     def _first(self, label: int, previous: int | None) -> np.ndarray:
@@ -212,12 +212,6 @@ class LayeredMatcher:
               previous: int | None, ranking: Ranking,
               ranked_from: int | None = None) -> list[np.ndarray]:
         return tiles_by_matches(self, query, start, stop, cap, previous, ranking, ranked_from)
-
-
-def _csr_offsets(keys: np.ndarray, n_keys: int) -> np.ndarray:
-    offsets = np.zeros(n_keys + 1, dtype=np.int64)
-    np.cumsum(np.bincount(keys, minlength=n_keys), out=offsets[1:])
-    return offsets
 
 
 def tiles_by_matches(matcher: Matcher, query: Labels, start: int, stop: int,

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 import time
-from bisect import bisect_right
+from bisect import bisect_left, bisect_right
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from itertools import groupby
@@ -47,6 +47,7 @@ from .animes import summarize
 from .blending import Join, PairIndex, plan_join
 from .costs import Ranking
 from .graph import SearchGraph
+from .growable import Growable
 from .options import SearchOptions
 from .pq import pq_window
 from .request_audio import RequestAudio
@@ -60,26 +61,6 @@ if TYPE_CHECKING:
 
 _SNAP = 1e-9
 _Result = TypeVar("_Result")
-
-
-class _Rows:
-    """A growable float64 array of rows (n, width)."""
-
-    def __init__(self, width: int) -> None:
-        self.data = np.zeros((64, width))
-        self.count = 0
-
-    def extend(self, rows: np.ndarray) -> None:
-        needed = self.count + len(rows)
-        if needed > len(self.data):
-            grown = np.zeros((max(needed, 2 * len(self.data)), self.data.shape[1]))
-            grown[: self.count] = self.data[: self.count]
-            self.data = grown
-        self.data[self.count : needed] = rows
-        self.count = needed
-
-    def view(self) -> np.ndarray:
-        return self.data[: self.count]
 
 
 @dataclass(frozen=True, eq=False)
@@ -110,17 +91,16 @@ class AnimeGraphSynthesizer(Synthesizer):
         self.spans: list[PhonemeSpan] = []
         self.searchers: list[_Searcher] = []
         self.run_starts: list[int] = []
-        self._labels = np.zeros(64, dtype=np.int64)
-        self._n_labels = 0
+        self._labels = Growable(np.int64)
         self.nodes: list[int] = []
         self.audio: RequestAudio | None = None
         self.audio_mode: bool | None = None
-        self.summaries: _Rows | None = None
+        self.summaries: Growable | None = None
         self.track = MotionTrack(model.animes)
         self.half_width = model.half_width if options.smooth else 0
         self.kernels = model.kernels if options.smooth else np.ones((model.n_components, 1))
-        self.raw = _Rows(model.n_components)
-        self.smoothed = _Rows(model.n_components)
+        self.raw = Growable(np.float64, (model.n_components,))
+        self.smoothed = Growable(np.float64, (model.n_components,))
         self.emitted = 0
         self.finished = False
         self.stats: dict[str, Any] = {"frames": 0, "tiles": 0, "jumps": 0, "search_ms": 0.0,
@@ -144,18 +124,12 @@ class AnimeGraphSynthesizer(Synthesizer):
                 self.run_starts.append(len(self.searchers))
             self.spans.append(span)
             self.searchers.append(searcher)
-            self._append_label(int(searcher.view.substitution[PHONEME_INDEX[span.phoneme]]))
+            self._labels.append(int(searcher.view.substitution[PHONEME_INDEX[span.phoneme]]))
 
     @property
     def query(self) -> np.ndarray:
         """The searched label of every span so far (n,) int64, each in its span's view."""
-        return self._labels[: self._n_labels]
-
-    def _append_label(self, label: int) -> None:
-        if self._n_labels == len(self._labels):
-            self._labels = np.concatenate([self._labels, np.zeros_like(self._labels)])
-        self._labels[self._n_labels] = label
-        self._n_labels += 1
+        return self._labels.view()
 
     def _searcher_for(self, emotion: str | None) -> _Searcher:
         view = self.model.view_for(emotion, self.options)
@@ -197,7 +171,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         if self.audio is None:
             return Ranking(graph, self.model.poses, self.model.summaries)
         if self.summaries is None:
-            self.summaries = _Rows(self.model.summaries.shape[1])
+            self.summaries = Growable(np.float64, (self.model.summaries.shape[1],))
         have = self.summaries.count
         if stop > have:
             curves = self.audio.curves(self.spans[stop - 1].end)
@@ -289,14 +263,9 @@ class AnimeGraphSynthesizer(Synthesizer):
         """The largest p in [start, stop] such that the audio covers spans start..p-1."""
         if self.audio is None:
             return stop
-        low, high = start, stop
-        while low < high:
-            middle = (low + high + 1) // 2
-            if self._audio_ready(self.spans[middle - 1].end):
-                low = middle
-            else:
-                high = middle - 1
-        return low
+        # Span ends ascend, so readiness holds for a prefix of the spans.
+        return start + bisect_left(range(start, stop), True,
+                                   key=lambda p: not self._audio_ready(self.spans[p].end))
 
     def _jumps(self, start: int, tile: list[int]) -> int:
         """Jumps into and inside a tile placed at ``start``; entering a view that does not
@@ -433,15 +402,9 @@ class AnimeGraphSynthesizer(Synthesizer):
     def _emittable(self, total: int) -> int:
         """One past the last frame (of ``total``) the smoothed samples so far can interpolate:
         the samples a frame needs grow with the frame, so a binary search finds it."""
-        low, high = self.emitted, total
-        available = self.smoothed.count
-        while low < high:
-            middle = (low + high) // 2
-            if _samples_needed(middle, self.model.fps, self.fps) <= available:
-                low = middle + 1
-            else:
-                high = middle
-        return low
+        return self.emitted + bisect_right(
+            range(self.emitted, total), self.smoothed.count,
+            key=lambda frame: _samples_needed(frame, self.model.fps, self.fps))
 
     def _emit(self) -> np.ndarray:
         total = frame_count(self.covered_until, self.fps) if self.spans else 0

@@ -20,6 +20,7 @@ from numba import njit
 
 from .animes import AnimeTable, sample_into
 from .blending import Join, JoinKind
+from .growable import Growable
 from .warp import Warp
 
 _NO_CORRECTION, _PAIR, _EXTEND = 0, 1, 2
@@ -36,33 +37,6 @@ class Placement:
     warp: Warp
 
 
-class _Column:
-    """A growable 1-D array."""
-
-    def __init__(self, dtype: type) -> None:
-        self.data: np.ndarray = np.zeros(16, dtype=dtype)
-        self.count = 0
-
-    def extend(self, values: np.ndarray | list[float] | list[int]) -> None:
-        needed = self.count + len(values)
-        if needed > len(self.data):
-            grown = np.zeros(max(needed, 2 * len(self.data)), dtype=self.data.dtype)
-            grown[: self.count] = self.data[: self.count]
-            self.data = grown
-        self.data[self.count : needed] = values
-        self.count = needed
-
-    def append(self, value: float) -> None:
-        if self.count == len(self.data):
-            self.extend([value])
-            return
-        self.data[self.count] = value
-        self.count += 1
-
-    def view(self) -> np.ndarray:
-        return self.data[: self.count]
-
-
 class MotionTrack:
     """Placements in timeline order and the joins between neighbours."""
 
@@ -70,15 +44,15 @@ class MotionTrack:
         self.animes = animes
         self.placements: list[Placement] = []
         self.joins: list[Join] = []
-        self._starts = _Column(np.float64)
-        self._ends = _Column(np.float64)
-        self._animes = _Column(np.int64)
-        self._knot_offsets = _Column(np.int64)
+        self._starts = Growable(np.float64)
+        self._ends = Growable(np.float64)
+        self._animes = Growable(np.int64)
+        self._knot_offsets = Growable(np.int64)
         self._knot_offsets.append(0)
-        self._knot_targets = _Column(np.float64)
-        self._knot_sources = _Column(np.float64)
-        self._join_kinds = _Column(np.int64)
-        self._join_examples = (_Column(np.int64), _Column(np.int64))
+        self._knot_targets = Growable(np.float64)
+        self._knot_sources = Growable(np.float64)
+        self._join_kinds = Growable(np.int64)
+        self._join_examples = (Growable(np.int64), Growable(np.int64))
 
     def __len__(self) -> int:
         return len(self.placements)
@@ -108,10 +82,8 @@ class MotionTrack:
             np.asarray(times, dtype=np.float64), self._starts.view(), self._ends.view(),
             self._animes.view(), self._knot_offsets.view(), self._knot_targets.view(),
             self._knot_sources.view(), self._join_kinds.view(), self._join_examples[0].view(),
-            self._join_examples[1].view(), np.asarray(animes.start, dtype=np.float64),
-            np.asarray(animes.end, dtype=np.float64),
-            np.asarray(animes.utterance, dtype=np.int64), motion.values,
-            np.asarray(motion.offsets, dtype=np.int64), float(motion.rate))
+            self._join_examples[1].view(), animes.start, animes.end, animes.utterance,
+            motion.values, motion.offsets, float(motion.rate))
 
 
 @njit(cache=True)
