@@ -15,8 +15,11 @@ LIVELINK_DIR = SHARED / "data" / "livelink-face"
 def run_cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
     """Run the real ``lipstream`` entry point in a subprocess."""
     return subprocess.run(
-        [sys.executable, "-m", "lipstream.cli", *args], capture_output=True, text=True,
-        cwd=cwd, timeout=300,
+        [sys.executable, "-m", "lipstream.cli", *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=300,
     )
 
 
@@ -31,13 +34,26 @@ def textgrid_long(intervals: list[tuple[float, float, str]], tier: str = "phones
     """A long-format Praat TextGrid with one interval tier, as Praat and MFA write it."""
     xmax = intervals[-1][1]
     lines = [
-        'File type = "ooTextFile"', 'Object class = "TextGrid"', "",
-        "xmin = 0", f"xmax = {xmax}", "tiers? <exists>", "size = 1", "item []:",
-        "    item [1]:", '        class = "IntervalTier"', f'        name = "{tier}"',
-        "        xmin = 0", f"        xmax = {xmax}",
+        'File type = "ooTextFile"',
+        'Object class = "TextGrid"',
+        "",
+        "xmin = 0",
+        f"xmax = {xmax}",
+        "tiers? <exists>",
+        "size = 1",
+        "item []:",
+        "    item [1]:",
+        '        class = "IntervalTier"',
+        f'        name = "{tier}"',
+        "        xmin = 0",
+        f"        xmax = {xmax}",
         f"        intervals: size = {len(intervals)}",
     ]
     for number, (start, end, label) in enumerate(intervals, 1):
-        lines += [f"        intervals [{number}]:", f"            xmin = {start}",
-                  f"            xmax = {end}", f'            text = "{label}"']
+        lines += [
+            f"        intervals [{number}]:",
+            f"            xmin = {start}",
+            f"            xmax = {end}",
+            f'            text = "{label}"',
+        ]
     return "\n".join(lines) + "\n"

@@ -56,9 +56,22 @@ def live_server(models_dir: Path, *extra: str) -> Iterator[LiveServer]:
     # pipe would block it.
     with tempfile.TemporaryFile(mode="w+") as log:
         process = subprocess.Popen(
-            [sys.executable, "-m", "lipstream.cli", "serve", "--models", str(models_dir),
-             "--host", "127.0.0.1", "--port", str(port), *extra],
-            stdout=log, stderr=subprocess.STDOUT, text=True,
+            [
+                sys.executable,
+                "-m",
+                "lipstream.cli",
+                "serve",
+                "--models",
+                str(models_dir),
+                "--host",
+                "127.0.0.1",
+                "--port",
+                str(port),
+                *extra,
+            ],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            text=True,
         )
         base = f"http://127.0.0.1:{port}"
         try:

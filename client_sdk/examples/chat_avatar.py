@@ -71,18 +71,23 @@ def input_events(speech: Speech, with_audio: bool) -> list[tuple[float, int, byt
     """(time s, order, payload) in sending order: each PCM16 chunk at its start time and
     each phoneme at its start; at equal times audio goes first, since a request that
     uses audio must have it from its first input on."""
-    events: list[tuple[float, int, bytes | Span]] = [
-        (span[1], 1, span) for span in speech.spans]
+    events: list[tuple[float, int, bytes | Span]] = [(span[1], 1, span) for span in speech.spans]
     if with_audio and speech.pcm16:
         chunk_bytes = round(AUDIO_CHUNK_S * speech.sample_rate) * PCM16_BYTES
-        events += [(offset / PCM16_BYTES / speech.sample_rate, 0,
-                     speech.pcm16[offset:offset + chunk_bytes])
-                    for offset in range(0, len(speech.pcm16), chunk_bytes)]
+        events += [
+            (
+                offset / PCM16_BYTES / speech.sample_rate,
+                0,
+                speech.pcm16[offset : offset + chunk_bytes],
+            )
+            for offset in range(0, len(speech.pcm16), chunk_bytes)
+        ]
     return sorted(events, key=lambda event: event[:2])
 
 
-async def feed(stream: Stream, speech: Speech, origin: float, with_audio: bool,
-               stop_at: float | None) -> None:
+async def feed(
+    stream: Stream, speech: Speech, origin: float, with_audio: bool, stop_at: float | None
+) -> None:
     """Send the input as the playback clock reaches it; interrupt at ``stop_at``."""
     for moment, _, payload in input_events(speech, with_audio):
         if stop_at is not None and moment >= stop_at:
@@ -107,17 +112,25 @@ async def consume(stream: Stream, origin: float, fps: float) -> tuple[int, float
     return frames, worst
 
 
-async def reply(client: AsyncClient, engine: str, character: str, speech: Speech,
-                args: argparse.Namespace, stop_at: float | None) -> Done:
+async def reply(
+    client: AsyncClient,
+    engine: str,
+    character: str,
+    speech: Speech,
+    args: argparse.Namespace,
+    stop_at: float | None,
+) -> Done:
     origin = time.perf_counter()
     stream = await client.start(engine, character, fps=args.fps, emotion=args.emotion)
     _, (frames, worst) = await asyncio.gather(
-        feed(stream, speech, origin, args.send_audio, stop_at),
-        consume(stream, origin, args.fps))
+        feed(stream, speech, origin, args.send_audio, stop_at), consume(stream, origin, args.fps)
+    )
     done = await stream.done()
-    print(f"  {len(speech.spans)} phonemes over {speech.spans[-1][2]:.2f} s, {frames} frames, "
-          f"latest frame {worst:.0f} ms after its time; done: {done.reason}, "
-          f"first frame after {done.stats.first_frame_latency_ms} ms (server)")
+    print(
+        f"  {len(speech.spans)} phonemes over {speech.spans[-1][2]:.2f} s, {frames} frames, "
+        f"latest frame {worst:.0f} ms after its time; done: {done.reason}, "
+        f"first frame after {done.stats.first_frame_latency_ms} ms (server)"
+    )
     return done
 
 
@@ -140,10 +153,14 @@ def main() -> int:
     parser.add_argument("--voice", default="en-us", help="espeak-ng voice")
     parser.add_argument("--fps", type=float, default=60.0)
     parser.add_argument("--emotion", choices=["neutral", "happy", "angry", "sad"])
-    parser.add_argument("--send-audio", action="store_true",
-                        help="also stream the PCM16 audio (for engines that use it)")
-    parser.add_argument("--interrupt-at", type=float,
-                        help="cut the first reply off at this many seconds")
+    parser.add_argument(
+        "--send-audio",
+        action="store_true",
+        help="also stream the PCM16 audio (for engines that use it)",
+    )
+    parser.add_argument(
+        "--interrupt-at", type=float, help="cut the first reply off at this many seconds"
+    )
     args = parser.parse_args()
     try:
         return asyncio.run(run(args))

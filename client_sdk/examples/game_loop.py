@@ -47,8 +47,10 @@ def play(args: argparse.Namespace) -> int:
         ready = stream.ready()
         jaw = jaw_channel(ready)
         timeline = FrameTimeline(ready.fps)
-        print(f"{engine}/{character}: {len(ready.channels)} channels at {ready.fps:g} fps, "
-              f"fidelity {ready.fidelity}, showing {ready.channels[jaw]}")
+        print(
+            f"{engine}/{character}: {len(ready.channels)} channels at {ready.fps:g} fps, "
+            f"fidelity {ready.fidelity}, showing {ready.channels[jaw]}"
+        )
         tick, late, report_every = 0, 0, max(1, round(args.report_every * TICK_HZ))
         started = time.perf_counter()
         while True:
@@ -72,9 +74,11 @@ def play(args: argparse.Namespace) -> int:
                 break
             tick += 1
         done = stream.done()
-    print(f"played {tick + 1} ticks at {TICK_HZ:g} Hz; {len(timeline)} frames received; "
-          f"{late} late ticks; done: {done.reason}, {done.stats.frames} frames, "
-          f"server max lag {done.stats.max_lag_ms} ms")
+    print(
+        f"played {tick + 1} ticks at {TICK_HZ:g} Hz; {len(timeline)} frames received; "
+        f"{late} late ticks; done: {done.reason}, {done.stats.frames} frames, "
+        f"server max lag {done.stats.max_lag_ms} ms"
+    )
     return 0
 
 
@@ -83,8 +87,9 @@ def main() -> int:
     add_server_arguments(parser)
     parser.add_argument("--fps", type=float, default=60.0, help="frame rate to request")
     parser.add_argument("--seconds", type=float, default=10.0, help="longest run time")
-    parser.add_argument("--report-every", type=float, default=0.1,
-                        help="print the shown frame this often (seconds)")
+    parser.add_argument(
+        "--report-every", type=float, default=0.1, help="print the shown frame this often (seconds)"
+    )
     args = parser.parse_args()
     try:
         return play(args)

@@ -53,15 +53,17 @@ def read_phones(path: Path) -> list[Span]:
 
 def _read_json_phones(path: Path) -> list[Span]:
     if path.suffix.lower() != ".json":
-        raise PhonesError(f"{path}: reading {path.suffix} files needs the lipstream package; "
-                          f"without it only .json phones are read")
+        raise PhonesError(
+            f"{path}: reading {path.suffix} files needs the lipstream package; "
+            f"without it only .json phones are read"
+        )
     try:
         items = json.loads(path.read_text(encoding="utf-8"))
-        return [(str(item["phoneme"]), float(item["start"]), float(item["end"]))
-                for item in items]
+        return [(str(item["phoneme"]), float(item["start"]), float(item["end"])) for item in items]
     except (OSError, ValueError, TypeError, KeyError) as error:
-        raise PhonesError(f"{path}: not a JSON list of phoneme/start/end objects ({error})") \
-            from None
+        raise PhonesError(
+            f"{path}: not a JSON list of phoneme/start/end objects ({error})"
+        ) from None
 
 
 def write_csv(path: Path, result: StreamResult) -> None:
@@ -71,18 +73,28 @@ def write_csv(path: Path, result: StreamResult) -> None:
         writer = csv.writer(handle, lineterminator="\n")
         writer.writerow(("time", *result.channels))
         for index, row in enumerate(result.rows()):
-            writer.writerow([VALUE_FORMAT % (index / result.ready.fps),
-                             *(VALUE_FORMAT % value for value in row)])
+            writer.writerow(
+                [
+                    VALUE_FORMAT % (index / result.ready.fps),
+                    *(VALUE_FORMAT % value for value in row),
+                ]
+            )
 
 
-async def convert(client: AsyncClient, target: tuple[str, str], source: Path, out: Path,
-                  fps: float, limit: asyncio.Semaphore) -> bool:
+async def convert(
+    client: AsyncClient,
+    target: tuple[str, str],
+    source: Path,
+    out: Path,
+    fps: float,
+    limit: asyncio.Semaphore,
+) -> bool:
     async with limit:
         try:
             spans = await asyncio.to_thread(read_phones, source)
             stream = await client.start(*target, fps=fps)
             for first in range(0, len(spans), CHUNK):
-                await stream.send_phonemes(spans[first:first + CHUNK])
+                await stream.send_phonemes(spans[first : first + CHUNK])
             await stream.end()
             result = await stream.collect()
             await asyncio.to_thread(write_csv, out, result)
@@ -106,9 +118,12 @@ async def run(args: argparse.Namespace) -> int:
     out_dir = Path(args.out_dir) if args.out_dir else None
     limit = asyncio.Semaphore(args.concurrency)
     async with AsyncClient(args.url, token=args.token) as client:
-        converted = await asyncio.gather(*(
-            convert(client, target, source, output_path(source, out_dir), args.fps, limit)
-            for source in sources))
+        converted = await asyncio.gather(
+            *(
+                convert(client, target, source, output_path(source, out_dir), args.fps, limit)
+                for source in sources
+            )
+        )
     failed = converted.count(False)
     print(f"converted {len(sources) - failed} of {len(sources)} files")
     return 1 if failed else 0
@@ -120,8 +135,9 @@ def main() -> int:
     parser.add_argument("phones", nargs="+", help=".TextGrid, .lab or .json phones files")
     parser.add_argument("--out-dir", help="where to write the CSVs (default: beside each input)")
     parser.add_argument("--fps", type=float, default=60.0)
-    parser.add_argument("--concurrency", type=int, default=4,
-                        help="requests in flight at once on the connection")
+    parser.add_argument(
+        "--concurrency", type=int, default=4, help="requests in flight at once on the connection"
+    )
     args = parser.parse_args()
     if args.concurrency < 1:
         parser.error("--concurrency must be at least 1")

@@ -78,7 +78,11 @@ def present(obj: Mapping[str, Any], key: str) -> bool:
 
 
 def read_text(
-    value: object, where: str, max_length: int, *, control: bool = False,
+    value: object,
+    where: str,
+    max_length: int,
+    *,
+    control: bool = False,
     pattern: re.Pattern[str] | None = None,
 ) -> str:
     """A non-empty string of at most ``max_length`` code points and valid UTF-8, without
@@ -86,8 +90,9 @@ def read_text(
     if not isinstance(value, str):
         raise InvalidField(INVALID_MESSAGE, where, f"must be a string, got {_kind(value)}")
     if not 1 <= len(value) <= max_length:
-        raise InvalidField(INVALID_MESSAGE, where,
-                           f"must be 1 to {max_length} characters, got {len(value)}")
+        raise InvalidField(
+            INVALID_MESSAGE, where, f"must be 1 to {max_length} characters, got {len(value)}"
+        )
     _require_utf8(value, where)
     if not control and _CONTROL.search(value):
         raise InvalidField(INVALID_MESSAGE, where, "must not contain control characters")
@@ -120,17 +125,16 @@ def read_number(
     return number
 
 
-def read_integer(
-    value: object, where: str, *, minimum: int = 0, maximum: int = MAX_INTEGER
-) -> int:
+def read_integer(value: object, where: str, *, minimum: int = 0, maximum: int = MAX_INTEGER) -> int:
     """An integer in [minimum, maximum]; integral floats such as 3.0 count as integers."""
     if isinstance(value, float) and math.isfinite(value) and value.is_integer():
         value = int(value)
     if isinstance(value, bool) or not isinstance(value, int):
         raise InvalidField(INVALID_MESSAGE, where, f"must be an integer, got {_kind(value)}")
     if not minimum <= value <= maximum:
-        raise InvalidField(INVALID_MESSAGE, where,
-                           f"must be in [{minimum}, {maximum}], got {value}")
+        raise InvalidField(
+            INVALID_MESSAGE, where, f"must be in [{minimum}, {maximum}], got {value}"
+        )
     return value
 
 
@@ -142,8 +146,9 @@ def read_bool(value: object, where: str) -> bool:
 
 def read_choice(value: object, where: str, choices: Collection[str]) -> str:
     if not isinstance(value, str) or value not in choices:
-        raise InvalidField(INVALID_MESSAGE, where,
-                           f"must be one of {sorted(choices)}, got {value!r}")
+        raise InvalidField(
+            INVALID_MESSAGE, where, f"must be one of {sorted(choices)}, got {value!r}"
+        )
     return value
 
 
@@ -152,10 +157,12 @@ def read_names(value: object, where: str, max_items: int) -> tuple[str, ...]:
     if not isinstance(value, list):
         raise InvalidField(INVALID_MESSAGE, where, f"must be a list, got {_kind(value)}")
     if not 1 <= len(value) <= max_items:
-        raise InvalidField(INVALID_MESSAGE, where,
-                           f"must hold 1 to {max_items} names, got {len(value)}")
-    names = tuple(read_text(item, f"{where}[{index}]", MAX_NAME_LENGTH)
-                  for index, item in enumerate(value))
+        raise InvalidField(
+            INVALID_MESSAGE, where, f"must hold 1 to {max_items} names, got {len(value)}"
+        )
+    names = tuple(
+        read_text(item, f"{where}[{index}]", MAX_NAME_LENGTH) for index, item in enumerate(value)
+    )
     if len(set(names)) != len(names):
         raise InvalidField(INVALID_MESSAGE, where, "names must be distinct")
     return names
@@ -252,6 +259,14 @@ def _as_float(value: float) -> float:
 
 
 def _kind(value: object) -> str:
-    names = {type(None): "null", bool: "boolean", int: "integer", float: "number", str: "string",
-             bytes: "binary", list: "list", dict: "object"}
+    names = {
+        type(None): "null",
+        bool: "boolean",
+        int: "integer",
+        float: "number",
+        str: "string",
+        bytes: "binary",
+        list: "list",
+        dict: "object",
+    }
     return names.get(type(value), type(value).__name__)

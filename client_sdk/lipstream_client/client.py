@@ -78,7 +78,9 @@ DEFAULT_CLOSE_TIMEOUT_S = 5.0
 _HANDSHAKE_BODY_CHARS = 200
 
 PhonemeLike: TypeAlias = (
-    PhonemeItem | tuple[str, float, float] | tuple[str, float, float, str | None]
+    PhonemeItem
+    | tuple[str, float, float]
+    | tuple[str, float, float, str | None]
     | Mapping[str, object]
 )
 MessageTap: TypeAlias = Callable[[ServerMessage, float], None]
@@ -136,8 +138,10 @@ def _coerce_item(item: PhonemeLike, where: str) -> PhonemeItem:
         return PhonemeItem(phoneme, start, end, emotion)  # type: ignore[arg-type]
     if isinstance(item, tuple) and len(item) in (3, 4):
         return PhonemeItem(*item)
-    raise ValueError(f"{where}: expected a PhonemeItem, a (phoneme, start, end[, emotion]) "
-                     f"tuple or a mapping, got {item!r}")
+    raise ValueError(
+        f"{where}: expected a PhonemeItem, a (phoneme, start, end[, emotion]) "
+        f"tuple or a mapping, got {item!r}"
+    )
 
 
 def phoneme_items(items: Iterable[PhonemeLike]) -> tuple[PhonemeItem, ...]:
@@ -310,8 +314,9 @@ class Stream:
             elif future is self._done and finished.done is not None:
                 self._done.set_result(finished.done)
             else:
-                future.set_exception(LipstreamClientError(
-                    f"request {self.id!r} ended without a ready message"))
+                future.set_exception(
+                    LipstreamClientError(f"request {self.id!r} ended without a ready message")
+                )
                 future.exception()
         self._queue.put_nowait(finished)
 
@@ -397,12 +402,14 @@ class AsyncClient:
             body = response.body.decode("utf-8", "replace")[:_HANDSHAKE_BODY_CHARS]
             raise HandshakeRejected(response.status_code, body.strip()) from None
         except InvalidHandshake as error:
-            raise LipstreamClientError(f"WebSocket handshake with {self.url} failed: {error}") \
-                from None
+            raise LipstreamClientError(
+                f"WebSocket handshake with {self.url} failed: {error}"
+            ) from None
         negotiated = encoding_for_subprotocol(self._connection.subprotocol)
         self.encoding = negotiated or DEFAULT_ENCODING
-        self._reader = asyncio.create_task(self._read(self._connection),
-                                           name=f"lipstream-reader {self.url}")
+        self._reader = asyncio.create_task(
+            self._read(self._connection), name=f"lipstream-reader {self.url}"
+        )
 
     async def close(self) -> None:
         """Close with 1000 and wait for the reader; open requests end with ConnectionClosed."""
@@ -449,9 +456,15 @@ class AsyncClient:
         request still open on this connection (ValueError).
         """
         request = Start(
-            id=id if id is not None else self._fresh_id(), engine=engine, character=character,
-            fps=fps, channels=tuple(channels) if channels is not None else None, output=output,
-            emotion=emotion, latency_budget_ms=latency_budget_ms, options=dict(options or {}),
+            id=id if id is not None else self._fresh_id(),
+            engine=engine,
+            character=character,
+            fps=fps,
+            channels=tuple(channels) if channels is not None else None,
+            output=output,
+            emotion=emotion,
+            latency_budget_ms=latency_budget_ms,
+            options=dict(options or {}),
             phoneme_source=phoneme_source,
         )
         return await self.start_request(request)
@@ -500,8 +513,9 @@ class AsyncClient:
         try:
             async for data in connection:
                 received_at = time.perf_counter()
-                message = decode(data, self.encoding, max_size=self._max_message_bytes,
-                                 sender="server")
+                message = decode(
+                    data, self.encoding, max_size=self._max_message_bytes, sender="server"
+                )
                 if self._on_message is not None and not isinstance(message, ProtocolError):
                     self._on_message(message, received_at)  # type: ignore[arg-type]
                 self._dispatch(message)
@@ -526,8 +540,11 @@ class AsyncClient:
             if isinstance(message, ErrorMessage):
                 self.warnings.append(LipstreamServerError.from_message(message))
             else:
-                self.warnings.append(LipstreamClientError(
-                    f"{message.type} for request {message.id!r}, which is not open"))
+                self.warnings.append(
+                    LipstreamClientError(
+                        f"{message.type} for request {message.id!r}, which is not open"
+                    )
+                )
             return
         assert not isinstance(message, (Start, Phonemes, AudioChunk, End, Cancel, Interrupt))
         if stream._on_message(message):

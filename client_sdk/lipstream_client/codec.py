@@ -100,9 +100,11 @@ def decode(
     _check_encoding(encoding)
     size = _size(data, max_size)
     if size > max_size:
-        return ProtocolError(MESSAGE_TOO_LARGE,
-                             f"message of {size} bytes exceeds the limit of {max_size} bytes",
-                             fatal=True)
+        return ProtocolError(
+            MESSAGE_TOO_LARGE,
+            f"message of {size} bytes exceeds the limit of {max_size} bytes",
+            fatal=True,
+        )
     payload = _parse(data, encoding)
     if isinstance(payload, ProtocolError):
         return payload
@@ -114,8 +116,7 @@ def decode(
 
 
 def _protocol_error(error: InvalidField, identifier: str | None) -> ProtocolError:
-    return ProtocolError(error.code, error.message, identifier, identifier is not None,
-                         error.where)
+    return ProtocolError(error.code, error.message, identifier, identifier is not None, error.where)
 
 
 def _check_encoding(encoding: str) -> None:
@@ -145,7 +146,11 @@ def _parse(data: bytes | bytearray | memoryview | str, encoding: Encoding) -> ob
             if isinstance(data, str):
                 return _malformed("msgpack messages travel in binary frames, got text")
             return msgpack.unpackb(
-                data, raw=False, strict_map_key=True, max_ext_len=0, use_list=True,
+                data,
+                raw=False,
+                strict_map_key=True,
+                max_ext_len=0,
+                use_list=True,
                 object_pairs_hook=_unique_keys,
             )
         text = data if isinstance(data, str) else bytes(data).decode("utf-8")

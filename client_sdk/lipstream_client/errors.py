@@ -108,84 +108,136 @@ ERROR_CODES: dict[str, ErrorCodeInfo] = {
     MALFORMED: ErrorCodeInfo(
         "not decodable: invalid msgpack or JSON, trailing bytes, msgpack ext types, non-string "
         "or duplicate map keys, invalid UTF-8, or the wrong frame type for the encoding",
-        "codec", "message"),
+        "codec",
+        "message",
+    ),
     MESSAGE_TOO_LARGE: ErrorCodeInfo(
-        "the message exceeds the maximum message size", "codec", "connection",
-        CloseCode.MESSAGE_TOO_BIG),
+        "the message exceeds the maximum message size",
+        "codec",
+        "connection",
+        CloseCode.MESSAGE_TOO_BIG,
+    ),
     INVALID_MESSAGE: ErrorCodeInfo(
         "not an object, or a field is missing, unexpected, of the wrong type or out of range",
-        "codec", "request"),
+        "codec",
+        "request",
+    ),
     UNSUPPORTED_VERSION: ErrorCodeInfo(
-        "the message's `v` is a protocol version this peer does not speak", "codec", "request"),
+        "the message's `v` is a protocol version this peer does not speak", "codec", "request"
+    ),
     UNKNOWN_TYPE: ErrorCodeInfo(
-        "the message's `type` is unknown, or not one this peer accepts", "codec", "request"),
+        "the message's `type` is unknown, or not one this peer accepts", "codec", "request"
+    ),
     INVALID_TIMES: ErrorCodeInfo(
         "a time is not finite, negative, or a phoneme's end is not after its start",
-        "codec", "request"),
+        "codec",
+        "request",
+    ),
     NON_MONOTONIC_TIMES: ErrorCodeInfo(
         "a phoneme starts before the previous one ends, within a message or across messages",
-        "codec", "request"),
+        "codec",
+        "request",
+    ),
     INVALID_AUDIO: ErrorCodeInfo(
         "PCM16 data of odd length, invalid base64, or a sample rate that changes mid-request",
-        "codec", "request"),
+        "codec",
+        "request",
+    ),
     INVALID_FRAMES: ErrorCodeInfo(
         "frames data does not fit n_channels, or holds a value that is not a finite float32",
-        "codec", "request"),
+        "codec",
+        "request",
+    ),
     UNKNOWN_ENGINE: ErrorCodeInfo("no engine of that name is loaded", "server", "request"),
     UNKNOWN_CHARACTER: ErrorCodeInfo(
-        "no model of that character is loaded for the engine", "server", "request"),
+        "no model of that character is loaded for the engine", "server", "request"
+    ),
     UNKNOWN_PHONEME: ErrorCodeInfo(
-        "a phoneme label is not in the phoneme set", "server", "request"),
+        "a phoneme label is not in the phoneme set", "server", "request"
+    ),
     UNKNOWN_PHONEME_SOURCE: ErrorCodeInfo(
-        "`phoneme_source` names no notation the server reads", "server", "request"),
+        "`phoneme_source` names no notation the server reads", "server", "request"
+    ),
     UNKNOWN_EMOTION: ErrorCodeInfo("an emotion the engine does not know", "server", "request"),
     UNKNOWN_CHANNEL: ErrorCodeInfo(
-        "an output channel, subset or transform names a channel the rig lacks", "server",
-        "request"),
+        "an output channel, subset or transform names a channel the rig lacks", "server", "request"
+    ),
     INVALID_REQUEST: ErrorCodeInfo(
         "the request is well formed but its values are not acceptable to the engine "
-        "(fps, options, output profile)", "server", "request"),
+        "(fps, options, output profile)",
+        "server",
+        "request",
+    ),
     UNKNOWN_REQUEST: ErrorCodeInfo(
         "a message names an id with no active request (for example before its `start`)",
-        "server", "message"),
+        "server",
+        "message",
+    ),
     DUPLICATE_REQUEST: ErrorCodeInfo(
-        "`start` reuses the id of an active request; that request continues", "server",
-        "message"),
+        "`start` reuses the id of an active request; that request continues", "server", "message"
+    ),
     REQUEST_FINISHED: ErrorCodeInfo(
-        "input arrived after the request's `end`; the request still completes", "server",
-        "message"),
+        "input arrived after the request's `end`; the request still completes", "server", "message"
+    ),
     TOO_MANY_PHONEMES: ErrorCodeInfo(
-        "the request exceeds the maximum number of phonemes per request", "server", "request"),
+        "the request exceeds the maximum number of phonemes per request", "server", "request"
+    ),
     TOO_MANY_REQUESTS: ErrorCodeInfo(
-        "the connection already has the maximum number of active requests", "server", "request"),
+        "the connection already has the maximum number of active requests", "server", "request"
+    ),
     BUDGET_INFEASIBLE: ErrorCodeInfo(
         "no fidelity rung meets latency_budget_ms; details.min_budget_ms is the smallest "
-        "feasible budget", "server", "request"),
+        "feasible budget",
+        "server",
+        "request",
+    ),
     RATE_LIMITED: ErrorCodeInfo(
-        "the connection exceeded its message rate", "server", "connection",
-        CloseCode.POLICY_VIOLATION),
+        "the connection exceeded its message rate",
+        "server",
+        "connection",
+        CloseCode.POLICY_VIOLATION,
+    ),
     IDLE_TIMEOUT: ErrorCodeInfo(
-        "no message arrived within the idle timeout and no request is active", "server",
-        "connection", CloseCode.NORMAL),
+        "no message arrived within the idle timeout and no request is active",
+        "server",
+        "connection",
+        CloseCode.NORMAL,
+    ),
     SERVER_BUSY: ErrorCodeInfo(
-        "the server is at its concurrent-session cap", "server", "connection",
-        CloseCode.TRY_AGAIN_LATER),
+        "the server is at its concurrent-session cap",
+        "server",
+        "connection",
+        CloseCode.TRY_AGAIN_LATER,
+    ),
     SHUTTING_DOWN: ErrorCodeInfo(
         "the server is draining: new `start`s are refused (request scope) and the connection "
-        "closes once its in-flight requests are done", "server", "connection",
-        CloseCode.GOING_AWAY),
+        "closes once its in-flight requests are done",
+        "server",
+        "connection",
+        CloseCode.GOING_AWAY,
+    ),
     UNAUTHORIZED: ErrorCodeInfo(
-        "missing or wrong bearer token", "server", "connection", CloseCode.POLICY_VIOLATION),
+        "missing or wrong bearer token", "server", "connection", CloseCode.POLICY_VIOLATION
+    ),
     ORIGIN_NOT_ALLOWED: ErrorCodeInfo(
-        "the Origin header is not in the allow-list", "server", "connection",
-        CloseCode.POLICY_VIOLATION),
+        "the Origin header is not in the allow-list",
+        "server",
+        "connection",
+        CloseCode.POLICY_VIOLATION,
+    ),
     SLOW_CONSUMER: ErrorCodeInfo(
         "the client read too slowly and the bounded send queue filled; the close reason "
-        "carries this code (no error message can be queued)", "server", "connection",
-        CloseCode.POLICY_VIOLATION),
+        "carries this code (no error message can be queued)",
+        "server",
+        "connection",
+        CloseCode.POLICY_VIOLATION,
+    ),
     INTERNAL_ERROR: ErrorCodeInfo(
-        "an unexpected server fault; with an id only that request ends", "server",
-        "connection", CloseCode.INTERNAL_ERROR),
+        "an unexpected server fault; with an id only that request ends",
+        "server",
+        "connection",
+        CloseCode.INTERNAL_ERROR,
+    ),
 }
 
 

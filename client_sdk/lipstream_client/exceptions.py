@@ -64,8 +64,9 @@ class ConnectionClosed(LipstreamClientError):
     """The WebSocket closed with ``code`` and ``reason`` (the error code that caused it,
     if any); ``error`` is the connection-level ``error`` message the server sent first."""
 
-    def __init__(self, code: int | None, reason: str = "",
-                 error: LipstreamServerError | None = None) -> None:
+    def __init__(
+        self, code: int | None, reason: str = "", error: LipstreamServerError | None = None
+    ) -> None:
         self.code = code
         self.reason = reason
         self.error = error
@@ -93,8 +94,9 @@ class HandshakeRejected(LipstreamClientError):
     def __init__(self, status: int, body: str = "") -> None:
         self.status = status
         self.body = body
-        super().__init__(f"WebSocket upgrade refused with HTTP {status}"
-                         + (f": {body}" if body else ""))
+        super().__init__(
+            f"WebSocket upgrade refused with HTTP {status}" + (f": {body}" if body else "")
+        )
 
     @property
     def retryable(self) -> bool:
@@ -109,8 +111,9 @@ class ProtocolViolation(LipstreamClientError):
         super().__init__(f"invalid message from the server: {error}")
 
 
-def closed_error(code: int | None, reason: str,
-                 error: LipstreamServerError | None = None) -> ConnectionClosed:
+def closed_error(
+    code: int | None, reason: str, error: LipstreamServerError | None = None
+) -> ConnectionClosed:
     """The ``ConnectionClosed`` subclass that names the close code's meaning."""
     if code == CloseCode.TRY_AGAIN_LATER:
         return ServerBusy(code, reason, error)

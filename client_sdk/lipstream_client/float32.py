@@ -49,7 +49,7 @@ def all_finite_float32(data: bytes) -> bool:
 
 def split_rows(values: list[float], width: int) -> list[list[float]]:
     """Flat row-major values to rows of ``width``."""
-    return [values[start:start + width] for start in range(0, len(values), width)]
+    return [values[start : start + width] for start in range(0, len(values), width)]
 
 
 def shortest_float32(value: float) -> float:

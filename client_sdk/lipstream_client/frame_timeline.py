@@ -36,14 +36,18 @@ class FrameTimeline:
         """Insert ``block``'s rows at their indices. A block that starts before the end
         (the return to rest after an interrupt) replaces everything from its first frame."""
         if block.fps != self.fps:
-            raise ValueError(f"block of request {block.id!r} is at {block.fps} fps, "
-                             f"the timeline at {self.fps} fps")
+            raise ValueError(
+                f"block of request {block.id!r} is at {block.fps} fps, "
+                f"the timeline at {self.fps} fps"
+            )
         if self.n_channels is not None and block.n_channels != self.n_channels:
-            raise ValueError(f"block of request {block.id!r} has {block.n_channels} channels, "
-                             f"earlier blocks {self.n_channels}")
+            raise ValueError(
+                f"block of request {block.id!r} has {block.n_channels} channels, "
+                f"earlier blocks {self.n_channels}"
+            )
         self.n_channels = block.n_channels
         if block.first_frame < len(self._rows):
-            del self._rows[block.end_frame:]
+            del self._rows[block.end_frame :]
         if block.end_frame > len(self._rows):
             self._rows.extend([None] * (block.end_frame - len(self._rows)))
         for offset, row in enumerate(block.rows()):
@@ -51,7 +55,7 @@ class FrameTimeline:
 
     def truncate(self, n_frames: int) -> None:
         """Keep frames 0 .. n_frames - 1 (``done.stats.frames`` ends the final timeline)."""
-        del self._rows[max(0, n_frames):]
+        del self._rows[max(0, n_frames) :]
 
     def __len__(self) -> int:
         """One past the highest frame index received."""

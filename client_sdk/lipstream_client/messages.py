@@ -289,8 +289,9 @@ class Frames:
         width = len(rows[0])
         if any(len(row) != width for row in rows):
             raise ValueError(f"every row must have {width} values")
-        return cls(id, seq, first_frame, fps, width,
-                   pack_float32([value for row in rows for value in row]))
+        return cls(
+            id, seq, first_frame, fps, width, pack_float32([value for row in rows for value in row])
+        )
 
 
 @dataclass(frozen=True, slots=True)

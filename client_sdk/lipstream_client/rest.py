@@ -47,8 +47,7 @@ from .wire import message_to_wire
 DEFAULT_TIMEOUT_S = 10.0
 _BODY_CHARS = 300
 _HTTP_SCHEMES = {"ws": "http", "wss": "https", "http": "http", "https": "https"}
-_MEDIA_TYPES: dict[Encoding, str] = {"msgpack": "application/msgpack",
-                                     "json": "application/json"}
+_MEDIA_TYPES: dict[Encoding, str] = {"msgpack": "application/msgpack", "json": "application/json"}
 SYNTHESIZE_ID = "synthesize"
 _ENVELOPE = ("v", "type", "id")
 
@@ -72,8 +71,9 @@ class RestServerError(LipstreamServerError):
     """``POST /v1/synthesize`` answered an error with a protocol ``code``; ``status`` is
     the HTTP status. The request has ended (``fatal``) and concerns no stream id."""
 
-    def __init__(self, status: int, code: str, message: str,
-                 details: Mapping[str, Any] | None = None) -> None:
+    def __init__(
+        self, status: int, code: str, message: str, details: Mapping[str, Any] | None = None
+    ) -> None:
         super().__init__(code, message, True, None, details)
         self.status = status
 
@@ -116,8 +116,9 @@ class Character:
 class RestClient:
     """Blocking calls to a lipstream server's HTTP API; ``timeout`` in seconds per call."""
 
-    def __init__(self, url: str, token: str | None = None,
-                 timeout: float = DEFAULT_TIMEOUT_S) -> None:
+    def __init__(
+        self, url: str, token: str | None = None, timeout: float = DEFAULT_TIMEOUT_S
+    ) -> None:
         self.root = http_root(url)
         self._token = token
         self._timeout = timeout
@@ -141,8 +142,7 @@ class RestClient:
     def characters(self) -> list[Character]:
         """``GET /v1/characters``."""
         listing = self.get_json("/v1/characters")["characters"]
-        return [Character(str(item["name"]), tuple(map(str, item["engines"])))
-                for item in listing]
+        return [Character(str(item["name"]), tuple(map(str, item["engines"]))) for item in listing]
 
     def default_target(self) -> tuple[str, str]:
         """(engine, character): the first character listed, with its first engine."""
@@ -175,17 +175,29 @@ class RestClient:
         sending) for input the protocol refuses; RestServerError for the
         server's refusals.
         """
-        start = Start(SYNTHESIZE_ID, engine, character, fps,
-                      tuple(channels) if channels is not None else None, output, emotion,
-                      latency_budget_ms, dict(options or {}), phoneme_source)
+        start = Start(
+            SYNTHESIZE_ID,
+            engine,
+            character,
+            fps,
+            tuple(channels) if channels is not None else None,
+            output,
+            emotion,
+            latency_budget_ms,
+            dict(options or {}),
+            phoneme_source,
+        )
         parts: list[Message] = [start, Phonemes(SYNTHESIZE_ID, phoneme_items(items))]
         if audio is not None:
             parts.append(AudioChunk(SYNTHESIZE_ID, audio[1], bytes(audio[0])))
         body = _synthesize_body(parts, encoding)
         media = _MEDIA_TYPES[encoding]
         request = urllib.request.Request(
-            self.root + "/v1/synthesize", data=body, method="POST",
-            headers=self._headers({"Content-Type": media, "Accept": media}))
+            self.root + "/v1/synthesize",
+            data=body,
+            method="POST",
+            headers=self._headers({"Content-Type": media, "Accept": media}),
+        )
         try:
             with self._open(request) as answer:
                 return _synthesis(_parse(answer.read(), encoding))
@@ -200,8 +212,9 @@ class RestClient:
 
     def _status(self, path: str) -> int:
         try:
-            with self._open(urllib.request.Request(self.root + path,
-                                                   headers=self._headers())) as answer:
+            with self._open(
+                urllib.request.Request(self.root + path, headers=self._headers())
+            ) as answer:
                 status: int = answer.status
                 return status
         except HttpError as error:
@@ -217,8 +230,9 @@ class RestClient:
         try:
             return self._opener.open(request, timeout=self._timeout)
         except urllib.error.HTTPError as error:
-            raise HttpError(request.get_method(), request.full_url, error.code,
-                            error.read()) from None
+            raise HttpError(
+                request.get_method(), request.full_url, error.code, error.read()
+            ) from None
 
 
 def _synthesize_body(parts: list[Message], encoding: Encoding) -> bytes:
@@ -226,8 +240,11 @@ def _synthesize_body(parts: list[Message], encoding: Encoding) -> bytes:
     body: dict[str, Any] = {}
     for message in parts:
         encode(message, encoding)  # EncodeError for what the protocol refuses
-        fields = {key: value for key, value in message_to_wire(message, encoding).items()
-                  if key not in _ENVELOPE}
+        fields = {
+            key: value
+            for key, value in message_to_wire(message, encoding).items()
+            if key not in _ENVELOPE
+        }
         if isinstance(message, Phonemes):
             body["items"] = fields["items"]
         elif isinstance(message, AudioChunk):
@@ -254,19 +271,29 @@ def _synthesis(answer: Any) -> Synthesis:
         data = answer["data"]
         if not isinstance(data, bytes):
             data = pack_float32([float(value) for row in data for value in row])
-        ready = Ready(SYNTHESIZE_ID, str(answer["engine"]), str(answer["character"]), fps,
-                      tuple(map(str, answer["channels"])), float(answer["lookahead_ms"]),
-                      str(answer["fidelity"]), answer.get("emotion"),
-                      answer.get("latency_budget_ms"), answer.get("options") or {},
-                      answer.get("phoneme_source"))
+        ready = Ready(
+            SYNTHESIZE_ID,
+            str(answer["engine"]),
+            str(answer["character"]),
+            fps,
+            tuple(map(str, answer["channels"])),
+            float(answer["lookahead_ms"]),
+            str(answer["fidelity"]),
+            answer.get("emotion"),
+            answer.get("latency_budget_ms"),
+            answer.get("options") or {},
+            answer.get("phoneme_source"),
+        )
         stats = answer["stats"]
         done = DoneStats(int(stats["frames"]), engine=stats.get("engine") or {})
         frames = Frames(SYNTHESIZE_ID, 0, int(answer.get("first_frame", 0)), fps, width, data)
     except (KeyError, TypeError, ValueError, OverflowError) as error:
         raise LipstreamClientError(f"unexpected /v1/synthesize answer: {error!r}") from None
     if len(data) != frames.n_frames * width * 4 or frames.n_frames != answer.get("n_frames"):
-        raise LipstreamClientError("the /v1/synthesize answer's data does not hold "
-                                   f"{answer.get('n_frames')} rows of {width} float32")
+        raise LipstreamClientError(
+            "the /v1/synthesize answer's data does not hold "
+            f"{answer.get('n_frames')} rows of {width} float32"
+        )
     return Synthesis(ready, frames, done)
 
 
@@ -276,8 +303,9 @@ def _server_error(error: HttpError, encoding: Encoding) -> LipstreamClientError:
     for candidate in (encoding, "json"):
         try:
             detail = _parse(error.raw, candidate)["error"]
-            return RestServerError(error.status, str(detail["code"]), str(detail["message"]),
-                                   detail.get("details"))
+            return RestServerError(
+                error.status, str(detail["code"]), str(detail["message"]), detail.get("details")
+            )
         except (KeyError, TypeError, ValueError, msgpack.UnpackException):
             continue
     return error

@@ -56,8 +56,11 @@ counts = st.integers(min_value=0, max_value=2**53 - 1)
 finite_floats = st.floats(allow_nan=False, allow_infinity=False)
 
 _json_scalars: st.SearchStrategy[JsonValue] = st.one_of(
-    st.none(), st.booleans(), st.integers(min_value=-(2**63), max_value=2**64 - 1),
-    finite_floats, st.text(_PRINTABLE, max_size=12),
+    st.none(),
+    st.booleans(),
+    st.integers(min_value=-(2**63), max_value=2**64 - 1),
+    finite_floats,
+    st.text(_PRINTABLE, max_size=12),
 )
 json_values: st.SearchStrategy[JsonValue] = st.recursive(
     _json_scalars,
@@ -71,11 +74,15 @@ channel_lists = st.lists(names, min_size=1, max_size=6, unique=True).map(tuple)
 @st.composite
 def phoneme_items(draw: st.DrawFn, max_items: int = 8) -> tuple[PhonemeItem, ...]:
     """An ordered, non-overlapping timeline: gaps >= 0 s and durations >= 1 ms."""
-    steps = draw(st.lists(
-        st.tuples(st.floats(0.0, 2.0), st.floats(1e-3, 2.0), phoneme_labels,
-                  st.none() | emotions),
-        min_size=1, max_size=max_items,
-    ))
+    steps = draw(
+        st.lists(
+            st.tuples(
+                st.floats(0.0, 2.0), st.floats(1e-3, 2.0), phoneme_labels, st.none() | emotions
+            ),
+            min_size=1,
+            max_size=max_items,
+        )
+    )
     cursor = draw(st.floats(0.0, 100.0))
     items: list[PhonemeItem] = []
     for gap, duration, label, emotion in steps:
@@ -108,7 +115,10 @@ def output_profiles(draw: st.DrawFn) -> OutputProfile:
 def starts(draw: st.DrawFn) -> Start:
     selection = draw(st.sampled_from(("none", "channels", "output")))
     return Start(
-        id=draw(ids), engine=draw(names), character=draw(names), fps=draw(fps_values),
+        id=draw(ids),
+        engine=draw(names),
+        character=draw(names),
+        fps=draw(fps_values),
         channels=draw(channel_lists) if selection == "channels" else None,
         output=draw(output_profiles()) if selection == "output" else None,
         emotion=draw(st.none() | emotions),
@@ -120,17 +130,31 @@ def starts(draw: st.DrawFn) -> Start:
 
 phonemes_messages = st.builds(Phonemes, id=ids, items=phoneme_items())
 audio_chunks = st.builds(
-    AudioChunk, id=ids, sample_rate=st.integers(MIN_SAMPLE_RATE, MAX_SAMPLE_RATE),
+    AudioChunk,
+    id=ids,
+    sample_rate=st.integers(MIN_SAMPLE_RATE, MAX_SAMPLE_RATE),
     pcm16=st.binary(min_size=1, max_size=32).map(lambda raw: raw + raw[:1] * (len(raw) % 2)),
 )
 ends = st.builds(End, id=ids)
 cancels = st.builds(Cancel, id=ids)
-interrupts = st.builds(Interrupt, id=ids, at=st.floats(0.0, 3600.0),
-                       return_ms=st.none() | st.floats(0.0, MAX_RETURN_MS))
+interrupts = st.builds(
+    Interrupt,
+    id=ids,
+    at=st.floats(0.0, 3600.0),
+    return_ms=st.none() | st.floats(0.0, MAX_RETURN_MS),
+)
 readies = st.builds(
-    Ready, id=ids, engine=names, character=names, fps=fps_values, channels=channel_lists,
-    lookahead_ms=st.floats(0.0, 10_000.0), fidelity=names, emotion=st.none() | emotions,
-    latency_budget_ms=st.none() | st.floats(1e-3, MAX_LATENCY_BUDGET_MS), options=json_maps,
+    Ready,
+    id=ids,
+    engine=names,
+    character=names,
+    fps=fps_values,
+    channels=channel_lists,
+    lookahead_ms=st.floats(0.0, 10_000.0),
+    fidelity=names,
+    emotion=st.none() | emotions,
+    latency_budget_ms=st.none() | st.floats(1e-3, MAX_LATENCY_BUDGET_MS),
+    options=json_maps,
     phoneme_source=st.none() | phoneme_sources,
 )
 float32_values = st.floats(width=32, allow_nan=False, allow_infinity=False)
@@ -140,22 +164,30 @@ float32_values = st.floats(width=32, allow_nan=False, allow_infinity=False)
 def frames_messages(draw: st.DrawFn) -> Frames:
     n_channels = draw(st.integers(1, 8))
     n_frames = draw(st.integers(1, 8))
-    values = draw(st.lists(float32_values, min_size=n_channels * n_frames,
-                           max_size=n_channels * n_frames))
-    return Frames(draw(ids), draw(counts), draw(counts), draw(fps_values), n_channels,
-                  pack_float32(values))
+    values = draw(
+        st.lists(float32_values, min_size=n_channels * n_frames, max_size=n_channels * n_frames)
+    )
+    return Frames(
+        draw(ids), draw(counts), draw(counts), draw(fps_values), n_channels, pack_float32(values)
+    )
 
 
 done_stats = st.builds(
-    DoneStats, frames=counts,
-    first_frame_latency_ms=st.none() | non_negative_ms, max_lag_ms=st.none() | non_negative_ms,
-    budget_met=st.none() | st.booleans(), engine=json_maps,
+    DoneStats,
+    frames=counts,
+    first_frame_latency_ms=st.none() | non_negative_ms,
+    max_lag_ms=st.none() | non_negative_ms,
+    budget_met=st.none() | st.booleans(),
+    engine=json_maps,
 )
 dones = st.builds(Done, id=ids, stats=done_stats, reason=st.sampled_from(DONE_REASONS))
 error_messages = st.builds(
-    ErrorMessage, code=st.sampled_from(sorted(ERROR_CODES)),
+    ErrorMessage,
+    code=st.sampled_from(sorted(ERROR_CODES)),
     message=st.text(_UNICODE, min_size=1, max_size=80),
-    id=st.none() | ids, fatal=st.booleans(), details=json_maps,
+    id=st.none() | ids,
+    fatal=st.booleans(),
+    details=json_maps,
 )
 
 

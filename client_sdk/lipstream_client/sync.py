@@ -167,8 +167,14 @@ class Client:
     ) -> None:
         self.timeout = timeout
         self._async = AsyncClient(
-            url, encoding, token, origin, open_timeout=open_timeout,
-            close_timeout=close_timeout, max_message_bytes=max_message_bytes, proxy=proxy,
+            url,
+            encoding,
+            token,
+            origin,
+            open_timeout=open_timeout,
+            close_timeout=close_timeout,
+            max_message_bytes=max_message_bytes,
+            proxy=proxy,
             on_message=on_message,
         )
         self._thread: _LoopThread | None = None
@@ -245,11 +251,20 @@ class Client:
         phoneme_source: str | None = None,
     ) -> SyncStream:
         """Open a request (see ``AsyncClient.start``)."""
-        stream = self._run(self._async.start(
-            engine, character, id=id, fps=fps, channels=channels, output=output,
-            emotion=emotion, latency_budget_ms=latency_budget_ms, options=options,
-            phoneme_source=phoneme_source,
-        ))
+        stream = self._run(
+            self._async.start(
+                engine,
+                character,
+                id=id,
+                fps=fps,
+                channels=channels,
+                output=output,
+                emotion=emotion,
+                latency_budget_ms=latency_budget_ms,
+                options=options,
+                phoneme_source=phoneme_source,
+            )
+        )
         return SyncStream(self, stream)
 
     def start_request(self, request: Start) -> SyncStream:

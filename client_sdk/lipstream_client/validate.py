@@ -109,8 +109,9 @@ def message_from_wire(payload: object, encoding: Encoding, sender: Sender | None
     ``sender`` restricts the accepted types to what that side may send.
     """
     if not isinstance(payload, dict):
-        raise InvalidField(INVALID_MESSAGE, None,
-                           "a message must be an object (a msgpack map or JSON object)")
+        raise InvalidField(
+            INVALID_MESSAGE, None, "a message must be an object (a msgpack map or JSON object)"
+        )
     _check_version(payload)
     message_type = payload.get("type")
     if not isinstance(message_type, str):
@@ -131,13 +132,16 @@ def _check_version(payload: Mapping[str, Any]) -> None:
     if isinstance(version, bool) or not isinstance(version, (int, float)):
         raise InvalidField(INVALID_MESSAGE, "v", "must be the protocol version number")
     if version != PROTOCOL_VERSION:
-        raise InvalidField(UNSUPPORTED_VERSION, "v",
-                           f"protocol version {version!r} is not supported; this peer speaks "
-                           f"{PROTOCOL_VERSION}")
+        raise InvalidField(
+            UNSUPPORTED_VERSION,
+            "v",
+            f"protocol version {version!r} is not supported; this peer speaks {PROTOCOL_VERSION}",
+        )
 
 
-def _object(payload: Mapping[str, Any], required: tuple[str, ...],
-            optional: tuple[str, ...] = ()) -> dict[str, Any]:
+def _object(
+    payload: Mapping[str, Any], required: tuple[str, ...], optional: tuple[str, ...] = ()
+) -> dict[str, Any]:
     return read_object(payload, "", ENVELOPE + required, optional)
 
 
@@ -154,24 +158,28 @@ def _optional_number(obj: Mapping[str, Any], key: str, **bounds: Any) -> float |
 
 
 def _start(payload: Mapping[str, Any], encoding: Encoding) -> Start:
-    obj = _object(payload, ("id", "engine", "character"),
-                  ("fps", "channels", "output", "emotion", "latency_budget_ms", "options",
-                   "phoneme_source"))
+    obj = _object(
+        payload,
+        ("id", "engine", "character"),
+        ("fps", "channels", "output", "emotion", "latency_budget_ms", "options", "phoneme_source"),
+    )
     if present(obj, "channels") and present(obj, "output"):
-        raise InvalidField(INVALID_MESSAGE, None,
-                           "give either 'channels' or 'output', not both")
+        raise InvalidField(INVALID_MESSAGE, None, "give either 'channels' or 'output', not both")
     return Start(
         id=_id(obj),
         engine=read_text(obj["engine"], "engine", MAX_NAME_LENGTH),
         character=read_text(obj["character"], "character", MAX_NAME_LENGTH),
         fps=read_number(obj["fps"], "fps", above=0.0, maximum=MAX_FPS)
-        if present(obj, "fps") else DEFAULT_FPS,
+        if present(obj, "fps")
+        else DEFAULT_FPS,
         channels=read_names(obj["channels"], "channels", MAX_CHANNELS)
-        if present(obj, "channels") else None,
+        if present(obj, "channels")
+        else None,
         output=_output(obj["output"]) if present(obj, "output") else None,
         emotion=_optional_text(obj, "emotion", "", MAX_EMOTION_LENGTH),
-        latency_budget_ms=_optional_number(obj, "latency_budget_ms", above=0.0,
-                                           maximum=MAX_LATENCY_BUDGET_MS),
+        latency_budget_ms=_optional_number(
+            obj, "latency_budget_ms", above=0.0, maximum=MAX_LATENCY_BUDGET_MS
+        ),
         options=read_json_map(obj["options"], "options") if present(obj, "options") else {},
         phoneme_source=_optional_text(obj, "phoneme_source", "", MAX_PHONEME_SOURCE_LENGTH),
     )
@@ -181,16 +189,22 @@ def _output(value: object) -> OutputProfile:
     where = "output"
     obj = read_object(value, where, (), ("naming", "channels", "transforms", "visemes"))
     if present(obj, "naming") and present(obj, "visemes"):
-        raise InvalidField(INVALID_MESSAGE, where,
-                           "'naming' applies to blendshapes; omit it with 'visemes'")
-    naming = read_choice(obj["naming"], f"{where}.naming", NAMINGS) \
-        if present(obj, "naming") else None
-    visemes = read_choice(obj["visemes"], f"{where}.visemes", VISEME_SETS) \
-        if present(obj, "visemes") else None
+        raise InvalidField(
+            INVALID_MESSAGE, where, "'naming' applies to blendshapes; omit it with 'visemes'"
+        )
+    naming = (
+        read_choice(obj["naming"], f"{where}.naming", NAMINGS) if present(obj, "naming") else None
+    )
+    visemes = (
+        read_choice(obj["visemes"], f"{where}.visemes", VISEME_SETS)
+        if present(obj, "visemes")
+        else None
+    )
     return OutputProfile(
         naming=cast(Naming | None, naming),
         channels=read_names(obj["channels"], f"{where}.channels", MAX_CHANNELS)
-        if present(obj, "channels") else None,
+        if present(obj, "channels")
+        else None,
         transforms=_transforms(obj["transforms"]) if present(obj, "transforms") else {},
         visemes=cast(VisemeSet | None, visemes),
     )
@@ -221,8 +235,9 @@ def _transform(value: object, where: str) -> ChannelTransform:
         if low > high:
             raise InvalidField(INVALID_MESSAGE, f"{where}.clamp", f"low {low} exceeds high {high}")
         clamp = (low, high)
-    multiplier = read_number(obj["multiplier"], f"{where}.multiplier") \
-        if present(obj, "multiplier") else 1.0
+    multiplier = (
+        read_number(obj["multiplier"], f"{where}.multiplier") if present(obj, "multiplier") else 1.0
+    )
     offset = read_number(obj["offset"], f"{where}.offset") if present(obj, "offset") else 0.0
     return ChannelTransform(multiplier, offset, clamp)
 
@@ -237,9 +252,11 @@ def _phonemes(payload: Mapping[str, Any], encoding: Encoding) -> Phonemes:
     for index, raw in enumerate(raw_items):
         item = _phoneme_item(raw, f"items[{index}]")
         if items and item.start < items[-1].end - TIME_TOLERANCE_S:
-            raise InvalidField(NON_MONOTONIC_TIMES, f"items[{index}].start",
-                               f"starts at {item.start} before the previous phoneme ends at "
-                               f"{items[-1].end}")
+            raise InvalidField(
+                NON_MONOTONIC_TIMES,
+                f"items[{index}].start",
+                f"starts at {item.start} before the previous phoneme ends at {items[-1].end}",
+            )
         items.append(item)
     return Phonemes(identifier, tuple(items))
 
@@ -247,27 +264,34 @@ def _phonemes(payload: Mapping[str, Any], encoding: Encoding) -> Phonemes:
 def _phoneme_item(value: object, where: str) -> PhonemeItem:
     obj = read_object(value, where, ("phoneme", "start", "end"), ("emotion",))
     phoneme = read_text(obj["phoneme"], f"{where}.phoneme", MAX_PHONEME_LENGTH)
-    start = read_number(obj["start"], f"{where}.start", minimum=0.0, maximum=MAX_TIME_S,
-                        code=INVALID_TIMES)
-    end = read_number(obj["end"], f"{where}.end", minimum=0.0, maximum=MAX_TIME_S,
-                      code=INVALID_TIMES)
+    start = read_number(
+        obj["start"], f"{where}.start", minimum=0.0, maximum=MAX_TIME_S, code=INVALID_TIMES
+    )
+    end = read_number(
+        obj["end"], f"{where}.end", minimum=0.0, maximum=MAX_TIME_S, code=INVALID_TIMES
+    )
     if end <= start:
-        raise InvalidField(INVALID_TIMES, f"{where}.end",
-                           f"end {end} must be after start {start}")
-    return PhonemeItem(phoneme, start, end, _optional_text(obj, "emotion", where,
-                                                           MAX_EMOTION_LENGTH))
+        raise InvalidField(INVALID_TIMES, f"{where}.end", f"end {end} must be after start {start}")
+    return PhonemeItem(
+        phoneme, start, end, _optional_text(obj, "emotion", where, MAX_EMOTION_LENGTH)
+    )
 
 
 def _audio(payload: Mapping[str, Any], encoding: Encoding) -> AudioChunk:
     obj = _object(payload, ("id", "sample_rate", "pcm16"))
     identifier = _id(obj)
-    rate = read_integer(obj["sample_rate"], "sample_rate", minimum=MIN_SAMPLE_RATE,
-                        maximum=MAX_SAMPLE_RATE)
-    pcm = read_bytes(obj["pcm16"], "pcm16") if encoding == "msgpack" \
+    rate = read_integer(
+        obj["sample_rate"], "sample_rate", minimum=MIN_SAMPLE_RATE, maximum=MAX_SAMPLE_RATE
+    )
+    pcm = (
+        read_bytes(obj["pcm16"], "pcm16")
+        if encoding == "msgpack"
         else read_base64(obj["pcm16"], "pcm16", INVALID_AUDIO)
+    )
     if not pcm or len(pcm) % PCM16_BYTES:
-        raise InvalidField(INVALID_AUDIO, "pcm16",
-                           f"must hold whole 16-bit samples, got {len(pcm)} bytes")
+        raise InvalidField(
+            INVALID_AUDIO, "pcm16", f"must hold whole 16-bit samples, got {len(pcm)} bytes"
+        )
     return AudioChunk(identifier, rate, pcm)
 
 
@@ -289,21 +313,25 @@ def _interrupt(payload: Mapping[str, Any], encoding: Encoding) -> Interrupt:
 
 
 def _ready(payload: Mapping[str, Any], encoding: Encoding) -> Ready:
-    obj = _object(payload, ("id", "engine", "character", "fps", "channels", "lookahead_ms",
-                            "fidelity"),
-                  ("emotion", "latency_budget_ms", "options", "phoneme_source"))
+    obj = _object(
+        payload,
+        ("id", "engine", "character", "fps", "channels", "lookahead_ms", "fidelity"),
+        ("emotion", "latency_budget_ms", "options", "phoneme_source"),
+    )
     return Ready(
         id=_id(obj),
         engine=read_text(obj["engine"], "engine", MAX_NAME_LENGTH),
         character=read_text(obj["character"], "character", MAX_NAME_LENGTH),
         fps=read_number(obj["fps"], "fps", above=0.0, maximum=MAX_FPS),
         channels=read_names(obj["channels"], "channels", MAX_CHANNELS),
-        lookahead_ms=read_number(obj["lookahead_ms"], "lookahead_ms", minimum=0.0,
-                                 maximum=MAX_TIME_S * 1000.0),
+        lookahead_ms=read_number(
+            obj["lookahead_ms"], "lookahead_ms", minimum=0.0, maximum=MAX_TIME_S * 1000.0
+        ),
         fidelity=read_text(obj["fidelity"], "fidelity", MAX_NAME_LENGTH),
         emotion=_optional_text(obj, "emotion", "", MAX_EMOTION_LENGTH),
-        latency_budget_ms=_optional_number(obj, "latency_budget_ms", above=0.0,
-                                           maximum=MAX_LATENCY_BUDGET_MS),
+        latency_budget_ms=_optional_number(
+            obj, "latency_budget_ms", above=0.0, maximum=MAX_LATENCY_BUDGET_MS
+        ),
         options=read_json_map(obj["options"], "options") if present(obj, "options") else {},
         phoneme_source=_optional_text(obj, "phoneme_source", "", MAX_PHONEME_SOURCE_LENGTH),
     )
@@ -313,8 +341,11 @@ def _frames(payload: Mapping[str, Any], encoding: Encoding) -> Frames:
     obj = _object(payload, ("id", "seq", "first_frame", "fps", "n_channels", "data"))
     identifier = _id(obj)
     n_channels = read_integer(obj["n_channels"], "n_channels", minimum=1, maximum=MAX_CHANNELS)
-    data = _frame_bytes(obj["data"], n_channels) if encoding == "msgpack" \
+    data = (
+        _frame_bytes(obj["data"], n_channels)
+        if encoding == "msgpack"
         else _frame_rows(obj["data"], n_channels)
+    )
     if not all_finite_float32(data):
         raise InvalidField(INVALID_FRAMES, "data", "values must be finite")
     return Frames(
@@ -331,9 +362,12 @@ def _frame_bytes(value: object, n_channels: int) -> bytes:
     data = read_bytes(value, "data")
     row_bytes = FLOAT32_BYTES * n_channels
     if not data or len(data) % row_bytes:
-        raise InvalidField(INVALID_FRAMES, "data",
-                           f"must be whole rows of {n_channels} float32 values "
-                           f"({row_bytes} bytes each), got {len(data)} bytes")
+        raise InvalidField(
+            INVALID_FRAMES,
+            "data",
+            f"must be whole rows of {n_channels} float32 values "
+            f"({row_bytes} bytes each), got {len(data)} bytes",
+        )
     return data
 
 
@@ -347,11 +381,13 @@ def _frame_rows(value: object, n_channels: int) -> bytes:
             raise InvalidField(INVALID_MESSAGE, where, "must be a non-empty list of numbers")
         for item in row:
             if isinstance(item, bool) or not isinstance(item, (int, float)):
-                raise InvalidField(INVALID_MESSAGE, where,
-                                   f"values must be numbers, got {type(item).__name__}")
+                raise InvalidField(
+                    INVALID_MESSAGE, where, f"values must be numbers, got {type(item).__name__}"
+                )
         if len(row) != n_channels:
-            raise InvalidField(INVALID_FRAMES, where,
-                               f"must have n_channels = {n_channels} values, got {len(row)}")
+            raise InvalidField(
+                INVALID_FRAMES, where, f"must have n_channels = {n_channels} values, got {len(row)}"
+            )
         flat.extend(row)
     try:
         return pack_float32(flat)
@@ -361,15 +397,15 @@ def _frame_rows(value: object, n_channels: int) -> bytes:
 
 def _done(payload: Mapping[str, Any], encoding: Encoding) -> Done:
     obj = _object(payload, ("id", "stats"), ("reason",))
-    reason = read_choice(obj["reason"], "reason", DONE_REASONS) if present(obj, "reason") \
-        else "end"
+    reason = read_choice(obj["reason"], "reason", DONE_REASONS) if present(obj, "reason") else "end"
     return Done(_id(obj), _stats(obj["stats"]), cast(DoneReason, reason))
 
 
 def _stats(value: object) -> DoneStats:
     where = "stats"
-    obj = read_object(value, where, ("frames",),
-                      ("first_frame_latency_ms", "max_lag_ms", "budget_met", "engine"))
+    obj = read_object(
+        value, where, ("frames",), ("first_frame_latency_ms", "max_lag_ms", "budget_met", "engine")
+    )
 
     def duration(key: str) -> float | None:
         return read_number(obj[key], f"{where}.{key}", minimum=0.0) if present(obj, key) else None
@@ -379,7 +415,8 @@ def _stats(value: object) -> DoneStats:
         first_frame_latency_ms=duration("first_frame_latency_ms"),
         max_lag_ms=duration("max_lag_ms"),
         budget_met=read_bool(obj["budget_met"], f"{where}.budget_met")
-        if present(obj, "budget_met") else None,
+        if present(obj, "budget_met")
+        else None,
         engine=read_json_map(obj["engine"], f"{where}.engine") if present(obj, "engine") else {},
     )
 
@@ -396,9 +433,18 @@ def _error(payload: Mapping[str, Any], encoding: Encoding) -> ErrorMessage:
 
 
 _PARSERS: dict[str, Callable[[Mapping[str, Any], Encoding], Message]] = {
-    "start": _start, "phonemes": _phonemes, "audio": _audio, "end": _end, "cancel": _cancel,
-    "interrupt": _interrupt, "ready": _ready, "frames": _frames, "done": _done, "error": _error,
+    "start": _start,
+    "phonemes": _phonemes,
+    "audio": _audio,
+    "end": _end,
+    "cancel": _cancel,
+    "interrupt": _interrupt,
+    "ready": _ready,
+    "frames": _frames,
+    "done": _done,
+    "error": _error,
 }
 _ALLOWED_TYPES: dict[Sender, Mapping[str, object]] = {
-    "client": CLIENT_MESSAGE_TYPES, "server": SERVER_MESSAGE_TYPES,
+    "client": CLIENT_MESSAGE_TYPES,
+    "server": SERVER_MESSAGE_TYPES,
 }

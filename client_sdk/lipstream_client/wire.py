@@ -49,41 +49,46 @@ def message_to_wire(message: Message, encoding: Encoding) -> Payload:
 
 
 def _compact(fields: Payload, keep_null: tuple[str, ...] = ()) -> Payload:
-    return {key: value for key, value in fields.items()
-            if key in keep_null or value is not None}
+    return {key: value for key, value in fields.items() if key in keep_null or value is not None}
 
 
 def _start(message: Start, encoding: Encoding) -> Payload:
-    return _compact({
-        "id": message.id,
-        "engine": message.engine,
-        "character": message.character,
-        "fps": message.fps,
-        "channels": list(message.channels) if message.channels is not None else None,
-        "output": _output(message.output) if message.output is not None else None,
-        "emotion": message.emotion,
-        "latency_budget_ms": message.latency_budget_ms,
-        "options": dict(message.options) or None,
-        "phoneme_source": message.phoneme_source,
-    })
+    return _compact(
+        {
+            "id": message.id,
+            "engine": message.engine,
+            "character": message.character,
+            "fps": message.fps,
+            "channels": list(message.channels) if message.channels is not None else None,
+            "output": _output(message.output) if message.output is not None else None,
+            "emotion": message.emotion,
+            "latency_budget_ms": message.latency_budget_ms,
+            "options": dict(message.options) or None,
+            "phoneme_source": message.phoneme_source,
+        }
+    )
 
 
 def _output(profile: OutputProfile) -> Payload:
-    return _compact({
-        "naming": profile.naming,
-        "channels": list(profile.channels) if profile.channels is not None else None,
-        "transforms": {name: _transform(spec) for name, spec in profile.transforms.items()}
-        or None,
-        "visemes": profile.visemes,
-    })
+    return _compact(
+        {
+            "naming": profile.naming,
+            "channels": list(profile.channels) if profile.channels is not None else None,
+            "transforms": {name: _transform(spec) for name, spec in profile.transforms.items()}
+            or None,
+            "visemes": profile.visemes,
+        }
+    )
 
 
 def _transform(spec: ChannelTransform) -> Payload:
-    return _compact({
-        "multiplier": spec.multiplier,
-        "offset": spec.offset,
-        "clamp": list(spec.clamp) if spec.clamp is not None else None,
-    })
+    return _compact(
+        {
+            "multiplier": spec.multiplier,
+            "offset": spec.offset,
+            "clamp": list(spec.clamp) if spec.clamp is not None else None,
+        }
+    )
 
 
 def _phonemes(message: Phonemes, encoding: Encoding) -> Payload:
@@ -91,13 +96,15 @@ def _phonemes(message: Phonemes, encoding: Encoding) -> Payload:
 
 
 def _item(item: PhonemeItem) -> Payload:
-    return _compact({"phoneme": item.phoneme, "start": item.start, "end": item.end,
-                     "emotion": item.emotion})
+    return _compact(
+        {"phoneme": item.phoneme, "start": item.start, "end": item.end, "emotion": item.emotion}
+    )
 
 
 def _audio(message: AudioChunk, encoding: Encoding) -> Payload:
-    pcm: bytes | str = message.pcm16 if encoding == "msgpack" \
-        else base64.b64encode(message.pcm16).decode("ascii")
+    pcm: bytes | str = (
+        message.pcm16 if encoding == "msgpack" else base64.b64encode(message.pcm16).decode("ascii")
+    )
     return {"id": message.id, "sample_rate": message.sample_rate, "pcm16": pcm}
 
 
@@ -114,26 +121,39 @@ def _interrupt(message: Interrupt, encoding: Encoding) -> Payload:
 
 
 def _ready(message: Ready, encoding: Encoding) -> Payload:
-    return _compact({
-        "id": message.id,
-        "engine": message.engine,
-        "character": message.character,
-        "fps": message.fps,
-        "channels": list(message.channels),
-        "lookahead_ms": message.lookahead_ms,
-        "fidelity": message.fidelity,
-        "emotion": message.emotion,
-        "latency_budget_ms": message.latency_budget_ms,
-        "options": dict(message.options) or None,
-        "phoneme_source": message.phoneme_source,
-    })
+    return _compact(
+        {
+            "id": message.id,
+            "engine": message.engine,
+            "character": message.character,
+            "fps": message.fps,
+            "channels": list(message.channels),
+            "lookahead_ms": message.lookahead_ms,
+            "fidelity": message.fidelity,
+            "emotion": message.emotion,
+            "latency_budget_ms": message.latency_budget_ms,
+            "options": dict(message.options) or None,
+            "phoneme_source": message.phoneme_source,
+        }
+    )
 
 
 def _frames(message: Frames, encoding: Encoding) -> Payload:
-    data: bytes | list[list[float]] = message.data if encoding == "msgpack" else split_rows(
-        [shortest_float32(value) for value in unpack_float32(message.data)], message.n_channels)
-    return {"id": message.id, "seq": message.seq, "first_frame": message.first_frame,
-            "fps": message.fps, "n_channels": message.n_channels, "data": data}
+    data: bytes | list[list[float]] = (
+        message.data
+        if encoding == "msgpack"
+        else split_rows(
+            [shortest_float32(value) for value in unpack_float32(message.data)], message.n_channels
+        )
+    )
+    return {
+        "id": message.id,
+        "seq": message.seq,
+        "first_frame": message.first_frame,
+        "fps": message.fps,
+        "n_channels": message.n_channels,
+        "data": data,
+    }
 
 
 def _done(message: Done, encoding: Encoding) -> Payload:
@@ -141,22 +161,39 @@ def _done(message: Done, encoding: Encoding) -> Payload:
 
 
 def _stats(stats: DoneStats) -> Payload:
-    return _compact({
-        "frames": stats.frames,
-        "first_frame_latency_ms": stats.first_frame_latency_ms,
-        "max_lag_ms": stats.max_lag_ms,
-        "budget_met": stats.budget_met,
-        "engine": dict(stats.engine) or None,
-    })
+    return _compact(
+        {
+            "frames": stats.frames,
+            "first_frame_latency_ms": stats.first_frame_latency_ms,
+            "max_lag_ms": stats.max_lag_ms,
+            "budget_met": stats.budget_met,
+            "engine": dict(stats.engine) or None,
+        }
+    )
 
 
 def _error(message: ErrorMessage, encoding: Encoding) -> Payload:
-    return _compact({"code": message.code, "message": message.message, "id": message.id,
-                     "fatal": message.fatal, "details": dict(message.details) or None},
-                    keep_null=("id",))
+    return _compact(
+        {
+            "code": message.code,
+            "message": message.message,
+            "id": message.id,
+            "fatal": message.fatal,
+            "details": dict(message.details) or None,
+        },
+        keep_null=("id",),
+    )
 
 
 _ENCODERS: dict[str, Callable[[Any, Encoding], Payload]] = {
-    "start": _start, "phonemes": _phonemes, "audio": _audio, "end": _end, "cancel": _cancel,
-    "interrupt": _interrupt, "ready": _ready, "frames": _frames, "done": _done, "error": _error,
+    "start": _start,
+    "phonemes": _phonemes,
+    "audio": _audio,
+    "end": _end,
+    "cancel": _cancel,
+    "interrupt": _interrupt,
+    "ready": _ready,
+    "frames": _frames,
+    "done": _done,
+    "error": _error,
 }

@@ -82,8 +82,7 @@ def _time_synthesis(model: Model, heldout: Corpus) -> tuple[float, float]:
     for utterance in heldout.utterances:
         audio = utterance.audio if model.uses_audio else None
         started = time.perf_counter()
-        model.synthesize(utterance.phones, fps=SPEED_FPS, audio=audio,
-                         emotion=utterance.emotion)
+        model.synthesize(utterance.phones, fps=SPEED_FPS, audio=audio, emotion=utterance.emotion)
         elapsed += time.perf_counter() - started
     phonemes = sum(len(u.phones) for u in heldout.utterances)
     duration = sum(u.phones[-1].end for u in heldout.utterances)
@@ -95,14 +94,17 @@ def bench_engine(engine: str, train: Corpus, heldout: Corpus, threshold: float |
     predictions = []
     for utterance in heldout.utterances:
         audio = utterance.audio if model.uses_audio else None
-        result = model.synthesize(utterance.phones, fps=heldout.fps, audio=audio,
-                                  emotion=utterance.emotion)
+        result = model.synthesize(
+            utterance.phones, fps=heldout.fps, audio=audio, emotion=utterance.emotion
+        )
         predictions.append(result.frames)
     errors = [rms_error(p, u.frames) for p, u in zip(predictions, heldout.utterances)]
     ms_per_phoneme, rtf = _time_synthesis(model, heldout)
     return EngineRow(
-        engine=engine, train_seconds=float(model.manifest.metrics["train_seconds"]),
-        ms_per_phoneme=ms_per_phoneme, real_time_factor=rtf,
+        engine=engine,
+        train_seconds=float(model.manifest.metrics["train_seconds"]),
+        ms_per_phoneme=ms_per_phoneme,
+        real_time_factor=rtf,
         rms_error=float(np.mean(errors)),
         closure_rate=_closure_rate(predictions, heldout, threshold),
     )
@@ -143,17 +145,21 @@ def _resolve(target: str) -> Any:
 
 def run_engine_benches(corpus: Corpus, names: list[str]) -> dict[str, Any]:
     """The engines' own benchmarks, for those of ``names`` that have one."""
-    return {name: _resolve(ENGINE_BENCHES[name][0])(corpus)
-            for name in names if name in ENGINE_BENCHES}
+    return {
+        name: _resolve(ENGINE_BENCHES[name][0])(corpus) for name in names if name in ENGINE_BENCHES
+    }
 
 
 def format_engine_benches(results: dict[str, Any]) -> str:
-    return "\n\n".join(f"== {name} ==\n" + _resolve(ENGINE_BENCHES[name][1])(figures)
-                       for name, figures in results.get("engine_benches", {}).items())
+    return "\n\n".join(
+        f"== {name} ==\n" + _resolve(ENGINE_BENCHES[name][1])(figures)
+        for name, figures in results.get("engine_benches", {}).items()
+    )
 
 
-def run_bench(corpus: Corpus, engines: list[str] | None = None, *,
-              engine_benches: bool = True) -> dict[str, Any]:
+def run_bench(
+    corpus: Corpus, engines: list[str] | None = None, *, engine_benches: bool = True
+) -> dict[str, Any]:
     """Benchmark ``engines`` (default: all registered) on ``corpus``'s held-out split."""
     train, heldout = corpus.split()
     threshold = _threshold(train)
@@ -166,11 +172,18 @@ def run_bench(corpus: Corpus, engines: list[str] | None = None, *,
     return {
         "lipstream_version": __version__,
         "date": datetime.now(UTC).isoformat(timespec="seconds"),
-        "machine": {"python": platform.python_version(), "processor": platform.machine(),
-                    "system": platform.system()},
-        "corpus": {"name": corpus.name, "digest": corpus.digest(), "fps": corpus.fps,
-                   "train_utterances": len(train.utterances),
-                   "heldout_utterances": len(heldout.utterances)},
+        "machine": {
+            "python": platform.python_version(),
+            "processor": platform.machine(),
+            "system": platform.system(),
+        },
+        "corpus": {
+            "name": corpus.name,
+            "digest": corpus.digest(),
+            "fps": corpus.fps,
+            "train_utterances": len(train.utterances),
+            "heldout_utterances": len(heldout.utterances),
+        },
         "recorded": _recorded_reference(heldout, threshold),
         "engines": [asdict(row) for row in rows],
         "engine_benches": extra,
@@ -182,8 +195,10 @@ def _fmt(value: float | None, pattern: str) -> str:
 
 
 def format_table(results: dict[str, Any]) -> str:
-    header = (f"{'engine':<16}{'train s':>9}{'ms/phon':>9}{'RTF':>9}{'RMS':>9}"
-              f"{'closure':>9}{'RMS÷base':>10}{'speed÷base':>12}{'close÷base':>12}")
+    header = (
+        f"{'engine':<16}{'train s':>9}{'ms/phon':>9}{'RTF':>9}{'RMS':>9}"
+        f"{'closure':>9}{'RMS÷base':>10}{'speed÷base':>12}{'close÷base':>12}"
+    )
     lines = [header, "-" * len(header)]
     for row in results["engines"]:
         lines.append(

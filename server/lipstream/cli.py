@@ -69,8 +69,12 @@ def _serve(args: argparse.Namespace, settings: Settings) -> None:
         log_level=args.log_level or settings.server.log_level,
     )
     with multiprocess_directory(server.workers):
-        serve(models.resolve(), args.host or settings.host,
-              settings.port if args.port is None else args.port, server)
+        serve(
+            models.resolve(),
+            args.host or settings.host,
+            settings.port if args.port is None else args.port,
+            server,
+        )
 
 
 def _inspect(args: argparse.Namespace, settings: Settings) -> None:
@@ -79,8 +83,10 @@ def _inspect(args: argparse.Namespace, settings: Settings) -> None:
 
     for directory in model_dirs(Path(args.dir)):
         manifest = read_manifest(directory)
-        print(f"{directory}: engine {manifest.engine}, character {manifest.name}, "
-              f"{len(manifest.channels)} channels at {manifest.fps:g} fps")
+        print(
+            f"{directory}: engine {manifest.engine}, character {manifest.name}, "
+            f"{len(manifest.channels)} channels at {manifest.fps:g} fps"
+        )
         print(f"  hyperparameters: {json.dumps(manifest.hyperparameters, sort_keys=True)}")
         print(f"  corpus digest: {manifest.corpus_digest}")
         print(f"  metrics: {json.dumps(manifest.metrics, sort_keys=True)}")
@@ -95,8 +101,9 @@ def _bench(args: argparse.Namespace, settings: Settings) -> None:
     corpus_dir = Path(args.corpus) if args.corpus else settings.demo_dir / DEMO_CORPUS_DIR
     if args.corpus is None and not corpus_dir.exists():
         build_demo(settings.demo_dir, progress=True)
-    results = run_bench(load_corpus(corpus_dir, progress=True),
-                        engine_benches=not args.no_engine_benches)
+    results = run_bench(
+        load_corpus(corpus_dir, progress=True), engine_benches=not args.no_engine_benches
+    )
     write_results(results, Path(args.results))
     if args.json:
         print(json.dumps(results, indent=2))
@@ -112,11 +119,22 @@ def _loadtest(args: argparse.Namespace, settings: Settings) -> None:
     host = "127.0.0.1" if settings.host in ("0.0.0.0", "::", "") else settings.host
     url = args.url or f"ws://{host}:{settings.port}/v1/stream"
     config = LoadTestConfig(
-        url=url, streams=args.streams, requests=args.requests, clips_s=tuple(args.clips),
-        fps=args.fps, engine=args.engine, character=args.character, encoding=args.encoding,
-        latency_budget_ms=args.latency_budget_ms, lead_ms=args.lead_ms, pause_s=args.pause,
-        seed=args.seed, token=args.token, max_duration_s=args.max_duration,
-        workers=args.workers, probe_phonemes=args.probe_phonemes,
+        url=url,
+        streams=args.streams,
+        requests=args.requests,
+        clips_s=tuple(args.clips),
+        fps=args.fps,
+        engine=args.engine,
+        character=args.character,
+        encoding=args.encoding,
+        latency_budget_ms=args.latency_budget_ms,
+        lead_ms=args.lead_ms,
+        pause_s=args.pause,
+        seed=args.seed,
+        token=args.token,
+        max_duration_s=args.max_duration,
+        workers=args.workers,
+        probe_phonemes=args.probe_phonemes,
     )
     results = loadtest(config)
     write_results(results, Path(args.results))
@@ -158,11 +176,14 @@ def _parser() -> argparse.ArgumentParser:
     serve.add_argument("--models", help="a model directory or a directory of them")
     serve.add_argument("--host")
     serve.add_argument("--port", type=int)
-    serve.add_argument("--workers", type=_positive_int,
-                       help="worker processes sharing the memory-mapped models "
-                            "(default: $LIPSTREAM_WORKERS or 1)")
-    serve.add_argument("--log-level", choices=["critical", "error", "warning", "info", "debug",
-                                               "trace"])
+    serve.add_argument(
+        "--workers",
+        type=_positive_int,
+        help="worker processes sharing the memory-mapped models (default: $LIPSTREAM_WORKERS or 1)",
+    )
+    serve.add_argument(
+        "--log-level", choices=["critical", "error", "warning", "info", "debug", "trace"]
+    )
     serve.set_defaults(run=_serve)
 
     inspect = commands.add_parser("inspect", help="summarize a model directory")
@@ -173,35 +194,56 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument("--corpus", help="corpus directory (default: the demo corpus)")
     bench.add_argument("--json", action="store_true", help="print JSON instead of a table")
     bench.add_argument("--results", default="bench/results.json")
-    bench.add_argument("--no-engine-benches", action="store_true",
-                       help="skip the engines' own benchmarks (e.g. anime-graph vs PQ-Matching)")
+    bench.add_argument(
+        "--no-engine-benches",
+        action="store_true",
+        help="skip the engines' own benchmarks (e.g. anime-graph vs PQ-Matching)",
+    )
     bench.set_defaults(run=_bench)
 
     load = commands.add_parser(
-        "loadtest", help="concurrent real-time sessions against a server on this machine")
-    load.add_argument("--url", help="loopback ws:// URL of /v1/stream "
-                      "(default: ws://$LIPSTREAM_HOST:$LIPSTREAM_PORT/v1/stream)")
+        "loadtest", help="concurrent real-time sessions against a server on this machine"
+    )
+    load.add_argument(
+        "--url",
+        help="loopback ws:// URL of /v1/stream "
+        "(default: ws://$LIPSTREAM_HOST:$LIPSTREAM_PORT/v1/stream)",
+    )
     load.add_argument("--streams", type=int, default=10, help="concurrent sessions")
     load.add_argument("--requests", type=int, default=30, help="requests per clip length")
-    load.add_argument("--clips", type=float, nargs="+", default=[5.0, 10.0, 20.0],
-                      help="clip lengths in seconds")
+    load.add_argument(
+        "--clips", type=float, nargs="+", default=[5.0, 10.0, 20.0], help="clip lengths in seconds"
+    )
     load.add_argument("--fps", type=float, default=60.0)
     load.add_argument("--engine", help="default: the server's first character's first engine")
     load.add_argument("--character", help="default: the server's first character")
     load.add_argument("--encoding", choices=["msgpack", "json"], default="msgpack")
     load.add_argument("--latency-budget-ms", type=float)
-    load.add_argument("--lead-ms", type=float, default=0.0,
-                      help="send each phoneme this long before its start")
+    load.add_argument(
+        "--lead-ms", type=float, default=0.0, help="send each phoneme this long before its start"
+    )
     load.add_argument("--pause", type=float, default=3.0, help="seconds between clip lengths")
     load.add_argument("--seed", type=int, default=0, help="seed of the synthetic clips")
     load.add_argument("--token", help="bearer token, if the server requires one")
-    load.add_argument("--max-duration", type=float, default=600.0,
-                      help="refuse runs planned longer than this many seconds (at most 3600)")
-    load.add_argument("--workers", type=int, default=1,
-                      help="load-generating processes sharing the sessions (one core each)")
-    load.add_argument("--probe-phonemes", type=int, default=0,
-                      help="also time the first frame of requests of this many phonemes "
-                           "sent whole, on one extra connection")
+    load.add_argument(
+        "--max-duration",
+        type=float,
+        default=600.0,
+        help="refuse runs planned longer than this many seconds (at most 3600)",
+    )
+    load.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        help="load-generating processes sharing the sessions (one core each)",
+    )
+    load.add_argument(
+        "--probe-phonemes",
+        type=int,
+        default=0,
+        help="also time the first frame of requests of this many phonemes "
+        "sent whole, on one extra connection",
+    )
     load.add_argument("--json", action="store_true", help="print JSON instead of a table")
     load.add_argument("--results", default="bench/loadtest.json")
     load.set_defaults(run=_loadtest)
@@ -214,8 +256,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         run(args, load_settings())
     except LipstreamError as error:
-        print(f"error [{error.code}]: {error.where + ': ' if error.where else ''}{error.message}",
-              file=sys.stderr)
+        print(
+            f"error [{error.code}]: {error.where + ': ' if error.where else ''}{error.message}",
+            file=sys.stderr,
+        )
         return 2
     except OSError as error:
         print(f"error [io_error]: {error}", file=sys.stderr)

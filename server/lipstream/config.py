@@ -141,54 +141,136 @@ class EnvSetting:
 
 
 ENV_SETTINGS: tuple[EnvSetting, ...] = (
-    EnvSetting("LIPSTREAM_WORKERS", "workers", _integer(1, 256),
-               "uvicorn worker processes (`--workers`)"),
+    EnvSetting(
+        "LIPSTREAM_WORKERS", "workers", _integer(1, 256), "uvicorn worker processes (`--workers`)"
+    ),
     EnvSetting("LIPSTREAM_LOG_LEVEL", "log_level", _log_level, "uvicorn log level"),
-    EnvSetting("LIPSTREAM_MAX_SESSIONS", "max_sessions", _integer(1, 1_000_000),
-               "concurrent WebSocket connections per worker; beyond: `server_busy`, close 1013"),
-    EnvSetting("LIPSTREAM_MAX_REQUESTS_PER_SESSION", "max_requests_per_session",
-               _integer(1, 100_000), "active requests per connection (`too_many_requests`)"),
-    EnvSetting("LIPSTREAM_MAX_MESSAGE_BYTES", "max_message_bytes", _integer(1024, 1 << 30),
-               "largest client message (`message_too_large`, close 1009)"),
-    EnvSetting("LIPSTREAM_MAX_BODY_BYTES", "max_body_bytes", _integer(1024, 1 << 31),
-               "largest `POST /v1/synthesize` body (HTTP 413)"),
-    EnvSetting("LIPSTREAM_MAX_PHONEMES", "max_phonemes_per_request", _integer(1, 10_000_000),
-               "phonemes per request (`too_many_phonemes`)"),
-    EnvSetting("LIPSTREAM_MAX_REQUEST_FRAMES", "max_request_frames", _integer(1, 100_000_000),
-               "frames per request, i.e. utterance length × fps (`invalid_times`)"),
-    EnvSetting("LIPSTREAM_MESSAGE_RATE", "message_rate", _number(0.0, 1e9, above=True),
-               "sustained client messages per second per connection (`rate_limited`)"),
-    EnvSetting("LIPSTREAM_MESSAGE_BURST", "message_burst", _integer(1, 1_000_000_000),
-               "messages a connection may send at once above the rate"),
-    EnvSetting("LIPSTREAM_IDLE_TIMEOUT_S", "idle_timeout_s", _number(0.0, 1e9, above=True),
-               "seconds without a message or active request before `idle_timeout`, close 1000"),
-    EnvSetting("LIPSTREAM_SEND_TIMEOUT_S", "send_timeout_s", _number(0.0, 3600.0, above=True),
-               "deadline of every WebSocket send; missing it closes the `slow_consumer` (1008); "
-               "a connection whose unsent bytes do not shrink for this long while the app is "
-               "not writing (a closed WebSocket, an HTTP response the client stopped reading) "
-               "is reset"),
-    EnvSetting("LIPSTREAM_AUTH_TOKENS", "auth_tokens", _words,
-               "comma-separated bearer tokens; empty = no authentication"),
-    EnvSetting("LIPSTREAM_ALLOWED_ORIGINS", "allowed_origins", _words,
-               "comma-separated WebSocket `Origin` allow-list; empty = any origin"),
-    EnvSetting("LIPSTREAM_DRAIN_TIMEOUT_S", "drain_timeout_s", _number(0.0, 86400.0),
-               "longest wait for in-flight requests on SIGTERM before closing with 1001"),
-    EnvSetting("LIPSTREAM_RETURN_MS", "return_ms", _number(0.0, 10_000.0),
-               "default time for the face to return to rest after `interrupt`"),
-    EnvSetting("LIPSTREAM_MAX_PHONEME_MS", "max_phoneme_ms", _number(0.0, 10_000.0, above=True),
-               "longest phoneme assumed when estimating a rung's worst-case latency"),
-    EnvSetting("LIPSTREAM_COMPUTE_MARGIN_MS", "compute_margin_ms", _number(0.0, 60_000.0),
-               "added to each rung's measured compute time in latency estimates"),
-    EnvSetting("LIPSTREAM_INLINE_WORK_MS", "inline_work_ms", _number(0.0, 60_000.0),
-               "estimated engine work above which a message is synthesized in the thread pool"),
-    EnvSetting("LIPSTREAM_SYNTH_THREADS", "synth_threads", _integer(1, 256),
-               "threads of the synthesis pool (large messages, `POST /v1/synthesize`)"),
-    EnvSetting("LIPSTREAM_PROFILES", "profiles", _path,
-               "JSON file of preset output profiles per character"),
-    EnvSetting("LIPSTREAM_PING_INTERVAL_S", "ping_interval_s", _number(0.0, 3600.0, above=True),
-               "WebSocket keep-alive ping interval"),
-    EnvSetting("LIPSTREAM_PING_TIMEOUT_S", "ping_timeout_s", _number(0.0, 3600.0, above=True),
-               "close a connection whose pong is this late"),
+    EnvSetting(
+        "LIPSTREAM_MAX_SESSIONS",
+        "max_sessions",
+        _integer(1, 1_000_000),
+        "concurrent WebSocket connections per worker; beyond: `server_busy`, close 1013",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MAX_REQUESTS_PER_SESSION",
+        "max_requests_per_session",
+        _integer(1, 100_000),
+        "active requests per connection (`too_many_requests`)",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MAX_MESSAGE_BYTES",
+        "max_message_bytes",
+        _integer(1024, 1 << 30),
+        "largest client message (`message_too_large`, close 1009)",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MAX_BODY_BYTES",
+        "max_body_bytes",
+        _integer(1024, 1 << 31),
+        "largest `POST /v1/synthesize` body (HTTP 413)",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MAX_PHONEMES",
+        "max_phonemes_per_request",
+        _integer(1, 10_000_000),
+        "phonemes per request (`too_many_phonemes`)",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MAX_REQUEST_FRAMES",
+        "max_request_frames",
+        _integer(1, 100_000_000),
+        "frames per request, i.e. utterance length × fps (`invalid_times`)",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MESSAGE_RATE",
+        "message_rate",
+        _number(0.0, 1e9, above=True),
+        "sustained client messages per second per connection (`rate_limited`)",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MESSAGE_BURST",
+        "message_burst",
+        _integer(1, 1_000_000_000),
+        "messages a connection may send at once above the rate",
+    ),
+    EnvSetting(
+        "LIPSTREAM_IDLE_TIMEOUT_S",
+        "idle_timeout_s",
+        _number(0.0, 1e9, above=True),
+        "seconds without a message or active request before `idle_timeout`, close 1000",
+    ),
+    EnvSetting(
+        "LIPSTREAM_SEND_TIMEOUT_S",
+        "send_timeout_s",
+        _number(0.0, 3600.0, above=True),
+        "deadline of every WebSocket send; missing it closes the `slow_consumer` (1008); "
+        "a connection whose unsent bytes do not shrink for this long while the app is "
+        "not writing (a closed WebSocket, an HTTP response the client stopped reading) "
+        "is reset",
+    ),
+    EnvSetting(
+        "LIPSTREAM_AUTH_TOKENS",
+        "auth_tokens",
+        _words,
+        "comma-separated bearer tokens; empty = no authentication",
+    ),
+    EnvSetting(
+        "LIPSTREAM_ALLOWED_ORIGINS",
+        "allowed_origins",
+        _words,
+        "comma-separated WebSocket `Origin` allow-list; empty = any origin",
+    ),
+    EnvSetting(
+        "LIPSTREAM_DRAIN_TIMEOUT_S",
+        "drain_timeout_s",
+        _number(0.0, 86400.0),
+        "longest wait for in-flight requests on SIGTERM before closing with 1001",
+    ),
+    EnvSetting(
+        "LIPSTREAM_RETURN_MS",
+        "return_ms",
+        _number(0.0, 10_000.0),
+        "default time for the face to return to rest after `interrupt`",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MAX_PHONEME_MS",
+        "max_phoneme_ms",
+        _number(0.0, 10_000.0, above=True),
+        "longest phoneme assumed when estimating a rung's worst-case latency",
+    ),
+    EnvSetting(
+        "LIPSTREAM_COMPUTE_MARGIN_MS",
+        "compute_margin_ms",
+        _number(0.0, 60_000.0),
+        "added to each rung's measured compute time in latency estimates",
+    ),
+    EnvSetting(
+        "LIPSTREAM_INLINE_WORK_MS",
+        "inline_work_ms",
+        _number(0.0, 60_000.0),
+        "estimated engine work above which a message is synthesized in the thread pool",
+    ),
+    EnvSetting(
+        "LIPSTREAM_SYNTH_THREADS",
+        "synth_threads",
+        _integer(1, 256),
+        "threads of the synthesis pool (large messages, `POST /v1/synthesize`)",
+    ),
+    EnvSetting(
+        "LIPSTREAM_PROFILES", "profiles", _path, "JSON file of preset output profiles per character"
+    ),
+    EnvSetting(
+        "LIPSTREAM_PING_INTERVAL_S",
+        "ping_interval_s",
+        _number(0.0, 3600.0, above=True),
+        "WebSocket keep-alive ping interval",
+    ),
+    EnvSetting(
+        "LIPSTREAM_PING_TIMEOUT_S",
+        "ping_timeout_s",
+        _number(0.0, 3600.0, above=True),
+        "close a connection whose pong is this late",
+    ),
 )
 
 

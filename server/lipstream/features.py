@@ -60,14 +60,17 @@ def _mel_to_hz(mel: np.ndarray) -> np.ndarray:
 def mel_filterbank(sample_rate: int, n_fft: int, config: MfccConfig) -> np.ndarray:
     """Triangular filters, shape (n_mels, n_fft // 2 + 1), over power-spectrum bins."""
     edges_hz = _mel_to_hz(
-        np.linspace(_hz_to_mel(np.array(config.f_min)), _hz_to_mel(np.array(config.f_max)),
-                    config.n_mels + 2)
+        np.linspace(
+            _hz_to_mel(np.array(config.f_min)),
+            _hz_to_mel(np.array(config.f_max)),
+            config.n_mels + 2,
+        )
     )
     bins_hz = np.arange(n_fft // 2 + 1) * sample_rate / n_fft
     lower, centre, upper = edges_hz[:-2, None], edges_hz[1:-1, None], edges_hz[2:, None]
     rising = (bins_hz[None, :] - lower) / (centre - lower)
     falling = (upper - bins_hz[None, :]) / (upper - centre)
-    return np.maximum(0.0, np.minimum(rising, falling))
+    return np.asarray(np.maximum(0.0, np.minimum(rising, falling)))
 
 
 @dataclass(frozen=True)
@@ -96,9 +99,15 @@ def _analysis(sample_rate: int, config: MfccConfig) -> _Analysis:
     low_bin, high_bin = (int(band[0]), int(band[-1]) + 1) if len(band) else (0, 0)
     density = 1.0 / (float(np.sum(window**2)) * n_fft)
     cepstral = dct(np.eye(config.n_mels), type=2, axis=1, norm="ortho")[:, : config.n_coefficients]
-    return _Analysis(length, n_fft, window.astype(np.float32), low_bin, high_bin,
-                     np.ascontiguousarray(filters[:, low_bin:high_bin].T * density),
-                     np.ascontiguousarray(cepstral))
+    return _Analysis(
+        length,
+        n_fft,
+        window.astype(np.float32),
+        low_bin,
+        high_bin,
+        np.ascontiguousarray(filters[:, low_bin:high_bin].T * density),
+        np.ascontiguousarray(cepstral),
+    )
 
 
 def _window_length(sample_rate: int, config: MfccConfig) -> int:
@@ -132,7 +141,10 @@ def frame_count(duration_s: float, config: MfccConfig = DEFAULT_MFCC) -> int:
 
 
 def mfcc(
-    samples: np.ndarray, sample_rate: int, first: int = 0, stop: int | None = None,
+    samples: np.ndarray,
+    sample_rate: int,
+    first: int = 0,
+    stop: int | None = None,
     config: MfccConfig = DEFAULT_MFCC,
 ) -> np.ndarray:
     """MFCC frames ``first .. stop - 1`` of mono ``samples`` at ``sample_rate`` Hz.

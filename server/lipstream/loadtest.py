@@ -69,8 +69,17 @@ from .loadtest_run import (
 from .loadtest_stats import A2F_STATISTICS, LAG_STATISTICS, overall_summary, summarize
 from .loadtest_workers import run_in_workers
 
-__all__ = ["LoadTestConfig", "NotLoopbackError", "RequestRecord", "check_config",
-           "check_loopback", "format_table", "loadtest", "planned_duration_s", "write_results"]
+__all__ = [
+    "LoadTestConfig",
+    "NotLoopbackError",
+    "RequestRecord",
+    "check_config",
+    "check_loopback",
+    "format_table",
+    "loadtest",
+    "planned_duration_s",
+    "write_results",
+]
 
 A2F_CLIPS_S: tuple[float, ...] = (5.0, 10.0, 20.0)
 MAX_STREAMS = 2000
@@ -134,14 +143,17 @@ def check_loopback(url: str) -> None:
     if not loopback:
         raise NotLoopbackError(
             f"the load test only targets this machine (localhost, 127.0.0.0/8 or ::1), "
-            f"got host {host!r}", where="--url")
+            f"got host {host!r}",
+            where="--url",
+        )
 
 
 def planned_duration_s(config: LoadTestConfig) -> float:
     """Upper estimate of the run's wall time: rounds of the longest delay plus clip, and pauses."""
     rounds = math.ceil(config.requests / config.streams)
-    return sum(rounds * (MAX_JITTER_S + clip) for clip in config.clips_s) \
-        + config.pause_s * max(0, len(config.clips_s) - 1)
+    return sum(rounds * (MAX_JITTER_S + clip) for clip in config.clips_s) + config.pause_s * max(
+        0, len(config.clips_s) - 1
+    )
 
 
 def check_config(config: LoadTestConfig) -> None:
@@ -150,18 +162,30 @@ def check_config(config: LoadTestConfig) -> None:
     bounds: list[tuple[str, bool, str]] = [
         ("--streams", 1 <= config.streams <= MAX_STREAMS, f"1..{MAX_STREAMS}"),
         ("--requests", 1 <= config.requests <= MAX_REQUESTS, f"1..{MAX_REQUESTS}"),
-        ("--clips", 1 <= len(config.clips_s) <= MAX_CLIPS
-         and all(1.0 <= clip <= MAX_CLIP_S for clip in config.clips_s),
-         f"1 to {MAX_CLIPS} lengths in [1, {MAX_CLIP_S:g}] s"),
+        (
+            "--clips",
+            1 <= len(config.clips_s) <= MAX_CLIPS
+            and all(1.0 <= clip <= MAX_CLIP_S for clip in config.clips_s),
+            f"1 to {MAX_CLIPS} lengths in [1, {MAX_CLIP_S:g}] s",
+        ),
         ("--fps", 0 < config.fps <= 1000, "(0, 1000]"),
         ("--lead-ms", 0 <= config.lead_ms <= 10_000, "[0, 10000]"),
         ("--pause", 0 <= config.pause_s <= 60, "[0, 60] s"),
-        ("--max-duration", 0 < config.max_duration_s <= MAX_DURATION_S,
-         f"(0, {MAX_DURATION_S:g}] s"),
-        ("--workers", 1 <= config.workers <= min(MAX_WORKERS, config.streams),
-         f"1..{MAX_WORKERS}, and at most --streams"),
-        ("--probe-phonemes", 0 <= config.probe_phonemes <= MAX_PROBE_PHONEMES,
-         f"0..{MAX_PROBE_PHONEMES}"),
+        (
+            "--max-duration",
+            0 < config.max_duration_s <= MAX_DURATION_S,
+            f"(0, {MAX_DURATION_S:g}] s",
+        ),
+        (
+            "--workers",
+            1 <= config.workers <= min(MAX_WORKERS, config.streams),
+            f"1..{MAX_WORKERS}, and at most --streams",
+        ),
+        (
+            "--probe-phonemes",
+            0 <= config.probe_phonemes <= MAX_PROBE_PHONEMES,
+            f"0..{MAX_PROBE_PHONEMES}",
+        ),
     ]
     for flag, ok, allowed in bounds:
         if not ok:
@@ -171,7 +195,9 @@ def check_config(config: LoadTestConfig) -> None:
         raise InvalidRequestError(
             f"this run would take up to {planned:.0f} s, more than the {config.max_duration_s:g} s "
             f"allowed; lower --requests or --clips, or raise --max-duration "
-            f"(at most {MAX_DURATION_S:g})", where="--max-duration")
+            f"(at most {MAX_DURATION_S:g})",
+            where="--max-duration",
+        )
 
 
 def http_base(url: str) -> str:
@@ -186,9 +212,11 @@ def default_target(url: str, token: str | None = None) -> tuple[str, str]:
     try:
         return RestClient(url, token, timeout=HTTP_TIMEOUT_S).default_target()
     except (OSError, ValueError, KeyError, TypeError, LipstreamClientError) as error:
-        raise InvalidRequestError(f"cannot list the server's characters at {http_base(url)} "
-                                  f"({error}); pass --engine and --character",
-                                  where="--url") from None
+        raise InvalidRequestError(
+            f"cannot list the server's characters at {http_base(url)} "
+            f"({error}); pass --engine and --character",
+            where="--url",
+        ) from None
 
 
 def _target(config: LoadTestConfig) -> tuple[str, str]:
@@ -203,8 +231,9 @@ def _present(values: Sequence[float | None]) -> list[float]:
     return [value for value in values if value is not None]
 
 
-def clip_report(plan: ClipPlan, share: ClipShare, wall_s: float,
-                server_cpu_s: float | None) -> dict[str, Any]:
+def clip_report(
+    plan: ClipPlan, share: ClipShare, wall_s: float, server_cpu_s: float | None
+) -> dict[str, Any]:
     """One clip length's figures, keyed as in bench/loadtest.json."""
     records = share.records
     frames = sum(record.frames for record in records)
@@ -219,8 +248,9 @@ def clip_report(plan: ClipPlan, share: ClipShare, wall_s: float,
         "first_frame_latency_ms": summarize(_present([r.first_frame_ms for r in records])),
         "fps": summarize(_present([r.fps for r in records])),
         "frame_lag_ms": summarize(share.frame_lags_ms(plan.fps), LAG_STATISTICS),
-        "server_max_lag_ms": summarize(_present([r.server_max_lag_ms for r in records]),
-                                       LAG_STATISTICS),
+        "server_max_lag_ms": summarize(
+            _present([r.server_max_lag_ms for r in records]), LAG_STATISTICS
+        ),
         "send_slip_ms": summarize(slips, LAG_STATISTICS),
         "probe": _probe_report(plan, share),
         "frames": frames,
@@ -235,35 +265,50 @@ def clip_report(plan: ClipPlan, share: ClipShare, wall_s: float,
 def _probe_report(plan: ClipPlan, share: ClipShare) -> dict[str, Any] | None:
     if not plan.probe_phonemes:
         return None
-    return {"phonemes": len(plan.probe_spans[: plan.probe_phonemes]),
-            "requests": len(share.probe_ms) + len(share.probe_errors),
-            "errors": dict(Counter(share.probe_errors)),
-            "first_frame_latency_ms": summarize(share.probe_ms)}
+    return {
+        "phonemes": len(plan.probe_spans[: plan.probe_phonemes]),
+        "requests": len(share.probe_ms) + len(share.probe_errors),
+        "errors": dict(Counter(share.probe_errors)),
+        "first_frame_latency_ms": summarize(share.probe_ms),
+    }
 
 
-def _run_clip(config: LoadTestConfig, plan: ClipPlan,
-              server_cpu: ServerCpu) -> dict[str, Any]:
+def _run_clip(config: LoadTestConfig, plan: ClipPlan, server_cpu: ServerCpu) -> dict[str, Any]:
     began = time.perf_counter()
     server_cpu.mark()
     if config.workers == 1:
-        share = run_coroutine(run_share(plan, range(config.requests), config.streams,
-                                        probe=True))
+        share = run_coroutine(run_share(plan, range(config.requests), config.streams, probe=True))
     else:
-        share = run_in_workers(plan, config.requests, config.streams, config.workers,
-                               probe=True)
+        share = run_in_workers(plan, config.requests, config.streams, config.workers, probe=True)
     return clip_report(plan, share, time.perf_counter() - began, server_cpu.mark())
 
 
-def _plan(config: LoadTestConfig, engine: str, character: str, clip_s: float,
-          jitter_s: tuple[float, ...], deadline: float) -> ClipPlan:
-    probe_spans = synthetic_clip(PROBE_CLIP_S, seed=config.seed + 1) if config.probe_phonemes \
-        else []
-    return ClipPlan(url=config.url, engine=engine, character=character,
-                    encoding=config.encoding, token=config.token, fps=config.fps,
-                    lead_ms=config.lead_ms, latency_budget_ms=config.latency_budget_ms,
-                    spans=tuple(synthetic_clip(clip_s, seed=config.seed)), jitter_s=jitter_s,
-                    deadline=deadline, probe_phonemes=config.probe_phonemes,
-                    probe_spans=tuple(probe_spans))
+def _plan(
+    config: LoadTestConfig,
+    engine: str,
+    character: str,
+    clip_s: float,
+    jitter_s: tuple[float, ...],
+    deadline: float,
+) -> ClipPlan:
+    probe_spans = (
+        synthetic_clip(PROBE_CLIP_S, seed=config.seed + 1) if config.probe_phonemes else []
+    )
+    return ClipPlan(
+        url=config.url,
+        engine=engine,
+        character=character,
+        encoding=config.encoding,
+        token=config.token,
+        fps=config.fps,
+        lead_ms=config.lead_ms,
+        latency_budget_ms=config.latency_budget_ms,
+        spans=tuple(synthetic_clip(clip_s, seed=config.seed)),
+        jitter_s=jitter_s,
+        deadline=deadline,
+        probe_phonemes=config.probe_phonemes,
+        probe_spans=tuple(probe_spans),
+    )
 
 
 def loadtest(config: LoadTestConfig) -> dict[str, Any]:
@@ -288,20 +333,26 @@ def loadtest(config: LoadTestConfig) -> dict[str, Any]:
     return {
         "tool": f"lipstream loadtest {__version__}",
         "method": "Audio2Face-3D nim_performance_test: streams x requests over each clip, "
-                  "seeded [0, 1) s start delays; phonemes paced in real time",
-        "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
-                    "python": platform.python_version(), "event_loop": event_loop_name()},
+        "seeded [0, 1) s start delays; phonemes paced in real time",
+        "machine": {
+            "cpus": os.cpu_count(),
+            "platform": platform.platform(),
+            "python": platform.python_version(),
+            "event_loop": event_loop_name(),
+        },
         "config": {**asdict(config), "token": None, "engine": engine, "character": character},
         "statistics": [name for name, _ in A2F_STATISTICS],
         "clips": clips,
-        "summary": {**overall_summary(clips),
-                    "requests": sum(clip["requests"] for clip in clips),
-                    "successful_requests": sum(clip["successful_requests"] for clip in clips),
-                    "errors": dict(sum((Counter(clip["errors"]) for clip in clips), Counter())),
-                    "wall_s": wall_s,
-                    "client_cpu_s": parent_cpu_s + children_cpu_s,
-                    "server_cpu_s": None if None in server_cpu_s else sum(server_cpu_s),
-                    "server_processes": len(server_cpu.pids)},
+        "summary": {
+            **overall_summary(clips),
+            "requests": sum(clip["requests"] for clip in clips),
+            "successful_requests": sum(clip["successful_requests"] for clip in clips),
+            "errors": dict(sum((Counter(clip["errors"]) for clip in clips), Counter())),
+            "wall_s": wall_s,
+            "client_cpu_s": parent_cpu_s + children_cpu_s,
+            "server_cpu_s": None if None in server_cpu_s else sum(server_cpu_s),
+            "server_processes": len(server_cpu.pids),
+        },
     }
 
 
@@ -316,9 +367,11 @@ def _cell(value: float | None, digits: int = 1) -> str:
 
 def format_table(results: dict[str, Any]) -> str:
     """A plain-text table: one row per clip length, then the headline figures."""
-    header = (f"{'clip s':>6} {'ok/req':>9} {'1st pkt p50':>11} {'p90':>7} {'p95':>7} "
-              f"{'p99':>7} {'max':>7} {'fps p1':>7} {'fps p50':>7} {'lag p50':>7} "
-              f"{'lag p99':>7} {'frames/s':>9}  errors")
+    header = (
+        f"{'clip s':>6} {'ok/req':>9} {'1st pkt p50':>11} {'p90':>7} {'p95':>7} "
+        f"{'p99':>7} {'max':>7} {'fps p1':>7} {'fps p50':>7} {'lag p50':>7} "
+        f"{'lag p99':>7} {'frames/s':>9}  errors"
+    )
     lines = [header]
     for clip in results["clips"]:
         latency, fps, lag = clip["first_packet_latency_ms"], clip["fps"], clip["frame_lag_ms"]
@@ -328,7 +381,8 @@ def format_table(results: dict[str, Any]) -> str:
             f"{_cell(latency['p50']):>11} {_cell(latency['p90']):>7} {_cell(latency['p95']):>7} "
             f"{_cell(latency['p99']):>7} {_cell(latency['max']):>7} {_cell(fps['p1']):>7} "
             f"{_cell(fps['p50']):>7} {_cell(lag['p50']):>7} {_cell(lag['p99']):>7} "
-            f"{_cell(clip['throughput_frames_per_s'], 0):>9}  {errors}")
+            f"{_cell(clip['throughput_frames_per_s'], 0):>9}  {errors}"
+        )
     summary = results["summary"]
     lines.append(
         f"worst p99 first-packet latency {_cell(summary['worst_p99_first_packet_latency_ms'])} ms, "
@@ -337,12 +391,15 @@ def format_table(results: dict[str, Any]) -> str:
         f"{_cell(summary['worst_p99_frame_lag_ms'])} ms; "
         f"{summary['successful_requests']}/{summary['requests']} requests ok in "
         f"{summary['wall_s']:.1f} s (CPU: client {summary['client_cpu_s']:.1f} s, "
-        f"server {_cell(summary['server_cpu_s'])} s)")
+        f"server {_cell(summary['server_cpu_s'])} s)"
+    )
     for clip in results["clips"]:
         probe = clip["probe"]
         if probe is not None:
             latency = probe["first_frame_latency_ms"]
-            lines.append(f"{clip['clip_s']:g} s clips: {probe['phonemes']}-phoneme requests "
-                         f"sent whole, first frame p50 {_cell(latency['p50'])} ms, p99 "
-                         f"{_cell(latency['p99'])} ms over {probe['requests']} requests")
+            lines.append(
+                f"{clip['clip_s']:g} s clips: {probe['phonemes']}-phoneme requests "
+                f"sent whole, first frame p50 {_cell(latency['p50'])} ms, p99 "
+                f"{_cell(latency['p99'])} ms over {probe['requests']} requests"
+            )
     return "\n".join(lines)

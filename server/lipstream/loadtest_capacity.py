@@ -43,8 +43,7 @@ from .loadtest_run import event_loop_name
 
 DEFAULT_RESULTS = "bench/capacity.json"
 MAX_PROBES = 24
-_SEARCH_KEY = ("engine", "character", "fps", "lead_ms", "clip_s", "encoding",
-               "server_processes")
+_SEARCH_KEY = ("engine", "character", "fps", "lead_ms", "clip_s", "encoding", "server_processes")
 
 
 @dataclass(frozen=True)
@@ -77,8 +76,14 @@ def check_search(search: CapacitySearch) -> None:
 
 def probe_config(search: CapacitySearch, streams: int) -> LoadTestConfig:
     """The load test of one probe with ``streams`` sessions."""
-    return replace(search.base, streams=streams, requests=streams, clips_s=(search.clip_s,),
-                   pause_s=0.0, workers=min(search.base.workers, streams))
+    return replace(
+        search.base,
+        streams=streams,
+        requests=streams,
+        clips_s=(search.clip_s,),
+        pause_s=0.0,
+        workers=min(search.base.workers, streams),
+    )
 
 
 def probe_summary(streams: int, results: dict[str, Any], lag_limit_ms: float) -> dict[str, Any]:
@@ -86,8 +91,11 @@ def probe_summary(streams: int, results: dict[str, Any], lag_limit_ms: float) ->
     clip = results["clips"][0]
     lag = clip["frame_lag_ms"]
     wall = clip["wall_s"]
-    passed = (clip["successful_requests"] == clip["requests"] and lag["p99"] is not None
-              and lag["p99"] < lag_limit_ms)
+    passed = (
+        clip["successful_requests"] == clip["requests"]
+        and lag["p99"] is not None
+        and lag["p99"] < lag_limit_ms
+    )
     probe = clip["probe"]
     return {
         "streams": streams,
@@ -97,19 +105,22 @@ def probe_summary(streams: int, results: dict[str, Any], lag_limit_ms: float) ->
         "requests": clip["requests"],
         "errors": clip["errors"],
         "frame_lag_ms": lag,
-        "first_packet_latency_ms": {key: clip["first_packet_latency_ms"][key]
-                                    for key in ("p50", "p99", "max")},
+        "first_packet_latency_ms": {
+            key: clip["first_packet_latency_ms"][key] for key in ("p50", "p99", "max")
+        },
         "fps_p1": clip["fps"]["p1"],
         "send_slip_ms_p99": clip["send_slip_ms"]["p99"],
-        "probe_first_frame_latency_ms": None if probe is None else
-        {key: probe["first_frame_latency_ms"][key] for key in ("p50", "p99", "max")},
+        "probe_first_frame_latency_ms": None
+        if probe is None
+        else {key: probe["first_frame_latency_ms"][key] for key in ("p50", "p99", "max")},
         "probe_requests": None if probe is None else probe["requests"],
         "wall_s": wall,
         "client_cpu_s": clip["client_cpu_s"],
         "server_cpu_s": clip["server_cpu_s"],
         "client_cores": clip["client_cpu_s"] / wall if wall else None,
-        "server_cores": None if clip["server_cpu_s"] is None or not wall else
-        clip["server_cpu_s"] / wall,
+        "server_cores": None
+        if clip["server_cpu_s"] is None or not wall
+        else clip["server_cpu_s"] / wall,
     }
 
 
@@ -128,13 +139,16 @@ def next_probe(passed: dict[int, bool], search: CapacitySearch) -> int | None:
     if high - low <= search.resolution:
         return None
     middle = (low + high) // 2
-    return max(low + 1, middle - middle % search.resolution) if middle > search.resolution \
-        else middle
+    return (
+        max(low + 1, middle - middle % search.resolution) if middle > search.resolution else middle
+    )
 
 
-def find_capacity(search: CapacitySearch,
-                  run: Callable[[LoadTestConfig], dict[str, Any]] = loadtest,
-                  progress: Callable[[str], None] | None = None) -> dict[str, Any]:
+def find_capacity(
+    search: CapacitySearch,
+    run: Callable[[LoadTestConfig], dict[str, Any]] = loadtest,
+    progress: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
     """Run the search; its document (see docs/loadtest.md, "Capacity")."""
     check_search(search)
     passed: dict[int, bool] = {}
@@ -145,8 +159,7 @@ def find_capacity(search: CapacitySearch,
         progress(_probe_line(idle) + "  (idle baseline)")
     while (streams := next_probe(passed, search)) is not None and len(probes) < MAX_PROBES:
         time.sleep(search.pause_s)
-        summary = probe_summary(streams, run(probe_config(search, streams)),
-                                search.lag_limit_ms)
+        summary = probe_summary(streams, run(probe_config(search, streams)), search.lag_limit_ms)
         passed[streams] = summary["passed"]
         probes.append(summary)
         if progress is not None:
@@ -154,15 +167,21 @@ def find_capacity(search: CapacitySearch,
     capacity = max((n for n, ok in passed.items() if ok), default=0)
     base = search.base
     return {
-        "engine": base.engine, "character": base.character, "fps": base.fps,
-        "lead_ms": base.lead_ms, "clip_s": search.clip_s, "encoding": base.encoding,
-        "workers": base.workers, "server_processes": idle["server_processes"],
+        "engine": base.engine,
+        "character": base.character,
+        "fps": base.fps,
+        "lead_ms": base.lead_ms,
+        "clip_s": search.clip_s,
+        "encoding": base.encoding,
+        "workers": base.workers,
+        "server_processes": idle["server_processes"],
         "lag_limit_ms": search.lag_limit_ms,
         "criterion": f"every request succeeds and p99 frame lag < {search.lag_limit_ms:g} ms "
-                     f"(lag: arrival minus scheduled time, start sent + i / fps)",
+        f"(lag: arrival minus scheduled time, start sent + i / fps)",
         "capacity_streams": capacity,
-        "upper_bound_streams": min((n for n, ok in passed.items() if not ok and n > capacity),
-                                   default=None),
+        "upper_bound_streams": min(
+            (n for n, ok in passed.items() if not ok and n > capacity), default=None
+        ),
         "idle": idle,
         "at_capacity": next((p for p in probes if p["streams"] == capacity), None),
         "probes": probes,
@@ -174,10 +193,12 @@ def find_capacity(search: CapacitySearch,
 def _probe_line(probe: dict[str, Any]) -> str:
     lag = probe["frame_lag_ms"]
     server = probe["server_cores"]
-    return (f"{probe['streams']:>5} sessions: {'pass' if probe['passed'] else 'FAIL'}  "
-            f"{probe['successful_requests']}/{probe['requests']} ok, lag p99 "
-            f"{_number(lag['p99'])} ms, max {_number(lag['max'])} ms; cores used: client "
-            f"{_number(probe['client_cores'], 2)}, server {_number(server, 2)}")
+    return (
+        f"{probe['streams']:>5} sessions: {'pass' if probe['passed'] else 'FAIL'}  "
+        f"{probe['successful_requests']}/{probe['requests']} ok, lag p99 "
+        f"{_number(lag['p99'])} ms, max {_number(lag['max'])} ms; cores used: client "
+        f"{_number(probe['client_cores'], 2)}, server {_number(server, 2)}"
+    )
 
 
 def _number(value: float | None, digits: int = 1) -> str:
@@ -191,15 +212,25 @@ def merge_results(path: Path, search: dict[str, Any]) -> dict[str, Any]:
         try:
             document = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, ValueError) as error:
-            raise LipstreamError(f"cannot read the results file: {error}", where=str(path),
-                                 code="invalid_results_file") from None
+            raise LipstreamError(
+                f"cannot read the results file: {error}",
+                where=str(path),
+                code="invalid_results_file",
+            ) from None
     key = tuple(search[name] for name in _SEARCH_KEY)
-    kept = [old for old in document.get("searches", [])
-            if tuple(old.get(name) for name in _SEARCH_KEY) != key]
+    kept = [
+        old
+        for old in document.get("searches", [])
+        if tuple(old.get(name) for name in _SEARCH_KEY) != key
+    ]
     return {
         "tool": f"lipstream loadtest capacity {__version__}",
-        "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
-                    "python": platform.python_version(), "event_loop": event_loop_name()},
+        "machine": {
+            "cpus": os.cpu_count(),
+            "platform": platform.platform(),
+            "python": platform.python_version(),
+            "event_loop": event_loop_name(),
+        },
         "searches": [*kept, search],
     }
 
@@ -208,26 +239,37 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m lipstream.loadtest_capacity",
         description="Find the most concurrent real-time sessions a lipstream server on this "
-                    "machine holds with p99 frame lag under a limit.")
-    parser.add_argument("--url", default="ws://127.0.0.1:8000/v1/stream",
-                        help="loopback ws:// URL of /v1/stream")
+        "machine holds with p99 frame lag under a limit.",
+    )
+    parser.add_argument(
+        "--url", default="ws://127.0.0.1:8000/v1/stream", help="loopback ws:// URL of /v1/stream"
+    )
     parser.add_argument("--engine", required=True)
     parser.add_argument("--character", required=True)
     parser.add_argument("--fps", type=float, default=60.0)
     parser.add_argument("--encoding", choices=["msgpack", "json"], default="msgpack")
-    parser.add_argument("--lead-ms", type=float, default=0.0,
-                        help="send each phoneme this long before its start")
+    parser.add_argument(
+        "--lead-ms", type=float, default=0.0, help="send each phoneme this long before its start"
+    )
     parser.add_argument("--clip", type=float, default=10.0, help="clip length in seconds")
     parser.add_argument("--lag-limit-ms", type=float, default=50.0)
     parser.add_argument("--start", type=int, default=100, help="first session count tried")
     parser.add_argument("--max-streams", type=int, default=1000)
-    parser.add_argument("--resolution", type=int, default=25,
-                        help="stop when the boundary is known to this many sessions")
-    parser.add_argument("--workers", type=int, default=1,
-                        help="load-generating processes (at most one core each)")
-    parser.add_argument("--probe-phonemes", type=int, default=0,
-                        help="also time the first frame of requests of this many phonemes "
-                             "sent whole")
+    parser.add_argument(
+        "--resolution",
+        type=int,
+        default=25,
+        help="stop when the boundary is known to this many sessions",
+    )
+    parser.add_argument(
+        "--workers", type=int, default=1, help="load-generating processes (at most one core each)"
+    )
+    parser.add_argument(
+        "--probe-phonemes",
+        type=int,
+        default=0,
+        help="also time the first frame of requests of this many phonemes sent whole",
+    )
     parser.add_argument("--pause", type=float, default=3.0, help="seconds between probes")
     parser.add_argument("--seed", type=int, default=0, help="seed of the synthetic clips")
     parser.add_argument("--token", help="bearer token, if the server requires one")
@@ -237,13 +279,27 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    base = LoadTestConfig(url=args.url, engine=args.engine, character=args.character,
-                          fps=args.fps, encoding=args.encoding, lead_ms=args.lead_ms,
-                          seed=args.seed, token=args.token, workers=args.workers,
-                          probe_phonemes=args.probe_phonemes)
-    search = CapacitySearch(base, clip_s=args.clip, lag_limit_ms=args.lag_limit_ms,
-                            start=args.start, max_streams=args.max_streams,
-                            resolution=args.resolution, pause_s=args.pause)
+    base = LoadTestConfig(
+        url=args.url,
+        engine=args.engine,
+        character=args.character,
+        fps=args.fps,
+        encoding=args.encoding,
+        lead_ms=args.lead_ms,
+        seed=args.seed,
+        token=args.token,
+        workers=args.workers,
+        probe_phonemes=args.probe_phonemes,
+    )
+    search = CapacitySearch(
+        base,
+        clip_s=args.clip,
+        lag_limit_ms=args.lag_limit_ms,
+        start=args.start,
+        max_streams=args.max_streams,
+        resolution=args.resolution,
+        pause_s=args.pause,
+    )
     try:
         result = find_capacity(search, progress=print)
         path = Path(args.results)
@@ -251,14 +307,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
     except LipstreamError as error:
-        print(f"error [{error.code}]: {error.where + ': ' if error.where else ''}"
-              f"{error.message}", file=sys.stderr)
+        print(
+            f"error [{error.code}]: {error.where + ': ' if error.where else ''}{error.message}",
+            file=sys.stderr,
+        )
         return 2
     except OSError as error:
         print(f"error [io_error]: {error}", file=sys.stderr)
         return 2
-    print(f"capacity: {result['capacity_streams']} sessions at {args.fps:g} fps with p99 lag "
-          f"< {args.lag_limit_ms:g} ms (lead {args.lead_ms:g} ms); written to {path}")
+    print(
+        f"capacity: {result['capacity_streams']} sessions at {args.fps:g} fps with p99 lag "
+        f"< {args.lag_limit_ms:g} ms (lead {args.lead_ms:g} ms); written to {path}"
+    )
     return 0
 
 

@@ -36,8 +36,9 @@ def _draw_ms(generator: random.Random, bounds: tuple[float, float]) -> float:
 def synthetic_clip(duration_s: float, seed: int = 0) -> list[Span]:
     """Contiguous (ARPAbet phoneme, start s, end s) spans from 0 to ``duration_s``."""
     if not 0.2 <= duration_s <= MAX_CLIP_S:
-        raise InvalidRequestError(f"clip length must be in [0.2, {MAX_CLIP_S:g}] s, "
-                                  f"got {duration_s!r}", where="clip")
+        raise InvalidRequestError(
+            f"clip length must be in [0.2, {MAX_CLIP_S:g}] s, got {duration_s!r}", where="clip"
+        )
     generator = random.Random(seed)
     spans: list[Span] = [(SILENCE, 0.0, LEADING_SILENCE_S)]
     clock = LEADING_SILENCE_S

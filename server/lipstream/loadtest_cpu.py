@@ -67,7 +67,7 @@ def cpu_seconds(pids: Iterable[int], proc: Path = PROC) -> float | None:
         except OSError:
             continue
         # Fields after the parenthesised command name; utime and stime are fields 14 and 15.
-        fields = stat[stat.rindex(")") + 2:].split()
+        fields = stat[stat.rindex(")") + 2 :].split()
         total_ticks += int(fields[11]) + int(fields[12])
         read = True
     return total_ticks / _TICKS_PER_S if read else None

@@ -170,8 +170,9 @@ class _Session:
     async def _connected(self) -> AsyncClient:
         if self.client is None or self.client.closed is not None:
             plan = self.plan
-            self.client = AsyncClient(plan.url, plan.encoding, plan.token,
-                                      on_message=self.on_message)
+            self.client = AsyncClient(
+                plan.url, plan.encoding, plan.token, on_message=self.on_message
+            )
             await self.client.connect()
         return self.client
 
@@ -179,8 +180,7 @@ class _Session:
         record = RequestRecord()
         try:
             client = await self._connected()
-            await asyncio.wait_for(self._stream(client, record),
-                                   self.plan.clip_s + REQUEST_SLACK_S)
+            await asyncio.wait_for(self._stream(client, record), self.plan.clip_s + REQUEST_SLACK_S)
         except LipstreamServerError as error:
             record.error = error.code
         except ConnectionClosed as error:
@@ -207,8 +207,13 @@ class _Session:
         trace = _Trace(time.perf_counter())
         self.traces[request_id] = trace
         try:
-            stream = await client.start(plan.engine, plan.character, id=request_id,
-                                        fps=plan.fps, latency_budget_ms=plan.latency_budget_ms)
+            stream = await client.start(
+                plan.engine,
+                plan.character,
+                id=request_id,
+                fps=plan.fps,
+                latency_budget_ms=plan.latency_budget_ms,
+            )
             await self._pace(stream, trace.sent_at, record)
             await stream.end()
             done = await stream.done()
@@ -243,8 +248,7 @@ def _fill(record: RequestRecord, trace: _Trace, done: Done) -> None:
     record.server_max_lag_ms = done.stats.max_lag_ms
 
 
-async def probe_first_frames(plan: ClipPlan, share: ClipShare,
-                             running: Callable[[], bool]) -> None:
+async def probe_first_frames(plan: ClipPlan, share: ClipShare, running: Callable[[], bool]) -> None:
     """While ``running()``, send whole ``probe_phonemes``-phoneme requests one after
     another on one connection and record each one's first-frame latency (ms): from
     sending ``start`` to receiving the first frames. It starts once every start delay of
@@ -265,8 +269,9 @@ async def probe_first_frames(plan: ClipPlan, share: ClipShare,
 
 async def _probe_once(plan: ClipPlan, client: AsyncClient, items: Sequence[Span]) -> float:
     sent_at = time.perf_counter()
-    stream = await client.start(plan.engine, plan.character, fps=plan.fps,
-                                latency_budget_ms=plan.latency_budget_ms)
+    stream = await client.start(
+        plan.engine, plan.character, fps=plan.fps, latency_budget_ms=plan.latency_budget_ms
+    )
     await stream.send_phonemes(items)
     await stream.end()
     first = await asyncio.wait_for(stream.next_block(), plan.clip_s + REQUEST_SLACK_S)
@@ -278,23 +283,27 @@ async def _probe_once(plan: ClipPlan, client: AsyncClient, items: Sequence[Span]
     return latency
 
 
-async def run_share(plan: ClipPlan, indices: Sequence[int], sessions: int, probe: bool,
-                    others_running: Callable[[], bool] | None = None) -> ClipShare:
+async def run_share(
+    plan: ClipPlan,
+    indices: Sequence[int],
+    sessions: int,
+    probe: bool,
+    others_running: Callable[[], bool] | None = None,
+) -> ClipShare:
     """Run ``sessions`` concurrent sessions over the requests ``indices`` (claimed in
     order), and the probe if asked, for as long as this share's sessions or
     ``others_running()`` (other processes' load) go on. CPU time is this process's."""
     share = ClipShare()
     cpu_began = time.process_time()
     pending = list(reversed(indices))
-    load = [asyncio.create_task(_Session(plan, share, pending).work())
-            for _ in range(sessions)]
+    load = [asyncio.create_task(_Session(plan, share, pending).work()) for _ in range(sessions)]
 
     def running() -> bool:
-        return any(not task.done() for task in load) or \
-            (others_running is not None and others_running())
+        return any(not task.done() for task in load) or (
+            others_running is not None and others_running()
+        )
 
-    probing = [probe_first_frames(plan, share, running)] if probe and plan.probe_phonemes \
-        else []
+    probing = [probe_first_frames(plan, share, running)] if probe and plan.probe_phonemes else []
     await asyncio.gather(*load, *probing)
     share.cpu_s = time.process_time() - cpu_began
     return share

@@ -42,8 +42,9 @@ def percentile(sorted_values: Sequence[float], q: float) -> float:
     return sorted_values[low] + (sorted_values[high] - sorted_values[low]) * fraction
 
 
-def summarize(values: Iterable[float],
-              statistics: Sequence[tuple[str, float | None]] = A2F_STATISTICS) -> Summary:
+def summarize(
+    values: Iterable[float], statistics: Sequence[tuple[str, float | None]] = A2F_STATISTICS
+) -> Summary:
     """The named statistics of ``values``, each None when there are no values."""
     ordered = sorted(values)
     if not ordered:

@@ -37,11 +37,17 @@ def split(total: int, parts: int, part: int) -> int:
 
 def encode_share(share: ClipShare) -> tuple[bytes, bytes, bytes]:
     """(JSON header, block lags as float64, block frame counts as int64)."""
-    header = {"records": [asdict(record) for record in share.records],
-              "probe_ms": share.probe_ms, "probe_errors": share.probe_errors,
-              "cpu_s": share.cpu_s}
-    return (json.dumps(header).encode("utf-8"), share.block_lag_ms.tobytes(),
-            share.block_frames.tobytes())
+    header = {
+        "records": [asdict(record) for record in share.records],
+        "probe_ms": share.probe_ms,
+        "probe_errors": share.probe_errors,
+        "cpu_s": share.cpu_s,
+    }
+    return (
+        json.dumps(header).encode("utf-8"),
+        share.block_lag_ms.tobytes(),
+        share.block_frames.tobytes(),
+    )
 
 
 def decode_share(header: bytes, lags: bytes, frames: bytes) -> ClipShare:
@@ -51,14 +57,19 @@ def decode_share(header: bytes, lags: bytes, frames: bytes) -> ClipShare:
     block_lag_ms.frombytes(lags)
     block_frames: array[int] = array("q")
     block_frames.frombytes(frames)
-    return ClipShare(records=[RequestRecord(**record) for record in fields["records"]],
-                     block_lag_ms=block_lag_ms, block_frames=block_frames,
-                     probe_ms=list(fields["probe_ms"]),
-                     probe_errors=list(fields["probe_errors"]), cpu_s=float(fields["cpu_s"]))
+    return ClipShare(
+        records=[RequestRecord(**record) for record in fields["records"]],
+        block_lag_ms=block_lag_ms,
+        block_frames=block_frames,
+        probe_ms=list(fields["probe_ms"]),
+        probe_errors=list(fields["probe_errors"]),
+        cpu_s=float(fields["cpu_s"]),
+    )
 
 
-def _worker(plan: ClipPlan, requests: int, sessions: int, workers: int, part: int,
-            pipe: Connection) -> None:
+def _worker(
+    plan: ClipPlan, requests: int, sessions: int, workers: int, part: int, pipe: Connection
+) -> None:
     indices = list(range(part, requests, workers))
     share = run_coroutine(run_share(plan, indices, split(sessions, workers, part), False))
     for chunk in encode_share(share):
@@ -66,8 +77,9 @@ def _worker(plan: ClipPlan, requests: int, sessions: int, workers: int, part: in
     pipe.close()
 
 
-def run_in_workers(plan: ClipPlan, requests: int, sessions: int, workers: int,
-                   probe: bool) -> ClipShare:
+def run_in_workers(
+    plan: ClipPlan, requests: int, sessions: int, workers: int, probe: bool
+) -> ClipShare:
     """Run the clip's ``requests`` over ``sessions`` sessions in ``workers`` forked
     processes (and the probe in this one); their merged measurements."""
     context = multiprocessing.get_context("fork")
@@ -75,23 +87,29 @@ def run_in_workers(plan: ClipPlan, requests: int, sessions: int, workers: int,
     processes = []
     for part in range(workers):
         receiving, sending = context.Pipe(duplex=False)
-        process = context.Process(target=_worker, name=f"lipstream-loadtest-{part}",
-                                  args=(plan, requests, sessions, workers, part, sending))
+        process = context.Process(
+            target=_worker,
+            name=f"lipstream-loadtest-{part}",
+            args=(plan, requests, sessions, workers, part, sending),
+        )
         process.start()
         sending.close()
         pipes.append(receiving)
         processes.append(process)
     merged = ClipShare()
     if probe:
-        merged.extend(run_coroutine(run_share(plan, [], 0, True,
-                                              lambda: not all(p.poll() for p in pipes))))
+        merged.extend(
+            run_coroutine(run_share(plan, [], 0, True, lambda: not all(p.poll() for p in pipes)))
+        )
     try:
         for part, pipe in enumerate(pipes):
             try:
                 merged.extend(decode_share(*(pipe.recv_bytes() for _ in range(3))))
             except EOFError:
-                raise WorkerFailed(f"load-generating process {part} ended without results "
-                                   f"(exit code {processes[part].exitcode})") from None
+                raise WorkerFailed(
+                    f"load-generating process {part} ended without results "
+                    f"(exit code {processes[part].exitcode})"
+                ) from None
     finally:
         for process in processes:
             process.join()

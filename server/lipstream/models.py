@@ -48,5 +48,6 @@ class ModelRegistry:
         raise LipstreamError(
             f"no model for engine {engine!r}"
             + (f" and character {character!r}" if character else ""),
-            where="engine", code="unknown_model",
+            where="engine",
+            code="unknown_model",
         )

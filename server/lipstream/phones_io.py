@@ -51,8 +51,12 @@ def write_frames(path: Path, result: SynthesisResult) -> None:
     if suffix == ".csv":
         write_frames_csv(path, result.frames, result.channels, result.fps)
     elif suffix == ".json":
-        payload = {"fps": result.fps, "channels": list(result.channels),
-                   "frames": result.frames.round(6).tolist(), "stats": result.stats}
+        payload = {
+            "fps": result.fps,
+            "channels": list(result.channels),
+            "frames": result.frames.round(6).tolist(),
+            "stats": result.stats,
+        }
         path.write_text(json.dumps(payload) + "\n", encoding="utf-8")
     else:
         raise InvalidRequestError(

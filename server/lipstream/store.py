@@ -125,7 +125,11 @@ def _map_member(path: Path, archive: zipfile.ZipFile, info: zipfile.ZipInfo) -> 
     if int(np.prod(shape)) == 0:
         return np.zeros(shape, dtype=dtype)
     mapped: np.ndarray = np.memmap(
-        path, dtype=dtype, mode="r", offset=data_offset, shape=tuple(shape),
+        path,
+        dtype=dtype,
+        mode="r",
+        offset=data_offset,
+        shape=tuple(shape),
         order="F" if fortran_order else "C",
     )
     return mapped

@@ -60,8 +60,11 @@ def check_emotion(emotion: Any, where: str) -> str | None:
     """``emotion`` if it is None or one of ``EMOTIONS``; else InvalidRequestError
     (code ``unknown_emotion``) at ``where``."""
     if emotion is not None and emotion not in EMOTIONS:
-        raise InvalidRequestError(f"unknown emotion {emotion!r}; known: {', '.join(EMOTIONS)}",
-                                  where=where, code="unknown_emotion")
+        raise InvalidRequestError(
+            f"unknown emotion {emotion!r}; known: {', '.join(EMOTIONS)}",
+            where=where,
+            code="unknown_emotion",
+        )
     return None if emotion is None else str(emotion)
 
 
@@ -80,8 +83,12 @@ def coerce_span(span: SpanLike, where: str = "span", source: str = "request") ->
         raise InvalidRequestError(
             f"span must satisfy 0 <= start < end, got start={start_s} end={end_s}", where=where
         )
-    return PhonemeSpan(normalize_phoneme(label, source=source, where=where), start_s, end_s,
-                       check_emotion(emotion, f"{where}.emotion"))
+    return PhonemeSpan(
+        normalize_phoneme(label, source=source, where=where),
+        start_s,
+        end_s,
+        check_emotion(emotion, f"{where}.emotion"),
+    )
 
 
 def coerce_spans(

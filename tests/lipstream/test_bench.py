@@ -16,8 +16,9 @@ def results(small_demo_corpus: Corpus) -> dict:
     return run_bench(small_demo_corpus, [BASELINE], engine_benches=False)
 
 
-def test_baseline_rms_matches_a_direct_computation(results: dict,
-                                                   small_demo_corpus: Corpus) -> None:
+def test_baseline_rms_matches_a_direct_computation(
+    results: dict, small_demo_corpus: Corpus
+) -> None:
     train, heldout = small_demo_corpus.split()
     model = VisemeLerpEngine().fit(train)
     errors = []

@@ -33,18 +33,22 @@ def livelink_corpus(tmp_path_factory: pytest.TempPathFactory) -> Path:
     for seed, source in enumerate(sorted(LIVELINK_DIR.glob("*.csv"))):
         shutil.copy(source, root / source.name)
         (root / source.with_suffix(".TextGrid").name).write_text(
-            textgrid_long(_phone_intervals(29.0, seed)))
+            textgrid_long(_phone_intervals(29.0, seed))
+        )
         (root / source.with_suffix(".json").name).write_text(
-            json.dumps({"emotion": ["sad", "angry"][seed % 2], "speaker": "capture"}))
+            json.dumps({"emotion": ["sad", "angry"][seed % 2], "speaker": "capture"})
+        )
     return root
 
 
 @pytest.mark.parametrize("engine", ["viseme-lerp", "anime-graph"])
-def test_train_inspect_synth_on_livelink_textgrid_corpus(livelink_corpus: Path, tmp_path: Path,
-                                                         engine: str) -> None:
+def test_train_inspect_synth_on_livelink_textgrid_corpus(
+    livelink_corpus: Path, tmp_path: Path, engine: str
+) -> None:
     model_dir = tmp_path / "model"
-    trained = run_cli("train", "--corpus", str(livelink_corpus), "--engine", engine,
-                      "--out", str(model_dir))
+    trained = run_cli(
+        "train", "--corpus", str(livelink_corpus), "--engine", engine, "--out", str(model_dir)
+    )
     assert trained.returncode == 0, trained.stderr
     manifest = json.loads((model_dir / "model.json").read_text())
     assert manifest["engine"] == engine and manifest["fps"] == 60.0
@@ -54,13 +58,28 @@ def test_train_inspect_synth_on_livelink_textgrid_corpus(livelink_corpus: Path, 
     assert inspected.returncode == 0 and f"engine {engine}" in inspected.stdout
 
     phones = tmp_path / "hello.json"
-    phones.write_text(json.dumps([{"phoneme": "HH", "start": 0.1, "end": 0.2},
-                                  {"phoneme": "AH0", "start": 0.2, "end": 0.3},
-                                  {"phoneme": "L", "start": 0.3, "end": 0.4},
-                                  {"phoneme": "OW1", "start": 0.4, "end": 0.7}]))
+    phones.write_text(
+        json.dumps(
+            [
+                {"phoneme": "HH", "start": 0.1, "end": 0.2},
+                {"phoneme": "AH0", "start": 0.2, "end": 0.3},
+                {"phoneme": "L", "start": 0.3, "end": 0.4},
+                {"phoneme": "OW1", "start": 0.4, "end": 0.7},
+            ]
+        )
+    )
     out = tmp_path / "hello.csv"
-    synth = run_cli("synth", "--model", str(model_dir), "--phones", str(phones), "--fps", "30",
-                    "--out", str(out))
+    synth = run_cli(
+        "synth",
+        "--model",
+        str(model_dir),
+        "--phones",
+        str(phones),
+        "--fps",
+        "30",
+        "--out",
+        str(out),
+    )
     assert synth.returncode == 0, synth.stderr
     with open(out, newline="") as handle:
         rows = list(csv.reader(handle))
@@ -72,14 +91,22 @@ def test_train_inspect_synth_on_livelink_textgrid_corpus(livelink_corpus: Path, 
 def test_train_all_writes_one_directory_per_engine(livelink_corpus: Path, tmp_path: Path) -> None:
     from lipstream.engines import engine_names
 
-    result = run_cli("train", "--corpus", str(livelink_corpus), "--engine", "all",
-                     "--out", str(tmp_path / "models"))
+    result = run_cli(
+        "train",
+        "--corpus",
+        str(livelink_corpus),
+        "--engine",
+        "all",
+        "--out",
+        str(tmp_path / "models"),
+    )
     assert result.returncode == 0, result.stderr
     assert sorted(p.name for p in (tmp_path / "models").iterdir()) == sorted(engine_names())
 
 
-def test_broken_corpus_is_one_line_naming_file_and_line(livelink_corpus: Path,
-                                                        tmp_path: Path) -> None:
+def test_broken_corpus_is_one_line_naming_file_and_line(
+    livelink_corpus: Path, tmp_path: Path
+) -> None:
     broken = tmp_path / "broken"
     shutil.copytree(livelink_corpus, broken)
     victim = min(broken.glob("*.csv"))
@@ -88,8 +115,9 @@ def test_broken_corpus_is_one_line_naming_file_and_line(livelink_corpus: Path,
     cells[20] = "nan"
     lines[41] = ",".join(cells)
     victim.write_text("\n".join(lines) + "\n")
-    result = run_cli("train", "--corpus", str(broken), "--engine", "viseme-lerp",
-                     "--out", str(tmp_path / "m"))
+    result = run_cli(
+        "train", "--corpus", str(broken), "--engine", "viseme-lerp", "--out", str(tmp_path / "m")
+    )
     assert result.returncode == 2
     message = result.stderr.strip().splitlines()
     assert len(message) == 1 or "Traceback" not in result.stderr

@@ -26,14 +26,17 @@ def test_aperture_is_jaw_minus_close_and_needs_both_channels() -> None:
 def test_threshold_is_a_fraction_of_median_open_vowel_aperture() -> None:
     fps = 10.0
     aperture = np.array([0.0, 0.4, 0.4, 0.0, 0.6, 0.6, 0.0, 0.2, 0.2, 0.0])
-    spans = [PhonemeSpan("AA", 0.1, 0.3), PhonemeSpan("AE", 0.4, 0.6),
-             PhonemeSpan("IY", 0.7, 0.9)]
+    spans = [PhonemeSpan("AA", 0.1, 0.3), PhonemeSpan("AE", 0.4, 0.6), PhonemeSpan("IY", 0.7, 0.9)]
     assert closure_threshold([(aperture, spans)], fps) == pytest.approx(CLOSURE_FRACTION * 0.5)
 
 
 def test_closure_counts_only_bilabials_with_frames() -> None:
     fps = 10.0
     aperture = np.array([0.5, 0.01, 0.5, 0.3, 0.3, 0.5])
-    spans = [PhonemeSpan("M", 0.0, 0.2), PhonemeSpan("P", 0.3, 0.5),
-             PhonemeSpan("AA", 0.5, 0.6), PhonemeSpan("B", 0.55, 0.58)]
+    spans = [
+        PhonemeSpan("M", 0.0, 0.2),
+        PhonemeSpan("P", 0.3, 0.5),
+        PhonemeSpan("AA", 0.5, 0.6),
+        PhonemeSpan("B", 0.55, 0.58),
+    ]
     assert closure_counts(aperture, spans, fps, threshold=0.05) == (1, 2)

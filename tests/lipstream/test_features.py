@@ -30,8 +30,13 @@ def test_frames_are_centred_on_a_100_hz_grid() -> None:
 def test_frames_computed_piecewise_equal_the_whole_signal() -> None:
     samples = np.random.default_rng(0).normal(size=22050).astype(np.float32)
     whole = mfcc(samples, 22050)
-    pieces = np.concatenate([mfcc(samples, 22050, 0, 17), mfcc(samples, 22050, 17, 60),
-                             mfcc(samples, 22050, 60, len(whole))])
+    pieces = np.concatenate(
+        [
+            mfcc(samples, 22050, 0, 17),
+            mfcc(samples, 22050, 17, 60),
+            mfcc(samples, 22050, 60, len(whole)),
+        ]
+    )
     np.testing.assert_array_equal(pieces, whole)
 
 
@@ -50,8 +55,9 @@ def _voice(f0: float, tilt: float, rate: int) -> np.ndarray:
     """Half a second of a harmonic series on ``f0`` up to 3.9 kHz, amplitudes ``tilt ** k``."""
     times = np.arange(rate // 2) / rate
     harmonics = range(1, int(3900 / f0))
-    return (0.2 * sum(tilt**k * np.sin(2 * np.pi * f0 * k * times + k) for k in harmonics)
-            ).astype(np.float32)
+    return (0.2 * sum(tilt**k * np.sin(2 * np.pi * f0 * k * times + k) for k in harmonics)).astype(
+        np.float32
+    )
 
 
 @pytest.mark.parametrize("rate", [8000, 22050, 44100])

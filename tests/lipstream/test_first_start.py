@@ -23,7 +23,9 @@ def test_first_start_builds_the_demo_then_serves_every_engine(tmp_path: Path) ->
     log = tmp_path / "serve.log"
     process = subprocess.Popen(
         [sys.executable, "-m", "lipstream.cli", "serve", "--port", str(port)],
-        env=environment, stdout=subprocess.DEVNULL, stderr=log.open("w"),
+        env=environment,
+        stdout=subprocess.DEVNULL,
+        stderr=log.open("w"),
     )
     base = f"http://127.0.0.1:{port}"
     try:

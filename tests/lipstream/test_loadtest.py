@@ -36,8 +36,8 @@ def test_percentiles_of_known_latencies() -> None:
     # Rank q/100 * (n - 1) over 10, 20, 30, 40, 50; by hand:
     assert summary["min"] == 10.0 and summary["max"] == 50.0
     assert summary["p50"] == 30.0 and summary["mean"] == 30.0
-    assert summary["p1"] == pytest.approx(10.4)   # rank 0.04
-    assert summary["p5"] == pytest.approx(12.0)   # rank 0.2
+    assert summary["p1"] == pytest.approx(10.4)  # rank 0.04
+    assert summary["p5"] == pytest.approx(12.0)  # rank 0.2
     assert summary["p10"] == pytest.approx(14.0)  # rank 0.4
     assert summary["p90"] == pytest.approx(46.0)  # rank 3.6
     assert summary["p95"] == pytest.approx(48.0)  # rank 3.8
@@ -56,16 +56,28 @@ def test_percentile_matches_numpy_default() -> None:
 def test_empty_sample_gives_nulls_and_overall_summary_follows_a2f() -> None:
     assert set(summarize([]).values()) == {None}
     clips = [
-        {"first_packet_latency_ms": {"p99": 12.0, "mean": 4.0}, "fps": {"p1": 58.0},
-         "frame_lag_ms": {"p99": 9.0, "max": 20.0}},
-        {"first_packet_latency_ms": {"p99": 30.0, "mean": 8.0}, "fps": {"p1": 55.5},
-         "frame_lag_ms": {"p99": 7.0, "max": 31.0}},
-        {"first_packet_latency_ms": {"p99": None, "mean": None}, "fps": {"p1": None},
-         "frame_lag_ms": {"p99": None, "max": None}},
+        {
+            "first_packet_latency_ms": {"p99": 12.0, "mean": 4.0},
+            "fps": {"p1": 58.0},
+            "frame_lag_ms": {"p99": 9.0, "max": 20.0},
+        },
+        {
+            "first_packet_latency_ms": {"p99": 30.0, "mean": 8.0},
+            "fps": {"p1": 55.5},
+            "frame_lag_ms": {"p99": 7.0, "max": 31.0},
+        },
+        {
+            "first_packet_latency_ms": {"p99": None, "mean": None},
+            "fps": {"p1": None},
+            "frame_lag_ms": {"p99": None, "max": None},
+        },
     ]
     assert overall_summary(clips) == {  # type: ignore[arg-type]
-        "worst_p99_first_packet_latency_ms": 30.0, "mean_first_packet_latency_ms": 6.0,
-        "lowest_p1_fps": 55.5, "worst_p99_frame_lag_ms": 9.0, "max_frame_lag_ms": 31.0,
+        "worst_p99_first_packet_latency_ms": 30.0,
+        "mean_first_packet_latency_ms": 6.0,
+        "lowest_p1_fps": 55.5,
+        "worst_p99_frame_lag_ms": 9.0,
+        "max_frame_lag_ms": 31.0,
     }
 
 
@@ -83,32 +95,51 @@ def test_synthetic_clips_are_contiguous_speech_of_the_exact_length(length: float
     assert 5.0 < rate < 16.0  # phonemes per second of conversational speech
 
 
-@pytest.mark.parametrize("url", [
-    "ws://127.0.0.1:8000/v1/stream", "ws://127.9.9.9:1/v1/stream", "ws://localhost/v1/stream",
-    "ws://[::1]:8000/v1/stream", "wss://127.0.0.1/v1/stream",
-])
+@pytest.mark.parametrize(
+    "url",
+    [
+        "ws://127.0.0.1:8000/v1/stream",
+        "ws://127.9.9.9:1/v1/stream",
+        "ws://localhost/v1/stream",
+        "ws://[::1]:8000/v1/stream",
+        "wss://127.0.0.1/v1/stream",
+    ],
+)
 def test_loopback_targets_are_accepted(url: str) -> None:
     check_loopback(url)
 
 
-@pytest.mark.parametrize("url", [
-    "ws://10.0.0.5:8000/v1/stream", "ws://example.com/v1/stream", "ws://0.0.0.0:8000/v1/stream",
-    "ws://[::ffff:8.8.8.8]/v1/stream", "http://127.0.0.1:8000/v1/stream",
-    "ws://localhost.example.com/v1/stream", "ws://127.0.0.1.nip.io/v1/stream",
-])
+@pytest.mark.parametrize(
+    "url",
+    [
+        "ws://10.0.0.5:8000/v1/stream",
+        "ws://example.com/v1/stream",
+        "ws://0.0.0.0:8000/v1/stream",
+        "ws://[::ffff:8.8.8.8]/v1/stream",
+        "http://127.0.0.1:8000/v1/stream",
+        "ws://localhost.example.com/v1/stream",
+        "ws://127.0.0.1.nip.io/v1/stream",
+    ],
+)
 def test_other_targets_are_refused(url: str) -> None:
     with pytest.raises(NotLoopbackError) as refused:
         check_loopback(url)
     assert refused.value.code == "not_loopback" and refused.value.where == "--url"
 
 
-@pytest.mark.parametrize(("change", "flag"), [
-    ({"streams": 0}, "--streams"), ({"streams": 2001}, "--streams"),
-    ({"requests": 20_001}, "--requests"), ({"clips_s": (5.0, 61.0)}, "--clips"),
-    ({"clips_s": ()}, "--clips"), ({"fps": 0.0}, "--fps"),
-    ({"max_duration_s": 4000.0}, "--max-duration"),
-    ({"streams": 1, "requests": 100}, "--max-duration"),
-])
+@pytest.mark.parametrize(
+    ("change", "flag"),
+    [
+        ({"streams": 0}, "--streams"),
+        ({"streams": 2001}, "--streams"),
+        ({"requests": 20_001}, "--requests"),
+        ({"clips_s": (5.0, 61.0)}, "--clips"),
+        ({"clips_s": ()}, "--clips"),
+        ({"fps": 0.0}, "--fps"),
+        ({"max_duration_s": 4000.0}, "--max-duration"),
+        ({"streams": 1, "requests": 100}, "--max-duration"),
+    ],
+)
 def test_counts_and_duration_are_bounded(change: dict[str, object], flag: str) -> None:
     config = dataclasses.replace(LoadTestConfig(), **change)  # type: ignore[arg-type]
     with pytest.raises(InvalidRequestError) as refused:
@@ -126,9 +157,17 @@ def test_planned_duration_counts_rounds_delays_and_pauses() -> None:
 
 def test_a_short_run_measures_every_request(tmp_path: Path) -> None:
     with FakeServer() as server:
-        config = LoadTestConfig(url=server.url, streams=2, requests=3, clips_s=(1.0,), fps=50.0,
-                                engine="viseme-lerp", character="demo", pause_s=0.0,
-                                max_duration_s=30.0)
+        config = LoadTestConfig(
+            url=server.url,
+            streams=2,
+            requests=3,
+            clips_s=(1.0,),
+            fps=50.0,
+            engine="viseme-lerp",
+            character="demo",
+            pause_s=0.0,
+            max_duration_s=30.0,
+        )
         results = loadtest(config)
     clip = results["clips"][0]
     assert clip["requests"] == 3 and clip["successful_requests"] == 3 and clip["errors"] == {}
@@ -142,16 +181,22 @@ def test_a_short_run_measures_every_request(tmp_path: Path) -> None:
     assert results["summary"]["requests"] == 3 and results["config"]["token"] is None
     assert set(results["statistics"]) == set(clip["fps"])
     write_results(results, tmp_path / "bench" / "loadtest.json")
-    assert json.loads((tmp_path / "bench" / "loadtest.json").read_text())["clips"][0]["frames"] \
-        == 153
+    assert (
+        json.loads((tmp_path / "bench" / "loadtest.json").read_text())["clips"][0]["frames"] == 153
+    )
     table = format_table(results)
     assert "3/3" in table and "worst p99 first-packet latency" in table
     assert math.isfinite(results["summary"]["wall_s"])
 
 
 def test_cli_refuses_a_remote_target_with_one_line(tmp_path: Path) -> None:
-    result = run_cli("loadtest", "--url", "ws://192.0.2.1:8000/v1/stream",
-                     "--results", str(tmp_path / "out.json"))
+    result = run_cli(
+        "loadtest",
+        "--url",
+        "ws://192.0.2.1:8000/v1/stream",
+        "--results",
+        str(tmp_path / "out.json"),
+    )
     assert result.returncode == 2
     assert result.stderr.startswith("error [not_loopback]: --url: ")
     assert not (tmp_path / "out.json").exists()

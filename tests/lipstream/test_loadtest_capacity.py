@@ -28,16 +28,29 @@ BASE = LoadTestConfig(engine="viseme-lerp", character="demo", workers=2, probe_p
 
 def _results(streams: int, p99_ms: float, failed: int = 0) -> dict[str, Any]:
     """A load-test document as ``loadtest`` shapes it, for a fake run."""
-    lag = {"p50": p99_ms - 40.0, "mean": p99_ms - 40.0, "p95": p99_ms - 5.0, "p99": p99_ms,
-           "max": p99_ms + 30.0}
+    lag = {
+        "p50": p99_ms - 40.0,
+        "mean": p99_ms - 40.0,
+        "p95": p99_ms - 5.0,
+        "p99": p99_ms,
+        "max": p99_ms + 30.0,
+    }
     clip = {
-        "requests": streams, "successful_requests": streams - failed,
-        "errors": {"timeout": failed} if failed else {}, "frame_lag_ms": lag,
+        "requests": streams,
+        "successful_requests": streams - failed,
+        "errors": {"timeout": failed} if failed else {},
+        "frame_lag_ms": lag,
         "first_packet_latency_ms": {"p50": 1.0, "p99": 2.0, "max": 3.0},
-        "fps": {"p1": 59.0}, "send_slip_ms": {"p99": 1.0},
-        "probe": {"phonemes": 30, "requests": 40,
-                  "first_frame_latency_ms": {"p50": 4.0, "p99": 9.0, "max": 12.0}},
-        "wall_s": 11.0, "client_cpu_s": 5.5, "server_cpu_s": 8.8,
+        "fps": {"p1": 59.0},
+        "send_slip_ms": {"p99": 1.0},
+        "probe": {
+            "phonemes": 30,
+            "requests": 40,
+            "first_frame_latency_ms": {"p50": 4.0, "p99": 9.0, "max": 12.0},
+        },
+        "wall_s": 11.0,
+        "client_cpu_s": 5.5,
+        "server_cpu_s": 8.8,
     }
     return {"clips": [clip], "summary": {"server_processes": 1}}
 
@@ -96,14 +109,23 @@ def test_a_probe_with_failed_requests_fails_however_low_its_lag() -> None:
 
 def test_searches_accumulate_in_one_file_by_key(tmp_path: Path) -> None:
     path = tmp_path / "capacity.json"
-    key = {"engine": "viseme-lerp", "character": "demo", "fps": 60.0, "lead_ms": 300.0,
-           "clip_s": 10.0, "encoding": "msgpack", "server_processes": 1}
+    key = {
+        "engine": "viseme-lerp",
+        "character": "demo",
+        "fps": 60.0,
+        "lead_ms": 300.0,
+        "clip_s": 10.0,
+        "encoding": "msgpack",
+        "server_processes": 1,
+    }
     path.write_text(json.dumps(merge_results(path, {**key, "capacity_streams": 400})))
     other = {**key, "engine": "anime-graph", "capacity_streams": 200}
     path.write_text(json.dumps(merge_results(path, other)))
     document = merge_results(path, {**key, "capacity_streams": 575})
-    assert [(s["engine"], s["capacity_streams"]) for s in document["searches"]] == \
-        [("anime-graph", 200), ("viseme-lerp", 575)]
+    assert [(s["engine"], s["capacity_streams"]) for s in document["searches"]] == [
+        ("anime-graph", 200),
+        ("viseme-lerp", 575),
+    ]
 
 
 def test_search_bounds_are_checked() -> None:
@@ -116,10 +138,17 @@ def test_search_bounds_are_checked() -> None:
 
 
 def test_a_share_crosses_the_process_boundary_intact() -> None:
-    share = ClipShare(records=[RequestRecord(), RequestRecord(error="timeout", frames=3,
-                                                              send_slip_ms=[0.5, 1.25])],
-                      block_lag_ms=array("d", [10.0, -2.5]), block_frames=array("q", [3, 1]),
-                      probe_ms=[4.0], probe_errors=["server_busy"], cpu_s=1.5)
+    share = ClipShare(
+        records=[
+            RequestRecord(),
+            RequestRecord(error="timeout", frames=3, send_slip_ms=[0.5, 1.25]),
+        ],
+        block_lag_ms=array("d", [10.0, -2.5]),
+        block_frames=array("q", [3, 1]),
+        probe_ms=[4.0],
+        probe_errors=["server_busy"],
+        cpu_s=1.5,
+    )
     assert decode_share(*encode_share(share)) == share
     # Row r of a block is scheduled r / fps after its first frame: at 50 fps, 20 ms each.
     assert list(share.frame_lags_ms(50.0)) == [10.0, -10.0, -30.0, -2.5]
@@ -128,9 +157,19 @@ def test_a_share_crosses_the_process_boundary_intact() -> None:
 
 def test_two_worker_processes_and_the_probe_measure_every_request() -> None:
     with FakeServer() as server:
-        config = LoadTestConfig(url=server.url, streams=2, requests=3, clips_s=(1.0,), fps=50.0,
-                                engine="viseme-lerp", character="demo", pause_s=0.0,
-                                max_duration_s=30.0, workers=2, probe_phonemes=5)
+        config = LoadTestConfig(
+            url=server.url,
+            streams=2,
+            requests=3,
+            clips_s=(1.0,),
+            fps=50.0,
+            engine="viseme-lerp",
+            character="demo",
+            pause_s=0.0,
+            max_duration_s=30.0,
+            workers=2,
+            probe_phonemes=5,
+        )
         results = loadtest(config)
     clip = results["clips"][0]
     assert clip["requests"] == 3 and clip["successful_requests"] == 3

@@ -9,20 +9,26 @@ import pytest
 
 from lipstream.loadtest_cpu import ServerCpu, cpu_seconds, listening_inodes, pids_holding
 
-HEADER = "  sl  local_address rem_address   st tx_queue rx_queue tr tm->when retrnsmt   uid  " \
-         "timeout inode\n"
+HEADER = (
+    "  sl  local_address rem_address   st tx_queue rx_queue tr tm->when retrnsmt   uid  "
+    "timeout inode\n"
+)
 TICKS = os.sysconf("SC_CLK_TCK")
 
 
 def _socket_line(port: int, state: str, inode: int) -> str:
-    return (f"   0: 0100007F:{port:04X} 00000000:0000 {state} 00000000:00000000 00:00000000 "
-            f"00000000  1000        0 {inode} 1 0000000000000000 100 0 0 10 0\n")
+    return (
+        f"   0: 0100007F:{port:04X} 00000000:0000 {state} 00000000:00000000 00:00000000 "
+        f"00000000  1000        0 {inode} 1 0000000000000000 100 0 0 10 0\n"
+    )
 
 
 def _stat(pid: int, utime: int, stime: int) -> str:
     # A command name with spaces and a parenthesis, as the kernel allows.
-    return f"{pid} (lip stream) worker) S 1 {pid} {pid} 0 -1 4194560 100 0 0 0 {utime} {stime} " \
-           "0 0 20 0 3 0 100 1000000 1000 18446744073709551615\n"
+    return (
+        f"{pid} (lip stream) worker) S 1 {pid} {pid} 0 -1 4194560 100 0 0 0 {utime} {stime} "
+        "0 0 20 0 3 0 100 1000000 1000 18446744073709551615\n"
+    )
 
 
 def _process(proc: Path, pid: int, sockets: list[int], utime: int, stime: int) -> None:
@@ -37,14 +43,16 @@ def _process(proc: Path, pid: int, sockets: list[int], utime: int, stime: int) -
 def proc(tmp_path: Path) -> Path:
     (tmp_path / "net").mkdir()
     (tmp_path / "net" / "tcp").write_text(
-        HEADER + _socket_line(8000, "0A", 111)      # listening on 8000
-        + _socket_line(8000, "01", 222)             # an established connection to it
-        + _socket_line(9000, "0A", 333))            # another server
+        HEADER
+        + _socket_line(8000, "0A", 111)  # listening on 8000
+        + _socket_line(8000, "01", 222)  # an established connection to it
+        + _socket_line(9000, "0A", 333)
+    )  # another server
     (tmp_path / "net" / "tcp6").write_text(HEADER + _socket_line(8000, "0A", 444))
-    _process(tmp_path, 10, [111], utime=300, stime=100)   # uvicorn supervisor
+    _process(tmp_path, 10, [111], utime=300, stime=100)  # uvicorn supervisor
     _process(tmp_path, 11, [444, 222], utime=50, stime=25)  # a worker
-    _process(tmp_path, 12, [333], utime=999, stime=999)   # unrelated
-    (tmp_path / "self").mkdir()                           # not a PID
+    _process(tmp_path, 12, [333], utime=999, stime=999)  # unrelated
+    (tmp_path / "self").mkdir()  # not a PID
     return tmp_path
 
 

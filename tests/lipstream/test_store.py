@@ -19,9 +19,14 @@ from lipstream.store import (
 
 def _manifest() -> ModelManifest:
     return ModelManifest(
-        engine="viseme-lerp", name="demo", channels=["jawOpen", "mouthClose"], fps=120.0,
-        phoneme_set=["AA", "sil"], hyperparameters={"scheme": "oculus15"},
-        corpus_digest="abc", metrics={"train_seconds": 1.5},
+        engine="viseme-lerp",
+        name="demo",
+        channels=["jawOpen", "mouthClose"],
+        fps=120.0,
+        phoneme_set=["AA", "sil"],
+        hyperparameters={"scheme": "oculus15"},
+        corpus_digest="abc",
+        metrics={"train_seconds": 1.5},
     )
 
 

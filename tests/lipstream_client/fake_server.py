@@ -69,8 +69,9 @@ class _Request:
 class FakeServer:
     """Start with ``with FakeServer(...) as server:``; connect to ``server.url``."""
 
-    def __init__(self, *, busy: bool = False, token: str | None = None,
-                 refuse_upgrade: bool = False) -> None:
+    def __init__(
+        self, *, busy: bool = False, token: str | None = None, refuse_upgrade: bool = False
+    ) -> None:
         self.busy = busy
         self.token = token
         self.refuse_upgrade = refuse_upgrade
@@ -99,8 +100,12 @@ class FakeServer:
 
     async def _start(self) -> None:
         self._server = await serve(
-            self._handle, "127.0.0.1", 0, subprotocols=list(SUBPROTOCOLS),  # type: ignore[arg-type]
-            process_request=self._process_request, compression=None,
+            self._handle,
+            "127.0.0.1",
+            0,
+            subprotocols=list(SUBPROTOCOLS),  # type: ignore[arg-type]
+            process_request=self._process_request,
+            compression=None,
         )
         self.port = self._server.sockets[0].getsockname()[1]
 
@@ -139,8 +144,11 @@ class _Session:
         if self.server.busy:
             await self.refuse("server_busy", 1013)
             return
-        authorization = self.connection.request.headers.get("Authorization") \
-            if self.connection.request else None
+        authorization = (
+            self.connection.request.headers.get("Authorization")
+            if self.connection.request
+            else None
+        )
         if self.server.token is not None and authorization != f"Bearer {self.server.token}":
             await self.refuse("unauthorized", 1008)
             return
@@ -158,8 +166,7 @@ class _Session:
             return
         request = self.requests.get(message.id or "")
         if request is None:
-            await self.send(ErrorMessage("unknown_request", "no such request",
-                                         message.id, False))
+            await self.send(ErrorMessage("unknown_request", "no such request", message.id, False))
         elif isinstance(message, Phonemes):
             request.covered = message.items[-1].end
             await self.emit(request, math.ceil(request.covered * request.start.fps) - 1)
@@ -180,13 +187,17 @@ class _Session:
                 await self.connection.close(code, "shutting_down")
             return
         if start.engine == "missing":
-            await self.send(ErrorMessage("unknown_engine", f"engine: no engine {start.engine!r}",
-                                         start.id, True))
+            await self.send(
+                ErrorMessage(
+                    "unknown_engine", f"engine: no engine {start.engine!r}", start.id, True
+                )
+            )
             return
         offset = start.options.get("offset", 0.0)
         self.requests[start.id] = _Request(start, float(offset))  # type: ignore[arg-type]
-        await self.send(Ready(start.id, start.engine, start.character, start.fps, CHANNELS,
-                              0.0, "exact"))
+        await self.send(
+            Ready(start.id, start.engine, start.character, start.fps, CHANNELS, 0.0, "exact")
+        )
 
     async def emit(self, request: _Request, last: int) -> None:
         if last < request.sent:
@@ -198,8 +209,9 @@ class _Session:
     async def send_rows(self, request: _Request, first: int, rows: list[list[float]]) -> None:
         for offset, row in enumerate(rows):
             request.rows[first + offset] = row
-        await self.send(Frames.from_rows(request.start.id, request.seq, first, request.start.fps,
-                                         rows))
+        await self.send(
+            Frames.from_rows(request.start.id, request.seq, first, request.start.fps, rows)
+        )
         request.seq += 1
 
     async def on_interrupt(self, request: _Request, interrupt: Interrupt) -> None:

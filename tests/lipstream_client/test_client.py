@@ -31,6 +31,7 @@ PHONEMES = [("HH", 0.0, 0.1), ("AY", 0.1, 0.3), ("sil", 0.3, 0.42)]
 def run(scenario: Callable[[], Awaitable[T]]) -> T:
     async def bounded() -> T:
         return await asyncio.wait_for(scenario(), 10)
+
     return asyncio.run(bounded())
 
 
@@ -72,8 +73,7 @@ def test_async_request_gets_every_frame_in_order(server: FakeServer, encoding: s
 
 
 @pytest.mark.parametrize("encoding", ["msgpack", "json"])
-def test_sync_and_async_clients_receive_identical_frames(server: FakeServer,
-                                                         encoding: str) -> None:
+def test_sync_and_async_clients_receive_identical_frames(server: FakeServer, encoding: str) -> None:
     from_async = run(lambda: one_request(server.url, encoding, offset=0.125))
     with Client(server.url, encoding, timeout=10) as client:  # type: ignore[arg-type]
         assert client.encoding == encoding
@@ -93,9 +93,12 @@ def test_multiplexed_requests_each_get_their_own_frames(server: FakeServer) -> N
 
     async def scenario() -> dict[str, StreamResult]:
         async with AsyncClient(server.url) as client:
-            streams = {name: await client.start("viseme-lerp", "demo", id=name, fps=FPS,
-                                                options={"offset": offset})
-                       for name, offset in offsets.items()}
+            streams = {
+                name: await client.start(
+                    "viseme-lerp", "demo", id=name, fps=FPS, options={"offset": offset}
+                )
+                for name, offset in offsets.items()
+            }
             assert client.active_ids == set(offsets)
             # Interleave the three requests' input on the one connection.
             for step in range(3):
@@ -184,13 +187,16 @@ def test_busy_server_maps_to_retryable_server_busy() -> None:
     assert closed.error is not None and closed.error.code == "server_busy"
 
 
-@pytest.mark.parametrize(("character", "kind", "code", "retryable"), [
-    ("close-1001", ServerGoingAway, 1001, True),
-    ("close-1011", ConnectionClosed, 1011, False),
-])
-def test_close_codes_end_open_requests(server: FakeServer, character: str,
-                                       kind: type[ConnectionClosed], code: int,
-                                       retryable: bool) -> None:
+@pytest.mark.parametrize(
+    ("character", "kind", "code", "retryable"),
+    [
+        ("close-1001", ServerGoingAway, 1001, True),
+        ("close-1011", ConnectionClosed, 1011, False),
+    ],
+)
+def test_close_codes_end_open_requests(
+    server: FakeServer, character: str, kind: type[ConnectionClosed], code: int, retryable: bool
+) -> None:
     async def scenario() -> ConnectionClosed:
         async with AsyncClient(server.url) as client:
             stream = await client.start("viseme-lerp", character)
@@ -225,8 +231,11 @@ async def one_request_with(url: str, token: str | None, origin: str | None) -> S
 
 
 def test_refused_upgrade_is_a_handshake_error() -> None:
-    with FakeServer(refuse_upgrade=True) as refusing, \
-            pytest.raises(HandshakeRejected) as refused, Client(refusing.url, timeout=10):
+    with (
+        FakeServer(refuse_upgrade=True) as refusing,
+        pytest.raises(HandshakeRejected) as refused,
+        Client(refusing.url, timeout=10),
+    ):
         pass
     assert refused.value.status == 403 and not refused.value.retryable
     assert "no subprotocol" in refused.value.body

@@ -16,19 +16,28 @@ from lipstream_client.rest import RestClient, RestServerError
 from tests.live_server import LiveServer, live_server, save_models
 
 FPS = 60.0
-LINE = [("sil", 0.0, 0.1), ("HH", 0.1, 0.17), ("AH", 0.17, 0.24), ("L", 0.24, 0.31),
-        ("OW", 0.31, 0.5), ("W", 0.5, 0.58), ("ER", 0.58, 0.72), ("L", 0.72, 0.8),
-        ("D", 0.8, 0.86), ("sil", 0.86, 1.0)]
+LINE = [
+    ("sil", 0.0, 0.1),
+    ("HH", 0.1, 0.17),
+    ("AH", 0.17, 0.24),
+    ("L", 0.24, 0.31),
+    ("OW", 0.31, 0.5),
+    ("W", 0.5, 0.58),
+    ("ER", 0.58, 0.72),
+    ("L", 0.72, 0.8),
+    ("D", 0.8, 0.86),
+    ("sil", 0.86, 1.0),
+]
 OTHER_LINES = [
-    [("sil", 0.0, 0.05), ("M", 0.05, 0.15), ("AA", 0.15, 0.4), ("M", 0.4, 0.5),
-     ("sil", 0.5, 0.7)],
+    [("sil", 0.0, 0.05), ("M", 0.05, 0.15), ("AA", 0.15, 0.4), ("M", 0.4, 0.5), ("sil", 0.5, 0.7)],
     [("sil", 0.0, 0.2), ("F", 0.2, 0.3), ("UW", 0.3, 0.55), ("sil", 0.55, 0.6)],
 ]
 
 
 @pytest.fixture(scope="module")
-def served(trained_models: dict[str, Model],
-           tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
+def served(
+    trained_models: dict[str, Model], tmp_path_factory: pytest.TempPathFactory
+) -> Iterator[LiveServer]:
     with live_server(save_models(trained_models, tmp_path_factory.mktemp("models"))) as server:
         yield server
 
@@ -41,18 +50,22 @@ def streamed(result: StreamResult) -> np.ndarray:
     return np.asarray(result.rows(), dtype=np.float32)
 
 
-async def request(url: str, engine: str, spans: list[tuple[str, float, float]],
-                  encoding: str = "msgpack", chunk: int = 3) -> StreamResult:
+async def request(
+    url: str,
+    engine: str,
+    spans: list[tuple[str, float, float]],
+    encoding: str = "msgpack",
+    chunk: int = 3,
+) -> StreamResult:
     async with AsyncClient(url, encoding=encoding) as client:  # type: ignore[arg-type]
         stream = await client.start(engine, "demo", fps=FPS)
         for first in range(0, len(spans), chunk):
-            await stream.send_phonemes(spans[first:first + chunk])
+            await stream.send_phonemes(spans[first : first + chunk])
         await stream.end()
         return await asyncio.wait_for(stream.collect(), 20)
 
 
-def test_server_lists_what_it_serves(served: LiveServer,
-                                     trained_models: dict[str, Model]) -> None:
+def test_server_lists_what_it_serves(served: LiveServer, trained_models: dict[str, Model]) -> None:
     rest = RestClient(served.ws)
     assert rest.healthy() and rest.ready()
     characters = rest.characters()
@@ -63,9 +76,9 @@ def test_server_lists_what_it_serves(served: LiveServer,
 
 @pytest.mark.parametrize("encoding", ["msgpack", "json"])
 @pytest.mark.parametrize("engine", ["viseme-lerp", "anime-graph"])
-def test_streamed_frames_equal_offline_synthesis(served: LiveServer,
-                                                 trained_models: dict[str, Model],
-                                                 engine: str, encoding: str) -> None:
+def test_streamed_frames_equal_offline_synthesis(
+    served: LiveServer, trained_models: dict[str, Model], engine: str, encoding: str
+) -> None:
     result = asyncio.run(request(served.ws, engine, LINE, encoding))
     model = trained_models[engine]
     assert result.ready.channels == tuple(model.channels)
@@ -80,7 +93,7 @@ def test_sync_and_async_clients_get_identical_frames(served: LiveServer) -> None
     with Client(served.ws, timeout=20) as client:
         stream = client.start("viseme-lerp", "demo", fps=FPS)
         for first in range(0, len(LINE), 3):
-            stream.send_phonemes(LINE[first:first + 3])
+            stream.send_phonemes(LINE[first : first + 3])
         stream.end()
         from_sync = stream.collect()
     np.testing.assert_array_equal(streamed(from_sync), streamed(from_async))
@@ -88,14 +101,16 @@ def test_sync_and_async_clients_get_identical_frames(served: LiveServer) -> None
     assert from_sync.done.stats.frames == from_async.done.stats.frames
 
 
-def test_multiplexed_requests_each_get_their_own_frames(served: LiveServer,
-                                                       trained_models: dict[str, Model]) -> None:
+def test_multiplexed_requests_each_get_their_own_frames(
+    served: LiveServer, trained_models: dict[str, Model]
+) -> None:
     lines = {"npc-1": LINE, "npc-2": OTHER_LINES[0], "npc-3": OTHER_LINES[1]}
 
     async def scenario() -> dict[str, StreamResult]:
         async with AsyncClient(served.ws) as client:
-            streams = {name: await client.start("viseme-lerp", "demo", id=name, fps=FPS)
-                       for name in lines}
+            streams = {
+                name: await client.start("viseme-lerp", "demo", id=name, fps=FPS) for name in lines
+            }
             for step in range(max(map(len, lines.values()))):
                 for name, stream in streams.items():
                     if step < len(lines[name]):
@@ -103,7 +118,8 @@ def test_multiplexed_requests_each_get_their_own_frames(served: LiveServer,
             for stream in streams.values():
                 await stream.end()
             results = await asyncio.wait_for(
-                asyncio.gather(*(stream.collect() for stream in streams.values())), 20)
+                asyncio.gather(*(stream.collect() for stream in streams.values())), 20
+            )
             return dict(zip(streams, results))
 
     results = asyncio.run(scenario())
@@ -151,8 +167,11 @@ def test_errors_are_typed_and_the_connection_keeps_serving(served: LiveServer) -
             good = await client.start("viseme-lerp", "demo", fps=FPS)
             await good.send_phonemes(LINE)
             await good.end()
-            return engine_error.value, phoneme_error.value, await asyncio.wait_for(
-                good.collect(), 20)
+            return (
+                engine_error.value,
+                phoneme_error.value,
+                await asyncio.wait_for(good.collect(), 20),
+            )
 
     engine_error, phoneme_error, good = asyncio.run(scenario())
     assert (engine_error.code, engine_error.fatal) == ("unknown_engine", True)
@@ -164,8 +183,11 @@ def test_errors_are_typed_and_the_connection_keeps_serving(served: LiveServer) -
 def test_loadtest_against_the_real_server(served: LiveServer, tmp_path: Path) -> None:
     from lipstream.loadtest import LoadTestConfig, loadtest
 
-    results = loadtest(LoadTestConfig(url=served.ws, streams=2, requests=2, clips_s=(1.0,),
-                                      pause_s=0.0, max_duration_s=30.0))
+    results = loadtest(
+        LoadTestConfig(
+            url=served.ws, streams=2, requests=2, clips_s=(1.0,), pause_s=0.0, max_duration_s=30.0
+        )
+    )
     clip = results["clips"][0]
     assert clip["successful_requests"] == 2, clip["errors"]
     assert results["config"]["character"] == "demo"
@@ -181,8 +203,7 @@ def test_rest_synthesize_equals_the_stream(served: LiveServer, encoding: str) ->
     stream = asyncio.run(request(served.ws, "viseme-lerp", LINE))
     assert answer.channels == stream.channels and answer.ready.fps == FPS
     assert answer.stats.frames == stream.done.stats.frames == answer.frames.n_frames
-    np.testing.assert_array_equal(np.asarray(answer.rows(), dtype=np.float32),
-                                  streamed(stream))
+    np.testing.assert_array_equal(np.asarray(answer.rows(), dtype=np.float32), streamed(stream))
 
 
 def test_rest_synthesize_errors_are_typed(served: LiveServer) -> None:

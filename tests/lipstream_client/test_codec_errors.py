@@ -25,11 +25,25 @@ from lipstream_client import (
 from lipstream_client import errors as codes
 
 START = {"v": 1, "type": "start", "id": "r1", "engine": "dp", "character": "ada"}
-PHONEMES = {"v": 1, "type": "phonemes", "id": "r1",
-            "items": [{"phoneme": "HH", "start": 0.0, "end": 0.1},
-                      {"phoneme": "AY", "start": 0.1, "end": 0.3}]}
-FRAMES = {"v": 1, "type": "frames", "id": "r1", "seq": 0, "first_frame": 0, "fps": 60.0,
-          "n_channels": 2, "data": [[0.0, 1.0], [0.5, 0.25]]}
+PHONEMES = {
+    "v": 1,
+    "type": "phonemes",
+    "id": "r1",
+    "items": [
+        {"phoneme": "HH", "start": 0.0, "end": 0.1},
+        {"phoneme": "AY", "start": 0.1, "end": 0.3},
+    ],
+}
+FRAMES = {
+    "v": 1,
+    "type": "frames",
+    "id": "r1",
+    "seq": 0,
+    "first_frame": 0,
+    "fps": 60.0,
+    "n_channels": 2,
+    "data": [[0.0, 1.0], [0.5, 0.25]],
+}
 
 
 def with_field(base: dict[str, Any], path: str, value: Any) -> dict[str, Any]:
@@ -58,28 +72,42 @@ def rejected_msgpack(data: bytes) -> ProtocolError:
     return result
 
 
-@pytest.mark.parametrize("data", [
-    b"\xc1",                                                  # reserved, never valid
-    msgpack.packb({"v": 1}) + b"\x00",                          # trailing bytes
-    msgpack.packb(msgpack.ExtType(42, b"payload")),           # ext types are refused
-    b"\xd6\xff\x00\x00\x00\x01",                              # timestamp ext
-    msgpack.packb({1: 2}),                                    # non-string key
-    msgpack.packb({b"v": 1}, use_bin_type=True),              # binary key
-    b"\x82\xa1v\x01\xa1v\x01",                                # duplicate key
-    b"\xa2\xff\xfe",                                          # invalid UTF-8 string
-    b"\x91" * 5000 + b"\xc0",                                 # nesting bomb
-    b"\xdd\xff\xff\xff\xff",                                  # array header claiming 4G items
-    b"",
-])
+@pytest.mark.parametrize(
+    "data",
+    [
+        b"\xc1",  # reserved, never valid
+        msgpack.packb({"v": 1}) + b"\x00",  # trailing bytes
+        msgpack.packb(msgpack.ExtType(42, b"payload")),  # ext types are refused
+        b"\xd6\xff\x00\x00\x00\x01",  # timestamp ext
+        msgpack.packb({1: 2}),  # non-string key
+        msgpack.packb({b"v": 1}, use_bin_type=True),  # binary key
+        b"\x82\xa1v\x01\xa1v\x01",  # duplicate key
+        b"\xa2\xff\xfe",  # invalid UTF-8 string
+        b"\x91" * 5000 + b"\xc0",  # nesting bomb
+        b"\xdd\xff\xff\xff\xff",  # array header claiming 4G items
+        b"",
+    ],
+)
 def test_undecodable_msgpack_is_malformed_and_not_fatal(data: bytes) -> None:
     error = rejected_msgpack(data)
     assert (error.code, error.id, error.fatal) == (codes.MALFORMED, None, False)
 
 
-@pytest.mark.parametrize("text", [
-    "{", '{"v": 1,}', "NaN", '{"v": NaN}', '{"v": Infinity}', "\ufeff{}",
-    '{"id": "a", "id": "b"}', "[" * 100_000 + "]" * 100_000, "1" * 5000, "",
-])
+@pytest.mark.parametrize(
+    "text",
+    [
+        "{",
+        '{"v": 1,}',
+        "NaN",
+        '{"v": NaN}',
+        '{"v": Infinity}',
+        "\ufeff{}",
+        '{"id": "a", "id": "b"}',
+        "[" * 100_000 + "]" * 100_000,
+        "1" * 5000,
+        "",
+    ],
+)
 def test_undecodable_json_is_malformed(text: str) -> None:
     error = decode(text, "json")
     assert isinstance(error, ProtocolError)
@@ -102,10 +130,17 @@ def test_non_object_payload_is_invalid_message(payload: Any) -> None:
     assert (error.code, error.id, error.fatal) == (codes.INVALID_MESSAGE, None, False)
 
 
-@pytest.mark.parametrize(("version", "code"), [
-    (2, codes.UNSUPPORTED_VERSION), (0, codes.UNSUPPORTED_VERSION), (1.5, codes.UNSUPPORTED_VERSION),
-    ("1", codes.INVALID_MESSAGE), (True, codes.INVALID_MESSAGE), (None, codes.INVALID_MESSAGE),
-])
+@pytest.mark.parametrize(
+    ("version", "code"),
+    [
+        (2, codes.UNSUPPORTED_VERSION),
+        (0, codes.UNSUPPORTED_VERSION),
+        (1.5, codes.UNSUPPORTED_VERSION),
+        ("1", codes.INVALID_MESSAGE),
+        (True, codes.INVALID_MESSAGE),
+        (None, codes.INVALID_MESSAGE),
+    ],
+)
 def test_version_field(version: Any, code: str) -> None:
     error = rejected_json({**START, "v": version})
     assert (error.code, error.where, error.id, error.fatal) == (code, "v", "r1", True)
@@ -117,7 +152,9 @@ def test_missing_version_and_type() -> None:
     assert "'v'" in rejected_json(no_version).message
     no_type = {key: value for key, value in START.items() if key != "type"}
     assert (rejected_json(no_type).code, rejected_json(no_type).where) == (
-        codes.INVALID_MESSAGE, "type")
+        codes.INVALID_MESSAGE,
+        "type",
+    )
     assert decode(json.dumps({**START, "v": 1.0}), "json") == Start("r1", "dp", "ada")
 
 
@@ -133,61 +170,100 @@ def test_unknown_type_and_wrong_direction() -> None:
     assert start_from_server.code == codes.UNKNOWN_TYPE
 
 
-@pytest.mark.parametrize(("payload", "where", "fragment"), [
-    ({**START, "colour": "red"}, None, "unexpected field 'colour'"),
-    ({key: value for key, value in START.items() if key != "engine"}, None, "missing field 'engine'"),
-    ({**START, "fps": "60"}, "fps", "must be a number"),
-    ({**START, "fps": True}, "fps", "must be a number"),
-    ({**START, "fps": 0}, "fps", "must be > 0"),
-    ({**START, "fps": 1001}, "fps", "must be <= 1000"),
-    ({**START, "engine": ""}, "engine", "1 to 128 characters"),
-    ({**START, "engine": "a\nb"}, "engine", "control characters"),
-    ({**START, "latency_budget_ms": -5}, "latency_budget_ms", "must be > 0"),
-    ({**START, "channels": ["jawOpen", "jawOpen"]}, "channels", "distinct"),
-    ({**START, "channels": []}, "channels", "1 to 1024"),
-    ({**START, "channels": ["jawOpen"], "output": {"naming": "arkit"}}, None, "not both"),
-    ({**START, "output": {"naming": "maya"}}, "output.naming", "must be one of"),
-    ({**START, "output": {"naming": "arkit", "visemes": "oculus15"}}, "output", "omit it"),
-    ({**START, "output": {"transforms": {"jawOpen": {"clamp": [1, 0]}}}},
-     "output.transforms.jawOpen.clamp", "exceeds high"),
-    ({**START, "output": {"transforms": {"jawOpen": {"clamp": [0]}}}},
-     "output.transforms.jawOpen.clamp", "[low, high]"),
-    ({**START, "output": {"transforms": {"jawOpen": {"gain": 2}}}},
-     "output.transforms.jawOpen", "unexpected field 'gain'"),
-    ({**START, "options": {"a": 2**64}}, "options.a", "64 bits"),
-    ({**START, "options": [1]}, "options", "must be an object"),
-    ({**START, "options": {"deep": json.loads("[" * 20 + "]" * 20)}}, "options.deep" + "[0]" * 15,
-     "deeper than 16"),
-    ({"v": 1, "type": "audio", "id": "r1", "sample_rate": 7999, "pcm16": "AAA="},
-     "sample_rate", "must be in [8000, 192000]"),
-    ({"v": 1, "type": "done", "id": "r1", "stats": {"frames": -1}}, "stats.frames", "must be in"),
-    ({"v": 1, "type": "done", "id": "r1", "stats": {"frames": 1.5}}, "stats.frames",
-     "must be an integer"),
-    ({"v": 1, "type": "done", "id": "r1", "stats": {"frames": 1}, "reason": "bored"}, "reason",
-     "must be one of"),
-    ({**FRAMES, "n_channels": 0}, "n_channels", "must be in [1, 1024]"),
-    ({**FRAMES, "data": [[0.0, True]]}, "data[0]", "must be numbers"),
-    ({"v": 1, "type": "interrupt", "id": "r1", "at": 1.0, "return_ms": 20000},
-     "return_ms", "must be <= 10000"),
-])
-def test_invalid_fields_name_the_field(payload: dict[str, Any], where: str | None,
-                                       fragment: str) -> None:
+@pytest.mark.parametrize(
+    ("payload", "where", "fragment"),
+    [
+        ({**START, "colour": "red"}, None, "unexpected field 'colour'"),
+        (
+            {key: value for key, value in START.items() if key != "engine"},
+            None,
+            "missing field 'engine'",
+        ),
+        ({**START, "fps": "60"}, "fps", "must be a number"),
+        ({**START, "fps": True}, "fps", "must be a number"),
+        ({**START, "fps": 0}, "fps", "must be > 0"),
+        ({**START, "fps": 1001}, "fps", "must be <= 1000"),
+        ({**START, "engine": ""}, "engine", "1 to 128 characters"),
+        ({**START, "engine": "a\nb"}, "engine", "control characters"),
+        ({**START, "latency_budget_ms": -5}, "latency_budget_ms", "must be > 0"),
+        ({**START, "channels": ["jawOpen", "jawOpen"]}, "channels", "distinct"),
+        ({**START, "channels": []}, "channels", "1 to 1024"),
+        ({**START, "channels": ["jawOpen"], "output": {"naming": "arkit"}}, None, "not both"),
+        ({**START, "output": {"naming": "maya"}}, "output.naming", "must be one of"),
+        ({**START, "output": {"naming": "arkit", "visemes": "oculus15"}}, "output", "omit it"),
+        (
+            {**START, "output": {"transforms": {"jawOpen": {"clamp": [1, 0]}}}},
+            "output.transforms.jawOpen.clamp",
+            "exceeds high",
+        ),
+        (
+            {**START, "output": {"transforms": {"jawOpen": {"clamp": [0]}}}},
+            "output.transforms.jawOpen.clamp",
+            "[low, high]",
+        ),
+        (
+            {**START, "output": {"transforms": {"jawOpen": {"gain": 2}}}},
+            "output.transforms.jawOpen",
+            "unexpected field 'gain'",
+        ),
+        ({**START, "options": {"a": 2**64}}, "options.a", "64 bits"),
+        ({**START, "options": [1]}, "options", "must be an object"),
+        (
+            {**START, "options": {"deep": json.loads("[" * 20 + "]" * 20)}},
+            "options.deep" + "[0]" * 15,
+            "deeper than 16",
+        ),
+        (
+            {"v": 1, "type": "audio", "id": "r1", "sample_rate": 7999, "pcm16": "AAA="},
+            "sample_rate",
+            "must be in [8000, 192000]",
+        ),
+        (
+            {"v": 1, "type": "done", "id": "r1", "stats": {"frames": -1}},
+            "stats.frames",
+            "must be in",
+        ),
+        (
+            {"v": 1, "type": "done", "id": "r1", "stats": {"frames": 1.5}},
+            "stats.frames",
+            "must be an integer",
+        ),
+        (
+            {"v": 1, "type": "done", "id": "r1", "stats": {"frames": 1}, "reason": "bored"},
+            "reason",
+            "must be one of",
+        ),
+        ({**FRAMES, "n_channels": 0}, "n_channels", "must be in [1, 1024]"),
+        ({**FRAMES, "data": [[0.0, True]]}, "data[0]", "must be numbers"),
+        (
+            {"v": 1, "type": "interrupt", "id": "r1", "at": 1.0, "return_ms": 20000},
+            "return_ms",
+            "must be <= 10000",
+        ),
+    ],
+)
+def test_invalid_fields_name_the_field(
+    payload: dict[str, Any], where: str | None, fragment: str
+) -> None:
     error = rejected_json(payload)
     assert (error.code, error.where) == (codes.INVALID_MESSAGE, where)
     assert fragment in error.message
     assert (error.id, error.fatal) == ("r1", True)
 
 
-@pytest.mark.parametrize(("path", "value", "code", "where"), [
-    ("items.0.start", -0.5, codes.INVALID_TIMES, "items[0].start"),
-    ("items.1.end", 0.1, codes.INVALID_TIMES, "items[1].end"),
-    ("items.1.end", 0.05, codes.INVALID_TIMES, "items[1].end"),
-    ("items.1.start", 0.05, codes.NON_MONOTONIC_TIMES, "items[1].start"),
-    ("items.0.end", 90_000.0, codes.INVALID_TIMES, "items[0].end"),
-    ("items.0.phoneme", "", codes.INVALID_MESSAGE, "items[0].phoneme"),
-    ("items.0.phoneme", 7, codes.INVALID_MESSAGE, "items[0].phoneme"),
-    ("items", [], codes.INVALID_MESSAGE, "items"),
-])
+@pytest.mark.parametrize(
+    ("path", "value", "code", "where"),
+    [
+        ("items.0.start", -0.5, codes.INVALID_TIMES, "items[0].start"),
+        ("items.1.end", 0.1, codes.INVALID_TIMES, "items[1].end"),
+        ("items.1.end", 0.05, codes.INVALID_TIMES, "items[1].end"),
+        ("items.1.start", 0.05, codes.NON_MONOTONIC_TIMES, "items[1].start"),
+        ("items.0.end", 90_000.0, codes.INVALID_TIMES, "items[0].end"),
+        ("items.0.phoneme", "", codes.INVALID_MESSAGE, "items[0].phoneme"),
+        ("items.0.phoneme", 7, codes.INVALID_MESSAGE, "items[0].phoneme"),
+        ("items", [], codes.INVALID_MESSAGE, "items"),
+    ],
+)
 def test_bad_phoneme_items(path: str, value: Any, code: str, where: str) -> None:
     error = rejected_json(with_field(PHONEMES, path, value))
     assert (error.code, error.where, error.id, error.fatal) == (code, where, "r1", True)
@@ -198,7 +274,10 @@ def test_json_numbers_beyond_double_range_are_invalid_times() -> None:
     error = decode(text, "json")
     assert isinstance(error, ProtocolError)
     assert (error.code, error.where, error.message) == (
-        codes.INVALID_TIMES, "items[0].start", "must be finite, got inf")
+        codes.INVALID_TIMES,
+        "items[0].start",
+        "must be finite, got inf",
+    )
 
 
 def test_phonemes_touching_within_tolerance_are_accepted() -> None:
@@ -219,16 +298,21 @@ def test_nan_and_infinity_in_msgpack_are_rejected() -> None:
 def test_interrupt_time_must_be_a_finite_non_negative_offset() -> None:
     interrupt = {"v": 1, "type": "interrupt", "id": "r1", "at": -1.0}
     assert rejected_json(interrupt).code == codes.INVALID_TIMES
-    assert rejected_msgpack(msgpack.packb({**interrupt, "at": math.nan})).code == codes.INVALID_TIMES
+    assert (
+        rejected_msgpack(msgpack.packb({**interrupt, "at": math.nan})).code == codes.INVALID_TIMES
+    )
 
 
-@pytest.mark.parametrize(("pcm16", "code"), [
-    ("AAA=", codes.INVALID_AUDIO),          # 2 bytes: fine below, odd here is tested separately
-    ("AA==", codes.INVALID_AUDIO),          # 1 byte: half a sample
-    ("AAAA AAA=", codes.INVALID_AUDIO),     # whitespace is not base64
-    ("AAA", codes.INVALID_AUDIO),           # missing padding
-    (12, codes.INVALID_MESSAGE),
-])
+@pytest.mark.parametrize(
+    ("pcm16", "code"),
+    [
+        ("AAA=", codes.INVALID_AUDIO),  # 2 bytes: fine below, odd here is tested separately
+        ("AA==", codes.INVALID_AUDIO),  # 1 byte: half a sample
+        ("AAAA AAA=", codes.INVALID_AUDIO),  # whitespace is not base64
+        ("AAA", codes.INVALID_AUDIO),  # missing padding
+        (12, codes.INVALID_MESSAGE),
+    ],
+)
 def test_bad_audio(pcm16: Any, code: str) -> None:
     payload = {"v": 1, "type": "audio", "id": "r1", "sample_rate": 16000, "pcm16": pcm16}
     result = decode(json.dumps(payload), "json")
@@ -274,7 +358,8 @@ def test_request_id_is_reported_only_when_readable() -> None:
 def test_error_messages_allow_a_null_id_but_not_a_missing_one() -> None:
     error = {"v": 1, "type": "error", "code": "server_busy", "message": "full", "fatal": True}
     assert decode(json.dumps({**error, "id": None}), "json") == ErrorMessage(
-        "server_busy", "full", None, True)
+        "server_busy", "full", None, True
+    )
     assert rejected_json(error).message == "missing field 'id'"
     assert rejected_json({**error, "id": None, "code": "Busy!"}).where == "code"
 
@@ -290,14 +375,18 @@ def test_size_limit_counts_bytes_and_closes_the_connection() -> None:
     data = msgpack.packb(START)
     assert isinstance(decode(data, "msgpack", max_size=len(data)), Start)
     assert decode(data, "msgpack", max_size=len(data) - 1) == ProtocolError(
-        codes.MESSAGE_TOO_LARGE, f"message of {len(data)} bytes exceeds the limit of "
-        f"{len(data) - 1} bytes", None, True)
+        codes.MESSAGE_TOO_LARGE,
+        f"message of {len(data)} bytes exceeds the limit of {len(data) - 1} bytes",
+        None,
+        True,
+    )
 
 
 def test_protocol_error_becomes_an_error_message() -> None:
     error = rejected_json({**START, "fps": -1})
-    assert error.to_message() == ErrorMessage(codes.INVALID_MESSAGE, "fps: must be > 0, got -1.0",
-                                              "r1", True)
+    assert error.to_message() == ErrorMessage(
+        codes.INVALID_MESSAGE, "fps: must be > 0, got -1.0", "r1", True
+    )
     assert str(error) == "fps: must be > 0, got -1.0 [invalid_message]"
 
 
@@ -312,8 +401,10 @@ def test_error_for_a_huge_field_name_still_encodes() -> None:
 def test_encode_refuses_invalid_messages() -> None:
     with pytest.raises(EncodeError) as caught:
         encode(Phonemes("r1", (PhonemeItem("AA", 0.5, 0.2),)), "json")
-    assert (caught.value.error.code, caught.value.error.where) == (codes.INVALID_TIMES,
-                                                                   "items[0].end")
+    assert (caught.value.error.code, caught.value.error.where) == (
+        codes.INVALID_TIMES,
+        "items[0].end",
+    )
     with pytest.raises(EncodeError):
         encode(Start("r1", "dp", "ada", fps=math.nan), "msgpack")
     with pytest.raises(EncodeError):

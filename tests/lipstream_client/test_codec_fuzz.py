@@ -16,34 +16,83 @@ from lipstream_client.wire import message_to_wire
 
 MESSAGE_CLASSES = tuple(MESSAGE_TYPES.values())
 CODEC_CODES = {code for code, info in ERROR_CODES.items() if info.origin == "codec"}
-FIELD_NAMES = sorted({
-    "id", "engine", "character", "fps", "channels", "output", "emotion", "latency_budget_ms",
-    "options", "items", "sample_rate", "pcm16", "at", "return_ms", "lookahead_ms", "fidelity",
-    "seq", "first_frame", "n_channels", "data", "stats", "reason", "code", "message", "fatal",
-    "details", "phoneme", "start", "end", "naming", "transforms", "visemes", "clamp",
-})
+FIELD_NAMES = sorted(
+    {
+        "id",
+        "engine",
+        "character",
+        "fps",
+        "channels",
+        "output",
+        "emotion",
+        "latency_budget_ms",
+        "options",
+        "items",
+        "sample_rate",
+        "pcm16",
+        "at",
+        "return_ms",
+        "lookahead_ms",
+        "fidelity",
+        "seq",
+        "first_frame",
+        "n_channels",
+        "data",
+        "stats",
+        "reason",
+        "code",
+        "message",
+        "fatal",
+        "details",
+        "phoneme",
+        "start",
+        "end",
+        "naming",
+        "transforms",
+        "visemes",
+        "clamp",
+    }
+)
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 scalars = st.one_of(
-    st.none(), st.booleans(), st.integers(), st.floats(), st.text(max_size=8),
+    st.none(),
+    st.booleans(),
+    st.integers(),
+    st.floats(),
+    st.text(max_size=8),
 )
 json_like = st.recursive(
     scalars,
-    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6), inner,
-                                                                max_size=4),
+    lambda inner: (
+        st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6), inner, max_size=4)
+    ),
     max_leaves=12,
 )
 msgpack_like = st.recursive(
-    st.one_of(st.none(), st.booleans(), st.integers(-(2**63), 2**64 - 1), st.floats(),
-              st.text(max_size=8), st.binary(max_size=8)),
-    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(
-        st.one_of(st.text(max_size=6), st.integers(0, 9), st.binary(max_size=4)), inner,
-        max_size=4),
+    st.one_of(
+        st.none(),
+        st.booleans(),
+        st.integers(-(2**63), 2**64 - 1),
+        st.floats(),
+        st.text(max_size=8),
+        st.binary(max_size=8),
+    ),
+    lambda inner: (
+        st.lists(inner, max_size=4)
+        | st.dictionaries(
+            st.one_of(st.text(max_size=6), st.integers(0, 9), st.binary(max_size=4)),
+            inner,
+            max_size=4,
+        )
+    ),
     max_leaves=12,
 )
 envelopes = st.fixed_dictionaries(
-    {"v": st.sampled_from([1, 1, 1, 2, "1", None]),
-     "type": st.sampled_from([*MESSAGE_TYPES, "hello", 5])},
+    {
+        "v": st.sampled_from([1, 1, 1, 2, "1", None]),
+        "type": st.sampled_from([*MESSAGE_TYPES, "hello", 5]),
+    },
     optional={name: json_like for name in FIELD_NAMES},
 )
 
@@ -110,8 +159,13 @@ def test_envelopes_with_arbitrary_fields(payload: dict[str, Any]) -> None:
 def paths(node: Any, prefix: tuple[Any, ...] = ()) -> list[tuple[Any, ...]]:
     """Every key/index path inside a payload."""
     found: list[tuple[Any, ...]] = []
-    children = node.items() if isinstance(node, dict) else enumerate(node) \
-        if isinstance(node, list) else ()
+    children = (
+        node.items()
+        if isinstance(node, dict)
+        else enumerate(node)
+        if isinstance(node, list)
+        else ()
+    )
     for key, value in children:
         found.append((*prefix, key))
         found.extend(paths(value, (*prefix, key)))

@@ -56,16 +56,22 @@ from lipstream_client.strategies import (
 
 ENCODINGS: tuple[Encoding, ...] = ("msgpack", "json")
 PER_TYPE: dict[str, st.SearchStrategy[Message]] = {
-    "start": starts(), "phonemes": phonemes_messages, "audio": audio_chunks, "end": ends,
-    "cancel": cancels, "interrupt": interrupts, "ready": readies, "frames": frames_messages(),
-    "done": dones, "error": error_messages,
+    "start": starts(),
+    "phonemes": phonemes_messages,
+    "audio": audio_chunks,
+    "end": ends,
+    "cancel": cancels,
+    "interrupt": interrupts,
+    "ready": readies,
+    "frames": frames_messages(),
+    "done": dones,
+    "error": error_messages,
 }
 
 
 def test_every_message_type_has_a_strategy() -> None:
     assert set(PER_TYPE) == set(MESSAGE_TYPES)
-    assert set(CLIENT_MESSAGE_TYPES) == {"start", "phonemes", "audio", "end", "cancel",
-                                         "interrupt"}
+    assert set(CLIENT_MESSAGE_TYPES) == {"start", "phonemes", "audio", "end", "cancel", "interrupt"}
     assert set(SERVER_MESSAGE_TYPES) == {"ready", "frames", "done", "error"}
 
 
@@ -73,8 +79,7 @@ def test_every_message_type_has_a_strategy() -> None:
 @pytest.mark.parametrize("encoding", ENCODINGS)
 @settings(max_examples=40, deadline=None)
 @given(data=st.data())
-def test_round_trip_is_identity(message_type: str, encoding: Encoding,
-                                data: st.DataObject) -> None:
+def test_round_trip_is_identity(message_type: str, encoding: Encoding, data: st.DataObject) -> None:
     message = data.draw(PER_TYPE[message_type])
     wire = encode(message, encoding)
     assert isinstance(wire, bytes if encoding == "msgpack" else str)
@@ -91,33 +96,67 @@ def test_both_encodings_decode_to_the_same_message(message: Message) -> None:
 
 
 def test_start_json_wire_form_is_exact() -> None:
-    message = Start("r1", "dp", "ada", fps=30.0, emotion="happy", latency_budget_ms=120.0,
-                    output=OutputProfile(naming="livelink", channels=("JawOpen",),
-                                         transforms={"JawOpen": ChannelTransform(1.5, 0.0,
-                                                                                 (0.0, 1.0))}),
-                    options={"lag": 4})
+    message = Start(
+        "r1",
+        "dp",
+        "ada",
+        fps=30.0,
+        emotion="happy",
+        latency_budget_ms=120.0,
+        output=OutputProfile(
+            naming="livelink",
+            channels=("JawOpen",),
+            transforms={"JawOpen": ChannelTransform(1.5, 0.0, (0.0, 1.0))},
+        ),
+        options={"lag": 4},
+    )
     assert json.loads(encode(message, "json")) == {
-        "v": 1, "type": "start", "id": "r1", "engine": "dp", "character": "ada", "fps": 30.0,
-        "output": {"naming": "livelink", "channels": ["JawOpen"],
-                   "transforms": {"JawOpen": {"multiplier": 1.5, "offset": 0.0,
-                                              "clamp": [0.0, 1.0]}}},
-        "emotion": "happy", "latency_budget_ms": 120.0, "options": {"lag": 4},
+        "v": 1,
+        "type": "start",
+        "id": "r1",
+        "engine": "dp",
+        "character": "ada",
+        "fps": 30.0,
+        "output": {
+            "naming": "livelink",
+            "channels": ["JawOpen"],
+            "transforms": {"JawOpen": {"multiplier": 1.5, "offset": 0.0, "clamp": [0.0, 1.0]}},
+        },
+        "emotion": "happy",
+        "latency_budget_ms": 120.0,
+        "options": {"lag": 4},
     }
 
 
 def test_optional_fields_are_omitted_and_error_id_is_always_present() -> None:
     assert json.loads(encode(End("a"), "json")) == {"v": 1, "type": "end", "id": "a"}
     assert json.loads(encode(Interrupt("a", 1.25), "json")) == {
-        "v": 1, "type": "interrupt", "id": "a", "at": 1.25}
+        "v": 1,
+        "type": "interrupt",
+        "id": "a",
+        "at": 1.25,
+    }
     assert json.loads(encode(ErrorMessage("server_busy", "full", None, True), "json")) == {
-        "v": 1, "type": "error", "code": "server_busy", "message": "full", "id": None,
-        "fatal": True}
+        "v": 1,
+        "type": "error",
+        "code": "server_busy",
+        "message": "full",
+        "id": None,
+        "fatal": True,
+    }
 
 
 def test_absent_and_null_optional_fields_decode_alike() -> None:
     base = {"v": 1, "type": "start", "id": "a", "engine": "dp", "character": "ada"}
-    with_nulls = {**base, "fps": None, "channels": None, "output": None, "emotion": None,
-                  "latency_budget_ms": None, "options": None}
+    with_nulls = {
+        **base,
+        "fps": None,
+        "channels": None,
+        "output": None,
+        "emotion": None,
+        "latency_budget_ms": None,
+        "options": None,
+    }
     expected = Start("a", "dp", "ada", fps=60.0)
     assert decode(json.dumps(base), "json") == expected
     assert decode(json.dumps(with_nulls), "json") == expected
@@ -158,8 +197,18 @@ def test_audio_is_bin_in_msgpack_and_base64_in_json() -> None:
 
 def test_done_and_ready_round_trip_with_all_fields() -> None:
     done = Done("a", DoneStats(90, 12.5, 30.0, True, {"jumps": 3, "cost": 1.5}), "interrupt")
-    ready = Ready("a", "dp", "ada", 60.0, ("jawOpen", "mouthClose"), 83.3, "fixed_lag",
-                  emotion="sad", latency_budget_ms=100.0, options={"lag": 5})
+    ready = Ready(
+        "a",
+        "dp",
+        "ada",
+        60.0,
+        ("jawOpen", "mouthClose"),
+        83.3,
+        "fixed_lag",
+        emotion="sad",
+        latency_budget_ms=100.0,
+        options={"lag": 5},
+    )
     phonemes = Phonemes("a", (PhonemeItem("HH", 0.0, 0.1), PhonemeItem("AY", 0.1, 0.3, "happy")))
     for message in (done, ready, phonemes, Cancel("a")):
         for encoding in ENCODINGS:
@@ -173,8 +222,10 @@ def test_subprotocol_names_select_encodings() -> None:
     assert encoding_for_subprotocol(None) == "msgpack"
     assert encoding_for_subprotocol("lipstream.v2.json") is None
     assert subprotocol_for("json") == "lipstream.v1.json"
-    assert select_subprotocol(["chat", "lipstream.v1.json", "lipstream.v1.msgpack"]) == \
-        "lipstream.v1.json"
+    assert (
+        select_subprotocol(["chat", "lipstream.v1.json", "lipstream.v1.msgpack"])
+        == "lipstream.v1.json"
+    )
     assert select_subprotocol(["lipstream.v2.msgpack"]) is None
     with pytest.raises(ValueError, match="encoding"):
         subprotocol_for("xml")  # type: ignore[arg-type]

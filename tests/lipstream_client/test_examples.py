@@ -31,32 +31,40 @@ def canned_line() -> list[tuple[str, float, float]]:
 
 
 @pytest.fixture(scope="module")
-def served(trained_models: dict[str, Model],
-           tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
+def served(
+    trained_models: dict[str, Model], tmp_path_factory: pytest.TempPathFactory
+) -> Iterator[LiveServer]:
     with live_server(save_models(trained_models, tmp_path_factory.mktemp("models"))) as server:
         yield server
 
 
 def run_example(name: str, *args: str) -> subprocess.CompletedProcess[str]:
-    path = os.pathsep.join([str(REPO / "server"), str(REPO / "client_sdk"),
-                            os.environ.get("PYTHONPATH", "")])
-    return subprocess.run([sys.executable, str(EXAMPLES / name), *args], capture_output=True,
-                          text=True, timeout=RUNTIME_LIMIT_S, check=False,
-                          env={**os.environ, "PYTHONPATH": path})
+    path = os.pathsep.join(
+        [str(REPO / "server"), str(REPO / "client_sdk"), os.environ.get("PYTHONPATH", "")]
+    )
+    return subprocess.run(
+        [sys.executable, str(EXAMPLES / name), *args],
+        capture_output=True,
+        text=True,
+        timeout=RUNTIME_LIMIT_S,
+        check=False,
+        env={**os.environ, "PYTHONPATH": path},
+    )
 
 
-def test_game_loop_plays_every_frame(served: LiveServer,
-                                     trained_models: dict[str, Model]) -> None:
+def test_game_loop_plays_every_frame(served: LiveServer, trained_models: dict[str, Model]) -> None:
     result = run_example("game_loop.py", "--url", served.ws, "--report-every", "0.5")
     assert result.returncode == 0, result.stderr
-    character_engine = re.search(r"^(\S+)/demo: (\d+) channels at 60 fps", result.stdout,
-                                 re.MULTILINE)
+    character_engine = re.search(
+        r"^(\S+)/demo: (\d+) channels at 60 fps", result.stdout, re.MULTILINE
+    )
     assert character_engine is not None, result.stdout
     model = trained_models[character_engine.group(1)]
     assert int(character_engine.group(2)) == len(model.channels)
     expected = len(model.synthesize(canned_line(), fps=60.0).frames)
-    summary = re.search(r"(\d+) frames received; (\d+) late ticks; done: end, (\d+) frames",
-                        result.stdout)
+    summary = re.search(
+        r"(\d+) frames received; (\d+) late ticks; done: end, (\d+) frames", result.stdout
+    )
     assert summary is not None, result.stdout
     assert int(summary.group(1)) == int(summary.group(3)) == expected
     assert result.stdout.count("t=") >= 3
@@ -64,9 +72,18 @@ def test_game_loop_plays_every_frame(served: LiveServer,
 
 def test_chat_avatar_streams_replies_and_handles_barge_in(served: LiveServer) -> None:
     # The server's default engine: for one that reads audio, audio must lead the input.
-    result = run_example("chat_avatar.py", "--url", served.ws, "--send-audio", "--interrupt-at",
-                         "0.4",
-                         "--text", "Hello there, nice to meet you.", "--text", "Goodbye.")
+    result = run_example(
+        "chat_avatar.py",
+        "--url",
+        served.ws,
+        "--send-audio",
+        "--interrupt-at",
+        "0.4",
+        "--text",
+        "Hello there, nice to meet you.",
+        "--text",
+        "Goodbye.",
+    )
     assert result.returncode == 0, result.stderr
     dones = re.findall(r"done: (\w+)", result.stdout)
     assert dones == ["interrupt", "end"], result.stdout
@@ -76,23 +93,48 @@ def test_chat_avatar_streams_replies_and_handles_barge_in(served: LiveServer) ->
 def test_phones_to_csv_matches_lipstream_synth(served: LiveServer, tmp_path: Path) -> None:
     intervals = [(0.0, 0.1, "sil"), (0.1, 0.2, "HH"), (0.2, 0.45, "AY1"), (0.45, 0.6, "")]
     (tmp_path / "hi.TextGrid").write_text(textgrid_long(intervals), encoding="utf-8")
-    (tmp_path / "mam.lab").write_text("0 0.1 sil\n0.1 0.2 M\n0.2 0.4 AA\n0.4 0.5 M\n",
-                                      encoding="utf-8")
-    (tmp_path / "few.json").write_text(json.dumps(
-        [{"phoneme": "F", "start": 0.0, "end": 0.1}, {"phoneme": "UW", "start": 0.1,
-                                                       "end": 0.3}]), encoding="utf-8")
+    (tmp_path / "mam.lab").write_text(
+        "0 0.1 sil\n0.1 0.2 M\n0.2 0.4 AA\n0.4 0.5 M\n", encoding="utf-8"
+    )
+    (tmp_path / "few.json").write_text(
+        json.dumps(
+            [
+                {"phoneme": "F", "start": 0.0, "end": 0.1},
+                {"phoneme": "UW", "start": 0.1, "end": 0.3},
+            ]
+        ),
+        encoding="utf-8",
+    )
     sources = ["hi.TextGrid", "mam.lab", "few.json"]
-    result = run_example("phones_to_csv.py", "--url", served.ws, "--engine", "viseme-lerp",
-                         "--character", "demo", "--out-dir", str(tmp_path / "out"),
-                         *(str(tmp_path / name) for name in sources),
-                         str(tmp_path / "missing.lab"))
+    result = run_example(
+        "phones_to_csv.py",
+        "--url",
+        served.ws,
+        "--engine",
+        "viseme-lerp",
+        "--character",
+        "demo",
+        "--out-dir",
+        str(tmp_path / "out"),
+        *(str(tmp_path / name) for name in sources),
+        str(tmp_path / "missing.lab"),
+    )
     assert result.returncode == 1  # one input is missing; the others still convert
     assert "converted 3 of 4 files" in result.stdout
     assert "missing.lab" in result.stderr
     for name in sources:
         reference = tmp_path / f"{Path(name).stem}.reference.csv"
-        synth = run_cli("synth", "--model", str(served.models_dir / "viseme-lerp"),
-                        "--phones", str(tmp_path / name), "--fps", "60", "--out", str(reference))
+        synth = run_cli(
+            "synth",
+            "--model",
+            str(served.models_dir / "viseme-lerp"),
+            "--phones",
+            str(tmp_path / name),
+            "--fps",
+            "60",
+            "--out",
+            str(reference),
+        )
         assert synth.returncode == 0, synth.stderr
         converted = (tmp_path / "out" / name).with_suffix(".csv")
         assert converted.read_text(encoding="utf-8") == reference.read_text(encoding="utf-8")

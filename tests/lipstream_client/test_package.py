@@ -27,10 +27,18 @@ NOT_LOADED = "import sys, lipstream_client; print(sorted(m for m in ('numpy', 'h
 
 
 def run_python(code: str) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
-        [str(CLIENT_SDK), os.environ.get("PYTHONPATH", "")])}
-    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
-                          timeout=60, check=False)
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(CLIENT_SDK), os.environ.get("PYTHONPATH", "")]),
+    }
+    return subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+        check=False,
+    )
 
 
 def test_imports_and_round_trips_with_numpy_blocked() -> None:
@@ -45,16 +53,19 @@ def test_import_loads_neither_numpy_nor_hypothesis() -> None:
     assert result.stdout.strip() == "[]"
 
 
-@pytest.mark.parametrize(("arkit", "naming", "expected"), [
-    ("jawOpen", "arkit", "jawOpen"),
-    ("jawOpen", "livelink", "JawOpen"),
-    ("eyeBlinkLeft", "livelink", "EyeBlinkLeft"),
-    ("eyeBlinkLeft", "suffix_lr", "eyeBlink_L"),
-    ("mouthSmileRight", "suffix_lr", "mouthSmile_R"),
-    ("jawOpen", "suffix_lr", "jawOpen"),
-    ("leftEyeYaw", "suffix_lr", "leftEyeYaw"),
-    ("Left", "suffix_lr", "Left"),
-])
+@pytest.mark.parametrize(
+    ("arkit", "naming", "expected"),
+    [
+        ("jawOpen", "arkit", "jawOpen"),
+        ("jawOpen", "livelink", "JawOpen"),
+        ("eyeBlinkLeft", "livelink", "EyeBlinkLeft"),
+        ("eyeBlinkLeft", "suffix_lr", "eyeBlink_L"),
+        ("mouthSmileRight", "suffix_lr", "mouthSmile_R"),
+        ("jawOpen", "suffix_lr", "jawOpen"),
+        ("leftEyeYaw", "suffix_lr", "leftEyeYaw"),
+        ("Left", "suffix_lr", "Left"),
+    ],
+)
 def test_rename_channel(arkit: str, naming: str, expected: str) -> None:
     assert rename_channel(arkit, naming) == expected  # type: ignore[arg-type]
 
@@ -62,12 +73,22 @@ def test_rename_channel(arkit: str, naming: str, expected: str) -> None:
 def test_oculus_visemes_order_and_spellings() -> None:
     assert len(OCULUS15_VISEMES) == 15
     assert OCULUS15_VISEMES[0] == "viseme_sil" and OCULUS15_VISEMES[-3:] == (
-        "viseme_I", "viseme_O", "viseme_U")
+        "viseme_I",
+        "viseme_O",
+        "viseme_U",
+    )
     assert OCULUS15_VISEMES.index("viseme_aa") == 10
-    for spelling, canonical in [("ih", "viseme_I"), ("oh", "viseme_O"), ("ou", "viseme_U"),
-                                ("viseme_I", "viseme_I"), ("I", "viseme_I"),
-                                ("viseme_ih", "viseme_I"), ("PP", "viseme_PP"),
-                                ("viseme_sil", "viseme_sil"), ("sil", "viseme_sil")]:
+    for spelling, canonical in [
+        ("ih", "viseme_I"),
+        ("oh", "viseme_O"),
+        ("ou", "viseme_U"),
+        ("viseme_I", "viseme_I"),
+        ("I", "viseme_I"),
+        ("viseme_ih", "viseme_I"),
+        ("PP", "viseme_PP"),
+        ("viseme_sil", "viseme_sil"),
+        ("sil", "viseme_sil"),
+    ]:
         assert canonical_viseme(spelling) == canonical
     for stranger in ("viseme_X", "jawOpen", "pp", "", "viseme_"):
         assert canonical_viseme(stranger) is None

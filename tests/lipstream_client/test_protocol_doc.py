@@ -30,14 +30,18 @@ def test_every_json_example_is_a_valid_message() -> None:
 def test_every_schema_field_is_documented_in_its_section(message_type: str) -> None:
     text = section(message_type)
     fields = set(load_schema(message_type)["properties"]) - {"v", "type"}
-    assert sorted(field for field in fields
-                  if not re.search(rf"`{field}(`|\.|\[\]\.)", text)) == []
+    assert sorted(field for field in fields if not re.search(rf"`{field}(`|\.|\[\]\.)", text)) == []
 
 
-@pytest.mark.parametrize(("message_type", "definition", "prefix"), [
-    ("phonemes", "phonemeItem", "items[]."), ("done", "stats", "stats."),
-    ("start", "output", ""), ("start", "transform", ""),
-])
+@pytest.mark.parametrize(
+    ("message_type", "definition", "prefix"),
+    [
+        ("phonemes", "phonemeItem", "items[]."),
+        ("done", "stats", "stats."),
+        ("start", "output", ""),
+        ("start", "transform", ""),
+    ],
+)
 def test_nested_fields_are_documented(message_type: str, definition: str, prefix: str) -> None:
     fields = load_schema(message_type)["$defs"][definition]["properties"]
     assert sorted(field for field in fields if f"`{prefix}{field}`" not in DOC) == []
@@ -58,6 +62,11 @@ def test_every_close_code_has_a_row() -> None:
 
 
 def test_subprotocols_and_version_rule_are_stated() -> None:
-    for phrase in ("lipstream.v1.msgpack", "lipstream.v1.json", "```mermaid", '"v": 1',
-                   "lipstream.v2.msgpack"):
+    for phrase in (
+        "lipstream.v1.msgpack",
+        "lipstream.v1.json",
+        "```mermaid",
+        '"v": 1',
+        "lipstream.v2.msgpack",
+    ):
         assert phrase in DOC

@@ -20,10 +20,40 @@ from lipstream_client.schema import schema_text
 from lipstream_client.strategies import messages
 from lipstream_client.wire import message_to_wire
 
-FIELD_NAMES = ("id", "fps", "channels", "output", "options", "items", "phoneme", "start", "end",
-               "emotion", "pcm16", "sample_rate", "at", "return_ms", "data", "n_channels", "seq",
-               "stats", "frames", "reason", "code", "message", "fatal", "details", "clamp",
-               "naming", "visemes", "transforms", "multiplier", "lookahead_ms", "v", "type")
+FIELD_NAMES = (
+    "id",
+    "fps",
+    "channels",
+    "output",
+    "options",
+    "items",
+    "phoneme",
+    "start",
+    "end",
+    "emotion",
+    "pcm16",
+    "sample_rate",
+    "at",
+    "return_ms",
+    "data",
+    "n_channels",
+    "seq",
+    "stats",
+    "frames",
+    "reason",
+    "code",
+    "message",
+    "fatal",
+    "details",
+    "clamp",
+    "naming",
+    "visemes",
+    "transforms",
+    "multiplier",
+    "lookahead_ms",
+    "v",
+    "type",
+)
 # Rules JSON Schema cannot state, as (code, pattern on "where: message"); docs/protocol.md
 # lists the same rules.
 BEYOND_SCHEMA = (
@@ -78,8 +108,13 @@ def test_every_encoded_message_satisfies_its_schema(message: Message) -> None:
 
 def paths(node: Any, prefix: tuple[Any, ...] = ()) -> list[tuple[Any, ...]]:
     found: list[tuple[Any, ...]] = []
-    children = node.items() if isinstance(node, dict) else enumerate(node) \
-        if isinstance(node, list) else ()
+    children = (
+        node.items()
+        if isinstance(node, dict)
+        else enumerate(node)
+        if isinstance(node, list)
+        else ()
+    )
     for key, value in children:
         found.append((*prefix, key))
         found.extend(paths(value, (*prefix, key)))
@@ -87,18 +122,42 @@ def paths(node: Any, prefix: tuple[Any, ...] = ()) -> list[tuple[Any, ...]]:
 
 
 # Each protocol limit, and a value just beyond it.
-BOUNDARIES = sorted({value for limit in (
-    0, 1, m.MAX_FPS, m.MAX_LATENCY_BUDGET_MS, m.MAX_RETURN_MS, m.MAX_TIME_S, m.MIN_SAMPLE_RATE,
-    m.MAX_SAMPLE_RATE, m.MAX_INTEGER, m.MAX_CHANNELS, m.MAX_TIME_S * 1000.0, 2**63, 2**64,
-) for value in (limit, -limit, limit + 1, limit + 0.5, limit - 1e-9)})
+BOUNDARIES = sorted(
+    {
+        value
+        for limit in (
+            0,
+            1,
+            m.MAX_FPS,
+            m.MAX_LATENCY_BUDGET_MS,
+            m.MAX_RETURN_MS,
+            m.MAX_TIME_S,
+            m.MIN_SAMPLE_RATE,
+            m.MAX_SAMPLE_RATE,
+            m.MAX_INTEGER,
+            m.MAX_CHANNELS,
+            m.MAX_TIME_S * 1000.0,
+            2**63,
+            2**64,
+        )
+        for value in (limit, -limit, limit + 1, limit + 0.5, limit - 1e-9)
+    }
+)
 
 replacements = st.recursive(
-    st.one_of(st.none(), st.booleans(), st.integers(-(2**70), 2**70), st.sampled_from(BOUNDARIES),
-              st.floats(allow_nan=False, allow_infinity=False, width=64),
-              st.sampled_from(["", "x", "a\n", "oculus15", "livelink", "end", "AAA=", "AA=="]),
-              st.text(max_size=6)),
-    lambda inner: st.lists(inner, max_size=3) | st.dictionaries(
-        st.sampled_from(FIELD_NAMES) | st.text(max_size=4), inner, max_size=3),
+    st.one_of(
+        st.none(),
+        st.booleans(),
+        st.integers(-(2**70), 2**70),
+        st.sampled_from(BOUNDARIES),
+        st.floats(allow_nan=False, allow_infinity=False, width=64),
+        st.sampled_from(["", "x", "a\n", "oculus15", "livelink", "end", "AAA=", "AA=="]),
+        st.text(max_size=6),
+    ),
+    lambda inner: (
+        st.lists(inner, max_size=3)
+        | st.dictionaries(st.sampled_from(FIELD_NAMES) | st.text(max_size=4), inner, max_size=3)
+    ),
     max_leaves=6,
 )
 
@@ -138,22 +197,62 @@ def test_codec_and_schema_agree_on_mutated_messages(payload: dict[str, Any]) -> 
         assert schema_accepts(payload), (result, payload)
 
 
-@pytest.mark.parametrize(("payload", "beyond"), [
-    ({"v": 1, "type": "phonemes", "id": "a",
-      "items": [{"phoneme": "AA", "start": 0.5, "end": 0.5}]}, True),
-    ({"v": 1, "type": "phonemes", "id": "a",
-      "items": [{"phoneme": "AA", "start": 0.0, "end": 0.5},
-                {"phoneme": "B", "start": 0.25, "end": 0.75}]}, True),
-    ({"v": 1, "type": "frames", "id": "a", "seq": 0, "first_frame": 0, "fps": 60,
-      "n_channels": 3, "data": [[0.0, 1.0]]}, True),
-    ({"v": 1, "type": "audio", "id": "a", "sample_rate": 16000, "pcm16": "AA=="}, True),
-    ({"v": 1, "type": "start", "id": "a", "engine": "e", "character": "c",
-      "output": {"transforms": {"x": {"clamp": [2, 1]}}}}, True),
-    ({"v": 1, "type": "start", "id": "a", "engine": "e", "character": "c", "fps": -1}, False),
-    ({"v": 1, "type": "start", "id": "a", "engine": "e", "character": "c", "colour": 1}, False),
-])
-def test_beyond_schema_rules_are_exactly_the_listed_ones(payload: dict[str, Any],
-                                                         beyond: bool) -> None:
+@pytest.mark.parametrize(
+    ("payload", "beyond"),
+    [
+        (
+            {
+                "v": 1,
+                "type": "phonemes",
+                "id": "a",
+                "items": [{"phoneme": "AA", "start": 0.5, "end": 0.5}],
+            },
+            True,
+        ),
+        (
+            {
+                "v": 1,
+                "type": "phonemes",
+                "id": "a",
+                "items": [
+                    {"phoneme": "AA", "start": 0.0, "end": 0.5},
+                    {"phoneme": "B", "start": 0.25, "end": 0.75},
+                ],
+            },
+            True,
+        ),
+        (
+            {
+                "v": 1,
+                "type": "frames",
+                "id": "a",
+                "seq": 0,
+                "first_frame": 0,
+                "fps": 60,
+                "n_channels": 3,
+                "data": [[0.0, 1.0]],
+            },
+            True,
+        ),
+        ({"v": 1, "type": "audio", "id": "a", "sample_rate": 16000, "pcm16": "AA=="}, True),
+        (
+            {
+                "v": 1,
+                "type": "start",
+                "id": "a",
+                "engine": "e",
+                "character": "c",
+                "output": {"transforms": {"x": {"clamp": [2, 1]}}},
+            },
+            True,
+        ),
+        ({"v": 1, "type": "start", "id": "a", "engine": "e", "character": "c", "fps": -1}, False),
+        ({"v": 1, "type": "start", "id": "a", "engine": "e", "character": "c", "colour": 1}, False),
+    ],
+)
+def test_beyond_schema_rules_are_exactly_the_listed_ones(
+    payload: dict[str, Any], beyond: bool
+) -> None:
     result = decode(json.dumps(payload), "json")
     assert isinstance(result, ProtocolError)
     assert schema_accepts(payload) == beyond

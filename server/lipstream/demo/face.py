@@ -222,7 +222,7 @@ def _assemble(face: dict[str, np.ndarray], asymmetry: float) -> np.ndarray:
             columns.append(face[channel[: -len("Left")]] * (1.0 + asymmetry))
         else:
             columns.append(face[channel[: -len("Right")]] * (1.0 - asymmetry))
-    return np.clip(np.stack(columns, axis=1), 0.0, 1.0).astype(np.float32)
+    return np.asarray(np.clip(np.stack(columns, axis=1), 0.0, 1.0), dtype=np.float32)
 
 
 def generate_face(

@@ -140,7 +140,7 @@ def _windows(segments: Sequence[Segment]) -> tuple[np.ndarray, np.ndarray, np.nd
 def _interpolated(centres: np.ndarray, middle: np.ndarray, narrow: np.ndarray) -> np.ndarray:
     if not narrow.any():
         return middle
-    return np.interp(centres, centres[narrow], middle[narrow])
+    return np.asarray(np.interp(centres, centres[narrow], middle[narrow]))
 
 
 def _anticipated(

@@ -89,8 +89,9 @@ class SynthesisRequest:
 
     def __post_init__(self) -> None:
         if not (isinstance(self.fps, (int, float)) and 0 < self.fps <= MAX_FPS):
-            raise InvalidRequestError(f"fps must be in (0, {MAX_FPS:g}], got {self.fps!r}",
-                                      where="fps")
+            raise InvalidRequestError(
+                f"fps must be in (0, {MAX_FPS:g}], got {self.fps!r}", where="fps"
+            )
         if self.emotion is not None and self.emotion not in EMOTIONS:
             raise InvalidRequestError(
                 f"emotion must be one of {EMOTIONS}, got {self.emotion!r}", where="emotion"
@@ -185,7 +186,10 @@ class Model(ABC):
 
     @abstractmethod
     def render(
-        self, spans: Sequence[PhonemeSpan], times: np.ndarray, request: SynthesisRequest,
+        self,
+        spans: Sequence[PhonemeSpan],
+        times: np.ndarray,
+        request: SynthesisRequest,
         audio: Audio | None,
     ) -> np.ndarray:
         """Frames at ``times`` (s, shape (n,)) as float32 (n, n_channels).
@@ -201,8 +205,9 @@ class Model(ABC):
 
     @classmethod
     @abstractmethod
-    def from_arrays(cls: type[ModelT], manifest: ModelManifest,
-                    arrays: Mapping[str, np.ndarray], path: Path) -> ModelT:
+    def from_arrays(
+        cls: type[ModelT], manifest: ModelManifest, arrays: Mapping[str, np.ndarray], path: Path
+    ) -> ModelT:
         """Rebuild a model from its manifest and (memory-mapped) arrays."""
 
     @property
@@ -229,8 +234,12 @@ class Model(ABC):
         return RenderingSynthesizer(self, request)
 
     def synthesize(
-        self, spans: Iterable[SpanLike], fps: float = 60.0, audio: Audio | None = None,
-        emotion: str | None = None, **engine_options: Any,
+        self,
+        spans: Iterable[SpanLike],
+        fps: float = 60.0,
+        audio: Audio | None = None,
+        emotion: str | None = None,
+        **engine_options: Any,
     ) -> SynthesisResult:
         """Offline synthesis of a whole utterance."""
         request = SynthesisRequest(fps=fps, emotion=emotion, options=engine_options)
@@ -249,7 +258,8 @@ class Model(ABC):
         if manifest.engine != cls.engine:
             raise ModelStoreError(
                 f"model was trained by engine {manifest.engine!r}, not {cls.engine!r}",
-                where=str(directory), code="model_engine_mismatch",
+                where=str(directory),
+                code="model_engine_mismatch",
             )
         return cls.from_arrays(manifest, load_arrays(directory), directory)
 
@@ -271,10 +281,15 @@ class Engine(ABC):
     def new_manifest(self, corpus: Any, **fields: Any) -> ModelManifest:
         """A manifest describing a model of this engine trained on ``corpus``."""
         return ModelManifest(
-            engine=self.name, name=corpus.name, channels=list(corpus.channels),
-            fps=float(corpus.fps), phoneme_set=list(PHONEMES),
-            hyperparameters=self.hyperparameters(), corpus_digest=corpus.digest(),
-            lipstream_version=__version__, **fields,
+            engine=self.name,
+            name=corpus.name,
+            channels=list(corpus.channels),
+            fps=float(corpus.fps),
+            phoneme_set=list(PHONEMES),
+            hyperparameters=self.hyperparameters(),
+            corpus_digest=corpus.digest(),
+            lipstream_version=__version__,
+            **fields,
         )
 
     def hyperparameters(self) -> dict[str, Any]:

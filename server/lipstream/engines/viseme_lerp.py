@@ -43,7 +43,10 @@ class VisemeLerpModel(Model):
         return Lookahead(phonemes=1)
 
     def render(
-        self, spans: Sequence[PhonemeSpan], times: np.ndarray, request: SynthesisRequest,
+        self,
+        spans: Sequence[PhonemeSpan],
+        times: np.ndarray,
+        request: SynthesisRequest,
         audio: Audio | None,
     ) -> np.ndarray:
         window = spans[_first_key(spans, times[0]) : _last_key(spans, times[-1]) + 1]
@@ -57,7 +60,7 @@ class VisemeLerpModel(Model):
         width = centres[left + 1] - centres[left]
         weight = np.minimum(np.maximum((times - centres[left]) / width, 0.0), 1.0)[:, None]
         frames = keys[left] * (1.0 - weight) + keys[left + 1] * weight
-        return frames.astype(np.float32)
+        return np.asarray(frames, dtype=np.float32)
 
     def arrays(self) -> dict[str, np.ndarray]:
         return {"poses": self.poses_}

@@ -24,7 +24,7 @@ _BEARER = "bearer "
 def bearer_token(authorization: str | None, query_string: bytes) -> str | None:
     """The token from the Authorization header, else from ``?access_token=``; None if absent."""
     if authorization is not None and authorization[: len(_BEARER)].lower() == _BEARER:
-        return authorization[len(_BEARER):].strip() or None
+        return authorization[len(_BEARER) :].strip() or None
     values = parse_qs(query_string.decode("latin-1")).get("access_token")
     return values[0] if values else None
 

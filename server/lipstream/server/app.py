@@ -56,10 +56,10 @@ def create_app(models_path: Path, settings: ServerSettings | None = None) -> Fas
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[LifespanState]:
         registry = ModelRegistry.load(models_path)
-        executor = ThreadPoolExecutor(settings.synth_threads,
-                                      thread_name_prefix="lipstream-synth")
-        server = ServerState(registry, Catalog.build(registry, settings), settings, metrics,
-                             lifecycle, executor)
+        executor = ThreadPoolExecutor(settings.synth_threads, thread_name_prefix="lipstream-synth")
+        server = ServerState(
+            registry, Catalog.build(registry, settings), settings, metrics, lifecycle, executor
+        )
         # Models, modules and the catalog live as long as the process: moving them out of
         # the collector's reach keeps each full collection short (80 ms otherwise, a lag
         # spike for every session).
@@ -73,10 +73,14 @@ def create_app(models_path: Path, settings: ServerSettings | None = None) -> Fas
             executor.shutdown(wait=False, cancel_futures=True)
             forget_this_process()
 
-    app = FastAPI(title="lipstream", version=__version__, lifespan=lifespan,
-                  description="Real-time lip sync: phoneme-aligned speech in, facial control "
-                              "frames out. Streaming is the WebSocket /v1/stream "
-                              "(docs/protocol.md); this document covers the HTTP routes.")
+    app = FastAPI(
+        title="lipstream",
+        version=__version__,
+        lifespan=lifespan,
+        description="Real-time lip sync: phoneme-aligned speech in, facial control "
+        "frames out. Streaming is the WebSocket /v1/stream "
+        "(docs/protocol.md); this document covers the HTTP routes.",
+    )
     app.state.lifecycle = lifecycle
     app.state.metrics = metrics
     openapi.install(app)
@@ -93,11 +97,7 @@ def create_app(models_path: Path, settings: ServerSettings | None = None) -> Fas
     @app.get("/v1/engines")
     async def engines(request: Request) -> dict[str, Any]:
         loaded = {model.manifest.engine for model in _server(request).registry.models.values()}
-        return {
-            "engines": [
-                {"name": name, "loaded": name in loaded} for name in ENGINES
-            ]
-        }
+        return {"engines": [{"name": name, "loaded": name in loaded} for name in ENGINES]}
 
     @app.get("/v1/characters")
     async def characters(request: Request) -> dict[str, Any]:
@@ -109,8 +109,9 @@ def create_app(models_path: Path, settings: ServerSettings | None = None) -> Fas
             ]
         }
 
-    @app.post("/v1/synthesize", openapi_extra=openapi.synthesize_operation(),
-              response_class=Response)
+    @app.post(
+        "/v1/synthesize", openapi_extra=openapi.synthesize_operation(), response_class=Response
+    )
     async def synthesize_route(request: Request) -> Response:
         """A whole utterance in, all its frames out (the frames /v1/stream would send)."""
         return await synthesize(request, _server(request))

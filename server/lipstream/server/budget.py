@@ -51,21 +51,26 @@ class BudgetInfeasible(LipstreamError):
         self.min_budget_ms = min_budget_ms
         super().__init__(
             f"{budget_ms:g} ms is below the {min_budget_ms} ms the fastest rung needs "
-            f"(lookahead at real-time input plus compute time)", where="latency_budget_ms")
+            f"(lookahead at real-time input plus compute time)",
+            where="latency_budget_ms",
+        )
 
 
 def lookahead_ms(rung: Rung, max_phoneme_ms: float) -> float:
     """The longest time a frame of ``rung`` waits for input arriving in real time (audio
     included: ``start`` does not say whether audio will follow)."""
     lookahead = rung.lookahead
-    return (1000.0 * (lookahead.seconds + lookahead.audio_seconds)
-            + lookahead.phonemes * max_phoneme_ms)
+    return (
+        1000.0 * (lookahead.seconds + lookahead.audio_seconds) + lookahead.phonemes * max_phoneme_ms
+    )
 
 
-def estimate(rung: Rung, max_phoneme_ms: float, compute_ms: float, margin_ms: float,
-             per_phoneme_ms: float) -> RungEstimate:
-    return RungEstimate(rung, lookahead_ms(rung, max_phoneme_ms), compute_ms + margin_ms,
-                        per_phoneme_ms)
+def estimate(
+    rung: Rung, max_phoneme_ms: float, compute_ms: float, margin_ms: float, per_phoneme_ms: float
+) -> RungEstimate:
+    return RungEstimate(
+        rung, lookahead_ms(rung, max_phoneme_ms), compute_ms + margin_ms, per_phoneme_ms
+    )
 
 
 def choose_rung(ladder: Sequence[RungEstimate], budget_ms: float | None) -> RungEstimate:

@@ -41,8 +41,10 @@ class ComputeCost:
 
 
 def calibration_spans() -> list[PhonemeSpan]:
-    return [PhonemeSpan(ARPABET[index % len(ARPABET)], index * PHONEME_S, (index + 1) * PHONEME_S)
-            for index in range(CALIBRATION_PHONEMES)]
+    return [
+        PhonemeSpan(ARPABET[index % len(ARPABET)], index * PHONEME_S, (index + 1) * PHONEME_S)
+        for index in range(CALIBRATION_PHONEMES)
+    ]
 
 
 def calibration_audio(spans: list[PhonemeSpan]) -> Audio:
@@ -65,12 +67,14 @@ def measure(model: Model, rung: Rung) -> ComputeCost:
     costs = [_measure_stream(model, rung, spans, None)]
     if audio is not None:
         costs.append(_measure_stream(model, rung, spans, audio))
-    return ComputeCost(max(cost.max_call_ms for cost in costs),
-                       max(cost.per_phoneme_ms for cost in costs))
+    return ComputeCost(
+        max(cost.max_call_ms for cost in costs), max(cost.per_phoneme_ms for cost in costs)
+    )
 
 
-def _measure_stream(model: Model, rung: Rung, spans: list[PhonemeSpan],
-                    audio: Audio | None) -> ComputeCost:
+def _measure_stream(
+    model: Model, rung: Rung, spans: list[PhonemeSpan], audio: Audio | None
+) -> ComputeCost:
     request = SynthesisRequest(fps=CALIBRATION_FPS, options=dict(rung.options))
     _stream(model, request, spans, audio)
     slowest, total = 0.0, 0.0
@@ -82,8 +86,9 @@ def _measure_stream(model: Model, rung: Rung, spans: list[PhonemeSpan],
     return ComputeCost(1000.0 * slowest, 1000.0 * per_phoneme)
 
 
-def _stream(model: Model, request: SynthesisRequest, spans: list[PhonemeSpan],
-            audio: Audio | None) -> list[float]:
+def _stream(
+    model: Model, request: SynthesisRequest, spans: list[PhonemeSpan], audio: Audio | None
+) -> list[float]:
     """Seconds spent in each call of one streamed pass; with ``audio``, each call also
     feeds the audio up to its span's end."""
     synthesizer = model.start(request)

@@ -19,11 +19,11 @@ from lipstream_client import OutputProfile
 from lipstream_client.errors import UNKNOWN_CHARACTER, UNKNOWN_ENGINE
 
 from ..config import ServerSettings
-from ..engines.base import EMOTIONS, Model
+from ..engines.base import Model
 from ..errors import LipstreamError
 from ..models import ModelRegistry
 from ..phonemes import SILENCE
-from ..timeline import PhonemeSpan
+from ..timeline import EMOTIONS, PhonemeSpan
 from .budget import RungEstimate, estimate
 from .calibration import measure
 from .profiles import ProfileError, ProfileRequest, load_presets, parse_profile, resolve_profile
@@ -66,10 +66,12 @@ class Catalog:
         for model in registry.models.values():
             source = _viseme_source(registry, model)
             if id(source) not in probed:
-                probed[id(source)] = VisemeProjector(probe_key_poses(source),
-                                                     mouth_channels(source.channels))
-            catalog.facts[id(model)] = ModelFacts(catalog._ladder(model), _rest_poses(model),
-                                                  probed[id(source)])
+                probed[id(source)] = VisemeProjector(
+                    probe_key_poses(source), mouth_channels(source.channels)
+                )
+            catalog.facts[id(model)] = ModelFacts(
+                catalog._ladder(model), _rest_poses(model), probed[id(source)]
+            )
         catalog.presets = _presets(registry, settings)
         catalog._check_presets()
         return catalog
@@ -81,15 +83,21 @@ class Catalog:
     def model(self, engine: str, character: str) -> Model:
         """The model serving ``character`` with ``engine``; CatalogError naming the field."""
         if engine not in self.engines:
-            raise CatalogError(f"no engine {engine!r} is loaded; loaded: "
-                               f"{', '.join(sorted(self.engines))}", where="engine")
+            raise CatalogError(
+                f"no engine {engine!r} is loaded; loaded: {', '.join(sorted(self.engines))}",
+                where="engine",
+            )
         for model in self.registry.models.values():
             if model.manifest.engine == engine and model.name == character:
                 return model
-        served = sorted(model.name for model in self.registry.models.values()
-                        if model.manifest.engine == engine)
-        raise CatalogError(f"no character {character!r} for engine {engine!r}; it serves "
-                           f"{', '.join(served)}", where="character", code=UNKNOWN_CHARACTER)
+        served = sorted(
+            model.name for model in self.registry.models.values() if model.manifest.engine == engine
+        )
+        raise CatalogError(
+            f"no character {character!r} for engine {engine!r}; it serves {', '.join(served)}",
+            where="character",
+            code=UNKNOWN_CHARACTER,
+        )
 
     def ladder(self, model: Model) -> tuple[RungEstimate, ...]:
         return self.facts[id(model)].ladder
@@ -112,8 +120,15 @@ class Catalog:
         rungs = []
         for rung in model.fidelity_ladder():
             cost = measure(model, rung)
-            rungs.append(estimate(rung, settings.max_phoneme_ms, cost.max_call_ms,
-                                  settings.compute_margin_ms, cost.per_phoneme_ms))
+            rungs.append(
+                estimate(
+                    rung,
+                    settings.max_phoneme_ms,
+                    cost.max_call_ms,
+                    settings.compute_margin_ms,
+                    cost.per_phoneme_ms,
+                )
+            )
         return tuple(rungs)
 
     def _check_presets(self) -> None:
@@ -122,13 +137,16 @@ class Catalog:
                 if model.name != character:
                     continue
                 try:
-                    resolve_profile(model.channels, ProfileRequest(preset, "preset"),
-                                    self._projector_of(model))
+                    resolve_profile(
+                        model.channels, ProfileRequest(preset, "preset"), self._projector_of(model)
+                    )
                 except ProfileError as error:
                     raise LipstreamError(
                         f"the preset output profile of {character!r} does not fit "
-                        f"{model.manifest.engine}: {error}", where=PRESET_KEY,
-                        code="invalid_setting") from None
+                        f"{model.manifest.engine}: {error}",
+                        where=PRESET_KEY,
+                        code="invalid_setting",
+                    ) from None
 
 
 def _rest_poses(model: Model) -> dict[str | None, np.ndarray]:
@@ -143,9 +161,16 @@ def _rest_poses(model: Model) -> dict[str | None, np.ndarray]:
 def _viseme_source(registry: ModelRegistry, model: Model) -> Model:
     """The model whose key poses define ``model``'s visemes: the character's viseme-lerp model
     with the same channels if one is loaded, else ``model`` itself."""
-    return next((other for other in registry.models.values()
-                 if other.manifest.engine == _VISEME_SOURCE_ENGINE and other.name == model.name
-                 and other.channels == model.channels), model)
+    return next(
+        (
+            other
+            for other in registry.models.values()
+            if other.manifest.engine == _VISEME_SOURCE_ENGINE
+            and other.name == model.name
+            and other.channels == model.channels
+        ),
+        model,
+    )
 
 
 def _presets(registry: ModelRegistry, settings: ServerSettings) -> dict[str, OutputProfile]:

@@ -30,9 +30,13 @@ class BoundedCloseProtocol(WebSocketsSansIOProtocol):
 
     def connection_made(self, transport: BaseTransport) -> None:
         super().connection_made(transport)
-        self.flush_watch = FlushWatch(cast(Transport, transport), self.loop,
-                                      flush_timeout_s(self.app_state), "a closed WebSocket",
-                                      self.client)
+        self.flush_watch = FlushWatch(
+            cast(Transport, transport),
+            self.loop,
+            flush_timeout_s(self.app_state),
+            "a closed WebSocket",
+            self.client,
+        )
 
     def connection_lost(self, exc: Exception | None) -> None:
         super().connection_lost(exc)

@@ -132,8 +132,13 @@ class FlushWatch:
             self._before = pending
         else:
             peer = f"{self.client[0]}:{self.client[1]}" if self.client else "a client"
-            logger.info("%s: resetting %s whose client took none of its %d unsent bytes in "
-                        "%g s", peer, self.what, pending, self.timeout_s)
+            logger.info(
+                "%s: resetting %s whose client took none of its %d unsent bytes in %g s",
+                peer,
+                self.what,
+                pending,
+                self.timeout_s,
+            )
             reset(self.transport)
             return
         self._timer = self.loop.call_later(self.timeout_s, self._check)

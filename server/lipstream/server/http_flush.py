@@ -44,8 +44,14 @@ class BoundedFlushHTTPProtocol(AutoHTTPProtocol):
 
     def connection_made(self, transport: Transport) -> None:  # type: ignore[override]
         super().connection_made(transport)
-        self.flush_watch = FlushWatch(transport, self.loop, flush_timeout_s(self.app_state),
-                                      "an HTTP connection", self.client, self._responding)
+        self.flush_watch = FlushWatch(
+            transport,
+            self.loop,
+            flush_timeout_s(self.app_state),
+            "an HTTP connection",
+            self.client,
+            self._responding,
+        )
 
     def connection_lost(self, exc: Exception | None) -> None:
         super().connection_lost(exc)
@@ -68,5 +74,9 @@ class BoundedFlushHTTPProtocol(AutoHTTPProtocol):
     def _responding(self) -> bool:
         """Whether the app may be writing now: a response under way, room in the buffer."""
         cycle = self.cycle
-        return (cycle is not None and not cycle.response_complete
-                and not self.flow.write_paused and not self.transport.is_closing())
+        return (
+            cycle is not None
+            and not cycle.response_complete
+            and not self.flow.write_paused
+            and not self.transport.is_closing()
+        )

@@ -80,8 +80,9 @@ class Lifecycle:
             return 0
         except TimeoutError:
             leftover = list(self.connections)
-            logger.warning("drain timeout: closing %d connection(s) with requests in flight",
-                           len(leftover))
+            logger.warning(
+                "drain timeout: closing %d connection(s) with requests in flight", len(leftover)
+            )
             for connection in leftover:
                 connection.abort()
         try:

@@ -40,8 +40,7 @@ from prometheus_client import (
 from prometheus_client.metrics import MetricWrapperBase
 from prometheus_client.multiprocess import MultiProcessCollector, mark_process_dead
 
-LATENCY_BUCKETS_S = (0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0,
-                     10.0)
+LATENCY_BUCKETS_S = (0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0)
 MULTIPROCESS_ENV = "PROMETHEUS_MULTIPROC_DIR"
 LIVE_GAUGE_FILES = "gauge_live*_*.db"
 
@@ -53,33 +52,66 @@ class Metrics:
         self.registry = CollectorRegistry()
         self._children: dict[tuple[int, tuple[str, ...]], Any] = {}
         registry = self.registry
-        self.sessions = Gauge("lipstream_sessions", "Open WebSocket sessions (connections).",
-                              registry=registry, multiprocess_mode="livesum")
-        self.requests_active = Gauge("lipstream_requests_active",
-                                     "Requests between ready and done.", registry=registry,
-                                     multiprocess_mode="livesum")
-        self.draining = Gauge("lipstream_draining", "1 while the process (with several "
-                              "workers: any worker) drains for shutdown.",
-                              registry=registry, multiprocess_mode="livemax")
-        self.requests = Counter("lipstream_requests", "Finished requests by how they ended "
-                                "(end, cancel, interrupt, error).", ["engine", "outcome"],
-                                registry=registry)
+        self.sessions = Gauge(
+            "lipstream_sessions",
+            "Open WebSocket sessions (connections).",
+            registry=registry,
+            multiprocess_mode="livesum",
+        )
+        self.requests_active = Gauge(
+            "lipstream_requests_active",
+            "Requests between ready and done.",
+            registry=registry,
+            multiprocess_mode="livesum",
+        )
+        self.draining = Gauge(
+            "lipstream_draining",
+            "1 while the process (with several workers: any worker) drains for shutdown.",
+            registry=registry,
+            multiprocess_mode="livemax",
+        )
+        self.requests = Counter(
+            "lipstream_requests",
+            "Finished requests by how they ended (end, cancel, interrupt, error).",
+            ["engine", "outcome"],
+            registry=registry,
+        )
         self.frames = Counter("lipstream_frames", "Frames sent.", ["engine"], registry=registry)
-        self.messages = Counter("lipstream_messages_received", "Client messages by type "
-                                "(invalid: rejected by the codec).", ["type"], registry=registry)
-        self.errors = Counter("lipstream_errors", "Error messages sent, by code.", ["code"],
-                              registry=registry)
-        self.refused = Counter("lipstream_connections_refused", "WebSocket connections refused "
-                               "or closed by policy, by error code.", ["code"], registry=registry)
-        self.first_frame = Histogram("lipstream_first_frame_latency_seconds",
-                                     "From receiving start to sending the first frame.",
-                                     ["engine"], buckets=LATENCY_BUCKETS_S, registry=registry)
-        self.lag = Histogram("lipstream_frame_lag_seconds", "Per frames block: from receiving "
-                             "the input covering its first frame to sending it.", ["engine"],
-                             buckets=LATENCY_BUCKETS_S, registry=registry)
-        self.synthesize = Histogram("lipstream_synthesize_seconds",
-                                    "Duration of POST /v1/synthesize.",
-                                    buckets=LATENCY_BUCKETS_S, registry=registry)
+        self.messages = Counter(
+            "lipstream_messages_received",
+            "Client messages by type (invalid: rejected by the codec).",
+            ["type"],
+            registry=registry,
+        )
+        self.errors = Counter(
+            "lipstream_errors", "Error messages sent, by code.", ["code"], registry=registry
+        )
+        self.refused = Counter(
+            "lipstream_connections_refused",
+            "WebSocket connections refused or closed by policy, by error code.",
+            ["code"],
+            registry=registry,
+        )
+        self.first_frame = Histogram(
+            "lipstream_first_frame_latency_seconds",
+            "From receiving start to sending the first frame.",
+            ["engine"],
+            buckets=LATENCY_BUCKETS_S,
+            registry=registry,
+        )
+        self.lag = Histogram(
+            "lipstream_frame_lag_seconds",
+            "Per frames block: from receiving the input covering its first frame to sending it.",
+            ["engine"],
+            buckets=LATENCY_BUCKETS_S,
+            registry=registry,
+        )
+        self.synthesize = Histogram(
+            "lipstream_synthesize_seconds",
+            "Duration of POST /v1/synthesize.",
+            buckets=LATENCY_BUCKETS_S,
+            registry=registry,
+        )
 
     def labelled(self, metric: MetricWrapperBase, *values: str) -> Any:
         """``metric.labels(*values)``, cached: the hot path avoids the label lookup."""
@@ -97,7 +129,7 @@ class Metrics:
             return generate_latest(self.registry), CONTENT_TYPE_LATEST
         forget_dead_processes(directory)
         combined = CollectorRegistry()
-        MultiProcessCollector(combined, path=str(directory))
+        MultiProcessCollector(combined, path=str(directory))  # type: ignore[no-untyped-call]
         return generate_latest(combined), CONTENT_TYPE_LATEST
 
 
@@ -111,7 +143,7 @@ def forget_this_process() -> None:
     """Drop this process's live gauges from the shared sum (when it stops serving)."""
     directory = multiprocess_dir()
     if directory is not None:
-        mark_process_dead(os.getpid(), str(directory))
+        mark_process_dead(os.getpid(), str(directory))  # type: ignore[no-untyped-call]
 
 
 def forget_dead_processes(directory: Path) -> None:
@@ -120,7 +152,7 @@ def forget_dead_processes(directory: Path) -> None:
     for path in directory.glob(LIVE_GAUGE_FILES):
         pid = path.stem.rsplit("_", 1)[-1]
         if pid.isdigit() and not _running(int(pid)):
-            mark_process_dead(int(pid), str(directory))
+            mark_process_dead(int(pid), str(directory))  # type: ignore[no-untyped-call]
 
 
 def _running(pid: int) -> bool:

@@ -26,9 +26,14 @@ ENVELOPE = ("v", "type", "id")
 def _moved(node: Any) -> Any:
     """A copy of a schema with ``#/$defs/X`` references pointing into the components."""
     if isinstance(node, dict):
-        return {key: (value.replace("#/$defs/", f"#/components/schemas/{PREFIX}")
-                      if key == "$ref" and isinstance(value, str) else _moved(value))
-                for key, value in node.items()}
+        return {
+            key: (
+                value.replace("#/$defs/", f"#/components/schemas/{PREFIX}")
+                if key == "$ref" and isinstance(value, str)
+                else _moved(value)
+            )
+            for key, value in node.items()
+        }
     if isinstance(node, list):
         return [_moved(item) for item in node]
     return node
@@ -39,21 +44,26 @@ def components() -> dict[str, Any]:
     start, phonemes, audio = (load_schema(kind) for kind in ("start", "phonemes", "audio"))
     schemas: dict[str, Any] = {}
     for schema in (start, phonemes, audio):
-        schemas.update({PREFIX + name: _moved(value)
-                        for name, value in schema.get("$defs", {}).items()})
-    properties = {key: _moved(value) for key, value in start["properties"].items()
-                  if key not in ENVELOPE}
+        schemas.update(
+            {PREFIX + name: _moved(value) for name, value in schema.get("$defs", {}).items()}
+        )
+    properties = {
+        key: _moved(value) for key, value in start["properties"].items() if key not in ENVELOPE
+    }
     properties["items"] = _moved(phonemes["properties"]["items"])
     properties["audio"] = {
-        "type": "object", "additionalProperties": False,
+        "type": "object",
+        "additionalProperties": False,
         "required": ["sample_rate", "pcm16"],
         "properties": {key: _moved(audio["properties"][key]) for key in ("sample_rate", "pcm16")},
         "description": "Optional speech audio for engines that use it (PCM16 mono; bin in "
-                       "msgpack, base64 in JSON).",
+        "msgpack, base64 in JSON).",
     }
     schemas[PREFIX + "SynthesizeRequest"] = {
-        "type": "object", "additionalProperties": False,
-        "required": ["engine", "character", "items"], "properties": properties,
+        "type": "object",
+        "additionalProperties": False,
+        "required": ["engine", "character", "items"],
+        "properties": properties,
         "description": "A start message's fields, the utterance's phonemes and optional audio.",
     }
     schemas[PREFIX + "SynthesizeResponse"] = _response_schema()
@@ -65,22 +75,44 @@ def _response_schema() -> dict[str, Any]:
     number = {"type": "number"}
     return {
         "type": "object",
-        "required": ["engine", "character", "fps", "channels", "fidelity", "lookahead_ms",
-                     "first_frame", "n_frames", "n_channels", "data", "stats"],
+        "required": [
+            "engine",
+            "character",
+            "fps",
+            "channels",
+            "fidelity",
+            "lookahead_ms",
+            "first_frame",
+            "n_frames",
+            "n_channels",
+            "data",
+            "stats",
+        ],
         "properties": {
-            "engine": {"type": "string"}, "character": {"type": "string"}, "fps": number,
+            "engine": {"type": "string"},
+            "character": {"type": "string"},
+            "fps": number,
             "channels": {"type": "array", "items": {"type": "string"}},
-            "fidelity": {"type": "string"}, "lookahead_ms": number,
-            "emotion": {"type": "string"}, "latency_budget_ms": number,
-            "options": {"type": "object"}, "phoneme_source": {"type": "string"},
+            "fidelity": {"type": "string"},
+            "lookahead_ms": number,
+            "emotion": {"type": "string"},
+            "latency_budget_ms": number,
+            "options": {"type": "object"},
+            "phoneme_source": {"type": "string"},
             "first_frame": {"type": "integer", "const": 0},
-            "n_frames": {"type": "integer"}, "n_channels": {"type": "integer"},
-            "data": {"description": "JSON: n_frames rows of n_channels numbers (shortest "
-                                    "float32 decimals). msgpack: bin of float32 little-endian, "
-                                    "row-major.",
-                     "type": "array", "items": {"type": "array", "items": number}},
-            "stats": {"type": "object", "properties": {"frames": {"type": "integer"},
-                                                       "engine": {"type": "object"}}},
+            "n_frames": {"type": "integer"},
+            "n_channels": {"type": "integer"},
+            "data": {
+                "description": "JSON: n_frames rows of n_channels numbers (shortest "
+                "float32 decimals). msgpack: bin of float32 little-endian, "
+                "row-major.",
+                "type": "array",
+                "items": {"type": "array", "items": number},
+            },
+            "stats": {
+                "type": "object",
+                "properties": {"frames": {"type": "integer"}, "engine": {"type": "object"}},
+            },
         },
         "description": "ready's resolved parameters, every frame, and done's stats.",
     }
@@ -88,33 +120,50 @@ def _response_schema() -> dict[str, Any]:
 
 def _error_schema() -> dict[str, Any]:
     return {
-        "type": "object", "required": ["error"],
-        "properties": {"error": {
-            "type": "object", "required": ["code", "message"],
-            "properties": {"code": {"type": "string"}, "message": {"type": "string"},
-                           "details": {"type": "object"}},
-        }},
+        "type": "object",
+        "required": ["error"],
+        "properties": {
+            "error": {
+                "type": "object",
+                "required": ["code", "message"],
+                "properties": {
+                    "code": {"type": "string"},
+                    "message": {"type": "string"},
+                    "details": {"type": "object"},
+                },
+            }
+        },
     }
 
 
 def _content(name: str) -> dict[str, Any]:
     reference = {"$ref": f"#/components/schemas/{PREFIX}{name}"}
-    return {"application/json": {"schema": reference},
-            "application/msgpack": {"schema": reference}}
+    return {"application/json": {"schema": reference}, "application/msgpack": {"schema": reference}}
 
 
 def synthesize_operation() -> dict[str, Any]:
     """``openapi_extra`` for the route: request body and responses."""
-    errors = {str(status): {"description": meaning, "content": _content("Error")}
-              for status, meaning in (
-                  (400, "malformed or invalid body"), (401, "missing or wrong bearer token"),
-                  (404, "unknown engine or character"), (406, "Accept allows no supported type"),
-                  (413, "body too large"), (415, "unsupported Content-Type"),
-                  (422, "valid but not acceptable (phoneme, emotion, channel, budget, limits)"))}
+    errors = {
+        str(status): {"description": meaning, "content": _content("Error")}
+        for status, meaning in (
+            (400, "malformed or invalid body"),
+            (401, "missing or wrong bearer token"),
+            (404, "unknown engine or character"),
+            (406, "Accept allows no supported type"),
+            (413, "body too large"),
+            (415, "unsupported Content-Type"),
+            (422, "valid but not acceptable (phoneme, emotion, channel, budget, limits)"),
+        )
+    }
     return {
         "requestBody": {"required": True, "content": _content("SynthesizeRequest")},
-        "responses": {"200": {"description": "all frames of the utterance",
-                              "content": _content("SynthesizeResponse")}, **errors},
+        "responses": {
+            "200": {
+                "description": "all frames of the utterance",
+                "content": _content("SynthesizeResponse"),
+            },
+            **errors,
+        },
     }
 
 
@@ -123,8 +172,9 @@ def install(app: FastAPI) -> Callable[[], dict[str, Any]]:
 
     def openapi() -> dict[str, Any]:
         if app.openapi_schema is None:
-            document = get_openapi(title=app.title, version=app.version,
-                                   description=app.description, routes=app.routes)
+            document = get_openapi(
+                title=app.title, version=app.version, description=app.description, routes=app.routes
+            )
             document.setdefault("components", {}).setdefault("schemas", {}).update(components())
             app.openapi_schema = document
         return app.openapi_schema

@@ -41,8 +41,11 @@ class RequestClock:
 
     def final_stats(self, stats: DoneStats) -> DoneStats:
         """``stats`` (frames, engine) completed with latency, lag and the budget verdict."""
-        latency = None if self.first_sent_at is None else \
-            _MS * max(0.0, self.first_sent_at - self.started_at)
+        latency = (
+            None
+            if self.first_sent_at is None
+            else _MS * max(0.0, self.first_sent_at - self.started_at)
+        )
         lag_ms = None if self.max_lag_s is None else _MS * self.max_lag_s
         met = None if self.budget_ms is None else (lag_ms is None or lag_ms <= self.budget_ms)
         return replace(stats, first_frame_latency_ms=latency, max_lag_ms=lag_ms, budget_met=met)

@@ -63,10 +63,14 @@ class ResolvedProfile:
     @cached_property
     def identity(self) -> bool:
         """True when the profile passes model frames through unchanged."""
-        return (self.projector is None
-                and np.array_equal(self.columns, np.arange(len(self.columns)))
-                and bool(np.all(self.multiplier == 1.0)) and not np.any(self.offset)
-                and bool(np.all(np.isinf(self.low))) and bool(np.all(np.isinf(self.high))))
+        return (
+            self.projector is None
+            and np.array_equal(self.columns, np.arange(len(self.columns)))
+            and bool(np.all(self.multiplier == 1.0))
+            and not np.any(self.offset)
+            and bool(np.all(np.isinf(self.low)))
+            and bool(np.all(np.isinf(self.high)))
+        )
 
     def apply(self, frames: np.ndarray) -> np.ndarray:
         """Output frames float32 (n, n_channels) for model frames (n, n_model_channels).
@@ -78,16 +82,20 @@ class ResolvedProfile:
             if not np.isfinite(frames).all():
                 raise ValueError("the engine produced non-finite values")
             return np.asarray(frames, dtype=np.float32)
-        source = self.projector.weights(frames) if self.projector is not None else \
-            np.asarray(frames, dtype=np.float64)
+        source = (
+            self.projector.weights(frames)
+            if self.projector is not None
+            else np.asarray(frames, dtype=np.float64)
+        )
         selected = source[:, self.columns]
         values = np.clip(selected * self.multiplier + self.offset, self.low, self.high)
         if not np.all(np.abs(values) <= _FLOAT32_MAX):
             if not np.all(np.isfinite(selected)):
                 raise ValueError("the engine produced non-finite values")
-            raise ProfileError("a transform drives a value beyond the float32 range",
-                               where="output.transforms")
-        return values.astype(np.float32)
+            raise ProfileError(
+                "a transform drives a value beyond the float32 range", where="output.transforms"
+            )
+        return np.asarray(values, dtype=np.float32)
 
 
 Lookup = Callable[[str, tuple[str, ...]], int | None]
@@ -140,29 +148,37 @@ def resolve_profile(
     return ResolvedProfile(
         channels=names,
         columns=np.asarray(positions, dtype=np.intp),
-        projector=_checked_projector(projector, len(model_channels), request)
-        if visemes else None,
-        multiplier=multiplier, offset=offset, low=low, high=high,
+        projector=_checked_projector(projector, len(model_channels), request) if visemes else None,
+        multiplier=multiplier,
+        offset=offset,
+        low=low,
+        high=high,
     )
 
 
-def _checked_projector(projector: Callable[[], VisemeProjector], width: int,
-                       request: ProfileRequest) -> VisemeProjector:
+def _checked_projector(
+    projector: Callable[[], VisemeProjector], width: int, request: ProfileRequest
+) -> VisemeProjector:
     built = projector()
     if built.n_channels != width:
-        raise ProfileError("the character's viseme key poses do not match this model's "
-                           "channels", where=request.where("visemes"))
+        raise ProfileError(
+            "the character's viseme key poses do not match this model's channels",
+            where=request.where("visemes"),
+        )
     return built
 
 
-def _renamed(model_channels: tuple[str, ...], profile: OutputProfile,
-             request: ProfileRequest) -> tuple[str, ...]:
+def _renamed(
+    model_channels: tuple[str, ...], profile: OutputProfile, request: ProfileRequest
+) -> tuple[str, ...]:
     naming = profile.naming or "arkit"
     names = tuple(rename_channel(name, naming) for name in model_channels)
     if len(set(names)) != len(names):
         clash = next(name for name in names if names.count(name) > 1)
-        raise ProfileError(f"naming {naming!r} gives two channels the name {clash!r}",
-                           where=request.where("naming"))
+        raise ProfileError(
+            f"naming {naming!r} gives two channels the name {clash!r}",
+            where=request.where("naming"),
+        )
     return names
 
 
@@ -175,8 +191,9 @@ def _viseme_lookup(name: str, available: tuple[str, ...]) -> int | None:
     return available.index(canonical) if canonical in available else None
 
 
-def _subset(profile: OutputProfile, available: tuple[str, ...], lookup: Lookup,
-            request: ProfileRequest) -> list[int]:
+def _subset(
+    profile: OutputProfile, available: tuple[str, ...], lookup: Lookup, request: ProfileRequest
+) -> list[int]:
     if profile.channels is None:
         return list(range(len(available)))
     positions: list[int] = []
@@ -186,8 +203,7 @@ def _subset(profile: OutputProfile, available: tuple[str, ...], lookup: Lookup,
         if position is None:
             raise _unknown(name, where, available)
         if position in positions:
-            raise ProfileError(f"{name!r} names {available[position]!r} a second time",
-                               where=where)
+            raise ProfileError(f"{name!r} names {available[position]!r} a second time", where=where)
         positions.append(position)
     return positions
 
@@ -215,19 +231,29 @@ def _transforms(
 
 def _unknown(name: str, where: str, available: tuple[str, ...]) -> ProfileError:
     shown = ", ".join(available[:8]) + (", ..." if len(available) > 8 else "")
-    return ProfileError(f"no output channel {name!r}; the output channels are {shown}",
-                        where=where, code=UNKNOWN_CHANNEL)
+    return ProfileError(
+        f"no output channel {name!r}; the output channels are {shown}",
+        where=where,
+        code=UNKNOWN_CHANNEL,
+    )
 
 
 def parse_profile(value: object, where: str) -> OutputProfile:
     """An output profile in the JSON form of ``start.output``, validated by the codec."""
-    payload = {"v": 1, "type": "start", "id": "preset", "engine": "preset",
-               "character": "preset", "output": value}
+    payload = {
+        "v": 1,
+        "type": "start",
+        "id": "preset",
+        "engine": "preset",
+        "character": "preset",
+        "output": value,
+    }
     decoded = decode(json.dumps(payload), "json", sender="client")
     if isinstance(decoded, ProtocolError) or not isinstance(decoded, Start):
         reason = str(decoded) if isinstance(decoded, ProtocolError) else "not a profile"
-        raise LipstreamError(f"invalid output profile: {reason}", where=where,
-                             code="invalid_setting")
+        raise LipstreamError(
+            f"invalid output profile: {reason}", where=where, code="invalid_setting"
+        )
     assert decoded.output is not None
     return decoded.output
 
@@ -237,9 +263,13 @@ def load_presets(path: Path) -> dict[str, OutputProfile]:
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as error:
-        raise LipstreamError(f"cannot read output profiles: {error}", where=str(path),
-                             code="invalid_setting") from None
+        raise LipstreamError(
+            f"cannot read output profiles: {error}", where=str(path), code="invalid_setting"
+        ) from None
     if not isinstance(data, Mapping):
-        raise LipstreamError("must be a JSON object mapping characters to output profiles",
-                             where=str(path), code="invalid_setting")
+        raise LipstreamError(
+            "must be a JSON object mapping characters to output profiles",
+            where=str(path),
+            code="invalid_setting",
+        )
     return {str(name): parse_profile(value, f"{path}: {name}") for name, value in data.items()}

@@ -42,10 +42,10 @@ from lipstream_client.errors import (
 from lipstream_client.messages import DoneReason, JsonValue
 
 from ..audio import Audio
-from ..engines.base import EMOTIONS, Synthesizer, frame_count, frames_before
+from ..engines.base import Synthesizer, frame_count, frames_before
 from ..errors import LipstreamError
 from ..phonemes import normalize_phoneme
-from ..timeline import PhonemeSpan
+from ..timeline import EMOTIONS, PhonemeSpan
 from .outgoing import Outgoing, RequestClock
 from .profiles import ResolvedProfile
 
@@ -60,8 +60,14 @@ class RequestError(LipstreamError):
 
     code = INVALID_REQUEST
 
-    def __init__(self, message: str, *, code: str, where: str | None = None,
-                 details: Mapping[str, JsonValue] | None = None) -> None:
+    def __init__(
+        self,
+        message: str,
+        *,
+        code: str,
+        where: str | None = None,
+        details: Mapping[str, JsonValue] | None = None,
+    ) -> None:
         super().__init__(message, where=where, code=code)
         self.details = dict(details or {})
 
@@ -117,8 +123,7 @@ class RequestSpec:
 class ActiveRequest:
     """One request between ``ready`` and ``done``."""
 
-    def __init__(self, spec: RequestSpec, synthesizer: Synthesizer,
-                 limits: RequestLimits) -> None:
+    def __init__(self, spec: RequestSpec, synthesizer: Synthesizer, limits: RequestLimits) -> None:
         self.spec = spec
         self.synthesizer = synthesizer
         self.limits = limits
@@ -144,10 +149,15 @@ class ActiveRequest:
         if self.n_phonemes + len(items) > self.limits.max_phonemes:
             raise RequestError(
                 f"the request would hold {self.n_phonemes + len(items)} phonemes; the server "
-                f"allows {self.limits.max_phonemes} per request", code=TOO_MANY_PHONEMES,
-                where="items", details={"max_phonemes": self.limits.max_phonemes})
-        spans = [self._span(item, f"items[{index}]", self.phonemes_end if index == 0 else None)
-                 for index, item in enumerate(items)]
+                f"allows {self.limits.max_phonemes} per request",
+                code=TOO_MANY_PHONEMES,
+                where="items",
+                details={"max_phonemes": self.limits.max_phonemes},
+            )
+        spans = [
+            self._span(item, f"items[{index}]", self.phonemes_end if index == 0 else None)
+            for index, item in enumerate(items)
+        ]
         self._feed(spans, None, INVALID_REQUEST)
         self.n_phonemes += len(spans)
         self.ends.extend(span.end for span in spans)
@@ -157,32 +167,48 @@ class ActiveRequest:
 
     def _span(self, item: PhonemeItem, where: str, previous_end: float | None) -> PhonemeSpan:
         if previous_end is not None and item.start < previous_end - TIME_TOLERANCE_S:
-            raise RequestError(f"starts at {item.start} s, before the previous phoneme of this "
-                               f"request ends at {previous_end} s", code=NON_MONOTONIC_TIMES,
-                               where=f"{where}.start")
+            raise RequestError(
+                f"starts at {item.start} s, before the previous phoneme of this "
+                f"request ends at {previous_end} s",
+                code=NON_MONOTONIC_TIMES,
+                where=f"{where}.start",
+            )
         try:
             phoneme = normalize_phoneme(item.phoneme, self.spec.phoneme_source, f"{where}.phoneme")
         except LipstreamError as error:
-            raise RequestError(error.message, code=protocol_code(error, UNKNOWN_PHONEME),
-                               where=error.where) from None
+            raise RequestError(
+                error.message, code=protocol_code(error, UNKNOWN_PHONEME), where=error.where
+            ) from None
         if item.emotion is not None and item.emotion not in EMOTIONS:
-            raise RequestError(f"unknown emotion {item.emotion!r}; known: {', '.join(EMOTIONS)}",
-                               code=UNKNOWN_EMOTION, where=f"{where}.emotion")
+            raise RequestError(
+                f"unknown emotion {item.emotion!r}; known: {', '.join(EMOTIONS)}",
+                code=UNKNOWN_EMOTION,
+                where=f"{where}.emotion",
+            )
         if frame_count(item.end, self.spec.fps) > self.limits.max_frames:
             raise RequestError(
                 f"ends at {item.end} s, beyond the server's limit of {self.limits.max_frames} "
-                f"frames per request at {self.spec.fps:g} fps", code=INVALID_TIMES,
-                where=f"{where}.end", details={"max_frames": self.limits.max_frames})
+                f"frames per request at {self.spec.fps:g} fps",
+                code=INVALID_TIMES,
+                where=f"{where}.end",
+                details={"max_frames": self.limits.max_frames},
+            )
         return PhonemeSpan(phoneme, item.start, item.end, item.emotion)
 
     def add_audio(self, chunk: AudioChunk, now: float) -> list[Outgoing]:
         if self.audio_rate is not None and chunk.sample_rate != self.audio_rate:
-            raise RequestError(f"{chunk.sample_rate} Hz follows audio at {self.audio_rate} Hz "
-                               f"in this request", code=INVALID_AUDIO, where="sample_rate")
+            raise RequestError(
+                f"{chunk.sample_rate} Hz follows audio at {self.audio_rate} Hz in this request",
+                code=INVALID_AUDIO,
+                where="sample_rate",
+            )
         limit_s = self.limits.max_frames / self.spec.fps
         if self.audio_s + chunk.duration > limit_s:
-            raise RequestError(f"the request's audio would exceed the server's limit of "
-                               f"{limit_s:g} s", code=INVALID_AUDIO, where="pcm16")
+            raise RequestError(
+                f"the request's audio would exceed the server's limit of {limit_s:g} s",
+                code=INVALID_AUDIO,
+                where="pcm16",
+            )
         self.audio_rate = chunk.sample_rate
         self.audio_s += chunk.duration
         if not self.spec.uses_audio:
@@ -200,15 +226,17 @@ class ActiveRequest:
         try:
             self.synthesizer.feed(spans, audio)
         except LipstreamError as error:
-            raise RequestError(error.message, code=protocol_code(error, fallback),
-                               where=error.where) from None
+            raise RequestError(
+                error.message, code=protocol_code(error, fallback), where=error.where
+            ) from None
 
     def _finish(self) -> np.ndarray:
         try:
             return self.synthesizer.finish()
         except LipstreamError as error:
-            raise RequestError(error.message, code=protocol_code(error, INVALID_REQUEST),
-                               where=error.where) from None
+            raise RequestError(
+                error.message, code=protocol_code(error, INVALID_REQUEST), where=error.where
+            ) from None
 
     # ---- endings --------------------------------------------------------------------------
 
@@ -243,9 +271,9 @@ class ActiveRequest:
             return self.spec.rest.astype(np.float64)
         index = min(index, total - 1)
         if index >= base:
-            return unsent[index - base].astype(np.float64)
+            return np.asarray(unsent[index - base], dtype=np.float64)
         sent = np.concatenate(self.sent)
-        return sent[index].astype(np.float64)
+        return np.asarray(sent[index], dtype=np.float64)
 
     # ---- output ---------------------------------------------------------------------------
 
@@ -266,15 +294,19 @@ class ActiveRequest:
         self.next_frame += len(rows)
         return self._blocks(rows, first, None, now)
 
-    def _blocks(self, rows: np.ndarray, first: int, covered_at: float | None,
-                now: float | None = None) -> list[Outgoing]:
+    def _blocks(
+        self, rows: np.ndarray, first: int, covered_at: float | None, now: float | None = None
+    ) -> list[Outgoing]:
         spec = self.spec
         blocks: list[Outgoing] = []
         for offset in range(0, len(rows), self.rows_per_message):
-            chunk = rows[offset: offset + self.rows_per_message]
+            chunk = rows[offset : offset + self.rows_per_message]
             index = first + offset
-            received = covered_at if covered_at is not None else \
-                self.coverage.received_at(index / spec.fps)
+            received = (
+                covered_at
+                if covered_at is not None
+                else self.coverage.received_at(index / spec.fps)
+            )
             data = np.ascontiguousarray(chunk, dtype="<f4").tobytes()
             frames = Frames(spec.id, self.seq, index, spec.fps, spec.profile.n_channels, data)
             self.seq += 1
@@ -287,7 +319,7 @@ class ActiveRequest:
 
 
 def _smoothstep(u: np.ndarray) -> np.ndarray:
-    return u * u * (3.0 - 2.0 * u)
+    return np.asarray(u * u * (3.0 - 2.0 * u))
 
 
 def json_safe(stats: Mapping[str, Any]) -> dict[str, JsonValue]:

@@ -53,20 +53,39 @@ from .session import Session, SessionLimits
 from .state import ServerState
 
 REQUEST_ID = "synthesize"
-START_FIELDS = ("engine", "character", "fps", "channels", "output", "emotion",
-                "latency_budget_ms", "options", "phoneme_source")
+START_FIELDS = (
+    "engine",
+    "character",
+    "fps",
+    "channels",
+    "output",
+    "emotion",
+    "latency_budget_ms",
+    "options",
+    "phoneme_source",
+)
 BODY_FIELDS = (*START_FIELDS, "items", "audio")
 MEDIA_TYPES: dict[str, Encoding] = {
-    "application/json": "json", "application/msgpack": "msgpack",
-    "application/x-msgpack": "msgpack", "application/vnd.msgpack": "msgpack",
+    "application/json": "json",
+    "application/msgpack": "msgpack",
+    "application/x-msgpack": "msgpack",
+    "application/vnd.msgpack": "msgpack",
 }
-RESPONSE_TYPES: dict[Encoding, str] = {"json": "application/json",
-                                       "msgpack": "application/msgpack"}
+RESPONSE_TYPES: dict[Encoding, str] = {"json": "application/json", "msgpack": "application/msgpack"}
 STATUS = {
-    MALFORMED: 400, INVALID_MESSAGE: 400, "invalid_times": 400, "non_monotonic_times": 400,
-    "invalid_audio": 400, "unsupported_version": 400, "unknown_type": 400,
-    "unknown_engine": 404, "unknown_character": 404, MESSAGE_TOO_LARGE: 413,
-    UNAUTHORIZED: 401, "unsupported_media_type": 415, "not_acceptable": 406,
+    MALFORMED: 400,
+    INVALID_MESSAGE: 400,
+    "invalid_times": 400,
+    "non_monotonic_times": 400,
+    "invalid_audio": 400,
+    "unsupported_version": 400,
+    "unknown_type": 400,
+    "unknown_engine": 404,
+    "unknown_character": 404,
+    MESSAGE_TOO_LARGE: 413,
+    UNAUTHORIZED: 401,
+    "unsupported_media_type": 415,
+    "not_acceptable": 406,
     INTERNAL_ERROR: 500,
 }
 UNPROCESSABLE = 422
@@ -75,8 +94,13 @@ UNPROCESSABLE = 422
 class HttpError(Exception):
     """An error response: protocol-style ``code``, HTTP ``status``, ``details``."""
 
-    def __init__(self, code: str, message: str, status: int | None = None,
-                 details: Mapping[str, Any] | None = None) -> None:
+    def __init__(
+        self,
+        code: str,
+        message: str,
+        status: int | None = None,
+        details: Mapping[str, Any] | None = None,
+    ) -> None:
         super().__init__(message)
         self.code = code
         self.message = message
@@ -102,11 +126,13 @@ async def synthesize(request: Request, state: ServerState) -> Response:
         response_encoding = _response_encoding(request, request_encoding)
         _authorize(request, state)
         body = await _read_body(request, state.settings.max_body_bytes)
-        messages = _messages(_parse(body, request_encoding), request_encoding,
-                             state.settings.max_body_bytes)
+        messages = _messages(
+            _parse(body, request_encoding), request_encoding, state.settings.max_body_bytes
+        )
         loop = asyncio.get_running_loop()
-        response = await loop.run_in_executor(state.executor, _answer, messages, state,
-                                              response_encoding)
+        response = await loop.run_in_executor(
+            state.executor, _answer, messages, state, response_encoding
+        )
     except HttpError as error:
         state.metrics.errors.labels(error.code).inc()
         return _error_response(error, response_encoding)
@@ -123,8 +149,10 @@ def _answer(messages: list[Message], state: ServerState, encoding: Encoding) -> 
 def _request_encoding(request: Request) -> Encoding:
     media = request.headers.get("content-type", "").split(";")[0].strip().lower()
     if media not in MEDIA_TYPES:
-        raise HttpError("unsupported_media_type", f"Content-Type must be one of "
-                        f"{', '.join(MEDIA_TYPES)}, got {media or 'none'!r}")
+        raise HttpError(
+            "unsupported_media_type",
+            f"Content-Type must be one of {', '.join(MEDIA_TYPES)}, got {media or 'none'!r}",
+        )
     return MEDIA_TYPES[media]
 
 
@@ -135,22 +163,24 @@ def _response_encoding(request: Request, default: Encoding) -> Encoding:
         return default
     for part in accept.split(","):
         media, *parameters = (piece.strip().lower() for piece in part.split(";"))
-        if any(parameter.replace(" ", "") in ("q=0", "q=0.0", "q=0.00", "q=0.000")
-               for parameter in parameters):
+        if any(
+            parameter.replace(" ", "") in ("q=0", "q=0.0", "q=0.00", "q=0.000")
+            for parameter in parameters
+        ):
             continue
         if media in ("*/*", "application/*"):
             return default
         if media in MEDIA_TYPES:
             return MEDIA_TYPES[media]
-    raise HttpError("not_acceptable", "Accept must allow application/json or "
-                    "application/msgpack")
+    raise HttpError("not_acceptable", "Accept must allow application/json or application/msgpack")
 
 
 def _authorize(request: Request, state: ServerState) -> None:
     token = bearer_token(request.headers.get("authorization"), request.scope["query_string"])
     if not token_accepted(token, state.settings.auth_tokens):
-        raise HttpError(UNAUTHORIZED, "a valid bearer token is required "
-                        "(Authorization: Bearer <token>)")
+        raise HttpError(
+            UNAUTHORIZED, "a valid bearer token is required (Authorization: Bearer <token>)"
+        )
 
 
 async def _read_body(request: Request, limit: int) -> bytes:
@@ -168,8 +198,11 @@ async def _read_body(request: Request, limit: int) -> bytes:
 
 
 def _too_large(size: int, limit: int) -> HttpError:
-    return HttpError(MESSAGE_TOO_LARGE, f"body of at least {size} bytes exceeds the limit of "
-                     f"{limit} bytes", details={"max_body_bytes": limit})
+    return HttpError(
+        MESSAGE_TOO_LARGE,
+        f"body of at least {size} bytes exceeds the limit of {limit} bytes",
+        details={"max_body_bytes": limit},
+    )
 
 
 def _parse(body: bytes, encoding: Encoding) -> dict[str, Any]:
@@ -184,8 +217,10 @@ def _parse(body: bytes, encoding: Encoding) -> dict[str, Any]:
         raise HttpError(INVALID_MESSAGE, "the body must be an object")
     unknown = sorted(str(key) for key in parsed if key not in BODY_FIELDS)
     if unknown:
-        raise HttpError(INVALID_MESSAGE, f"unknown field(s) {', '.join(unknown)}; expected "
-                        f"{', '.join(BODY_FIELDS)}")
+        raise HttpError(
+            INVALID_MESSAGE,
+            f"unknown field(s) {', '.join(unknown)}; expected {', '.join(BODY_FIELDS)}",
+        )
     if "items" not in parsed:
         raise HttpError(INVALID_MESSAGE, "items: missing (the utterance's phonemes)")
     return parsed
@@ -210,8 +245,11 @@ def _messages(body: dict[str, Any], encoding: Encoding, limit: int) -> list[Mess
 
 def _decoded(kind: str, fields: dict[str, Any], encoding: Encoding, limit: int) -> Message:
     payload = {"v": 1, "type": kind, "id": REQUEST_ID, **fields}
-    wire: bytes | str = msgpack.packb(payload, use_bin_type=True) if encoding == "msgpack" \
+    wire: bytes | str = (
+        msgpack.packb(payload, use_bin_type=True)
+        if encoding == "msgpack"
         else json.dumps(payload, allow_nan=False)
+    )
     decoded = decode(wire, encoding, max_size=2 * limit, sender="client")
     if isinstance(decoded, ProtocolError):
         prefix = "audio." if kind == "audio" else ""
@@ -223,8 +261,12 @@ def _decoded(kind: str, fields: dict[str, Any], encoding: Encoding, limit: int) 
 def _run(messages: list[Message], state: ServerState) -> Synthesis:
     """Play the messages through a one-request session (in the thread pool)."""
     settings = state.settings
-    limits = SessionLimits(1, RequestLimits(settings.max_phonemes_per_request,
-                                            settings.max_request_frames, settings.return_ms))
+    limits = SessionLimits(
+        1,
+        RequestLimits(
+            settings.max_phonemes_per_request, settings.max_request_frames, settings.return_ms
+        ),
+    )
     session = Session(state.catalog, limits)
     ready: Ready | None = None
     done: Done | None = None
@@ -250,12 +292,19 @@ def _run(messages: list[Message], state: ServerState) -> Synthesis:
 def _response(result: Synthesis, encoding: Encoding) -> Response:
     ready, frames = result.ready, result.frames
     body: dict[str, Any] = {
-        "engine": ready.engine, "character": ready.character, "fps": ready.fps,
-        "channels": list(ready.channels), "fidelity": ready.fidelity,
-        "lookahead_ms": ready.lookahead_ms, "emotion": ready.emotion,
-        "latency_budget_ms": ready.latency_budget_ms, "options": dict(ready.options),
-        "phoneme_source": ready.phoneme_source, "first_frame": 0,
-        "n_frames": len(frames), "n_channels": len(ready.channels),
+        "engine": ready.engine,
+        "character": ready.character,
+        "fps": ready.fps,
+        "channels": list(ready.channels),
+        "fidelity": ready.fidelity,
+        "lookahead_ms": ready.lookahead_ms,
+        "emotion": ready.emotion,
+        "latency_budget_ms": ready.latency_budget_ms,
+        "options": dict(ready.options),
+        "phoneme_source": ready.phoneme_source,
+        "first_frame": 0,
+        "n_frames": len(frames),
+        "n_channels": len(ready.channels),
         "stats": {"frames": result.done.stats.frames, "engine": dict(result.done.stats.engine)},
     }
     body = {key: value for key, value in body.items() if value is not None}
@@ -263,8 +312,10 @@ def _response(result: Synthesis, encoding: Encoding) -> Response:
         body["data"] = np.ascontiguousarray(frames, dtype="<f4").tobytes()
         return Response(msgpack.packb(body, use_bin_type=True), media_type=RESPONSE_TYPES[encoding])
     body["data"] = [[float(value) for value in row] for row in frames.astype(str)]
-    return Response(json.dumps(body, allow_nan=False, separators=(",", ":")),
-                    media_type=RESPONSE_TYPES[encoding])
+    return Response(
+        json.dumps(body, allow_nan=False, separators=(",", ":")),
+        media_type=RESPONSE_TYPES[encoding],
+    )
 
 
 def _error_response(error: HttpError, encoding: Encoding) -> Response:
@@ -273,7 +324,15 @@ def _error_response(error: HttpError, encoding: Encoding) -> Response:
         content["details"] = error.details
     headers = {"WWW-Authenticate": "Bearer"} if error.status == 401 else None
     if encoding == "msgpack":
-        return Response(msgpack.packb({"error": content}, use_bin_type=True), error.status,
-                        headers=headers, media_type=RESPONSE_TYPES[encoding])
-    return Response(json.dumps({"error": content}), error.status, headers=headers,
-                    media_type=RESPONSE_TYPES[encoding])
+        return Response(
+            msgpack.packb({"error": content}, use_bin_type=True),
+            error.status,
+            headers=headers,
+            media_type=RESPONSE_TYPES[encoding],
+        )
+    return Response(
+        json.dumps({"error": content}),
+        error.status,
+        headers=headers,
+        media_type=RESPONSE_TYPES[encoding],
+    )

@@ -59,9 +59,16 @@ def serve(models: Path, host: str, port: int, server: ServerSettings) -> None:
     """Serve ``models`` until SIGTERM or SIGINT, draining first (see ``lifecycle``)."""
     if server.workers > 1:
         os.environ["LIPSTREAM_MODELS"] = str(models)
-        uvicorn.run(APP_FACTORY, factory=True, host=host, port=port, workers=server.workers,
-                    **uvicorn_options(server))
+        uvicorn.run(
+            APP_FACTORY,
+            factory=True,
+            host=host,
+            port=port,
+            workers=server.workers,
+            **uvicorn_options(server),
+        )
         return
-    config = uvicorn.Config(create_app(models, server), host=host, port=port,
-                            **uvicorn_options(server))
+    config = uvicorn.Config(
+        create_app(models, server), host=host, port=port, **uvicorn_options(server)
+    )
     uvicorn.Server(config).run()

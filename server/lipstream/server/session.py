@@ -52,9 +52,10 @@ from lipstream_client.errors import (
 )
 from lipstream_client.messages import DoneReason, JsonValue
 
-from ..engines.base import EMOTIONS, Model, Rung, SynthesisRequest
+from ..engines.base import Model, Rung, SynthesisRequest
 from ..errors import LipstreamError
 from ..phonemes import SOURCES
+from ..timeline import EMOTIONS
 from .budget import BudgetInfeasible, RungEstimate, choose_rung, lookahead_ms
 from .calibration import PHONEME_S
 from .catalog import Catalog
@@ -134,15 +135,23 @@ class Session:
             return self._dispatch(received, now)
         except Exception:
             identifier = getattr(received, "id", None)
-            logger.exception("unexpected fault handling %s for request %r",
-                             type(received).__name__, identifier)
+            logger.exception(
+                "unexpected fault handling %s for request %r", type(received).__name__, identifier
+            )
             request = self.requests.get(identifier) if isinstance(identifier, str) else None
             if request is not None:
                 self._forget(request.id)
-            return [_error(INTERNAL_ERROR, "an unexpected server fault ended this request"
-                           if identifier else "an unexpected server fault",
-                           identifier if isinstance(identifier, str) else None, fatal=True,
-                           clock=request.spec.clock if request is not None else None)]
+            return [
+                _error(
+                    INTERNAL_ERROR,
+                    "an unexpected server fault ended this request"
+                    if identifier
+                    else "an unexpected server fault",
+                    identifier if isinstance(identifier, str) else None,
+                    fatal=True,
+                    clock=request.spec.clock if request is not None else None,
+                )
+            ]
 
     # ---- dispatch -------------------------------------------------------------------------
 
@@ -165,19 +174,33 @@ class Session:
             outgoing = self._apply(request, received, now)
         except RequestError as error:
             self._forget(request.id)
-            return [_error(error.code, _located(error), request.id, fatal=True,
-                           details=error.details, clock=request.spec.clock)]
+            return [
+                _error(
+                    error.code,
+                    _located(error),
+                    request.id,
+                    fatal=True,
+                    details=error.details,
+                    clock=request.spec.clock,
+                )
+            ]
         except LipstreamError as error:
             self._forget(request.id)
-            return [_error(protocol_code(error, INVALID_REQUEST), _located(error), request.id,
-                           fatal=True, clock=request.spec.clock)]
+            return [
+                _error(
+                    protocol_code(error, INVALID_REQUEST),
+                    _located(error),
+                    request.id,
+                    fatal=True,
+                    clock=request.spec.clock,
+                )
+            ]
         if isinstance(received, (End, Cancel, Interrupt)):
             self._forget(request.id)
             self._remember(request.id, _REASONS[type(received)])
         return outgoing
 
-    def _apply(self, request: ActiveRequest, received: RequestInput,
-               now: float) -> list[Outgoing]:
+    def _apply(self, request: ActiveRequest, received: RequestInput, now: float) -> list[Outgoing]:
         if isinstance(received, Phonemes):
             return request.add_phonemes(received.items, now)
         if isinstance(received, AudioChunk):
@@ -193,10 +216,20 @@ class Session:
         if reason == "interrupt":
             return []
         if reason == "end":
-            return [_error(REQUEST_FINISHED, f"request {received.id!r} has already ended; "
-                           f"this {received.type} was dropped", received.id)]
-        return [_error(UNKNOWN_REQUEST, f"no active request {received.id!r} on this "
-                       f"connection; send start first", received.id)]
+            return [
+                _error(
+                    REQUEST_FINISHED,
+                    f"request {received.id!r} has already ended; this {received.type} was dropped",
+                    received.id,
+                )
+            ]
+        return [
+            _error(
+                UNKNOWN_REQUEST,
+                f"no active request {received.id!r} on this connection; send start first",
+                received.id,
+            )
+        ]
 
     def _forget(self, identifier: str) -> None:
         self.requests.pop(identifier, None)
@@ -212,24 +245,51 @@ class Session:
 
     def _start(self, start: Start, now: float) -> list[Outgoing]:
         if start.id in self.requests:
-            return [_error(DUPLICATE_REQUEST, f"request {start.id!r} is active; this start "
-                           f"was dropped and that request continues", start.id)]
+            return [
+                _error(
+                    DUPLICATE_REQUEST,
+                    f"request {start.id!r} is active; this start "
+                    f"was dropped and that request continues",
+                    start.id,
+                )
+            ]
         if self.draining:
-            return [_error(SHUTTING_DOWN, "the server is shutting down and accepts no new "
-                           "requests; reconnect to another instance", start.id, fatal=True)]
+            return [
+                _error(
+                    SHUTTING_DOWN,
+                    "the server is shutting down and accepts no new "
+                    "requests; reconnect to another instance",
+                    start.id,
+                    fatal=True,
+                )
+            ]
         if len(self.requests) >= self.limits.max_requests:
-            return [_error(TOO_MANY_REQUESTS, f"this connection already has "
-                           f"{len(self.requests)} active requests, the server's maximum",
-                           start.id, fatal=True,
-                           details={"max_requests": self.limits.max_requests})]
+            return [
+                _error(
+                    TOO_MANY_REQUESTS,
+                    f"this connection already has "
+                    f"{len(self.requests)} active requests, the server's maximum",
+                    start.id,
+                    fatal=True,
+                    details={"max_requests": self.limits.max_requests},
+                )
+            ]
         try:
             request, ready, estimate = self._open(start, now)
         except BudgetInfeasible as error:
-            return [_error(error.code, _located(error), start.id, fatal=True,
-                           details={"min_budget_ms": error.min_budget_ms})]
+            return [
+                _error(
+                    error.code,
+                    _located(error),
+                    start.id,
+                    fatal=True,
+                    details={"min_budget_ms": error.min_budget_ms},
+                )
+            ]
         except LipstreamError as error:
-            return [_error(protocol_code(error, INVALID_REQUEST), _located(error), start.id,
-                           fatal=True)]
+            return [
+                _error(protocol_code(error, INVALID_REQUEST), _located(error), start.id, fatal=True)
+            ]
         self.requests[start.id] = request
         self.per_phoneme_ms[start.id] = estimate.per_phoneme_ms
         self.ended.pop(start.id, None)
@@ -240,43 +300,68 @@ class Session:
         model = catalog.model(start.engine, start.character)
         source = _phoneme_source(start.phoneme_source)
         if start.emotion is not None and start.emotion not in EMOTIONS:
-            raise LipstreamError(f"unknown emotion {start.emotion!r}; known: "
-                                 f"{', '.join(EMOTIONS)}", where="emotion", code=UNKNOWN_EMOTION)
+            raise LipstreamError(
+                f"unknown emotion {start.emotion!r}; known: {', '.join(EMOTIONS)}",
+                where="emotion",
+                code=UNKNOWN_EMOTION,
+            )
         estimate = choose_rung(catalog.ladder(model), start.latency_budget_ms)
-        profile = resolve_profile(model.channels,
-                                  requested_profile(start, catalog.preset(start.character)),
-                                  lambda: catalog.projector(model))
-        options = _merged_options(start.options, estimate.rung.options,
-                                  budgeted=start.latency_budget_ms is not None)
+        profile = resolve_profile(
+            model.channels,
+            requested_profile(start, catalog.preset(start.character)),
+            lambda: catalog.projector(model),
+        )
+        options = _merged_options(
+            start.options, estimate.rung.options, budgeted=start.latency_budget_ms is not None
+        )
         synthesizer = model.start(SynthesisRequest(start.fps, start.emotion, options))
         rest = profile.apply(catalog.rest_pose(model, start.emotion)[None])[0]
         clock = RequestClock(model.manifest.engine, now, start.latency_budget_ms)
-        spec = RequestSpec(start.id, model.manifest.engine, start.fps, source, model.uses_audio,
-                           profile, rest, clock)
+        spec = RequestSpec(
+            start.id,
+            model.manifest.engine,
+            start.fps,
+            source,
+            model.uses_audio,
+            profile,
+            rest,
+            clock,
+        )
         fidelity, lookahead = self._fidelity(model, estimate, options)
         ready = Ready(
-            id=start.id, engine=model.manifest.engine, character=model.name, fps=start.fps,
-            channels=profile.channels, lookahead_ms=lookahead,
-            fidelity=fidelity, emotion=start.emotion,
-            latency_budget_ms=start.latency_budget_ms, options=options, phoneme_source=source,
+            id=start.id,
+            engine=model.manifest.engine,
+            character=model.name,
+            fps=start.fps,
+            channels=profile.channels,
+            lookahead_ms=lookahead,
+            fidelity=fidelity,
+            emotion=start.emotion,
+            latency_budget_ms=start.latency_budget_ms,
+            options=options,
+            phoneme_source=source,
         )
         return ActiveRequest(spec, synthesizer, self.limits.request), ready, estimate
 
-    def _fidelity(self, model: Model, estimate: RungEstimate,
-                  options: Mapping[str, JsonValue]) -> tuple[str, float]:
+    def _fidelity(
+        self, model: Model, estimate: RungEstimate, options: Mapping[str, JsonValue]
+    ) -> tuple[str, float]:
         """The rung's name and lookahead (ms), or, when the client's options change one the
         rung pins (possible without a budget), ``custom`` and the lookahead of those options
         (a frame that may wait for the end of the input: the longest request)."""
-        if all(options.get(key) == _json_value(value)
-               for key, value in estimate.rung.options.items()):
+        if all(
+            options.get(key) == _json_value(value) for key, value in estimate.rung.options.items()
+        ):
             return estimate.rung.name, estimate.lookahead_ms
         settings = self.catalog.settings
         lookahead = model.lookahead_for(options)
         if lookahead is None:
-            return CUSTOM_FIDELITY, min(_LONGEST_WAIT_MS, float(
-                settings.max_phonemes_per_request * settings.max_phoneme_ms))
-        return CUSTOM_FIDELITY, lookahead_ms(Rung(CUSTOM_FIDELITY, lookahead),
-                                             settings.max_phoneme_ms)
+            return CUSTOM_FIDELITY, min(
+                _LONGEST_WAIT_MS, float(settings.max_phonemes_per_request * settings.max_phoneme_ms)
+            )
+        return CUSTOM_FIDELITY, lookahead_ms(
+            Rung(CUSTOM_FIDELITY, lookahead), settings.max_phoneme_ms
+        )
 
 
 _REASONS: dict[type, DoneReason] = {End: "end", Cancel: "cancel", Interrupt: "interrupt"}
@@ -285,14 +370,17 @@ _REASONS: dict[type, DoneReason] = {End: "end", Cancel: "cancel", Interrupt: "in
 def _phoneme_source(requested: str | None) -> str:
     source = requested or DEFAULT_PHONEME_SOURCE
     if source not in SOURCES:
-        raise LipstreamError(f"unknown phoneme notation {source!r}; expected one of "
-                             f"{', '.join(SOURCES)}", where="phoneme_source",
-                             code=UNKNOWN_PHONEME_SOURCE)
+        raise LipstreamError(
+            f"unknown phoneme notation {source!r}; expected one of {', '.join(SOURCES)}",
+            where="phoneme_source",
+            code=UNKNOWN_PHONEME_SOURCE,
+        )
     return source
 
 
-def _merged_options(client: Mapping[str, JsonValue], rung: Mapping[str, Any],
-                    budgeted: bool) -> dict[str, JsonValue]:
+def _merged_options(
+    client: Mapping[str, JsonValue], rung: Mapping[str, Any], budgeted: bool
+) -> dict[str, JsonValue]:
     """Engine options: with a budget the rung's options win (they are what meets it);
     without one the client's do."""
     selected = {key: _json_value(value) for key, value in rung.items()}
@@ -315,9 +403,14 @@ def _located(error: LipstreamError) -> str:
     return f"{error.where}: {error.message}" if error.where else error.message
 
 
-def _error(code: str, message: str, identifier: str | None, fatal: bool = False,
-           details: Mapping[str, JsonValue] | None = None,
-           clock: RequestClock | None = None) -> Outgoing:
+def _error(
+    code: str,
+    message: str,
+    identifier: str | None,
+    fatal: bool = False,
+    details: Mapping[str, JsonValue] | None = None,
+    clock: RequestClock | None = None,
+) -> Outgoing:
     """An error message; ``clock`` is the request's when the error ends an active request."""
     if len(message) > _MAX_TEXT:
         message = message[: _MAX_TEXT - len(_CLIPPED)] + _CLIPPED

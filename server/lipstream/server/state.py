@@ -37,6 +37,7 @@ class ServerState:
         settings = self.settings
         return SessionLimits(
             max_requests=settings.max_requests_per_session,
-            request=RequestLimits(settings.max_phonemes_per_request,
-                                  settings.max_request_frames, settings.return_ms),
+            request=RequestLimits(
+                settings.max_phonemes_per_request, settings.max_request_frames, settings.return_ms
+            ),
         )

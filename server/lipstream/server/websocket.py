@@ -83,8 +83,10 @@ async def stream_endpoint(websocket: WebSocket) -> None:
     refusal = _refusal(websocket, state)
     connection = Connection(websocket, encoding, state)
     if refusal is None and not state.lifecycle.admit(connection):
-        busy = (f"the server is at its limit of {state.settings.max_sessions} sessions; "
-                "retry with exponential backoff")
+        busy = (
+            f"the server is at its limit of {state.settings.max_sessions} sessions; "
+            "retry with exponential backoff"
+        )
         refusal = (SERVER_BUSY, busy)
     try:
         await websocket.accept(subprotocol=subprotocol)
@@ -107,15 +109,18 @@ def _refusal(websocket: WebSocket, state: ServerState) -> tuple[str, str] | None
         return ORIGIN_NOT_ALLOWED, "this Origin may not use the server"
     token = bearer_token(websocket.headers.get("authorization"), websocket.scope["query_string"])
     if not token_accepted(token, settings.auth_tokens):
-        return UNAUTHORIZED, ("a valid bearer token is required (Authorization: Bearer <token>, "
-                              "or ?access_token=<token>)")
+        return UNAUTHORIZED, (
+            "a valid bearer token is required (Authorization: Bearer <token>, "
+            "or ?access_token=<token>)"
+        )
     if state.lifecycle.draining:
         return SHUTTING_DOWN, "the server is shutting down; connect to another instance"
     return None
 
 
-async def _refuse(websocket: WebSocket, encoding: Encoding, code: str, message: str,
-                  state: ServerState) -> None:
+async def _refuse(
+    websocket: WebSocket, encoding: Encoding, code: str, message: str, state: ServerState
+) -> None:
     payload = encode(ErrorMessage(code, message, None, True), encoding, validate=False)
     close_code = ERROR_CODES[code].close_code or CloseCode.POLICY_VIOLATION
     try:
@@ -143,8 +148,9 @@ class Connection:
         self.settings = state.settings
         self.metrics = state.metrics
         self.session = Session(state.catalog, state.session_limits)
-        self.bucket = TokenBucket(self.settings.message_rate, self.settings.message_burst,
-                                  time.monotonic())
+        self.bucket = TokenBucket(
+            self.settings.message_rate, self.settings.message_burst, time.monotonic()
+        )
         self.loop = asyncio.get_running_loop()
         self.deadline = SendDeadline(self.loop, self.settings.send_timeout_s)
         self.finished = False
@@ -180,8 +186,9 @@ class Connection:
         except Exception:
             logger.exception("unexpected fault in a WebSocket connection")
             if not self.finished:
-                await self._close(CloseCode.INTERNAL_ERROR, "internal_error",
-                                  "an unexpected server fault")
+                await self._close(
+                    CloseCode.INTERNAL_ERROR, "internal_error", "an unexpected server fault"
+                )
         finally:
             self.deadline.disarm()
             self.session.close()
@@ -191,29 +198,38 @@ class Connection:
         settings = self.settings
         while not self.finished:
             if self.aborted or (self.session.draining and self.session.active_requests == 0):
-                await self._close(CloseCode.GOING_AWAY, SHUTTING_DOWN,
-                                  "the server is shutting down; reconnect to another instance")
+                await self._close(
+                    CloseCode.GOING_AWAY,
+                    SHUTTING_DOWN,
+                    "the server is shutting down; reconnect to another instance",
+                )
                 return
             event = await self._next_event()
             if event is _WAKE:
                 continue
             if event is _IDLE:
-                await self._close(CloseCode.NORMAL, IDLE_TIMEOUT,
-                                  f"no message and no active request for "
-                                  f"{settings.idle_timeout_s:g} s")
+                await self._close(
+                    CloseCode.NORMAL,
+                    IDLE_TIMEOUT,
+                    f"no message and no active request for {settings.idle_timeout_s:g} s",
+                )
                 return
             assert isinstance(event, MutableMapping)
             if event["type"] == "websocket.disconnect":
                 return
             now = time.monotonic()
             if not self.bucket.take(now):
-                await self._close(CloseCode.POLICY_VIOLATION, RATE_LIMITED,
-                                  f"more than {settings.message_rate:g} messages per second "
-                                  f"(bursts of {settings.message_burst})")
+                await self._close(
+                    CloseCode.POLICY_VIOLATION,
+                    RATE_LIMITED,
+                    f"more than {settings.message_rate:g} messages per second "
+                    f"(bursts of {settings.message_burst})",
+                )
                 return
             payload = event["bytes"] if event.get("bytes") is not None else event.get("text", "")
-            decoded = decode(payload, self.encoding, max_size=settings.max_message_bytes,
-                             sender="client")
+            decoded = decode(
+                payload, self.encoding, max_size=settings.max_message_bytes, sender="client"
+            )
             kind = "invalid" if isinstance(decoded, ProtocolError) else decoded.type
             self.metrics.labelled(self.metrics.messages, kind).inc()
             outgoing = await self._handle(decoded, now)
@@ -250,8 +266,9 @@ class Connection:
 
     async def _handle(self, decoded: InputMessage, now: float) -> list[Outgoing]:
         if self.session.estimated_work_ms(decoded) > self.settings.inline_work_ms:
-            return await self.loop.run_in_executor(self.state.executor, self.session.handle,
-                                                   decoded, now)
+            return await self.loop.run_in_executor(
+                self.state.executor, self.session.handle, decoded, now
+            )
         return self.session.handle(decoded, now)
 
     def _track_active(self) -> None:
@@ -328,7 +345,8 @@ class Connection:
             metrics.labelled(metrics.lag, stamped.engine).observe(stamped.lag_s)
         if stamped.first_frame_latency_s is not None:
             metrics.labelled(metrics.first_frame, stamped.engine).observe(
-                stamped.first_frame_latency_s)
+                stamped.first_frame_latency_s
+            )
 
     async def _close_now(self, code: int, reason: str) -> None:
         try:
@@ -348,7 +366,10 @@ def _connection_ending(outgoing: list[Outgoing]) -> tuple[int, str] | None:
         message = item.message
         if isinstance(message, ErrorMessage) and message.fatal and message.id is None:
             info = ERROR_CODES.get(message.code)
-            code = info.close_code if info is not None and info.close_code else \
-                CloseCode.INTERNAL_ERROR
+            code = (
+                info.close_code
+                if info is not None and info.close_code
+                else CloseCode.INTERNAL_ERROR
+            )
             return int(code), message.code
     return None

@@ -35,8 +35,9 @@ def _stream(model: Model, spans: list[PhonemeSpan], cuts: list[int], fps: float)
 
 
 @pytest.mark.parametrize("engine", ENGINES)
-def test_output_shape_dtype_and_channels(engine: str, trained_models: dict[str, Model],
-                                         small_demo_corpus: Corpus) -> None:
+def test_output_shape_dtype_and_channels(
+    engine: str, trained_models: dict[str, Model], small_demo_corpus: Corpus
+) -> None:
     model = trained_models[engine]
     spans = _heldout_spans(small_demo_corpus)
     frames, channels, fps = model.synthesize(spans, fps=60)
@@ -114,10 +115,27 @@ def test_spans_as_tuples_or_mappings_are_equivalent(
 ) -> None:
     model = trained_models[engine]
     spans = _heldout_spans(small_demo_corpus)
-    vowels = {"AA", "AE", "AH", "AO", "AW", "AY", "EH", "ER", "EY", "IH", "IY", "OW", "OY", "UH",
-              "UW"}
-    as_tuples = [(s.phoneme.lower() + ("1" if s.phoneme in vowels else ""), s.start, s.end)
-                 for s in spans]
+    vowels = {
+        "AA",
+        "AE",
+        "AH",
+        "AO",
+        "AW",
+        "AY",
+        "EH",
+        "ER",
+        "EY",
+        "IH",
+        "IY",
+        "OW",
+        "OY",
+        "UH",
+        "UW",
+    }
+    as_tuples = [
+        (s.phoneme.lower() + ("1" if s.phoneme in vowels else ""), s.start, s.end) for s in spans
+    ]
     as_maps = [{"phoneme": s.phoneme, "start": s.start, "end": s.end} for s in spans]
-    np.testing.assert_array_equal(model.synthesize(as_tuples).frames,
-                                  model.synthesize(as_maps).frames)
+    np.testing.assert_array_equal(
+        model.synthesize(as_tuples).frames, model.synthesize(as_maps).frames
+    )

@@ -28,12 +28,27 @@ def _utterance(stem: str, plan: list[tuple[str, float, float, float]]) -> Uttera
 
 @pytest.fixture()
 def corpus() -> Corpus:
-    first = _utterance("a", [("sil", 0.0, 0.2, 0.0), ("AA", 0.2, 0.4, 0.8), ("P", 0.4, 0.5, 0.1),
-                             ("sil", 0.5, 0.7, 0.0)])
-    second = _utterance("b", [("sil", 0.0, 0.1, 0.0), ("AA", 0.1, 0.2, 0.6), ("M", 0.2, 0.4, 0.3),
-                              ("sil", 0.4, 0.6, 0.0)])
-    return Corpus(name="toy", fps=FPS, channels=("jawOpen", "mouthClose"),
-                  utterances=[first, second])
+    first = _utterance(
+        "a",
+        [
+            ("sil", 0.0, 0.2, 0.0),
+            ("AA", 0.2, 0.4, 0.8),
+            ("P", 0.4, 0.5, 0.1),
+            ("sil", 0.5, 0.7, 0.0),
+        ],
+    )
+    second = _utterance(
+        "b",
+        [
+            ("sil", 0.0, 0.1, 0.0),
+            ("AA", 0.1, 0.2, 0.6),
+            ("M", 0.2, 0.4, 0.3),
+            ("sil", 0.4, 0.6, 0.0),
+        ],
+    )
+    return Corpus(
+        name="toy", fps=FPS, channels=("jawOpen", "mouthClose"), utterances=[first, second]
+    )
 
 
 def test_key_poses_are_frame_weighted_viseme_means(corpus: Corpus) -> None:
@@ -41,10 +56,12 @@ def test_key_poses_are_frame_weighted_viseme_means(corpus: Corpus) -> None:
     scheme = get_scheme("oculus15")
     aa = model.poses_[scheme.classes.index("aa")]
     pp = model.poses_[scheme.classes.index("PP")]
-    np.testing.assert_allclose(aa, [(20 * 0.8 + 10 * 0.6) / 30, 2 * (20 * 0.8 + 10 * 0.6) / 30],
-                               rtol=1e-6)
-    np.testing.assert_allclose(pp, [(10 * 0.1 + 20 * 0.3) / 30, 2 * (10 * 0.1 + 20 * 0.3) / 30],
-                               rtol=1e-6)
+    np.testing.assert_allclose(
+        aa, [(20 * 0.8 + 10 * 0.6) / 30, 2 * (20 * 0.8 + 10 * 0.6) / 30], rtol=1e-6
+    )
+    np.testing.assert_allclose(
+        pp, [(10 * 0.1 + 20 * 0.3) / 30, 2 * (10 * 0.1 + 20 * 0.3) / 30], rtol=1e-6
+    )
     unseen = model.poses_[scheme.classes.index("SS")]
     np.testing.assert_allclose(unseen, model.poses_[scheme.classes.index("sil")])
 
@@ -57,7 +74,14 @@ def test_frames_interpolate_linearly_between_phoneme_centres(corpus: Corpus) -> 
     rest = float(model.poses_[scheme.classes.index("sil"), 0])
     spans = [("sil", 0.0, 0.2), ("AA", 0.2, 0.4), ("B", 0.4, 0.6)]
     frames = model.synthesize(spans, fps=20).frames[:, 0]
-    expected = {0: rest, 2: rest, 4: rest + (aa - rest) * (0.2 - 0.1) / 0.2, 6: aa,
-                8: aa + (pp - aa) * (0.4 - 0.3) / 0.2, 10: pp, 12: pp}
+    expected = {
+        0: rest,
+        2: rest,
+        4: rest + (aa - rest) * (0.2 - 0.1) / 0.2,
+        6: aa,
+        8: aa + (pp - aa) * (0.4 - 0.3) / 0.2,
+        10: pp,
+        12: pp,
+    }
     for index, value in expected.items():
         assert frames[index] == pytest.approx(value, abs=1e-6), index

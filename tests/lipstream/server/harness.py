@@ -69,8 +69,7 @@ def serving(models: Path, settings: ServerSettings | None = None) -> Iterator[Se
     config = uvicorn.Config(app, host="127.0.0.1", port=port, **uvicorn_options(settings))
     server = uvicorn.Server(config)
     loop = asyncio.new_event_loop()
-    thread = threading.Thread(target=loop.run_until_complete, args=(server.serve(),),
-                              daemon=True)
+    thread = threading.Thread(target=loop.run_until_complete, args=(server.serve(),), daemon=True)
     thread.start()
     deadline = time.monotonic() + STARTUP_TIMEOUT_S
     while not server.started:
@@ -78,8 +77,9 @@ def serving(models: Path, settings: ServerSettings | None = None) -> Iterator[Se
             raise RuntimeError("the test server did not start")
         time.sleep(0.01)
     try:
-        yield Served(f"http://127.0.0.1:{port}", f"ws://127.0.0.1:{port}/v1/stream", app, loop,
-                     server)
+        yield Served(
+            f"http://127.0.0.1:{port}", f"ws://127.0.0.1:{port}/v1/stream", app, loop, server
+        )
     finally:
         server.should_exit = True
         thread.join(timeout=15)
@@ -110,8 +110,9 @@ class Client:
 
     def _receive(self, timeout: float) -> Message:
         payload = self.connection.recv(timeout=timeout)
-        assert isinstance(payload, bytes) == (self.encoding == "msgpack"), \
+        assert isinstance(payload, bytes) == (self.encoding == "msgpack"), (
             "msgpack travels in binary frames, JSON in text frames"
+        )
         message = decode(payload, self.encoding, sender="server", max_size=1 << 24)
         assert not isinstance(message, ProtocolError), message
         return message

@@ -15,10 +15,22 @@ from lipstream_client import End, ErrorMessage, PhonemeItem, Phonemes, Ready, St
 from tests.lipstream.server.test_session import frames_of, new_session, play
 
 ENGINE = "anime-graph"
-WORDS = [("sil", 0.0, 0.12), ("HH", 0.12, 0.2), ("AH0", 0.2, 0.27), ("L", 0.27, 0.35),
-         ("OW1", 0.35, 0.55), ("W", 0.55, 0.63), ("ER1", 0.63, 0.78), ("L", 0.78, 0.85),
-         ("D", 0.85, 0.92), ("sil", 0.92, 1.1), ("M", 1.1, 1.2), ("AA1", 1.2, 1.45),
-         ("M", 1.45, 1.55), ("sil", 1.55, 1.8)]
+WORDS = [
+    ("sil", 0.0, 0.12),
+    ("HH", 0.12, 0.2),
+    ("AH0", 0.2, 0.27),
+    ("L", 0.27, 0.35),
+    ("OW1", 0.35, 0.55),
+    ("W", 0.55, 0.63),
+    ("ER1", 0.63, 0.78),
+    ("L", 0.78, 0.85),
+    ("D", 0.85, 0.92),
+    ("sil", 0.92, 1.1),
+    ("M", 1.1, 1.2),
+    ("AA1", 1.2, 1.45),
+    ("M", 1.45, 1.55),
+    ("sil", 1.55, 1.8),
+]
 
 
 def test_the_catalog_measures_every_rung_of_the_declared_ladder(catalog: Catalog) -> None:
@@ -42,9 +54,19 @@ def test_a_budget_between_two_rungs_gets_the_lower_one(catalog: Catalog, lower: 
     chosen = ladder[lower]
     budget = 0.5 * (ladder[lower - 1].worst_case_ms + chosen.worst_case_ms)
     session = new_session(catalog)
-    out = play(session, Start("a", ENGINE, "demo", fps=60, latency_budget_ms=budget,
-                              options={"max_tile": 50, "graph": "unclustered"}),
-               Phonemes("a", tuple(PhonemeItem(*word) for word in WORDS)), End("a"))
+    out = play(
+        session,
+        Start(
+            "a",
+            ENGINE,
+            "demo",
+            fps=60,
+            latency_budget_ms=budget,
+            options={"max_tile": 50, "graph": "unclustered"},
+        ),
+        Phonemes("a", tuple(PhonemeItem(*word) for word in WORDS)),
+        End("a"),
+    )
     ready = out[0]
     assert isinstance(ready, Ready)
     assert (ready.fidelity, ready.lookahead_ms) == (chosen.rung.name, chosen.lookahead_ms)
@@ -63,11 +85,16 @@ def test_without_a_budget_the_top_rung_serves(catalog: Catalog) -> None:
     assert ready.options == dict(top.rung.options)
 
 
-@pytest.mark.parametrize(("options", "phonemes", "smooth"), [
-    ({"max_tile": 3}, 3, True),
-    ({"search": "pq", "pq_window": 2, "pq_advance": 1, "smooth": False}, 2, False)])
+@pytest.mark.parametrize(
+    ("options", "phonemes", "smooth"),
+    [
+        ({"max_tile": 3}, 3, True),
+        ({"search": "pq", "pq_window": 2, "pq_advance": 1, "smooth": False}, 2, False),
+    ],
+)
 def test_options_that_leave_every_rung_are_served_as_custom_with_their_own_lookahead(
-        catalog: Catalog, options: dict, phonemes: int, smooth: bool) -> None:  # type: ignore[type-arg]
+    catalog: Catalog, options: dict, phonemes: int, smooth: bool
+) -> None:  # type: ignore[type-arg]
     model = catalog.model(ENGINE, "demo")
     [ready] = play(new_session(catalog), Start("a", ENGINE, "demo", options=options))
     assert isinstance(ready, Ready) and ready.fidelity == "custom"
@@ -85,22 +112,26 @@ def test_an_uncapped_tile_may_wait_for_the_longest_request(catalog: Catalog) -> 
 
 def test_a_client_repeating_the_top_rungs_options_gets_that_rung(catalog: Catalog) -> None:
     top = catalog.ladder(catalog.model(ENGINE, "demo"))[0]
-    [ready] = play(new_session(catalog), Start("a", ENGINE, "demo",
-                                               options={**top.rung.options, "blend": True}))
+    [ready] = play(
+        new_session(catalog),
+        Start("a", ENGINE, "demo", options={**top.rung.options, "blend": True}),
+    )
     assert isinstance(ready, Ready)
     assert (ready.fidelity, ready.lookahead_ms) == (top.rung.name, top.lookahead_ms)
 
 
-def test_a_budget_below_the_lowest_rung_names_the_smallest_feasible_one(
-        catalog: Catalog) -> None:
+def test_a_budget_below_the_lowest_rung_names_the_smallest_feasible_one(catalog: Catalog) -> None:
     model = catalog.model(ENGINE, "demo")
     lowest = catalog.ladder(model)[-1]
     smallest = math.ceil(lowest.worst_case_ms)
     session = new_session(catalog)
     [error] = play(session, Start("a", ENGINE, "demo", latency_budget_ms=smallest - 1.0))
     assert isinstance(error, ErrorMessage)
-    assert (error.code, error.fatal, error.details) == ("budget_infeasible", True,
-                                                        {"min_budget_ms": smallest})
+    assert (error.code, error.fatal, error.details) == (
+        "budget_infeasible",
+        True,
+        {"min_budget_ms": smallest},
+    )
     [ready] = play(session, Start("a", ENGINE, "demo", latency_budget_ms=float(smallest)))
     assert isinstance(ready, Ready) and ready.fidelity == lowest.rung.name
 
@@ -110,10 +141,16 @@ def test_each_phonemes_emotion_reaches_the_engine(catalog: Catalog) -> None:
     emotions = ["happy"] * 5 + [None] * 4 + ["sad"] * 5
     items = tuple(PhonemeItem(*word, emotion) for word, emotion in zip(WORDS, emotions))
     # Over the wire and back, in three messages, with the request's own emotion angry.
-    messages = [decode(encode(Phonemes("a", items[low:high]), "msgpack"), "msgpack",
-                       sender="client") for low, high in [(0, 3), (3, 10), (10, 14)]]
-    out = play(new_session(catalog), Start("a", ENGINE, "demo", fps=50, emotion="angry"),
-               *messages, End("a"))
+    messages = [
+        decode(encode(Phonemes("a", items[low:high]), "msgpack"), "msgpack", sender="client")
+        for low, high in [(0, 3), (3, 10), (10, 14)]
+    ]
+    out = play(
+        new_session(catalog),
+        Start("a", ENGINE, "demo", fps=50, emotion="angry"),
+        *messages,
+        End("a"),
+    )
     spans = [(*word, emotion) for word, emotion in zip(WORDS, emotions)]
     expected = model.synthesize(spans, fps=50, emotion="angry").frames
     streamed = frames_of(out)
@@ -123,17 +160,21 @@ def test_each_phonemes_emotion_reaches_the_engine(catalog: Catalog) -> None:
     # The middle phonemes name no emotion, so they are angry, like the request.
     views = model.start(fps=50, emotion="angry")
     views.feed(spans)
-    assert [searcher.view.name for searcher in views.searchers] == \
-        ["happy"] * 5 + ["angry"] * 4 + ["sad"] * 5
+    assert [searcher.view.name for searcher in views.searchers] == ["happy"] * 5 + ["angry"] * 4 + [
+        "sad"
+    ] * 5
 
 
-def test_the_emotion_of_each_phoneme_changes_the_frames_of_its_run_only(
-        catalog: Catalog) -> None:
+def test_the_emotion_of_each_phoneme_changes_the_frames_of_its_run_only(catalog: Catalog) -> None:
     model = catalog.model(ENGINE, "demo")
     first = len(WORDS) - 5
     spans = [(*word, "happy" if index >= first else None) for index, word in enumerate(WORDS)]
-    out = play(new_session(catalog), Start("a", ENGINE, "demo", fps=60, emotion="sad"),
-               Phonemes("a", tuple(PhonemeItem(*span) for span in spans)), End("a"))
+    out = play(
+        new_session(catalog),
+        Start("a", ENGINE, "demo", fps=60, emotion="sad"),
+        Phonemes("a", tuple(PhonemeItem(*span) for span in spans)),
+        End("a"),
+    )
     assert not [message for message in out if isinstance(message, ErrorMessage)]
     mixed = frames_of(out)
     # The sad run is what sad alone gives, up to its last fragment (which the join into the
@@ -144,5 +185,8 @@ def test_the_emotion_of_each_phoneme_changes_the_frames_of_its_run_only(
     assert settled > 20
     np.testing.assert_array_equal(mixed[:settled], sad_alone[:settled])
     all_sad = model.synthesize(WORDS, fps=60, emotion="sad").frames
-    assert not np.allclose(mixed[frames_before(WORDS[first][2], 60.0):],
-                           all_sad[frames_before(WORDS[first][2], 60.0):], atol=1e-3)
+    assert not np.allclose(
+        mixed[frames_before(WORDS[first][2], 60.0) :],
+        all_sad[frames_before(WORDS[first][2], 60.0) :],
+        atol=1e-3,
+    )

@@ -22,9 +22,20 @@ def served(small_demo_corpus: Corpus, tmp_path_factory: pytest.TempPathFactory) 
     train_engine(small_demo_corpus, "viseme-lerp", models / "viseme-lerp")
     port = free_port()
     process = subprocess.Popen(
-        [sys.executable, "-m", "lipstream.cli", "serve", "--models", str(models),
-         "--host", "127.0.0.1", "--port", str(port)],
-        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+        [
+            sys.executable,
+            "-m",
+            "lipstream.cli",
+            "serve",
+            "--models",
+            str(models),
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(port),
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
     )
     base = f"http://127.0.0.1:{port}"
     try:
@@ -56,8 +67,19 @@ def test_lists_loaded_engines_and_characters(served: str) -> None:
 
 def test_serving_a_missing_directory_fails_with_one_line(tmp_path: Path) -> None:
     result = subprocess.run(
-        [sys.executable, "-m", "lipstream.cli", "serve", "--models", str(tmp_path / "none"),
-         "--port", str(free_port())], capture_output=True, text=True, timeout=60,
+        [
+            sys.executable,
+            "-m",
+            "lipstream.cli",
+            "serve",
+            "--models",
+            str(tmp_path / "none"),
+            "--port",
+            str(free_port()),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     assert result.returncode != 0
     assert "no such model directory" in result.stderr

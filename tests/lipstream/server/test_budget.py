@@ -25,8 +25,11 @@ GREEDY = Rung("greedy", Lookahead())
 def ladder() -> list:  # type: ignore[type-arg]
     # max phoneme 200 ms, margin 5 ms: exact 100 + 800 + 12 + 5 = 917 ms,
     # fixed_lag 50 + 200 + 3 + 5 = 258 ms, greedy 0 + 0 + 20.4 + 5 = 25.4 ms.
-    return [estimate(EXACT, 200.0, 12.0, 5.0, 0.3), estimate(FIXED_LAG, 200.0, 3.0, 5.0, 0.1),
-            estimate(GREEDY, 200.0, 20.4, 5.0, 0.2)]
+    return [
+        estimate(EXACT, 200.0, 12.0, 5.0, 0.3),
+        estimate(FIXED_LAG, 200.0, 3.0, 5.0, 0.1),
+        estimate(GREEDY, 200.0, 20.4, 5.0, 0.2),
+    ]
 
 
 def test_lookahead_is_seconds_plus_whole_phonemes_at_the_longest_duration() -> None:
@@ -36,10 +39,18 @@ def test_lookahead_is_seconds_plus_whole_phonemes_at_the_longest_duration() -> N
     assert [rung.worst_case_ms for rung in ladder()] == pytest.approx([917.0, 258.0, 25.4])
 
 
-@pytest.mark.parametrize(("budget", "chosen"), [
-    (None, "exact"), (5000.0, "exact"), (917.0, "exact"), (916.9, "fixed_lag"),
-    (258.0, "fixed_lag"), (100.0, "greedy"), (25.4, "greedy"),
-])
+@pytest.mark.parametrize(
+    ("budget", "chosen"),
+    [
+        (None, "exact"),
+        (5000.0, "exact"),
+        (917.0, "exact"),
+        (916.9, "fixed_lag"),
+        (258.0, "fixed_lag"),
+        (100.0, "greedy"),
+        (25.4, "greedy"),
+    ],
+)
 def test_the_best_rung_within_the_budget_is_chosen(budget: float | None, chosen: str) -> None:
     assert choose_rung(ladder(), budget).rung.name == chosen
 
@@ -84,7 +95,8 @@ def test_catalog_ladder_follows_each_models_declared_rungs(catalog: Catalog) -> 
 def test_rest_pose_of_viseme_lerp_is_its_silence_key_pose(catalog: Catalog) -> None:
     model = catalog.model("viseme-lerp", "demo")
     silence_row = model.scheme.classes.index(  # type: ignore[attr-defined]
-        model.scheme.viseme_of(SILENCE))  # type: ignore[attr-defined]
+        model.scheme.viseme_of(SILENCE)
+    )  # type: ignore[attr-defined]
     expected = model.poses_[silence_row]  # type: ignore[attr-defined]
     for emotion in (None, "happy"):
         np.testing.assert_allclose(catalog.rest_pose(model, emotion), expected, atol=1e-7)

@@ -43,8 +43,8 @@ def test_sends_within_the_deadline_are_left_alone_and_the_timer_lapses() -> None
 def test_a_stuck_send_is_cut_at_its_own_deadline_not_at_the_timers_first_check() -> None:
     async def scenario() -> tuple[float, float]:
         deadline = SendDeadline(asyncio.get_running_loop(), TIMEOUT_S)
-        first = await _send(deadline, 0.15)   # arms the timer for t = 0.2
-        stuck = await _send(deadline, 5.0)    # started at 0.15: due at 0.35, not 0.2
+        first = await _send(deadline, 0.15)  # arms the timer for t = 0.2
+        stuck = await _send(deadline, 5.0)  # started at 0.15: due at 0.35, not 0.2
         return first, stuck
 
     first, stuck = asyncio.run(scenario())

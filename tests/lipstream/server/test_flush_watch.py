@@ -80,11 +80,18 @@ class BufferTransport(asyncio.Transport):
         self.aborted = True
 
 
-def watch(writing: Callable[[], bool] = lambda: False) -> tuple[FlushWatch, BufferTransport,
-                                                                ManualLoop]:
+def watch(
+    writing: Callable[[], bool] = lambda: False,
+) -> tuple[FlushWatch, BufferTransport, ManualLoop]:
     transport, loop = BufferTransport(), ManualLoop()
-    flush_watch = FlushWatch(transport, cast(asyncio.AbstractEventLoop, loop), TIMEOUT_S,
-                             "a test connection", ("127.0.0.1", 5), writing)
+    flush_watch = FlushWatch(
+        transport,
+        cast(asyncio.AbstractEventLoop, loop),
+        TIMEOUT_S,
+        "a test connection",
+        ("127.0.0.1", 5),
+        writing,
+    )
     return flush_watch, transport, loop
 
 
@@ -95,8 +102,9 @@ def test_a_client_that_takes_nothing_for_one_timeout_is_reset() -> None:
     assert [timer.delay for timer in loop.pending()] == [TIMEOUT_S]
     loop.fire()
     assert transport.aborted
-    assert transport.sock.options == [(socket.SOL_SOCKET, socket.SO_LINGER,
-                                       struct.pack("ii", 1, 0))]
+    assert transport.sock.options == [
+        (socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+    ]
     assert loop.pending() == []
 
 

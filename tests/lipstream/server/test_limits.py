@@ -48,10 +48,15 @@ def test_message_size_limit_closes_with_1009(lerp_dir: Path) -> None:
 
 
 def test_phonemes_per_request_limit_ends_only_that_request(lerp_dir: Path) -> None:
-    with serving(lerp_dir, ServerSettings(max_phonemes_per_request=3)) as served, \
-            client(served.ws) as ws:
-        ws.send(Start("a", "viseme-lerp", "demo"), Phonemes("a", ITEMS),
-                Phonemes("a", (PhonemeItem("M", 0.3, 0.4), PhonemeItem("AA", 0.4, 0.5))))
+    with (
+        serving(lerp_dir, ServerSettings(max_phonemes_per_request=3)) as served,
+        client(served.ws) as ws,
+    ):
+        ws.send(
+            Start("a", "viseme-lerp", "demo"),
+            Phonemes("a", ITEMS),
+            Phonemes("a", (PhonemeItem("M", 0.3, 0.4), PhonemeItem("AA", 0.4, 0.5))),
+        )
         answers = ws.until_done("a")
         assert connection_error(answers) == ("too_many_phonemes", True, "a")
         ws.send(Start("b", "viseme-lerp", "demo"), Phonemes("b", ITEMS), End("b"))
@@ -79,8 +84,10 @@ def test_session_cap_refuses_with_1013_and_frees_on_close(lerp_dir: Path) -> Non
 
 
 def test_message_rate_limit_closes_with_1008(lerp_dir: Path) -> None:
-    with serving(lerp_dir, ServerSettings(message_rate=2.0, message_burst=4)) as served, \
-            client(served.ws) as ws:
+    with (
+        serving(lerp_dir, ServerSettings(message_rate=2.0, message_burst=4)) as served,
+        client(served.ws) as ws,
+    ):
         for _ in range(6):
             ws.send(End("x"))
         messages, code, reason = ws.closed()
@@ -118,13 +125,17 @@ def test_bearer_token_is_required_when_configured(lerp_dir: Path) -> None:
         with client(served.ws + "?access_token=other") as ws:
             ws.send(Start("a", "viseme-lerp", "demo"))
             assert isinstance(ws.recv(), Ready)
-        body = {"engine": "viseme-lerp", "character": "demo",
-                "items": [{"phoneme": "AA", "start": 0, "end": 0.1}]}
+        body = {
+            "engine": "viseme-lerp",
+            "character": "demo",
+            "items": [{"phoneme": "AA", "start": 0, "end": 0.1}],
+        }
         refused = httpx.post(f"{served.http}/v1/synthesize", json=body)
         assert refused.status_code == 401 and refused.headers["www-authenticate"] == "Bearer"
         assert refused.json()["error"]["code"] == "unauthorized"
-        allowed = httpx.post(f"{served.http}/v1/synthesize", json=body,
-                             headers={"Authorization": "Bearer s3cret"})
+        allowed = httpx.post(
+            f"{served.http}/v1/synthesize", json=body, headers={"Authorization": "Bearer s3cret"}
+        )
         assert allowed.status_code == 200
 
 
@@ -164,8 +175,9 @@ def test_a_client_that_stops_reading_is_closed_as_a_slow_consumer(lerp_dir: Path
 
 @pytest.mark.parametrize("payload", [encode(Start("a", "viseme-lerp", "demo"), "msgpack")])
 def test_limits_do_not_touch_well_behaved_clients(lerp_dir: Path, payload: bytes) -> None:
-    settings = ServerSettings(max_message_bytes=2048, message_rate=50.0, message_burst=10,
-                              idle_timeout_s=5.0)
+    settings = ServerSettings(
+        max_message_bytes=2048, message_rate=50.0, message_burst=10, idle_timeout_s=5.0
+    )
     with serving(lerp_dir, settings) as served, client(served.ws) as ws:
         ws.send_raw(payload)
         ws.send(Phonemes("a", ITEMS), End("a"))

@@ -33,9 +33,18 @@ from tests.helpers import free_port
 from tests.live_server import stop_process
 
 FPS = 60.0
-LINE = [("sil", 0.0, 0.1), ("HH", 0.1, 0.17), ("AH", 0.17, 0.24), ("L", 0.24, 0.31),
-        ("OW", 0.31, 0.5), ("W", 0.5, 0.58), ("ER", 0.58, 0.72), ("L", 0.72, 0.8),
-        ("D", 0.8, 0.86), ("sil", 0.86, 1.0)]
+LINE = [
+    ("sil", 0.0, 0.1),
+    ("HH", 0.1, 0.17),
+    ("AH", 0.17, 0.24),
+    ("L", 0.24, 0.31),
+    ("OW", 0.31, 0.5),
+    ("W", 0.5, 0.58),
+    ("ER", 0.58, 0.72),
+    ("L", 0.72, 0.8),
+    ("D", 0.8, 0.86),
+    ("sil", 0.86, 1.0),
+]
 CHUNK = 3
 PHONEMES_MESSAGES = 4  # ceil(10 / 3)
 REQUESTS_PER_CONNECTION = 2
@@ -56,8 +65,7 @@ def wait_for(condition: Callable[[], bool], timeout: float, what: str) -> None:
         time.sleep(0.05)
 
 
-def wait_for_value(read: Callable[[], float], expected: float, timeout: float,
-                   what: str) -> None:
+def wait_for_value(read: Callable[[], float], expected: float, timeout: float, what: str) -> None:
     deadline = time.monotonic() + timeout
     while (last := read()) != expected:
         assert time.monotonic() < deadline, f"{what}: {last:g}, not {expected:g}, after {timeout} s"
@@ -69,23 +77,41 @@ def open_sessions(base: str) -> float:
 
 
 @contextmanager
-def lipstream_serve(models: Path, workers: int, environ: dict[str, str],
-                    log: Path) -> Iterator[tuple[subprocess.Popen[bytes], str]]:
+def lipstream_serve(
+    models: Path, workers: int, environ: dict[str, str], log: Path
+) -> Iterator[tuple[subprocess.Popen[bytes], str]]:
     """``lipstream serve`` on a free loopback port, every worker started, its output in
     ``log``; SIGTERM (then SIGKILL) at the end."""
     port = free_port()
-    env = {**os.environ, "LIPSTREAM_LOG_LEVEL": "info", "LIPSTREAM_DRAIN_TIMEOUT_S": "5",
-           **environ}
+    env = {**os.environ, "LIPSTREAM_LOG_LEVEL": "info", "LIPSTREAM_DRAIN_TIMEOUT_S": "5", **environ}
     with log.open("ab") as output:
         process = subprocess.Popen(
-            [sys.executable, "-m", "lipstream.cli", "serve", "--models", str(models),
-             "--host", "127.0.0.1", "--port", str(port), "--workers", str(workers)],
-            env=env, stdout=output, stderr=subprocess.STDOUT)
+            [
+                sys.executable,
+                "-m",
+                "lipstream.cli",
+                "serve",
+                "--models",
+                str(models),
+                "--host",
+                "127.0.0.1",
+                "--port",
+                str(port),
+                "--workers",
+                str(workers),
+            ],
+            env=env,
+            stdout=output,
+            stderr=subprocess.STDOUT,
+        )
     base = f"http://127.0.0.1:{port}"
     try:
         # /readyz answers once one worker is ready; each logs its own startup.
-        wait_for(lambda: process.poll() is not None or started(log) == workers, 30,
-                 "every worker started")
+        wait_for(
+            lambda: process.poll() is not None or started(log) == workers,
+            30,
+            "every worker started",
+        )
         if process.poll() is not None or not ready(base):
             raise RuntimeError(f"lipstream serve did not start: {log.read_text()[-2000:]}")
         yield process, base
@@ -108,8 +134,11 @@ def ready(base: str) -> bool:
 def scrape(base: str) -> Samples:
     """Every sample of ``/metrics``, by name and labels (a new connection each time)."""
     text = httpx.get(f"{base}/metrics", timeout=5).text
-    return {(sample.name, frozenset(sample.labels.items())): sample.value
-            for family in text_string_to_metric_families(text) for sample in family.samples}
+    return {
+        (sample.name, frozenset(sample.labels.items())): sample.value
+        for family in text_string_to_metric_families(text)
+        for sample in family.samples
+    }
 
 
 def value(samples: Samples, name: str, **labels: str) -> float:
@@ -122,8 +151,12 @@ def per_worker(directory: Path, kind: str, name: str, **labels: str) -> dict[int
     for path in directory.glob(f"{kind}_*.db"):
         pid = int(path.stem.rsplit("_", 1)[1])
         merged = MultiProcessCollector.merge([str(path)], accumulate=True)
-        values[pid] = sum(sample.value for metric in merged for sample in metric.samples
-                          if sample.name == name and sample.labels == labels)
+        values[pid] = sum(
+            sample.value
+            for metric in merged
+            for sample in metric.samples
+            if sample.name == name and sample.labels == labels
+        )
     return values
 
 
@@ -138,13 +171,14 @@ def sessions_by_worker(directory: Path) -> dict[int, float]:
 async def request(client: AsyncClient) -> StreamResult:
     stream = await client.start("viseme-lerp", "demo", fps=FPS)
     for first in range(0, len(LINE), CHUNK):
-        await stream.send_phonemes(LINE[first:first + CHUNK])
+        await stream.send_phonemes(LINE[first : first + CHUNK])
     await stream.end()
     return await asyncio.wait_for(stream.collect(), 10)
 
 
-async def connect_until(url: str, both_workers: Callable[[], bool], requests: int,
-                        clients: list[AsyncClient]) -> list[StreamResult]:
+async def connect_until(
+    url: str, both_workers: Callable[[], bool], requests: int, clients: list[AsyncClient]
+) -> list[StreamResult]:
     """Open connections (kept in ``clients``), each serving ``requests`` requests, until
     ``both_workers()`` holds; the results of every request."""
     results: list[StreamResult] = []
@@ -162,25 +196,37 @@ async def close_all(clients: list[AsyncClient]) -> None:
     await asyncio.gather(*(client.close() for client in clients))
 
 
-def test_metrics_of_two_workers_are_summed_exactly(lerp_dir: Path,
-                                                   trained_models: dict[str, Model],
-                                                   tmp_path: Path) -> None:
+def test_metrics_of_two_workers_are_summed_exactly(
+    lerp_dir: Path, trained_models: dict[str, Model], tmp_path: Path
+) -> None:
     directory = tmp_path / "prometheus"
     directory.mkdir()
-    subprocess.run([sys.executable, "-c", STALE_RUN], check=True, timeout=30,
-                   env={**os.environ, MULTIPROCESS_ENV: str(directory)})
+    subprocess.run(
+        [sys.executable, "-c", STALE_RUN],
+        check=True,
+        timeout=30,
+        env={**os.environ, MULTIPROCESS_ENV: str(directory)},
+    )
     assert sum(frames_by_worker(directory).values()) == STALE_FRAMES
     expected_frames = len(trained_models["viseme-lerp"].synthesize(LINE, fps=FPS).frames)
 
-    with lipstream_serve(lerp_dir, 2, {MULTIPROCESS_ENV: str(directory)},
-                         tmp_path / "serve.log") as (process, base), \
-            asyncio.Runner() as runner:  # one loop for the clients, between blocking checks
+    with (
+        lipstream_serve(
+            lerp_dir, 2, {MULTIPROCESS_ENV: str(directory)}, tmp_path / "serve.log"
+        ) as (process, base),
+        asyncio.Runner() as runner,
+    ):  # one loop for the clients, between blocking checks
         url = base.replace("http://", "ws://") + "/v1/stream"
         # Traffic on both workers, connections still open: sessions sum over the workers.
         clients: list[AsyncClient] = []
-        results = runner.run(connect_until(
-            url, lambda: len([f for f in frames_by_worker(directory).values() if f]) >= 2,
-            REQUESTS_PER_CONNECTION, clients))
+        results = runner.run(
+            connect_until(
+                url,
+                lambda: len([f for f in frames_by_worker(directory).values() if f]) >= 2,
+                REQUESTS_PER_CONNECTION,
+                clients,
+            )
+        )
         open_scrapes = [scrape(base) for _ in range(4)]
         shares = sessions_by_worker(directory)
         runner.run(close_all(clients))
@@ -190,18 +236,31 @@ def test_metrics_of_two_workers_are_summed_exactly(lerp_dir: Path,
 
         # A killed worker's sessions leave the sum; its counts stay in the totals.
         held: list[AsyncClient] = []
-        runner.run(connect_until(
-            url, lambda: len([s for s in sessions_by_worker(directory).values() if s]) >= 2,
-            0, held))
-        wait_for_value(lambda: sum(sessions_by_worker(directory).values()), len(held), 5,
-                       "held sessions in the workers' files")
+        runner.run(
+            connect_until(
+                url,
+                lambda: len([s for s in sessions_by_worker(directory).values() if s]) >= 2,
+                0,
+                held,
+            )
+        )
+        wait_for_value(
+            lambda: sum(sessions_by_worker(directory).values()),
+            len(held),
+            5,
+            "held sessions in the workers' files",
+        )
         holding = sessions_by_worker(directory)
         victim = max(holding, key=lambda pid: holding[pid])
         survivor = next(pid for pid in holding if pid != victim and holding[pid])
         os.kill(victim, signal.SIGKILL)
         survivors = len(held) - holding[victim]
-        wait_for_value(lambda: open_sessions(base), survivors, 5,
-                       f"open sessions after killing a worker that held {holding[victim]:g}")
+        wait_for_value(
+            lambda: open_sessions(base),
+            survivors,
+            5,
+            f"open sessions after killing a worker that held {holding[victim]:g}",
+        )
         after_kill = scrape(base)
         runner.run(close_all(held))
         wait_for_value(lambda: open_sessions(base), 0, 5, "open sessions")
@@ -227,14 +286,20 @@ def test_metrics_of_two_workers_are_summed_exactly(lerp_dir: Path,
         assert value(samples, "lipstream_requests_active") == 0
         assert value(samples, "lipstream_draining") == 0
         assert value(samples, "lipstream_frames_total", engine="viseme-lerp") == frames
-        assert value(samples, "lipstream_requests_total", engine="viseme-lerp",
-                     outcome="end") == requests
+        assert (
+            value(samples, "lipstream_requests_total", engine="viseme-lerp", outcome="end")
+            == requests
+        )
         assert value(samples, "lipstream_messages_received_total", type="start") == requests
-        assert value(samples, "lipstream_messages_received_total",
-                     type="phonemes") == requests * PHONEMES_MESSAGES
+        assert (
+            value(samples, "lipstream_messages_received_total", type="phonemes")
+            == requests * PHONEMES_MESSAGES
+        )
         assert value(samples, "lipstream_messages_received_total", type="end") == requests
-        assert value(samples, "lipstream_first_frame_latency_seconds_count",
-                     engine="viseme-lerp") == requests
+        assert (
+            value(samples, "lipstream_first_frame_latency_seconds_count", engine="viseme-lerp")
+            == requests
+        )
     assert value(after_kill, "lipstream_frames_total", engine="viseme-lerp") == frames
     # The killed worker's live gauges were dropped; the survivor took its own when it stopped.
     assert list(directory.glob(f"gauge_live*_{victim}.db")) == []
@@ -242,7 +307,8 @@ def test_metrics_of_two_workers_are_summed_exactly(lerp_dir: Path,
 
 
 def test_the_multiprocess_directory_is_emptied_or_made_private(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     given = tmp_path / "given"
     given.mkdir()
     (given / "counter_1.db").write_bytes(b"stale")
@@ -263,21 +329,33 @@ def test_the_multiprocess_directory_is_emptied_or_made_private(
     assert not private.exists() and MULTIPROCESS_ENV not in os.environ
 
 
-def test_several_workers_without_a_directory_get_a_private_one(lerp_dir: Path,
-                                                               tmp_path: Path) -> None:
+def test_several_workers_without_a_directory_get_a_private_one(
+    lerp_dir: Path, tmp_path: Path
+) -> None:
     temporary = tmp_path / "tmp"
     temporary.mkdir()
     environ = {"TMPDIR": str(temporary)}
-    with lipstream_serve(lerp_dir, 2, environ, tmp_path / "serve.log") as (process, base), \
-            asyncio.Runner() as runner:
+    with (
+        lipstream_serve(lerp_dir, 2, environ, tmp_path / "serve.log") as (process, base),
+        asyncio.Runner() as runner,
+    ):
         url = base.replace("http://", "ws://") + "/v1/stream"
         [directory] = temporary.glob("lipstream-metrics-*")
         clients: list[AsyncClient] = []
-        runner.run(connect_until(
-            url, lambda: len([s for s in sessions_by_worker(directory).values() if s]) >= 2,
-            0, clients))
-        wait_for_value(lambda: sum(sessions_by_worker(directory).values()), len(clients), 5,
-                       "sessions in the workers' files")
+        runner.run(
+            connect_until(
+                url,
+                lambda: len([s for s in sessions_by_worker(directory).values() if s]) >= 2,
+                0,
+                clients,
+            )
+        )
+        wait_for_value(
+            lambda: sum(sessions_by_worker(directory).values()),
+            len(clients),
+            5,
+            "sessions in the workers' files",
+        )
         scrapes = [scrape(base) for _ in range(4)]
         runner.run(close_all(clients))
         process.terminate()

@@ -31,8 +31,9 @@ if TYPE_CHECKING:
     from lipstream.engines.base import Model
 
 RIG = ("jawOpen", "mouthClose", "eyeBlinkLeft", "eyeBlinkRight")
-FRAMES = np.array([[0.1, 0.2, 0.3, 0.4], [0.5, 0.6, 0.7, 0.8], [0.7, 0.0, 1.0, 0.25]],
-                  dtype=np.float32)
+FRAMES = np.array(
+    [[0.1, 0.2, 0.3, 0.4], [0.5, 0.6, 0.7, 0.8], [0.7, 0.0, 1.0, 0.25]], dtype=np.float32
+)
 
 
 def no_projector() -> VisemeProjector:
@@ -49,11 +50,14 @@ def test_default_profile_is_every_channel_in_arkit_names_unchanged() -> None:
     assert profile.apply(FRAMES).tobytes() == FRAMES.tobytes()
 
 
-@pytest.mark.parametrize(("naming", "expected"), [
-    ("arkit", RIG),
-    ("livelink", ("JawOpen", "MouthClose", "EyeBlinkLeft", "EyeBlinkRight")),
-    ("suffix_lr", ("jawOpen", "mouthClose", "eyeBlink_L", "eyeBlink_R")),
-])
+@pytest.mark.parametrize(
+    ("naming", "expected"),
+    [
+        ("arkit", RIG),
+        ("livelink", ("JawOpen", "MouthClose", "EyeBlinkLeft", "EyeBlinkRight")),
+        ("suffix_lr", ("jawOpen", "mouthClose", "eyeBlink_L", "eyeBlink_R")),
+    ],
+)
 def test_naming_styles(naming: str, expected: tuple[str, ...]) -> None:
     assert resolved(OutputProfile(naming=naming)).channels == expected  # type: ignore[arg-type]
 
@@ -66,16 +70,26 @@ def test_subset_picks_and_orders_columns_in_the_output_naming() -> None:
 
 
 def test_transform_is_multiply_add_then_clamp_after_the_subset() -> None:
-    profile = resolved(OutputProfile(
-        naming="livelink", channels=("JawOpen", "MouthClose"),
-        transforms={"JawOpen": ChannelTransform(2.0, -0.5, (0.0, 0.6)),
-                    "MouthClose": ChannelTransform(offset=0.25)}))
+    profile = resolved(
+        OutputProfile(
+            naming="livelink",
+            channels=("JawOpen", "MouthClose"),
+            transforms={
+                "JawOpen": ChannelTransform(2.0, -0.5, (0.0, 0.6)),
+                "MouthClose": ChannelTransform(offset=0.25),
+            },
+        )
+    )
     out = profile.apply(FRAMES)
     # JawOpen: 0.1*2-0.5 = -0.3 -> 0; 0.5*2-0.5 = 0.5; 0.7*2-0.5 = 0.9 -> 0.6.
     # MouthClose: 0.2+0.25, 0.6+0.25, 0.0+0.25.
-    expected = np.array([[0.0, np.float32(0.2) + 0.25], [np.float32(0.5) * 2 - 0.5,
-                                                          np.float32(0.6) + 0.25],
-                         [0.6, 0.25]])
+    expected = np.array(
+        [
+            [0.0, np.float32(0.2) + 0.25],
+            [np.float32(0.5) * 2 - 0.5, np.float32(0.6) + 0.25],
+            [0.6, 0.25],
+        ]
+    )
     assert out.dtype == np.float32 and out.shape == (3, 2)
     np.testing.assert_array_equal(out, expected.astype(np.float32))
 
@@ -88,16 +102,20 @@ def test_unknown_channels_name_the_field_that_holds_them() -> None:
         resolved(OutputProfile(channels=("nose",)), field="")
     assert (error.value.code, error.value.where) == ("unknown_channel", "channels[0]")
     with pytest.raises(ProfileError) as error:
-        resolved(OutputProfile(channels=("jawOpen",),
-                               transforms={"mouthClose": ChannelTransform(2.0)}))
-    assert (error.value.code, error.value.where) == ("unknown_channel",
-                                                     "output.transforms.mouthClose")
+        resolved(
+            OutputProfile(channels=("jawOpen",), transforms={"mouthClose": ChannelTransform(2.0)})
+        )
+    assert (error.value.code, error.value.where) == (
+        "unknown_channel",
+        "output.transforms.mouthClose",
+    )
 
 
 def test_names_that_collide_after_renaming_are_invalid() -> None:
     with pytest.raises(ProfileError) as error:
-        resolve_profile(("fooLeft", "foo_L"), ProfileRequest(OutputProfile(naming="suffix_lr")),
-                        no_projector)
+        resolve_profile(
+            ("fooLeft", "foo_L"), ProfileRequest(OutputProfile(naming="suffix_lr")), no_projector
+        )
     assert (error.value.code, error.value.where) == ("invalid_request", "output.naming")
 
 
@@ -141,14 +159,21 @@ def test_projection_recovers_known_convex_weights_ignoring_non_mouth_channels() 
 
 def test_viseme_profile_uses_oculus_order_and_accepts_ovr_spellings() -> None:
     projector = synthetic_projector()
-    full = resolve_profile(VISEME_RIG, ProfileRequest(OutputProfile(visemes="oculus15")),
-                           lambda: projector)
+    full = resolve_profile(
+        VISEME_RIG, ProfileRequest(OutputProfile(visemes="oculus15")), lambda: projector
+    )
     assert full.channels == OCULUS15_VISEMES
     subset = resolve_profile(
         VISEME_RIG,
-        ProfileRequest(OutputProfile(visemes="oculus15", channels=("ih", "PP", "viseme_aa"),
-                                     transforms={"I": ChannelTransform(2.0)})),
-        lambda: projector)
+        ProfileRequest(
+            OutputProfile(
+                visemes="oculus15",
+                channels=("ih", "PP", "viseme_aa"),
+                transforms={"I": ChannelTransform(2.0)},
+            )
+        ),
+        lambda: projector,
+    )
     assert subset.channels == ("viseme_I", "viseme_PP", "viseme_aa")
     frame = (0.5 * projector.poses[12] + 0.5 * projector.poses[10])[None]
     np.testing.assert_allclose(subset.apply(frame), [[1.0, 0.0, 0.5]], atol=1e-5)
@@ -156,43 +181,66 @@ def test_viseme_profile_uses_oculus_order_and_accepts_ovr_spellings() -> None:
 
 def test_viseme_aliases_naming_one_viseme_twice_are_invalid() -> None:
     with pytest.raises(ProfileError) as error:
-        resolve_profile(VISEME_RIG, ProfileRequest(OutputProfile(visemes="oculus15",
-                                                                 channels=("I", "ih"))),
-                        synthetic_projector)
+        resolve_profile(
+            VISEME_RIG,
+            ProfileRequest(OutputProfile(visemes="oculus15", channels=("I", "ih"))),
+            synthetic_projector,
+        )
     assert (error.value.code, error.value.where) == ("invalid_request", "output.channels[1]")
     with pytest.raises(ProfileError) as error:
-        resolve_profile(VISEME_RIG, ProfileRequest(OutputProfile(visemes="oculus15",
-                                                                 channels=("jawOpen",))),
-                        synthetic_projector)
+        resolve_profile(
+            VISEME_RIG,
+            ProfileRequest(OutputProfile(visemes="oculus15", channels=("jawOpen",))),
+            synthetic_projector,
+        )
     assert error.value.code == "unknown_channel"
 
 
-def test_probing_viseme_lerp_returns_its_trained_key_poses(trained_models: dict[str, Model]) -> None:
+def test_probing_viseme_lerp_returns_its_trained_key_poses(
+    trained_models: dict[str, Model],
+) -> None:
     model = trained_models["viseme-lerp"]
     assert model.manifest.hyperparameters["scheme"] == "oculus15"
-    np.testing.assert_allclose(probe_key_poses(model), model.poses_,  # type: ignore[attr-defined]
-                               atol=1e-6)
+    np.testing.assert_allclose(
+        probe_key_poses(model),
+        model.poses_,  # type: ignore[attr-defined]
+        atol=1e-6,
+    )
 
 
 # ---- presets -----------------------------------------------------------------------------
 
+
 def test_requested_profile_precedence() -> None:
     preset = OutputProfile(naming="livelink")
     output = OutputProfile(naming="suffix_lr")
-    assert requested_profile(Start("a", "e", "c", channels=("jawOpen",)), preset) == \
-        ProfileRequest(OutputProfile(channels=("jawOpen",)), "")
-    assert requested_profile(Start("a", "e", "c", output=output), preset) == \
-        ProfileRequest(output)
+    assert requested_profile(Start("a", "e", "c", channels=("jawOpen",)), preset) == ProfileRequest(
+        OutputProfile(channels=("jawOpen",)), ""
+    )
+    assert requested_profile(Start("a", "e", "c", output=output), preset) == ProfileRequest(output)
     assert requested_profile(Start("a", "e", "c"), preset) == ProfileRequest(preset, "preset")
 
 
 def test_presets_file_is_validated_by_the_codec(tmp_path: Path) -> None:
     good = tmp_path / "profiles.json"
-    good.write_text(json.dumps({"demo": {"naming": "livelink", "channels": ["JawOpen"],
-                                         "transforms": {"JawOpen": {"clamp": [0, 0.5]}}}}))
-    assert load_presets(good) == {"demo": OutputProfile(
-        naming="livelink", channels=("JawOpen",),
-        transforms={"JawOpen": ChannelTransform(clamp=(0.0, 0.5))})}
+    good.write_text(
+        json.dumps(
+            {
+                "demo": {
+                    "naming": "livelink",
+                    "channels": ["JawOpen"],
+                    "transforms": {"JawOpen": {"clamp": [0, 0.5]}},
+                }
+            }
+        )
+    )
+    assert load_presets(good) == {
+        "demo": OutputProfile(
+            naming="livelink",
+            channels=("JawOpen",),
+            transforms={"JawOpen": ChannelTransform(clamp=(0.0, 0.5))},
+        )
+    }
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"demo": {"naming": "klingon"}}))
     with pytest.raises(LipstreamError) as error:

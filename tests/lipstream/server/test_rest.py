@@ -27,10 +27,14 @@ def served(all_models_dir: Path) -> Iterator[Served]:
         yield running
 
 
-def post(served: Served, body: Any, content_type: str = "application/json",
-         accept: str | None = None) -> httpx.Response:
-    content = body if isinstance(body, (bytes, str)) else (
-        msgpack.packb(body) if "msgpack" in content_type else json.dumps(body))
+def post(
+    served: Served, body: Any, content_type: str = "application/json", accept: str | None = None
+) -> httpx.Response:
+    content = (
+        body
+        if isinstance(body, (bytes, str))
+        else (msgpack.packb(body) if "msgpack" in content_type else json.dumps(body))
+    )
     headers = {"Content-Type": content_type, **({"Accept": accept} if accept else {})}
     return httpx.post(f"{served.http}/v1/synthesize", content=content, headers=headers)
 
@@ -48,14 +52,22 @@ def test_json_in_json_out_equals_the_offline_synthesis(served: Served, catalog: 
     assert result["stats"]["frames"] == 16
 
 
-@pytest.mark.parametrize(("content_type", "accept", "returned"), [
-    ("application/msgpack", None, "application/msgpack"),
-    ("application/msgpack", "application/json", "application/json"),
-    ("application/json", "application/x-msgpack;q=0.9, application/json;q=0", "application/msgpack"),
-    ("application/json", "*/*", "application/json"),
-])
-def test_content_negotiation(served: Served, content_type: str, accept: str | None,
-                             returned: str) -> None:
+@pytest.mark.parametrize(
+    ("content_type", "accept", "returned"),
+    [
+        ("application/msgpack", None, "application/msgpack"),
+        ("application/msgpack", "application/json", "application/json"),
+        (
+            "application/json",
+            "application/x-msgpack;q=0.9, application/json;q=0",
+            "application/msgpack",
+        ),
+        ("application/json", "*/*", "application/json"),
+    ],
+)
+def test_content_negotiation(
+    served: Served, content_type: str, accept: str | None, returned: str
+) -> None:
     answer = post(served, BODY, content_type, accept)
     assert answer.status_code == 200 and answer.headers["content-type"] == returned
     if returned == "application/msgpack":
@@ -67,40 +79,104 @@ def test_content_negotiation(served: Served, content_type: str, accept: str | No
 
 def test_audio_rides_along_for_audio_engines(served: Served) -> None:
     pcm = (np.arange(1200, dtype="<i2") % 300 * 50).astype("<i2").tobytes()
-    body = {**BODY, "engine": "anime-graph", "channels": ["jawOpen"],
-            "audio": {"sample_rate": 16000, "pcm16": base64.b64encode(pcm).decode()}}
+    body = {
+        **BODY,
+        "engine": "anime-graph",
+        "channels": ["jawOpen"],
+        "audio": {"sample_rate": 16000, "pcm16": base64.b64encode(pcm).decode()},
+    }
     answer = post(served, body)
     assert answer.status_code == 200, answer.text
     assert np.array(answer.json()["data"]).shape == (16, 1)
-    packed = post(served, {**body, "audio": {"sample_rate": 16000, "pcm16": pcm}},
-                  "application/msgpack", "application/json")
+    packed = post(
+        served,
+        {**body, "audio": {"sample_rate": 16000, "pcm16": pcm}},
+        "application/msgpack",
+        "application/json",
+    )
     assert packed.json()["data"] == answer.json()["data"]
 
 
-@pytest.mark.parametrize(("body", "content_type", "accept", "status", "code", "text"), [
-    ("{", "application/json", None, 400, "malformed", "not valid json"),
-    ({**BODY, "speed": 2}, "application/json", None, 400, "invalid_message", "speed"),
-    ({k: v for k, v in BODY.items() if k != "items"}, "application/json", None, 400,
-     "invalid_message", "items"),
-    ({**BODY, "items": [ITEMS[1], ITEMS[0]]}, "application/json", None, 400,
-     "non_monotonic_times", "items[1].start"),
-    ({**BODY, "audio": {"sample_rate": 16000, "pcm16": "AAA"}}, "application/json", None, 400,
-     "invalid_audio", "audio.pcm16"),
-    ({**BODY, "engine": "nope"}, "application/json", None, 404, "unknown_engine", "engine"),
-    ({**BODY, "character": "x"}, "application/json", None, 404, "unknown_character", "character"),
-    ({**BODY, "items": [{"phoneme": "XQ", "start": 0, "end": 1}]}, "application/json", None,
-     422, "unknown_phoneme", "items[0].phoneme"),
-    ({**BODY, "channels": ["nose"]}, "application/json", None, 422, "unknown_channel",
-     "channels[0]"),
-    (BODY, "text/plain", None, 415, "unsupported_media_type", "Content-Type"),
-    (BODY, "application/json", "text/html", 406, "not_acceptable", "Accept"),
-    ({**BODY, "items": [{"phoneme": "AA", "start": i / 10, "end": (i + 1) / 10}
-                        for i in range(100)]}, "application/json", None, 413,
-     "message_too_large", "4096 bytes"),
-])
+@pytest.mark.parametrize(
+    ("body", "content_type", "accept", "status", "code", "text"),
+    [
+        ("{", "application/json", None, 400, "malformed", "not valid json"),
+        ({**BODY, "speed": 2}, "application/json", None, 400, "invalid_message", "speed"),
+        (
+            {k: v for k, v in BODY.items() if k != "items"},
+            "application/json",
+            None,
+            400,
+            "invalid_message",
+            "items",
+        ),
+        (
+            {**BODY, "items": [ITEMS[1], ITEMS[0]]},
+            "application/json",
+            None,
+            400,
+            "non_monotonic_times",
+            "items[1].start",
+        ),
+        (
+            {**BODY, "audio": {"sample_rate": 16000, "pcm16": "AAA"}},
+            "application/json",
+            None,
+            400,
+            "invalid_audio",
+            "audio.pcm16",
+        ),
+        ({**BODY, "engine": "nope"}, "application/json", None, 404, "unknown_engine", "engine"),
+        (
+            {**BODY, "character": "x"},
+            "application/json",
+            None,
+            404,
+            "unknown_character",
+            "character",
+        ),
+        (
+            {**BODY, "items": [{"phoneme": "XQ", "start": 0, "end": 1}]},
+            "application/json",
+            None,
+            422,
+            "unknown_phoneme",
+            "items[0].phoneme",
+        ),
+        (
+            {**BODY, "channels": ["nose"]},
+            "application/json",
+            None,
+            422,
+            "unknown_channel",
+            "channels[0]",
+        ),
+        (BODY, "text/plain", None, 415, "unsupported_media_type", "Content-Type"),
+        (BODY, "application/json", "text/html", 406, "not_acceptable", "Accept"),
+        (
+            {
+                **BODY,
+                "items": [
+                    {"phoneme": "AA", "start": i / 10, "end": (i + 1) / 10} for i in range(100)
+                ],
+            },
+            "application/json",
+            None,
+            413,
+            "message_too_large",
+            "4096 bytes",
+        ),
+    ],
+)
 def test_errors_have_a_status_code_and_a_located_message(
-        served: Served, body: Any, content_type: str, accept: str | None, status: int,
-        code: str, text: str) -> None:
+    served: Served,
+    body: Any,
+    content_type: str,
+    accept: str | None,
+    status: int,
+    code: str,
+    text: str,
+) -> None:
     answer = post(served, body, content_type, accept)
     assert answer.status_code == status
     error = answer.json()["error"]
@@ -108,8 +184,9 @@ def test_errors_have_a_status_code_and_a_located_message(
 
 
 def test_budget_infeasible_carries_the_smallest_feasible_budget(served: Served) -> None:
-    answer = post(served, {**BODY, "latency_budget_ms": 10}, "application/json",
-                  "application/msgpack")
+    answer = post(
+        served, {**BODY, "latency_budget_ms": 10}, "application/json", "application/msgpack"
+    )
     assert answer.status_code == 422
     error = msgpack.unpackb(answer.content)["error"]
     assert error["code"] == "budget_infeasible" and error["details"]["min_budget_ms"] > 200
@@ -119,8 +196,9 @@ def test_openapi_documents_the_routes_and_every_reference_resolves(served: Serve
     document = httpx.get(f"{served.http}/openapi.json").json()
     operation = document["paths"]["/v1/synthesize"]["post"]
     assert set(operation["requestBody"]["content"]) == {"application/json", "application/msgpack"}
-    assert {"/healthz", "/readyz", "/v1/engines", "/v1/characters", "/metrics"} <= \
-        set(document["paths"])
+    assert {"/healthz", "/readyz", "/v1/engines", "/v1/characters", "/metrics"} <= set(
+        document["paths"]
+    )
     request = document["components"]["schemas"]["lipstream_SynthesizeRequest"]
     assert {"engine", "character", "items", "audio", "output"} <= set(request["properties"])
 

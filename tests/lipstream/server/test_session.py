@@ -38,14 +38,20 @@ SPANS = [("HH", 0.0, 0.1), ("AY1", 0.1, 0.4), ("sil", 0.4, 0.6)]
 ITEMS = tuple(PhonemeItem(label, start, end) for label, start, end in SPANS)
 
 
-def new_session(catalog: Catalog, max_requests: int = 3, max_phonemes: int = 20,
-                max_frames: int = 1000) -> Session:
-    return Session(catalog, SessionLimits(max_requests, RequestLimits(max_phonemes, max_frames,
-                                                                      100.0)))
+def new_session(
+    catalog: Catalog, max_requests: int = 3, max_phonemes: int = 20, max_frames: int = 1000
+) -> Session:
+    return Session(
+        catalog, SessionLimits(max_requests, RequestLimits(max_phonemes, max_frames, 100.0))
+    )
 
 
-def play(session: Session, *messages: Message | ProtocolError, now: float = 0.0,
-         sent: float | None = None) -> list[ServerMessage]:
+def play(
+    session: Session,
+    *messages: Message | ProtocolError,
+    now: float = 0.0,
+    sent: float | None = None,
+) -> list[ServerMessage]:
     """Handle messages at ``now``; stamp (send) the answers at ``sent`` (default ``now``)."""
     answers: list[Outgoing] = []
     for message in messages:
@@ -61,8 +67,11 @@ def frames_of(messages: list[ServerMessage], identifier: str = "a") -> np.ndarra
     assert [block.seq for block in blocks] == list(range(len(blocks)))
     for previous, block in pairwise(blocks):
         assert block.first_frame == previous.end_frame
-    return np.concatenate([np.frombuffer(b.data, "<f4").reshape(-1, b.n_channels)
-                           for b in blocks]) if blocks else np.zeros((0, 0))
+    return (
+        np.concatenate([np.frombuffer(b.data, "<f4").reshape(-1, b.n_channels) for b in blocks])
+        if blocks
+        else np.zeros((0, 0))
+    )
 
 
 def errors(messages: list[ServerMessage]) -> list[tuple[str, str | None, bool]]:
@@ -71,19 +80,34 @@ def errors(messages: list[ServerMessage]) -> list[tuple[str, str | None, bool]]:
 
 def test_ready_reports_the_resolved_request(catalog: Catalog) -> None:
     session = new_session(catalog)
-    [ready] = play(session, Start("a", "viseme-lerp", "demo", fps=50, emotion="happy",
-                                  options={"note": 1}))
+    [ready] = play(
+        session, Start("a", "viseme-lerp", "demo", fps=50, emotion="happy", options={"note": 1})
+    )
     model = catalog.model("viseme-lerp", "demo")
-    assert ready == Ready(id="a", engine="viseme-lerp", character="demo", fps=50,
-                          channels=model.channels, lookahead_ms=200.0, fidelity="default",
-                          emotion="happy", options={"note": 1}, phoneme_source="auto")
+    assert ready == Ready(
+        id="a",
+        engine="viseme-lerp",
+        character="demo",
+        fps=50,
+        channels=model.channels,
+        lookahead_ms=200.0,
+        fidelity="default",
+        emotion="happy",
+        options={"note": 1},
+        phoneme_source="auto",
+    )
 
 
 def test_streamed_frames_equal_the_offline_synthesis(catalog: Catalog) -> None:
     session = new_session(catalog)
-    out = play(session, Start("a", "viseme-lerp", "demo", fps=60),
-               Phonemes("a", ITEMS[:1]), Phonemes("a", ITEMS[1:2]), Phonemes("a", ITEMS[2:]),
-               End("a"))
+    out = play(
+        session,
+        Start("a", "viseme-lerp", "demo", fps=60),
+        Phonemes("a", ITEMS[:1]),
+        Phonemes("a", ITEMS[1:2]),
+        Phonemes("a", ITEMS[2:]),
+        End("a"),
+    )
     expected = catalog.model("viseme-lerp", "demo").synthesize(SPANS, fps=60).frames
     np.testing.assert_array_equal(frames_of(out), expected)
     done = out[-1]
@@ -95,11 +119,16 @@ def test_streamed_frames_equal_the_offline_synthesis(catalog: Catalog) -> None:
 def test_requests_multiplex_independently(catalog: Catalog) -> None:
     session = new_session(catalog)
     other = [("M", 0.0, 0.2), ("AA1", 0.2, 0.5)]
-    out = play(session, Start("a", "viseme-lerp", "demo", fps=60),
-               Start("b", "anime-graph", "demo", fps=30, channels=("jawOpen", "mouthClose")),
-               Phonemes("a", ITEMS[:2]),
-               Phonemes("b", tuple(PhonemeItem(*span) for span in other)),
-               Phonemes("a", ITEMS[2:]), End("b"), End("a"))
+    out = play(
+        session,
+        Start("a", "viseme-lerp", "demo", fps=60),
+        Start("b", "anime-graph", "demo", fps=30, channels=("jawOpen", "mouthClose")),
+        Phonemes("a", ITEMS[:2]),
+        Phonemes("b", tuple(PhonemeItem(*span) for span in other)),
+        Phonemes("a", ITEMS[2:]),
+        End("b"),
+        End("a"),
+    )
     lerp = catalog.model("viseme-lerp", "demo").synthesize(SPANS, fps=60).frames
     graph = catalog.model("anime-graph", "demo").synthesize(other, fps=30).frames[:, :2]
     np.testing.assert_array_equal(frames_of(out, "a"), lerp)
@@ -111,8 +140,9 @@ def test_requests_multiplex_independently(catalog: Catalog) -> None:
 
 def test_cancel_reports_the_frames_sent_and_frees_the_id(catalog: Catalog) -> None:
     session = new_session(catalog)
-    out = play(session, Start("a", "viseme-lerp", "demo", fps=10), Phonemes("a", ITEMS),
-               Cancel("a"))
+    out = play(
+        session, Start("a", "viseme-lerp", "demo", fps=10), Phonemes("a", ITEMS), Cancel("a")
+    )
     sent = len(frames_of(out))
     assert sent == 4  # lookahead of one phoneme: final before 0.4 s, frames 0..3 at 10 fps
     assert out[-1] == Done("a", out[-1].stats, "cancel")  # type: ignore[union-attr]
@@ -124,8 +154,12 @@ def test_cancel_reports_the_frames_sent_and_frees_the_id(catalog: Catalog) -> No
 def test_interrupt_blends_from_the_face_at_the_cut_to_rest(catalog: Catalog) -> None:
     session = new_session(catalog)
     model = catalog.model("viseme-lerp", "demo")
-    out = play(session, Start("a", "viseme-lerp", "demo", fps=100), Phonemes("a", ITEMS),
-               Interrupt("a", at=0.25, return_ms=50))
+    out = play(
+        session,
+        Start("a", "viseme-lerp", "demo", fps=100),
+        Phonemes("a", ITEMS),
+        Interrupt("a", at=0.25, return_ms=50),
+    )
     offline = model.synthesize(SPANS, fps=100).frames
     rest = catalog.rest_pose(model, None).astype(np.float64)
     rows: dict[int, np.ndarray] = {}
@@ -149,10 +183,15 @@ def test_interrupt_blends_from_the_face_at_the_cut_to_rest(catalog: Catalog) -> 
 
 
 def test_interrupt_after_the_input_cuts_at_its_end_with_the_default_return(
-        catalog: Catalog) -> None:
+    catalog: Catalog,
+) -> None:
     session = new_session(catalog)
-    out = play(session, Start("a", "viseme-lerp", "demo", fps=10), Phonemes("a", ITEMS[:2]),
-               Interrupt("a", at=30.0))
+    out = play(
+        session,
+        Start("a", "viseme-lerp", "demo", fps=10),
+        Phonemes("a", ITEMS[:2]),
+        Interrupt("a", at=30.0),
+    )
     blocks = [m for m in out if isinstance(m, Frames)]
     # The cut is at the input's end, 0.4 s = frame 4; 100 ms at 10 fps is one step.
     assert blocks[-1].first_frame == 4 and blocks[-1].n_frames == 2
@@ -161,27 +200,44 @@ def test_interrupt_after_the_input_cuts_at_its_end_with_the_default_return(
 
 def test_oculus_visemes_through_the_session_are_distributions(catalog: Catalog) -> None:
     session = new_session(catalog)
-    out = play(session, Start("a", "anime-graph", "demo", output=OutputProfile(visemes="oculus15")),
-               Phonemes("a", ITEMS), End("a"))
+    out = play(
+        session,
+        Start("a", "anime-graph", "demo", output=OutputProfile(visemes="oculus15")),
+        Phonemes("a", ITEMS),
+        End("a"),
+    )
     assert isinstance(out[0], Ready) and out[0].channels == OCULUS15_VISEMES
     weights = frames_of(out)
     assert weights.shape == (37, 15) and np.all(weights >= 0)
     np.testing.assert_allclose(weights.sum(axis=1), 1.0, atol=1e-5)
 
 
-@pytest.mark.parametrize(("start", "code", "where"), [
-    (Start("a", "nope", "demo"), "unknown_engine", "engine"),
-    (Start("a", "viseme-lerp", "nobody"), "unknown_character", "character"),
-    (Start("a", "viseme-lerp", "demo", emotion="bored"), "unknown_emotion", "emotion"),
-    (Start("a", "viseme-lerp", "demo", phoneme_source="klingon"), "unknown_phoneme_source",
-     "phoneme_source"),
-    (Start("a", "viseme-lerp", "demo", channels=("jawOpen", "nose")), "unknown_channel",
-     "channels[1]"),
-    (Start("a", "anime-graph", "demo", options={"search": "psychic"}), "invalid_request",
-     "options.search"),
-])
+@pytest.mark.parametrize(
+    ("start", "code", "where"),
+    [
+        (Start("a", "nope", "demo"), "unknown_engine", "engine"),
+        (Start("a", "viseme-lerp", "nobody"), "unknown_character", "character"),
+        (Start("a", "viseme-lerp", "demo", emotion="bored"), "unknown_emotion", "emotion"),
+        (
+            Start("a", "viseme-lerp", "demo", phoneme_source="klingon"),
+            "unknown_phoneme_source",
+            "phoneme_source",
+        ),
+        (
+            Start("a", "viseme-lerp", "demo", channels=("jawOpen", "nose")),
+            "unknown_channel",
+            "channels[1]",
+        ),
+        (
+            Start("a", "anime-graph", "demo", options={"search": "psychic"}),
+            "invalid_request",
+            "options.search",
+        ),
+    ],
+)
 def test_start_errors_are_fatal_for_the_request_and_name_the_field(
-        catalog: Catalog, start: Start, code: str, where: str) -> None:
+    catalog: Catalog, start: Start, code: str, where: str
+) -> None:
     session = new_session(catalog)
     [error] = play(session, start)
     assert isinstance(error, ErrorMessage)
@@ -196,21 +252,29 @@ def test_budget_infeasible_gives_the_smallest_feasible_budget(catalog: Catalog) 
     assert isinstance(error, ErrorMessage) and error.code == "budget_infeasible"
     worst = catalog.ladder(catalog.model("viseme-lerp", "demo"))[0].worst_case_ms
     assert error.details == {"min_budget_ms": math.ceil(worst)}
-    [ready] = play(session, Start("a", "viseme-lerp", "demo",
-                                  latency_budget_ms=float(math.ceil(worst))))
+    [ready] = play(
+        session, Start("a", "viseme-lerp", "demo", latency_budget_ms=float(math.ceil(worst)))
+    )
     assert isinstance(ready, Ready) and ready.latency_budget_ms == math.ceil(worst)
 
 
-@pytest.mark.parametrize(("items", "code", "where"), [
-    ((PhonemeItem("XQ", 0.6, 0.7),), "unknown_phoneme", "items[0].phoneme"),
-    ((PhonemeItem("AA", 0.5, 0.7),), "non_monotonic_times", "items[0].start"),
-    ((PhonemeItem("AA", 0.6, 0.7, emotion="bored"),), "unknown_emotion", "items[0].emotion"),
-    ((PhonemeItem("AA", 0.6, 17.0),), "invalid_times", "items[0].end"),
-    (tuple(PhonemeItem("AA", 1 + i * 0.1, 1.05 + i * 0.1) for i in range(18)),
-     "too_many_phonemes", "items"),
-])
-def test_phoneme_errors_end_the_request(catalog: Catalog, items: tuple[PhonemeItem, ...],
-                                        code: str, where: str) -> None:
+@pytest.mark.parametrize(
+    ("items", "code", "where"),
+    [
+        ((PhonemeItem("XQ", 0.6, 0.7),), "unknown_phoneme", "items[0].phoneme"),
+        ((PhonemeItem("AA", 0.5, 0.7),), "non_monotonic_times", "items[0].start"),
+        ((PhonemeItem("AA", 0.6, 0.7, emotion="bored"),), "unknown_emotion", "items[0].emotion"),
+        ((PhonemeItem("AA", 0.6, 17.0),), "invalid_times", "items[0].end"),
+        (
+            tuple(PhonemeItem("AA", 1 + i * 0.1, 1.05 + i * 0.1) for i in range(18)),
+            "too_many_phonemes",
+            "items",
+        ),
+    ],
+)
+def test_phoneme_errors_end_the_request(
+    catalog: Catalog, items: tuple[PhonemeItem, ...], code: str, where: str
+) -> None:
     session = new_session(catalog)
     play(session, Start("a", "viseme-lerp", "demo"), Phonemes("a", ITEMS))
     [error] = [m for m in play(session, Phonemes("a", items)) if isinstance(m, ErrorMessage)]
@@ -222,8 +286,9 @@ def test_phoneme_errors_end_the_request(catalog: Catalog, items: tuple[PhonemeIt
 def test_message_scope_errors_leave_requests_running(catalog: Catalog) -> None:
     session = new_session(catalog)
     play(session, Start("a", "viseme-lerp", "demo"))
-    assert errors(play(session, Start("a", "viseme-lerp", "demo"))) == \
-        [("duplicate_request", "a", False)]
+    assert errors(play(session, Start("a", "viseme-lerp", "demo"))) == [
+        ("duplicate_request", "a", False)
+    ]
     assert errors(play(session, End("zz"))) == [("unknown_request", "zz", False)]
     malformed = decode(b"\xc1", "msgpack", sender="client")
     assert errors(play(session, malformed)) == [("malformed", None, False)]  # type: ignore[arg-type]
@@ -251,16 +316,20 @@ def test_request_and_audio_limits(catalog: Catalog) -> None:
     assert errors(play(session, AudioChunk("a", 8000, b"\0\0"))) == [("invalid_audio", "a", True)]
 
 
-def test_audio_streamed_before_phonemes_matches_offline_audio_synthesis(
-        catalog: Catalog) -> None:
+def test_audio_streamed_before_phonemes_matches_offline_audio_synthesis(catalog: Catalog) -> None:
     model = catalog.model("anime-graph", "demo")
     rate = 16000
     samples = (8000 * np.sin(np.arange(int(0.6 * rate)) * 0.05)).astype("<i2")
     session = new_session(catalog)
-    out = play(session, Start("a", "anime-graph", "demo"),
-               AudioChunk("a", rate, samples[:4000].tobytes()),
-               AudioChunk("a", rate, samples[4000:].tobytes()),
-               Phonemes("a", ITEMS[:2]), Phonemes("a", ITEMS[2:]), End("a"))
+    out = play(
+        session,
+        Start("a", "anime-graph", "demo"),
+        AudioChunk("a", rate, samples[:4000].tobytes()),
+        AudioChunk("a", rate, samples[4000:].tobytes()),
+        Phonemes("a", ITEMS[:2]),
+        Phonemes("a", ITEMS[2:]),
+        End("a"),
+    )
     offline = model.synthesize(SPANS, fps=60, audio=Audio.from_pcm16(samples.tobytes(), rate))
     np.testing.assert_array_equal(frames_of(out), offline.frames)
 
@@ -269,13 +338,13 @@ def test_draining_refuses_new_requests_but_finishes_running_ones(catalog: Catalo
     session = new_session(catalog)
     play(session, Start("a", "viseme-lerp", "demo"))
     session.begin_drain()
-    assert errors(play(session, Start("b", "viseme-lerp", "demo"))) == \
-        [("shutting_down", "b", True)]
+    assert errors(play(session, Start("b", "viseme-lerp", "demo"))) == [
+        ("shutting_down", "b", True)
+    ]
     assert isinstance(play(session, Phonemes("a", ITEMS), End("a"))[-1], Done)
 
 
-def test_lag_and_first_frame_latency_are_measured_from_receipt_to_send(
-        catalog: Catalog) -> None:
+def test_lag_and_first_frame_latency_are_measured_from_receipt_to_send(catalog: Catalog) -> None:
     session = new_session(catalog)
     play(session, Start("a", "viseme-lerp", "demo", fps=10, latency_budget_ms=1000), now=0.0)
     early = play(session, Phonemes("a", ITEMS), now=1.0, sent=1.25)

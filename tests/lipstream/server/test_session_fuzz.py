@@ -50,13 +50,25 @@ labels = st.sampled_from(("AA1", "B", "sil", "HH", "ɪ", "OW0", "M", "S", "XQ"))
 def starts(draw: st.DrawFn) -> Start:
     if draw(st.integers(0, 9)) == 0:  # anything the codec accepts
         return replace(draw(protocol.starts()), id=draw(ids))
-    profile = draw(st.sampled_from((None, None, OutputProfile(naming="livelink"),
-                                    OutputProfile(visemes="oculus15", channels=("ih", "PP")))))
-    return Start(draw(ids), draw(st.sampled_from(("viseme-lerp",) * 3 + ("anime-graph", "nope"))),
-                 draw(st.sampled_from(("demo",) * 5 + ("nobody",))),
-                 fps=draw(st.sampled_from((10.0, 30.0, 60.0))), output=profile,
-                 emotion=draw(st.sampled_from((None,) * 4 + ("happy", "bored"))),
-                 latency_budget_ms=draw(st.sampled_from((None,) * 4 + (5.0, 5000.0))))
+    profile = draw(
+        st.sampled_from(
+            (
+                None,
+                None,
+                OutputProfile(naming="livelink"),
+                OutputProfile(visemes="oculus15", channels=("ih", "PP")),
+            )
+        )
+    )
+    return Start(
+        draw(ids),
+        draw(st.sampled_from(("viseme-lerp",) * 3 + ("anime-graph", "nope"))),
+        draw(st.sampled_from(("demo",) * 5 + ("nobody",))),
+        fps=draw(st.sampled_from((10.0, 30.0, 60.0))),
+        output=profile,
+        emotion=draw(st.sampled_from((None,) * 4 + ("happy", "bored"))),
+        latency_budget_ms=draw(st.sampled_from((None,) * 4 + (5.0, 5000.0))),
+    )
 
 
 @st.composite
@@ -65,19 +77,30 @@ def phonemes(draw: st.DrawFn) -> Phonemes:
     items = []
     for _ in range(draw(st.integers(1, 4))):
         end = start + draw(st.floats(0.01, 0.3))
-        items.append(PhonemeItem(draw(labels), start, end,
-                                 draw(st.sampled_from((None,) * 6 + ("sad", "bored")))))
+        items.append(
+            PhonemeItem(
+                draw(labels), start, end, draw(st.sampled_from((None,) * 6 + ("sad", "bored")))
+            )
+        )
         start = end + draw(st.sampled_from((0.0, 0.0, 0.05)))
     return Phonemes(draw(ids), tuple(items))
 
 
 garbage = st.binary(max_size=40).map(lambda raw: decode(raw, "msgpack", sender="client"))
 inputs = st.one_of(
-    starts(), starts(), phonemes(), phonemes(), phonemes(), phonemes(), st.builds(End, ids),
-    st.builds(End, ids), st.builds(Cancel, ids),
+    starts(),
+    starts(),
+    phonemes(),
+    phonemes(),
+    phonemes(),
+    phonemes(),
+    st.builds(End, ids),
+    st.builds(End, ids),
+    st.builds(Cancel, ids),
     st.builds(Interrupt, ids, st.floats(0.0, 4.0), st.none() | st.floats(0.0, 300.0)),
     st.builds(AudioChunk, ids, st.sampled_from((16000, 22050)), st.just(b"\x01\x00" * 64)),
-    protocol.client_messages(), garbage,
+    protocol.client_messages(),
+    garbage,
 )
 
 
@@ -97,8 +120,9 @@ class ClientView:
 
     def check(self, answer: ServerMessage) -> None:
         assert decode(encode(answer, "msgpack"), "msgpack", sender="server") == answer
-        assert not isinstance(decode(encode(answer, "json"), "json", sender="server"),
-                              ProtocolError)
+        assert not isinstance(
+            decode(encode(answer, "json"), "json", sender="server"), ProtocolError
+        )
         if isinstance(answer, Ready):
             assert answer.id not in self.open
             self.open[answer.id] = Track()
@@ -130,7 +154,8 @@ class ClientView:
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(inputs, min_size=3, max_size=24))
 def test_any_input_gets_only_documented_well_ordered_answers(
-        catalog: Catalog, sequence: list[Message | ProtocolError]) -> None:
+    catalog: Catalog, sequence: list[Message | ProtocolError]
+) -> None:
     session = Session(catalog, SessionLimits(2, RequestLimits(12, 400, 100.0)))
     view = ClientView()
     opening = Start("a", "viseme-lerp", "demo", fps=30)

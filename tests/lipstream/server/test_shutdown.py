@@ -43,10 +43,10 @@ def readyz(base: str) -> int:
         return 0
 
 
-def test_drain_finishes_in_flight_requests_then_closes_with_1001(lerp_dir: Path,
-                                                                 catalog: Catalog) -> None:
-    with serving(lerp_dir, ServerSettings(drain_timeout_s=20)) as served, \
-            client(served.ws) as ws:
+def test_drain_finishes_in_flight_requests_then_closes_with_1001(
+    lerp_dir: Path, catalog: Catalog
+) -> None:
+    with serving(lerp_dir, ServerSettings(drain_timeout_s=20)) as served, client(served.ws) as ws:
         ws.send(Start("a", "viseme-lerp", "demo"), Phonemes("a", ITEMS[:2]))
         assert isinstance(ws.recv(), Ready)
         drained = served.call_soon(served.app.state.lifecycle.drain(20))
@@ -69,13 +69,13 @@ def test_drain_finishes_in_flight_requests_then_closes_with_1001(lerp_dir: Path,
     expected = catalog.model("viseme-lerp", "demo").synthesize(SPANS, fps=60).frames
     np.testing.assert_array_equal(np.array([rows[i] for i in sorted(rows)]), expected)
     assert [(m.code, m.id, m.fatal) for m in messages] == [  # type: ignore[union-attr]
-        ("shutting_down", None, True)]
+        ("shutting_down", None, True)
+    ]
     assert (code, reason) == (1001, "shutting_down")
 
 
 def test_the_drain_timeout_bounds_the_wait(lerp_dir: Path) -> None:
-    with serving(lerp_dir, ServerSettings(drain_timeout_s=0.3)) as served, \
-            client(served.ws) as ws:
+    with serving(lerp_dir, ServerSettings(drain_timeout_s=0.3)) as served, client(served.ws) as ws:
         ws.send(Start("a", "viseme-lerp", "demo"), Phonemes("a", ITEMS[:1]))
         assert isinstance(ws.recv(), Ready)
         began = time.monotonic()
@@ -92,9 +92,23 @@ def lipstream_serve(models: Path, *flags: str) -> Iterator[tuple[subprocess.Pope
     port = free_port()
     env = {**os.environ, "LIPSTREAM_DRAIN_TIMEOUT_S": "20", "LIPSTREAM_LOG_LEVEL": "warning"}
     process = subprocess.Popen(
-        [sys.executable, "-m", "lipstream.cli", "serve", "--models", str(models),
-         "--host", "127.0.0.1", "--port", str(port), *flags],
-        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        [
+            sys.executable,
+            "-m",
+            "lipstream.cli",
+            "serve",
+            "--models",
+            str(models),
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(port),
+            *flags,
+        ],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     base = f"http://127.0.0.1:{port}"
     try:
         wait_for(lambda: readyz(base) == 200, timeout=30)
@@ -106,8 +120,9 @@ def lipstream_serve(models: Path, *flags: str) -> Iterator[tuple[subprocess.Pope
 
 
 @pytest.mark.parametrize("workers", ["1", "2"])
-def test_sigterm_loses_no_in_flight_utterance(lerp_dir: Path, catalog: Catalog,
-                                              workers: str) -> None:
+def test_sigterm_loses_no_in_flight_utterance(
+    lerp_dir: Path, catalog: Catalog, workers: str
+) -> None:
     with lipstream_serve(lerp_dir, "--workers", workers) as (process, base):
         url = base.replace("http://", "ws://") + "/v1/stream"
         with client(url) as first, client(url, "json") as second:

@@ -70,10 +70,12 @@ def raw_websocket(served: Served, receive_buffer: int) -> socket.socket:
     sock.settimeout(5.0)
     sock.connect((address.hostname, address.port))
     key = base64.b64encode(os.urandom(16)).decode()
-    sock.sendall(f"GET /v1/stream HTTP/1.1\r\nHost: {address.netloc}\r\nUpgrade: websocket\r\n"
-                 f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
-                 f"Sec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: {SUBPROTOCOL_MSGPACK}"
-                 "\r\n\r\n".encode())
+    sock.sendall(
+        f"GET /v1/stream HTTP/1.1\r\nHost: {address.netloc}\r\nUpgrade: websocket\r\n"
+        f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
+        f"Sec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: {SUBPROTOCOL_MSGPACK}"
+        "\r\n\r\n".encode()
+    )
     response = b""
     while not response.endswith(b"\r\n\r\n"):  # byte by byte: not one byte of frames beyond
         byte = sock.recv(1)
@@ -143,14 +145,19 @@ def read_until_closed(sock: socket.socket) -> tuple[int, str]:
 
 
 def test_a_client_that_never_reads_again_is_reset_while_others_are_served(
-        lerp_dir: Path, trained_models: dict[str, Model]) -> None:
+    lerp_dir: Path, trained_models: dict[str, Model]
+) -> None:
     settings = ServerSettings(send_timeout_s=SEND_TIMEOUT_S, max_request_frames=200_000)
     with serving(lerp_dir, settings) as served:
         slow = raw_websocket(served, receive_buffer=4096)
         server_port, client_port = slow.getpeername()[1], slow.getsockname()[1]
         # 90 s at 1000 fps: about 10 MB of frames, far beyond every buffer on the way.
-        send_messages(slow, Start("slow", "viseme-lerp", "demo", fps=1000),
-                      Phonemes("slow", LONG_ITEMS), End("slow"))
+        send_messages(
+            slow,
+            Start("slow", "viseme-lerp", "demo", fps=1000),
+            Phonemes("slow", LONG_ITEMS),
+            End("slow"),
+        )
         began = time.monotonic()
         connection = server_connection(served, client_port)
         assert connection is not None
@@ -158,8 +165,11 @@ def test_a_client_that_never_reads_again_is_reset_while_others_are_served(
         wait_until(lambda: transport.get_write_buffer_size() > 0, began)  # the send stalls
 
         with client(served.ws) as other:
-            other.send(Start("a", "viseme-lerp", "demo"),
-                       Phonemes("a", tuple(PhonemeItem(*span) for span in SPANS)), End("a"))
+            other.send(
+                Start("a", "viseme-lerp", "demo"),
+                Phonemes("a", tuple(PhonemeItem(*span) for span in SPANS)),
+                End("a"),
+            )
             answers = other.until_done("a")
             served_meanwhile = server_connection(served, client_port) is not None
 

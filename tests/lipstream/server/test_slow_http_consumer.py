@@ -73,8 +73,9 @@ def served(lerp_dir: Path) -> Iterator[Served]:
 
 def synthesize_body(spans: list[tuple[str, float, float]], fps: int) -> bytes:
     items = [{"phoneme": phoneme, "start": start, "end": end} for phoneme, start, end in spans]
-    return json.dumps({"engine": "viseme-lerp", "character": "demo", "fps": fps,
-                       "items": items}).encode()
+    return json.dumps(
+        {"engine": "viseme-lerp", "character": "demo", "fps": fps, "items": items}
+    ).encode()
 
 
 def connect(served: Served, receive_buffer: int | None = None) -> socket.socket:
@@ -88,13 +89,16 @@ def connect(served: Served, receive_buffer: int | None = None) -> socket.socket:
 
 
 def send_request(sock: socket.socket, method: str, path: str, body: bytes = b"") -> None:
-    head = (f"{method} {path} HTTP/1.1\r\nHost: lipstream\r\nAccept: application/msgpack\r\n"
-            f"Content-Type: application/json\r\nContent-Length: {len(body)}\r\n\r\n")
+    head = (
+        f"{method} {path} HTTP/1.1\r\nHost: lipstream\r\nAccept: application/msgpack\r\n"
+        f"Content-Type: application/json\r\nContent-Length: {len(body)}\r\n\r\n"
+    )
     sock.sendall(head.encode() + body)
 
 
-def read_response(sock: socket.socket, pause_s: float = 0.0,
-                  chunk: int = 1 << 16) -> tuple[int, bytes]:
+def read_response(
+    sock: socket.socket, pause_s: float = 0.0, chunk: int = 1 << 16
+) -> tuple[int, bytes]:
     """Status and body of one Content-Length response, read ``chunk`` bytes at a time with
     ``pause_s`` after each read."""
     data = b""
@@ -144,7 +148,8 @@ def response_frames(body: bytes) -> np.ndarray:
 
 
 def test_a_client_that_never_reads_its_response_is_reset_while_others_are_served(
-        served: Served, trained_models: dict[str, Model]) -> None:
+    served: Served, trained_models: dict[str, Model]
+) -> None:
     model = trained_models["viseme-lerp"]
     never = connect(served, SMALL_RECEIVE_BUFFER)
     server_port, client_port = never.getpeername()[1], never.getsockname()[1]
@@ -155,11 +160,18 @@ def test_a_client_that_never_reads_its_response_is_reset_while_others_are_served
     stalled_at = wait_until(lambda: transport.get_write_buffer_size() > 0, began)
 
     short = synthesize_body(SPANS, 60)
-    answer = httpx.post(f"{served.http}/v1/synthesize", content=short, timeout=5,
-                        headers={"Content-Type": "application/json"})
+    answer = httpx.post(
+        f"{served.http}/v1/synthesize",
+        content=short,
+        timeout=5,
+        headers={"Content-Type": "application/json"},
+    )
     with client(served.ws) as other:
-        other.send(Start("a", "viseme-lerp", "demo"),
-                   Phonemes("a", tuple(PhonemeItem(*span) for span in SPANS)), End("a"))
+        other.send(
+            Start("a", "viseme-lerp", "demo"),
+            Phonemes("a", tuple(PhonemeItem(*span) for span in SPANS)),
+            End("a"),
+        )
         messages = other.until_done("a")
     served_meanwhile = server_connection(served, client_port) is not None
 
@@ -186,7 +198,8 @@ def test_a_client_that_never_reads_its_response_is_reset_while_others_are_served
 
 
 def test_a_slow_but_steady_reader_gets_the_whole_response(
-        served: Served, trained_models: dict[str, Model]) -> None:
+    served: Served, trained_models: dict[str, Model]
+) -> None:
     sock = connect(served, SMALL_RECEIVE_BUFFER)
     send_request(sock, "POST", "/v1/synthesize", synthesize_body(LONG_SPANS, STEADY_FPS))
     began = time.monotonic()
@@ -248,7 +261,8 @@ def test_a_slow_but_steady_reader_gets_a_whole_streamed_response(served: Served)
     # A small kernel buffer on the server's side: the transport's buffer then fills and
     # drains again and again, and the app writes each time it has drained.
     server_socket = server_connection(served, client_port).transport.get_extra_info(  # type: ignore[union-attr]
-        "socket")
+        "socket"
+    )
     server_socket.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 1 << 16)
     send_request(sock, "GET", "/test/finite")
     status, body = read_response(sock, STEADY_PAUSE_S, STEADY_CHUNK)
@@ -261,7 +275,8 @@ def test_a_slow_but_steady_reader_gets_a_whole_streamed_response(served: Served)
 
 
 def test_a_websocket_upgrade_behind_an_unread_response_is_left_to_the_websocket_rules(
-        served: Served, trained_models: dict[str, Model]) -> None:
+    served: Served, trained_models: dict[str, Model]
+) -> None:
     sock = connect(served, SMALL_RECEIVE_BUFFER)
     client_port = sock.getsockname()[1]
     key = base64.b64encode(os.urandom(16)).decode()
@@ -270,10 +285,12 @@ def test_a_websocket_upgrade_behind_an_unread_response_is_left_to_the_websocket_
     wait_until(lambda: server_connection(served, client_port) is not None, began)
     transport = server_connection(served, client_port).transport  # type: ignore[union-attr]
     wait_until(lambda: unsent_bytes(transport) > 0, began)  # the response is written whole
-    sock.sendall(f"GET /v1/stream HTTP/1.1\r\nHost: lipstream\r\nUpgrade: websocket\r\n"
-                 f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
-                 f"Sec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: {SUBPROTOCOL_MSGPACK}"
-                 "\r\n\r\n".encode())
+    sock.sendall(
+        f"GET /v1/stream HTTP/1.1\r\nHost: lipstream\r\nUpgrade: websocket\r\n"
+        f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
+        f"Sec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: {SUBPROTOCOL_MSGPACK}"
+        "\r\n\r\n".encode()
+    )
     # The response ended with its bytes unsent, and the upgrade follows: a watch of the
     # HTTP connection would reset it one send timeout later. The WebSocket's rules judge
     # only its app's sends and what is left once its app is done, and the app has sent

@@ -34,11 +34,19 @@ from lipstream_client import (
 )
 from tests.lipstream.server.harness import Served, client, frame_rows, serving
 
-SPANS = [("sil", 0.0, 0.05), ("HH", 0.05, 0.12), ("AY1", 0.12, 0.31), ("M", 0.31, 0.4),
-         ("sil", 0.4, 0.5)]
+SPANS = [
+    ("sil", 0.0, 0.05),
+    ("HH", 0.05, 0.12),
+    ("AY1", 0.12, 0.31),
+    ("M", 0.31, 0.4),
+    ("sil", 0.4, 0.5),
+]
 ITEMS = tuple(PhonemeItem(label, start, end) for label, start, end in SPANS)
-PROFILE = OutputProfile(naming="livelink", channels=("JawOpen", "MouthClose", "MouthFunnel"),
-                        transforms={"JawOpen": ChannelTransform(1.5, 0.1, (0.0, 0.9))})
+PROFILE = OutputProfile(
+    naming="livelink",
+    channels=("JawOpen", "MouthClose", "MouthFunnel"),
+    transforms={"JawOpen": ChannelTransform(1.5, 0.1, (0.0, 0.9))},
+)
 
 
 @pytest.fixture(scope="module")
@@ -54,9 +62,11 @@ def rows_of(messages: list, identifier: str) -> np.ndarray:  # type: ignore[type
 
 def rest_frames(served: Served, body: dict, encoding: Encoding) -> tuple[np.ndarray, dict]:  # type: ignore[type-arg]
     if encoding == "msgpack":
-        answer = httpx.post(f"{served.http}/v1/synthesize", content=msgpack.packb(body),
-                            headers={"Content-Type": "application/msgpack",
-                                     "Accept": "application/msgpack"})
+        answer = httpx.post(
+            f"{served.http}/v1/synthesize",
+            content=msgpack.packb(body),
+            headers={"Content-Type": "application/msgpack", "Accept": "application/msgpack"},
+        )
         assert answer.status_code == 200, answer.content
         result = msgpack.unpackb(answer.content)
         frames = np.frombuffer(result["data"], "<f4").reshape(-1, result["n_channels"])
@@ -69,19 +79,30 @@ def rest_frames(served: Served, body: dict, encoding: Encoding) -> tuple[np.ndar
 
 
 @pytest.mark.parametrize("encoding", ["msgpack", "json"])
-def test_every_message_type_round_trips_in_both_encodings(served: Served, catalog: Catalog,
-                                                          encoding: Encoding) -> None:
+def test_every_message_type_round_trips_in_both_encodings(
+    served: Served, catalog: Catalog, encoding: Encoding
+) -> None:
     with client(served.ws, encoding) as ws:
         assert ws.connection.subprotocol == f"lipstream.v1.{encoding}"
-        ws.send(Start("a", "viseme-lerp", "demo", fps=60, output=PROFILE, emotion="happy"),
-                Phonemes("a", ITEMS[:2]), Phonemes("a", ITEMS[2:]), End("a"))
+        ws.send(
+            Start("a", "viseme-lerp", "demo", fps=60, output=PROFILE, emotion="happy"),
+            Phonemes("a", ITEMS[:2]),
+            Phonemes("a", ITEMS[2:]),
+            End("a"),
+        )
         ended = ws.until_done("a")
-        ws.send(Start("b", "anime-graph", "demo", channels=("jawOpen",)),
-                AudioChunk("b", 16000, (np.arange(800, dtype="<i2") * 7).tobytes()),
-                Phonemes("b", ITEMS), Cancel("b"))
+        ws.send(
+            Start("b", "anime-graph", "demo", channels=("jawOpen",)),
+            AudioChunk("b", 16000, (np.arange(800, dtype="<i2") * 7).tobytes()),
+            Phonemes("b", ITEMS),
+            Cancel("b"),
+        )
         cancelled = ws.until_done("b")
-        ws.send(Start("c", "viseme-lerp", "demo", fps=100), Phonemes("c", ITEMS),
-                Interrupt("c", 0.2, 30.0))
+        ws.send(
+            Start("c", "viseme-lerp", "demo", fps=100),
+            Phonemes("c", ITEMS),
+            Interrupt("c", 0.2, 30.0),
+        )
         interrupted = ws.until_done("c")
         ws.send(End("nobody"))
         error = ws.recv()
@@ -100,10 +121,14 @@ def test_every_message_type_round_trips_in_both_encodings(served: Served, catalo
     assert (error.code, error.id, error.fatal) == ("unknown_request", "nobody", False)
 
 
-def test_requests_multiplexed_on_one_connection_stay_independent(served: Served,
-                                                                 catalog: Catalog) -> None:
-    utterances = {"npc-1": SPANS, "npc-2": [("S", 0.0, 0.2), ("OW1", 0.2, 0.6)],
-                  "npc-3": [("F", 0.1, 0.3), ("IY1", 0.3, 0.45)]}
+def test_requests_multiplexed_on_one_connection_stay_independent(
+    served: Served, catalog: Catalog
+) -> None:
+    utterances = {
+        "npc-1": SPANS,
+        "npc-2": [("S", 0.0, 0.2), ("OW1", 0.2, 0.6)],
+        "npc-3": [("F", 0.1, 0.3), ("IY1", 0.3, 0.45)],
+    }
     with client(served.ws, "json") as ws:
         for identifier in utterances:
             ws.send(Start(identifier, "viseme-lerp", "demo", fps=30))
@@ -112,8 +137,11 @@ def test_requests_multiplexed_on_one_connection_stay_independent(served: Served,
                 if index < len(spans):
                     ws.send(Phonemes(identifier, (PhonemeItem(*spans[index]),)))
         for identifier, spans in utterances.items():
-            ws.send(Phonemes(identifier, tuple(PhonemeItem(*span) for span in spans[2:])) if
-                    len(spans) > 2 else End(identifier))
+            ws.send(
+                Phonemes(identifier, tuple(PhonemeItem(*span) for span in spans[2:]))
+                if len(spans) > 2
+                else End(identifier)
+            )
             if len(spans) > 2:
                 ws.send(End(identifier))
         messages = []
@@ -121,30 +149,51 @@ def test_requests_multiplexed_on_one_connection_stay_independent(served: Served,
             messages.append(ws.recv())
     model = catalog.model("viseme-lerp", "demo")
     for identifier, spans in utterances.items():
-        np.testing.assert_array_equal(rows_of(messages, identifier),
-                                      model.synthesize(spans, fps=30).frames)
+        np.testing.assert_array_equal(
+            rows_of(messages, identifier), model.synthesize(spans, fps=30).frames
+        )
 
 
-@pytest.mark.parametrize(("start", "encoding"), [
-    (Start("r", "viseme-lerp", "demo", fps=60, output=PROFILE), "msgpack"),
-    (Start("r", "anime-graph", "demo", fps=30, output=OutputProfile(visemes="oculus15"),
-           latency_budget_ms=5000), "json"),
-])
-def test_streamed_frames_equal_post_synthesize(served: Served, start: Start,
-                                               encoding: Encoding) -> None:
+@pytest.mark.parametrize(
+    ("start", "encoding"),
+    [
+        (Start("r", "viseme-lerp", "demo", fps=60, output=PROFILE), "msgpack"),
+        (
+            Start(
+                "r",
+                "anime-graph",
+                "demo",
+                fps=30,
+                output=OutputProfile(visemes="oculus15"),
+                latency_budget_ms=5000,
+            ),
+            "json",
+        ),
+    ],
+)
+def test_streamed_frames_equal_post_synthesize(
+    served: Served, start: Start, encoding: Encoding
+) -> None:
     with client(served.ws, encoding) as ws:
         ws.send(start, *(Phonemes("r", (item,)) for item in ITEMS), End("r"))
         streamed = ws.until_done("r")
-    body = {"engine": start.engine, "character": start.character, "fps": start.fps,
-            "items": [{"phoneme": i.phoneme, "start": i.start, "end": i.end} for i in ITEMS],
-            "output": _output_json(start.output), "latency_budget_ms": start.latency_budget_ms}
-    frames, result = rest_frames(served, {k: v for k, v in body.items() if v is not None},
-                                 encoding)
+    body = {
+        "engine": start.engine,
+        "character": start.character,
+        "fps": start.fps,
+        "items": [{"phoneme": i.phoneme, "start": i.start, "end": i.end} for i in ITEMS],
+        "output": _output_json(start.output),
+        "latency_budget_ms": start.latency_budget_ms,
+    }
+    frames, result = rest_frames(served, {k: v for k, v in body.items() if v is not None}, encoding)
     assert frames.tobytes() == rows_of(streamed, "r").tobytes()
     ready = streamed[0]
     assert isinstance(ready, Ready)
-    assert (result["channels"], result["fidelity"], result["lookahead_ms"]) == \
-        (list(ready.channels), ready.fidelity, ready.lookahead_ms)
+    assert (result["channels"], result["fidelity"], result["lookahead_ms"]) == (
+        list(ready.channels),
+        ready.fidelity,
+        ready.lookahead_ms,
+    )
     assert result["stats"]["frames"] == len(frames) == int(0.5 * start.fps) + 1
 
 
@@ -161,12 +210,16 @@ def test_subprotocol_negotiation_and_no_compression(served: Served) -> None:
         assert ws.connection.response.headers.get("Sec-WebSocket-Extensions") is None
         ws.send(Start("a", "viseme-lerp", "demo"))
         assert isinstance(ws.recv(), Ready)
-    with client(served.ws, "json",
-                subprotocols=["lipstream.v2.json", "lipstream.v1.json",
-                              "lipstream.v1.msgpack"]) as ws:
+    with client(
+        served.ws,
+        "json",
+        subprotocols=["lipstream.v2.json", "lipstream.v1.json", "lipstream.v1.msgpack"],
+    ) as ws:
         assert ws.connection.subprotocol == "lipstream.v1.json"
-    with pytest.raises(InvalidStatus) as refused, \
-            client(served.ws, "json", subprotocols=["lipstream.v2.json"]):
+    with (
+        pytest.raises(InvalidStatus) as refused,
+        client(served.ws, "json", subprotocols=["lipstream.v2.json"]),
+    ):
         pass
     assert refused.value.response.status_code == 403
 
@@ -178,14 +231,19 @@ def test_bad_input_gets_errors_and_the_connection_keeps_serving(served: Served) 
         ws.send_raw(encode(Start("a", "viseme-lerp", "demo"), "msgpack") + b"\x00")  # trailing
         codes = [ws.recv() for _ in range(3)]
         assert [(m.code, m.fatal) for m in codes] == [  # type: ignore[union-attr]
-            ("malformed", False), ("malformed", False), ("malformed", False)]
+            ("malformed", False),
+            ("malformed", False),
+            ("malformed", False),
+        ]
         ws.send(Start("a", "viseme-lerp", "demo"), Phonemes("a", ITEMS), End("a"))
         assert isinstance(ws.until_done("a")[-1], Done)
 
 
 def test_health_answers_while_a_long_synthesis_runs(served: Served) -> None:
-    spans = [(("AA1", "M", "S", "IY1")[index % 4], index * 0.08, (index + 1) * 0.08)
-             for index in range(10_000)]  # the default per-request limit
+    spans = [
+        (("AA1", "M", "S", "IY1")[index % 4], index * 0.08, (index + 1) * 0.08)
+        for index in range(10_000)
+    ]  # the default per-request limit
     items = tuple(PhonemeItem(*span) for span in spans)
     finished: list[float] = []
 
@@ -222,6 +280,9 @@ def test_metrics_count_sessions_frames_latency_and_errors(served: Served) -> Non
     assert 'lipstream_errors_total{code="unknown_emotion"}' in text
     assert 'lipstream_first_frame_latency_seconds_count{engine="viseme-lerp"}' in text
     assert 'lipstream_frame_lag_seconds_bucket{engine="viseme-lerp",le="+Inf"}' in text
-    total = next(line for line in text.splitlines()
-                 if line.startswith('lipstream_frames_total{engine="viseme-lerp"}'))
+    total = next(
+        line
+        for line in text.splitlines()
+        if line.startswith('lipstream_frames_total{engine="viseme-lerp"}')
+    )
     assert float(total.split()[-1]) >= frames == 31

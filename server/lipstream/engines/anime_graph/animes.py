@@ -57,14 +57,25 @@ class Curves:
         Outside an utterance the first/last segment is continued linearly
         (``extrapolate``) or its end value is held.
         """
-        return _interpolate(self.values, np.asarray(self.offsets, dtype=np.int64),
-                            np.asarray(utterance, dtype=np.int64),
-                            np.asarray(times, dtype=np.float64), float(self.rate), extrapolate)
+        return _interpolate(
+            self.values,
+            np.asarray(self.offsets, dtype=np.int64),
+            np.asarray(utterance, dtype=np.int64),
+            np.asarray(times, dtype=np.float64),
+            float(self.rate),
+            extrapolate,
+        )
 
 
 @njit(cache=True)
-def _interpolate(values: np.ndarray, offsets: np.ndarray, utterance: np.ndarray,
-                 times: np.ndarray, rate: float, extrapolate: bool) -> np.ndarray:
+def _interpolate(
+    values: np.ndarray,
+    offsets: np.ndarray,
+    utterance: np.ndarray,
+    times: np.ndarray,
+    rate: float,
+    extrapolate: bool,
+) -> np.ndarray:
     """``Curves.sample``, compiled: it runs for every fragment placed, and as numpy calls
     its fixed cost dwarfed the few rows it reads."""
     out = np.empty((len(times), values.shape[1]))
@@ -74,8 +85,15 @@ def _interpolate(values: np.ndarray, offsets: np.ndarray, utterance: np.ndarray,
 
 
 @njit(cache=True)
-def sample_into(out: np.ndarray, values: np.ndarray, offsets: np.ndarray, utterance: int,
-                time: float, rate: float, extrapolate: bool) -> None:
+def sample_into(
+    out: np.ndarray,
+    values: np.ndarray,
+    offsets: np.ndarray,
+    utterance: int,
+    time: float,
+    rate: float,
+    extrapolate: bool,
+) -> None:
     """One row of ``Curves.sample``: utterance ``utterance`` at ``time`` (s) into ``out``
     (dim,)."""
     first = offsets[utterance]
@@ -140,8 +158,9 @@ class AnimeTable:
         return summarize(self.features, self.utterance, self.start, self.end)
 
 
-def summarize(features: Curves, utterance: np.ndarray, start: np.ndarray,
-              end: np.ndarray) -> np.ndarray:
+def summarize(
+    features: Curves, utterance: np.ndarray, start: np.ndarray, end: np.ndarray
+) -> np.ndarray:
     """The feature curve under each span (start, end in s), sampled at the centres of
     ``SUMMARY_POINTS`` equal parts: float32 (n_spans, SUMMARY_POINTS * dim)."""
     relative = (np.arange(SUMMARY_POINTS) + 0.5) / SUMMARY_POINTS
@@ -164,8 +183,9 @@ def utterance_features(audio: Audio, until_s: float, config: MfccConfig) -> np.n
     return mfcc(audio.samples, audio.sample_rate, 0, stop, config)
 
 
-def segment_corpus(corpus: Corpus, basis: MotionBasis, config: MfccConfig,
-                   use_audio: bool) -> AnimeTable:
+def segment_corpus(
+    corpus: Corpus, basis: MotionBasis, config: MfccConfig, use_audio: bool
+) -> AnimeTable:
     """Cut every utterance of ``corpus`` into animes."""
     utterances = list(corpus.utterances)
     labels: list[int] = []
@@ -185,8 +205,10 @@ def segment_corpus(corpus: Corpus, basis: MotionBasis, config: MfccConfig,
         motion.append(basis.project(utterance.frames).astype(np.float32))
         if use_audio:
             if utterance.audio is None:
-                raise CorpusError("utterance has no audio while the others have",
-                                  where=f"utterance {utterance.stem!r}")
+                raise CorpusError(
+                    "utterance has no audio while the others have",
+                    where=f"utterance {utterance.stem!r}",
+                )
             features.append(utterance_features(utterance.audio, utterance.phones[-1].end, config))
     fps = float(corpus.fps)
     return AnimeTable(
@@ -196,5 +218,6 @@ def segment_corpus(corpus: Corpus, basis: MotionBasis, config: MfccConfig,
         end=np.asarray(ends, dtype=np.float64),
         motion=_stack(motion, basis.n_components, fps, np.float32),
         features=_stack(features, config.n_coefficients, config.rate, np.float32)
-        if use_audio else None,
+        if use_audio
+        else None,
     )

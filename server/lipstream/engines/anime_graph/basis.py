@@ -34,29 +34,32 @@ class MotionBasis:
 
     def project(self, frames: np.ndarray) -> np.ndarray:
         """Channel frames (n, n_channels) to coefficients (n, n_components), float64."""
-        return (np.asarray(frames, dtype=np.float64) - self.mean) @ self.components.T
+        return np.asarray((np.asarray(frames, dtype=np.float64) - self.mean) @ self.components.T)
 
     def reconstruct(self, coefficients: np.ndarray) -> np.ndarray:
         """Coefficients (n, n_components) back to channel frames (n, n_channels), float64."""
-        return np.asarray(coefficients, dtype=np.float64) @ self.components + self.mean
+        return np.asarray(np.asarray(coefficients, dtype=np.float64) @ self.components + self.mean)
 
 
-def fit_basis(frames: np.ndarray, variance: float,
-              per_channel: bool = True) -> tuple[MotionBasis, float]:
+def fit_basis(
+    frames: np.ndarray, variance: float, per_channel: bool = True
+) -> tuple[MotionBasis, float]:
     """PCA of ``frames`` (n, n_channels) keeping ``variance`` (0, 1] of the total variance,
     or (``per_channel``) of every moving channel's own; returns the basis and the share of
     the total variance it explains."""
     data = np.asarray(frames, dtype=np.float64)
     spread = data.var(axis=0).sum()
     if not spread > 0.0:
-        raise CorpusError("the training frames never change: there is no motion to learn",
-                          where="corpus")
+        raise CorpusError(
+            "the training frames never change: there is no motion to learn", where="corpus"
+        )
     if len(data) < 2:
         raise CorpusError("at least two training frames are needed", where="corpus")
     pca = PCA(n_components=min(data.shape), svd_solver="full").fit(data)
     kept = _components_needed(pca.explained_variance_, pca.components_, variance, per_channel)
-    basis = MotionBasis(mean=pca.mean_.astype(np.float64),
-                        components=pca.components_[:kept].astype(np.float64))
+    basis = MotionBasis(
+        mean=pca.mean_.astype(np.float64), components=pca.components_[:kept].astype(np.float64)
+    )
     return basis, float(np.sum(pca.explained_variance_ratio_[:kept]))
 
 
@@ -69,11 +72,12 @@ def channel_shares(eigenvalues: np.ndarray, components: np.ndarray) -> np.ndarra
     moving = totals > 1e-12 * max(float(totals.max()), 1e-300)
     shares = np.ones_like(parts)
     shares[:, moving] = np.cumsum(parts[:, moving], axis=0) / totals[moving]
-    return shares
+    return np.asarray(shares)
 
 
-def _components_needed(eigenvalues: np.ndarray, components: np.ndarray, variance: float,
-                       per_channel: bool) -> int:
+def _components_needed(
+    eigenvalues: np.ndarray, components: np.ndarray, variance: float, per_channel: bool
+) -> int:
     if per_channel:
         reached = channel_shares(eigenvalues, components).min(axis=1)
     else:

@@ -55,8 +55,13 @@ class PairIndex:
     n_labels: int
 
     @classmethod
-    def build(cls, labels: np.ndarray, successor: np.ndarray, n_labels: int,
-              members: np.ndarray | None = None) -> PairIndex:
+    def build(
+        cls,
+        labels: np.ndarray,
+        successor: np.ndarray,
+        n_labels: int,
+        members: np.ndarray | None = None,
+    ) -> PairIndex:
         """Pairs among ``members`` (anime ids; default all)."""
         chosen = np.arange(len(labels)) if members is None else np.asarray(members)
         linked = chosen[successor[chosen] >= 0]
@@ -73,8 +78,15 @@ class PairIndex:
         return self.sources[low:high]
 
 
-def plan_join(left: int, right: int, labels: tuple[int, int], poses: Poses, pairs: PairIndex,
-              limit: int | None, blend: bool) -> Join:
+def plan_join(
+    left: int,
+    right: int,
+    labels: tuple[int, int],
+    poses: Poses,
+    pairs: PairIndex,
+    limit: int | None,
+    blend: bool,
+) -> Join:
     """The join from fragment anime ``left`` to ``right`` shown for query ``labels``."""
     if int(poses.successor[left]) == right:
         return Join(JoinKind.SEAMLESS)
@@ -84,7 +96,8 @@ def plan_join(left: int, right: int, labels: tuple[int, int], poses: Poses, pair
     if not len(candidates):
         return Join(JoinKind.EXTEND)
     meeting = poses.last[candidates]
-    cost = (np.linalg.norm(meeting - poses.last[left], axis=1)
-            + np.linalg.norm(meeting - poses.first[right], axis=1))
+    cost = np.linalg.norm(meeting - poses.last[left], axis=1) + np.linalg.norm(
+        meeting - poses.first[right], axis=1
+    )
     chosen = int(candidates[int(np.argmin(cost))])
     return Join(JoinKind.PAIR, chosen, int(poses.successor[chosen]))

@@ -16,16 +16,18 @@ from sklearn.cluster import KMeans
 from sklearn.exceptions import ConvergenceWarning
 
 
-def cluster_animes(shapes: np.ndarray, k: int, seed: int,
-                   max_iter: int = 100) -> tuple[np.ndarray, np.ndarray]:
+def cluster_animes(
+    shapes: np.ndarray, k: int, seed: int, max_iter: int = 100
+) -> tuple[np.ndarray, np.ndarray]:
     """Cluster ``shapes`` (n_animes, dim): (assignment (n_animes,), representative
     (n_clusters,)). Fewer than ``k`` clusters come back when there are fewer distinct
     fragments."""
     n_clusters = max(1, min(int(k), len(shapes)))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
-        kmeans = KMeans(n_clusters=n_clusters, n_init=1, max_iter=max_iter,
-                        random_state=seed).fit(shapes)
+        kmeans = KMeans(n_clusters=n_clusters, n_init=1, max_iter=max_iter, random_state=seed).fit(
+            shapes
+        )
     raw = kmeans.labels_.astype(np.int64)
     distance = np.linalg.norm(shapes - kmeans.cluster_centers_[raw], axis=1)
     order = np.lexsort((np.arange(len(raw)), distance, raw))

@@ -59,8 +59,9 @@ class Ranking:
         """Cost of showing each of ``nodes`` at query ``position`` (which has ``label``)."""
         if self.query_summaries is None:
             return np.zeros(len(nodes))
-        return self.graph.audio_costs(np.asarray(nodes), label, self.query_summaries[position],
-                                      self.anime_summaries)
+        return self.graph.audio_costs(
+            np.asarray(nodes), label, self.query_summaries[position], self.anime_summaries
+        )
 
     def label_costs(self, position: int, label: int) -> np.ndarray:
         """``node_costs`` of the whole Anime Array row of ``label``, cached per position."""
@@ -89,9 +90,15 @@ class Ranking:
 
 
 @njit(cache=True, fastmath=True)
-def audio_cost(node: int, label: int, target: np.ndarray, n_labels: int,
-                entry_offsets: np.ndarray, entry_members: np.ndarray,
-                summaries: np.ndarray) -> float:
+def audio_cost(
+    node: int,
+    label: int,
+    target: np.ndarray,
+    n_labels: int,
+    entry_offsets: np.ndarray,
+    entry_members: np.ndarray,
+    summaries: np.ndarray,
+) -> float:
     """Distance from ``target`` (D,) to the nearest member of ``node`` that has ``label``."""
     best = math.inf
     key = node * n_labels + label
@@ -106,8 +113,9 @@ def audio_cost(node: int, label: int, target: np.ndarray, n_labels: int,
 
 
 @njit(cache=True, fastmath=True)
-def pose_jump(before: int, after: int, last: np.ndarray, first: np.ndarray,
-              successor: np.ndarray) -> float:
+def pose_jump(
+    before: int, after: int, last: np.ndarray, first: np.ndarray, successor: np.ndarray
+) -> float:
     """``Poses.discontinuity`` of one join, anime ``before`` -> anime ``after``."""
     if successor[before] == after:
         return 0.0
@@ -119,9 +127,17 @@ def pose_jump(before: int, after: int, last: np.ndarray, first: np.ndarray,
 
 
 @njit(cache=True, fastmath=True)
-def cheapest_run(starts: np.ndarray, length: int, previous: int, use_audio: bool,
-                 query_summaries: np.ndarray, summaries: np.ndarray, last: np.ndarray,
-                 first: np.ndarray, successor: np.ndarray) -> int:
+def cheapest_run(
+    starts: np.ndarray,
+    length: int,
+    previous: int,
+    use_audio: bool,
+    query_summaries: np.ndarray,
+    summaries: np.ndarray,
+    last: np.ndarray,
+    first: np.ndarray,
+    successor: np.ndarray,
+) -> int:
     """Index into ``starts`` of the cheapest recording run starts[s] .. starts[s] + length - 1
     (anime ids) shown at ``length`` query positions with audio summaries (length, D): the
     least sum of audio distances, or without audio the least pose jump from ``previous``

@@ -47,25 +47,40 @@ class AnimeGraphEngine(Engine):
     name = "anime-graph"
     model_class = AnimeGraphModel
 
-    def __init__(self, variance: float = 0.95, graph: str = "unclustered", clusters: int = 1000,
-                 max_tile: int = 10, max_candidates: int = 128, energy: float = 0.99,
-                 smoothing_window: float = 0.1, use_audio: bool = True, seed: int = 0,
-                 variance_per_channel: bool = True) -> None:
+    def __init__(
+        self,
+        variance: float = 0.95,
+        graph: str = "unclustered",
+        clusters: int = 1000,
+        max_tile: int = 10,
+        max_candidates: int = 128,
+        energy: float = 0.99,
+        smoothing_window: float = 0.1,
+        use_audio: bool = True,
+        seed: int = 0,
+        variance_per_channel: bool = True,
+    ) -> None:
         if not 0.0 < variance <= 1.0:
             raise _invalid("variance", f"variance must be in (0, 1], got {variance!r}")
         if graph not in GRAPHS:
             raise _invalid("graph", f"graph must be one of {', '.join(GRAPHS)}, got {graph!r}")
         if graph == "clustered" and clusters < 1:
             raise _invalid("clusters", "the clustered graph needs clusters >= 1")
-        for name, value, low in (("clusters", clusters, 0), ("max_tile", max_tile, 1),
-                                 ("max_candidates", max_candidates, 1), ("seed", seed, 0)):
+        for name, value, low in (
+            ("clusters", clusters, 0),
+            ("max_tile", max_tile, 1),
+            ("max_candidates", max_candidates, 1),
+            ("seed", seed, 0),
+        ):
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise _invalid(name, f"{name} must be an integer >= {low}, got {value!r}")
         if not 0.0 < energy <= 1.0:
             raise _invalid("energy", f"energy must be in (0, 1], got {energy!r}")
         if not 0.0 <= smoothing_window <= 1.0:
-            raise _invalid("smoothing_window",
-                           f"smoothing_window must be in [0, 1] s, got {smoothing_window!r}")
+            raise _invalid(
+                "smoothing_window",
+                f"smoothing_window must be in [0, 1] s, got {smoothing_window!r}",
+            )
         self.variance = float(variance)
         self.variance_per_channel = bool(variance_per_channel)
         self.graph = graph
@@ -81,8 +96,13 @@ class AnimeGraphEngine(Engine):
         utterances = list(corpus.utterances)
         if not utterances:
             raise CorpusError("the corpus has no utterances", where=f"corpus {corpus.name!r}")
-        bar = tqdm(total=len(STAGES), desc="anime-graph", unit="stage", file=sys.stderr,
-                   disable=not progress)
+        bar = tqdm(
+            total=len(STAGES),
+            desc="anime-graph",
+            unit="stage",
+            file=sys.stderr,
+            disable=not progress,
+        )
         all_frames = np.concatenate([u.frames for u in utterances])
         basis, explained = fit_basis(all_frames, self.variance, self.variance_per_channel)
         bar.update()
@@ -114,19 +134,32 @@ class AnimeGraphEngine(Engine):
         }  # fmt: skip
         manifest = self.new_manifest(
             corpus,
-            metrics=_metrics(animes, basis.n_components, explained, arrays, list(views), cutoffs,
-                             energy_below(curves, animes.motion.rate, cutoffs)),
-            extra={"mfcc": asdict(DEFAULT_MFCC), "audio_features": use_audio,
-                   "views": list(views)},
+            metrics=_metrics(
+                animes,
+                basis.n_components,
+                explained,
+                arrays,
+                list(views),
+                cutoffs,
+                energy_below(curves, animes.motion.rate, cutoffs),
+            ),
+            extra={"mfcc": asdict(DEFAULT_MFCC), "audio_features": use_audio, "views": list(views)},
         )
         return AnimeGraphModel(manifest, arrays)
 
 
-def _metrics(animes: AnimeTable, n_components: int, explained: float,
-             arrays: dict[str, np.ndarray], views: list[str], cutoffs: np.ndarray,
-             kept: np.ndarray) -> dict[str, Any]:
+def _metrics(
+    animes: AnimeTable,
+    n_components: int,
+    explained: float,
+    arrays: dict[str, np.ndarray],
+    views: list[str],
+    cutoffs: np.ndarray,
+    kept: np.ndarray,
+) -> dict[str, Any]:
     metrics: dict[str, Any] = {
-        "animes": animes.size, "pca_components": n_components,
+        "animes": animes.size,
+        "pca_components": n_components,
         "explained_variance": round(explained, 5),
         "index_states": int(arrays[f"{WHOLE}_index_transitions"].shape[0]),
         "cutoffs_hz": [round(float(c), 4) for c in cutoffs],
@@ -137,9 +170,12 @@ def _metrics(animes: AnimeTable, n_components: int, explained: float,
     if len(representative):
         assignment = np.full(animes.size, -1, dtype=np.int64)
         assignment[arrays[f"{WHOLE}_members"]] = arrays[f"{WHOLE}_cluster_assignment"]
-        degree = ClusterGraph.build(assignment, representative, animes.labels,
-                                    animes.successors(), len(PHONEMES)).degree()
-        metrics |= {"clusters": len(representative),
-                    "cluster_degree_mean": round(float(degree.mean()), 3),
-                    "cluster_degree_max": int(degree.max())}
+        degree = ClusterGraph.build(
+            assignment, representative, animes.labels, animes.successors(), len(PHONEMES)
+        ).degree()
+        metrics |= {
+            "clusters": len(representative),
+            "cluster_degree_mean": round(float(degree.mean()), 3),
+            "cluster_degree_max": int(degree.max()),
+        }
     return metrics

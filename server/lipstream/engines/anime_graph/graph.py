@@ -68,13 +68,15 @@ class SearchGraph(Protocol):
     def motion_of(self, nodes: np.ndarray) -> np.ndarray:
         """The anime whose motion each node shows."""
 
-    def audio_costs(self, nodes: np.ndarray, label: int, summary: np.ndarray,
-                    summaries: np.ndarray) -> np.ndarray:
+    def audio_costs(
+        self, nodes: np.ndarray, label: int, summary: np.ndarray, summaries: np.ndarray
+    ) -> np.ndarray:
         """Distance from a query phoneme's audio ``summary`` (D,) to each node's audio for
         ``label``, given the per-anime ``summaries`` (n_animes, D)."""
 
-    def audio_costs_at(self, nodes: np.ndarray, labels: np.ndarray, targets: np.ndarray,
-                       summaries: np.ndarray) -> np.ndarray:
+    def audio_costs_at(
+        self, nodes: np.ndarray, labels: np.ndarray, targets: np.ndarray, summaries: np.ndarray
+    ) -> np.ndarray:
         """Elementwise ``audio_costs``: node i's audio for labels[i] against targets[i]
         ((len(nodes), D), or one (D,) summary for all)."""
 
@@ -90,15 +92,24 @@ class AnimeGraph:
     label_nodes: np.ndarray
 
     @classmethod
-    def build(cls, labels: np.ndarray, successor: np.ndarray, n_labels: int,
-              members: np.ndarray | None = None) -> AnimeGraph:
+    def build(
+        cls,
+        labels: np.ndarray,
+        successor: np.ndarray,
+        n_labels: int,
+        members: np.ndarray | None = None,
+    ) -> AnimeGraph:
         """The graph over ``members`` (anime ids, ascending; default all). Recordings lie
         wholly inside or outside the members, so edges need no filtering."""
         chosen = np.arange(len(labels)) if members is None else np.asarray(members)
         keys = np.asarray(labels, dtype=np.int64)[chosen]
         order = chosen[np.argsort(keys, kind="stable")].astype(np.int32)
-        return cls(np.asarray(labels), np.asarray(successor, dtype=np.int32),
-                   csr_offsets(keys, n_labels), order)
+        return cls(
+            np.asarray(labels),
+            np.asarray(successor, dtype=np.int32),
+            csr_offsets(keys, n_labels),
+            order,
+        )
 
     @property
     def n_nodes(self) -> int:
@@ -130,12 +141,14 @@ class AnimeGraph:
     def motion_of(self, nodes: np.ndarray) -> np.ndarray:
         return np.asarray(nodes)
 
-    def audio_costs(self, nodes: np.ndarray, label: int, summary: np.ndarray,
-                    summaries: np.ndarray) -> np.ndarray:
+    def audio_costs(
+        self, nodes: np.ndarray, label: int, summary: np.ndarray, summaries: np.ndarray
+    ) -> np.ndarray:
         return self.audio_costs_at(nodes, np.full(len(nodes), label), summary, summaries)
 
-    def audio_costs_at(self, nodes: np.ndarray, labels: np.ndarray, targets: np.ndarray,
-                       summaries: np.ndarray) -> np.ndarray:
+    def audio_costs_at(
+        self, nodes: np.ndarray, labels: np.ndarray, targets: np.ndarray, summaries: np.ndarray
+    ) -> np.ndarray:
         return _distances(summaries[nodes], np.asarray(targets))
 
 
@@ -160,8 +173,14 @@ class ClusterGraph:
     label_nodes: np.ndarray
 
     @classmethod
-    def build(cls, assignment: np.ndarray, representative: np.ndarray, labels: np.ndarray,
-              successor: np.ndarray, n_labels: int) -> ClusterGraph:
+    def build(
+        cls,
+        assignment: np.ndarray,
+        representative: np.ndarray,
+        labels: np.ndarray,
+        successor: np.ndarray,
+        n_labels: int,
+    ) -> ClusterGraph:
         """Merge animes by ``assignment`` (n_animes,) into clusters 0..k-1; animes assigned
         -1 stay out of the graph."""
         k = len(representative)
@@ -180,8 +199,9 @@ class ClusterGraph:
             edge_targets=(edges % k).astype(np.int32),
             edge_keys=edges,
             label_offsets=csr_offsets(pairs % n_labels, n_labels),
-            label_nodes=(pairs[np.argsort(pairs % n_labels, kind="stable")] // n_labels)
-            .astype(np.int32),
+            label_nodes=(pairs[np.argsort(pairs % n_labels, kind="stable")] // n_labels).astype(
+                np.int32
+            ),
         )
 
     @property
@@ -223,18 +243,23 @@ class ClusterGraph:
     def is_edge(self, sources: np.ndarray, targets: np.ndarray) -> np.ndarray:
         keys = np.asarray(sources, dtype=np.int64) * self.n_nodes + np.asarray(targets)
         spots = np.minimum(np.searchsorted(self.edge_keys, keys), len(self.edge_keys) - 1)
-        return np.asarray(self.edge_keys[spots] == keys) if len(self.edge_keys) else \
-            np.zeros(np.shape(keys), dtype=bool)
+        return (
+            np.asarray(self.edge_keys[spots] == keys)
+            if len(self.edge_keys)
+            else np.zeros(np.shape(keys), dtype=bool)
+        )
 
     def motion_of(self, nodes: np.ndarray) -> np.ndarray:
         return np.asarray(self.representative[nodes])
 
-    def audio_costs(self, nodes: np.ndarray, label: int, summary: np.ndarray,
-                    summaries: np.ndarray) -> np.ndarray:
+    def audio_costs(
+        self, nodes: np.ndarray, label: int, summary: np.ndarray, summaries: np.ndarray
+    ) -> np.ndarray:
         return self.audio_costs_at(nodes, np.full(len(nodes), label), summary, summaries)
 
-    def audio_costs_at(self, nodes: np.ndarray, labels: np.ndarray, targets: np.ndarray,
-                       summaries: np.ndarray) -> np.ndarray:
+    def audio_costs_at(
+        self, nodes: np.ndarray, labels: np.ndarray, targets: np.ndarray, summaries: np.ndarray
+    ) -> np.ndarray:
         entries = np.asarray(nodes, dtype=np.int64) * self.n_labels + labels
         owner, items = _ranges(self.entry_offsets, entries)
         targets = np.asarray(targets)

@@ -19,8 +19,9 @@ class Growable:
 
     def _reserve(self, needed: int) -> None:
         if needed > len(self.data):
-            grown = np.zeros((max(needed, 2 * len(self.data)), *self.data.shape[1:]),
-                             dtype=self.data.dtype)
+            grown = np.zeros(
+                (max(needed, 2 * len(self.data)), *self.data.shape[1:]), dtype=self.data.dtype
+            )
             grown[: self.count] = self.data[: self.count]
             self.data = grown
 

@@ -32,13 +32,19 @@ class SuffixIndex:
     text_anime: np.ndarray
 
     @classmethod
-    def build(cls, labels: np.ndarray, utterance: np.ndarray, alphabet: int,
-              members: np.ndarray | None = None) -> SuffixIndex:
+    def build(
+        cls,
+        labels: np.ndarray,
+        utterance: np.ndarray,
+        alphabet: int,
+        members: np.ndarray | None = None,
+    ) -> SuffixIndex:
         """Index the animes ``members`` (ascending ids; default all) with ``labels`` (n,) in
         [0, alphabet), grouped by ``utterance`` (n,)."""
         chosen = np.arange(len(labels)) if members is None else np.asarray(members)
-        text, text_anime = _join(np.asarray(labels)[chosen], np.asarray(utterance)[chosen],
-                                 chosen, alphabet)
+        text, text_anime = _join(
+            np.asarray(labels)[chosen], np.asarray(utterance)[chosen], chosen, alphabet
+        )
         automaton = _Automaton()
         for position, symbol in enumerate(text):
             automaton.extend(symbol, position)
@@ -49,8 +55,9 @@ class SuffixIndex:
     def n_states(self) -> int:
         return int(self.transitions.shape[0])
 
-    def match(self, query: Sequence[int] | np.ndarray, start: int, stop: int,
-              cap: int | None = None) -> tuple[int, int]:
+    def match(
+        self, query: Sequence[int] | np.ndarray, start: int, stop: int, cap: int | None = None
+    ) -> tuple[int, int]:
         """Longest prefix of ``query[start:stop]`` (at most ``cap`` long) that occurs in the
         corpus: (length, automaton state after reading it)."""
         table = self.transitions
@@ -78,8 +85,9 @@ class SuffixIndex:
         return np.sort(self.text_anime[np.asarray(ends, dtype=np.int64) - length + 1])
 
 
-def _join(labels: np.ndarray, utterance: np.ndarray, animes: np.ndarray,
-          alphabet: int) -> tuple[list[int], np.ndarray]:
+def _join(
+    labels: np.ndarray, utterance: np.ndarray, animes: np.ndarray, alphabet: int
+) -> tuple[list[int], np.ndarray]:
     text: list[int] = []
     text_anime: list[int] = []
     previous_owner = None
@@ -125,8 +133,9 @@ class _Automaton:
             if self.length[state] + 1 == self.length[target]:
                 self.link[current] = target
             else:
-                clone = self._new_state(self.length[state] + 1, dict(self.moves[target]),
-                                        self.first_end[target], True)
+                clone = self._new_state(
+                    self.length[state] + 1, dict(self.moves[target]), self.first_end[target], True
+                )
                 self.link[clone] = self.link[target]
                 while state != -1 and self.moves[state].get(symbol) == target:
                     self.moves[state][symbol] = clone

@@ -42,9 +42,15 @@ def _grow(values: np.ndarray, needed: int) -> np.ndarray:
 
 
 @njit(cache=_CACHE)
-def reach(query: np.ndarray, cap: int, first: np.ndarray, n_labels: int,
-          step_offsets: np.ndarray, step_targets: np.ndarray,
-          slot: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def reach(
+    query: np.ndarray,
+    cap: int,
+    first: np.ndarray,
+    n_labels: int,
+    step_offsets: np.ndarray,
+    step_targets: np.ndarray,
+    slot: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Layers of the run of ``query`` (L,) labels (``cap`` <= 0: uncapped) seeded with the
     nodes ``first``. ``slot`` (n,) int64 scratch, all -1, is left all -1.
 
@@ -89,11 +95,24 @@ def reach(query: np.ndarray, cap: int, first: np.ndarray, n_labels: int,
 
 
 @njit(cache=_CACHE)
-def cheapest(query: np.ndarray, states: np.ndarray, layer_offsets: np.ndarray,
-             sources: np.ndarray, targets: np.ndarray, previous: int, use_audio: bool,
-             query_summaries: np.ndarray, n_labels: int, entry_offsets: np.ndarray,
-             entry_members: np.ndarray, summaries: np.ndarray, motion: np.ndarray,
-             last: np.ndarray, first: np.ndarray, successor: np.ndarray) -> np.ndarray:
+def cheapest(
+    query: np.ndarray,
+    states: np.ndarray,
+    layer_offsets: np.ndarray,
+    sources: np.ndarray,
+    targets: np.ndarray,
+    previous: int,
+    use_audio: bool,
+    query_summaries: np.ndarray,
+    n_labels: int,
+    entry_offsets: np.ndarray,
+    entry_members: np.ndarray,
+    summaries: np.ndarray,
+    motion: np.ndarray,
+    last: np.ndarray,
+    first: np.ndarray,
+    successor: np.ndarray,
+) -> np.ndarray:
     """Node ids (L,) of the cheapest path through the layers ``reach`` found.
 
     With ``use_audio``, state s at depth d costs the audio distance to
@@ -110,38 +129,80 @@ def cheapest(query: np.ndarray, states: np.ndarray, layer_offsets: np.ndarray,
     depth_end = layer_offsets[1]
     for state in range(depth_end):
         if alive[state]:
-            costs[state] = _node_cost(state, 0, query, states, use_audio,
-                                      query_summaries, n_labels, entry_offsets,
-                                      entry_members, summaries)
+            costs[state] = _node_cost(
+                state,
+                0,
+                query,
+                states,
+                use_audio,
+                query_summaries,
+                n_labels,
+                entry_offsets,
+                entry_members,
+                summaries,
+            )
             if previous >= 0 and not use_audio:
-                costs[state] += pose_jump(motion[previous], motion[states[state]], last, first,
-                                          successor)
+                costs[state] += pose_jump(
+                    motion[previous], motion[states[state]], last, first, successor
+                )
     depth = 1
     edge = 0
     while edge < len(sources):
         while targets[edge] >= layer_offsets[depth + 1]:
-            _price_layer(depth, layer_offsets, alive, costs, query, states, use_audio,
-                         query_summaries, n_labels, entry_offsets, entry_members, summaries)
+            _price_layer(
+                depth,
+                layer_offsets,
+                alive,
+                costs,
+                query,
+                states,
+                use_audio,
+                query_summaries,
+                n_labels,
+                entry_offsets,
+                entry_members,
+                summaries,
+            )
             depth += 1
         target, source = targets[edge], sources[edge]
         if alive[target]:
-            join = 0.0 if use_audio else pose_jump(motion[states[source]],
-                                                   motion[states[target]], last, first,
-                                                   successor)
+            join = (
+                0.0
+                if use_audio
+                else pose_jump(
+                    motion[states[source]], motion[states[target]], last, first, successor
+                )
+            )
             reaching = costs[source] + join
             held = back[target]
-            if held < 0 or reaching < costs[target] or (
-                    reaching == costs[target] and states[source] < states[held]):
+            if (
+                held < 0
+                or reaching < costs[target]
+                or (reaching == costs[target] and states[source] < states[held])
+            ):
                 costs[target], back[target] = reaching, source
         edge += 1
     while depth < n_layers:
-        _price_layer(depth, layer_offsets, alive, costs, query, states, use_audio,
-                     query_summaries, n_labels, entry_offsets, entry_members, summaries)
+        _price_layer(
+            depth,
+            layer_offsets,
+            alive,
+            costs,
+            query,
+            states,
+            use_audio,
+            query_summaries,
+            n_labels,
+            entry_offsets,
+            entry_members,
+            summaries,
+        )
         depth += 1
     best = layer_offsets[n_layers - 1]
     for state in range(best + 1, layer_offsets[n_layers]):
-        if costs[state] < costs[best] or (costs[state] == costs[best]
-                                          and states[state] < states[best]):
+        if costs[state] < costs[best] or (
+            costs[state] == costs[best] and states[state] < states[best]
+        ):
             best = state
     path = np.empty(n_layers, dtype=np.int64)
     for depth in range(n_layers - 1, -1, -1):
@@ -151,25 +212,58 @@ def cheapest(query: np.ndarray, states: np.ndarray, layer_offsets: np.ndarray,
 
 
 @njit(cache=_CACHE)
-def _node_cost(state: int, depth: int, query: np.ndarray, states: np.ndarray,
-               use_audio: bool, query_summaries: np.ndarray, n_labels: int,
-               entry_offsets: np.ndarray, entry_members: np.ndarray,
-               summaries: np.ndarray) -> float:
+def _node_cost(
+    state: int,
+    depth: int,
+    query: np.ndarray,
+    states: np.ndarray,
+    use_audio: bool,
+    query_summaries: np.ndarray,
+    n_labels: int,
+    entry_offsets: np.ndarray,
+    entry_members: np.ndarray,
+    summaries: np.ndarray,
+) -> float:
     if not use_audio:
         return 0.0
-    return audio_cost(states[state], query[depth], query_summaries[depth], n_labels,
-                       entry_offsets, entry_members, summaries)
+    return audio_cost(
+        states[state],
+        query[depth],
+        query_summaries[depth],
+        n_labels,
+        entry_offsets,
+        entry_members,
+        summaries,
+    )
 
 
 @njit(cache=_CACHE)
-def _price_layer(depth: int, layer_offsets: np.ndarray, alive: np.ndarray, costs: np.ndarray,
-                 query: np.ndarray, states: np.ndarray, use_audio: bool,
-                 query_summaries: np.ndarray, n_labels: int,
-                 entry_offsets: np.ndarray, entry_members: np.ndarray,
-                 summaries: np.ndarray) -> None:
+def _price_layer(
+    depth: int,
+    layer_offsets: np.ndarray,
+    alive: np.ndarray,
+    costs: np.ndarray,
+    query: np.ndarray,
+    states: np.ndarray,
+    use_audio: bool,
+    query_summaries: np.ndarray,
+    n_labels: int,
+    entry_offsets: np.ndarray,
+    entry_members: np.ndarray,
+    summaries: np.ndarray,
+) -> None:
     """Add the node costs of layer ``depth``, once all its incoming edges are relaxed."""
     for state in range(layer_offsets[depth], layer_offsets[depth + 1]):
         if alive[state]:
-            costs[state] += _node_cost(state, depth, query, states, use_audio,
-                                       query_summaries, n_labels, entry_offsets,
-                                       entry_members, summaries)
+            costs[state] += _node_cost(
+                state,
+                depth,
+                query,
+                states,
+                use_audio,
+                query_summaries,
+                n_labels,
+                entry_offsets,
+                entry_members,
+                summaries,
+            )

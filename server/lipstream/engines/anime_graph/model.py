@@ -57,18 +57,23 @@ class AnimeGraphModel(Model):
         self.max_tile = int(settings["max_tile"])
         self.max_candidates = int(settings["max_candidates"])
         self.default_graph = str(settings["graph"])
-        self.basis = MotionBasis(np.asarray(arrays["basis_mean"], dtype=np.float64),
-                                 np.asarray(arrays["basis_components"], dtype=np.float64))
+        self.basis = MotionBasis(
+            np.asarray(arrays["basis_mean"], dtype=np.float64),
+            np.asarray(arrays["basis_components"], dtype=np.float64),
+        )
         self.channel_low = np.asarray(arrays["channel_low"], dtype=np.float64)
         self.channel_high = np.asarray(arrays["channel_high"], dtype=np.float64)
         self.animes = _anime_table(arrays, self.fps, self.mfcc, self.has_audio)
         successor = self.animes.successors()
         everything = np.arange(self.animes.size)
-        self.poses = Poses(self.animes.poses_at(everything, 0.0),
-                           self.animes.poses_at(everything, 1.0), successor)
+        self.poses = Poses(
+            self.animes.poses_at(everything, 0.0), self.animes.poses_at(everything, 1.0), successor
+        )
         self.summaries = np.asarray(arrays["anime_summary"])
-        self.views = {name: load_view(name, arrays, self.animes.labels, successor)
-                      for name in manifest.extra["views"]}
+        self.views = {
+            name: load_view(name, arrays, self.animes.labels, successor)
+            for name in manifest.extra["views"]
+        }
         if WHOLE not in self.views:
             raise ModelStoreError(f"the model has no {WHOLE!r} view", where="model.json")
         self.has_clusters = self.views[WHOLE].cluster_graph is not None
@@ -86,20 +91,24 @@ class AnimeGraphModel(Model):
         """A frame at t waits for the span containing t + seconds to have ``phonemes`` whole
         spans after it (the tile cap, or a PQ window): the worst over every request option
         but an uncapped tile; ``fidelity_ladder`` gives each greedy rung's own."""
-        return Lookahead(seconds=(self.half_width + 1) / self.fps,
-                         phonemes=max(self.max_tile, MAX_PQ_WINDOW),
-                         audio_seconds=self.audio_wait_s)
+        return Lookahead(
+            seconds=(self.half_width + 1) / self.fps,
+            phonemes=max(self.max_tile, MAX_PQ_WINDOW),
+            audio_seconds=self.audio_wait_s,
+        )
 
     def greedy_lookahead(self, max_tile: int, smooth: bool) -> Lookahead:
         """What a frame waits for under GreedyMatching with tiles of at most ``max_tile``
         phonemes: the next model-grid sample past t plus the smoothing half-width (when
         ``smooth``), then ``max_tile`` spans, which decide the fragment after it."""
         if max_tile < 1:
-            raise InvalidRequestError(f"a bounded lookahead needs max_tile >= 1, got "
-                                      f"{max_tile}", where="options.max_tile")
+            raise InvalidRequestError(
+                f"a bounded lookahead needs max_tile >= 1, got {max_tile}", where="options.max_tile"
+            )
         half_width = self.half_width if smooth else 0
-        return Lookahead(seconds=(half_width + 1) / self.fps, phonemes=max_tile,
-                         audio_seconds=self.audio_wait_s)
+        return Lookahead(
+            seconds=(half_width + 1) / self.fps, phonemes=max_tile, audio_seconds=self.audio_wait_s
+        )
 
     def lookahead_for(self, options: Mapping[str, Any]) -> Lookahead | None:
         """Greedy with tiles of at most ``max_tile`` (none when uncapped: a tile may wait for
@@ -108,8 +117,11 @@ class AnimeGraphModel(Model):
         parsed = parse_options(options, self.default_graph, self.has_clusters, self.max_tile)
         if parsed.search == "pq":
             smoothing = self.half_width if parsed.smooth else 0
-            return Lookahead(seconds=(smoothing + 1) / self.fps, phonemes=parsed.pq_window,
-                             audio_seconds=self.audio_wait_s)
+            return Lookahead(
+                seconds=(smoothing + 1) / self.fps,
+                phonemes=parsed.pq_window,
+                audio_seconds=self.audio_wait_s,
+            )
         if parsed.max_tile is None:
             return None
         return self.greedy_lookahead(parsed.max_tile, parsed.smooth)
@@ -128,13 +140,25 @@ class AnimeGraphModel(Model):
         jumps), then 10, 4, 2 and 1 phonemes below it; last, one-phoneme tiles without the
         low-pass filter, which waits H frames. A rung pins ``search`` and ``max_tile`` (and
         ``smooth`` off on the last), the options its lookahead depends on."""
-        tiles = sorted({self.max_tile, *(t for t in LADDER_TILES if t < self.max_tile)},
-                       reverse=True)
-        rungs = [Rung(f"greedy_tile{tile}", self.greedy_lookahead(tile, smooth=True),
-                      {"search": "greedy", "max_tile": tile}) for tile in tiles]
+        tiles = sorted(
+            {self.max_tile, *(t for t in LADDER_TILES if t < self.max_tile)}, reverse=True
+        )
+        rungs = [
+            Rung(
+                f"greedy_tile{tile}",
+                self.greedy_lookahead(tile, smooth=True),
+                {"search": "greedy", "max_tile": tile},
+            )
+            for tile in tiles
+        ]
         if self.half_width > 0:
-            rungs.append(Rung("greedy_tile1_unsmoothed", self.greedy_lookahead(1, smooth=False),
-                              {"search": "greedy", "max_tile": 1, "smooth": False}))
+            rungs.append(
+                Rung(
+                    "greedy_tile1_unsmoothed",
+                    self.greedy_lookahead(1, smooth=False),
+                    {"search": "greedy", "max_tile": 1, "smooth": False},
+                )
+            )
         return tuple(rungs)
 
     def view_for(self, emotion: str | None, options: SearchOptions) -> GraphView:
@@ -157,26 +181,34 @@ class AnimeGraphModel(Model):
             if name == "clustered" and view.cluster_graph is not None:
                 self._matchers[key] = LayeredMatcher(view.cluster_graph)
             else:
-                self._matchers[key] = SuffixMatcher(view.index, view.anime_graph,
-                                                    self.max_candidates)
+                self._matchers[key] = SuffixMatcher(
+                    view.index, view.anime_graph, self.max_candidates
+                )
         return self._matchers[key]
 
     def to_channels(self, coefficients: np.ndarray) -> np.ndarray:
         """PCA coefficients (n, n_pc) to channel frames (n, n_channels) float32, held inside
         the range the recordings span."""
         frames = np.clip(self.basis.reconstruct(coefficients), self.channel_low, self.channel_high)
-        return frames.astype(np.float32)
+        return np.asarray(frames, dtype=np.float32)
 
-    def start(self, request: SynthesisRequest | None = None,
-              **settings: Any) -> AnimeGraphSynthesizer:
+    def start(
+        self, request: SynthesisRequest | None = None, **settings: Any
+    ) -> AnimeGraphSynthesizer:
         if request is None:
             request = make_request(**settings)
-        options = parse_options(request.options, self.default_graph, self.has_clusters,
-                                self.max_tile)
+        options = parse_options(
+            request.options, self.default_graph, self.has_clusters, self.max_tile
+        )
         return AnimeGraphSynthesizer(self, request, options)
 
-    def render(self, spans: Sequence[PhonemeSpan], times: np.ndarray, request: SynthesisRequest,
-               audio: Audio | None) -> np.ndarray:
+    def render(
+        self,
+        spans: Sequence[PhonemeSpan],
+        times: np.ndarray,
+        request: SynthesisRequest,
+        audio: Audio | None,
+    ) -> np.ndarray:
         """Frames at arbitrary ``times`` (s): the offline track, interpolated."""
         fine = SynthesisRequest(fps=self.fps, emotion=request.emotion, options=request.options)
         synthesizer = self.start(fine)
@@ -190,14 +222,16 @@ class AnimeGraphModel(Model):
         return dict(self._arrays)
 
     @classmethod
-    def from_arrays(cls, manifest: ModelManifest, arrays: Mapping[str, np.ndarray],
-                    path: Path) -> AnimeGraphModel:
+    def from_arrays(
+        cls, manifest: ModelManifest, arrays: Mapping[str, np.ndarray], path: Path
+    ) -> AnimeGraphModel:
         require_arrays(arrays, REQUIRED_ARRAYS, path)
         return cls(manifest, arrays)
 
 
-def _anime_table(arrays: Mapping[str, np.ndarray], fps: float, mfcc: MfccConfig,
-                 has_audio: bool) -> AnimeTable:
+def _anime_table(
+    arrays: Mapping[str, np.ndarray], fps: float, mfcc: MfccConfig, has_audio: bool
+) -> AnimeTable:
     features = Curves(arrays["features"], np.asarray(arrays["feature_offsets"]), mfcc.rate)
     return AnimeTable(
         labels=np.asarray(arrays["anime_label"]),

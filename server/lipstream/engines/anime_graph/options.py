@@ -42,40 +42,47 @@ class SearchOptions:
 def _choice(options: Mapping[str, Any], name: str, allowed: tuple[str, ...], default: str) -> str:
     value = options.get(name, default)
     if value not in allowed:
-        raise InvalidRequestError(f"{name} must be one of {', '.join(allowed)}, got {value!r}",
-                                  where=f"options.{name}")
+        raise InvalidRequestError(
+            f"{name} must be one of {', '.join(allowed)}, got {value!r}", where=f"options.{name}"
+        )
     return str(value)
 
 
 def _integer(options: Mapping[str, Any], name: str, low: int, high: int, default: int) -> int:
     value = options.get(name, default)
     if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
-        raise InvalidRequestError(f"{name} must be an integer in [{low}, {high}], got {value!r}",
-                                  where=f"options.{name}")
+        raise InvalidRequestError(
+            f"{name} must be an integer in [{low}, {high}], got {value!r}", where=f"options.{name}"
+        )
     return value
 
 
 def _flag(options: Mapping[str, Any], name: str) -> bool:
     value = options.get(name, True)
     if not isinstance(value, bool):
-        raise InvalidRequestError(f"{name} must be true or false, got {value!r}",
-                                  where=f"options.{name}")
+        raise InvalidRequestError(
+            f"{name} must be true or false, got {value!r}", where=f"options.{name}"
+        )
     return value
 
 
-def parse_options(options: Mapping[str, Any], default_graph: str, has_clusters: bool,
-                  default_max_tile: int) -> SearchOptions:
+def parse_options(
+    options: Mapping[str, Any], default_graph: str, has_clusters: bool, default_max_tile: int
+) -> SearchOptions:
     """Validate ``options``; unknown names and a clustered request on a model trained without
     clusters raise ``InvalidRequestError``."""
     unknown = sorted(set(options) - set(SearchOptions.__dataclass_fields__))
     if unknown:
         raise InvalidRequestError(
             f"unknown option(s) {', '.join(unknown)} for engine anime-graph; known: "
-            f"{', '.join(SearchOptions.__dataclass_fields__)}", where=f"options.{unknown[0]}")
+            f"{', '.join(SearchOptions.__dataclass_fields__)}",
+            where=f"options.{unknown[0]}",
+        )
     graph = _choice(options, "graph", GRAPHS, default_graph)
     if graph == "clustered" and not has_clusters:
-        raise InvalidRequestError("this model was trained without a clustered graph "
-                                  "(clusters=0)", where="options.graph")
+        raise InvalidRequestError(
+            "this model was trained without a clustered graph (clusters=0)", where="options.graph"
+        )
     window = _integer(options, "pq_window", 1, MAX_PQ_WINDOW, SearchOptions.pq_window)
     return SearchOptions(
         graph=graph,
@@ -97,6 +104,8 @@ def _budget(options: Mapping[str, Any]) -> float | None:
     if value is None:
         return None
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
-        raise InvalidRequestError(f"pq_budget_s must be a positive number of seconds, got "
-                                  f"{value!r}", where="options.pq_budget_s")
+        raise InvalidRequestError(
+            f"pq_budget_s must be a positive number of seconds, got {value!r}",
+            where="options.pq_budget_s",
+        )
     return float(value)

@@ -56,8 +56,13 @@ class _Level:
     order: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
 
-def _children(graph: SearchGraph, ranking: Ranking, last: int | None, candidates: np.ndarray,
-              costs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _children(
+    graph: SearchGraph,
+    ranking: Ranking,
+    last: int | None,
+    candidates: np.ndarray,
+    costs: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
     """(extra jumps, extra cost) of appending each candidate after node ``last``."""
     if last is None:
         return np.zeros(len(candidates), dtype=np.int64), costs
@@ -70,8 +75,13 @@ def _better(jumps: int, cost: float, best_jumps: int, best_cost: float) -> bool:
     return jumps < best_jumps or (jumps == best_jumps and cost < best_cost - _TOLERANCE)
 
 
-def _dive(graph: SearchGraph, ranking: Ranking, candidates: list[np.ndarray],
-          costs: list[np.ndarray], anchor: int | None) -> tuple[list[int], int, float]:
+def _dive(
+    graph: SearchGraph,
+    ranking: Ranking,
+    candidates: list[np.ndarray],
+    costs: list[np.ndarray],
+    anchor: int | None,
+) -> tuple[list[int], int, float]:
     """A quick complete path: follow an edge when one exists, else the cheapest node."""
     path: list[int] = []
     jumps, cost, last = 0, 0.0, anchor
@@ -83,13 +93,21 @@ def _dive(graph: SearchGraph, ranking: Ranking, candidates: list[np.ndarray],
     return path, jumps, cost
 
 
-def pq_window(graph: SearchGraph, ranking: Ranking, query: Labels, start: int,
-              stop: int, anchor: int | None = None, deadline: float | None = None) -> WindowResult:
+def pq_window(
+    graph: SearchGraph,
+    ranking: Ranking,
+    query: Labels,
+    start: int,
+    stop: int,
+    anchor: int | None = None,
+    deadline: float | None = None,
+) -> WindowResult:
     """PQ-DFS over ``query[start:stop]`` after the committed node ``anchor``; raises
     ``SearchTimeout`` past ``deadline`` (a ``time.perf_counter`` value)."""
     if deadline is not None and time.perf_counter() > deadline:
-        raise SearchTimeout(f"PQ-Matching passed its deadline before the window at {start}",
-                            where="search")
+        raise SearchTimeout(
+            f"PQ-Matching passed its deadline before the window at {start}", where="search"
+        )
     positions = range(start, stop)
     candidates = [graph.nodes_with_label(int(query[p])) for p in positions]
     costs = [ranking.label_costs(p, int(query[p])) for p in positions]
@@ -126,15 +144,22 @@ def pq_window(graph: SearchGraph, ranking: Ranking, query: Labels, start: int,
             continue
         expanded += 1
         if deadline is not None and expanded % _CLOCK_EVERY == 0 and time.perf_counter() > deadline:
-            raise SearchTimeout(f"PQ-Matching window at {start} passed its deadline",
-                                where="search")
+            raise SearchTimeout(
+                f"PQ-Matching window at {start} passed its deadline", where="search"
+            )
         stack.append(level(depth + 1, path[-1], jumps, cost))
     return WindowResult(np.asarray(best_path, dtype=np.int64), best_jumps, best_cost, expanded)
 
 
-def pq_matching(graph: SearchGraph, ranking: Ranking, query: Labels, window: int,
-                advance: int, anchor: int | None = None,
-                deadline: float | None = None) -> tuple[np.ndarray, int]:
+def pq_matching(
+    graph: SearchGraph,
+    ranking: Ranking,
+    query: Labels,
+    window: int,
+    advance: int,
+    anchor: int | None = None,
+    deadline: float | None = None,
+) -> tuple[np.ndarray, int]:
     """PQ-Matching(h=window, h_q=advance) over the whole query: (nodes, partial paths
     expanded). ``deadline`` as for ``pq_window``."""
     nodes: list[int] = []

@@ -36,7 +36,8 @@ class RequestAudio:
         elif int(audio.sample_rate) != self.sample_rate:
             raise InvalidRequestError(
                 f"audio at {audio.sample_rate} Hz follows audio at {self.sample_rate} Hz",
-                where="audio")
+                where="audio",
+            )
         samples = np.asarray(audio.samples, dtype=np.float32).ravel()
         needed = self._length + len(samples)
         if needed > len(self._samples):
@@ -51,8 +52,10 @@ class RequestAudio:
         if self.sample_rate is None:
             return 0
         if self._covered[0] != self._length:
-            self._covered = (self._length,
-                             frames_covered(self._length, self.sample_rate, self.config))
+            self._covered = (
+                self._length,
+                frames_covered(self._length, self.sample_rate, self.config),
+            )
         return self._covered[1]
 
     def _frames_needed(self, until_s: float) -> int:
@@ -77,6 +80,7 @@ class RequestAudio:
             self._features = np.concatenate([self._features, fresh])
             self._curve = None
         if self._curve is None:
-            self._curve = Curves(self._features, np.array([0, len(self._features)]),
-                                 self.config.rate)
+            self._curve = Curves(
+                self._features, np.array([0, len(self._features)]), self.config.rate
+            )
         return self._curve

@@ -51,18 +51,27 @@ class Match:
 
 
 class Matcher(Protocol):
-    def match(self, query: Labels, start: int, stop: int, cap: int | None,
-              previous: int | None = None) -> Match:
+    def match(
+        self, query: Labels, start: int, stop: int, cap: int | None, previous: int | None = None
+    ) -> Match:
         """The run of ``query[start:stop]`` from ``start`` (at most ``cap`` long): the one
         continuing node ``previous`` when an edge allows, else the longest."""
 
-    def choose(self, match: Match, query: Labels, previous: int | None,
-               ranking: Ranking) -> np.ndarray:
+    def choose(
+        self, match: Match, query: Labels, previous: int | None, ranking: Ranking
+    ) -> np.ndarray:
         """The best path spelling the run, as node ids (match.length,)."""
 
-    def tiles(self, query: Labels, start: int, stop: int, cap: int | None,
-              previous: int | None, ranking: Ranking,
-              ranked_from: int | None = None) -> list[np.ndarray]:
+    def tiles(
+        self,
+        query: Labels,
+        start: int,
+        stop: int,
+        cap: int | None,
+        previous: int | None,
+        ranking: Ranking,
+        ranked_from: int | None = None,
+    ) -> list[np.ndarray]:
         """GreedyMatching of ``query[start:stop]``: the tiles' node ids, in order. The first
         tile may continue ``previous``; its join is ranked from ``ranked_from`` when given
         (a node shown before in another view), else from ``previous``."""
@@ -78,8 +87,9 @@ class SuffixMatcher:
     graph: AnimeGraph
     limit: int | None = None
 
-    def match(self, query: Labels, start: int, stop: int, cap: int | None,
-              previous: int | None = None) -> Match:
+    def match(
+        self, query: Labels, start: int, stop: int, cap: int | None, previous: int | None = None
+    ) -> Match:
         if previous is not None:
             following = int(self.graph.successor[previous])
             length = _spelled(self.graph, following, query, start, stop, cap)
@@ -88,8 +98,9 @@ class SuffixMatcher:
         length, state = self.index.match(query, start, stop, cap)
         return Match(start, length, state)
 
-    def choose(self, match: Match, query: Labels, previous: int | None,
-               ranking: Ranking) -> np.ndarray:
+    def choose(
+        self, match: Match, query: Labels, previous: int | None, ranking: Ranking
+    ) -> np.ndarray:
         steps = np.arange(match.length)
         if match.continuation >= 0:
             return match.continuation + steps
@@ -102,19 +113,39 @@ class SuffixMatcher:
             costs += ranking.join_costs(np.full(len(starts), previous), starts)
         return int(starts[int(np.argmin(costs))]) + steps
 
-    def tiles(self, query: Labels, start: int, stop: int, cap: int | None,
-              previous: int | None, ranking: Ranking,
-              ranked_from: int | None = None) -> list[np.ndarray]:
+    def tiles(
+        self,
+        query: Labels,
+        start: int,
+        stop: int,
+        cap: int | None,
+        previous: int | None,
+        ranking: Ranking,
+        ranked_from: int | None = None,
+    ) -> list[np.ndarray]:
         labels = np.asarray(query[start:stop], dtype=np.int64)
         index, poses = self.index, ranking.poses
         joined = previous if ranked_from is None else ranked_from
         nodes, ends = greedy_tiles(
-            labels, cap or 0, -1 if previous is None else previous,
-            -1 if joined is None else joined, self.limit or 0,
-            index.transitions, index.low, index.high, index.ends, index.text_anime,
-            self.graph.labels, self.graph.successor, ranking.uses_audio,
-            ranking.summaries_of(start, stop - start), ranking.anime_summaries, poses.last,
-            poses.first, poses.successor)
+            labels,
+            cap or 0,
+            -1 if previous is None else previous,
+            -1 if joined is None else joined,
+            self.limit or 0,
+            index.transitions,
+            index.low,
+            index.high,
+            index.ends,
+            index.text_anime,
+            self.graph.labels,
+            self.graph.successor,
+            ranking.uses_audio,
+            ranking.summaries_of(start, stop - start),
+            ranking.anime_summaries,
+            poses.last,
+            poses.first,
+            poses.successor,
+        )
         if len(nodes) < stop - start:
             _missing(query, start + len(nodes))
         bounds = [0, *ends.tolist()]
@@ -122,12 +153,12 @@ class SuffixMatcher:
 
 
 def _missing(query: Labels, position: int) -> None:
-    raise ValueError(f"phoneme {query[position]} at query position {position} "
-                     "is not in the graph")
+    raise ValueError(f"phoneme {query[position]} at query position {position} is not in the graph")
 
 
-def _spelled(graph: AnimeGraph, anime: int, query: Labels, start: int, stop: int,
-             cap: int | None) -> int:
+def _spelled(
+    graph: AnimeGraph, anime: int, query: Labels, start: int, stop: int, cap: int | None
+) -> int:
     """How far the recording from ``anime`` on reads ``query[start:stop]`` (at most ``cap``)."""
     length = 0
     while anime >= 0 and start + length < stop and (cap is None or length < cap):
@@ -167,8 +198,7 @@ class LayeredMatcher:
         edge, label = np.nonzero(self.carries[targets])
         keys = sources[edge] * self.n_labels + label
         order = np.lexsort((targets[edge], keys))
-        return (csr_offsets(keys, graph.n_nodes * self.n_labels),
-                targets[edge][order])
+        return (csr_offsets(keys, graph.n_nodes * self.n_labels), targets[edge][order])
 
     def _first(self, label: int, previous: int | None) -> np.ndarray:
         """Start nodes: those carrying ``label``, only the ones ``previous`` links to when
@@ -182,41 +212,70 @@ class LayeredMatcher:
                 return linked
         return np.flatnonzero(self.carries[:, label])
 
-    def match(self, query: Labels, start: int, stop: int, cap: int | None,
-              previous: int | None = None) -> Match:
+    def match(
+        self, query: Labels, start: int, stop: int, cap: int | None, previous: int | None = None
+    ) -> Match:
         if start >= stop:
             return Match(start, 0)
         first = self._first(int(query[start]), previous)
         if not len(first):
             return Match(start, 0)
         labels = np.asarray(query[start:stop], dtype=np.int64)
-        states, offsets, sources, targets = reach(labels, cap or 0, first, self.n_labels,
-                                                  self.step_offsets, self.step_targets,
-                                                  self._slot)
-        return Match(start, len(offsets) - 1, layers=(states, offsets),
-                     steps=((sources, targets),))
+        states, offsets, sources, targets = reach(
+            labels, cap or 0, first, self.n_labels, self.step_offsets, self.step_targets, self._slot
+        )
+        return Match(start, len(offsets) - 1, layers=(states, offsets), steps=((sources, targets),))
 
-    def choose(self, match: Match, query: Labels, previous: int | None,
-               ranking: Ranking) -> np.ndarray:
+    def choose(
+        self, match: Match, query: Labels, previous: int | None, ranking: Ranking
+    ) -> np.ndarray:
         (states, offsets), ((sources, targets),) = match.layers, match.steps
         labels = np.asarray(query[match.start : match.start + match.length], dtype=np.int64)
         poses = ranking.poses
-        return np.asarray(cheapest(
-            labels, states, offsets, sources, targets, -1 if previous is None else previous,
-            ranking.uses_audio, ranking.summaries_of(match.start, match.length),
-            self.n_labels, self.entry_offsets, self.entry_members, ranking.anime_summaries,
-            self.motion, poses.last, poses.first, poses.successor))
+        return np.asarray(
+            cheapest(
+                labels,
+                states,
+                offsets,
+                sources,
+                targets,
+                -1 if previous is None else previous,
+                ranking.uses_audio,
+                ranking.summaries_of(match.start, match.length),
+                self.n_labels,
+                self.entry_offsets,
+                self.entry_members,
+                ranking.anime_summaries,
+                self.motion,
+                poses.last,
+                poses.first,
+                poses.successor,
+            )
+        )
 
-
-    def tiles(self, query: Labels, start: int, stop: int, cap: int | None,
-              previous: int | None, ranking: Ranking,
-              ranked_from: int | None = None) -> list[np.ndarray]:
+    def tiles(
+        self,
+        query: Labels,
+        start: int,
+        stop: int,
+        cap: int | None,
+        previous: int | None,
+        ranking: Ranking,
+        ranked_from: int | None = None,
+    ) -> list[np.ndarray]:
         return tiles_by_matches(self, query, start, stop, cap, previous, ranking, ranked_from)
 
 
-def tiles_by_matches(matcher: Matcher, query: Labels, start: int, stop: int,
-                     cap: int | None, previous: int | None, ranking: Ranking,
-                     ranked_from: int | None = None) -> list[np.ndarray]:
+def tiles_by_matches(
+    matcher: Matcher,
+    query: Labels,
+    start: int,
+    stop: int,
+    cap: int | None,
+    previous: int | None,
+    ranking: Ranking,
+    ranked_from: int | None = None,
+) -> list[np.ndarray]:
     """Algorithm 2's loop, one ``match`` and ``choose`` per tile."""
     tiles: list[np.ndarray] = []
     position = start
@@ -232,8 +291,13 @@ def tiles_by_matches(matcher: Matcher, query: Labels, start: int, stop: int,
     return tiles
 
 
-def greedy_matching(matcher: Matcher, query: Labels, ranking: Ranking,
-                    cap: int | None = None, previous: int | None = None) -> list[np.ndarray]:
+def greedy_matching(
+    matcher: Matcher,
+    query: Labels,
+    ranking: Ranking,
+    cap: int | None = None,
+    previous: int | None = None,
+) -> list[np.ndarray]:
     """GreedyMatching over the whole query: the tiles' node ids, in order."""
     return matcher.tiles(query, 0, len(query), cap, previous, ranking)
 

@@ -21,8 +21,15 @@ from .costs import cheapest_run
 
 
 @njit(cache=True)
-def _continued(previous: int, query: np.ndarray, position: int, stop: int, cap: int,
-               labels: np.ndarray, successor: np.ndarray) -> int:
+def _continued(
+    previous: int,
+    query: np.ndarray,
+    position: int,
+    stop: int,
+    cap: int,
+    labels: np.ndarray,
+    successor: np.ndarray,
+) -> int:
     """How far the recording after anime ``previous`` reads query[position:stop]."""
     length = 0
     anime = successor[previous] if previous >= 0 else -1
@@ -35,8 +42,15 @@ def _continued(previous: int, query: np.ndarray, position: int, stop: int, cap: 
 
 
 @njit(cache=True)
-def _occurrences(state: int, length: int, limit: int, low: np.ndarray, high: np.ndarray,
-                 ends: np.ndarray, text_anime: np.ndarray) -> np.ndarray:
+def _occurrences(
+    state: int,
+    length: int,
+    limit: int,
+    low: np.ndarray,
+    high: np.ndarray,
+    ends: np.ndarray,
+    text_anime: np.ndarray,
+) -> np.ndarray:
     """``SuffixIndex.occurrences``: first animes of the run's occurrences, ascending."""
     first, count = low[state], high[state] - low[state]
     taken = count if limit <= 0 or count <= limit else limit
@@ -49,12 +63,26 @@ def _occurrences(state: int, length: int, limit: int, low: np.ndarray, high: np.
 
 
 @njit(cache=True)
-def greedy_tiles(query: np.ndarray, cap: int, previous: int, joined: int, limit: int,
-                 transitions: np.ndarray, low: np.ndarray, high: np.ndarray, ends: np.ndarray,
-                 text_anime: np.ndarray, labels: np.ndarray, successor: np.ndarray,
-                 use_audio: bool, query_summaries: np.ndarray, summaries: np.ndarray,
-                 last: np.ndarray, first: np.ndarray,
-                 pose_successor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def greedy_tiles(
+    query: np.ndarray,
+    cap: int,
+    previous: int,
+    joined: int,
+    limit: int,
+    transitions: np.ndarray,
+    low: np.ndarray,
+    high: np.ndarray,
+    ends: np.ndarray,
+    text_anime: np.ndarray,
+    labels: np.ndarray,
+    successor: np.ndarray,
+    use_audio: bool,
+    query_summaries: np.ndarray,
+    summaries: np.ndarray,
+    last: np.ndarray,
+    first: np.ndarray,
+    pose_successor: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
     """Tile ``query`` (l,) labels: (anime per position (l,), tile end positions (T,)).
 
     ``cap`` <= 0 leaves tiles uncapped; ``previous`` (-1: none) is the anime before the
@@ -82,9 +110,19 @@ def greedy_tiles(query: np.ndarray, cap: int, previous: int, joined: int, limit:
             if length == 0:
                 break
             starts = _occurrences(state, length, limit, low, high, ends, text_anime)
-            chosen = starts[cheapest_run(starts, length, joined, use_audio,
-                                         query_summaries[position : position + length],
-                                         summaries, last, first, pose_successor)]
+            chosen = starts[
+                cheapest_run(
+                    starts,
+                    length,
+                    joined,
+                    use_audio,
+                    query_summaries[position : position + length],
+                    summaries,
+                    last,
+                    first,
+                    pose_successor,
+                )
+            ]
         for offset in range(length):
             nodes[position + offset] = chosen + offset
         position += length

@@ -79,8 +79,9 @@ class AnimeGraphSynthesizer(Synthesizer):
     those of query position j, whose ``query`` label and ``nodes`` id are in its view.
     """
 
-    def __init__(self, model: AnimeGraphModel, request: SynthesisRequest,
-                 options: SearchOptions) -> None:
+    def __init__(
+        self, model: AnimeGraphModel, request: SynthesisRequest, options: SearchOptions
+    ) -> None:
         self.model = model
         self.request = request
         self.fps = float(request.fps)
@@ -103,9 +104,15 @@ class AnimeGraphSynthesizer(Synthesizer):
         self.smoothed = Growable(np.float64, (model.n_components,))
         self.emitted = 0
         self.finished = False
-        self.stats: dict[str, Any] = {"frames": 0, "tiles": 0, "jumps": 0, "search_ms": 0.0,
-                                      "graph": options.graph, "search": options.search,
-                                      "view": self.view.name}
+        self.stats: dict[str, Any] = {
+            "frames": 0,
+            "tiles": 0,
+            "jumps": 0,
+            "search_ms": 0.0,
+            "graph": options.graph,
+            "search": options.search,
+            "view": self.view.name,
+        }
 
     @property
     def covered_until(self) -> float:
@@ -135,8 +142,10 @@ class AnimeGraphSynthesizer(Synthesizer):
         view = self.model.view_for(emotion, self.options)
         if view.name not in self._by_view:
             self._by_view[view.name] = _Searcher(
-                view, self.model.graph_of(view, self.options.graph),
-                self.model.matcher_of(view, self.options.graph))
+                view,
+                self.model.graph_of(view, self.options.graph),
+                self.model.matcher_of(view, self.options.graph),
+            )
         return self._by_view[view.name]
 
     def _take_audio(self, audio: Audio | None) -> None:
@@ -147,7 +156,10 @@ class AnimeGraphSynthesizer(Synthesizer):
         elif audio is not None and not self.audio_mode and self.model.has_audio:
             raise InvalidRequestError(
                 "audio must come with the first feed of a request: this request started "
-                "without audio", where="audio", code="audio_after_start")
+                "without audio",
+                where="audio",
+                code="audio_after_start",
+            )
         if audio is not None and self.audio is not None:
             self.audio.add(audio)
 
@@ -177,8 +189,9 @@ class AnimeGraphSynthesizer(Synthesizer):
             curves = self.audio.curves(self.spans[stop - 1].end)
             starts = np.array([span.start for span in self.spans[have:stop]])
             ends = np.array([span.end for span in self.spans[have:stop]])
-            self.summaries.extend(summarize(curves, np.zeros(stop - have, dtype=np.int64),
-                                            starts, ends))
+            self.summaries.extend(
+                summarize(curves, np.zeros(stop - have, dtype=np.int64), starts, ends)
+            )
         return Ranking(graph, self.model.poses, self.model.summaries, self.summaries.view())
 
     def _run_stop(self, start: int) -> int:
@@ -216,17 +229,22 @@ class AnimeGraphSynthesizer(Synthesizer):
                 return None
             ranking = self._ranking(searcher.graph, start, end)
             budget = self.options.pq_budget_s
-            deadline = None if budget is None else \
-                time.perf_counter() + budget - self.stats["search_ms"] / 1000.0
-            result = self._timed(lambda: pq_window(searcher.graph, ranking, self.query, start,
-                                                   end, ranked, deadline))
+            deadline = (
+                None
+                if budget is None
+                else time.perf_counter() + budget - self.stats["search_ms"] / 1000.0
+            )
+            result = self._timed(
+                lambda: pq_window(searcher.graph, ranking, self.query, start, end, ranked, deadline)
+            )
             last_window = closed and end == stop
             keep = len(result.nodes) if last_window else self.options.pq_advance
             return [[int(node) for node in result.nodes[:keep]]]
         return self._greedy_tiles(start, stop, closed, continuing, ranked)
 
-    def _greedy_tiles(self, start: int, stop: int, closed: bool, continuing: int | None,
-                      ranked: int | None) -> list[list[int]] | None:
+    def _greedy_tiles(
+        self, start: int, stop: int, closed: bool, continuing: int | None, ranked: int | None
+    ) -> list[list[int]] | None:
         """GreedyMatching of the run from ``start`` as far as the audio covers it; every tile
         but a last one that may still grow (it ends where the known input ends, below the
         cap) is final."""
@@ -236,8 +254,11 @@ class AnimeGraphSynthesizer(Synthesizer):
             return None
         ranking = self._ranking(searcher.graph, start, ready)
         cap = self.options.max_tile
-        tiles = self._timed(lambda: searcher.matcher.tiles(self.query, start, ready, cap,
-                                                           continuing, ranking, ranked))
+        tiles = self._timed(
+            lambda: searcher.matcher.tiles(
+                self.query, start, ready, cap, continuing, ranking, ranked
+            )
+        )
         if not (ready == stop and closed) and len(tiles[-1]) != cap:
             tiles.pop()
         return [[int(node) for node in tile] for tile in tiles] or None
@@ -247,8 +268,9 @@ class AnimeGraphSynthesizer(Synthesizer):
         query of one view, as the benchmark's warm search time: the search alone, without
         the cache misses the rest of a synthesis leaves behind."""
         if not self.finished or len(self.nodes) < len(self.query) or self.run_starts:
-            raise InvalidRequestError("only a finished single-view request can be re-timed",
-                                      code="request_unfinished")
+            raise InvalidRequestError(
+                "only a finished single-view request can be re-timed", code="request_unfinished"
+            )
         searcher = self.searchers[0]
         ranking = self._ranking(searcher.graph, 0, len(self.query))
         cap = self.options.max_tile
@@ -264,8 +286,9 @@ class AnimeGraphSynthesizer(Synthesizer):
         if self.audio is None:
             return stop
         # Span ends ascend, so readiness holds for a prefix of the spans.
-        return start + bisect_left(range(start, stop), True,
-                                   key=lambda p: not self._audio_ready(self.spans[p].end))
+        return start + bisect_left(
+            range(start, stop), True, key=lambda p: not self._audio_ready(self.spans[p].end)
+        )
 
     def _jumps(self, start: int, tile: list[int]) -> int:
         """Jumps into and inside a tile placed at ``start``; entering a view that does not
@@ -333,9 +356,14 @@ class AnimeGraphSynthesizer(Synthesizer):
         source_curve = animes.features.rows(owner)
         source_frames = np.arange(math.ceil(source[0] * rate), math.floor(source[1] * rate) + 1)
         source_frames = source_frames[source_frames < len(source_curve)]
-        return Alignment(target_curve[target_frames], target_frames / rate,
-                         np.asarray(source_curve[source_frames], dtype=np.float64),
-                         source_frames / rate, (span.start, span.end), source)
+        return Alignment(
+            target_curve[target_frames],
+            target_frames / rate,
+            np.asarray(source_curve[source_frames], dtype=np.float64),
+            source_frames / rate,
+            (span.start, span.end),
+            source,
+        )
 
     def _place(self, position: int, anime: int, warp: Warp) -> None:
         span = self.spans[position]
@@ -343,8 +371,15 @@ class AnimeGraphSynthesizer(Synthesizer):
         if position > 0:
             left = self.track.placements[position - 1].anime
             labels, pairs = self._join_pairs(position)
-            join = plan_join(left, anime, labels, self.model.poses, pairs,
-                             self.model.max_candidates, self.options.blend)
+            join = plan_join(
+                left,
+                anime,
+                labels,
+                self.model.poses,
+                pairs,
+                self.model.max_candidates,
+                self.options.blend,
+            )
         self.track.append(Placement(span.start, span.end, anime, warp), join)
 
     def _join_pairs(self, position: int) -> tuple[tuple[int, int], PairIndex]:
@@ -354,8 +389,10 @@ class AnimeGraphSynthesizer(Synthesizer):
         if self.searchers[position - 1].view is view:
             return (int(self.query[position - 1]), int(self.query[position])), view.pairs
         whole = self.model.views[WHOLE]
-        left, right = (int(whole.substitution[PHONEME_INDEX[self.spans[index].phoneme]])
-                       for index in (position - 1, position))
+        left, right = (
+            int(whole.substitution[PHONEME_INDEX[self.spans[index].phoneme]])
+            for index in (position - 1, position)
+        )
         return (left, right), whole.pairs
 
     def _track_final_until(self) -> float:
@@ -403,8 +440,10 @@ class AnimeGraphSynthesizer(Synthesizer):
         """One past the last frame (of ``total``) the smoothed samples so far can interpolate:
         the samples a frame needs grow with the frame, so a binary search finds it."""
         return self.emitted + bisect_right(
-            range(self.emitted, total), self.smoothed.count,
-            key=lambda frame: _samples_needed(frame, self.model.fps, self.fps))
+            range(self.emitted, total),
+            self.smoothed.count,
+            key=lambda frame: _samples_needed(frame, self.model.fps, self.fps),
+        )
 
     def _emit(self) -> np.ndarray:
         total = frame_count(self.covered_until, self.fps) if self.spans else 0

@@ -79,19 +79,44 @@ class MotionTrack:
         placement starting at or before it."""
         animes, motion = self.animes, self.animes.motion
         return _evaluate(
-            np.asarray(times, dtype=np.float64), self._starts.view(), self._ends.view(),
-            self._animes.view(), self._knot_offsets.view(), self._knot_targets.view(),
-            self._knot_sources.view(), self._join_kinds.view(), self._join_examples[0].view(),
-            self._join_examples[1].view(), animes.start, animes.end, animes.utterance,
-            motion.values, motion.offsets, float(motion.rate))
+            np.asarray(times, dtype=np.float64),
+            self._starts.view(),
+            self._ends.view(),
+            self._animes.view(),
+            self._knot_offsets.view(),
+            self._knot_targets.view(),
+            self._knot_sources.view(),
+            self._join_kinds.view(),
+            self._join_examples[0].view(),
+            self._join_examples[1].view(),
+            animes.start,
+            animes.end,
+            animes.utterance,
+            motion.values,
+            motion.offsets,
+            float(motion.rate),
+        )
 
 
 @njit(cache=True)
-def _evaluate(times: np.ndarray, starts: np.ndarray, ends: np.ndarray, animes: np.ndarray,
-              knot_offsets: np.ndarray, knot_targets: np.ndarray, knot_sources: np.ndarray,
-              join_kinds: np.ndarray, left_examples: np.ndarray, right_examples: np.ndarray,
-              anime_start: np.ndarray, anime_end: np.ndarray, utterance: np.ndarray,
-              values: np.ndarray, offsets: np.ndarray, rate: float) -> np.ndarray:
+def _evaluate(
+    times: np.ndarray,
+    starts: np.ndarray,
+    ends: np.ndarray,
+    animes: np.ndarray,
+    knot_offsets: np.ndarray,
+    knot_targets: np.ndarray,
+    knot_sources: np.ndarray,
+    join_kinds: np.ndarray,
+    left_examples: np.ndarray,
+    right_examples: np.ndarray,
+    anime_start: np.ndarray,
+    anime_end: np.ndarray,
+    utterance: np.ndarray,
+    values: np.ndarray,
+    offsets: np.ndarray,
+    rate: float,
+) -> np.ndarray:
     """Each time's fragment value plus the corrections of the joins on either side:
     out = base + w_left (left - base) + w_right (right - base), w clipped to [0, 1]."""
     out = np.empty((len(times), values.shape[1]))
@@ -109,9 +134,17 @@ def _evaluate(times: np.ndarray, starts: np.ndarray, ends: np.ndarray, animes: n
             if join < 0 or join >= len(join_kinds) or join_kinds[join] == _NO_CORRECTION:
                 continue
             weight, anime, recording = _correction(
-                side, join_kinds[join], time, index, starts, ends, animes,
+                side,
+                join_kinds[join],
+                time,
+                index,
+                starts,
+                ends,
+                animes,
                 right_examples[join] if side == 0 else left_examples[join],
-                anime_start, anime_end)
+                anime_start,
+                anime_end,
+            )
             weight = min(max(weight, 0.0), 1.0)
             if weight > 0.0:
                 sample_into(other, values, offsets, utterance[anime], recording, rate, True)
@@ -121,9 +154,18 @@ def _evaluate(times: np.ndarray, starts: np.ndarray, ends: np.ndarray, animes: n
 
 
 @njit(cache=True)
-def _correction(side: int, kind: int, time: float, index: int, starts: np.ndarray,
-                ends: np.ndarray, animes: np.ndarray, example: int, anime_start: np.ndarray,
-                anime_end: np.ndarray) -> tuple[float, int, float]:
+def _correction(
+    side: int,
+    kind: int,
+    time: float,
+    index: int,
+    starts: np.ndarray,
+    ends: np.ndarray,
+    animes: np.ndarray,
+    example: int,
+    anime_start: np.ndarray,
+    anime_end: np.ndarray,
+) -> tuple[float, int, float]:
     """(weight, anime, recording time) of the correction from the left (``side`` 0) or
     right (1) join of placement ``index``: a pair example stretched onto the span, or the
     neighbour's recording extended across it."""

@@ -34,8 +34,17 @@ from .graph import AnimeGraph, ClusterGraph, SearchGraph
 from .index import SuffixIndex
 
 WHOLE = "all"
-VIEW_ARRAYS = ("members", "substitution", "index_transitions", "index_low", "index_high",
-               "index_ends", "index_text_anime", "cluster_assignment", "cluster_representative")
+VIEW_ARRAYS = (
+    "members",
+    "substitution",
+    "index_transitions",
+    "index_low",
+    "index_high",
+    "index_ends",
+    "index_text_anime",
+    "cluster_assignment",
+    "cluster_representative",
+)
 
 
 @dataclass(frozen=True)
@@ -100,8 +109,15 @@ def substitution_table(labels: np.ndarray) -> np.ndarray:
     return table
 
 
-def fit_view(name: str, members: np.ndarray, labels: np.ndarray, utterance: np.ndarray,
-             shapes: np.ndarray, clusters: int, seed: int) -> dict[str, np.ndarray]:
+def fit_view(
+    name: str,
+    members: np.ndarray,
+    labels: np.ndarray,
+    utterance: np.ndarray,
+    shapes: np.ndarray,
+    clusters: int,
+    seed: int,
+) -> dict[str, np.ndarray]:
     """The stored arrays of one view, keys ``<name>_<array>``."""
     index = SuffixIndex.build(labels, utterance, len(PHONEMES), members)
     if clusters > 0:
@@ -118,8 +134,9 @@ def fit_view(name: str, members: np.ndarray, labels: np.ndarray, utterance: np.n
     return {f"{name}_{key}": value for key, value in arrays.items()}
 
 
-def load_view(name: str, arrays: Mapping[str, np.ndarray], labels: np.ndarray,
-              successor: np.ndarray) -> GraphView:
+def load_view(
+    name: str, arrays: Mapping[str, np.ndarray], labels: np.ndarray, successor: np.ndarray
+) -> GraphView:
     """Rebuild a view from its stored arrays."""
     missing = [key for key in VIEW_ARRAYS if f"{name}_{key}" not in arrays]
     if missing:
@@ -130,15 +147,24 @@ def load_view(name: str, arrays: Mapping[str, np.ndarray], labels: np.ndarray,
     assignment = np.full(len(labels), -1, dtype=np.int64)
     if len(part["cluster_representative"]):
         assignment[members] = part["cluster_assignment"]
-        cluster_graph = ClusterGraph.build(assignment, part["cluster_representative"], labels,
-                                           successor, len(PHONEMES))
+        cluster_graph = ClusterGraph.build(
+            assignment, part["cluster_representative"], labels, successor, len(PHONEMES)
+        )
     return GraphView(
-        name=name, members=members, substitution=part["substitution"],
+        name=name,
+        members=members,
+        substitution=part["substitution"],
         anime_graph=AnimeGraph.build(labels, successor, len(PHONEMES), members),
-        index=SuffixIndex(arrays[f"{name}_index_transitions"], part["index_low"],
-                          part["index_high"], part["index_ends"], part["index_text_anime"]),
+        index=SuffixIndex(
+            arrays[f"{name}_index_transitions"],
+            part["index_low"],
+            part["index_high"],
+            part["index_ends"],
+            part["index_text_anime"],
+        ),
         pairs=PairIndex.build(labels, successor, len(PHONEMES), members),
-        cluster_graph=cluster_graph, cluster_of=assignment,
+        cluster_graph=cluster_graph,
+        cluster_of=assignment,
     )
 
 

@@ -31,7 +31,7 @@ class Warp:
     source: np.ndarray
 
     def __call__(self, times: np.ndarray) -> np.ndarray:
-        return np.interp(times, self.target, self.source)
+        return np.asarray(np.interp(times, self.target, self.source))
 
 
 def linear_warp(start: float, end: float, source_start: float, source_end: float) -> Warp:
@@ -64,8 +64,7 @@ def accumulated_costs(cost: np.ndarray) -> np.ndarray:
     for row in range(1, rows):
         table[row, 0] = table[row - 1, 0] + cost[row, 0]
         for column in range(1, columns):
-            best = min(table[row - 1, column - 1], table[row - 1, column],
-                       table[row, column - 1])
+            best = min(table[row - 1, column - 1], table[row - 1, column], table[row, column - 1])
             table[row, column] = cost[row, column] + best
     return table
 
@@ -120,23 +119,40 @@ def dtw_warps(problems: Sequence[Alignment]) -> list[Warp]:
     map to the source span's ends. Problems with under two frames on either side
     are warped linearly.
     """
-    return [_dtw(p) if len(p.target_features) >= 2 and len(p.source_features) >= 2
-            else linear_warp(*p.span, *p.source_span) for p in problems]
+    return [
+        _dtw(p)
+        if len(p.target_features) >= 2 and len(p.source_features) >= 2
+        else linear_warp(*p.span, *p.source_span)
+        for p in problems
+    ]
 
 
 def _dtw(problem: Alignment) -> Warp:
-    table = accumulated_costs(frame_costs(np.asarray(problem.target_features, dtype=np.float64),
-                                          np.asarray(problem.source_features,
-                                                     dtype=np.float64)))
+    table = accumulated_costs(
+        frame_costs(
+            np.asarray(problem.target_features, dtype=np.float64),
+            np.asarray(problem.source_features, dtype=np.float64),
+        )
+    )
     mapped = matched_means(table, np.asarray(problem.source_times, dtype=np.float64))
-    target, source = knots(np.asarray(problem.target_times, dtype=np.float64), mapped,
-                           *problem.span, *problem.source_span)
+    target, source = knots(
+        np.asarray(problem.target_times, dtype=np.float64),
+        mapped,
+        *problem.span,
+        *problem.source_span,
+    )
     return Warp(target, source)
 
 
 @njit(cache=True)
-def knots(target_times: np.ndarray, mapped: np.ndarray, start: float, end: float,
-          source_start: float, source_end: float) -> tuple[np.ndarray, np.ndarray]:
+def knots(
+    target_times: np.ndarray,
+    mapped: np.ndarray,
+    start: float,
+    end: float,
+    source_start: float,
+    source_end: float,
+) -> tuple[np.ndarray, np.ndarray]:
     """Knots: the span's ends and each target frame strictly inside the span, mapped to
     its matched source time, clipped to the source span and made non-decreasing."""
     target = np.empty(len(target_times) + 2)
@@ -153,10 +169,16 @@ def knots(target_times: np.ndarray, mapped: np.ndarray, start: float, end: float
     return target[: count + 1], source[: count + 1]
 
 
-def dtw_warp(target_features: np.ndarray, target_times: np.ndarray, source_features: np.ndarray,
-             source_times: np.ndarray, span: tuple[float, float],
-             source_span: tuple[float, float]) -> Warp:
+def dtw_warp(
+    target_features: np.ndarray,
+    target_times: np.ndarray,
+    source_features: np.ndarray,
+    source_times: np.ndarray,
+    span: tuple[float, float],
+    source_span: tuple[float, float],
+) -> Warp:
     """Warp from the target ``span`` (s) onto ``source_span`` (s) by DTW of the feature frames
     (n, D) at ``target_times`` and (m, D) at ``source_times``."""
-    return dtw_warps([Alignment(target_features, target_times, source_features, source_times,
-                                span, source_span)])[0]
+    return dtw_warps(
+        [Alignment(target_features, target_times, source_features, source_times, span, source_span)]
+    )[0]

@@ -33,7 +33,8 @@ def test_channel_shares_match_the_reconstruction_of_each_channel() -> None:
 
 @pytest.mark.parametrize(("per_channel", "components"), [(False, 2), (True, 3)])
 def test_the_quiet_channel_needs_its_own_component_only_per_channel(
-        per_channel: bool, components: int) -> None:
+    per_channel: bool, components: int
+) -> None:
     frames = _frames()
     basis, explained = fit_basis(frames, 0.95, per_channel)
     assert basis.n_components == components

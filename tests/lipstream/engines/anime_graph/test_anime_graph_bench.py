@@ -22,14 +22,18 @@ def test_the_paper_table_rows_agree_with_their_own_measurements() -> None:
     assert [row["graph"] for row in table["rows"]] == ["unclustered", "clustered"] * 2
     for row in table["rows"]:
         greedy = row["greedy"]
-        unclustered = next(other["greedy"] for other in table["rows"]
-                           if other["stem"] == row["stem"] and other["graph"] == "unclustered")
+        unclustered = next(
+            other["greedy"]
+            for other in table["rows"]
+            if other["stem"] == row["stem"] and other["graph"] == "unclustered"
+        )
         assert 0 < greedy["search_ms"] and 0 < greedy["search_ms_in_synthesis"]
         for pq in row["pq"].values():
             assert not pq["timed_out"] and greedy["jumps"] <= pq["jumps"]
             assert pq["speedup"] == pytest.approx(pq["search_ms"] / greedy["search_ms"])
             assert pq["speedup_over_unclustered_greedy"] == pytest.approx(
-                pq["search_ms"] / unclustered["search_ms"])
+                pq["search_ms"] / unclustered["search_ms"]
+            )
     assert table["greedy_never_more_jumps"] is True
     assert table["min_speedup_over_pq4"] is None  # no PQ(4) was run
     assert set(table["min_speedup_over_pq4_same_graph"]) == {"unclustered", "clustered"}

@@ -51,9 +51,13 @@ def runs(seed: int, emotions: list[str | None], length: int = 7) -> list[list[Ph
     return pieces
 
 
-def decided(model: AnimeGraphModel, spans: list[PhonemeSpan], audio: Audio | None = None,
-            emotion: str | None = None, **options: object,
-            ) -> tuple[AnimeGraphSynthesizer, np.ndarray, np.ndarray]:
+def decided(
+    model: AnimeGraphModel,
+    spans: list[PhonemeSpan],
+    audio: Audio | None = None,
+    emotion: str | None = None,
+    **options: object,
+) -> tuple[AnimeGraphSynthesizer, np.ndarray, np.ndarray]:
     """The finished synthesizer, its frames and the anime shown at each query position."""
     synthesizer = model.start(fps=FPS, emotion=emotion, **options)
     synthesizer.feed(spans, audio)
@@ -68,14 +72,18 @@ def recorded_emotion(model: AnimeGraphModel, animes: np.ndarray) -> list[str]:
 
 @pytest.mark.parametrize("options", OPTION_SETS)
 @pytest.mark.parametrize("request_emotion", [None, "happy", "sad"])
-def test_each_run_shows_only_recordings_of_its_emotion(model: AnimeGraphModel, options: dict,
-                                                      request_emotion: str | None) -> None:
+def test_each_run_shows_only_recordings_of_its_emotion(
+    model: AnimeGraphModel, options: dict, request_emotion: str | None
+) -> None:
     pieces = runs(3, ["neutral", "happy", None, "sad", "neutral"])
     spans = list(itertools.chain.from_iterable(pieces))
     synthesizer, _, animes = decided(model, spans, emotion=request_emotion, **options)
     fallback = request_emotion if request_emotion in RECORDED else "all"
-    expected_views = [{"neutral": "neutral", "happy": "happy", None: fallback, "sad": "all"}[
-        piece[0].emotion] for piece in pieces for _ in piece]
+    expected_views = [
+        {"neutral": "neutral", "happy": "happy", None: fallback, "sad": "all"}[piece[0].emotion]
+        for piece in pieces
+        for _ in piece
+    ]
     assert [searcher.view.name for searcher in synthesizer.searchers] == expected_views
     shown = recorded_emotion(model, animes)
     for position, view in enumerate(expected_views):
@@ -86,12 +94,14 @@ def test_each_run_shows_only_recordings_of_its_emotion(model: AnimeGraphModel, o
 
 @pytest.mark.parametrize("options", OPTION_SETS)
 def test_a_change_of_emotion_mid_recording_does_not_continue_that_recording(
-        model: AnimeGraphModel, corpus: Corpus, options: dict) -> None:
+    model: AnimeGraphModel, corpus: Corpus, options: dict
+) -> None:
     """The query is a neutral recording, its second half asked for happy: the neutral run
     finds the recording itself, and its natural continuation must not leak into the happy
     run."""
-    number = max(range(0, len(corpus.utterances), 2),
-                 key=lambda index: len(corpus.utterances[index].phones))
+    number = max(
+        range(0, len(corpus.utterances), 2), key=lambda index: len(corpus.utterances[index].phones)
+    )
     recording = corpus.utterances[number]
     half = len(recording.phones) // 2
     spans = tagged(recording.phones[:half], "neutral") + tagged(recording.phones[half:], "happy")
@@ -102,19 +112,20 @@ def test_a_change_of_emotion_mid_recording_does_not_continue_that_recording(
         assert set(owner.tolist()) == {number}
 
 
-def test_without_match_emotion_every_run_searches_the_whole_corpus(
-        model: AnimeGraphModel) -> None:
+def test_without_match_emotion_every_run_searches_the_whole_corpus(model: AnimeGraphModel) -> None:
     spans = list(itertools.chain.from_iterable(runs(4, ["neutral", "happy"])))
     synthesizer, _, _ = decided(model, spans, match_emotion=False)
     assert {searcher.view.name for searcher in synthesizer.searchers} == {"all"}
     plain = [PhonemeSpan(s.phoneme, s.start, s.end) for s in spans]
-    np.testing.assert_array_equal(decided(model, spans, match_emotion=False)[1],
-                                  decided(model, plain)[1])
+    np.testing.assert_array_equal(
+        decided(model, spans, match_emotion=False)[1], decided(model, plain)[1]
+    )
 
 
 @pytest.mark.parametrize("options", OPTION_SETS)
-def test_the_first_run_is_what_its_emotion_alone_gives(model: AnimeGraphModel,
-                                                       options: dict) -> None:
+def test_the_first_run_is_what_its_emotion_alone_gives(
+    model: AnimeGraphModel, options: dict
+) -> None:
     first, second = runs(6, ["neutral", "happy"], length=9)
     mixed, mixed_frames, _ = decided(model, first + second, **options)
     alone, alone_frames, _ = decided(model, tagged(first, None), emotion="neutral", **options)
@@ -127,17 +138,26 @@ def test_the_first_run_is_what_its_emotion_alone_gives(model: AnimeGraphModel,
 
 
 @pytest.mark.parametrize("options", OPTION_SETS)
-def test_a_later_run_does_not_depend_on_the_run_before(model: AnimeGraphModel,
-                                                       options: dict) -> None:
+def test_a_later_run_does_not_depend_on_the_run_before(
+    model: AnimeGraphModel, options: dict
+) -> None:
     """With audio, joins cost nothing, so a run in a view that holds none of the previous
     run's animes restarts the search: change the phonemes of the neutral run and the happy
     run's fragments, and its frames past the join, stay the same."""
     first, second = runs(8, ["neutral", "happy"], length=9)
     # Same timing, other phonemes (its silences at both ends kept, so the audio around the
     # join is the same noise).
-    other = [span if span.phoneme == "sil" else
-             PhonemeSpan(PHONES[(PHONES.index(span.phoneme) + 3) % len(PHONES)], span.start,
-                         span.end, span.emotion) for span in first]
+    other = [
+        span
+        if span.phoneme == "sil"
+        else PhonemeSpan(
+            PHONES[(PHONES.index(span.phoneme) + 3) % len(PHONES)],
+            span.start,
+            span.end,
+            span.emotion,
+        )
+        for span in first
+    ]
     results = []
     for opening in (first, other):
         spans = opening + second
@@ -155,8 +175,9 @@ def test_a_later_run_does_not_depend_on_the_run_before(model: AnimeGraphModel,
 
 
 @pytest.mark.parametrize("search", ["greedy", "pq"])
-def test_jumps_count_every_join_that_is_not_a_recorded_succession(model: AnimeGraphModel,
-                                                                  search: str) -> None:
+def test_jumps_count_every_join_that_is_not_a_recorded_succession(
+    model: AnimeGraphModel, search: str
+) -> None:
     spans = list(itertools.chain.from_iterable(runs(10, ["happy", "neutral", None, "happy"])))
     synthesizer, _, animes = decided(model, spans, search=search, pq_window=3)
     successor = model.poses.successor
@@ -166,16 +187,26 @@ def test_jumps_count_every_join_that_is_not_a_recorded_succession(model: AnimeGr
 
 
 def test_the_silence_in_a_gap_takes_the_emotion_of_the_span_after_it(
-        model: AnimeGraphModel) -> None:
+    model: AnimeGraphModel,
+) -> None:
     spans = [PhonemeSpan("AA", 0.0, 0.1, "neutral"), PhonemeSpan("M", 0.3, 0.4, "happy")]
     synthesizer, _, animes = decided(model, spans)
     assert [(s.phoneme, s.emotion) for s in synthesizer.spans] == [
-        ("AA", "neutral"), ("sil", "happy"), ("M", "happy")]
+        ("AA", "neutral"),
+        ("sil", "happy"),
+        ("M", "happy"),
+    ]
     assert recorded_emotion(model, animes) == ["neutral", "happy", "happy"]
 
 
-def _stream(model: AnimeGraphModel, spans: list[PhonemeSpan], cuts: list[int],
-            audio: Audio | None, emotion: str | None, options: dict) -> np.ndarray:
+def _stream(
+    model: AnimeGraphModel,
+    spans: list[PhonemeSpan],
+    cuts: list[int],
+    audio: Audio | None,
+    emotion: str | None,
+    options: dict,
+) -> np.ndarray:
     synthesizer = model.start(fps=FPS, emotion=emotion, **options)
     bounds = [0, *sorted(set(cuts)), len(spans)]
     out = []
@@ -188,18 +219,23 @@ def _stream(model: AnimeGraphModel, spans: list[PhonemeSpan], cuts: list[int],
 
 @settings(max_examples=25, deadline=None)
 @given(data=st.data())
-def test_mixed_emotions_stream_exactly_like_offline(model: AnimeGraphModel,
-                                                    data: st.DataObject) -> None:
+def test_mixed_emotions_stream_exactly_like_offline(
+    model: AnimeGraphModel, data: st.DataObject
+) -> None:
     seed = data.draw(st.integers(0, 2**16))
-    emotions = data.draw(st.lists(st.sampled_from([None, "neutral", "happy", "sad"]),
-                                  min_size=1, max_size=4))
+    emotions = data.draw(
+        st.lists(st.sampled_from([None, "neutral", "happy", "sad"]), min_size=1, max_size=4)
+    )
     spans = list(itertools.chain.from_iterable(runs(seed, emotions, length=4)))
     # Emotion changes inside pieces too, at arbitrary spans.
     for index in data.draw(st.lists(st.integers(0, len(spans) - 1), max_size=3)):
-        spans[index] = PhonemeSpan(spans[index].phoneme, spans[index].start, spans[index].end,
-                                   data.draw(st.sampled_from([None, "neutral", "happy"])))
-    audio = render_audio(spans, np.random.default_rng(seed)) if data.draw(st.booleans()) \
-        else None
+        spans[index] = PhonemeSpan(
+            spans[index].phoneme,
+            spans[index].start,
+            spans[index].end,
+            data.draw(st.sampled_from([None, "neutral", "happy"])),
+        )
+    audio = render_audio(spans, np.random.default_rng(seed)) if data.draw(st.booleans()) else None
     options: dict = data.draw(st.sampled_from(OPTION_SETS))
     emotion = data.draw(st.sampled_from([None, "happy"]))
     cuts = data.draw(st.lists(st.integers(1, len(spans) - 1), max_size=10))

@@ -35,16 +35,25 @@ def model() -> AnimeGraphModel:
     return AnimeGraphEngine(clusters=30, max_tile=6).fit(corpus)
 
 
-def _stream(model: AnimeGraphModel, spans: list[PhonemeSpan], cuts: list[int],
-            audio: Audio | None, audio_cuts: list[int], fps: float, **options: object) -> np.ndarray:
+def _stream(
+    model: AnimeGraphModel,
+    spans: list[PhonemeSpan],
+    cuts: list[int],
+    audio: Audio | None,
+    audio_cuts: list[int],
+    fps: float,
+    **options: object,
+) -> np.ndarray:
     """Feed span chunk i with audio piece i; audio pieces left over follow with no spans."""
     synthesizer = model.start(fps=fps, **options)
     bounds = [0, *sorted(set(cuts)), len(spans)]
     pieces: list[Audio | None] = [None] * (len(bounds) - 1)
     if audio is not None:
         edges = [0, *sorted(set(audio_cuts)), len(audio.samples)]
-        pieces = [Audio(audio.samples[low:high], audio.sample_rate)
-                  for low, high in itertools.pairwise(edges)]
+        pieces = [
+            Audio(audio.samples[low:high], audio.sample_rate)
+            for low, high in itertools.pairwise(edges)
+        ]
     out = []
     for step in range(max(len(bounds) - 1, len(pieces))):
         chunk = spans[bounds[step] : bounds[step + 1]] if step < len(bounds) - 1 else []
@@ -65,16 +74,20 @@ def test_any_chunking_gives_the_offline_frames(model: AnimeGraphModel, data: st.
     emotion = data.draw(st.sampled_from([None, "happy"]))
     fps = data.draw(st.sampled_from([24.0, 30.0, 60.0, 97.0, 120.0]))
     cuts = data.draw(st.lists(st.integers(1, len(spans) - 1), max_size=8))
-    audio_cuts = data.draw(st.lists(st.integers(1, len(audio.samples) - 1), max_size=8)) \
-        if audio is not None else []
+    audio_cuts = (
+        data.draw(st.lists(st.integers(1, len(audio.samples) - 1), max_size=8))
+        if audio is not None
+        else []
+    )
     offline = model.synthesize(spans, fps=fps, audio=audio, emotion=emotion, **options).frames
     streamed = _stream(model, spans, cuts, audio, audio_cuts, fps, emotion=emotion, **options)
     np.testing.assert_array_equal(streamed, offline)
 
 
 @pytest.mark.parametrize("options", OPTION_SETS)
-def test_frames_come_out_within_the_declared_lookahead(model: AnimeGraphModel,
-                                                       options: dict) -> None:
+def test_frames_come_out_within_the_declared_lookahead(
+    model: AnimeGraphModel, options: dict
+) -> None:
     spans = make_spans(np.random.default_rng(11), 30)
     lookahead = model.lookahead
     synthesizer = model.start(fps=60.0, **options)
@@ -88,8 +101,9 @@ def test_frames_come_out_within_the_declared_lookahead(model: AnimeGraphModel,
     assert emitted + len(synthesizer.finish()) == len(model.synthesize(spans, fps=60.0).frames)
 
 
-def test_a_saved_model_answers_exactly_like_the_trained_one(model: AnimeGraphModel,
-                                                            tmp_path: Path) -> None:
+def test_a_saved_model_answers_exactly_like_the_trained_one(
+    model: AnimeGraphModel, tmp_path: Path
+) -> None:
     model.save(tmp_path / "ag")
     loaded = load_model(tmp_path / "ag")
     assert isinstance(loaded, AnimeGraphModel)
@@ -124,18 +138,25 @@ def test_greedy_reaches_the_fewest_jumps_of_any_matching(model: AnimeGraphModel)
     graph, query = synthesizer.graph, synthesizer.query
     best = {int(node): 0 for node in graph.nodes_with_label(query[0])}
     for label in query[1:]:
-        best = {int(node): min(jumps + int(not graph.is_edge(np.array([previous]),
-                                                              np.array([node]))[0])
-                               for previous, jumps in best.items())
-                for node in graph.nodes_with_label(label)}
+        best = {
+            int(node): min(
+                jumps + int(not graph.is_edge(np.array([previous]), np.array([node]))[0])
+                for previous, jumps in best.items()
+            )
+            for node in graph.nodes_with_label(label)
+        }
     assert synthesizer.stats["jumps"] == min(best.values()) == synthesizer.stats["tiles"] - 1
 
 
 def test_an_emotion_is_searched_among_its_own_recordings(model: AnimeGraphModel) -> None:
     spans = make_spans(np.random.default_rng(6), 20)
     recorded_emotion = ["neutral", "happy"]
-    for emotion, view in [("happy", "happy"), ("neutral", "neutral"), (None, "all"),
-                          ("sad", "all")]:
+    for emotion, view in [
+        ("happy", "happy"),
+        ("neutral", "neutral"),
+        (None, "all"),
+        ("sad", "all"),
+    ]:
         synthesizer = model.start(fps=60.0, emotion=emotion)
         synthesizer.feed(spans)
         synthesizer.finish()
@@ -148,8 +169,12 @@ def test_an_emotion_is_searched_among_its_own_recordings(model: AnimeGraphModel)
 
 
 def test_a_phoneme_the_corpus_never_says_borrows_its_viseme(model: AnimeGraphModel) -> None:
-    spans = [PhonemeSpan("sil", 0.0, 0.1), PhonemeSpan("P", 0.1, 0.2),
-             PhonemeSpan("AA", 0.2, 0.3), PhonemeSpan("ZH", 0.3, 0.4)]
+    spans = [
+        PhonemeSpan("sil", 0.0, 0.1),
+        PhonemeSpan("P", 0.1, 0.2),
+        PhonemeSpan("AA", 0.2, 0.3),
+        PhonemeSpan("ZH", 0.3, 0.4),
+    ]
     synthesizer = model.start(fps=60.0)
     synthesizer.feed(spans)
     frames = synthesizer.finish()
@@ -159,16 +184,19 @@ def test_a_phoneme_the_corpus_never_says_borrows_its_viseme(model: AnimeGraphMod
     assert labels[3] in (PHONEME_INDEX["S"], PHONEME_INDEX["sil"])
 
 
-@pytest.mark.parametrize("options, where", [
-    ({"graph": "tree"}, "options.graph"),
-    ({"search": "astar"}, "options.search"),
-    ({"pq_window": 9}, "options.pq_window"),
-    ({"pq_window": 3, "pq_advance": 4}, "options.pq_advance"),
-    ({"blend": "yes"}, "options.blend"),
-    ({"speed": 2}, "options.speed"),
-    ({"max_tile": -1}, "options.max_tile"),
-    ({"pq_budget_s": 0}, "options.pq_budget_s"),
-])
+@pytest.mark.parametrize(
+    "options, where",
+    [
+        ({"graph": "tree"}, "options.graph"),
+        ({"search": "astar"}, "options.search"),
+        ({"pq_window": 9}, "options.pq_window"),
+        ({"pq_window": 3, "pq_advance": 4}, "options.pq_advance"),
+        ({"blend": "yes"}, "options.blend"),
+        ({"speed": 2}, "options.speed"),
+        ({"max_tile": -1}, "options.max_tile"),
+        ({"pq_budget_s": 0}, "options.pq_budget_s"),
+    ],
+)
 def test_bad_options_are_refused(model: AnimeGraphModel, options: dict, where: str) -> None:
     with pytest.raises(InvalidRequestError) as caught:
         model.start(fps=60.0, **options)
@@ -210,8 +238,7 @@ def test_hyperparameters_are_checked_and_registered() -> None:
 
 
 def test_a_model_without_clusters_refuses_the_clustered_graph() -> None:
-    lean = AnimeGraphEngine(clusters=0).fit(make_corpus(seed=2, n_utterances=4,
-                                                        with_audio=False))
+    lean = AnimeGraphEngine(clusters=0).fit(make_corpus(seed=2, n_utterances=4, with_audio=False))
     assert lean.manifest.extra["audio_features"] is False
     with pytest.raises(InvalidRequestError):
         lean.start(fps=60.0, graph="clustered")
@@ -220,7 +247,8 @@ def test_a_model_without_clusters_refuses_the_clustered_graph() -> None:
 
 
 def test_render_samples_the_offline_track_and_empty_input_gives_no_frames(
-        model: AnimeGraphModel) -> None:
+    model: AnimeGraphModel,
+) -> None:
     spans = make_spans(np.random.default_rng(12), 8)
     offline = model.synthesize(spans, fps=model.fps).frames
     times = np.arange(len(offline)) / model.fps

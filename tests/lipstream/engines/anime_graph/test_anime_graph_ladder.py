@@ -44,8 +44,11 @@ def test_the_ladder_shortens_tiles_then_drops_smoothing(model: AnimeGraphModel) 
         Rung("greedy_tile4", Lookahead(smoothed, 4), {"search": "greedy", "max_tile": 4}),
         Rung("greedy_tile2", Lookahead(smoothed, 2), {"search": "greedy", "max_tile": 2}),
         Rung("greedy_tile1", Lookahead(smoothed, 1), {"search": "greedy", "max_tile": 1}),
-        Rung("greedy_tile1_unsmoothed", Lookahead(raw, 1),
-             {"search": "greedy", "max_tile": 1, "smooth": False}),
+        Rung(
+            "greedy_tile1_unsmoothed",
+            Lookahead(raw, 1),
+            {"search": "greedy", "max_tile": 1, "smooth": False},
+        ),
     )
 
 
@@ -59,21 +62,26 @@ def test_each_rung_waits_less_than_the_one_above(model: AnimeGraphModel) -> None
             assert lookahead_ms(lower, longest_phoneme_ms) < lookahead_ms(upper, longest_phoneme_ms)
 
 
-@pytest.mark.parametrize(("max_tile", "expected"), [
-    (6, ["greedy_tile6", "greedy_tile4", "greedy_tile2", "greedy_tile1"]),
-    (12, ["greedy_tile12", "greedy_tile10", "greedy_tile4", "greedy_tile2", "greedy_tile1"]),
-    (1, ["greedy_tile1"]),
-])
+@pytest.mark.parametrize(
+    ("max_tile", "expected"),
+    [
+        (6, ["greedy_tile6", "greedy_tile4", "greedy_tile2", "greedy_tile1"]),
+        (12, ["greedy_tile12", "greedy_tile10", "greedy_tile4", "greedy_tile2", "greedy_tile1"]),
+        (1, ["greedy_tile1"]),
+    ],
+)
 def test_the_top_rung_is_the_models_own_tile_cap(max_tile: int, expected: list[str]) -> None:
     lean = AnimeGraphEngine(clusters=0, max_tile=max_tile, smoothing_window=0.0).fit(
-        make_corpus(seed=2, n_utterances=4, with_audio=False))
+        make_corpus(seed=2, n_utterances=4, with_audio=False)
+    )
     ladder = lean.fidelity_ladder()
     assert [rung.name for rung in ladder] == expected  # no smoothing: no unsmoothed rung
     assert all(rung.lookahead.seconds == 1 / lean.fps for rung in ladder)
 
 
-def _stream_one_by_one(model: AnimeGraphModel, spans: list[PhonemeSpan], options: dict,
-                       fps: float = FPS) -> tuple[np.ndarray, list[int]]:
+def _stream_one_by_one(
+    model: AnimeGraphModel, spans: list[PhonemeSpan], options: dict, fps: float = FPS
+) -> tuple[np.ndarray, list[int]]:
     """All frames, and how many had come out after each span was fed."""
     synthesizer = model.start(fps=fps, **options)
     pieces, emitted = [], []
@@ -88,8 +96,9 @@ def _stream_one_by_one(model: AnimeGraphModel, spans: list[PhonemeSpan], options
 @pytest.mark.parametrize("fps", [FPS, OFF_GRID_FPS])
 @pytest.mark.parametrize("graph", ["unclustered", "clustered"])
 @pytest.mark.parametrize("rung_index", range(5))
-def test_a_rung_emits_every_frame_its_lookahead_promises(model: AnimeGraphModel, graph: str,
-                                                         rung_index: int, fps: float) -> None:
+def test_a_rung_emits_every_frame_its_lookahead_promises(
+    model: AnimeGraphModel, graph: str, rung_index: int, fps: float
+) -> None:
     rung = model.fidelity_ladder()[rung_index]
     options = {**rung.options, "graph": graph}
     for seed in (1, 2):
@@ -104,8 +113,8 @@ def test_a_rung_emits_every_frame_its_lookahead_promises(model: AnimeGraphModel,
 
 @pytest.mark.parametrize("rung_index", range(5))
 def test_a_rung_needs_all_the_phonemes_it_declares(
-        corpus_and_model: tuple[list[list[PhonemeSpan]], AnimeGraphModel],
-        rung_index: int) -> None:
+    corpus_and_model: tuple[list[list[PhonemeSpan]], AnimeGraphModel], rung_index: int
+) -> None:
     """A long pause, then a recorded line said again: the line is one tile, cut at the cap,
     so the frames in the pause wait for exactly ``max_tile`` phonemes of the line."""
     recordings, model = corpus_and_model
@@ -114,28 +123,35 @@ def test_a_rung_needs_all_the_phonemes_it_declares(
     assert len(line) > 10
     pause = 0.5
     spans = [PhonemeSpan("sil", 0.0, pause)] + [
-        PhonemeSpan(span.phoneme, span.start + pause, span.end + pause) for span in line]
+        PhonemeSpan(span.phoneme, span.start + pause, span.end + pause) for span in line
+    ]
     _, emitted = _stream_one_by_one(model, spans, dict(rung.options))
     shorter = Lookahead(rung.lookahead.seconds, rung.lookahead.phonemes - 1)
-    assert any(count < frames_before(final_until(spans[: index + 1], shorter), FPS)
-               for index, count in enumerate(emitted)), rung.name
+    assert any(
+        count < frames_before(final_until(spans[: index + 1], shorter), FPS)
+        for index, count in enumerate(emitted)
+    ), rung.name
 
 
 @pytest.mark.parametrize("rung_index", [3, 4])
-def test_one_phoneme_tiles_need_the_whole_declared_seconds(model: AnimeGraphModel,
-                                                           rung_index: int) -> None:
+def test_one_phoneme_tiles_need_the_whole_declared_seconds(
+    model: AnimeGraphModel, rung_index: int
+) -> None:
     """With one-phoneme tiles every fragment but the last is decided, so the smoothing
     half-width and the interpolation sample are the whole wait."""
     rung = model.fidelity_ladder()[rung_index]
     spans = make_spans(np.random.default_rng(5), 30)
     _, emitted = _stream_one_by_one(model, spans, dict(rung.options), OFF_GRID_FPS)
     sooner = Lookahead(rung.lookahead.seconds - 1 / FPS, rung.lookahead.phonemes)
-    assert any(count < frames_before(final_until(spans[: index + 1], sooner), OFF_GRID_FPS)
-               for index, count in enumerate(emitted)), rung.name
+    assert any(
+        count < frames_before(final_until(spans[: index + 1], sooner), OFF_GRID_FPS)
+        for index, count in enumerate(emitted)
+    ), rung.name
 
 
 def test_the_synthesizer_takes_max_tile_and_smoothing_from_the_request(
-        model: AnimeGraphModel) -> None:
+    model: AnimeGraphModel,
+) -> None:
     spans = make_spans(np.random.default_rng(7), 20)
     for rung in model.fidelity_ladder():
         synthesizer = model.start(fps=FPS, **rung.options)
@@ -151,12 +167,12 @@ def test_the_synthesizer_takes_max_tile_and_smoothing_from_the_request(
 
 @pytest.fixture(scope="module")
 def audio_model() -> AnimeGraphModel:
-    return AnimeGraphEngine(clusters=0).fit(make_corpus(seed=4, n_utterances=16,
-                                                        length=(10, 14)))
+    return AnimeGraphEngine(clusters=0).fit(make_corpus(seed=4, n_utterances=16, length=(10, 14)))
 
 
-def _stream_with_audio(model: AnimeGraphModel, spans: list[PhonemeSpan], audio: Audio,
-                       reach_s: float, options: dict) -> list[int]:
+def _stream_with_audio(
+    model: AnimeGraphModel, spans: list[PhonemeSpan], audio: Audio, reach_s: float, options: dict
+) -> list[int]:
     """Frames out after each span is fed with the audio up to its end + ``reach_s``."""
     synthesizer = model.start(fps=FPS, **options)
     rate, sent, emitted = audio.sample_rate, 0, [0]
@@ -170,28 +186,36 @@ def _stream_with_audio(model: AnimeGraphModel, spans: list[PhonemeSpan], audio: 
 
 @pytest.mark.parametrize("rung_index", [0, 3, 4])
 def test_audio_that_reaches_the_declared_wait_releases_every_promised_frame(
-        audio_model: AnimeGraphModel, rung_index: int) -> None:
+    audio_model: AnimeGraphModel, rung_index: int
+) -> None:
     rung = audio_model.fidelity_ladder()[rung_index]
     wait = rung.lookahead.audio_seconds
     assert wait == pytest.approx(2 / 100 + 0.025 / 2)  # MFCC: two 10 ms steps, half a window
     spans = make_spans(np.random.default_rng(8), 30)
-    audio = render_audio(spans + [PhonemeSpan("sil", spans[-1].end, spans[-1].end + 1.0)],
-                         np.random.default_rng(9))
+    audio = render_audio(
+        spans + [PhonemeSpan("sil", spans[-1].end, spans[-1].end + 1.0)], np.random.default_rng(9)
+    )
     emitted = _stream_with_audio(audio_model, spans, audio, wait, dict(rung.options))
     for index, count in enumerate(emitted):
         assert count >= frames_before(final_until(spans[: index + 1], rung.lookahead), FPS)
     if rung.name == "greedy_tile1_unsmoothed":
         # Its frames wait for the very next one-phoneme tile, which waits for its audio.
         short = _stream_with_audio(audio_model, spans, audio, wait - 0.011, dict(rung.options))
-        assert any(count < frames_before(final_until(spans[: index + 1], rung.lookahead), FPS)
-                   for index, count in enumerate(short)), "the declared audio wait is not needed"
+        assert any(
+            count < frames_before(final_until(spans[: index + 1], rung.lookahead), FPS)
+            for index, count in enumerate(short)
+        ), "the declared audio wait is not needed"
 
 
-@pytest.mark.parametrize("options", [
-    {"max_tile": 3},
-    {"search": "pq", "pq_window": 3, "pq_advance": 1},
-    {"search": "pq", "pq_window": 2, "pq_advance": 2, "smooth": False},
-    {"search": "pq", "pq_window": 4, "pq_advance": 3, "graph": "clustered"}])
+@pytest.mark.parametrize(
+    "options",
+    [
+        {"max_tile": 3},
+        {"search": "pq", "pq_window": 3, "pq_advance": 1},
+        {"search": "pq", "pq_window": 2, "pq_advance": 2, "smooth": False},
+        {"search": "pq", "pq_window": 4, "pq_advance": 3, "graph": "clustered"},
+    ],
+)
 def test_the_lookahead_of_any_options_is_kept(model: AnimeGraphModel, options: dict) -> None:  # type: ignore[type-arg]
     lookahead = model.lookahead_for(options)
     assert lookahead is not None
@@ -205,4 +229,3 @@ def test_the_lookahead_of_any_options_is_kept(model: AnimeGraphModel, options: d
 def test_an_uncapped_tile_has_no_bounded_lookahead(model: AnimeGraphModel) -> None:
     assert model.lookahead_for({"max_tile": 0}) is None
     assert model.lookahead_for({}) == model.fidelity_ladder()[0].lookahead
-

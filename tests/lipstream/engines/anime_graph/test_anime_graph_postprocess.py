@@ -36,9 +36,16 @@ def _tones(seconds: float, parts: list[tuple[float, float]]) -> np.ndarray:
 def test_learned_cutoff_keeps_99_percent_of_the_energy() -> None:
     # energy shares: component 0 -> 1 Hz 97.2%, 4 Hz 2.2%, 20 Hz 0.6%: 99% is reached at 4 Hz;
     # component 1 -> 2 Hz 80%, 9 Hz 20%: 99% is reached at 9 Hz.
-    curves = [np.stack([_tones(seconds, [(1.0, 1.0), (4.0, 0.15), (20.0, 0.08)]),
-                        _tones(seconds, [(2.0, 1.0), (9.0, 0.5)])], axis=1)
-              for seconds in (2.0, 3.0, 5.0)]
+    curves = [
+        np.stack(
+            [
+                _tones(seconds, [(1.0, 1.0), (4.0, 0.15), (20.0, 0.08)]),
+                _tones(seconds, [(2.0, 1.0), (9.0, 0.5)]),
+            ],
+            axis=1,
+        )
+        for seconds in (2.0, 3.0, 5.0)
+    ]
     cutoffs = learn_cutoffs(curves, FPS, 0.99)
     assert cutoffs == pytest.approx([4.0, 9.0], abs=1e-9)
     kept = energy_below(curves, FPS, cutoffs)
@@ -115,19 +122,34 @@ def test_dtw_matches_each_target_frame_along_the_cheapest_of_all_paths(shape: tu
     expected = [np.mean([source_times[j] for i, j in best if i == row]) for row in range(n)]
     table = accumulated_costs(frame_costs(target, source))
     np.testing.assert_allclose(matched_means(table, source_times), expected, rtol=1e-12)
-    problem = Alignment(target, 0.1 + np.arange(n) / 100.0, source, source_times,
-                        (0.1, 0.1 + n / 100.0), (2.0, 2.0 + m / 100.0))
+    problem = Alignment(
+        target,
+        0.1 + np.arange(n) / 100.0,
+        source,
+        source_times,
+        (0.1, 0.1 + n / 100.0),
+        (2.0, 2.0 + m / 100.0),
+    )
     alone = dtw_warps([problem])[0]
     inside = [(t, s) for t, s in zip(problem.target_times, expected) if 0.1 < t < 0.1 + n / 100.0]
     assert alone.target.tolist() == [0.1] + [t for t, _ in inside] + [0.1 + n / 100.0]
-    np.testing.assert_allclose(alone.source[1:-1], np.maximum.accumulate(
-        np.clip([s for _, s in inside], 2.0, 2.0 + m / 100.0)), rtol=1e-12)
+    np.testing.assert_allclose(
+        alone.source[1:-1],
+        np.maximum.accumulate(np.clip([s for _, s in inside], 2.0, 2.0 + m / 100.0)),
+        rtol=1e-12,
+    )
 
 
 def test_short_problems_are_warped_linearly() -> None:
     rng = np.random.default_rng(4)
-    problem = Alignment(rng.normal(size=(1, 3)), np.array([0.1]), rng.normal(size=(5, 3)),
-                        2.0 + np.arange(5) / 100.0, (0.1, 0.11), (2.0, 2.05))
+    problem = Alignment(
+        rng.normal(size=(1, 3)),
+        np.array([0.1]),
+        rng.normal(size=(5, 3)),
+        2.0 + np.arange(5) / 100.0,
+        (0.1, 0.11),
+        (2.0, 2.05),
+    )
     warp = dtw_warps([problem])[0]
     assert warp.target.tolist() == [0.1, 0.11]
     assert warp.source.tolist() == [2.0, 2.05]
@@ -146,10 +168,14 @@ def _join_jumps(model: AnimeGraphModel, seed: int, blend: bool, smooth: bool) ->
     synthesizer.feed(spans)
     steps = np.diff(synthesizer.finish().astype(np.float64), axis=0)
     track = synthesizer.track
-    return np.array([np.linalg.norm(steps[k] - (steps[k - 1] + steps[k + 1]) / 2.0)
-                     for index, join in enumerate(track.joins)
-                     if join.kind is not JoinKind.SEAMLESS
-                     for k in [int(np.ceil(track.placements[index + 1].start * FPS)) - 1]])
+    return np.array(
+        [
+            np.linalg.norm(steps[k] - (steps[k - 1] + steps[k + 1]) / 2.0)
+            for index, join in enumerate(track.joins)
+            if join.kind is not JoinKind.SEAMLESS
+            for k in [int(np.ceil(track.placements[index + 1].start * FPS)) - 1]
+        ]
+    )
 
 
 def test_joins_jump_no_further_than_the_recordings_step(model: AnimeGraphModel) -> None:
@@ -186,18 +212,21 @@ def test_merged_nodes_keep_every_label_audio_feature_and_edge() -> None:
     rng = np.random.default_rng(1)
     labels = rng.integers(0, 5, 60).astype(np.int16)
     utterance = np.repeat(np.arange(6), 10).astype(np.int32)
-    successor = np.where(np.append(utterance[1:] == utterance[:-1], False),
-                         np.arange(1, 61), -1).astype(np.int32)
+    successor = np.where(
+        np.append(utterance[1:] == utterance[:-1], False), np.arange(1, 61), -1
+    ).astype(np.int32)
     assignment = rng.integers(0, 8, 60)
     representative = np.array([np.flatnonzero(assignment == c)[0] for c in range(8)])
     graph = ClusterGraph.build(assignment, representative, labels, successor, 5)
     for anime in range(60):
         assert graph.has_label(np.array([assignment[anime]]), int(labels[anime]))[0]
         if successor[anime] >= 0:
-            assert graph.is_edge(np.array([assignment[anime]]),
-                                 np.array([assignment[successor[anime]]]))[0]
-    edges = {(int(assignment[a]), int(assignment[successor[a]])) for a in range(60)
-             if successor[a] >= 0}
+            assert graph.is_edge(
+                np.array([assignment[anime]]), np.array([assignment[successor[anime]]])
+            )[0]
+    edges = {
+        (int(assignment[a]), int(assignment[successor[a]])) for a in range(60) if successor[a] >= 0
+    }
     assert sum(len(graph.successors_of(np.array([c]))[1]) for c in range(8)) == len(edges)
     summaries = rng.normal(size=(60, 3))
     query = rng.normal(size=3)

@@ -22,8 +22,9 @@ def _database(seed: int, audio: bool) -> tuple[AnimeGraph, Ranking, np.ndarray, 
     lengths = rng.integers(1, 6, rng.integers(2, 5))
     labels = rng.integers(0, ALPHABET, lengths.sum()).astype(np.int16)
     utterance = np.repeat(np.arange(len(lengths)), lengths).astype(np.int32)
-    successor = np.where(np.append(utterance[1:] == utterance[:-1], False),
-                         np.arange(1, len(labels) + 1), -1).astype(np.int32)
+    successor = np.where(
+        np.append(utterance[1:] == utterance[:-1], False), np.arange(1, len(labels) + 1), -1
+    ).astype(np.int32)
     graph = AnimeGraph.build(labels, successor, ALPHABET)
     poses = Poses(rng.normal(size=(len(labels), 2)), rng.normal(size=(len(labels), 2)), successor)
     summaries = rng.normal(size=(len(labels), 3))
@@ -32,21 +33,29 @@ def _database(seed: int, audio: bool) -> tuple[AnimeGraph, Ranking, np.ndarray, 
     return graph, ranking, labels, SuffixIndex.build(labels, utterance, ALPHABET)
 
 
-def _objective(graph: AnimeGraph, ranking: Ranking, nodes: tuple[int, ...], start: int,
-               query: list[int], anchor: int | None) -> tuple[int, float]:
+def _objective(
+    graph: AnimeGraph,
+    ranking: Ranking,
+    nodes: tuple[int, ...],
+    start: int,
+    query: list[int],
+    anchor: int | None,
+) -> tuple[int, float]:
     """(jumps, cost) of a window's node sequence, computed from first principles."""
     chain = ([anchor] if anchor is not None else []) + list(nodes)
     jumps = sum(int(graph.successor[a] != b) for a, b in pairwise(chain))
-    cost = sum(float(ranking.node_costs(np.array([node]), start + i, query[start + i])[0])
-               for i, node in enumerate(nodes))
-    cost += sum(float(ranking.join_costs(np.array([a]), np.array([b]))[0])
-                for a, b in pairwise(chain))
+    cost = sum(
+        float(ranking.node_costs(np.array([node]), start + i, query[start + i])[0])
+        for i, node in enumerate(nodes)
+    )
+    cost += sum(
+        float(ranking.join_costs(np.array([a]), np.array([b]))[0]) for a, b in pairwise(chain)
+    )
     return jumps, cost
 
 
 @settings(max_examples=120, deadline=None)
-@given(seed=st.integers(0, 2**16), audio=st.booleans(), window=st.integers(1, 4),
-       data=st.data())
+@given(seed=st.integers(0, 2**16), audio=st.booleans(), window=st.integers(1, 4), data=st.data())
 def test_pq_window_is_exact(seed: int, audio: bool, window: int, data: st.DataObject) -> None:
     graph, ranking, labels, _ = _database(seed, audio)
     present = sorted(set(labels.tolist()))
@@ -59,16 +68,18 @@ def test_pq_window_is_exact(seed: int, audio: bool, window: int, data: st.DataOb
     assert found[0] == result.jumps
     assert abs(found[1] - result.cost) < 1e-9
     choices = [graph.nodes_with_label(label).tolist() for label in query[start : start + window]]
-    best = min(_objective(graph, ranking, nodes, start, query, anchor)
-               for nodes in product(*choices))
+    best = min(
+        _objective(graph, ranking, nodes, start, query, anchor) for nodes in product(*choices)
+    )
     assert result.jumps == best[0]
     assert abs(result.cost - best[1]) < 1e-9
 
 
 @settings(max_examples=80, deadline=None)
 @given(seed=st.integers(0, 2**16), window=st.integers(1, 4), data=st.data())
-def test_pq_matching_never_beats_greedy_on_jumps(seed: int, window: int,
-                                                 data: st.DataObject) -> None:
+def test_pq_matching_never_beats_greedy_on_jumps(
+    seed: int, window: int, data: st.DataObject
+) -> None:
     graph, ranking, labels, index = _database(seed, audio=False)
     present = sorted(set(labels.tolist()))
     query = data.draw(st.lists(st.sampled_from(present), min_size=1, max_size=10))

@@ -33,8 +33,11 @@ def _successor(utterance: np.ndarray) -> np.ndarray:
 def databases(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray, list[int]]:
     """(labels, utterance, query): recordings over a small alphabet and a query whose
     labels all occur in them."""
-    recordings = draw(st.lists(st.lists(st.integers(0, ALPHABET - 1), min_size=1, max_size=7),
-                               min_size=1, max_size=4))
+    recordings = draw(
+        st.lists(
+            st.lists(st.integers(0, ALPHABET - 1), min_size=1, max_size=7), min_size=1, max_size=4
+        )
+    )
     labels = np.array([label for recording in recordings for label in recording], dtype=np.int16)
     utterance = np.repeat(np.arange(len(recordings)), [len(r) for r in recordings])
     present = sorted(set(labels.tolist()))
@@ -55,22 +58,28 @@ def _min_jumps(graph: SearchGraph, query: list[int]) -> int:
     for label in query[1:]:
         nodes = graph.nodes_with_label(label)
         best = {
-            int(node): min(jumps + int(not graph.is_edge(np.array([previous]), np.array([node]))[0])
-                           for previous, jumps in best.items())
+            int(node): min(
+                jumps + int(not graph.is_edge(np.array([previous]), np.array([node]))[0])
+                for previous, jumps in best.items()
+            )
             for node in nodes
         }
     return min(best.values())
 
 
-def _min_tiles(labels: np.ndarray, utterance: np.ndarray, query: list[int],
-               cap: int | None = None) -> int:
+def _min_tiles(
+    labels: np.ndarray, utterance: np.ndarray, query: list[int], cap: int | None = None
+) -> int:
     """Fewest substrings of the recordings that concatenate to the query, by trying every
     split point (dynamic programming over all tilings)."""
     texts = [tuple(labels[utterance == u].tolist()) for u in np.unique(utterance)]
 
     def occurs(piece: tuple[int, ...]) -> bool:
-        return any(text[i : i + len(piece)] == piece
-                   for text in texts for i in range(len(text) - len(piece) + 1))
+        return any(
+            text[i : i + len(piece)] == piece
+            for text in texts
+            for i in range(len(text) - len(piece) + 1)
+        )
 
     fewest = [0] + [10**9] * len(query)
     for stop in range(1, len(query) + 1):
@@ -101,7 +110,8 @@ def test_greedy_uses_the_minimum_number_of_jumps(database: tuple) -> None:
 @settings(max_examples=150, deadline=None)
 @given(databases(), st.integers(1, 3))
 def test_capped_greedy_continues_a_cut_tile_and_matches_uncapped_below_the_cap(
-        database: tuple, cap: int) -> None:
+    database: tuple, cap: int
+) -> None:
     labels, utterance, query = database
     successor = _successor(utterance)
     graph = AnimeGraph.build(labels, successor, ALPHABET)
@@ -122,7 +132,8 @@ def test_capped_greedy_continues_a_cut_tile_and_matches_uncapped_below_the_cap(
 @settings(max_examples=150, deadline=None)
 @given(databases(), st.integers(1, 6), st.integers(0, 2**16))
 def test_greedy_on_a_clustered_graph_uses_the_minimum_number_of_jumps(
-        database: tuple, k: int, seed: int) -> None:
+    database: tuple, k: int, seed: int
+) -> None:
     labels, utterance, query = database
     successor = _successor(utterance)
     rng = np.random.default_rng(seed)
@@ -144,9 +155,12 @@ def test_suffix_index_finds_every_occurrence(database: tuple, data: st.DataObjec
     index = SuffixIndex.build(labels, utterance, ALPHABET)
     pattern = data.draw(st.lists(st.integers(0, ALPHABET - 1), min_size=1, max_size=4))
     length, state = index.match(pattern, 0, len(pattern))
-    expected = [start for start in range(len(labels))
-                if labels[start : start + len(pattern)].tolist() == pattern
-                and len(set(utterance[start : start + len(pattern)].tolist())) == 1]
+    expected = [
+        start
+        for start in range(len(labels))
+        if labels[start : start + len(pattern)].tolist() == pattern
+        and len(set(utterance[start : start + len(pattern)].tolist())) == 1
+    ]
     if expected:
         assert length == len(pattern)
         assert index.occurrences(state, length).tolist() == expected
@@ -188,8 +202,9 @@ def test_without_audio_ties_go_to_the_smoothest_join() -> None:
     ranking = Ranking(graph, Poses(first, last, successor), np.zeros((9, 0)))
     tiles = greedy_matching(matcher, [2, 0, 1], ranking)
     assert [tile.tolist() for tile in tiles] == [[2], [6, 7]]
-    assert [t.tolist() for t in greedy_matching(matcher, [2, 0, 1], ranking)] == \
-        [t.tolist() for t in tiles]
+    assert [t.tolist() for t in greedy_matching(matcher, [2, 0, 1], ranking)] == [
+        t.tolist() for t in tiles
+    ]
 
 
 def test_a_capped_tile_resumes_its_recording() -> None:
@@ -224,8 +239,9 @@ def test_every_labelling_of_a_tiny_graph_has_at_least_greedys_jumps() -> None:
     graph = AnimeGraph.build(labels, successor, ALPHABET)
     matcher = SuffixMatcher(SuffixIndex.build(labels, utterance, ALPHABET), graph)
     query = [3, 0, 1, 2, 3, 0]
-    greedy = count_jumps(graph, np.concatenate(
-        greedy_matching(matcher, query, _ranking(graph, 9, successor))))
+    greedy = count_jumps(
+        graph, np.concatenate(greedy_matching(matcher, query, _ranking(graph, 9, successor)))
+    )
     choices = [graph.nodes_with_label(label).tolist() for label in query]
     brute = min(count_jumps(graph, np.array(nodes)) for nodes in product(*choices))
     assert greedy == brute == 2
@@ -234,8 +250,9 @@ def test_every_labelling_of_a_tiny_graph_has_at_least_greedys_jumps() -> None:
 def _clustered(labels: np.ndarray, successor: np.ndarray, k: int, seed: int) -> ClusterGraph:
     assignment = np.random.default_rng(seed).integers(0, k, len(labels))
     assignment = np.searchsorted(np.unique(assignment), assignment)
-    representative = np.array([np.flatnonzero(assignment == c)[0]
-                               for c in range(int(assignment.max()) + 1)])
+    representative = np.array(
+        [np.flatnonzero(assignment == c)[0] for c in range(int(assignment.max()) + 1)]
+    )
     return ClusterGraph.build(assignment, representative, labels, successor, ALPHABET)
 
 
@@ -244,41 +261,50 @@ def _paths(graph: SearchGraph, run: list[int], previous: int | None) -> list[tup
     successor of ``previous`` when some successor carries the run's first label."""
     starts = graph.nodes_with_label(run[0]).tolist()
     if previous is not None:
-        linked = [node for node in starts
-                  if graph.is_edge(np.array([previous]), np.array([node]))[0]]
+        linked = [
+            node for node in starts if graph.is_edge(np.array([previous]), np.array([node]))[0]
+        ]
         starts = linked or starts
     paths: list[tuple[int, ...]] = [(node,) for node in starts]
     for label in run[1:]:
-        paths = [path + (int(node),) for path in paths
-                 for node in graph.successors_of(np.array([path[-1]]))[1]
-                 if graph.has_label(np.array([node]), label)[0]]
+        paths = [
+            path + (int(node),)
+            for path in paths
+            for node in graph.successors_of(np.array([path[-1]]))[1]
+            if graph.has_label(np.array([node]), label)[0]
+        ]
     return paths
 
 
-def _path_cost(ranking: Ranking, nodes: tuple[int, ...], run: list[int],
-               previous: int | None) -> float:
-    cost = sum(float(ranking.node_costs(np.array([node]), i, run[i])[0])
-               for i, node in enumerate(nodes))
+def _path_cost(
+    ranking: Ranking, nodes: tuple[int, ...], run: list[int], previous: int | None
+) -> float:
+    cost = sum(
+        float(ranking.node_costs(np.array([node]), i, run[i])[0]) for i, node in enumerate(nodes)
+    )
     joins = list(zip(nodes, nodes[1:]))
     if previous is not None:
         joins.insert(0, (previous, nodes[0]))
-    return cost + sum(float(ranking.join_costs(np.array([a]), np.array([b]))[0])
-                      for a, b in joins)
+    return cost + sum(float(ranking.join_costs(np.array([a]), np.array([b]))[0]) for a, b in joins)
 
 
 @settings(max_examples=120, deadline=None)
 @given(databases(), st.integers(1, 6), st.integers(0, 2**16), st.booleans(), st.data())
 def test_layered_matcher_takes_the_cheapest_of_the_longest_paths(
-        database: tuple, k: int, seed: int, audio: bool, data: st.DataObject) -> None:
+    database: tuple, k: int, seed: int, audio: bool, data: st.DataObject
+) -> None:
     labels, utterance, query = database
     query = query[:6]
     successor = _successor(utterance)
     graph = _clustered(labels, successor, k, seed)
     rng = np.random.default_rng(seed)
-    poses = Poses(rng.normal(size=(len(labels), 2)), rng.normal(size=(len(labels), 2)),
-                  successor)
-    ranking = Ranking(graph, poses, rng.normal(size=(len(labels), 3)),
-                      rng.normal(size=(len(query), 3)) if audio else None)
+    poses = Poses(rng.normal(size=(len(labels), 2)), rng.normal(size=(len(labels), 2)), successor)
+    ranking = Ranking(
+        graph,
+        poses,
+        rng.normal(size=(len(labels), 3)),
+        rng.normal(size=(len(query), 3)) if audio else None,
+    )
     previous = data.draw(st.none() | st.integers(0, graph.n_nodes - 1))
     matcher = LayeredMatcher(graph)
     match = matcher.match(query, 0, len(query), None, previous)
@@ -295,7 +321,8 @@ def test_layered_matcher_takes_the_cheapest_of_the_longest_paths(
 @settings(max_examples=100, deadline=None)
 @given(databases(), st.integers(1, 6), st.integers(0, 2**16))
 def test_layered_ties_go_to_the_lowest_last_node_then_the_lowest_predecessors(
-        database: tuple, k: int, seed: int) -> None:
+    database: tuple, k: int, seed: int
+) -> None:
     labels, utterance, query = database
     query = query[:6]
     successor = _successor(utterance)
@@ -316,8 +343,7 @@ def test_clustered_audio_costs_at_are_each_nodes_nearest_member_per_label() -> N
     graph = ClusterGraph.build(assignment, np.array([0, 2]), labels, successor, 3)
     summaries = np.array([[0.0], [1.0], [2.0], [3.0], [4.0], [5.0]])
     targets = np.array([[2.5], [2.5], [0.0], [10.0]])
-    costs = graph.audio_costs_at(np.array([0, 1, 0, 1]), np.array([0, 0, 1, 2]), targets,
-                                 summaries)
+    costs = graph.audio_costs_at(np.array([0, 1, 0, 1]), np.array([0, 0, 1, 2]), targets, summaries)
     # node 0 label 0: animes {0} -> 2.5; node 1 label 0: {2, 5} -> 0.5;
     # node 0 label 1: {1} -> 1.0; node 1 has no label 2 -> inf
     assert costs.tolist() == [2.5, 0.5, 1.0, np.inf]
@@ -327,8 +353,9 @@ def test_clustered_audio_costs_at_are_each_nodes_nearest_member_per_label() -> N
 
 @settings(max_examples=150, deadline=None)
 @given(databases(), st.integers(0, 3), st.booleans(), st.integers(0, 2**16), st.data())
-def test_compiled_tiles_equal_the_match_and_choose_loop(database: tuple, cap: int, audio: bool,
-                                                        seed: int, data: st.DataObject) -> None:
+def test_compiled_tiles_equal_the_match_and_choose_loop(
+    database: tuple, cap: int, audio: bool, seed: int, data: st.DataObject
+) -> None:
     labels, utterance, query = database
     successor = _successor(utterance)
     graph = AnimeGraph.build(labels, successor, ALPHABET)
@@ -337,13 +364,13 @@ def test_compiled_tiles_equal_the_match_and_choose_loop(database: tuple, cap: in
     rng = np.random.default_rng(seed)
     poses = Poses(rng.normal(size=(len(labels), 2)), rng.normal(size=(len(labels), 2)), successor)
     summaries = rng.normal(size=(len(labels), 3))
-    ranking = Ranking(graph, poses, summaries,
-                      rng.normal(size=(len(query), 3)) if audio else None)
+    ranking = Ranking(graph, poses, summaries, rng.normal(size=(len(query), 3)) if audio else None)
     previous = data.draw(st.none() | st.integers(0, len(labels) - 1))
     ranked_from = data.draw(st.none() | st.integers(0, len(labels) - 1))
     compiled = matcher.tiles(query, 0, len(query), cap or None, previous, ranking, ranked_from)
-    reference = tiles_by_matches(matcher, query, 0, len(query), cap or None, previous, ranking,
-                                 ranked_from)
+    reference = tiles_by_matches(
+        matcher, query, 0, len(query), cap or None, previous, ranking, ranked_from
+    )
     assert [t.tolist() for t in compiled] == [t.tolist() for t in reference]
 
 
@@ -364,9 +391,10 @@ def test_a_label_outside_the_alphabet_stops_every_matcher_where_it_stands(label:
     successor = _successor(utterance)
     graph = AnimeGraph.build(labels, successor, ALPHABET)
     clustered = ClusterGraph.build(np.arange(5), np.arange(5), labels, successor, ALPHABET)
-    for matcher, searched in ((SuffixMatcher(SuffixIndex.build(labels, utterance, ALPHABET),
-                                             graph), graph),
-                              (LayeredMatcher(clustered), clustered)):
+    for matcher, searched in (
+        (SuffixMatcher(SuffixIndex.build(labels, utterance, ALPHABET), graph), graph),
+        (LayeredMatcher(clustered), clustered),
+    ):
         ranking = _ranking(searched, 5, successor)
         with pytest.raises(ValueError, match=f"phoneme {label} at query position 2"):
             greedy_matching(matcher, [0, 1, label, 0], ranking)
