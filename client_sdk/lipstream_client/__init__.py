@@ -10,7 +10,13 @@ blocking wrapper (``Client``), ``exceptions`` what they raise,
 endpoints with the standard library.
 """
 
-from .channels import OCULUS15_VISEMES, canonical_viseme, rename_channel
+from .channels import (
+    OCULUS15_VISEMES,
+    PRESTON_BLAIR_SHAPES,
+    VISEME_CHANNELS,
+    canonical_viseme,
+    rename_channel,
+)
 from .client import AsyncClient, RequestOver, Stream, StreamResult
 from .codec import (
     DEFAULT_ENCODING,
@@ -71,6 +77,8 @@ __all__ = [
     "DEFAULT_MAX_SIZE",
     "ERROR_CODES",
     "OCULUS15_VISEMES",
+    "PRESTON_BLAIR_SHAPES",
+    "VISEME_CHANNELS",
     "PROTOCOL_VERSION",
     "RETRYABLE_CLOSE_CODES",
     "SUBPROTOCOLS",

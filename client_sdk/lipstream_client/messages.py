@@ -49,10 +49,10 @@ Encoding = Literal["msgpack", "json"]
 Sender = Literal["client", "server"]
 ENCODINGS: tuple[Encoding, ...] = ("msgpack", "json")
 Naming = Literal["arkit", "livelink", "suffix_lr"]
-VisemeSet = Literal["oculus15"]
+VisemeSet = Literal["oculus15", "preston-blair"]
 DoneReason = Literal["end", "cancel", "interrupt"]
 NAMINGS: tuple[Naming, ...] = ("arkit", "livelink", "suffix_lr")
-VISEME_SETS: tuple[VisemeSet, ...] = ("oculus15",)
+VISEME_SETS: tuple[VisemeSet, ...] = ("oculus15", "preston-blair")
 DONE_REASONS: tuple[DoneReason, ...] = ("end", "cancel", "interrupt")
 
 JsonValue: TypeAlias = None | bool | int | float | str | list["JsonValue"] | dict[str, "JsonValue"]

@@ -11,9 +11,16 @@ import json
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+from lipstream_client.messages import NAMINGS, VISEME_SETS
 
 from .config import Settings, load_settings
 from .errors import LipstreamError
+from .exports import FORMATS, MOHO_FPS
+
+if TYPE_CHECKING:
+    from lipstream_client import OutputProfile
 
 
 def _build_demo(args: argparse.Namespace, settings: Settings) -> None:
@@ -29,7 +36,7 @@ def _train(args: argparse.Namespace, settings: Settings) -> None:
     from .training import resolve_engines, train_engine, train_engines
 
     engines = resolve_engines(args.engine)
-    corpus = load_corpus(args.corpus, progress=True)
+    corpus = load_corpus(args.corpus, progress=True, tier=args.tier)
     out = Path(args.out)
     if args.engine == "all":
         written = train_engines(corpus, engines, out, progress=True)
@@ -42,14 +49,56 @@ def _train(args: argparse.Namespace, settings: Settings) -> None:
 def _synth(args: argparse.Namespace, settings: Settings) -> None:
     from .audio import read_wav
     from .engines import load_model
+    from .exports import SHAPE_FORMATS, format_for
+    from .exports.writer import ExportSettings
     from .phones_io import read_phones, write_frames
+    from .server.profiles import apply_to_result
 
+    out = Path(args.out)
+    format_name = format_for(out, args.format)
+    profile = _output_profile(args, shapes=format_name in SHAPE_FORMATS)
     model = load_model(args.model)
-    spans = read_phones(Path(args.phones))
+    spans = read_phones(Path(args.phones), args.tier)
     audio = read_wav(Path(args.audio)) if args.audio else None
     result = model.synthesize(spans, fps=args.fps, audio=audio, emotion=args.emotion)
-    write_frames(Path(args.out), result)
-    print(f"wrote {len(result.frames)} frames at {result.fps:g} fps to {args.out}")
+    result = apply_to_result(model, result, profile)
+    export = ExportSettings(sound_file=args.audio or "", moho_fps=args.moho_fps)
+    write_frames(out, result, format_name, export)
+    print(f"wrote {len(result.frames)} frames at {result.fps:g} fps to {args.out} ({format_name})")
+
+
+def _output_profile(args: argparse.Namespace, *, shapes: bool) -> OutputProfile | None:
+    """The output profile of ``--profile`` with ``--naming``, ``--channels`` and ``--visemes``
+    laid over it, validated as the server validates ``start.output``; Rhubarb and Moho
+    formats (``shapes``) default to the Preston Blair visemes."""
+    from .server.profiles import parse_profile
+
+    fields: dict[str, object] = {}
+    where = "command line"
+    if args.profile:
+        where = args.profile
+        try:
+            loaded = json.loads(Path(args.profile).read_text(encoding="utf-8"))
+        except (OSError, ValueError) as error:
+            raise LipstreamError(
+                f"cannot read the output profile: {error}",
+                where=args.profile,
+                code="invalid_setting",
+            ) from None
+        if not isinstance(loaded, dict):
+            raise LipstreamError(
+                "an output profile must be a JSON object",
+                where=args.profile,
+                code="invalid_setting",
+            )
+        fields.update(loaded)
+    for key in ("naming", "channels", "visemes"):
+        value = getattr(args, key)
+        if value is not None:
+            fields[key] = value
+    if shapes and "visemes" not in fields and "naming" not in fields:
+        fields["visemes"] = "preston-blair"
+    return parse_profile(fields, where) if fields else None
 
 
 def _serve(args: argparse.Namespace, settings: Settings) -> None:
@@ -161,6 +210,9 @@ def _parser() -> argparse.ArgumentParser:
     train.add_argument("--corpus", required=True)
     train.add_argument("--engine", required=True, help="an engine name, or all")
     train.add_argument("--out", required=True)
+    train.add_argument(
+        "--tier", help="TextGrid phone tier (default: corpus.json's tier, else phones/MAU/...)"
+    )
     train.set_defaults(run=_train)
 
     synth = commands.add_parser("synth", help="synthesize frames for a phones file")
@@ -169,7 +221,18 @@ def _parser() -> argparse.ArgumentParser:
     synth.add_argument("--audio")
     synth.add_argument("--fps", type=float, default=60.0)
     synth.add_argument("--emotion", choices=["neutral", "happy", "angry", "sad"])
-    synth.add_argument("--out", required=True, help=".csv or .json")
+    synth.add_argument("--out", required=True, help=".csv, .json, .tsv, .xml or .dat")
+    synth.add_argument(
+        "--format", choices=FORMATS, help="output format (default: by the --out extension)"
+    )
+    synth.add_argument("--tier", help="TextGrid phone tier (default: phones, MAU, phone, ...)")
+    synth.add_argument("--profile", help="output profile JSON file (as the server's output)")
+    synth.add_argument("--naming", choices=NAMINGS, help="channel naming")
+    synth.add_argument("--channels", nargs="+", metavar="NAME", help="output these channels")
+    synth.add_argument("--visemes", choices=VISEME_SETS, help="output visemes, not blendshapes")
+    synth.add_argument(
+        "--moho-fps", type=float, default=MOHO_FPS, help="frame rate of a Moho .dat (24-100)"
+    )
     synth.set_defaults(run=_synth)
 
     serve = commands.add_parser("serve", help="run the server")

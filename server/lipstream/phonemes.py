@@ -30,7 +30,7 @@ SILENCE = "sil"
 PHONEMES: tuple[str, ...] = ARPABET + (SILENCE,)
 PHONEME_INDEX: dict[str, int] = {p: i for i, p in enumerate(PHONEMES)}
 
-SOURCES: tuple[str, ...] = ("auto", "arpabet", "mfa", "timit", "mocha", "espeak", "ipa")
+SOURCES: tuple[str, ...] = ("auto", "arpabet", "mfa", "timit", "mocha", "espeak", "ipa", "sampa")
 # "request" is what timeline.coerce_spans passes for client-sent labels.
 SOURCE_ALIASES: Mapping[str, str] = MappingProxyType({"request": "auto"})
 
@@ -141,6 +141,29 @@ _IPA_TABLE: dict[str, str] = {
     "l": "L", "ɫ": "L", "ʎ": "L", "ɭ": "L", "ɬ": "L", "ɹ̩": "ER",
     "ɹ": "R", "r": "R", "ɻ": "R", "ʀ": "R", "j": "Y", "ʝ": "Y", "w": "W", "ʍ": "W",
 }  # fmt: skip
+# English SAMPA as WebMAUS writes it in its MAU tier (British and American
+# inventories, with the X-SAMPA spelling r\ and the rhotic `), plus the BAS
+# pause and noise markers. Case-sensitive; a length mark ":" is dropped if the
+# long form is not listed.
+_SAMPA_TABLE: dict[str, str] = {
+    # pauses and non-speech
+    "<p:>": SILENCE, "<p>": SILENCE, "<nib>": SILENCE, "<usb>": SILENCE, "<sil>": SILENCE,
+    # monophthongs
+    "i:": "IY", "i": "IY", "I": "IH", "e": "EH", "E": "EH", "{": "AE", "a": "AE",
+    "A:": "AA", "A": "AA", "Q": "AA", "O:": "AO", "O": "AO", "o": "OW", "U": "UH",
+    "u:": "UW", "u": "UW", "V": "AH", "@": "AH", "3:": "ER", "3": "ER", "3`": "ER",
+    "@`": "ER", "r=": "ER",
+    # diphthongs and centring diphthongs
+    "eI": "EY", "aI": "AY", "OI": "OY", "@U": "OW", "oU": "OW", "aU": "AW",
+    "I@": "IY", "e@": "EH", "E@": "EH", "U@": "UH",
+    # consonants
+    "p": "P", "b": "B", "t": "T", "d": "D", "k": "K", "g": "G", "?": "T", "4": "D",
+    "tS": "CH", "dZ": "JH", "f": "F", "v": "V", "T": "TH", "D": "DH",
+    "s": "S", "z": "Z", "S": "SH", "Z": "ZH", "h": "HH", "x": "K", "C": "HH",
+    "m": "M", "n": "N", "N": "NG", "m=": "M", "n=": "N",
+    "l": "L", "5": "L", "l=": "L", "r": "R", "r\\": "R", "j": "Y", "w": "W", "W": "W",
+}  # fmt: skip
+
 _IPA_IGNORED = frozenset("ˈˌ.‿\u0361\u035c")  # stress, syllable break, ties
 _IPA_MODIFIERS = frozenset("ːˑ:ʰʲʷˠˤⁿˡʱ")  # length (also ASCII ":") and secondary articulations
 
@@ -187,6 +210,12 @@ def _read_espeak(label: str) -> str | None:
     return _ESPEAK_TABLE.get(label.strip(_ESPEAK_STRESS))
 
 
+def _read_sampa(label: str) -> str | None:
+    if label == SILENCE:
+        return SILENCE
+    return _SAMPA_TABLE.get(label) or _SAMPA_TABLE.get(label.replace(":", ""))
+
+
 def _ipa_base(text: str) -> str:
     """Drops length marks, secondary articulations and combining diacritics."""
     return "".join(c for c in text if c not in _IPA_MODIFIERS and not unicodedata.combining(c))
@@ -218,7 +247,7 @@ def _read_auto(label: str) -> str | None:
 
 _READERS: Mapping[str, Callable[[str], str | None]] = MappingProxyType({
     "auto": _read_auto, "arpabet": _read_arpabet, "mfa": _read_mfa, "timit": _read_timit,
-    "mocha": _read_mocha, "espeak": _read_espeak, "ipa": _read_ipa,
+    "mocha": _read_mocha, "espeak": _read_espeak, "ipa": _read_ipa, "sampa": _read_sampa,
 })  # fmt: skip
 
 
@@ -268,9 +297,10 @@ def normalize_phonemes(
     ]
 
 
-# Narrowest notation first, so plain ARPAbet is not read as espeak; "mfa" is
-# ARPAbet or IPA plus silence tokens, so it comes after both.
-_DETECTION_ORDER = ("arpabet", "timit", "mocha", "espeak", "ipa", "mfa", "auto")
+# Narrowest notation first, so plain ARPAbet is not read as espeak; SAMPA
+# after espeak, whose mnemonics it shares; "mfa" is ARPAbet or IPA plus
+# silence tokens, so it comes after both.
+_DETECTION_ORDER = ("arpabet", "timit", "mocha", "espeak", "ipa", "sampa", "mfa", "auto")
 
 
 def detect_source(labels: Iterable[str], where: str | None = None) -> str:

@@ -1,9 +1,10 @@
 """Phone files in and frame files out, for ``lipstream synth`` and batch tools.
 
-Phones: a Praat TextGrid (tier ``phones``), an HTK/MOCHA ``.lab``, or JSON
-``[{"phoneme": ..., "start": s, "end": s}, ...]``. Frames: CSV in the corpus
-format (``time`` plus one column per channel) or JSON
-``{"fps", "channels", "frames": [[...], ...]}``, chosen by extension.
+Phones: a Praat TextGrid (the phone tier of MFA, WebMAUS and other aligners,
+or a named one; see ``corpus.tiers``), an HTK/MOCHA ``.lab``, or JSON
+``[{"phoneme": ..., "start": s, "end": s}, ...]``. Frames: any format of
+``lipstream.exports`` (corpus CSV, JSON, Live Link Face CSV, Rhubarb, Moho),
+named or chosen by extension.
 """
 
 from __future__ import annotations
@@ -11,9 +12,10 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .corpus import read_lab_phones, read_textgrid_phones, write_frames_csv
+from .corpus import read_lab_phones, read_textgrid_phones
 from .engines.base import SynthesisResult
 from .errors import InvalidRequestError, LipstreamError
+from .exports.writer import ExportSettings, write_export
 from .timeline import PhonemeSpan, coerce_spans
 
 
@@ -30,11 +32,12 @@ def _read_json_phones(path: Path) -> list[PhonemeSpan]:
         raise type(error)(error.message, where=f"{path}: {error.where}", code=error.code) from None
 
 
-def read_phones(path: Path) -> list[PhonemeSpan]:
-    """Spans from a .TextGrid, .lab or .json file, chosen by extension."""
+def read_phones(path: Path, tier: str | None = None) -> list[PhonemeSpan]:
+    """Spans from a .TextGrid (its phone tier, or the one named ``tier``), .lab or .json file,
+    chosen by extension."""
     suffix = path.suffix.lower()
     if suffix == ".textgrid":
-        return read_textgrid_phones(path)
+        return read_textgrid_phones(path, tier)
     if suffix == ".lab":
         return read_lab_phones(path)
     if suffix == ".json":
@@ -45,20 +48,12 @@ def read_phones(path: Path) -> list[PhonemeSpan]:
     )
 
 
-def write_frames(path: Path, result: SynthesisResult) -> None:
-    """Write frames as CSV (corpus format) or JSON, chosen by extension."""
-    suffix = path.suffix.lower()
-    if suffix == ".csv":
-        write_frames_csv(path, result.frames, result.channels, result.fps)
-    elif suffix == ".json":
-        payload = {
-            "fps": result.fps,
-            "channels": list(result.channels),
-            "frames": result.frames.round(6).tolist(),
-            "stats": result.stats,
-        }
-        path.write_text(json.dumps(payload) + "\n", encoding="utf-8")
-    else:
-        raise InvalidRequestError(
-            f"unsupported output type {path.suffix!r} (use .csv or .json)", where=str(path)
-        )
+def write_frames(
+    path: Path,
+    result: SynthesisResult,
+    format_name: str | None = None,
+    settings: ExportSettings | None = None,
+) -> str:
+    """Write frames in ``format_name`` (one of ``exports.FORMATS``), else by extension
+    (``.csv``, ``.json``, ``.tsv``, ``.xml``, ``.dat``); returns the format written."""
+    return write_export(path, result, format_name, settings)

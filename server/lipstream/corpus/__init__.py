@@ -11,6 +11,7 @@ from .frames_csv import read_frames_csv, write_frames_csv
 from .lab import read_lab_phones
 from .livelink import read_livelink_csv
 from .loader import load_corpus
+from .metadata import CorpusWarning
 from .model import EMOTIONS, Corpus, Utterance
 from .textgrid import read_textgrid_phones
 from .writer import write_corpus
@@ -18,6 +19,7 @@ from .writer import write_corpus
 __all__ = [
     "EMOTIONS",
     "Corpus",
+    "CorpusWarning",
     "Utterance",
     "load_corpus",
     "read_frames_csv",

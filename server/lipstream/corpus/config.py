@@ -1,6 +1,7 @@
-"""The optional ``corpus.json``: name, frame rate, channel selection, held-out stems.
+"""The optional ``corpus.json``: name, frame rate, channels, held-out stems, phone tier.
 
-Sketch: ``{"name": str, "fps": number, "channels": [str], "heldout": [str]}``,
+Sketch: ``{"name": str, "fps": number, "channels": [str], "heldout": [str],
+"tier": str}``,
 every key optional. Each value is type-checked and any other key is refused,
 with the file and key in the message. Whether the channels and stems exist is
 checked later, against the frames (``validation``) and the stems found.
@@ -19,7 +20,7 @@ from ..errors import CorpusError
 from .metadata import read_json_object
 
 CONFIG_FILE = "corpus.json"
-CONFIG_KEYS = ("name", "fps", "channels", "heldout")
+CONFIG_KEYS = ("name", "fps", "channels", "heldout", "tier")
 
 
 @dataclass(frozen=True)
@@ -30,14 +31,13 @@ class CorpusConfig:
     fps: float | None = None
     channels: tuple[str, ...] | None = None
     heldout: tuple[str, ...] = ()
+    tier: str | None = None
 
 
 def read_corpus_config(path: str | Path) -> CorpusConfig:
     path = Path(path)
     data = read_json_object(path, CONFIG_KEYS)
-    name = data.get("name")
-    if "name" in data and (not isinstance(name, str) or not name):
-        raise CorpusError(f"key 'name' must be a non-empty string, got {name!r}", where=path.name)
+    name, tier = _text(path, data, "name"), _text(path, data, "tier")
     channels = _names(path, data, "channels")
     if channels == ():
         raise CorpusError("key 'channels' must list at least one channel", where=path.name)
@@ -46,7 +46,15 @@ def read_corpus_config(path: str | Path) -> CorpusConfig:
         fps=_fps(path, data) if "fps" in data else None,
         channels=channels,
         heldout=_names(path, data, "heldout") or (),
+        tier=tier,
     )
+
+
+def _text(path: Path, data: dict[str, Any], key: str) -> str | None:
+    value = data.get(key)
+    if key in data and (not isinstance(value, str) or not value):
+        raise CorpusError(f"key {key!r} must be a non-empty string, got {value!r}", where=path.name)
+    return value if isinstance(value, str) else None
 
 
 def _fps(path: Path, data: dict[str, Any]) -> float:
@@ -82,4 +90,6 @@ def write_corpus_config(path: Path, config: CorpusConfig) -> None:
         data["channels"] = list(config.channels)
     if config.heldout:
         data["heldout"] = list(config.heldout)
+    if config.tier is not None:
+        data["tier"] = config.tier
     path.write_text(json.dumps(data, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")

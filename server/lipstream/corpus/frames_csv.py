@@ -71,19 +71,28 @@ def write_frames_csv(
     path: str | Path, frames: np.ndarray, channels: Sequence[str], fps: float
 ) -> None:
     """Write frames (n, c) with frame ``i`` at ``i / fps`` s: ``time`` then the c channels."""
+    text = frames_csv_text(frames, channels, fps, where=str(path))
+    with open(path, "w", encoding="utf-8", newline="") as handle:
+        handle.write(text)
+
+
+def frames_csv_text(
+    frames: np.ndarray, channels: Sequence[str], fps: float, where: str = "frames"
+) -> str:
+    """The CSV text of frames (n, c), frame ``i`` at ``i / fps`` s; ``where`` names the
+    destination in errors."""
     frames = np.asarray(frames, dtype=np.float64)
     if frames.ndim != 2 or frames.shape[1] != len(channels):
         raise CorpusError(
             f"frames of shape {frames.shape} do not match {len(channels)} channels",
-            where=str(path),
+            where=where,
         )
     if TIME_COLUMN in channels:
-        raise CorpusError(f"a channel may not be named {TIME_COLUMN!r}", where=str(path))
+        raise CorpusError(f"a channel may not be named {TIME_COLUMN!r}", where=where)
     header = io.StringIO()
     csv.writer(header, lineterminator="").writerow((TIME_COLUMN, *channels))
     times = np.arange(frames.shape[0], dtype=np.float64) / fps
     table = np.column_stack([times, frames])
-    with open(path, "w", encoding="utf-8", newline="") as handle:
-        np.savetxt(
-            handle, table, fmt=VALUE_FORMAT, delimiter=",", header=header.getvalue(), comments=""
-        )
+    body = io.StringIO()
+    np.savetxt(body, table, fmt=VALUE_FORMAT, delimiter=",", header=header.getvalue(), comments="")
+    return body.getvalue()

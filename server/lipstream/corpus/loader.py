@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import csv
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from tqdm import tqdm
@@ -23,15 +23,14 @@ from ..errors import CorpusError
 from .config import CONFIG_FILE, CorpusConfig, read_corpus_config
 from .frames_csv import read_frames_csv
 from .grid import estimate_fps, resample_to_grid
-from .intervals import LabelledInterval, to_phoneme_spans
+from .intervals import to_phoneme_spans
 from .lab import lab_spans, read_lab_intervals
 from .layout import UtteranceFiles, discover_utterances
 from .livelink import is_livelink_header, read_livelink_csv
 from .metadata import UtteranceMetadata, read_utterance_metadata
 from .model import Corpus, Utterance
 from .table import FrameTable
-from .textgrid import PHONE_SOURCE as TEXTGRID_SOURCE
-from .textgrid import read_textgrid_intervals
+from .textgrid import read_textgrid_tier
 from .validation import check_channel_selection, check_phones_within_frames, check_same_channels
 
 
@@ -45,12 +44,15 @@ class _Grid:
     reference_channels: tuple[str, ...]
 
 
-def load_corpus(path: str | Path, *, progress: bool = False) -> Corpus:
-    """Load and validate the corpus in directory ``path``; ``progress`` shows a bar on stderr."""
+def load_corpus(path: str | Path, *, progress: bool = False, tier: str | None = None) -> Corpus:
+    """Load and validate the corpus in directory ``path``; ``progress`` shows a bar on stderr;
+    ``tier`` names the TextGrids' phone tier (overriding ``corpus.json``'s ``tier``)."""
     root = Path(path)
     if not root.is_dir():
         raise CorpusError("corpus path is not a directory", where=str(root))
     config = _config(root)
+    if tier is not None:
+        config = replace(config, tier=tier)
     files = discover_utterances(root)
     if not files:
         raise CorpusError(
@@ -65,7 +67,7 @@ def load_corpus(path: str | Path, *, progress: bool = False) -> Corpus:
     for utterance_files in bar:
         table = read_frames(utterance_files.frames)
         grid = _settle_grid(grid, config, utterance_files.frames, table)
-        utterances.append(_utterance(utterance_files, table, grid))
+        utterances.append(_utterance(utterance_files, table, grid, config.tier))
     assert grid is not None
     return Corpus(name, grid.fps, grid.channels, utterances, heldout=config.heldout)
 
@@ -117,12 +119,17 @@ def _settle_grid(
     return _Grid(fps, channels, frames.name, table.channels)
 
 
-def _utterance(files: UtteranceFiles, table: FrameTable, grid: _Grid) -> Utterance:
-    intervals = _read_intervals(files, float(table.times[-1]))
-    check_phones_within_frames(intervals, float(table.times[-1]), grid.fps, files.frames.name)
+def _utterance(
+    files: UtteranceFiles, table: FrameTable, grid: _Grid, tier: str | None
+) -> Utterance:
+    frames_end = float(table.times[-1])
     if files.phones_are_textgrid:
-        phones = to_phoneme_spans(intervals, source=TEXTGRID_SOURCE)
+        phone_tier = read_textgrid_tier(files.phones, tier)
+        check_phones_within_frames(phone_tier.intervals, frames_end, grid.fps, files.frames.name)
+        phones = to_phoneme_spans(phone_tier.intervals, source=phone_tier.source)
     else:
+        intervals = read_lab_intervals(files.phones, frames_duration=frames_end)
+        check_phones_within_frames(intervals, frames_end, grid.fps, files.frames.name)
         phones = lab_spans(intervals)
     columns = [table.channels.index(name) for name in grid.channels]
     frames = resample_to_grid(table.times, table.frames[:, columns], grid.fps)
@@ -135,10 +142,5 @@ def _utterance(files: UtteranceFiles, table: FrameTable, grid: _Grid) -> Utteran
         audio=read_wav(files.audio) if files.audio else None,
         emotion=metadata.emotion,
         speaker=metadata.speaker,
+        text=metadata.text,
     )
-
-
-def _read_intervals(files: UtteranceFiles, frames_end: float) -> list[LabelledInterval]:
-    if files.phones_are_textgrid:
-        return read_textgrid_intervals(files.phones)
-    return read_lab_intervals(files.phones, frames_duration=frames_end)

@@ -1,14 +1,16 @@
-"""Per-utterance metadata, ``<stem>.json``: ``{"emotion": ..., "speaker": ...}``.
+"""Per-utterance metadata, ``<stem>.json``: ``{"emotion": ..., "speaker": ..., "text": ...}``.
 
-Sketch: parse the JSON (syntax errors name file:line:column), require an
-object whose keys are among the known ones and whose values have the right
-type; unknown keys and values are refused, never dropped. ``read_json_object``
-is shared with ``config`` for ``corpus.json``.
+Sketch: parse the JSON (syntax errors name file:line:column) and require an
+object whose known keys have the right type; a wrong value is refused. Other
+keys (corpora carry all sorts: durations, ids, notes) are ignored with a
+``CorpusWarning`` naming the file and key. ``read_json_object`` is shared
+with ``config`` for ``corpus.json``, which stays strict about its keys.
 """
 
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -17,17 +19,25 @@ from ..errors import CorpusError
 from .model import EMOTIONS
 from .validation import at_line
 
-METADATA_KEYS = ("emotion", "speaker")
+METADATA_KEYS = ("emotion", "speaker", "text")
+
+
+class CorpusWarning(UserWarning):
+    """Something in a corpus was ignored; the message names the file and what."""
 
 
 @dataclass(frozen=True)
 class UtteranceMetadata:
     emotion: str = "neutral"
     speaker: str | None = None
+    text: str | None = None
 
 
-def read_json_object(path: Path, allowed_keys: tuple[str, ...]) -> dict[str, Any]:
-    """A JSON object whose keys are all in ``allowed_keys``."""
+def read_json_object(
+    path: Path, allowed_keys: tuple[str, ...], *, strict: bool = True
+) -> dict[str, Any]:
+    """A JSON object holding only ``allowed_keys``: any other key raises when ``strict``,
+    else is dropped with a ``CorpusWarning``."""
     try:
         text = path.read_text(encoding="utf-8-sig")
     except OSError as exc:
@@ -43,33 +53,47 @@ def read_json_object(path: Path, allowed_keys: tuple[str, ...]) -> dict[str, Any
     if not isinstance(data, dict):
         raise CorpusError(f"must hold a JSON object, found {type(data).__name__}", where=path.name)
     unknown = [key for key in data if key not in allowed_keys]
-    if unknown:
+    if unknown and strict:
         raise CorpusError(
             f"unknown key {unknown[0]!r}; allowed keys: {', '.join(allowed_keys)}",
             where=path.name,
         )
-    return data
+    for key in unknown:
+        warnings.warn(
+            f"{path.name}: unknown key {key!r} ignored; known keys: {', '.join(allowed_keys)}",
+            CorpusWarning,
+            stacklevel=2,
+        )
+    return {key: value for key, value in data.items() if key in allowed_keys}
 
 
 def read_utterance_metadata(path: str | Path) -> UtteranceMetadata:
     path = Path(path)
-    data = read_json_object(path, METADATA_KEYS)
+    data = read_json_object(path, METADATA_KEYS, strict=False)
     emotion = data.get("emotion", "neutral")
     if not isinstance(emotion, str) or emotion not in EMOTIONS:
         raise CorpusError(
             f"key 'emotion' must be one of {', '.join(EMOTIONS)}, got {emotion!r}",
             where=path.name,
         )
-    speaker = data.get("speaker")
-    if speaker is not None and not isinstance(speaker, str):
+    return UtteranceMetadata(
+        emotion, _optional_text(path, data, "speaker"), _optional_text(path, data, "text")
+    )
+
+
+def _optional_text(path: Path, data: dict[str, Any], key: str) -> str | None:
+    value = data.get(key)
+    if value is not None and not isinstance(value, str):
         raise CorpusError(
-            f"key 'speaker' must be a string, got {type(speaker).__name__}", where=path.name
+            f"key {key!r} must be a string, got {type(value).__name__}", where=path.name
         )
-    return UtteranceMetadata(emotion, speaker)
+    return value
 
 
 def write_utterance_metadata(path: Path, metadata: UtteranceMetadata) -> None:
     data: dict[str, str] = {"emotion": metadata.emotion}
     if metadata.speaker is not None:
         data["speaker"] = metadata.speaker
+    if metadata.text is not None:
+        data["text"] = metadata.text
     path.write_text(json.dumps(data, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")

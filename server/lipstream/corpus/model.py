@@ -30,6 +30,7 @@ class Utterance:
 
     ``frames``: (n_frames, n_channels) float32; frame ``i`` is at ``i / fps`` s.
     ``phones``: contiguous spans in seconds (gaps already filled with silence).
+    ``text``: the transcript, when the corpus carries one (not used in training).
     """
 
     stem: str
@@ -39,6 +40,7 @@ class Utterance:
     audio: Audio | None = None
     emotion: str = "neutral"
     speaker: str | None = None
+    text: str | None = None
 
     def __post_init__(self) -> None:
         where = f"utterance {self.stem!r}"

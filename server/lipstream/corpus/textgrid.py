@@ -1,19 +1,21 @@
-"""Praat TextGrid phone alignments (the Montreal Forced Aligner's output).
+"""Praat TextGrid phone alignments (MFA, WebMAUS and other aligners' output).
 
 Sketch: praatio parses the file (long or short text format, UTF-8 or UTF-16)
 keeping empty intervals, which are silence. The phones come from the interval
-tier named ``phones`` (or, in MFA's multi-speaker output, the single tier
-named ``<speaker> - phones``). ``textgrid_lines`` locates every interval's
+tier ``tiers.choose_phone_tier`` picks (``phones``, ``MAU``, ``phone``,
+``segments``, MFA's ``<speaker> - phones``, or the one asked for), and their
+labels are read in that tier's notation (``tiers.tier_source``): MFA's
+ARPAbet or IPA, WebMAUS's SAMPA, or detected. ``textgrid_lines`` locates every interval's
 line so that ordering and extent errors can point at it, and catches
 intervals praatio would silently reorder or (short format) silently drop.
 A file praatio rejects is first checked by that locator, so the error names
 the line at fault (structure, order) whenever it can.
-Labels are normalized with the ``mfa`` phone-set rules.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -26,37 +28,48 @@ from ..phonemes import SILENCE
 from ..timeline import PhonemeSpan
 from .intervals import LabelledInterval, to_phoneme_spans
 from .textgrid_lines import TextGridLayoutError, TierLines, locate_interval_tiers
+from .tiers import choose_phone_tier, tier_source
 from .validation import at_line, check_interval_order
 
-PHONES_TIER = "phones"
-MFA_SPEAKER_SUFFIX = " - phones"
-PHONE_SOURCE = "mfa"
+PHONES_TIER = "phones"  # the tier write_textgrid_phones writes
 
 
-def read_textgrid_phones(path: str | Path) -> list[PhonemeSpan]:
-    """Contiguous phoneme spans (seconds) from the ``phones`` tier; gaps become ``sil``."""
-    return to_phoneme_spans(read_textgrid_intervals(path), source=PHONE_SOURCE)
+@dataclass(frozen=True)
+class PhoneTier:
+    """The phone tier of a TextGrid: its name, its labels' notation (a ``phonemes`` source)
+    and its intervals in file order, each located by file:line."""
+
+    name: str
+    source: str
+    intervals: list[LabelledInterval]
 
 
-def read_textgrid_intervals(path: str | Path) -> list[LabelledInterval]:
-    """The ``phones`` tier's intervals in file order, each located by file:line."""
+def read_textgrid_phones(path: str | Path, tier: str | None = None) -> list[PhonemeSpan]:
+    """Contiguous phoneme spans (seconds) from the phone tier (``tier``: the tier's name, else
+    the first aligner tier found); gaps become ``sil``."""
+    found = read_textgrid_tier(path, tier)
+    return to_phoneme_spans(found.intervals, source=found.source)
+
+
+def read_textgrid_tier(path: str | Path, tier: str | None = None) -> PhoneTier:
+    """The phone tier (named ``tier``, else the first aligner tier found) and its notation."""
     path = Path(path)
     text = _read_text(path)
     grid = _open_with_praatio(path, text)
     layout = _layout(path, text)
-    name = _phones_tier_name(path, grid.tierNames)
-    tier = grid.getTier(name)
-    if not isinstance(tier, IntervalTier) or name not in layout:
+    name = choose_phone_tier(grid.tierNames, tier, path.name)
+    praat_tier = grid.getTier(name)
+    if not isinstance(praat_tier, IntervalTier) or name not in layout:
         raise CorpusError(f"tier {name!r} is a point tier, not an interval tier", where=path.name)
     lines = layout[name]
-    if lines.declared != len(tier.entries):
+    if lines.declared != len(praat_tier.entries):
         raise CorpusError(
             f"tier {name!r} declares {lines.declared} intervals but praatio read "
-            f"{len(tier.entries)}",
+            f"{len(praat_tier.entries)}",
             where=path.name,
         )
     check_interval_order(_located(path, lines))
-    return [
+    intervals = [
         LabelledInterval(
             entry.label,
             float(entry.start),
@@ -64,8 +77,12 @@ def read_textgrid_intervals(path: str | Path) -> list[LabelledInterval]:
             at_line(path.name, located.start_line),
             at_line(path.name, located.end_line),
         )
-        for entry, located in zip(tier.entries, lines.intervals)
+        for entry, located in zip(praat_tier.entries, lines.intervals)
     ]
+    source = tier_source(
+        name, (interval.label for interval in intervals), f"{path.name}: tier {name!r}"
+    )
+    return PhoneTier(name, source, intervals)
 
 
 def _read_text(path: Path) -> str:
@@ -99,18 +116,6 @@ def _layout(path: Path, text: str) -> dict[str, TierLines]:
         raise CorpusError(
             f"malformed TextGrid: {exc.problem}", where=at_line(path.name, exc.line)
         ) from None
-
-
-def _phones_tier_name(path: Path, names: Sequence[str]) -> str:
-    if PHONES_TIER in names:
-        return PHONES_TIER
-    speaker_tiers = [name for name in names if name.endswith(MFA_SPEAKER_SUFFIX)]
-    if len(speaker_tiers) == 1:
-        return speaker_tiers[0]
-    found = ", ".join(repr(name) for name in names) or "none"
-    raise CorpusError(
-        f"no interval tier named {PHONES_TIER!r}; tiers found: {found}", where=path.name
-    )
 
 
 def _located(path: Path, lines: TierLines) -> list[LabelledInterval]:

@@ -3,7 +3,7 @@
 Sketch: per utterance, ``<stem>.csv`` (``time`` = i / fps, then one column
 per channel, ``%.6f``), the phones as ``<stem>.TextGrid`` (tier ``phones``) or
 ``<stem>.lab`` (seconds, or HTK 100-ns units), ``<stem>.wav`` (16-bit PCM)
-when there is audio and ``<stem>.json`` with emotion and speaker; then
+when there is audio and ``<stem>.json`` with emotion, speaker and text; then
 ``corpus.json`` with name, fps, channels and held-out stems. It refuses to
 write into a directory that already holds corpus files, so no stale
 utterance can join the new corpus.
@@ -97,5 +97,5 @@ def _write_utterance(
         write_lab_phones(root / f"{stem}{LAB_SUFFIX}", utterance.phones, units=units)
     if utterance.audio is not None:
         write_wav(root / f"{stem}{AUDIO_SUFFIX}", utterance.audio)
-    metadata = UtteranceMetadata(utterance.emotion, utterance.speaker)
+    metadata = UtteranceMetadata(utterance.emotion, utterance.speaker, utterance.text)
     write_utterance_metadata(root / f"{stem}{METADATA_SUFFIX}", metadata)

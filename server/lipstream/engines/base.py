@@ -17,6 +17,11 @@ best first, each with the engine options that select it and the
 ``Lookahead`` those options need; a server takes the best rung that fits a
 latency budget. Engines with one fidelity inherit a one-rung ladder.
 
+Options: a model declares the engine options it takes in ``option_names``;
+``start`` refuses any other name through ``check_options`` (one coded
+``invalid_request`` error, listing the known names, for every engine) before
+the engine reads their values.
+
 Emotion: ``SynthesisRequest.emotion`` is the request's; a span's own
 ``PhonemeSpan.emotion`` overrides it for that span (``emotion_of``). Engines
 that model emotion honour both (anime-graph searches each run of equal
@@ -172,6 +177,7 @@ class Model(ABC):
 
     engine: ClassVar[str]
     uses_audio: ClassVar[bool] = False
+    option_names: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, manifest: ModelManifest) -> None:
         self.manifest = manifest
@@ -228,9 +234,17 @@ class Model(ABC):
         return (Rung("default", self.lookahead),)
 
     def start(self, request: SynthesisRequest | None = None, **settings: Any) -> Synthesizer:
-        """A streaming synthesizer; pass a ``SynthesisRequest`` or its fields."""
+        """A streaming synthesizer; pass a ``SynthesisRequest`` or its fields.
+
+        InvalidRequestError if the request names an option outside ``option_names``."""
         if request is None:
             request = make_request(**settings)
+        check_options(self.engine, self.option_names, request.options)
+        return self.synthesizer(request)
+
+    def synthesizer(self, request: SynthesisRequest) -> Synthesizer:
+        """The synthesizer of a request whose option names are checked; engines whose
+        streaming is not ``render`` by lookahead override this."""
         return RenderingSynthesizer(self, request)
 
     def synthesize(
@@ -262,6 +276,18 @@ class Model(ABC):
                 code="model_engine_mismatch",
             )
         return cls.from_arrays(manifest, load_arrays(directory), directory)
+
+
+def check_options(engine: str, known: Sequence[str], options: Mapping[str, Any]) -> None:
+    """InvalidRequestError (``invalid_request``, at ``options.<name>``) naming every option in
+    ``options`` that ``engine`` does not know, and listing the ones it does."""
+    unknown = sorted(str(name) for name in options if name not in known)
+    if unknown:
+        raise InvalidRequestError(
+            f"unknown option(s) {', '.join(unknown)} for engine {engine}; "
+            f"known options: {', '.join(known) or 'none'}",
+            where=f"options.{unknown[0]}",
+        )
 
 
 def make_request(fps: float = 60.0, emotion: str | None = None, **options: Any) -> SynthesisRequest:

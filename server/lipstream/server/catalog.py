@@ -3,8 +3,8 @@
 Sketch: the ``Catalog`` wraps the ``ModelRegistry`` and precomputes, per
 model, the latency estimate of every fidelity rung (``budget``,
 ``calibration``), the rest pose for each emotion (the frame in the middle of
-one second of silence), and, per character, the Oculus viseme projector and
-the preset output profile. After ``build`` it is read-only, so sessions on
+one second of silence), and, per character, the viseme projectors (one per
+output viseme set) and the preset output profile. After ``build`` it is read-only, so sessions on
 the event loop and in the synthesis thread pool share it without locks.
 """
 
@@ -27,7 +27,7 @@ from ..timeline import EMOTIONS, PhonemeSpan
 from .budget import RungEstimate, estimate
 from .calibration import measure
 from .profiles import ProfileError, ProfileRequest, load_presets, parse_profile, resolve_profile
-from .viseme_projection import VisemeProjector, mouth_channels, probe_key_poses
+from .viseme_projection import VisemeProjector, build_projectors
 
 REST_PROBE_S = 1.0
 PRESET_KEY = "output_profile"
@@ -46,7 +46,7 @@ class ModelFacts:
 
     ladder: tuple[RungEstimate, ...]
     rest: dict[str | None, np.ndarray]
-    projector: VisemeProjector
+    projectors: dict[str, VisemeProjector]
 
 
 @dataclass
@@ -62,13 +62,11 @@ class Catalog:
     def build(cls, registry: ModelRegistry, settings: ServerSettings) -> Catalog:
         """Measure and probe every model; LipstreamError for a preset that does not fit."""
         catalog = cls(registry, settings)
-        probed: dict[int, VisemeProjector] = {}
+        probed: dict[int, dict[str, VisemeProjector]] = {}
         for model in registry.models.values():
             source = _viseme_source(registry, model)
             if id(source) not in probed:
-                probed[id(source)] = VisemeProjector(
-                    probe_key_poses(source), mouth_channels(source.channels)
-                )
+                probed[id(source)] = build_projectors(source)
             catalog.facts[id(model)] = ModelFacts(
                 catalog._ladder(model), _rest_poses(model), probed[id(source)]
             )
@@ -106,11 +104,12 @@ class Catalog:
         """The model's face at rest, float32 (n_channels,)."""
         return self.facts[id(model)].rest[emotion]
 
-    def projector(self, model: Model) -> VisemeProjector:
-        return self.facts[id(model)].projector
+    def projector(self, model: Model, visemes: str = "oculus15") -> VisemeProjector:
+        """The projector of ``model``'s frames onto the viseme set ``visemes``."""
+        return self.facts[id(model)].projectors[visemes]
 
-    def _projector_of(self, model: Model) -> Callable[[], VisemeProjector]:
-        return lambda: self.projector(model)
+    def _projector_of(self, model: Model) -> Callable[[str], VisemeProjector]:
+        return lambda visemes: self.projector(model, visemes)
 
     def preset(self, character: str) -> OutputProfile | None:
         return self.presets.get(character)

@@ -159,8 +159,13 @@ def synthesize_operation() -> dict[str, Any]:
         "requestBody": {"required": True, "content": _content("SynthesizeRequest")},
         "responses": {
             "200": {
-                "description": "all frames of the utterance",
-                "content": _content("SynthesizeResponse"),
+                "description": "all frames of the utterance; with Accept: text/csv, the frames "
+                "alone as CSV: a header `time,<channel>,...`, then one row per frame, frame i at "
+                "i / fps seconds, values with 6 decimals",
+                "content": {
+                    **_content("SynthesizeResponse"),
+                    "text/csv": {"schema": {"type": "string"}},
+                },
             },
             **errors,
         },

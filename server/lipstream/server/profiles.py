@@ -1,15 +1,16 @@
 """Output profiles: which channels a request's frames carry, under which names and scaling.
 
 Sketch: a profile (``lipstream_client.OutputProfile``) is resolved once per
-request against the model's ARKit channel names, into a column gather (or an
-Oculus viseme projection) and per-column multiplier, offset and clamp
+request against the model's ARKit channel names, into a column gather (or a
+viseme projection: Oculus 15 or Preston Blair) and per-column multiplier, offset and clamp
 vectors. Applying it to a float32 block (n_frames, n_model_channels) is then
 one gather, one multiply-add and one clip in numpy. The profile comes from
 ``start`` (its ``channels`` shorthand or its ``output``), else from the
 character's preset, else it is ARKit naming with every channel. Presets are
 read from the ``LIPSTREAM_PROFILES`` JSON file (``{"character": {output
 profile}}``) or from a model manifest's ``extra["output_profile"]``, in the
-JSON form of ``start.output``, and are validated by the same codec.
+JSON form of ``start.output``, and are validated by the same codec. The
+command line (``lipstream synth``) resolves its profiles here too.
 """
 
 from __future__ import annotations
@@ -23,11 +24,13 @@ from pathlib import Path
 import numpy as np
 
 from lipstream_client import OutputProfile, ProtocolError, Start, decode
-from lipstream_client.channels import OCULUS15_VISEMES, canonical_viseme, rename_channel
+from lipstream_client.channels import VISEME_CHANNELS, canonical_viseme, rename_channel
 from lipstream_client.errors import INVALID_REQUEST, UNKNOWN_CHANNEL
+from lipstream_client.messages import VisemeSet
 
+from ..engines.base import Model, SynthesisResult
 from ..errors import LipstreamError
-from .viseme_projection import VisemeProjector
+from .viseme_projection import VISEME_SCHEMES, VisemeProjector, mouth_channels, probe_key_poses
 
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
 
@@ -44,7 +47,7 @@ class ResolvedProfile:
     """A profile bound to one model's channels.
 
     ``columns`` picks model columns or, in viseme mode (``projector`` set),
-    columns of the 15 Oculus viseme weights the projector computes first; then
+    columns of the viseme weights the projector computes first; then
     output column j is ``clip(value * multiplier[j] + offset[j], low[j], high[j])``.
     """
 
@@ -99,6 +102,7 @@ class ResolvedProfile:
 
 
 Lookup = Callable[[str, tuple[str, ...]], int | None]
+ProjectorSource = Callable[[VisemeSet], VisemeProjector]
 
 
 @dataclass(frozen=True)
@@ -125,10 +129,10 @@ def requested_profile(start: Start, preset: OutputProfile | None) -> ProfileRequ
 def resolve_profile(
     model_channels: tuple[str, ...],
     request: ProfileRequest,
-    projector: Callable[[], VisemeProjector],
+    projector: ProjectorSource,
 ) -> ResolvedProfile:
-    """Bind the requested profile to ``model_channels``; ``projector`` is called only for
-    visemes.
+    """Bind the requested profile to ``model_channels``; ``projector`` is called, with the
+    viseme set, only for visemes.
 
     ProfileError: ``unknown_channel`` naming the field and name the rig lacks,
     ``invalid_request`` for names that collide after renaming or canonicalising.
@@ -136,19 +140,20 @@ def resolve_profile(
     profile = request.profile or OutputProfile()
     lookup: Lookup
     if profile.visemes is not None:
-        available = OCULUS15_VISEMES
-        lookup = _viseme_lookup
+        available = VISEME_CHANNELS[profile.visemes]
+        lookup = _viseme_lookup(profile.visemes)
     else:
         available = _renamed(model_channels, profile, request)
         lookup = _exact_lookup
     positions = _subset(profile, available, lookup, request)
     names = tuple(available[position] for position in positions)
     multiplier, offset, low, high = _transforms(profile, names, lookup, request)
-    visemes = profile.visemes is not None
     return ResolvedProfile(
         channels=names,
         columns=np.asarray(positions, dtype=np.intp),
-        projector=_checked_projector(projector, len(model_channels), request) if visemes else None,
+        projector=None
+        if profile.visemes is None
+        else _checked_projector(projector, profile.visemes, len(model_channels), request),
         multiplier=multiplier,
         offset=offset,
         low=low,
@@ -157,9 +162,9 @@ def resolve_profile(
 
 
 def _checked_projector(
-    projector: Callable[[], VisemeProjector], width: int, request: ProfileRequest
+    projector: ProjectorSource, visemes: VisemeSet, width: int, request: ProfileRequest
 ) -> VisemeProjector:
-    built = projector()
+    built = projector(visemes)
     if built.n_channels != width:
         raise ProfileError(
             "the character's viseme key poses do not match this model's channels",
@@ -186,9 +191,12 @@ def _exact_lookup(name: str, available: tuple[str, ...]) -> int | None:
     return available.index(name) if name in available else None
 
 
-def _viseme_lookup(name: str, available: tuple[str, ...]) -> int | None:
-    canonical = canonical_viseme(name)
-    return available.index(canonical) if canonical in available else None
+def _viseme_lookup(visemes: VisemeSet) -> Lookup:
+    def lookup(name: str, available: tuple[str, ...]) -> int | None:
+        canonical = canonical_viseme(name, visemes)
+        return available.index(canonical) if canonical in available else None
+
+    return lookup
 
 
 def _subset(
@@ -273,3 +281,23 @@ def load_presets(path: Path) -> dict[str, OutputProfile]:
             code="invalid_setting",
         )
     return {str(name): parse_profile(value, f"{path}: {name}") for name, value in data.items()}
+
+
+def apply_to_result(
+    model: Model, result: SynthesisResult, profile: OutputProfile | None, field: str = "profile"
+) -> SynthesisResult:
+    """A whole synthesis of ``model`` through ``profile`` (errors located under ``field``).
+
+    The command line's path: visemes are projected onto key poses probed from ``model``
+    itself, as the server does for a character without a ``viseme-lerp`` model."""
+    if profile is None:
+        return result
+
+    def projector(visemes: VisemeSet) -> VisemeProjector:
+        poses = probe_key_poses(model, VISEME_SCHEMES[visemes])
+        return VisemeProjector(poses, mouth_channels(model.channels))
+
+    resolved = resolve_profile(model.channels, ProfileRequest(profile, field), projector)
+    return SynthesisResult(
+        resolved.apply(result.frames), resolved.channels, result.fps, dict(result.stats)
+    )

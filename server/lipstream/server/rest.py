@@ -10,8 +10,11 @@ sends for the same request, since engines give the same frames for any
 chunking of the input. The response, msgpack or JSON by ``Accept`` (default:
 the request's type), carries ``ready``'s resolved parameters, every frame
 (float32 little-endian ``bin`` in msgpack, rows of shortest float32 decimals
-in JSON) and ``done``'s stats. Errors answer with an HTTP status and
-``{"error": {"code", "message", "details"}}`` in the response's type.
+in JSON) and ``done``'s stats; with ``Accept: text/csv`` it is the frames
+alone as the corpus frame CSV (``time`` and one column per output channel,
+``%.6f``). Errors answer with an HTTP status and
+``{"error": {"code", "message", "details"}}`` in the response's type (JSON
+when CSV was asked for).
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ import json
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 import msgpack
 import numpy as np
@@ -47,6 +50,7 @@ from lipstream_client.errors import (
     UNAUTHORIZED,
 )
 
+from ..corpus.frames_csv import frames_csv_text
 from .admission import bearer_token, token_accepted
 from .request import RequestLimits
 from .session import Session, SessionLimits
@@ -72,6 +76,8 @@ MEDIA_TYPES: dict[str, Encoding] = {
     "application/vnd.msgpack": "msgpack",
 }
 RESPONSE_TYPES: dict[Encoding, str] = {"json": "application/json", "msgpack": "application/msgpack"}
+CSV_TYPE = "text/csv"
+ResponseFormat = Literal["json", "msgpack", "csv"]
 STATUS = {
     MALFORMED: 400,
     INVALID_MESSAGE: 400,
@@ -120,7 +126,7 @@ class Synthesis:
 async def synthesize(request: Request, state: ServerState) -> Response:
     """Handle one ``POST /v1/synthesize``."""
     started = time.perf_counter()
-    response_encoding: Encoding = "json"
+    response_encoding: ResponseFormat = "json"
     try:
         request_encoding = _request_encoding(request)
         response_encoding = _response_encoding(request, request_encoding)
@@ -135,12 +141,12 @@ async def synthesize(request: Request, state: ServerState) -> Response:
         )
     except HttpError as error:
         state.metrics.errors.labels(error.code).inc()
-        return _error_response(error, response_encoding)
+        return _error_response(error, "json" if response_encoding == "csv" else response_encoding)
     state.metrics.synthesize.observe(time.perf_counter() - started)
     return response
 
 
-def _answer(messages: list[Message], state: ServerState, encoding: Encoding) -> Response:
+def _answer(messages: list[Message], state: ServerState, encoding: ResponseFormat) -> Response:
     """Synthesize and encode the response (in the thread pool: both scale with the
     utterance)."""
     return _response(_run(messages, state), encoding)
@@ -156,7 +162,7 @@ def _request_encoding(request: Request) -> Encoding:
     return MEDIA_TYPES[media]
 
 
-def _response_encoding(request: Request, default: Encoding) -> Encoding:
+def _response_encoding(request: Request, default: Encoding) -> ResponseFormat:
     """The first acceptable type in ``Accept`` (quality factors > 0, in order)."""
     accept = request.headers.get("accept")
     if not accept:
@@ -172,7 +178,11 @@ def _response_encoding(request: Request, default: Encoding) -> Encoding:
             return default
         if media in MEDIA_TYPES:
             return MEDIA_TYPES[media]
-    raise HttpError("not_acceptable", "Accept must allow application/json or application/msgpack")
+        if media in (CSV_TYPE, "text/*"):
+            return "csv"
+    raise HttpError(
+        "not_acceptable", "Accept must allow application/json, application/msgpack or text/csv"
+    )
 
 
 def _authorize(request: Request, state: ServerState) -> None:
@@ -289,8 +299,10 @@ def _run(messages: list[Message], state: ServerState) -> Synthesis:
     return Synthesis(ready, frames, done)
 
 
-def _response(result: Synthesis, encoding: Encoding) -> Response:
+def _response(result: Synthesis, encoding: ResponseFormat) -> Response:
     ready, frames = result.ready, result.frames
+    if encoding == "csv":
+        return Response(frames_csv_text(frames, ready.channels, ready.fps), media_type=CSV_TYPE)
     body: dict[str, Any] = {
         "engine": ready.engine,
         "character": ready.character,

@@ -309,7 +309,7 @@ class Session:
         profile = resolve_profile(
             model.channels,
             requested_profile(start, catalog.preset(start.character)),
-            lambda: catalog.projector(model),
+            lambda visemes: catalog.projector(model, visemes),
         )
         options = _merged_options(
             start.options, estimate.rung.options, budgeted=start.latency_budget_ms is not None

@@ -1,26 +1,29 @@
-"""Oculus 15 viseme weights from blendshape frames, by non-negative least squares.
+"""Viseme weights from blendshape frames, by non-negative least squares.
 
-Method: each Oculus viseme v has a key pose p_v (one value per model
+Method: each viseme v of a set (the 15 Oculus visemes, or the nine Preston
+Blair mouth shapes of Rhubarb Lip Sync) has a key pose p_v (one value per model
 channel). A frame x is explained as a convex combination of the key poses:
 minimise ||P w - x||² over w >= 0 with sum(w) = 1, where the columns of P
 are the key poses. The sum constraint enters as one extra, heavily weighted
 row of ones, and each frame is solved by Lawson-Hanson NNLS
 (``scipy.optimize.nnls``); weights below 1e-9 (solver rounding) are zeroed
 and the rest renormalised to sum to 1 exactly. Like OVRLipSync's output, the
-15 weights are a distribution over visemes, and the key pose of silence maps
-to ``viseme_sil`` = 1. Only mouth channels
+weights are a distribution over visemes, and the key pose of silence maps
+to silence (``viseme_sil``, shape ``X``) = 1. Only mouth channels
 (``jaw*``, ``mouth*``, ``cheek*``, ``tongue*``) enter the fit, so blinks and
 brows do not leak into the visemes; a rig with none of them uses every
 channel.
 
 Key poses are probed from a model: every canonical phoneme is synthesized
 held for 200 ms between silences, the frame at its centre is taken, and the
-frames are averaged over the phonemes of each class of
-``lipstream.visemes.OCULUS15``; ``viseme_sil`` is the frame at the centre of a
-silence. The server probes the character's ``viseme-lerp`` model when one
-with the same channels is loaded: its frame at a span centre is exactly its
-trained key pose (the mean of the corpus frames of that viseme class), so
-the projection inverts that model. Otherwise it probes the request's model.
+frames are averaged over the phonemes of each class of the set's scheme
+(``lipstream.visemes.OCULUS15``, ``PRESTON_BLAIR``); silence's pose is the
+frame at the centre of a silence. One probe serves every set. The server
+probes the character's ``viseme-lerp`` model when one with the same channels
+is loaded: its frame at a span centre is exactly its trained key pose (the
+mean of the corpus frames of that viseme class), so the projection inverts
+that model. Otherwise it probes the request's model, as ``lipstream synth``
+does.
 """
 
 from __future__ import annotations
@@ -31,7 +34,11 @@ from scipy.optimize import nnls
 from ..engines.base import Model
 from ..phonemes import PHONEMES, SILENCE
 from ..timeline import PhonemeSpan
-from ..visemes import OCULUS15
+from ..visemes import OCULUS15, PRESTON_BLAIR, VisemeScheme
+
+# Output viseme sets (``output.visemes``) and their schemes; each scheme's class order is the
+# set's channel order (lipstream_client.channels.VISEME_CHANNELS).
+VISEME_SCHEMES: dict[str, VisemeScheme] = {"oculus15": OCULUS15, "preston-blair": PRESTON_BLAIR}
 
 PROBE_FPS = 100.0
 PROBE_HOLD_S = 0.2
@@ -47,8 +54,9 @@ def mouth_channels(channels: tuple[str, ...]) -> np.ndarray:
     return mask if mask.any() else np.ones(len(channels), dtype=bool)
 
 
-def probe_key_poses(model: Model) -> np.ndarray:
-    """Key poses float64 (15, n_channels), rows in Oculus viseme order, probed from ``model``."""
+def probe_phoneme_poses(model: Model) -> dict[str, np.ndarray]:
+    """Each canonical phoneme's pose, float64 (n_channels,): ``model``'s frame at the centre
+    of the phoneme held alone between silences (silence: the centre of the first gap)."""
     spans: list[PhonemeSpan] = []
     centres: dict[str, float] = {SILENCE: PROBE_GAP_S / 2}
     start = PROBE_GAP_S
@@ -60,21 +68,43 @@ def probe_key_poses(model: Model) -> np.ndarray:
         start += PROBE_HOLD_S + PROBE_GAP_S
     spans.append(PhonemeSpan(SILENCE, start, start + PROBE_GAP_S))
     frames = np.asarray(model.synthesize(spans, fps=PROBE_FPS).frames, dtype=np.float64)
-    poses = np.zeros((len(OCULUS15.classes), frames.shape[1]))
-    for row, viseme in enumerate(OCULUS15.classes):
-        members = OCULUS15.members(viseme)
-        indices = [round(centres[phoneme] * PROBE_FPS) for phoneme in members]
-        poses[row] = frames[indices].mean(axis=0)
-    return poses
+    return {phoneme: frames[round(centre * PROBE_FPS)] for phoneme, centre in centres.items()}
+
+
+def key_poses(phoneme_poses: dict[str, np.ndarray], scheme: VisemeScheme) -> np.ndarray:
+    """Key poses float64 (n_classes, n_channels), rows in ``scheme.classes`` order: the mean
+    pose of each class's phonemes."""
+    return np.stack(
+        [
+            np.mean([phoneme_poses[phoneme] for phoneme in scheme.members(viseme)], axis=0)
+            for viseme in scheme.classes
+        ]
+    )
+
+
+def probe_key_poses(model: Model, scheme: VisemeScheme = OCULUS15) -> np.ndarray:
+    """Key poses float64 (n_classes, n_channels) of ``scheme``, probed from ``model``."""
+    return key_poses(probe_phoneme_poses(model), scheme)
+
+
+def build_projectors(model: Model) -> dict[str, VisemeProjector]:
+    """A projector per output viseme set, from one probe of ``model``."""
+    poses = probe_phoneme_poses(model)
+    mask = mouth_channels(model.channels)
+    return {
+        name: VisemeProjector(key_poses(poses, scheme), mask)
+        for name, scheme in VISEME_SCHEMES.items()
+    }
 
 
 class VisemeProjector:
-    """Projects frames (n, n_channels) onto key ``poses`` (15, n_channels) as convex weights."""
+    """Projects frames (n, n_channels) onto key ``poses`` (n_visemes, n_channels) as convex
+    weights."""
 
     def __init__(self, poses: np.ndarray, mask: np.ndarray) -> None:
         poses = np.asarray(poses, dtype=np.float64)
-        if poses.ndim != 2 or poses.shape[0] != len(OCULUS15.classes):
-            raise ValueError(f"key poses must be (15, n_channels), got {poses.shape}")
+        if poses.ndim != 2 or poses.shape[0] < 1:
+            raise ValueError(f"key poses must be (n_visemes, n_channels), got {poses.shape}")
         self.poses = poses
         self.mask = np.asarray(mask, dtype=bool)
         scale = _SUM_WEIGHT * max(1.0, float(np.abs(poses[:, self.mask]).max(initial=0.0)))
@@ -86,7 +116,7 @@ class VisemeProjector:
         return int(self.poses.shape[1])
 
     def weights(self, frames: np.ndarray) -> np.ndarray:
-        """Viseme weights float64 (n, 15), each row >= 0 and summing to 1."""
+        """Viseme weights float64 (n, n_visemes), each row >= 0 and summing to 1."""
         frames = np.asarray(frames, dtype=np.float64)
         out = np.empty((len(frames), len(self.poses)))
         target = np.empty(self._system.shape[0])

@@ -1,4 +1,5 @@
-"""Output profiles: naming, subsets, transforms and Oculus visemes, with exact values."""
+"""Output profiles: naming, subsets, transforms, Oculus and Preston Blair visemes, with exact
+values."""
 
 from __future__ import annotations
 
@@ -24,8 +25,9 @@ from lipstream.server.viseme_projection import (
     mouth_channels,
     probe_key_poses,
 )
+from lipstream.visemes import OCULUS15, PRESTON_BLAIR
 from lipstream_client import ChannelTransform, OutputProfile, Start
-from lipstream_client.channels import OCULUS15_VISEMES
+from lipstream_client.channels import OCULUS15_VISEMES, PRESTON_BLAIR_SHAPES
 
 if TYPE_CHECKING:
     from lipstream.engines.base import Model
@@ -36,7 +38,7 @@ FRAMES = np.array(
 )
 
 
-def no_projector() -> VisemeProjector:
+def no_projector(visemes: str) -> VisemeProjector:
     raise AssertionError("a blendshape profile must not build the viseme projector")
 
 
@@ -134,7 +136,7 @@ MOUTH = tuple(f"mouthShape{index:02d}" for index in range(16))
 VISEME_RIG = (*MOUTH, "eyeBlinkLeft")
 
 
-def synthetic_projector() -> VisemeProjector:
+def synthetic_projector(visemes: str = "oculus15") -> VisemeProjector:
     poses = np.random.default_rng(7).random((15, len(VISEME_RIG)))
     return VisemeProjector(poses, mouth_channels(VISEME_RIG))
 
@@ -160,7 +162,7 @@ def test_projection_recovers_known_convex_weights_ignoring_non_mouth_channels() 
 def test_viseme_profile_uses_oculus_order_and_accepts_ovr_spellings() -> None:
     projector = synthetic_projector()
     full = resolve_profile(
-        VISEME_RIG, ProfileRequest(OutputProfile(visemes="oculus15")), lambda: projector
+        VISEME_RIG, ProfileRequest(OutputProfile(visemes="oculus15")), lambda visemes: projector
     )
     assert full.channels == OCULUS15_VISEMES
     subset = resolve_profile(
@@ -172,7 +174,7 @@ def test_viseme_profile_uses_oculus_order_and_accepts_ovr_spellings() -> None:
                 transforms={"I": ChannelTransform(2.0)},
             )
         ),
-        lambda: projector,
+        lambda visemes: projector,
     )
     assert subset.channels == ("viseme_I", "viseme_PP", "viseme_aa")
     frame = (0.5 * projector.poses[12] + 0.5 * projector.poses[10])[None]
@@ -206,6 +208,69 @@ def test_probing_viseme_lerp_returns_its_trained_key_poses(
         model.poses_,  # type: ignore[attr-defined]
         atol=1e-6,
     )
+
+
+# ---- Preston Blair mouth shapes ----------------------------------------------------------
+
+
+def test_preston_blair_profile_has_the_nine_shapes_in_any_case() -> None:
+    poses = np.random.default_rng(11).random((9, len(VISEME_RIG)))
+    projector = VisemeProjector(poses, mouth_channels(VISEME_RIG))
+    asked: list[str] = []
+
+    def source(visemes: str) -> VisemeProjector:
+        asked.append(visemes)
+        return projector
+
+    full = resolve_profile(
+        VISEME_RIG, ProfileRequest(OutputProfile(visemes="preston-blair")), source
+    )
+    assert full.channels == PRESTON_BLAIR_SHAPES == ("A", "B", "C", "D", "E", "F", "G", "H", "X")
+    subset = resolve_profile(
+        VISEME_RIG,
+        ProfileRequest(OutputProfile(visemes="preston-blair", channels=("x", "d"))),
+        source,
+    )
+    assert subset.channels == ("X", "D") and asked == ["preston-blair", "preston-blair"]
+    frame = (0.25 * poses[8] + 0.75 * poses[3])[None]
+    np.testing.assert_allclose(subset.apply(frame), [[0.25, 0.75]], atol=1e-5)
+    with pytest.raises(ProfileError) as error:
+        resolve_profile(
+            VISEME_RIG,
+            ProfileRequest(OutputProfile(visemes="preston-blair", channels=("viseme_PP",))),
+            source,
+        )
+    assert error.value.code == "unknown_channel"
+
+
+def test_preston_blair_key_poses_of_viseme_lerp_average_its_oculus_poses(
+    trained_models: dict[str, Model],
+) -> None:
+    model = trained_models["viseme-lerp"]
+    oculus_poses = model.poses_.astype(np.float64)  # type: ignore[attr-defined]
+    expected = np.stack(
+        [
+            np.mean(
+                [oculus_poses[OCULUS15.index_of(phoneme)] for phoneme in PRESTON_BLAIR.members(s)],
+                axis=0,
+            )
+            for s in PRESTON_BLAIR_SHAPES
+        ]
+    )
+    np.testing.assert_allclose(probe_key_poses(model, PRESTON_BLAIR), expected, atol=1e-6)
+
+
+def test_a_viseme_lerp_frame_projects_onto_mouth_shapes(catalog: Catalog) -> None:
+    model = catalog.model("viseme-lerp", "demo")
+    projector = catalog.projector(model, "preston-blair")
+    poses = model.poses_.astype(np.float64)  # type: ignore[attr-defined]
+    # Shape A is P B M (all Oculus PP); shape D is AA AY AW (all Oculus aa).
+    frame = 0.7 * poses[OCULUS15.classes.index("PP")] + 0.3 * poses[OCULUS15.classes.index("aa")]
+    expected = np.zeros(9)
+    expected[[0, 3]] = (0.7, 0.3)
+    np.testing.assert_allclose(projector.weights(frame[None])[0], expected, atol=1e-4)
+    rest = catalog.rest_pose(model, None)
+    assert projector.weights(rest[None])[0, 8] == pytest.approx(1.0, abs=1e-6)
 
 
 # ---- presets -----------------------------------------------------------------------------

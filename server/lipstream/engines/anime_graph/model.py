@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -21,12 +21,12 @@ from ...errors import InvalidRequestError, ModelStoreError
 from ...features import MfccConfig
 from ...store import ModelManifest, require_arrays
 from ...timeline import PhonemeSpan
-from ..base import Lookahead, Model, Rung, SynthesisRequest, make_request
+from ..base import Lookahead, Model, Rung, SynthesisRequest
 from .animes import AnimeTable, Curves
 from .basis import MotionBasis
 from .costs import Poses
 from .graph import SearchGraph
-from .options import MAX_PQ_WINDOW, SearchOptions, parse_options
+from .options import ENGINE, MAX_PQ_WINDOW, OPTION_NAMES, SearchOptions, parse_options
 from .search import LayeredMatcher, Matcher, SuffixMatcher
 from .smoothing import lowpass_kernels
 from .synthesizer import AnimeGraphSynthesizer
@@ -43,7 +43,8 @@ LADDER_TILES = (10, 4, 2, 1)
 class AnimeGraphModel(Model):
     """Anime Graph + GreedyMatching (Cao et al. 2004); see ``docs/engines/anime-graph.md``."""
 
-    engine = "anime-graph"
+    engine = ENGINE
+    option_names = OPTION_NAMES
     uses_audio = True
 
     def __init__(self, manifest: ModelManifest, arrays: Mapping[str, np.ndarray]) -> None:
@@ -195,8 +196,10 @@ class AnimeGraphModel(Model):
     def start(
         self, request: SynthesisRequest | None = None, **settings: Any
     ) -> AnimeGraphSynthesizer:
-        if request is None:
-            request = make_request(**settings)
+        """The contract's ``start`` (option names checked), typed as this engine's."""
+        return cast(AnimeGraphSynthesizer, super().start(request, **settings))
+
+    def synthesizer(self, request: SynthesisRequest) -> AnimeGraphSynthesizer:
         options = parse_options(
             request.options, self.default_graph, self.has_clusters, self.max_tile
         )

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ...errors import InvalidRequestError
+from ..base import check_options
 
 GRAPHS = ("unclustered", "clustered")
 SEARCHES = ("greedy", "pq")
@@ -37,6 +38,10 @@ class SearchOptions:
     match_emotion: bool = True
     max_tile: int | None = 10
     pq_budget_s: float | None = None
+
+
+ENGINE = "anime-graph"
+OPTION_NAMES: tuple[str, ...] = tuple(SearchOptions.__dataclass_fields__)
 
 
 def _choice(options: Mapping[str, Any], name: str, allowed: tuple[str, ...], default: str) -> str:
@@ -71,13 +76,7 @@ def parse_options(
 ) -> SearchOptions:
     """Validate ``options``; unknown names and a clustered request on a model trained without
     clusters raise ``InvalidRequestError``."""
-    unknown = sorted(set(options) - set(SearchOptions.__dataclass_fields__))
-    if unknown:
-        raise InvalidRequestError(
-            f"unknown option(s) {', '.join(unknown)} for engine anime-graph; known: "
-            f"{', '.join(SearchOptions.__dataclass_fields__)}",
-            where=f"options.{unknown[0]}",
-        )
+    check_options(ENGINE, OPTION_NAMES, options)
     graph = _choice(options, "graph", GRAPHS, default_graph)
     if graph == "clustered" and not has_clusters:
         raise InvalidRequestError(
