@@ -77,7 +77,9 @@ def test_canonical_inventory() -> None:
     assert [PHONEME_INDEX[p] for p in PHONEMES] == list(range(40))
 
 
-@pytest.mark.parametrize("source", ["auto", "arpabet", "mfa", "timit", "mocha", "espeak", "ipa"])
+@pytest.mark.parametrize(
+    "source", ["auto", "arpabet", "mfa", "timit", "mocha", "espeak", "ipa", "sampa"]
+)
 def test_silence_label_is_accepted_by_every_source(source: str) -> None:
     assert normalize_phoneme("sil", source) == "sil"
 
@@ -329,9 +331,9 @@ def test_non_string_label_and_unknown_source_raise_lipstream_errors() -> None:
         not_a_string: Any = 7
         normalize_phoneme(not_a_string, "arpabet")
     with pytest.raises(LipstreamError) as caught:
-        normalize_phoneme("AA", "sampa", where="config.toml:line 2")
+        normalize_phoneme("AA", "xsampa", where="config.toml:line 2")
     assert caught.value.code == "unknown_phoneme_source"
-    assert "'sampa'" in str(caught.value) and caught.value.where == "config.toml:line 2"
+    assert "'xsampa'" in str(caught.value) and caught.value.where == "config.toml:line 2"
 
 
 def test_detect_source_reads_a_whole_file_of_labels() -> None:
@@ -346,6 +348,31 @@ def test_detect_source_reads_a_whole_file_of_labels() -> None:
         detect_source(["AA", "zz9"], where="a.lab")
     with pytest.raises(UnknownPhonemeError, match="mix notations"):
         detect_source(["ii", "h#"])
+
+
+@pytest.mark.parametrize(
+    ("label", "expected"),
+    [("{", "AE"), ("@U", "OW"), ("oU", "OW"), ("aI", "AY"), ("eI", "EY"), ("OI", "OY"),
+     ("aU", "AW"), ("I@", "IY"), ("e@", "EH"), ("U@", "UH"), ("i:", "IY"), ("I", "IH"),
+     ("E", "EH"), ("A:", "AA"), ("Q", "AA"), ("O:", "AO"), ("V", "AH"), ("@", "AH"),
+     ("3:", "ER"), ("@`", "ER"), ("u:", "UW"), ("U", "UH"), ("E:", "EH"),
+     ("tS", "CH"), ("dZ", "JH"), ("T", "TH"), ("D", "DH"), ("S", "SH"), ("Z", "ZH"),
+     ("s", "S"), ("z", "Z"), ("t", "T"), ("d", "D"), ("N", "NG"), ("n", "N"), ("h", "HH"),
+     ("j", "Y"), ("r\\", "R"), ("r", "R"), ("?", "T"), ("4", "D"), ("5", "L"),
+     ("<p:>", "sil"), ("<p>", "sil"), ("<nib>", "sil")],
+)  # fmt: skip
+def test_sampa_as_webmaus_writes_it(label: str, expected: str) -> None:
+    assert normalize_phoneme(label, "sampa") == expected
+
+
+def test_sampa_words_and_its_refusals() -> None:
+    thought_judge_ship = "T O: t dZ V dZ S I p".split()
+    assert normalize_phonemes(thought_judge_ship, "sampa") == ("TH AO T JH AH JH SH IH P".split())
+    for label in ("AA1", "sp", "<p", "ə"):
+        with pytest.raises(UnknownPhonemeError, match="for source 'sampa'"):
+            normalize_phoneme(label, "sampa")
+    assert detect_source(["<p:>", "h", "@", "l", "@U", "<p:>"]) == "sampa"
+    assert detect_source(["h", "{", "p", "i"]) == "sampa"
 
 
 def test_is_silence() -> None:

@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from lipstream.corpus import Corpus
 from lipstream.engines import engine_names, load_model
 from lipstream.engines.base import Model, frame_count, frames_before
+from lipstream.errors import InvalidRequestError
 from lipstream.timeline import PhonemeSpan
 
 ENGINES = engine_names()
@@ -139,3 +140,32 @@ def test_spans_as_tuples_or_mappings_are_equivalent(
     np.testing.assert_array_equal(
         model.synthesize(as_tuples).frames, model.synthesize(as_maps).frames
     )
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_unknown_options_get_one_coded_error_listing_the_known_ones(
+    engine: str, trained_models: dict[str, Model], small_demo_corpus: Corpus
+) -> None:
+    model = trained_models[engine]
+    spans = _heldout_spans(small_demo_corpus)
+    for call in (
+        lambda: model.start(fps=60, bogus=1, max_jumps=3),
+        lambda: model.synthesize(spans, fps=60, bogus=1, max_jumps=3),
+    ):
+        with pytest.raises(InvalidRequestError) as caught:
+            call()
+        error = caught.value
+        assert error.code == "invalid_request" and error.where == "options.bogus"
+        assert f"unknown option(s) bogus, max_jumps for engine {engine}" in error.message
+        known = ", ".join(model.option_names) or "none"
+        assert error.message.endswith(f"known options: {known}")
+
+
+def test_each_engine_declares_the_options_it_reads(trained_models: dict[str, Model]) -> None:
+    assert trained_models["viseme-lerp"].option_names == ()
+    assert set(trained_models["anime-graph"].option_names) == {
+        "graph", "search", "pq_window", "pq_advance", "blend", "smooth", "match_emotion",
+        "max_tile", "pq_budget_s",
+    }  # fmt: skip
+    anime = trained_models["anime-graph"]
+    assert anime.start(fps=60, smooth=False, max_tile=4) is not None
