@@ -9,7 +9,13 @@ from pathlib import Path
 
 import pytest
 
-from lipstream_client import OCULUS15_VISEMES, canonical_viseme, rename_channel
+from lipstream_client import (
+    OCULUS15_VISEMES,
+    PRESTON_BLAIR_SHAPES,
+    VISEME_CHANNELS,
+    canonical_viseme,
+    rename_channel,
+)
 
 CLIENT_SDK = Path(__file__).resolve().parents[2] / "client_sdk"
 WITHOUT_NUMPY = """
@@ -92,3 +98,15 @@ def test_oculus_visemes_order_and_spellings() -> None:
         assert canonical_viseme(spelling) == canonical
     for stranger in ("viseme_X", "jawOpen", "pp", "", "viseme_"):
         assert canonical_viseme(stranger) is None
+
+
+def test_preston_blair_shapes_and_spellings() -> None:
+    assert PRESTON_BLAIR_SHAPES == ("A", "B", "C", "D", "E", "F", "G", "H", "X")
+    assert VISEME_CHANNELS == {"oculus15": OCULUS15_VISEMES, "preston-blair": PRESTON_BLAIR_SHAPES}
+    assert [canonical_viseme(name, "preston-blair") for name in ("a", "X", " h ")] == [
+        "A",
+        "X",
+        "H",
+    ]
+    for stranger in ("I", "viseme_PP", "AB", "", "MBP"):
+        assert canonical_viseme(stranger, "preston-blair") is None

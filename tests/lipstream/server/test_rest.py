@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import base64
+import csv
+import io
 import json
 from collections.abc import Iterator
 from pathlib import Path
@@ -127,6 +129,24 @@ def test_audio_rides_along_for_audio_engines(served: Served) -> None:
             "audio.pcm16",
         ),
         ({**BODY, "engine": "nope"}, "application/json", None, 404, "unknown_engine", "engine"),
+        ({**BODY, "engine": "nope"}, "application/json", "text/csv", 404, "unknown_engine", "engine"),
+        (
+            {**BODY, "options": {"bogus": 1}},
+            "application/json",
+            None,
+            422,
+            "invalid_request",
+            "options.bogus: unknown option(s) bogus for engine viseme-lerp; known options: none",
+        ),
+        (
+            {**BODY, "engine": "anime-graph", "options": {"max_jumps": 2, "smooth": False}},
+            "application/json",
+            None,
+            422,
+            "invalid_request",
+            "unknown option(s) max_jumps for engine anime-graph; known options: graph, search, "
+            "pq_window, pq_advance, blend, smooth, match_emotion, max_tile, pq_budget_s",
+        ),
         (
             {**BODY, "character": "x"},
             "application/json",
@@ -181,6 +201,34 @@ def test_errors_have_a_status_code_and_a_located_message(
     assert answer.status_code == status
     error = answer.json()["error"]
     assert error["code"] == code and text in error["message"]
+
+
+def test_csv_for_accept_text_csv_holds_the_frames_of_the_json_answer(served: Served) -> None:
+    answer = post(served, BODY, accept="text/csv")
+    assert answer.status_code == 200
+    assert answer.headers["content-type"].split(";")[0] == "text/csv"
+    rows = list(csv.reader(io.StringIO(answer.text)))
+    as_json = post(served, BODY).json()
+    assert rows[0] == ["time", *as_json["channels"]]
+    assert len(rows) == 1 + 16
+    times = [float(row[0]) for row in rows[1:]]
+    assert times == [round(index / 50, 6) for index in range(16)]
+    values = np.array([[float(cell) for cell in row[1:]] for row in rows[1:]])
+    np.testing.assert_allclose(values, np.array(as_json["data"]), atol=5e-7)
+    assert all(len(cell.split(".")[1]) == 6 for cell in rows[5])
+
+
+def test_preston_blair_mouth_shapes_as_csv(served: Served) -> None:
+    body = {**BODY, "output": {"visemes": "preston-blair"}}
+    answer = post(served, body, accept="text/csv")
+    assert answer.status_code == 200, answer.text
+    rows = list(csv.reader(io.StringIO(answer.text)))
+    assert rows[0] == ["time", "A", "B", "C", "D", "E", "F", "G", "H", "X"]
+    weights = np.array([[float(cell) for cell in row[1:]] for row in rows[1:]])
+    np.testing.assert_allclose(weights.sum(axis=1), 1.0, atol=1e-5)
+    assert weights.min() >= 0.0
+    # At the centre of AY (0.2 s, frame 10) the mouth is wide open: shape D.
+    assert rows[0][1 + int(np.argmax(weights[10]))] == "D"
 
 
 def test_budget_infeasible_carries_the_smallest_feasible_budget(served: Served) -> None:

@@ -286,3 +286,25 @@ def test_metrics_count_sessions_frames_latency_and_errors(served: Served) -> Non
         if line.startswith('lipstream_frames_total{engine="viseme-lerp"}')
     )
     assert float(total.split()[-1]) >= frames == 31
+
+
+@pytest.mark.parametrize(
+    ("engine", "options", "known"),
+    [
+        ("viseme-lerp", {"bogus": 1}, "none"),
+        ("anime-graph", {"bogus": 1}, "graph, search, pq_window"),
+    ],
+)
+def test_unknown_engine_options_get_a_coded_error_listing_the_known_ones(
+    served: Served, engine: str, options: dict[str, int], known: str
+) -> None:
+    with client(served.ws, "json") as ws:
+        ws.send(Start("o", engine, "demo", options=options))
+        error = ws.recv()
+        ws.send(Start("p", engine, "demo"), Phonemes("p", ITEMS), End("p"))
+        after = ws.until_done("p")
+    assert isinstance(error, ErrorMessage)
+    assert (error.code, error.id, error.fatal) == ("invalid_request", "o", True)
+    assert error.message.startswith(f"options.bogus: unknown option(s) bogus for engine {engine}")
+    assert f"; known options: {known}" in error.message
+    assert isinstance(after[-1], Done)  # the connection serves the next request
