@@ -129,7 +129,14 @@ def test_audio_rides_along_for_audio_engines(served: Served) -> None:
             "audio.pcm16",
         ),
         ({**BODY, "engine": "nope"}, "application/json", None, 404, "unknown_engine", "engine"),
-        ({**BODY, "engine": "nope"}, "application/json", "text/csv", 404, "unknown_engine", "engine"),
+        (
+            {**BODY, "engine": "nope"},
+            "application/json",
+            "text/csv",
+            404,
+            "unknown_engine",
+            "engine",
+        ),
         (
             {**BODY, "options": {"bogus": 1}},
             "application/json",
