@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -32,11 +33,15 @@ def _build_demo(args: argparse.Namespace, settings: Settings) -> None:
 
 
 def _train(args: argparse.Namespace, settings: Settings) -> None:
-    from .corpus import load_corpus
+    from .corpus import CorpusWarning, load_corpus
     from .training import resolve_engines, train_engine, train_engines
 
     engines = resolve_engines(args.engine)
-    corpus = load_corpus(args.corpus, progress=True, tier=args.tier)
+    with warnings.catch_warnings(record=True) as ignored:
+        warnings.simplefilter("always", CorpusWarning)
+        corpus = load_corpus(args.corpus, progress=True, tier=args.tier)
+    for warning in ignored:
+        print(f"warning: {warning.message}", file=sys.stderr)
     out = Path(args.out)
     if args.engine == "all":
         written = train_engines(corpus, engines, out, progress=True)

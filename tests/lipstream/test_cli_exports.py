@@ -168,6 +168,7 @@ def test_train_reads_the_tier_named_on_the_command_line(tmp_path: Path) -> None:
             writer.writerow(["time", "jawOpen", "mouthClose"])
             writer.writerows([t, 0.5 * t, 1 - 0.5 * t] for t in times)
         (corpus / f"{stem}.TextGrid").write_text(textgrid({"KAN": MAU}))
+    (corpus / "a.json").write_text(json.dumps({"text": "ma", "note": "take 2"}))
     out = tmp_path / "model"
     refused = run_cli(
         "train", "--corpus", str(corpus), "--engine", "viseme-lerp", "--out", str(out)
@@ -187,4 +188,5 @@ def test_train_reads_the_tier_named_on_the_command_line(tmp_path: Path) -> None:
         "KAN",
     )
     assert trained.returncode == 0, trained.stderr
+    assert "warning: a.json: unknown key 'note' ignored" in trained.stderr
     assert json.loads((out / "model.json").read_text())["channels"] == ["jawOpen", "mouthClose"]
