@@ -80,9 +80,7 @@ def errors(messages: list[ServerMessage]) -> list[tuple[str, str | None, bool]]:
 
 def test_ready_reports_the_resolved_request(catalog: Catalog) -> None:
     session = new_session(catalog)
-    [ready] = play(
-        session, Start("a", "viseme-lerp", "demo", fps=50, emotion="happy", options={"note": 1})
-    )
+    [ready] = play(session, Start("a", "viseme-lerp", "demo", fps=50, emotion="happy"))
     model = catalog.model("viseme-lerp", "demo")
     assert ready == Ready(
         id="a",
@@ -93,7 +91,7 @@ def test_ready_reports_the_resolved_request(catalog: Catalog) -> None:
         lookahead_ms=200.0,
         fidelity="default",
         emotion="happy",
-        options={"note": 1},
+        options={},
         phoneme_source="auto",
     )
 
@@ -232,6 +230,11 @@ def test_oculus_visemes_through_the_session_are_distributions(catalog: Catalog) 
             Start("a", "anime-graph", "demo", options={"search": "psychic"}),
             "invalid_request",
             "options.search",
+        ),
+        (
+            Start("a", "viseme-lerp", "demo", options={"note": 1}),
+            "invalid_request",
+            "options.note",
         ),
     ],
 )
