@@ -76,34 +76,16 @@ def _output_profile(args: argparse.Namespace, *, shapes: bool) -> OutputProfile 
     """The output profile of ``--profile`` with ``--naming``, ``--channels`` and ``--visemes``
     laid over it, validated as the server validates ``start.output``; Rhubarb and Moho
     formats (``shapes``) default to the Preston Blair visemes."""
-    from .server.profiles import parse_profile
+    from .server.profiles import parse_profile, profile_fields
 
-    fields: dict[str, object] = {}
-    where = "command line"
-    if args.profile:
-        where = args.profile
-        try:
-            loaded = json.loads(Path(args.profile).read_text(encoding="utf-8"))
-        except (OSError, ValueError) as error:
-            raise LipstreamError(
-                f"cannot read the output profile: {error}",
-                where=args.profile,
-                code="invalid_setting",
-            ) from None
-        if not isinstance(loaded, dict):
-            raise LipstreamError(
-                "an output profile must be a JSON object",
-                where=args.profile,
-                code="invalid_setting",
-            )
-        fields.update(loaded)
+    fields = profile_fields(Path(args.profile)) if args.profile else {}
     for key in ("naming", "channels", "visemes"):
         value = getattr(args, key)
         if value is not None:
             fields[key] = value
     if shapes and "visemes" not in fields and "naming" not in fields:
         fields["visemes"] = "preston-blair"
-    return parse_profile(fields, where) if fields else None
+    return parse_profile(fields, args.profile or "command line") if fields else None
 
 
 def _serve(args: argparse.Namespace, settings: Settings) -> None:

@@ -190,3 +190,17 @@ def test_train_reads_the_tier_named_on_the_command_line(tmp_path: Path) -> None:
     assert trained.returncode == 0, trained.stderr
     assert "warning: a.json: unknown key 'note' ignored" in trained.stderr
     assert json.loads((out / "model.json").read_text())["channels"] == ["jawOpen", "mouthClose"]
+
+
+def test_a_profile_file_that_is_not_a_profile_object_is_refused(
+    lerp_model: Path, mau_grid: Path, tmp_path: Path
+) -> None:
+    profile = tmp_path / "profile.json"
+    profile.write_text("[1, 2]")
+    result = run_cli(
+        "synth", "--model", str(lerp_model), "--phones", str(mau_grid),
+        "--out", str(tmp_path / "x.csv"), "--profile", str(profile),
+    )  # fmt: skip
+    assert result.returncode == 2
+    assert "error [invalid_setting]" in result.stderr
+    assert "must be a JSON object holding an output profile" in result.stderr

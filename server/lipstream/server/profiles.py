@@ -268,19 +268,28 @@ def parse_profile(value: object, where: str) -> OutputProfile:
 
 def load_presets(path: Path) -> dict[str, OutputProfile]:
     """Per-character presets from a JSON file ``{"character": {output profile}, ...}``."""
+    data = _json_object(path, "output profiles", "mapping characters to output profiles")
+    return {str(name): parse_profile(value, f"{path}: {name}") for name, value in data.items()}
+
+
+def profile_fields(path: Path) -> dict[str, object]:
+    """The fields of one output profile in a JSON file (validated by ``parse_profile`` once
+    the caller has laid its own over them)."""
+    return dict(_json_object(path, "the output profile", "holding an output profile"))
+
+
+def _json_object(path: Path, what: str, holding: str) -> Mapping[str, object]:
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as error:
         raise LipstreamError(
-            f"cannot read output profiles: {error}", where=str(path), code="invalid_setting"
+            f"cannot read {what}: {error}", where=str(path), code="invalid_setting"
         ) from None
     if not isinstance(data, Mapping):
         raise LipstreamError(
-            "must be a JSON object mapping characters to output profiles",
-            where=str(path),
-            code="invalid_setting",
+            f"must be a JSON object {holding}", where=str(path), code="invalid_setting"
         )
-    return {str(name): parse_profile(value, f"{path}: {name}") for name, value in data.items()}
+    return data
 
 
 def apply_to_result(
