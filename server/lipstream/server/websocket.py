@@ -310,13 +310,18 @@ class Connection:
         return outgoing, [None] * len(outgoing)
 
     def _encoded(self, outgoing: list[Outgoing]) -> Answers:
-        """``outgoing`` with each frames block encoded (stamping leaves those unchanged)."""
-        return outgoing, [
-            encode(item.message, self.encoding, validate=False)
-            if isinstance(item.message, Frames)
-            else None
-            for item in outgoing
-        ]
+        """``outgoing`` with each frames block encoded (stamping leaves those unchanged);
+        nothing more is encoded once the client is gone."""
+        payloads: list[Payload | None] = []
+        for item in outgoing:
+            if self._peer_gone or self.aborted:
+                return [], []
+            payloads.append(
+                encode(item.message, self.encoding, validate=False)
+                if isinstance(item.message, Frames)
+                else None
+            )
+        return outgoing, payloads
 
     async def _in_pool(self, job: Callable[[], T]) -> T:
         """Run ``job`` in the synthesis pool, reading the client's messages ahead meanwhile."""
