@@ -280,6 +280,8 @@ class Connection:
                     return _IDLE
                 task, self._receive_task = self._receive_task, None
                 return task.result()
+            if timeout is None:  # no timer per message while requests are active
+                return await self._receive()
             async with asyncio.timeout(timeout):
                 return await self._receive()
         except TimeoutError:

@@ -407,9 +407,7 @@ def test_options_outside_the_ladder_are_priced_by_the_engine_not_a_rung(
 
 
 def test_a_request_over_its_cpu_budget_ends_with_a_coded_error(catalog: Catalog) -> None:
-    session = Session(
-        catalog, SessionLimits(3, RequestLimits(20, 1000, 100.0), cpu_budget_s=1e-9)
-    )
+    session = Session(catalog, SessionLimits(3, RequestLimits(20, 1000, 100.0), cpu_budget_s=1e-9))
     out = play(session, Start("a", "viseme-lerp", "demo"), Phonemes("a", ITEMS))
     assert errors(out) == [("cpu_budget_exceeded", "a", True)]
     assert "a" not in session.requests
