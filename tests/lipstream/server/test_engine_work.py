@@ -103,17 +103,25 @@ def test_health_answers_while_pq_runs_and_the_cpu_budget_ends_it(all_models_dir:
     assert (last.code, last.id, last.fatal) == ("cpu_budget_exceeded", "pq", True)
 
 
-def test_pq_beyond_its_cap_is_refused_before_any_search(all_models_dir: Path) -> None:
-    with serving(all_models_dir, ServerSettings(request_cpu_s=2.0)) as served:
+def test_pq_beyond_its_cap_is_refused_and_rest_has_the_cpu_budget(all_models_dir: Path) -> None:
+    with serving(all_models_dir, ServerSettings(request_cpu_s=1.0)) as served:
         with client(served.ws) as ws:
             ws.send(Start("big", "anime-graph", "demo", options=PQ))
             over = tuple(PhonemeItem("AA1", 0.08 * i, 0.08 * (i + 1)) for i in range(43))
             ws.send(Phonemes("big", over))
-            answers = ws.until_done("big")
-            error = answers[-1]
+            error = ws.until_done("big")[-1]
             assert isinstance(error, ErrorMessage)
             assert (error.code, error.id, error.fatal) == ("search_too_large", "big", True)
             assert "256" in error.message
+        body = {
+            "engine": "anime-graph",
+            "character": "demo",
+            "options": PQ,
+            "items": [{"phoneme": i.phoneme, "start": i.start, "end": i.end} for i in ITEMS],
+        }
+        answer = httpx.post(f"{served.http}/v1/synthesize", json=body, timeout=WORK_BOUND_S)
+        assert answer.status_code == 422
+        assert answer.json()["error"]["code"] == "cpu_budget_exceeded"
 
 
 def test_cancel_stops_the_running_work_and_ends_the_request(all_models_dir: Path) -> None:
