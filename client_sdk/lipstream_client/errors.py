@@ -46,6 +46,9 @@ REQUEST_FINISHED = "request_finished"
 TOO_MANY_PHONEMES = "too_many_phonemes"
 TOO_MANY_REQUESTS = "too_many_requests"
 BUDGET_INFEASIBLE = "budget_infeasible"
+CPU_BUDGET_EXCEEDED = "cpu_budget_exceeded"
+SEARCH_TOO_LARGE = "search_too_large"
+SEARCH_TIMEOUT = "search_timeout"
 
 # Connection-level errors: the server closes the connection after sending them.
 RATE_LIMITED = "rate_limited"
@@ -188,6 +191,22 @@ ERROR_CODES: dict[str, ErrorCodeInfo] = {
     BUDGET_INFEASIBLE: ErrorCodeInfo(
         "no fidelity rung meets latency_budget_ms; details.min_budget_ms is the smallest "
         "feasible budget",
+        "server",
+        "request",
+    ),
+    CPU_BUDGET_EXCEEDED: ErrorCodeInfo(
+        "the request's engine work used up the server's CPU budget per request",
+        "server",
+        "request",
+    ),
+    SEARCH_TOO_LARGE: ErrorCodeInfo(
+        "the request holds more phonemes than an exponential search option allows "
+        "(anime-graph's PQ-Matching: pq_window × phonemes at most 256)",
+        "server",
+        "request",
+    ),
+    SEARCH_TIMEOUT: ErrorCodeInfo(
+        "the search ran past the request's own search budget (anime-graph's pq_budget_s)",
         "server",
         "request",
     ),

@@ -55,6 +55,7 @@ class ServerSettings:
     max_phoneme_ms: float = 200.0
     compute_margin_ms: float = 5.0
     inline_work_ms: float = 2.0
+    request_cpu_s: float = 10.0
     synth_threads: int = 2
     profiles: Path | None = None
     ping_interval_s: float = 20.0
@@ -249,6 +250,12 @@ ENV_SETTINGS: tuple[EnvSetting, ...] = (
         "inline_work_ms",
         _number(0.0, 60_000.0),
         "estimated engine work above which a message is synthesized in the thread pool",
+    ),
+    EnvSetting(
+        "LIPSTREAM_REQUEST_CPU_S",
+        "request_cpu_s",
+        _number(0.0, 86400.0, above=True),
+        "CPU seconds of engine work one request may use; beyond: `cpu_budget_exceeded`",
     ),
     EnvSetting(
         "LIPSTREAM_SYNTH_THREADS",

@@ -22,6 +22,15 @@ Options: a model declares the engine options it takes in ``option_names``;
 ``invalid_request`` error, listing the known names, for every engine) before
 the engine reads their values.
 
+Cost and stopping: ``Model.call_cost(options, measured)`` is the engine's
+estimate of what one streaming call costs (per phoneme it decides, per frame
+it may emit) for a request with those options: calibration's measurement when
+the options select a rung, else the engine's own worst case (unbounded unless
+the engine knows better). A server runs a call off its event loop when the
+estimate is large. ``SynthesisRequest.guard`` (``work.WorkGuard``) is the
+request's cancellation and CPU-budget token: a synthesizer checks it between
+the steps of its long loops, and stops there.
+
 Emotion: ``SynthesisRequest.emotion`` is the request's; a span's own
 ``PhonemeSpan.emotion`` overrides it for that span (``emotion_of``). Engines
 that model emotion honour both (anime-graph searches each run of equal
@@ -46,6 +55,7 @@ from ..errors import InvalidRequestError, ModelStoreError
 from ..phonemes import PHONEMES, SILENCE
 from ..store import ModelManifest, load_arrays, read_manifest, save_model_dir
 from ..timeline import EMOTIONS, PhonemeSpan, SpanLike, coerce_spans
+from .work import WorkGuard
 
 MAX_FPS = 1000.0
 _EPS = 1e-9
@@ -84,13 +94,35 @@ class Rung:
 
 
 @dataclass(frozen=True)
+class CallCost:
+    """Estimated milliseconds of one streaming call: per phoneme it decides and per frame it
+    may emit (``math.inf``: no bound is known)."""
+
+    per_phoneme_ms: float
+    per_frame_ms: float
+
+    def ms(self, phonemes: int, frames: int) -> float:
+        """The estimate for a call deciding ``phonemes`` phonemes and emitting ``frames``."""
+        total = 0.0
+        if phonemes > 0:
+            total += self.per_phoneme_ms * phonemes
+        if frames > 0:
+            total += self.per_frame_ms * frames
+        return total
+
+
+UNBOUNDED_COST = CallCost(math.inf, math.inf)
+
+
+@dataclass(frozen=True)
 class SynthesisRequest:
     """Per-request settings: output ``fps`` (Hz), ``emotion`` (of every span that names
-    none) and engine options."""
+    none), engine options, and the ``guard`` that stops the request's work."""
 
     fps: float = 60.0
     emotion: str | None = None
     options: Mapping[str, Any] = field(default_factory=dict)
+    guard: WorkGuard = field(default_factory=WorkGuard, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         if not (isinstance(self.fps, (int, float)) and 0 < self.fps <= MAX_FPS):
@@ -233,6 +265,26 @@ class Model(ABC):
         server lets them override the client's; rungs further down should wait less."""
         return (Rung("default", self.lookahead),)
 
+    def rung_for(self, options: Mapping[str, Any]) -> Rung | None:
+        """The rung of ``fidelity_ladder`` that these engine ``options`` select exactly, None
+        when they leave the ladder; engines whose options have defaults override it to
+        compare the options they resolve to."""
+        return next(
+            (rung for rung in self.fidelity_ladder() if dict(rung.options) == dict(options)), None
+        )
+
+    def call_cost(self, options: Mapping[str, Any], measured: Mapping[str, CallCost]) -> CallCost:
+        """The estimated cost of one streaming call of a request with these ``options``.
+
+        ``measured`` holds calibration's cost of each rung, by name: options that select a
+        rung (``rung_for``) cost what it measured. Other options cost the engine's own worst
+        case, unbounded here: no measurement vouches for them. Engines that can bound the
+        work of options outside their ladder override this."""
+        rung = self.rung_for(options)
+        if rung is not None and rung.name in measured:
+            return measured[rung.name]
+        return UNBOUNDED_COST
+
     def start(self, request: SynthesisRequest | None = None, **settings: Any) -> Synthesizer:
         """A streaming synthesizer; pass a ``SynthesisRequest`` or its fields.
 
@@ -360,6 +412,7 @@ class RenderingSynthesizer(Synthesizer):
     def _emit(self, stop: int) -> np.ndarray:
         if stop <= self.emitted:
             return np.zeros((0, len(self.model.channels)), dtype=np.float32)
+        self.request.guard.check()
         times = np.arange(self.emitted, stop, dtype=np.float64) / self.request.fps
         frames = np.asarray(
             self.model.render(self.spans, times, self.request, self.audio), dtype=np.float32

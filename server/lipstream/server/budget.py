@@ -24,18 +24,23 @@ from dataclasses import dataclass
 
 from lipstream_client.errors import BUDGET_INFEASIBLE
 
-from ..engines.base import Rung
+from ..engines.base import CallCost, Rung
 from ..errors import LipstreamError
 
 
 @dataclass(frozen=True)
 class RungEstimate:
-    """A rung with its worst-case latency parts, in milliseconds."""
+    """A rung with its worst-case latency parts and its measured call cost, in milliseconds."""
 
     rung: Rung
     lookahead_ms: float
     compute_ms: float
     per_phoneme_ms: float
+    per_frame_ms: float = 0.0
+
+    @property
+    def call_cost(self) -> CallCost:
+        return CallCost(self.per_phoneme_ms, self.per_frame_ms)
 
     @property
     def worst_case_ms(self) -> float:
@@ -66,10 +71,14 @@ def lookahead_ms(rung: Rung, max_phoneme_ms: float) -> float:
 
 
 def estimate(
-    rung: Rung, max_phoneme_ms: float, compute_ms: float, margin_ms: float, per_phoneme_ms: float
+    rung: Rung, max_phoneme_ms: float, compute_ms: float, margin_ms: float, call: CallCost
 ) -> RungEstimate:
     return RungEstimate(
-        rung, lookahead_ms(rung, max_phoneme_ms), compute_ms + margin_ms, per_phoneme_ms
+        rung,
+        lookahead_ms(rung, max_phoneme_ms),
+        compute_ms + margin_ms,
+        call.per_phoneme_ms,
+        call.per_frame_ms,
     )
 
 

@@ -6,11 +6,15 @@ a rung's synthesizer one phoneme per ``feed``, followed by ``finish``, once
 to warm up and then ``CALIBRATION_PASSES`` times measured. The slowest
 single call over the measured passes is the rung's compute time (it enters
 the latency estimate), and the total time divided by the phonemes is its
-per-phoneme cost (which decides whether a message is synthesized inline or
-in the thread pool). An engine that uses audio is measured a second time
-with a calibration signal fed alongside the phonemes (audio features, DTW),
-and the costlier of the two counts: ``start`` does not say whether audio
-will follow.
+per-phoneme cost. The cost of output frames is measured apart: the utterance
+is synthesized offline at ``CALIBRATION_FPS`` and at ``FRAME_CALIBRATION_FPS``,
+and the extra time (the fastest of the passes at each rate) over the extra
+frames is the per-frame cost. Together they estimate a streaming call
+(``engines.base.CallCost``), which decides whether a message is synthesized
+inline or in the thread pool. An engine that uses audio is measured a second
+time with a calibration signal fed alongside the phonemes (audio features,
+DTW), and the costlier of the two counts: ``start`` does not say whether
+audio will follow.
 """
 
 from __future__ import annotations
@@ -21,23 +25,30 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..audio import Audio
-from ..engines.base import Model, Rung, SynthesisRequest
+from ..engines.base import MAX_FPS, CallCost, Model, Rung, SynthesisRequest, frame_count
 from ..phonemes import ARPABET
 from ..timeline import PhonemeSpan
 
 CALIBRATION_PHONEMES = 48
 CALIBRATION_PASSES = 2
 CALIBRATION_FPS = 60.0
+FRAME_CALIBRATION_FPS = MAX_FPS
 PHONEME_S = 0.08
 CALIBRATION_RATE = 16_000
 
 
 @dataclass(frozen=True)
 class ComputeCost:
-    """Measured milliseconds: the slowest incremental call and the mean cost per phoneme."""
+    """Measured milliseconds: the slowest incremental call, the mean cost per phoneme (at
+    ``CALIBRATION_FPS``) and the cost of each further output frame."""
 
     max_call_ms: float
     per_phoneme_ms: float
+    per_frame_ms: float = 0.0
+
+    @property
+    def call_cost(self) -> CallCost:
+        return CallCost(self.per_phoneme_ms, self.per_frame_ms)
 
 
 def calibration_spans() -> list[PhonemeSpan]:
@@ -68,8 +79,32 @@ def measure(model: Model, rung: Rung) -> ComputeCost:
     if audio is not None:
         costs.append(_measure_stream(model, rung, spans, audio))
     return ComputeCost(
-        max(cost.max_call_ms for cost in costs), max(cost.per_phoneme_ms for cost in costs)
+        max(cost.max_call_ms for cost in costs),
+        max(cost.per_phoneme_ms for cost in costs),
+        _per_frame_ms(model, rung, spans),
     )
+
+
+def _per_frame_ms(model: Model, rung: Rung, spans: list[PhonemeSpan]) -> float:
+    """Milliseconds per output frame: offline synthesis at two frame rates, the fastest of
+    ``CALIBRATION_PASSES`` (after a warm-up) at each, the extra time over the extra frames."""
+    times = []
+    for fps in (CALIBRATION_FPS, FRAME_CALIBRATION_FPS):
+        request = SynthesisRequest(fps=fps, options=dict(rung.options))
+        passes = [_offline(model, request, spans) for _ in range(CALIBRATION_PASSES + 1)]
+        times.append(min(passes[1:]))
+    extra = frame_count(spans[-1].end, FRAME_CALIBRATION_FPS) - frame_count(
+        spans[-1].end, CALIBRATION_FPS
+    )
+    return max(0.0, 1000.0 * (times[1] - times[0]) / extra)
+
+
+def _offline(model: Model, request: SynthesisRequest, spans: list[PhonemeSpan]) -> float:
+    started = time.perf_counter()
+    synthesizer = model.start(request)
+    synthesizer.feed(spans)
+    synthesizer.finish()
+    return time.perf_counter() - started
 
 
 def _measure_stream(

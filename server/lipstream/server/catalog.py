@@ -10,8 +10,9 @@ the event loop and in the synthesis thread pool share it without locks.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -19,7 +20,7 @@ from lipstream_client import OutputProfile
 from lipstream_client.errors import UNKNOWN_CHARACTER, UNKNOWN_ENGINE
 
 from ..config import ServerSettings
-from ..engines.base import Model
+from ..engines.base import CallCost, Model
 from ..errors import LipstreamError
 from ..models import ModelRegistry
 from ..phonemes import SILENCE
@@ -100,6 +101,12 @@ class Catalog:
     def ladder(self, model: Model) -> tuple[RungEstimate, ...]:
         return self.facts[id(model)].ladder
 
+    def call_cost(self, model: Model, options: Mapping[str, Any]) -> CallCost:
+        """The engine's estimate of one streaming call with ``options``, from the costs
+        calibration measured for its rungs."""
+        measured = {estimate.rung.name: estimate.call_cost for estimate in self.ladder(model)}
+        return model.call_cost(options, measured)
+
     def rest_pose(self, model: Model, emotion: str | None) -> np.ndarray:
         """The model's face at rest, float32 (n_channels,)."""
         return self.facts[id(model)].rest[emotion]
@@ -125,7 +132,7 @@ class Catalog:
                     settings.max_phoneme_ms,
                     cost.max_call_ms,
                     settings.compute_margin_ms,
-                    cost.per_phoneme_ms,
+                    cost.call_cost,
                 )
             )
         return tuple(rungs)

@@ -86,6 +86,11 @@ class Metrics:
         self.errors = Counter(
             "lipstream_errors", "Error messages sent, by code.", ["code"], registry=registry
         )
+        self.work_stopped = Counter(
+            "lipstream_work_stopped",
+            "Engine calls stopped at a step by a cancel or a closed connection.",
+            registry=registry,
+        )
         self.refused = Counter(
             "lipstream_connections_refused",
             "WebSocket connections refused or closed by policy, by error code.",

@@ -276,6 +276,7 @@ def _run(messages: list[Message], state: ServerState) -> Synthesis:
         RequestLimits(
             settings.max_phonemes_per_request, settings.max_request_frames, settings.return_ms
         ),
+        cpu_budget_s=settings.request_cpu_s,
     )
     session = Session(state.catalog, limits)
     ready: Ready | None = None

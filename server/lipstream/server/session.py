@@ -15,11 +15,21 @@ ignored, anything else gets ``unknown_request``. No exception leaves
 ``handle``: an unexpected fault becomes ``internal_error`` for the request
 (or, with no request to blame, for the connection). Sockets, timers,
 threads, rate limits and closing belong to the connection layer.
+
+Engine work: each request has a ``WorkGuard`` that meters its engine calls
+against the CPU budget (``cpu_budget_exceeded`` ends the request) and that
+``stop_work`` (the client's ``cancel``, read while the work runs) or
+``stop_all_work`` (the connection closed) cancels: the engine stops at its
+next step, and the stopped request's messages answer nothing until its
+``cancel``. ``estimated_work_ms`` prices a message with the engine's own
+``CallCost`` for the request's options, so the connection knows which
+messages to keep off its event loop.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 from bisect import bisect_right
 from collections import OrderedDict
 from collections.abc import Mapping
@@ -52,7 +62,8 @@ from lipstream_client.errors import (
 )
 from lipstream_client.messages import DoneReason, JsonValue
 
-from ..engines.base import Model, Rung, SynthesisRequest
+from ..engines.base import CallCost, Model, Rung, SynthesisRequest, frame_count
+from ..engines.work import WorkGuard
 from ..errors import LipstreamError
 from ..phonemes import SOURCES
 from ..timeline import EMOTIONS
@@ -78,11 +89,13 @@ RequestInput: TypeAlias = Phonemes | AudioChunk | End | Cancel | Interrupt
 
 @dataclass(frozen=True)
 class SessionLimits:
-    """How many requests a connection may hold at once, and each request's limits."""
+    """How many requests a connection may hold at once, and each request's limits (its
+    engine work's CPU seconds: ``cpu_budget_s``, None for no budget)."""
 
     max_requests: int
     request: RequestLimits
     remembered_ids: int = REMEMBERED_IDS
+    cpu_budget_s: float | None = None
 
 
 class Session:
@@ -92,9 +105,11 @@ class Session:
         self.catalog = catalog
         self.limits = limits
         self.requests: dict[str, ActiveRequest] = {}
-        self.per_phoneme_ms: dict[str, float] = {}
+        self.costs: dict[str, CallCost] = {}
+        self.guards: dict[str, WorkGuard] = {}
         self.ended: OrderedDict[str, DoneReason] = OrderedDict()
         self.draining = False
+        self.stopped_work = 0
 
     @property
     def active_requests(self) -> int:
@@ -105,27 +120,54 @@ class Session:
         self.draining = True
 
     def close(self) -> int:
-        """Drop every active request (the connection is gone); how many were dropped."""
+        """Stop and drop every active request (the connection is gone); how many were
+        dropped."""
+        self.stop_all_work()
         dropped = len(self.requests)
         self.requests.clear()
+        self.costs.clear()
+        self.guards.clear()
         return dropped
 
     def estimated_work_ms(self, received: InputMessage) -> float:
-        """Roughly how long ``handle(received)`` keeps the engine busy, in milliseconds."""
-        if not isinstance(received, (Phonemes, AudioChunk, End, Cancel, Interrupt)):
+        """How long ``handle(received)`` may keep the engine busy, in milliseconds: the engine's
+        call cost for the request's options (``Model.call_cost``) for the phonemes the message
+        decides and the frames it may release (``math.inf`` when the engine knows no bound)."""
+        if not isinstance(received, (Phonemes, AudioChunk, End, Interrupt)):
             return 0.0
         request = self.requests.get(received.id)
         if request is None:
             return 0.0
-        cost = self.per_phoneme_ms.get(received.id, 0.0)
+        fps = request.spec.fps
+        until = request.phonemes_end
+        extra_frames = 0
         if isinstance(received, Phonemes):
-            return cost * len(received.items)
-        if isinstance(received, AudioChunk):
-            return cost * received.duration / PHONEME_S
-        if isinstance(received, (End, Interrupt)):
-            final = bisect_right(request.ends, request.next_frame / request.spec.fps)
-            return cost * (len(request.ends) - final)
-        return 0.0
+            phonemes = len(received.items)
+            until = max([until, *(item.end for item in received.items[-1:])])
+        elif isinstance(received, AudioChunk):
+            phonemes = math.ceil(received.duration / PHONEME_S)
+        else:
+            phonemes = len(request.ends) - bisect_right(request.ends, request.next_frame / fps)
+            if isinstance(received, Interrupt):
+                return_ms = received.return_ms
+                if return_ms is None:
+                    return_ms = self.limits.request.default_return_ms
+                extra_frames = math.ceil(return_ms * fps / 1000.0) + 1
+        released = min(frame_count(until, fps), self.limits.request.max_frames)
+        frames = max(0, released - request.next_frame) + extra_frames
+        return self.costs[received.id].ms(phonemes, frames)
+
+    def stop_work(self, identifier: str) -> None:
+        """Stop the work of active request ``identifier`` at its next step (the client sent
+        ``cancel`` for it); its messages then answer nothing until that ``cancel``."""
+        guard = self.guards.get(identifier)
+        if guard is not None:
+            guard.cancel()
+
+    def stop_all_work(self) -> None:
+        """Stop the work of every active request at its next step (the connection is over)."""
+        for guard in list(self.guards.values()):
+            guard.cancel()
 
     def handle(self, received: InputMessage, now: float) -> list[Outgoing]:
         """The messages that answer ``received``, which arrived at monotonic time ``now``."""
@@ -170,28 +212,25 @@ class Session:
         request = self.requests.get(received.id)
         if request is None:
             return self._orphan(received)
+        guard = self.guards[request.id]
         try:
-            outgoing = self._apply(request, received, now)
-        except RequestError as error:
-            self._forget(request.id)
-            return [
-                _error(
-                    error.code,
-                    _located(error),
-                    request.id,
-                    fatal=True,
-                    details=error.details,
-                    clock=request.spec.clock,
-                )
-            ]
+            outgoing = self._metered(guard, request, received, now)
         except LipstreamError as error:
+            if guard.cancelled and not isinstance(received, Cancel):
+                # Stopped by the client's cancel, which follows in order and ends it, or by
+                # the end of the connection.
+                self.stopped_work += 1
+                return []
             self._forget(request.id)
+            details = error.details if isinstance(error, RequestError) else None
+            code = error.code if isinstance(error, RequestError) else None
             return [
                 _error(
-                    protocol_code(error, INVALID_REQUEST),
+                    code or protocol_code(error, INVALID_REQUEST),
                     _located(error),
                     request.id,
                     fatal=True,
+                    details=details,
                     clock=request.spec.clock,
                 )
             ]
@@ -199,6 +238,16 @@ class Session:
             self._forget(request.id)
             self._remember(request.id, _REASONS[type(received)])
         return outgoing
+
+    def _metered(
+        self, guard: WorkGuard, request: ActiveRequest, received: RequestInput, now: float
+    ) -> list[Outgoing]:
+        """``_apply`` with the engine's time counted against the request's CPU budget
+        (``cancel`` does no engine work, so it runs even when the work was stopped)."""
+        if isinstance(received, Cancel):
+            return self._apply(request, received, now)
+        with guard.metering():
+            return self._apply(request, received, now)
 
     def _apply(self, request: ActiveRequest, received: RequestInput, now: float) -> list[Outgoing]:
         if isinstance(received, Phonemes):
@@ -233,7 +282,8 @@ class Session:
 
     def _forget(self, identifier: str) -> None:
         self.requests.pop(identifier, None)
-        self.per_phoneme_ms.pop(identifier, None)
+        self.costs.pop(identifier, None)
+        self.guards.pop(identifier, None)
 
     def _remember(self, identifier: str, reason: DoneReason) -> None:
         self.ended[identifier] = reason
@@ -275,7 +325,7 @@ class Session:
                 )
             ]
         try:
-            request, ready, estimate = self._open(start, now)
+            request, ready, cost, guard = self._open(start, now)
         except BudgetInfeasible as error:
             return [
                 _error(
@@ -291,11 +341,12 @@ class Session:
                 _error(protocol_code(error, INVALID_REQUEST), _located(error), start.id, fatal=True)
             ]
         self.requests[start.id] = request
-        self.per_phoneme_ms[start.id] = estimate.per_phoneme_ms
+        self.costs[start.id] = cost
+        self.guards[start.id] = guard
         self.ended.pop(start.id, None)
         return [Outgoing(ready, request.spec.clock)]
 
-    def _open(self, start: Start, now: float) -> tuple[ActiveRequest, Ready, RungEstimate]:
+    def _open(self, start: Start, now: float) -> tuple[ActiveRequest, Ready, CallCost, WorkGuard]:
         catalog = self.catalog
         model = catalog.model(start.engine, start.character)
         source = _phoneme_source(start.phoneme_source)
@@ -314,7 +365,8 @@ class Session:
         options = _merged_options(
             start.options, estimate.rung.options, budgeted=start.latency_budget_ms is not None
         )
-        synthesizer = model.start(SynthesisRequest(start.fps, start.emotion, options))
+        guard = WorkGuard(self.limits.cpu_budget_s)
+        synthesizer = model.start(SynthesisRequest(start.fps, start.emotion, options, guard))
         rest = profile.apply(catalog.rest_pose(model, start.emotion)[None])[0]
         clock = RequestClock(model.manifest.engine, now, start.latency_budget_ms)
         spec = RequestSpec(
@@ -341,7 +393,8 @@ class Session:
             options=options,
             phoneme_source=source,
         )
-        return ActiveRequest(spec, synthesizer, self.limits.request), ready, estimate
+        request = ActiveRequest(spec, synthesizer, self.limits.request)
+        return request, ready, catalog.call_cost(model, options), guard
 
     def _fidelity(
         self, model: Model, estimate: RungEstimate, options: Mapping[str, JsonValue]

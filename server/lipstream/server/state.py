@@ -40,4 +40,5 @@ class ServerState:
             request=RequestLimits(
                 settings.max_phonemes_per_request, settings.max_request_frames, settings.return_ms
             ),
+            cpu_budget_s=settings.request_cpu_s,
         )

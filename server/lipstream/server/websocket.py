@@ -6,10 +6,16 @@ with HTTP 403); then come the Origin allow-list, the bearer token, the drain
 and the session cap. A refused connection is accepted only to receive an
 ``error`` and its close code. An admitted connection is one task that takes
 one message at a time: rate limit (token bucket), decode (size-limited,
-sans I/O), then ``Session.handle``, inline when its estimated engine work is
-below ``inline_work_ms`` and in the synthesis thread pool otherwise, so the
-event loop never waits on a long synthesis; then it stamps, encodes and
-sends the answers itself. Sending from the same task, rather than handing
+sans I/O), then ``Session.handle``, inline when the engine's estimate of its
+work is below ``inline_work_ms`` and in the synthesis thread pool otherwise
+(with its frames encoded there too), so the event loop never waits on a
+long synthesis; answers of more than ``JSON_INLINE_VALUES`` JSON numbers are
+encoded in the pool as well. While work runs in the pool the connection
+keeps receiving (``read_ahead``): the socket is read and pings answered, a
+``cancel`` stops its request's work at once (``Session.stop_work``), a
+closed socket stops all of it, and the messages read wait, in order, for
+their turn. Then the task stamps and sends the answers itself. Sending
+from the same task, rather than handing
 each answer to a writer task, saves a task switch and a queue round trip
 per message, the largest cost left once the engine is fast. A send waits
 only when the client's socket buffers are full; the connection then reads
@@ -26,13 +32,14 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections.abc import MutableMapping, Sequence
-from typing import Any
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, TypeAlias, TypeVar
 
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from lipstream_client import (
     ERROR_CODES,
+    Cancel,
     CloseCode,
     Done,
     Encoding,
@@ -58,6 +65,7 @@ from lipstream_client.errors import (
 from .admission import TokenBucket, bearer_token, origin_allowed, token_accepted
 from .deadline import SendDeadline
 from .outgoing import Outgoing, Stamped
+from .read_ahead import DISCONNECT, ReadAhead, Received
 from .session import InputMessage, Session
 from .state import ServerState
 
@@ -68,6 +76,10 @@ CLOSE_DEADLINE_S = 1.0
 _IDLE = object()
 _WAKE = object()
 _PEER_GONE = (WebSocketDisconnect, RuntimeError, OSError)
+JSON_INLINE_VALUES = 512  # about 4 ms of JSON encoding: more goes to the pool
+Payload: TypeAlias = bytes | str
+Answers: TypeAlias = tuple[list[Outgoing], list[Payload | None]]
+T = TypeVar("T")
 
 
 async def stream_endpoint(websocket: WebSocket) -> None:
@@ -159,6 +171,10 @@ class Connection:
         self._receiving = False
         self._woken = False
         self._active = 0
+        self._stopped = 0
+        self.read_ahead = ReadAhead(self.settings.max_message_bytes)
+        self._receive_task: asyncio.Task[Received] | None = None
+        self._peer_gone = False
 
     # ---- lifecycle hooks (Drainable) ------------------------------------------------------
 
@@ -168,6 +184,7 @@ class Connection:
 
     def abort(self) -> None:
         self.aborted = True
+        self.session.stop_all_work()
         self._wake()
 
     def _wake(self) -> None:
@@ -191,6 +208,8 @@ class Connection:
                 )
         finally:
             self.deadline.disarm()
+            if self._receive_task is not None:
+                self._receive_task.cancel()
             self.session.close()
             self._track_active()
 
@@ -204,21 +223,20 @@ class Connection:
                     "the server is shutting down; reconnect to another instance",
                 )
                 return
-            event = await self._next_event()
-            if event is _WAKE:
+            received = await self._next_event()
+            if received is _WAKE:
                 continue
-            if event is _IDLE:
+            if received is _IDLE:
                 await self._close(
                     CloseCode.NORMAL,
                     IDLE_TIMEOUT,
                     f"no message and no active request for {settings.idle_timeout_s:g} s",
                 )
                 return
-            assert isinstance(event, MutableMapping)
-            if event["type"] == "websocket.disconnect":
+            assert isinstance(received, Received)
+            if received.event["type"] == "websocket.disconnect":
                 return
-            now = time.monotonic()
-            if not self.bucket.take(now):
+            if not self.bucket.take(received.at):
                 await self._close(
                     CloseCode.POLICY_VIOLATION,
                     RATE_LIMITED,
@@ -226,66 +244,138 @@ class Connection:
                     f"(bursts of {settings.message_burst})",
                 )
                 return
-            payload = event["bytes"] if event.get("bytes") is not None else event.get("text", "")
-            decoded = decode(
-                payload, self.encoding, max_size=settings.max_message_bytes, sender="client"
-            )
+            decoded = received.decoded
+            if decoded is None:
+                decoded = self._decode(received.event)
             kind = "invalid" if isinstance(decoded, ProtocolError) else decoded.type
             self.metrics.labelled(self.metrics.messages, kind).inc()
-            outgoing = await self._handle(decoded, now)
+            outgoing, payloads = await self._handle(decoded, received.at)
             self._track_active()
-            if not await self._send_all(outgoing):
+            if not await self._send_all(outgoing, payloads):
                 return
             ending = _connection_ending(outgoing)
             if ending is not None:
                 await self._close(*ending)
                 return
 
+    def _decode(self, event: Mapping[str, Any]) -> InputMessage:
+        payload = event["bytes"] if event.get("bytes") is not None else event.get("text", "")
+        return decode(
+            payload, self.encoding, max_size=self.settings.max_message_bytes, sender="client"
+        )
+
     async def _next_event(self) -> object:
-        """The client's next ASGI event; ``_IDLE`` after ``idle_timeout_s`` without one while
-        no request is active, ``_WAKE`` when ``_wake`` interrupted the wait."""
+        """The client's next message (those read ahead first); ``_IDLE`` after
+        ``idle_timeout_s`` without one while no request is active, ``_WAKE`` when ``_wake``
+        interrupted the wait."""
+        ahead = self.read_ahead.pop()
+        if ahead is not None:
+            return ahead
         self._receiving = True
+        timeout = None if self.session.active_requests else self.settings.idle_timeout_s
         try:
-            if self.session.active_requests:
-                message: MutableMapping[str, Any] = await self.websocket.receive()
-                return message
-            async with asyncio.timeout(self.settings.idle_timeout_s):
-                message = await self.websocket.receive()
-                return message
+            if self._receive_task is not None:
+                done, _ = await asyncio.wait({self._receive_task}, timeout=timeout)
+                if not done:
+                    return _IDLE
+                task, self._receive_task = self._receive_task, None
+                return task.result()
+            if timeout is None:  # no timer per message while requests are active
+                return await self._receive()
+            async with asyncio.timeout(timeout):
+                return await self._receive()
         except TimeoutError:
             return _IDLE
         except asyncio.CancelledError:
             if not self._woken or self._task is None or self._task.uncancel():
                 raise
             return _WAKE
-        except _PEER_GONE:
-            return {"type": "websocket.disconnect"}
         finally:
             self._receiving = False
             self._woken = False
 
-    async def _handle(self, decoded: InputMessage, now: float) -> list[Outgoing]:
+    async def _receive(self) -> Received:
+        try:
+            event: Mapping[str, Any] = await self.websocket.receive()
+        except _PEER_GONE:
+            event = DISCONNECT
+        return Received(event, time.monotonic())
+
+    async def _handle(self, decoded: InputMessage, now: float) -> Answers:
+        """The answers to ``decoded``, with the payloads encoded in the pool (None: encode
+        when sending)."""
         if self.session.estimated_work_ms(decoded) > self.settings.inline_work_ms:
-            return await self.loop.run_in_executor(
-                self.state.executor, self.session.handle, decoded, now
+            return await self._in_pool(lambda: self._encoded(self.session.handle(decoded, now)))
+        outgoing = self.session.handle(decoded, now)
+        if self.encoding == "json" and _values(outgoing) > JSON_INLINE_VALUES:
+            return await self._in_pool(lambda: self._encoded(outgoing))
+        return outgoing, [None] * len(outgoing)
+
+    def _encoded(self, outgoing: list[Outgoing]) -> Answers:
+        """``outgoing`` with each frames block encoded (stamping leaves those unchanged);
+        nothing more is encoded once the client is gone."""
+        payloads: list[Payload | None] = []
+        for item in outgoing:
+            if self._peer_gone or self.aborted:
+                return [], []
+            payloads.append(
+                encode(item.message, self.encoding, validate=False)
+                if isinstance(item.message, Frames)
+                else None
             )
-        return self.session.handle(decoded, now)
+        return outgoing, payloads
+
+    async def _in_pool(self, job: Callable[[], T]) -> T:
+        """Run ``job`` in the synthesis pool, reading the client's messages ahead meanwhile."""
+        future = self.loop.run_in_executor(self.state.executor, job)
+        while not future.done() and not self._peer_gone and self.read_ahead.has_room():
+            if self._receive_task is None:
+                self._receive_task = asyncio.create_task(self._receive())
+            receiving = self._receive_task
+            waits: set[asyncio.Future[Any]] = {future, receiving}
+            await asyncio.wait(waits, return_when=asyncio.FIRST_COMPLETED)
+            if receiving.done():
+                self._receive_task = None
+                self._read(receiving.result())
+        return await future
+
+    def _read(self, received: Received) -> None:
+        """Keep a message read while work runs; a ``cancel`` stops its request's work now,
+        a closed socket all of it (and nothing read before it will be answered)."""
+        if received.event["type"] == "websocket.disconnect":
+            self._peer_gone = True
+            self.session.stop_all_work()
+            self.read_ahead.clear()
+            self.read_ahead.push(received)
+            return
+        decoded = self._decode(received.event)
+        if isinstance(decoded, Cancel) and not self.read_ahead.starts(decoded.id):
+            self.session.stop_work(decoded.id)
+        self.read_ahead.push(Received(received.event, received.at, decoded))
 
     def _track_active(self) -> None:
         active = self.session.active_requests
         if active != self._active:
             self.metrics.requests_active.inc(active - self._active)
             self._active = active
+        stopped = self.session.stopped_work
+        if stopped != self._stopped:
+            self.metrics.work_stopped.inc(stopped - self._stopped)
+            self._stopped = stopped
 
     # ---- sending --------------------------------------------------------------------------
 
-    async def _send_all(self, items: Sequence[Outgoing]) -> bool:
-        """Stamp, encode and send ``items`` in order; False once the connection is over
-        (the client is gone, or missed a send deadline and was closed as a slow consumer)."""
-        for item in items:
+    async def _send_all(
+        self, items: Sequence[Outgoing], payloads: Sequence[Payload | None] = ()
+    ) -> bool:
+        """Stamp, encode (unless ``payloads`` holds the encoding) and send ``items`` in order;
+        False once the connection is over (the client is gone, or missed a send deadline and
+        was closed as a slow consumer)."""
+        for index, item in enumerate(items):
             self._observe(item)
             stamped = item.stamp(time.monotonic())
-            payload = encode(stamped.message, self.encoding, validate=False)
+            encoded = payloads[index] if index < len(payloads) else None
+            payload = encoded or encode(stamped.message, self.encoding, validate=False)
             try:
                 await self._send_payload(payload)
             except TimeoutError:
@@ -354,6 +444,11 @@ class Connection:
                 await self.websocket.close(code=code, reason=reason)
         except (TimeoutError, *_PEER_GONE):
             return
+
+
+def _values(outgoing: list[Outgoing]) -> int:
+    """The numbers the frames blocks in ``outgoing`` carry."""
+    return sum(len(item.message.data) // 4 for item in outgoing if isinstance(item.message, Frames))
 
 
 def _connection_error(code: str, message: str) -> Outgoing:

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pytest
 
-from lipstream.engines.base import Lookahead, Rung
+from lipstream.engines.base import CallCost, Lookahead, Rung
 from lipstream.phonemes import SILENCE
 from lipstream.server.budget import BudgetInfeasible, choose_rung, estimate, lookahead_ms
 from lipstream.server.calibration import CALIBRATION_PHONEMES, calibration_spans, measure
@@ -26,9 +26,9 @@ def ladder() -> list:  # type: ignore[type-arg]
     # max phoneme 200 ms, margin 5 ms: exact 100 + 800 + 12 + 5 = 917 ms,
     # fixed_lag 50 + 200 + 3 + 5 = 258 ms, greedy 0 + 0 + 20.4 + 5 = 25.4 ms.
     return [
-        estimate(EXACT, 200.0, 12.0, 5.0, 0.3),
-        estimate(FIXED_LAG, 200.0, 3.0, 5.0, 0.1),
-        estimate(GREEDY, 200.0, 20.4, 5.0, 0.2),
+        estimate(EXACT, 200.0, 12.0, 5.0, CallCost(0.3, 0.0)),
+        estimate(FIXED_LAG, 200.0, 3.0, 5.0, CallCost(0.1, 0.0)),
+        estimate(GREEDY, 200.0, 20.4, 5.0, CallCost(0.2, 0.0)),
     ]
 
 
@@ -70,6 +70,8 @@ def test_calibration_utterance_and_measurement(trained_models: dict[str, Model])
     assert all(left.end == pytest.approx(right.start) for left, right in pairwise(spans))
     cost = measure(trained_models["viseme-lerp"], Rung("default", Lookahead(phonemes=1)))
     assert 0.0 < cost.per_phoneme_ms <= cost.max_call_ms < 1000.0
+    # A frame costs something, and less than a phoneme with its 4.8 frames at 60 fps.
+    assert 0.0 < cost.per_frame_ms < cost.per_phoneme_ms
 
 
 def test_catalog_resolves_models_and_names_the_missing_field(catalog: Catalog) -> None:
@@ -132,9 +134,13 @@ class _AudioEngineModel:
 def test_an_engine_that_uses_audio_is_also_calibrated_with_audio_under_each_span() -> None:
     model = _AudioEngineModel()
     measure(model, Rung("default", Lookahead(phonemes=1)))  # type: ignore[arg-type]
-    with_audio = [fed for fed in model.passes if fed[0][1] is not None]
-    without = [fed for fed in model.passes if fed[0][1] is None]
+    streamed = [fed for fed in model.passes if len(fed) > 1]
+    with_audio = [fed for fed in streamed if fed[0][1] is not None]
+    without = [fed for fed in streamed if fed[0][1] is None]
     assert len(with_audio) == len(without) == 3  # warm-up + CALIBRATION_PASSES each
+    # The frame cost: the whole utterance in one feed, at two frame rates, 3 passes each.
+    offline = [fed for fed in model.passes if len(fed) == 1]
+    assert len(offline) == 6 and all(fed[0][1] is None for fed in offline)
     for fed in with_audio:
         ends = [round(span.end * audio.sample_rate) for span, audio in fed]
         assert [len(audio.samples) for _, audio in fed] == np.diff([0, *ends]).tolist()

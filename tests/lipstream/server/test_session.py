@@ -375,10 +375,53 @@ def test_an_engine_fault_ends_only_its_request(catalog: Catalog) -> None:
     assert isinstance(play(session, Phonemes("b", ITEMS), End("b"))[-1], Done)
 
 
-def test_work_estimate_scales_with_the_phonemes_in_a_message(catalog: Catalog) -> None:
+def test_work_estimate_prices_phonemes_and_frames_at_the_calibrated_cost(
+    catalog: Catalog,
+) -> None:
     session = new_session(catalog)
-    play(session, Start("a", "viseme-lerp", "demo"))
-    per_phoneme = catalog.ladder(catalog.model("viseme-lerp", "demo"))[0].per_phoneme_ms
-    assert session.estimated_work_ms(Phonemes("a", ITEMS)) == pytest.approx(3 * per_phoneme)
+    play(session, Start("a", "viseme-lerp", "demo", fps=60))
+    measured = catalog.ladder(catalog.model("viseme-lerp", "demo"))[0]
+    # 3 phonemes; they end at 0.6 s, so frames 0..36 (37) may follow.
+    expected = 3 * measured.per_phoneme_ms + 37 * measured.per_frame_ms
+    assert session.estimated_work_ms(Phonemes("a", ITEMS)) == pytest.approx(expected)
     assert session.estimated_work_ms(Phonemes("zz", ITEMS)) == 0.0
     assert session.estimated_work_ms(Start("b", "viseme-lerp", "demo")) == 0.0
+    play(session, Phonemes("a", ITEMS))
+    # viseme-lerp waits one phoneme: frames before 0.4 s (24) are out; end decides the last
+    # phoneme and releases frames 24..36.
+    assert session.requests["a"].next_frame == 24
+    assert session.estimated_work_ms(End("a")) == pytest.approx(
+        measured.per_phoneme_ms + 13 * measured.per_frame_ms
+    )
+
+
+def test_options_outside_the_ladder_are_priced_by_the_engine_not_a_rung(
+    catalog: Catalog,
+) -> None:
+    model = catalog.model("anime-graph", "demo")
+    top = catalog.ladder(model)[0]
+    # Naming the rung's own defaults still selects it: the measured cost.
+    same = catalog.call_cost(model, {**top.rung.options, "graph": model.default_graph})
+    assert (same.per_phoneme_ms, same.per_frame_ms) == (top.per_phoneme_ms, top.per_frame_ms)
+    session = new_session(catalog)
+    play(session, Start("pq", "anime-graph", "demo", options={"search": "pq"}))
+    assert session.estimated_work_ms(Phonemes("pq", ITEMS[:1])) == math.inf
+    assert session.estimated_work_ms(Cancel("pq")) == 0.0
+
+
+def test_a_request_over_its_cpu_budget_ends_with_a_coded_error(catalog: Catalog) -> None:
+    session = Session(catalog, SessionLimits(3, RequestLimits(20, 1000, 100.0), cpu_budget_s=1e-9))
+    out = play(session, Start("a", "viseme-lerp", "demo"), Phonemes("a", ITEMS))
+    assert errors(out) == [("cpu_budget_exceeded", "a", True)]
+    assert "a" not in session.requests
+
+
+def test_stopped_work_answers_nothing_until_its_cancel(catalog: Catalog) -> None:
+    session = new_session(catalog)
+    play(session, Start("a", "viseme-lerp", "demo"), Start("b", "viseme-lerp", "demo"))
+    session.stop_work("a")
+    assert play(session, Phonemes("a", ITEMS), End("a")) == []
+    assert session.stopped_work == 2
+    done = play(session, Cancel("a"))
+    assert len(done) == 1 and isinstance(done[0], Done) and done[0].reason == "cancel"
+    assert isinstance(play(session, Phonemes("b", ITEMS), End("b"))[-1], Done)

@@ -162,6 +162,24 @@ class AnimeGraphModel(Model):
             )
         return tuple(rungs)
 
+    def rung_for(self, options: Mapping[str, Any]) -> Rung | None:
+        """The rung whose options resolve to the same search as ``options`` (defaults filled
+        in), so a client that also names a rung's default graph still gets its measured
+        cost. PQ-Matching never selects a rung: its work per window grows exponentially with
+        h and no calibration bounds it, so ``call_cost`` leaves it unbounded (such calls
+        always leave the server's event loop), and the request's guard and ``pq_budget_s``
+        stop it."""
+        parsed = parse_options(options, self.default_graph, self.has_clusters, self.max_tile)
+        return next(
+            (
+                rung
+                for rung in self.fidelity_ladder()
+                if parse_options(rung.options, self.default_graph, self.has_clusters, self.max_tile)
+                == parsed
+            ),
+            None,
+        )
+
     def view_for(self, emotion: str | None, options: SearchOptions) -> GraphView:
         """The view searched for a span spoken with ``emotion`` (its own, else the
         request's): that emotion's when it was recorded and ``match_emotion`` is on, else
@@ -213,7 +231,7 @@ class AnimeGraphModel(Model):
         audio: Audio | None,
     ) -> np.ndarray:
         """Frames at arbitrary ``times`` (s): the offline track, interpolated."""
-        fine = SynthesisRequest(fps=self.fps, emotion=request.emotion, options=request.options)
+        fine = SynthesisRequest(self.fps, request.emotion, request.options, request.guard)
         synthesizer = self.start(fine)
         synthesizer.feed(spans, audio)
         frames = synthesizer.finish().astype(np.float64)

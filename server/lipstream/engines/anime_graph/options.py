@@ -10,7 +10,9 @@ a tile's phonemes; 0 lifts the cap, which makes GreedyMatching exactly
 minimal in jumps but lets a frame wait for a whole tile, beyond the model's
 declared lookahead. ``pq_budget_s`` (seconds, default unlimited) makes a
 PQ-Matching request fail with ``search_timeout`` once its search has run that
-long, since PQ-Matching can take minutes.
+long, since PQ-Matching can take minutes. PQ-Matching's work grows
+exponentially with its window, so a request may hold at most
+``MAX_PQ_STEPS`` // ``pq_window`` phonemes (``search_too_large`` beyond).
 """
 
 from __future__ import annotations
@@ -25,6 +27,8 @@ from ..base import check_options
 GRAPHS = ("unclustered", "clustered")
 SEARCHES = ("greedy", "pq")
 MAX_PQ_WINDOW = 6
+MAX_PQ_STEPS = 256
+SEARCH_TOO_LARGE = "search_too_large"
 
 
 @dataclass(frozen=True)
@@ -38,6 +42,18 @@ class SearchOptions:
     match_emotion: bool = True
     max_tile: int | None = 10
     pq_budget_s: float | None = None
+
+    def check_size(self, phonemes: int) -> None:
+        """``InvalidRequestError`` (``search_too_large``) when a PQ-Matching request would hold
+        more than ``MAX_PQ_STEPS`` window × phonemes."""
+        if self.search == "pq" and self.pq_window * phonemes > MAX_PQ_STEPS:
+            raise InvalidRequestError(
+                f"PQ-Matching with pq_window {self.pq_window} takes at most "
+                f"{MAX_PQ_STEPS // self.pq_window} phonemes per request (pq_window × phonemes "
+                f"<= {MAX_PQ_STEPS}); this request would hold {phonemes}",
+                where="options.search",
+                code=SEARCH_TOO_LARGE,
+            )
 
 
 ENGINE = "anime-graph"

@@ -10,12 +10,14 @@ order, the first sibling that cannot beat the incumbent ends its level.
 A window's jumps include the join to the last node already committed. The
 first h_q nodes are committed and the window advances by h_q. Partial paths
 are never merged, so the work grows exponentially with h, as in the paper;
-memory stays O(h * candidates).
+memory stays O(h * candidates). A caller's ``check`` (the request's
+``WorkGuard`` and ``pq_budget_s``) runs before each window and every
+``CHECK_EVERY`` partial paths, and stops the search by raising.
 """
 
 from __future__ import annotations
 
-import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -25,13 +27,20 @@ from .costs import Labels, Ranking
 from .graph import SearchGraph
 
 _TOLERANCE = 1e-9
-_CLOCK_EVERY = 256
+CHECK_EVERY = 256
+SEARCH_TIMEOUT = "search_timeout"
+
+Check = Callable[[], None]
 
 
 class SearchTimeout(LipstreamError):
-    """PQ-Matching ran past its deadline (benchmarks only)."""
+    """PQ-Matching used up the request's ``pq_budget_s``."""
 
-    code = "search_timeout"
+    code = SEARCH_TIMEOUT
+
+
+def _unchecked() -> None:
+    return None
 
 
 @dataclass(frozen=True)
@@ -100,14 +109,11 @@ def pq_window(
     start: int,
     stop: int,
     anchor: int | None = None,
-    deadline: float | None = None,
+    check: Check = _unchecked,
 ) -> WindowResult:
-    """PQ-DFS over ``query[start:stop]`` after the committed node ``anchor``; raises
-    ``SearchTimeout`` past ``deadline`` (a ``time.perf_counter`` value)."""
-    if deadline is not None and time.perf_counter() > deadline:
-        raise SearchTimeout(
-            f"PQ-Matching passed its deadline before the window at {start}", where="search"
-        )
+    """PQ-DFS over ``query[start:stop]`` after the committed node ``anchor``; ``check`` runs
+    first and every ``CHECK_EVERY`` partial paths, and stops the search by raising."""
+    check()
     positions = range(start, stop)
     candidates = [graph.nodes_with_label(int(query[p])) for p in positions]
     costs = [ranking.label_costs(p, int(query[p])) for p in positions]
@@ -143,10 +149,8 @@ def pq_window(
             best_path, best_jumps, best_cost = list(path), jumps, cost
             continue
         expanded += 1
-        if deadline is not None and expanded % _CLOCK_EVERY == 0 and time.perf_counter() > deadline:
-            raise SearchTimeout(
-                f"PQ-Matching window at {start} passed its deadline", where="search"
-            )
+        if expanded % CHECK_EVERY == 0:
+            check()
         stack.append(level(depth + 1, path[-1], jumps, cost))
     return WindowResult(np.asarray(best_path, dtype=np.int64), best_jumps, best_cost, expanded)
 
@@ -158,16 +162,16 @@ def pq_matching(
     window: int,
     advance: int,
     anchor: int | None = None,
-    deadline: float | None = None,
+    check: Check = _unchecked,
 ) -> tuple[np.ndarray, int]:
     """PQ-Matching(h=window, h_q=advance) over the whole query: (nodes, partial paths
-    expanded). ``deadline`` as for ``pq_window``."""
+    expanded). ``check`` as for ``pq_window``."""
     nodes: list[int] = []
     expanded = 0
     position = 0
     while position < len(query):
         stop = min(len(query), position + window)
-        result = pq_window(graph, ranking, query, position, stop, anchor, deadline)
+        result = pq_window(graph, ranking, query, position, stop, anchor, check)
         expanded += result.expanded
         keep = len(result.nodes) if stop == len(query) else min(advance, len(result.nodes))
         nodes.extend(int(node) for node in result.nodes[:keep])

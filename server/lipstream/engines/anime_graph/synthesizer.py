@@ -43,13 +43,14 @@ from ...errors import InvalidRequestError
 from ...phonemes import PHONEME_INDEX, SILENCE
 from ...timeline import PhonemeSpan, SpanLike, coerce_spans
 from ..base import SynthesisRequest, Synthesizer, fill_gaps, frame_count
+from ..work import WorkGuard
 from .animes import summarize
 from .blending import Join, PairIndex, plan_join
 from .costs import Ranking
 from .graph import SearchGraph
 from .growable import Growable
 from .options import SearchOptions
-from .pq import pq_window
+from .pq import SearchTimeout, pq_window
 from .request_audio import RequestAudio
 from .search import Matcher, count_jumps
 from .track import MotionTrack, Placement
@@ -104,6 +105,8 @@ class AnimeGraphSynthesizer(Synthesizer):
         self.smoothed = Growable(np.float64, (model.n_components,))
         self.emitted = 0
         self.finished = False
+        self.guard = request.guard
+        self.search_guard = WorkGuard(options.pq_budget_s, time.perf_counter, _search_timeout)
         self.stats: dict[str, Any] = {
             "frames": 0,
             "tiles": 0,
@@ -125,7 +128,9 @@ class AnimeGraphSynthesizer(Synthesizer):
             raise InvalidRequestError("input fed after finish()", code="request_finished")
         self._take_audio(audio)
         new = coerce_spans(spans, after=self.covered_until, first_index=len(self.spans))
-        for span in fill_gaps(new, self.covered_until):
+        filled = fill_gaps(new, self.covered_until)
+        self.options.check_size(len(self.spans) + len(filled))
+        for span in filled:
             searcher = self._searcher_for(self.request.emotion_of(span))
             if self.searchers and searcher is not self.searchers[-1]:
                 self.run_starts.append(len(self.searchers))
@@ -228,14 +233,10 @@ class AnimeGraphSynthesizer(Synthesizer):
             if not self._audio_ready(self.spans[end - 1].end):
                 return None
             ranking = self._ranking(searcher.graph, start, end)
-            budget = self.options.pq_budget_s
-            deadline = (
-                None
-                if budget is None
-                else time.perf_counter() + budget - self.stats["search_ms"] / 1000.0
-            )
             result = self._timed(
-                lambda: pq_window(searcher.graph, ranking, self.query, start, end, ranked, deadline)
+                lambda: pq_window(
+                    searcher.graph, ranking, self.query, start, end, ranked, self._check
+                )
             )
             last_window = closed and end == stop
             keep = len(result.nodes) if last_window else self.options.pq_advance
@@ -299,18 +300,26 @@ class AnimeGraphSynthesizer(Synthesizer):
         return entered + count_jumps(self.searchers[start].graph, np.asarray(lead + tile))
 
     def _timed(self, call: Callable[[], _Result]) -> _Result:
-        """Run one search step, adding its time to ``stats["search_ms"]``."""
+        """Run one search step, adding its time to ``stats["search_ms"]`` and to what
+        ``pq_budget_s`` allows."""
         started = time.perf_counter()
         try:
-            return call()
+            with self.search_guard.metering():
+                return call()
         finally:
             self.stats["search_ms"] += 1000.0 * (time.perf_counter() - started)
+
+    def _check(self) -> None:
+        """Stop here if the request's work was cancelled or its budgets are spent."""
+        self.guard.check()
+        self.search_guard.check()
 
     def _decide(self) -> None:
         if self.finished and self.audio is not None and self.spans:
             self.audio.curves(self.covered_until)
         placed = len(self.nodes)
         while len(self.nodes) < len(self.query):
+            self.guard.check()
             tiles = self._next_tiles()
             if tiles is None:
                 break
@@ -323,6 +332,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         positions = range(placed, len(self.nodes))
         animes = self._animes(positions)
         for position, anime, warp in zip(positions, animes, self._warps(positions, animes)):
+            self.guard.check()
             self._place(position, anime, warp)
 
     def _animes(self, positions: range) -> list[int]:
@@ -450,6 +460,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         stop = self._emittable(total)
         if stop <= self.emitted:
             return np.zeros((0, len(self.model.channels)), dtype=np.float32)
+        self.guard.check()
         positions = np.arange(self.emitted, stop) * (self.model.fps / self.fps)
         snapped = np.round(positions)
         positions = np.where(np.abs(positions - snapped) < _SNAP, snapped, positions)
@@ -478,3 +489,10 @@ def _filter(block: np.ndarray, kernels: np.ndarray) -> np.ndarray:
     for component in range(block.shape[1]):
         out[:, component] = np.convolve(block[:, component], kernels[component][::-1], "valid")
     return out
+
+
+def _search_timeout(spent_s: float, budget_s: float) -> SearchTimeout:
+    return SearchTimeout(
+        f"PQ-Matching searched for {spent_s:.3g} s, past pq_budget_s = {budget_s:g} s",
+        where="search",
+    )

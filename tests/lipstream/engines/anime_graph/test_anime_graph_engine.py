@@ -256,3 +256,17 @@ def test_render_samples_the_offline_track_and_empty_input_gives_no_frames(
     np.testing.assert_allclose(model.render(spans, times, request, None), offline, atol=1e-6)
     synthesizer = model.start(fps=30.0)
     assert synthesizer.finish().shape == (0, 6)
+
+
+@pytest.mark.parametrize(("window", "allowed"), [(6, 42), (4, 64), (1, 256)])
+def test_pq_takes_at_most_256_window_phonemes(
+    model: AnimeGraphModel, window: int, allowed: int
+) -> None:
+    synthesizer = model.start(fps=60, search="pq", pq_window=window)
+    spans = [("AA", 0.08 * i, 0.08 * (i + 1)) for i in range(allowed + 1)]
+    synthesizer.feed(spans[:allowed])  # at the cap: accepted (feeding searches nothing)
+    with pytest.raises(LipstreamError) as raised:
+        synthesizer.feed(spans[allowed:])
+    assert (raised.value.code, raised.value.where) == ("search_too_large", "options.search")
+    greedy = model.start(fps=60)
+    greedy.feed(spans)  # the cap is PQ's only

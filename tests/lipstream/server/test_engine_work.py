@@ -1,0 +1,205 @@
+"""Long engine work against a real server: it never holds the event loop, it stops when its
+request is cancelled, its connection closes or its CPU budget is spent, and a connection doing
+it keeps reading (pings, cancel).
+
+PQ-Matching with a 6-phoneme window over one phoneme repeated is the long work: on the test
+model it searches for more than 20 s, far beyond every budget set here, so each request below
+is ended by the mechanism under test, never by finishing.
+"""
+
+from __future__ import annotations
+
+import re
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import httpx
+
+from lipstream.config import ServerSettings
+from lipstream_client import (
+    Cancel,
+    Done,
+    End,
+    ErrorMessage,
+    Frames,
+    Message,
+    PhonemeItem,
+    Phonemes,
+    Ready,
+    Start,
+)
+from tests.lipstream.server.harness import Client, Served, client, serving
+
+ANSWER_BOUND_S = 5.0  # whether the server answers at all, not how fast
+WORK_BOUND_S = 60.0  # a budget of CPU seconds takes longer on a busy machine
+PQ = {"search": "pq", "pq_window": 6}
+PQ_PHONEMES = 42  # 6 × 42 = 252, within the cap of 256
+ITEMS = tuple(PhonemeItem("AA1", 0.08 * i, 0.08 * (i + 1)) for i in range(PQ_PHONEMES))
+SHORT = tuple(
+    PhonemeItem(label, 0.1 * i, 0.1 * (i + 1)) for i, label in enumerate("M AA1 sil".split())
+)
+
+
+def final(ws: Client, identifier: str) -> list[Message]:
+    """Messages of ``identifier`` up to its done or fatal error, each within WORK_BOUND_S."""
+    collected: list[Message] = []
+    while True:
+        message = ws.recv(timeout=WORK_BOUND_S)
+        if getattr(message, "id", None) == identifier:
+            collected.append(message)
+            if isinstance(message, Done) or (isinstance(message, ErrorMessage) and message.fatal):
+                return collected
+
+
+def metric(served: Served, name: str) -> float:
+    text = httpx.get(f"{served.http}/metrics", timeout=ANSWER_BOUND_S).text
+    found = re.search(rf"^{name} ([0-9.e+]+)$", text, flags=re.MULTILINE)
+    return float(found.group(1)) if found else 0.0
+
+
+def eventually(condition: Callable[[], bool], what: str, bound_s: float = 10.0) -> None:
+    deadline = time.monotonic() + bound_s
+    while not condition():
+        assert time.monotonic() < deadline, f"not within {bound_s} s: {what}"
+        time.sleep(0.05)
+
+
+def short_request_completes(served: Served, identifier: str, options: dict) -> None:  # type: ignore[type-arg]
+    """A short request on a new connection gets its done."""
+    with client(served.ws) as ws:
+        ws.send(Start(identifier, "anime-graph", "demo", options=options))
+        ws.send(Phonemes(identifier, SHORT), End(identifier))
+        answers = ws.until_done(identifier)
+    assert isinstance(answers[0], Ready) and isinstance(answers[-1], Done)
+
+
+def test_health_answers_while_pq_runs_and_the_cpu_budget_ends_it(all_models_dir: Path) -> None:
+    settings = ServerSettings(request_cpu_s=1.0)
+    outcome: list[Message] = []
+    with serving(all_models_dir, settings) as served:
+
+        def stream() -> None:
+            with client(served.ws) as ws:
+                ws.send(Start("pq", "anime-graph", "demo", options=PQ))
+                for item in ITEMS:  # one phoneme per message, as a TTS sends them
+                    ws.send(Phonemes("pq", (item,)))
+                ws.send(End("pq"))
+                outcome.extend(final(ws, "pq"))
+
+        worker = threading.Thread(target=stream)
+        worker.start()
+        answers = 0
+        with httpx.Client(timeout=ANSWER_BOUND_S) as http:
+            while worker.is_alive():
+                assert http.get(f"{served.http}/healthz").status_code == 200
+                answers += 1
+                time.sleep(0.05)
+        worker.join()
+    assert answers >= 1
+    last = outcome[-1]
+    assert isinstance(last, ErrorMessage)
+    assert (last.code, last.id, last.fatal) == ("cpu_budget_exceeded", "pq", True)
+
+
+def test_pq_beyond_its_cap_is_refused_and_rest_has_the_cpu_budget(all_models_dir: Path) -> None:
+    with serving(all_models_dir, ServerSettings(request_cpu_s=1.0)) as served:
+        with client(served.ws) as ws:
+            ws.send(Start("big", "anime-graph", "demo", options=PQ))
+            over = tuple(PhonemeItem("AA1", 0.08 * i, 0.08 * (i + 1)) for i in range(43))
+            ws.send(Phonemes("big", over))
+            error = ws.until_done("big")[-1]
+            assert isinstance(error, ErrorMessage)
+            assert (error.code, error.id, error.fatal) == ("search_too_large", "big", True)
+            assert "256" in error.message
+        body = {
+            "engine": "anime-graph",
+            "character": "demo",
+            "options": PQ,
+            "items": [{"phoneme": i.phoneme, "start": i.start, "end": i.end} for i in ITEMS],
+        }
+        answer = httpx.post(f"{served.http}/v1/synthesize", json=body, timeout=WORK_BOUND_S)
+        assert answer.status_code == 422
+        assert answer.json()["error"]["code"] == "cpu_budget_exceeded"
+
+
+def test_cancel_stops_the_running_work_and_ends_the_request(all_models_dir: Path) -> None:
+    settings = ServerSettings(request_cpu_s=600.0, synth_threads=1)
+    with serving(all_models_dir, settings) as served:
+        with client(served.ws) as ws:
+            ws.send(Start("pq", "anime-graph", "demo", options=PQ))
+            ws.send(Phonemes("pq", ITEMS))  # one long job in the pool
+            ws.send(Cancel("pq"))
+            answers = final(ws, "pq")
+            done = answers[-1]
+            # The connection handles messages in order, so the cancel's done comes only
+            # after the job in the pool returned: stopped, not finished (600 s budget).
+            assert isinstance(done, Done) and done.reason == "cancel"
+            assert not any(isinstance(answer, Frames) for answer in answers)
+            assert metric(served, "lipstream_work_stopped_total") == 1.0
+        # The pool's only thread is free again.
+        short_request_completes(served, "after", {"max_tile": 3})
+
+
+def test_closing_the_connection_stops_its_work(all_models_dir: Path) -> None:
+    settings = ServerSettings(request_cpu_s=600.0, synth_threads=1)
+    with serving(all_models_dir, settings) as served:
+        with client(served.ws) as ws:
+            ws.send(Start("pq", "anime-graph", "demo", options=PQ))
+            assert isinstance(ws.recv(), Ready)
+            ws.send(Phonemes("pq", ITEMS))
+        eventually(
+            lambda: metric(served, "lipstream_work_stopped_total") == 1.0,
+            "the closed connection's work stopped",
+        )
+        short_request_completes(served, "after", {"max_tile": 3})
+
+
+def test_a_connection_doing_long_work_keeps_answering_pings(all_models_dir: Path) -> None:
+    settings = ServerSettings(request_cpu_s=1.5, ping_interval_s=0.2, ping_timeout_s=1.0)
+    with serving(all_models_dir, settings) as served:
+        with client(served.ws) as ws:
+            ws.send(Start("pq", "anime-graph", "demo", options=PQ))
+            ws.send(Phonemes("pq", ITEMS))  # 1.5 s of CPU in the pool: many pings
+            error = final(ws, "pq")[-1]
+            assert isinstance(error, ErrorMessage) and error.code == "cpu_budget_exceeded"
+            # Still the same connection: a next request is served on it.
+            ws.send(Start("next", "anime-graph", "demo"))
+            ws.send(Phonemes("next", SHORT), End("next"))
+            assert isinstance(ws.until_done("next")[-1], Done)
+
+
+def test_a_large_json_answer_does_not_stall_other_connections(all_models_dir: Path) -> None:
+    """90 s at 1000 fps in JSON: about 2.5 million numbers to encode."""
+    with serving(all_models_dir, ServerSettings()) as served:
+        received: list[Message] = []
+        stop = threading.Event()
+
+        def large() -> None:
+            with client(served.ws, "json") as ws:
+                ws.send(Start("big", "viseme-lerp", "demo", fps=1000))
+                ws.send(Phonemes("big", (PhonemeItem("AA1", 0.0, 90.0),)), End("big"))
+                while not stop.is_set():
+                    try:
+                        received.append(ws.recv(timeout=0.2))
+                    except TimeoutError:
+                        continue
+
+        worker = threading.Thread(target=large)
+        worker.start()
+        try:
+            eventually(lambda: len(received) >= 1, "ready of the large request")
+            time.sleep(0.5)  # its answer is being produced now
+            with client(served.ws) as other:
+                other.send(Start("small", "viseme-lerp", "demo"))
+                other.send(Phonemes("small", SHORT), End("small"))
+                answers = other.until_done("small")
+            assert isinstance(answers[-1], Done)
+            health = httpx.get(f"{served.http}/healthz", timeout=ANSWER_BOUND_S)
+            assert health.status_code == 200
+            # The large request was still being encoded: its done had not come.
+            assert not any(isinstance(message, Done) for message in received)
+        finally:
+            stop.set()
+            worker.join()
