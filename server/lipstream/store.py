@@ -234,5 +234,7 @@ def require_arrays(
     """Pick the named arrays, with a clear error when one is missing."""
     missing = [name for name in names if name not in arrays]
     if missing:
-        raise ModelStoreError(f"arrays.npz lacks {missing}", where=str(where / ARRAYS_NAME))
+        raise ModelStoreError(
+            f"is missing (arrays.npz lacks {missing})", where=f"{where / ARRAYS_NAME}: {missing[0]}"
+        )
     return {name: arrays[name] for name in names}

@@ -60,7 +60,7 @@ def check_stored_model(
     fields_of = FieldReader(str(directory / MANIFEST_NAME))
     graph, views, mfcc, has_audio = _check_manifest(manifest, fields_of)
     reader = ArrayReader(arrays, str(directory / ARRAYS_NAME))
-    sizes = _check_animes(reader, len(manifest.channels), mfcc, has_audio)
+    sizes = _check_animes(reader, len(manifest.channels), manifest.fps, mfcc, has_audio)
     labels = np.asarray(reader.arrays["anime_label"], dtype=np.int64)
     utterance = np.asarray(reader.arrays["anime_utterance"], dtype=np.int64)
     for name in views:
@@ -143,32 +143,37 @@ def _check_mfcc(values: Mapping[str, object], fields_of: FieldReader) -> MfccCon
 
 
 def _check_animes(
-    reader: ArrayReader, n_channels: int, mfcc: MfccConfig, has_audio: bool
+    reader: ArrayReader, n_channels: int, fps: float, mfcc: MfccConfig, has_audio: bool
 ) -> _Sizes:
     """The model-wide arrays: motion basis, channel range, animes, curves, summaries."""
-    reader.floats("basis_mean", (n_channels,))
-    n_components = reader.floats("basis_components", (None, n_channels)).shape[0]
+    low = np.asarray(reader.floats("channel_low", (n_channels,)), dtype=np.float64)
+    high = np.asarray(reader.floats("channel_high", (n_channels,)), dtype=np.float64)
+    if (low > high).any():
+        raise reader.error("channel_high", "lies below channel_low")
+    slack = 1e-6 * (1.0 + np.abs(low) + np.abs(high))
+    mean = reader.floats("basis_mean", (n_channels,))
+    if ((mean < low - slack) | (mean > high + slack)).any():
+        raise reader.error("basis_mean", "lies outside [channel_low, channel_high]")
+    components = np.asarray(reader.floats("basis_components", (None, n_channels)), np.float64)
+    n_components = len(components)
     if n_components < 1:
         raise reader.error("basis_components", "holds no component")
-    low = reader.floats("channel_low", (n_channels,))
-    high = reader.floats("channel_high", (n_channels,))
-    if (np.asarray(low) > np.asarray(high)).any():
-        raise reader.error("channel_high", "lies below channel_low")
+    if np.abs(components @ components.T - np.eye(n_components)).max() > 1e-4:
+        raise reader.error("basis_components", "is not orthonormal")
     labels = reader.integers("anime_label", (None,), 0, len(PHONEMES))
     n_animes = len(labels)
     if n_animes < 1:
         raise reader.error("anime_label", "holds no anime")
     motion = reader.floats("motion", (None, n_components))
+    # A projection of a pose inside the channel box is no longer than the box's diagonal.
+    reach = 1.001 * float(np.linalg.norm(high - low)) + 1e-6
+    if (np.linalg.norm(np.asarray(motion, dtype=np.float64), axis=1) > reach).any():
+        raise reader.error("motion", "holds a pose outside the channels' recorded range")
     motion_offsets = reader.offsets("motion_offsets", None, len(motion), nonempty=True)
     n_recordings = len(motion_offsets) - 1
     utterance = reader.integers("anime_utterance", (n_animes,), 0, n_recordings)
     check_ascending(reader.where("anime_utterance"), utterance, strict=False)
-    start = reader.floats("anime_start", (n_animes,))
-    end = reader.floats("anime_end", (n_animes,))
-    if (np.asarray(start) < 0.0).any():
-        raise reader.error("anime_start", "holds a negative time")
-    if (np.asarray(end) < np.asarray(start)).any():
-        raise reader.error("anime_end", "holds an end before its start")
+    _check_times(reader, n_animes, np.diff(motion_offsets)[utterance] / fps)
     summary_width = 0
     if has_audio:
         features = reader.floats("features", (None, mfcc.n_coefficients))
@@ -179,6 +184,20 @@ def _check_animes(
     if (np.asarray(cutoffs) < 0.0).any():
         raise reader.error("cutoffs", "holds a negative frequency")
     return _Sizes(n_animes, n_recordings, n_components, summary_width)
+
+
+def _check_times(reader: ArrayReader, n_animes: int, recorded: np.ndarray) -> None:
+    """Anime spans (s) ordered and inside their recording of ``recorded`` seconds per anime
+    (a corpus lets a phone end up to one frame period after the last frame)."""
+    start = np.asarray(reader.floats("anime_start", (n_animes,)))
+    end = np.asarray(reader.floats("anime_end", (n_animes,)))
+    if (start < 0.0).any():
+        raise reader.error("anime_start", "holds a negative time")
+    if (end < start).any():
+        raise reader.error("anime_end", "holds an end before its start")
+    if (end > recorded + 1e-6).any():
+        at = int(np.argmax(end > recorded + 1e-6))
+        raise reader.error("anime_end", f"anime {at} ends after its recording")
 
 
 def _check_view(
