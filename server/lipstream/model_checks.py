@@ -125,7 +125,8 @@ class FieldReader:
 
 def check_shape(where: str, array: np.ndarray, shape: Shape) -> None:
     """``array`` has ``len(shape)`` dimensions, each of the given length (None: any)."""
-    expected = "(" + ", ".join("n" if length is None else str(length) for length in shape) + ")"
+    lengths = ", ".join("n" if length is None else str(length) for length in shape)
+    expected = f"({lengths},)" if len(shape) == 1 else f"({lengths})"
     if array.ndim != len(shape) or any(
         length is not None and actual != length for actual, length in zip(array.shape, shape)
     ):
