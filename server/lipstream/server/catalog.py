@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -24,6 +25,7 @@ from ..engines.base import CallCost, Model
 from ..errors import LipstreamError, ModelStoreError
 from ..models import ModelRegistry
 from ..phonemes import SILENCE
+from ..store import MANIFEST_NAME
 from ..timeline import EMOTIONS, PhonemeSpan
 from .budget import RungEstimate, estimate
 from .calibration import measure
@@ -195,14 +197,15 @@ def _presets(registry: ModelRegistry, settings: ServerSettings) -> dict[str, Out
     """Presets stored in the models (a model whose preset does not parse is dropped), then
     those of ``settings.profiles``."""
     presets: dict[str, OutputProfile] = {}
-    for directory, model in list(registry.models.items()):
+    for name, model in list(registry.models.items()):
         value = model.manifest.extra.get(PRESET_KEY)
         if value is not None:
-            where = f"{directory}/model.json: extra.{PRESET_KEY}"
+            manifest = registry.directories.get(name, Path(name)) / MANIFEST_NAME
+            where = f"{manifest}: extra.{PRESET_KEY}"
             try:
                 presets[model.name] = parse_profile(value, where)
             except LipstreamError as error:
-                registry.drop(directory, ModelStoreError(error.message, where=error.where))
+                registry.drop(name, ModelStoreError(error.message, where=error.where))
     if settings.profiles is not None:
         presets.update(load_presets(settings.profiles))
     return presets
