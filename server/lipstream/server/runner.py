@@ -26,7 +26,6 @@ import uvicorn
 from fastapi import FastAPI
 
 from ..config import ServerSettings, load_settings
-from ..errors import LipstreamError
 from ..models import ModelRegistry
 from .app import create_app
 from .closing import BoundedCloseProtocol
@@ -65,8 +64,7 @@ def serve(
     registry: ModelRegistry | None = None,
 ) -> None:
     """Serve ``models`` (already loaded as ``registry``, for one worker) until SIGTERM or
-    SIGINT, draining first (see ``lifecycle``); LipstreamError when the app does not
-    start."""
+    SIGINT, draining first (see ``lifecycle``)."""
     if server.workers > 1:
         os.environ["LIPSTREAM_MODELS"] = str(models)
         uvicorn.run(
@@ -81,9 +79,4 @@ def serve(
     config = uvicorn.Config(
         create_app(models, server, registry), host=host, port=port, **uvicorn_options(server)
     )
-    instance = uvicorn.Server(config)
-    instance.run()
-    if not instance.started:
-        raise LipstreamError(
-            "the server did not start; the log above says why", where="serve", code="startup_failed"
-        )
+    uvicorn.Server(config).run()
