@@ -17,6 +17,7 @@ request.
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -92,7 +93,7 @@ class FieldReader:
             raise self.error(field, f"must hold at least {min_count} strings, got {len(value)}")
         items = [self.string(item, f"{field}[{index}]") for index, item in enumerate(value)]
         if unique and len(set(items)) != len(items):
-            repeated = sorted({item for item in items if items.count(item) > 1})
+            repeated = sorted(item for item, count in Counter(items).items() if count > 1)
             raise self.error(field, f"must not repeat names, repeats {repeated[:5]}")
         return items
 
@@ -171,7 +172,7 @@ def check_indices(where: str, array: np.ndarray, low: int, high: int) -> None:
 
 
 def check_ascending(where: str, array: np.ndarray, *, strict: bool) -> None:
-    """A 1-D array in ascending order (``strict``: no repeats)."""
+    """A 1-D integer array in ascending order (``strict``: no repeats)."""
     steps = np.diff(np.asarray(array, dtype=np.int64))
     wrong = steps <= 0 if strict else steps < 0
     if wrong.any():

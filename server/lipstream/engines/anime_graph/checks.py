@@ -3,22 +3,27 @@
 Sketch: ``check_stored_model`` runs once, in ``AnimeGraphModel.from_arrays``,
 and declares every manifest field and array the model reads (see
 ``lipstream.model_checks``): hyperparameters and MFCC settings typed and
-bounded; arrays of the right kind and shape; animes' labels, recordings and
-times in range; per-recording curves as offsets that give every recording at
-least one sample (a kernel reads the first and last sample of each);
-audio summaries as wide as the request's; every view's members whole
-recordings, its stand-ins phonemes the view says, its clusters in range.
+bounded; arrays of the right kind and shape, floats finite; the motion basis
+orthonormal, its mean inside the recorded channel range and no stored pose
+longer than that range allows (so no finite but huge value overflows on the
+way to a frame); animes' labels, recordings and spans in range, a span ending
+at most one frame period after its recording (what a corpus allows);
+per-recording curves as offsets that give every recording at least one
+sample (a kernel reads the first and last sample of each); audio summaries
+and features as wide as a request's; every view's members whole recordings,
+its stand-ins phonemes the view says, its clusters in range.
 
 The suffix automaton gets a structural check, since the greedy kernel follows
 its transitions blindly and turns an occurrence into anime ids by arithmetic:
-``ends`` is a permutation of the text positions, no transition enters the
-root, and along every transition v -c-> u each end e of u has text[e] = c and,
-unless v is the root, e - 1 among the ends of v. By induction every end of the
-state reached by reading a query q of length L closes an occurrence of q, so
-e - L + 1 >= 0 and the L text positions are consecutive animes of one
-recording: every anime id the kernel forms is in range. The check touches
-each (transition, end) pair once, at most the text length times the longest
-recording's phoneme count.
+the text rebuilt from the view's recordings must match the stored anime of
+each text position, ``ends`` must be a permutation of the text positions, no
+transition may enter the root, and along every transition v -c-> u each end
+e of u must have text[e] = c and, unless v is the root, e - 1 among the ends
+of v. By induction every end of the state reached by reading a query q of
+length L then closes an occurrence of q, so e - L + 1 >= 0 and the L text
+positions are consecutive animes of one recording: every anime id the kernel
+forms is in range. The check touches each (transition, end) pair once, at
+most the text length times the longest recording's phoneme count.
 """
 
 from __future__ import annotations
