@@ -106,14 +106,18 @@ def _serve(args: argparse.Namespace, settings: Settings) -> None:
     )
     # Loaded here, so a model set that cannot be served stops the command with one line;
     # one worker serves these very models, several load their own.
-    registry = ModelRegistry.load(models.resolve(), strict=server.strict_models)
+    registry: ModelRegistry | None = ModelRegistry.load(
+        models.resolve(), strict=server.strict_models
+    )
+    if server.workers > 1:
+        registry = None
     with multiprocess_directory(server.workers):
         serve(
             models.resolve(),
             args.host or settings.host,
             settings.port if args.port is None else args.port,
             server,
-            registry if server.workers == 1 else None,
+            registry,
         )
 
 
