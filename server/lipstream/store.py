@@ -137,8 +137,11 @@ def read_manifest(path: Path) -> ModelManifest:
     if not manifest_path.is_file():
         raise ModelStoreError("not a model directory (no model.json)", where=str(path))
     where = str(manifest_path)
-    with open(manifest_path, "rb") as handle:
-        raw = handle.read(MAX_MANIFEST_BYTES + 1)
+    try:
+        with open(manifest_path, "rb") as handle:
+            raw = handle.read(MAX_MANIFEST_BYTES + 1)
+    except OSError as exc:
+        raise ModelStoreError(f"cannot read model.json: {exc}", where=where) from None
     if len(raw) > MAX_MANIFEST_BYTES:
         raise ModelStoreError(f"model.json is larger than {MAX_MANIFEST_BYTES} bytes", where=where)
     try:
@@ -222,8 +225,6 @@ def load_arrays(path: Path) -> dict[str, np.ndarray]:
                 info.filename[: -len(".npy")]: _map_member(arrays_path, archive, info)
                 for info in members
             }
-    except ModelStoreError:
-        raise
     except _ARCHIVE_ERRORS as exc:
         raise ModelStoreError(f"cannot read arrays: {exc}", where=str(arrays_path)) from None
 
