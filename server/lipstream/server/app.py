@@ -49,25 +49,20 @@ def _server(request: Request) -> ServerState:
 def create_app(
     models_path: Path,
     settings: ServerSettings | None = None,
-    registry: ModelRegistry | None = None,
+    loaded: ModelRegistry | None = None,
 ) -> FastAPI:
-    """An app serving every model found under ``models_path`` (or the models already loaded
-    from there as ``registry``) with ``settings`` (default: the ``LIPSTREAM_*``
-    environment)."""
+    """An app serving every model found under ``models_path`` (or the models already
+    ``loaded`` from there) with ``settings`` (default: the ``LIPSTREAM_*`` environment)."""
     settings = settings or load_server_settings()
     metrics = Metrics()
     lifecycle = Lifecycle(settings.max_sessions, on_drain=lambda: metrics.draining.set(1))
 
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[LifespanState]:
-        models = (
-            registry
-            if registry is not None
-            else ModelRegistry.load(models_path, strict=settings.strict_models)
-        )
+        registry = loaded or ModelRegistry.load(models_path, strict=settings.strict_models)
         executor = ThreadPoolExecutor(settings.synth_threads, thread_name_prefix="lipstream-synth")
         server = ServerState(
-            models, Catalog.build(models, settings), settings, metrics, lifecycle, executor
+            registry, Catalog.build(registry, settings), settings, metrics, lifecycle, executor
         )
         # Models, modules and the catalog live as long as the process: moving them out of
         # the collector's reach keeps each full collection short (80 ms otherwise, a lag

@@ -46,6 +46,7 @@ from .views import WHOLE
 
 MAX_VIEWS = 64
 _PAIRS_PER_CHUNK = 1 << 20
+_ROWS_PER_CHUNK = 1 << 16
 
 
 @dataclass(frozen=True)
@@ -172,8 +173,10 @@ def _check_animes(
     motion = reader.floats("motion", (None, n_components))
     # A projection of a pose inside the channel box is no longer than the box's diagonal.
     reach = 1.001 * float(np.linalg.norm(high - low)) + 1e-6
-    if (np.linalg.norm(np.asarray(motion, dtype=np.float64), axis=1) > reach).any():
-        raise reader.error("motion", "holds a pose outside the channels' recorded range")
+    for first in range(0, len(motion), _ROWS_PER_CHUNK):
+        rows = np.asarray(motion[first : first + _ROWS_PER_CHUNK], dtype=np.float64)
+        if (np.einsum("ij,ij->i", rows, rows) > reach * reach).any():
+            raise reader.error("motion", "holds a pose outside the channels' recorded range")
     motion_offsets = reader.offsets("motion_offsets", None, len(motion), nonempty=True)
     n_recordings = len(motion_offsets) - 1
     utterance = reader.integers("anime_utterance", (n_animes,), 0, n_recordings)
