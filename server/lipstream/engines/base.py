@@ -56,11 +56,13 @@ from ..model_checks import field_error
 from ..phonemes import PHONEMES, SILENCE
 from ..store import (
     MANIFEST_NAME,
-    MAX_FPS,
     ModelManifest,
     load_arrays,
     read_manifest,
     save_model_dir,
+)
+from ..store import (
+    MAX_FPS as MAX_FPS,  # re-exported: the request fps bound
 )
 from ..timeline import EMOTIONS, PhonemeSpan, SpanLike, coerce_spans
 from .work import WorkGuard
