@@ -89,7 +89,7 @@ def _output_profile(args: argparse.Namespace, *, shapes: bool) -> OutputProfile 
 
 
 def _serve(args: argparse.Namespace, settings: Settings) -> None:
-    from .models import model_dirs
+    from .models import ModelRegistry
     from .server.metrics import multiprocess_directory
     from .server.runner import serve
     from .training import DEMO_MODELS_DIR, build_demo
@@ -99,17 +99,25 @@ def _serve(args: argparse.Namespace, settings: Settings) -> None:
         print(f"no models in {models}: building the demo character first", file=sys.stderr)
         build_demo(settings.demo_dir, progress=True)
         models = settings.demo_dir / DEMO_MODELS_DIR
-    model_dirs(models)
     server = settings.server.with_changes(
         workers=args.workers or settings.server.workers,
         log_level=args.log_level or settings.server.log_level,
+        strict_models=args.strict_models or settings.server.strict_models,
     )
+    # Loaded here, so a model set that cannot be served stops the command with one line;
+    # one worker serves these very models, several load their own.
+    registry: ModelRegistry | None = ModelRegistry.load(
+        models.resolve(), strict=server.strict_models
+    )
+    if server.workers > 1:
+        registry = None
     with multiprocess_directory(server.workers):
         serve(
             models.resolve(),
             args.host or settings.host,
             settings.port if args.port is None else args.port,
             server,
+            registry,
         )
 
 
@@ -233,6 +241,12 @@ def _parser() -> argparse.ArgumentParser:
     )
     serve.add_argument(
         "--log-level", choices=["critical", "error", "warning", "info", "debug", "trace"]
+    )
+    serve.add_argument(
+        "--strict-models",
+        action="store_true",
+        help="exit when any model fails to load (default: $LIPSTREAM_STRICT_MODELS or serve "
+        "the others and report it)",
     )
     serve.set_defaults(run=_serve)
 

@@ -60,6 +60,7 @@ class ServerSettings:
     profiles: Path | None = None
     ping_interval_s: float = 20.0
     ping_timeout_s: float = 20.0
+    strict_models: bool = False
 
     def with_changes(self, **changes: Any) -> ServerSettings:
         """A copy with some fields replaced (tests and the CLI use it)."""
@@ -121,6 +122,13 @@ def _log_level(name: str, text: str) -> str:
     if level not in ("critical", "error", "warning", "info", "debug", "trace"):
         raise _invalid(name, text, "one of critical, error, warning, info, debug, trace")
     return level
+
+
+def _flag(name: str, text: str) -> bool:
+    word = text.strip().lower()
+    if word not in ("1", "true", "yes", "on", "0", "false", "no", "off"):
+        raise _invalid(name, text, "one of 1, true, yes, on, 0, false, no, off")
+    return word in ("1", "true", "yes", "on")
 
 
 def _path(name: str, text: str) -> Path | None:
@@ -277,6 +285,13 @@ ENV_SETTINGS: tuple[EnvSetting, ...] = (
         "ping_timeout_s",
         _number(0.0, 3600.0, above=True),
         "close a connection whose pong is this late",
+    ),
+    EnvSetting(
+        "LIPSTREAM_STRICT_MODELS",
+        "strict_models",
+        _flag,
+        "refuse to start when any model fails to load (`--strict-models`); otherwise the "
+        "others are served and the failure is reported",
     ),
 )
 

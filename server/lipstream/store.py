@@ -9,11 +9,18 @@ Layout of a model directory::
 The ``.npz`` members are stored uncompressed, so each one is memory-mapped in
 place (``mmap_mode="r"`` semantics): worker processes that load the same model
 share its pages. No pickle is ever written or read.
+
+Reading is defensive, as a model directory may be damaged or hand-edited:
+``model.json`` is bounded in size and nesting and refuses NaN and Infinity, and
+every manifest field is type-checked (``lipstream.model_checks``), so a bad
+field is a ``model_invalid`` error naming the file and the field, never a raw
+exception. Each engine's ``from_arrays`` checks the arrays it reads.
 """
 
 from __future__ import annotations
 
 import json
+import struct
 import zipfile
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
@@ -23,11 +30,30 @@ from typing import Any
 import numpy as np
 
 from .errors import ModelStoreError
+from .model_checks import FieldReader
 
 SCHEMA_VERSION = 1
 MANIFEST_NAME = "model.json"
 ARRAYS_NAME = "arrays.npz"
+MAX_FPS = 1000.0
+"""Highest frame rate of a stored model or a request, in Hz."""
+MAX_MANIFEST_BYTES = 4 << 20
+MAX_MANIFEST_DEPTH = 32
 _LOCAL_HEADER_SIZE = 30
+_REQUIRED_FIELDS = ("engine", "name", "channels", "fps", "phoneme_set")
+_ARCHIVE_ERRORS = (
+    OSError,
+    EOFError,
+    ValueError,
+    TypeError,
+    SyntaxError,
+    OverflowError,
+    NotImplementedError,
+    RuntimeError,
+    struct.error,
+    zipfile.BadZipFile,
+    zipfile.LargeZipFile,
+)
 
 
 @dataclass
@@ -51,8 +77,10 @@ class ModelManifest:
 
     @classmethod
     def from_mapping(cls, data: Mapping[str, Any], where: str) -> ModelManifest:
+        """The manifest of ``data`` (read from the file ``where``), every field type-checked;
+        ``model_invalid`` naming the field otherwise."""
         version = data.get("schema_version")
-        if version != SCHEMA_VERSION:
+        if isinstance(version, bool) or version != SCHEMA_VERSION:
             raise ModelStoreError(
                 f"schema version {version!r} is not supported (this lipstream reads "
                 f"version {SCHEMA_VERSION}); retrain the model with `lipstream train`",
@@ -62,11 +90,32 @@ class ModelManifest:
         known = set(cls.__dataclass_fields__)
         unknown = sorted(set(data) - known)
         if unknown:
-            raise ModelStoreError(f"unknown manifest keys {unknown}", where=where)
-        try:
-            return cls(**data)
-        except TypeError as exc:
-            raise ModelStoreError(f"manifest is incomplete: {exc}", where=where) from None
+            raise ModelStoreError(f"unknown manifest keys {unknown[:10]}", where=where)
+        fields = FieldReader(where)
+        for key in _REQUIRED_FIELDS:
+            fields.member(data, key, key)
+        return cls(
+            engine=fields.string(data["engine"], "engine"),
+            name=fields.string(data["name"], "name"),
+            channels=fields.strings(data["channels"], "channels", unique=True, min_count=1),
+            fps=fields.number(data["fps"], "fps", 0.0, MAX_FPS, above=True),
+            phoneme_set=fields.strings(data["phoneme_set"], "phoneme_set", unique=True),
+            hyperparameters=dict(
+                fields.mapping(data.get("hyperparameters", {}), "hyperparameters")
+            ),
+            corpus_digest=_text(fields, data, "corpus_digest"),
+            metrics=dict(fields.mapping(data.get("metrics", {}), "metrics")),
+            extra=dict(fields.mapping(data.get("extra", {}), "extra")),
+            lipstream_version=_text(fields, data, "lipstream_version"),
+        )
+
+
+def _text(fields: FieldReader, data: Mapping[str, Any], key: str) -> str:
+    """An optional free-text field (may be empty)."""
+    value = data.get(key, "")
+    if not isinstance(value, str):
+        raise fields.error(key, f"must be a string, got {type(value).__name__}")
+    return value
 
 
 def save_model_dir(path: Path, manifest: ModelManifest, arrays: Mapping[str, np.ndarray]) -> None:
@@ -87,15 +136,46 @@ def read_manifest(path: Path) -> ModelManifest:
     manifest_path = path / MANIFEST_NAME
     if not manifest_path.is_file():
         raise ModelStoreError("not a model directory (no model.json)", where=str(path))
+    where = str(manifest_path)
     try:
-        data = json.loads(manifest_path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ModelStoreError(
-            f"model.json is not valid JSON: {exc}", where=str(manifest_path)
-        ) from exc
+        with open(manifest_path, "rb") as handle:
+            raw = handle.read(MAX_MANIFEST_BYTES + 1)
+    except OSError as exc:
+        raise ModelStoreError(f"cannot read model.json: {exc}", where=where) from None
+    if len(raw) > MAX_MANIFEST_BYTES:
+        raise ModelStoreError(f"model.json is larger than {MAX_MANIFEST_BYTES} bytes", where=where)
+    try:
+        data = json.loads(raw.decode("utf-8"), parse_constant=_refuse_constant)
+    except RecursionError:
+        raise ModelStoreError("model.json is nested too deeply", where=where) from None
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise ModelStoreError(f"model.json is not valid JSON: {exc}", where=where) from None
     if not isinstance(data, dict):
-        raise ModelStoreError("model.json must hold an object", where=str(manifest_path))
-    return ModelManifest.from_mapping(data, str(manifest_path))
+        raise ModelStoreError("model.json must hold an object", where=where)
+    _check_depth(data, where)
+    return ModelManifest.from_mapping(data, where)
+
+
+def _refuse_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a JSON number")
+
+
+def _check_depth(data: Any, where: str) -> None:
+    """Refuse lists and objects nested more than ``MAX_MANIFEST_DEPTH`` deep (walked without
+    recursion), so no later reader of the manifest recurses without bound."""
+    level: list[Any] = [data]
+    for _ in range(MAX_MANIFEST_DEPTH):
+        level = [
+            child
+            for value in level
+            for child in (value.values() if isinstance(value, dict) else value)
+            if isinstance(child, (dict, list))
+        ]
+        if not level:
+            return
+    raise ModelStoreError(
+        f"model.json nests lists and objects more than {MAX_MANIFEST_DEPTH} deep", where=where
+    )
 
 
 def _member_offset(raw: Any, info: zipfile.ZipInfo) -> int:
@@ -145,7 +225,7 @@ def load_arrays(path: Path) -> dict[str, np.ndarray]:
                 info.filename[: -len(".npy")]: _map_member(arrays_path, archive, info)
                 for info in members
             }
-    except (OSError, zipfile.BadZipFile, ValueError) as exc:
+    except _ARCHIVE_ERRORS as exc:
         raise ModelStoreError(f"cannot read arrays: {exc}", where=str(arrays_path)) from None
 
 
@@ -155,5 +235,7 @@ def require_arrays(
     """Pick the named arrays, with a clear error when one is missing."""
     missing = [name for name in names if name not in arrays]
     if missing:
-        raise ModelStoreError(f"arrays.npz lacks {missing}", where=str(where / ARRAYS_NAME))
+        raise ModelStoreError(
+            f"is missing (arrays.npz lacks {missing})", where=f"{where / ARRAYS_NAME}: {missing[0]}"
+        )
     return {name: arrays[name] for name in names}

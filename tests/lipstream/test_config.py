@@ -44,12 +44,15 @@ def test_values_are_parsed_into_their_types() -> None:
             "LIPSTREAM_PROFILES": "/etc/lipstream/profiles.json",
             "LIPSTREAM_LOG_LEVEL": "DEBUG",
             "LIPSTREAM_DRAIN_TIMEOUT_S": "0",
+            "LIPSTREAM_STRICT_MODELS": " Yes ",
         }
     )
     assert server.max_sessions == 5 and server.message_rate == 2.5
     assert server.auth_tokens == ("alpha", "beta") and server.allowed_origins == ()
     assert server.profiles == Path("/etc/lipstream/profiles.json")
     assert server.log_level == "debug" and server.drain_timeout_s == 0.0
+    assert server.strict_models is True
+    assert load_server_settings({"LIPSTREAM_STRICT_MODELS": "off"}).strict_models is False
 
 
 @pytest.mark.parametrize(
@@ -60,6 +63,7 @@ def test_values_are_parsed_into_their_types() -> None:
         ("LIPSTREAM_MESSAGE_RATE", "0", "a number in (0, 1e+09]"),
         ("LIPSTREAM_IDLE_TIMEOUT_S", "nan", "a number in (0, 1e+09]"),
         ("LIPSTREAM_LOG_LEVEL", "loud", "one of critical"),
+        ("LIPSTREAM_STRICT_MODELS", "maybe", "one of 1, true, yes, on, 0, false, no, off"),
         ("LIPSTREAM_PORT", "70000", "an integer in [0, 65535]"),
     ],
 )
@@ -78,6 +82,8 @@ def test_every_server_setting_has_one_variable() -> None:
 
 
 def _shown(value: object) -> str:
+    if isinstance(value, bool):
+        return str(value).lower()
     if isinstance(value, tuple):
         return "(empty)" if not value else ",".join(map(str, value))
     if value is None:

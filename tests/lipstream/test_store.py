@@ -9,10 +9,13 @@ from lipstream.errors import ModelStoreError
 from lipstream.store import (
     ARRAYS_NAME,
     MANIFEST_NAME,
+    MAX_MANIFEST_BYTES,
+    MAX_MANIFEST_DEPTH,
     SCHEMA_VERSION,
     ModelManifest,
     load_arrays,
     read_manifest,
+    require_arrays,
     save_model_dir,
 )
 
@@ -95,3 +98,123 @@ def test_truncated_archive_is_a_clear_error(tmp_path: Path) -> None:
 def test_not_a_model_directory(tmp_path: Path) -> None:
     with pytest.raises(ModelStoreError, match="no model.json"):
         read_manifest(tmp_path)
+
+
+def _write_manifest(directory: Path, text: str) -> None:
+    directory.mkdir(parents=True, exist_ok=True)
+    (directory / MANIFEST_NAME).write_text(text, encoding="utf-8")
+
+
+def _fields() -> dict[str, object]:
+    return json.loads(_manifest().to_json())
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "named"),
+    [
+        ("fps", "sixty", "fps"),
+        ("fps", -0.5, "fps"),
+        ("fps", 0, "fps"),
+        ("fps", 1001, "fps"),
+        ("fps", False, "fps"),
+        ("engine", ["viseme-lerp"], "engine"),
+        ("name", {"first": "demo"}, "name"),
+        ("name", "x" * 129, "name"),
+        ("channels", "jawOpen", "channels"),
+        ("channels", ["jawOpen", 7], "channels[1]"),
+        ("channels", ["jawOpen", "jawOpen"], "channels"),
+        ("channels", [], "channels"),
+        ("phoneme_set", [None], "phoneme_set[0]"),
+        ("hyperparameters", [1, 2], "hyperparameters"),
+        ("metrics", "fast", "metrics"),
+        ("extra", 3, "extra"),
+        ("corpus_digest", 12, "corpus_digest"),
+        ("lipstream_version", None, "lipstream_version"),
+    ],
+)
+def test_a_field_of_the_wrong_type_is_model_invalid_naming_it(
+    tmp_path: Path, field: str, value: object, named: str
+) -> None:
+    data = _fields()
+    data[field] = value
+    _write_manifest(tmp_path, json.dumps(data))
+    with pytest.raises(ModelStoreError) as caught:
+        read_manifest(tmp_path)
+    assert caught.value.code == "model_invalid"
+    assert caught.value.where == f"{tmp_path / MANIFEST_NAME}: {named}"
+
+
+@pytest.mark.parametrize("field", ["engine", "name", "channels", "fps", "phoneme_set"])
+def test_a_missing_field_is_named(tmp_path: Path, field: str) -> None:
+    data = _fields()
+    del data[field]
+    _write_manifest(tmp_path, json.dumps(data))
+    with pytest.raises(ModelStoreError, match="is missing") as caught:
+        read_manifest(tmp_path)
+    assert caught.value.where == f"{tmp_path / MANIFEST_NAME}: {field}"
+
+
+@pytest.mark.parametrize("depth", [33, 1000, 10_000, 100_000])
+def test_deep_nesting_is_refused_without_recursing(tmp_path: Path, depth: int) -> None:
+    text = json.dumps({**_fields(), "metrics": "@"}).replace('"@"', "[" * depth + "]" * depth)
+    _write_manifest(tmp_path, text)
+    with pytest.raises(ModelStoreError, match="nest") as caught:
+        read_manifest(tmp_path)
+    assert caught.value.code == "model_invalid"
+    assert caught.value.where == str(tmp_path / MANIFEST_NAME)
+
+
+def test_nesting_up_to_the_limit_is_read(tmp_path: Path) -> None:
+    # The manifest is level 1 and ``metrics`` level 2, so its lists may reach level 32.
+    def manifest(lists: int) -> str:
+        return json.dumps({**_fields(), "metrics": {"deep": "@"}}).replace(
+            '"@"', "[" * lists + "]" * lists
+        )
+
+    _write_manifest(tmp_path, manifest(MAX_MANIFEST_DEPTH - 2))
+    nested = read_manifest(tmp_path).metrics["deep"]
+    for _ in range(MAX_MANIFEST_DEPTH - 3):
+        (nested,) = nested
+    assert nested == []
+    _write_manifest(tmp_path, manifest(MAX_MANIFEST_DEPTH - 1))
+    with pytest.raises(ModelStoreError, match=f"more than {MAX_MANIFEST_DEPTH} deep"):
+        read_manifest(tmp_path)
+
+
+@pytest.mark.parametrize("constant", ["NaN", "Infinity", "-Infinity"])
+def test_non_finite_constants_are_not_json(tmp_path: Path, constant: str) -> None:
+    text = json.dumps(_fields()).replace('"fps": 120.0', f'"fps": {constant}')
+    assert constant in text
+    _write_manifest(tmp_path, text)
+    with pytest.raises(ModelStoreError, match=f"{constant} is not a JSON number"):
+        read_manifest(tmp_path)
+
+
+def test_an_oversized_manifest_is_refused_before_parsing(tmp_path: Path) -> None:
+    data = {**_fields(), "metrics": {"padding": "x" * MAX_MANIFEST_BYTES}}
+    _write_manifest(tmp_path, json.dumps(data))
+    with pytest.raises(ModelStoreError, match=f"larger than {MAX_MANIFEST_BYTES} bytes"):
+        read_manifest(tmp_path)
+
+
+def test_a_boolean_schema_version_is_not_version_one(tmp_path: Path) -> None:
+    _write_manifest(tmp_path, json.dumps({**_fields(), "schema_version": True}))
+    with pytest.raises(ModelStoreError) as caught:
+        read_manifest(tmp_path)
+    assert caught.value.code == "model_schema_version"
+
+
+def test_a_missing_array_is_named(tmp_path: Path) -> None:
+    with pytest.raises(ModelStoreError, match="is missing") as caught:
+        require_arrays({"a": np.ones(2)}, ["a", "b", "c"], tmp_path)
+    assert caught.value.where == f"{tmp_path / ARRAYS_NAME}: b"
+    assert "['b', 'c']" in caught.value.message
+
+
+def test_an_array_header_claiming_more_data_than_the_file_holds(tmp_path: Path) -> None:
+    save_model_dir(tmp_path, _manifest(), {"a": np.ones(10)})
+    raw = (tmp_path / ARRAYS_NAME).read_bytes()
+    assert b"'shape': (10,), }" in raw
+    (tmp_path / ARRAYS_NAME).write_bytes(raw.replace(b"'shape': (10,), }", b"'shape': (9999,)}"))
+    with pytest.raises(ModelStoreError, match="cannot read arrays"):
+        load_arrays(tmp_path)

@@ -52,12 +52,21 @@ import numpy as np
 from .._version import __version__
 from ..audio import Audio
 from ..errors import InvalidRequestError, ModelStoreError
+from ..model_checks import field_error
 from ..phonemes import PHONEMES, SILENCE
-from ..store import ModelManifest, load_arrays, read_manifest, save_model_dir
+from ..store import (
+    MANIFEST_NAME,
+    ModelManifest,
+    load_arrays,
+    read_manifest,
+    save_model_dir,
+)
+from ..store import (
+    MAX_FPS as MAX_FPS,  # re-exported: the request fps bound
+)
 from ..timeline import EMOTIONS, PhonemeSpan, SpanLike, coerce_spans
 from .work import WorkGuard
 
-MAX_FPS = 1000.0
 _EPS = 1e-9
 
 ModelT = TypeVar("ModelT", bound="Model")
@@ -326,6 +335,13 @@ class Model(ABC):
                 f"model was trained by engine {manifest.engine!r}, not {cls.engine!r}",
                 where=str(directory),
                 code="model_engine_mismatch",
+            )
+        if manifest.phoneme_set != list(PHONEMES):
+            raise field_error(
+                str(directory / MANIFEST_NAME),
+                "phoneme_set",
+                "differs from this lipstream's phoneme set (lipstream.phonemes.PHONEMES), "
+                "which every engine's stored labels index; retrain the model",
             )
         return cls.from_arrays(manifest, load_arrays(directory), directory)
 

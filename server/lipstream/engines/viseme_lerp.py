@@ -17,9 +17,10 @@ from typing import Any
 import numpy as np
 
 from ..audio import Audio
-from ..errors import CorpusError
+from ..errors import CorpusError, LipstreamError
+from ..model_checks import ArrayReader, FieldReader
 from ..phonemes import PHONEMES, SILENCE
-from ..store import ModelManifest, require_arrays
+from ..store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
 from ..timeline import PhonemeSpan
 from ..visemes import get_scheme
 from .base import Engine, Lookahead, Model, SynthesisRequest
@@ -69,7 +70,16 @@ class VisemeLerpModel(Model):
     def from_arrays(
         cls, manifest: ModelManifest, arrays: Mapping[str, np.ndarray], path: Path
     ) -> VisemeLerpModel:
-        return cls(manifest, require_arrays(arrays, ["poses"], path)["poses"])
+        fields = FieldReader(str(path / MANIFEST_NAME))
+        field = "hyperparameters.scheme"
+        name = fields.string(fields.member(manifest.hyperparameters, "scheme", field), field)
+        try:
+            scheme = get_scheme(name)
+        except LipstreamError as error:
+            raise fields.error(field, error.message) from None
+        reader = ArrayReader(arrays, str(path / ARRAYS_NAME))
+        poses = reader.floats("poses", (len(scheme.classes), len(manifest.channels)))
+        return cls(manifest, poses)
 
 
 class VisemeLerpEngine(Engine):

@@ -46,16 +46,20 @@ def _server(request: Request) -> ServerState:
     return state
 
 
-def create_app(models_path: Path, settings: ServerSettings | None = None) -> FastAPI:
-    """An app serving every model found under ``models_path`` with ``settings`` (default:
-    the ``LIPSTREAM_*`` environment)."""
+def create_app(
+    models_path: Path,
+    settings: ServerSettings | None = None,
+    loaded: ModelRegistry | None = None,
+) -> FastAPI:
+    """An app serving every model found under ``models_path`` (or the models already
+    ``loaded`` from there) with ``settings`` (default: the ``LIPSTREAM_*`` environment)."""
     settings = settings or load_server_settings()
     metrics = Metrics()
     lifecycle = Lifecycle(settings.max_sessions, on_drain=lambda: metrics.draining.set(1))
 
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[LifespanState]:
-        registry = ModelRegistry.load(models_path)
+        registry = loaded or ModelRegistry.load(models_path, strict=settings.strict_models)
         executor = ThreadPoolExecutor(settings.synth_threads, thread_name_prefix="lipstream-synth")
         server = ServerState(
             registry, Catalog.build(registry, settings), settings, metrics, lifecycle, executor
@@ -91,8 +95,11 @@ def create_app(models_path: Path, settings: ServerSettings | None = None) -> Fas
 
     @app.get("/readyz")
     async def readyz(request: Request) -> JSONResponse:
-        ready = _server(request).ready
-        return JSONResponse({"ready": ready}, status_code=200 if ready else 503)
+        """Ready or not, with the model directories that are not served and why."""
+        server = _server(request)
+        ready = server.ready
+        detail = {"ready": ready, "failed_models": server.registry.failure_report()}
+        return JSONResponse(detail, status_code=200 if ready else 503)
 
     @app.get("/v1/engines")
     async def engines(request: Request) -> dict[str, Any]:
@@ -106,7 +113,8 @@ def create_app(models_path: Path, settings: ServerSettings | None = None) -> Fas
             "characters": [
                 {"name": name, "engines": engines}
                 for name, engines in registry.characters().items()
-            ]
+            ],
+            "failed_models": registry.failure_report(),
         }
 
     @app.post(

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -21,9 +22,10 @@ from lipstream_client.errors import UNKNOWN_CHARACTER, UNKNOWN_ENGINE
 
 from ..config import ServerSettings
 from ..engines.base import CallCost, Model
-from ..errors import LipstreamError
+from ..errors import LipstreamError, ModelStoreError
 from ..models import ModelRegistry
 from ..phonemes import SILENCE
+from ..store import MANIFEST_NAME
 from ..timeline import EMOTIONS, PhonemeSpan
 from .budget import RungEstimate, estimate
 from .calibration import measure
@@ -61,17 +63,23 @@ class Catalog:
 
     @classmethod
     def build(cls, registry: ModelRegistry, settings: ServerSettings) -> Catalog:
-        """Measure and probe every model; LipstreamError for a preset that does not fit."""
+        """Measure and probe every model; a model whose probes or stored preset fail is
+        dropped from ``registry`` (see ``ModelRegistry.require_models`` for when that
+        raises); LipstreamError for a preset from ``settings`` that does not fit."""
         catalog = cls(registry, settings)
         probed: dict[int, dict[str, VisemeProjector]] = {}
-        for model in registry.models.values():
-            source = _viseme_source(registry, model)
-            if id(source) not in probed:
-                probed[id(source)] = build_projectors(source)
-            catalog.facts[id(model)] = ModelFacts(
-                catalog._ladder(model), _rest_poses(model), probed[id(source)]
-            )
+        for name, model in list(registry.models.items()):
+            try:
+                source = _viseme_source(registry, model)
+                if id(source) not in probed:
+                    probed[id(source)] = build_projectors(source)
+                catalog.facts[id(model)] = ModelFacts(
+                    catalog._ladder(model), _rest_poses(model), probed[id(source)]
+                )
+            except LipstreamError as error:
+                registry.drop(name, error)
         catalog.presets = _presets(registry, settings)
+        registry.require_models(strict=settings.strict_models)
         catalog._check_presets()
         return catalog
 
@@ -156,10 +164,16 @@ class Catalog:
 
 
 def _rest_poses(model: Model) -> dict[str | None, np.ndarray]:
+    """The rest pose per emotion; a model whose silence is not finite is refused."""
     silence = [PhonemeSpan(SILENCE, 0.0, REST_PROBE_S)]
     poses: dict[str | None, np.ndarray] = {}
     for emotion in (None, *EMOTIONS):
         frames = model.synthesize(silence, fps=float(model.manifest.fps), emotion=emotion).frames
+        if not np.isfinite(frames).all():
+            raise ModelStoreError(
+                f"synthesizes NaN or infinite frames for silence (emotion {emotion})",
+                where=f"model {model.manifest.engine}/{model.name}",
+            )
         poses[emotion] = np.asarray(frames[len(frames) // 2], dtype=np.float32)
     return poses
 
@@ -180,12 +194,18 @@ def _viseme_source(registry: ModelRegistry, model: Model) -> Model:
 
 
 def _presets(registry: ModelRegistry, settings: ServerSettings) -> dict[str, OutputProfile]:
+    """Presets stored in the models (a model whose preset does not parse is dropped), then
+    those of ``settings.profiles``."""
     presets: dict[str, OutputProfile] = {}
-    for directory, model in registry.models.items():
+    for name, model in list(registry.models.items()):
         value = model.manifest.extra.get(PRESET_KEY)
         if value is not None:
-            where = f"{directory}/model.json: extra.{PRESET_KEY}"
-            presets[model.name] = parse_profile(value, where)
+            manifest = registry.directories.get(name, Path(name)) / MANIFEST_NAME
+            where = f"{manifest}: extra.{PRESET_KEY}"
+            try:
+                presets[model.name] = parse_profile(value, where)
+            except LipstreamError as error:
+                registry.drop(name, ModelStoreError(error.message, where=error.where))
     if settings.profiles is not None:
         presets.update(load_presets(settings.profiles))
     return presets

@@ -26,6 +26,7 @@ import uvicorn
 from fastapi import FastAPI
 
 from ..config import ServerSettings, load_settings
+from ..models import ModelRegistry
 from .app import create_app
 from .closing import BoundedCloseProtocol
 from .http_flush import BoundedFlushHTTPProtocol
@@ -55,8 +56,15 @@ def uvicorn_options(server: ServerSettings) -> dict[str, Any]:
     }
 
 
-def serve(models: Path, host: str, port: int, server: ServerSettings) -> None:
-    """Serve ``models`` until SIGTERM or SIGINT, draining first (see ``lifecycle``)."""
+def serve(
+    models: Path,
+    host: str,
+    port: int,
+    server: ServerSettings,
+    registry: ModelRegistry | None = None,
+) -> None:
+    """Serve ``models`` (already loaded as ``registry``, for one worker) until SIGTERM or
+    SIGINT, draining first (see ``lifecycle``)."""
     if server.workers > 1:
         os.environ["LIPSTREAM_MODELS"] = str(models)
         uvicorn.run(
@@ -69,6 +77,6 @@ def serve(models: Path, host: str, port: int, server: ServerSettings) -> None:
         )
         return
     config = uvicorn.Config(
-        create_app(models, server), host=host, port=port, **uvicorn_options(server)
+        create_app(models, server, registry), host=host, port=port, **uvicorn_options(server)
     )
     uvicorn.Server(config).run()

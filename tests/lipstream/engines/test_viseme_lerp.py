@@ -2,11 +2,19 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
 import numpy as np
 import pytest
 
 from lipstream.corpus import Corpus, Utterance
+from lipstream.engines import load_model
 from lipstream.engines.viseme_lerp import VisemeLerpEngine
+from lipstream.errors import ModelStoreError
+from lipstream.store import save_model_dir
 from lipstream.timeline import PhonemeSpan
 from lipstream.visemes import get_scheme
 
@@ -85,3 +93,36 @@ def test_frames_interpolate_linearly_between_phoneme_centres(corpus: Corpus) -> 
     }
     for index, value in expected.items():
         assert frames[index] == pytest.approx(value, abs=1e-6), index
+
+
+@pytest.mark.parametrize(
+    ("corrupt", "named"),
+    [
+        (lambda poses, hyper: (poses * np.nan, hyper), "arrays.npz: poses"),
+        (lambda poses, hyper: (poses[:, :1], hyper), "arrays.npz: poses"),
+        (lambda poses, hyper: (poses[:-1], hyper), "arrays.npz: poses"),
+        (lambda poses, hyper: (poses.astype(np.int32), hyper), "arrays.npz: poses"),
+        (lambda poses, hyper: (poses, {"scheme": 7}), "model.json: hyperparameters.scheme"),
+        (lambda poses, hyper: (poses, {"scheme": "nope"}), "model.json: hyperparameters.scheme"),
+        (lambda poses, hyper: (poses, {}), "model.json: hyperparameters.scheme"),
+    ],
+)
+def test_a_corrupt_stored_model_is_refused_naming_the_array_or_field(
+    corpus: Corpus, tmp_path: Path, corrupt: Callable[..., Any], named: str
+) -> None:
+    model = VisemeLerpEngine().fit(corpus)
+    model.save(tmp_path)
+    assert np.array_equal(load_model(tmp_path).poses_, model.poses_)  # type: ignore[attr-defined]
+    poses, hyperparameters = corrupt(model.poses_, dict(model.manifest.hyperparameters))
+    manifest = replace(model.manifest, hyperparameters=hyperparameters)
+    save_model_dir(tmp_path, manifest, {"poses": poses})
+    with pytest.raises(ModelStoreError) as caught:
+        load_model(tmp_path)
+    assert caught.value.code == "model_invalid"
+    assert caught.value.where == f"{tmp_path}/{named}"
+
+
+def test_a_scheme_alias_still_loads(corpus: Corpus, tmp_path: Path) -> None:
+    model = VisemeLerpEngine(scheme="OVR").fit(corpus)
+    model.save(tmp_path)
+    assert load_model(tmp_path).scheme.name == "oculus15"  # type: ignore[attr-defined]

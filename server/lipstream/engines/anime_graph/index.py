@@ -42,11 +42,11 @@ class SuffixIndex:
         """Index the animes ``members`` (ascending ids; default all) with ``labels`` (n,) in
         [0, alphabet), grouped by ``utterance`` (n,)."""
         chosen = np.arange(len(labels)) if members is None else np.asarray(members)
-        text, text_anime = _join(
+        text, text_anime = join_text(
             np.asarray(labels)[chosen], np.asarray(utterance)[chosen], chosen, alphabet
         )
         automaton = _Automaton()
-        for position, symbol in enumerate(text):
+        for position, symbol in enumerate(text.tolist()):
             automaton.extend(symbol, position)
         low, high, ends = automaton.end_position_ranges()
         return cls(automaton.dense(alphabet + 1), low, high, ends, text_anime)
@@ -85,20 +85,21 @@ class SuffixIndex:
         return np.sort(self.text_anime[np.asarray(ends, dtype=np.int64) - length + 1])
 
 
-def _join(
+def join_text(
     labels: np.ndarray, utterance: np.ndarray, animes: np.ndarray, alphabet: int
-) -> tuple[list[int], np.ndarray]:
-    text: list[int] = []
-    text_anime: list[int] = []
-    previous_owner = None
-    for anime, label, owner in zip(animes.tolist(), labels.tolist(), utterance.tolist()):
-        if previous_owner is not None and owner != previous_owner:
-            text.append(alphabet)
-            text_anime.append(-1)
-        text.append(int(label))
-        text_anime.append(anime)
-        previous_owner = owner
-    return text, np.asarray(text_anime, dtype=np.int32)
+) -> tuple[np.ndarray, np.ndarray]:
+    """The text T of ``animes`` with ``labels`` and ``utterance`` (n,), the symbol
+    ``alphabet`` separating recordings: (T int64, the anime at each position int32, -1 at
+    separators)."""
+    owners = np.asarray(utterance)
+    count = len(owners)
+    starts = np.flatnonzero(owners[1:] != owners[:-1]) + 1
+    positions = np.arange(count) + np.searchsorted(starts, np.arange(count), side="right")
+    text = np.full(count + len(starts), alphabet, dtype=np.int64)
+    text[positions] = labels
+    text_anime = np.full(count + len(starts), -1, dtype=np.int32)
+    text_anime[positions] = animes
+    return text, text_anime
 
 
 class _Automaton:

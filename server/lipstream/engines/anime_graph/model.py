@@ -24,6 +24,7 @@ from ...timeline import PhonemeSpan
 from ..base import Lookahead, Model, Rung, SynthesisRequest
 from .animes import AnimeTable, Curves
 from .basis import MotionBasis
+from .checks import check_stored_model
 from .costs import Poses
 from .graph import SearchGraph
 from .options import ENGINE, MAX_PQ_WINDOW, OPTION_NAMES, SearchOptions, parse_options
@@ -247,6 +248,7 @@ class AnimeGraphModel(Model):
         cls, manifest: ModelManifest, arrays: Mapping[str, np.ndarray], path: Path
     ) -> AnimeGraphModel:
         require_arrays(arrays, REQUIRED_ARRAYS, path)
+        check_stored_model(manifest, arrays, path)
         return cls(manifest, arrays)
 
 

@@ -1,0 +1,85 @@
+"""The catalog's start-up probes set a model aside when it fails them, and serve the rest."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pytest
+
+from lipstream.config import ServerSettings
+from lipstream.engines.viseme_lerp import VisemeLerpModel
+from lipstream.errors import LipstreamError, ModelStoreError
+from lipstream.models import ModelRegistry
+from lipstream.server.catalog import Catalog
+
+if TYPE_CHECKING:
+    from lipstream.engines.base import Model
+
+
+def _registry(good: Model, broken: Model) -> ModelRegistry:
+    return ModelRegistry(
+        models={"good": good, "broken": broken},
+        directories={"good": Path("/m/good"), "broken": Path("/m/broken")},
+        root=Path("/m"),
+    )
+
+
+def _nan_model(lerp: VisemeLerpModel) -> VisemeLerpModel:
+    """Built in memory, past the load-time checks, as a model the checks missed would be."""
+    manifest = replace(lerp.manifest, name="broken")
+    return VisemeLerpModel(manifest, lerp.poses_ * np.nan)
+
+
+def test_a_model_synthesizing_non_finite_silence_is_set_aside(
+    trained_models: dict[str, Model],
+) -> None:
+    lerp = trained_models["viseme-lerp"]
+    assert isinstance(lerp, VisemeLerpModel)
+    registry = _registry(lerp, _nan_model(lerp))
+    catalog = Catalog.build(registry, ServerSettings())
+    assert list(registry.models) == ["good"]
+    (failure,) = registry.failure_report()
+    assert failure["model"] == "broken" and failure["character"] == "broken"
+    assert failure["code"] == "model_invalid"
+    assert failure["message"].startswith("synthesizes NaN or infinite frames for silence")
+    assert np.isfinite(catalog.rest_pose(lerp, None)).all()
+
+
+def test_strict_models_makes_a_failed_probe_fatal(trained_models: dict[str, Model]) -> None:
+    lerp = trained_models["viseme-lerp"]
+    assert isinstance(lerp, VisemeLerpModel)
+    with pytest.raises(ModelStoreError, match="synthesizes NaN"):
+        Catalog.build(_registry(lerp, _nan_model(lerp)), ServerSettings(strict_models=True))
+
+
+def test_a_stored_preset_that_does_not_parse_sets_its_model_aside(
+    trained_models: dict[str, Model],
+) -> None:
+    lerp = trained_models["viseme-lerp"]
+    assert isinstance(lerp, VisemeLerpModel)
+    manifest = replace(
+        lerp.manifest, name="broken", extra={"output_profile": {"channels": "jawOpen"}}
+    )
+    registry = _registry(lerp, VisemeLerpModel(manifest, lerp.poses_))
+    Catalog.build(registry, ServerSettings())
+    assert list(registry.models) == ["good"]
+    error = registry.failures["broken"].error
+    assert (error.code, error.where) == (
+        "model_invalid",
+        "/m/broken/model.json: extra.output_profile",
+    )
+    assert registry.failure_report()[0]["where"] == "broken/model.json: extra.output_profile"
+
+
+def test_when_every_model_fails_its_probes_the_catalog_raises(
+    trained_models: dict[str, Model],
+) -> None:
+    lerp = trained_models["viseme-lerp"]
+    assert isinstance(lerp, VisemeLerpModel)
+    registry = ModelRegistry(models={"broken": _nan_model(lerp)}, root=Path("/m"))
+    with pytest.raises(LipstreamError, match="no model could be loaded") as caught:
+        Catalog.build(registry, ServerSettings())
+    assert caught.value.where == "/m"
