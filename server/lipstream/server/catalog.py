@@ -10,6 +10,7 @@ the event loop and in the synthesis thread pool share it without locks.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,6 +32,8 @@ from .budget import RungEstimate, estimate
 from .calibration import measure
 from .profiles import ProfileError, ProfileRequest, load_presets, parse_profile, resolve_profile
 from .viseme_projection import VisemeProjector, build_projectors
+
+logger = logging.getLogger("lipstream.server")
 
 REST_PROBE_S = 1.0
 PRESET_KEY = "output_profile"
@@ -78,6 +81,10 @@ class Catalog:
                 )
             except LipstreamError as error:
                 registry.drop(name, error)
+            except Exception as error:  # a fault in one model's probe must not stop the rest
+                logger.exception("probing model %s failed", name)
+                fault = f"its start-up probe failed ({type(error).__name__}: {error})"
+                registry.drop(name, ModelStoreError(fault, where=name))
         catalog.presets = _presets(registry, settings)
         registry.require_models(strict=settings.strict_models)
         catalog._check_presets()

@@ -83,3 +83,24 @@ def test_when_every_model_fails_its_probes_the_catalog_raises(
     with pytest.raises(LipstreamError, match="no model could be loaded") as caught:
         Catalog.build(registry, ServerSettings())
     assert caught.value.where == "/m"
+
+
+class _FaultyModel(VisemeLerpModel):
+    """A model whose synthesis raises something other than a LipstreamError."""
+
+    def render(self, *args: object, **kwargs: object) -> np.ndarray:
+        raise ZeroDivisionError("a fault inside the engine")
+
+
+def test_an_unexpected_fault_in_a_probe_sets_only_that_model_aside(
+    trained_models: dict[str, Model],
+) -> None:
+    lerp = trained_models["viseme-lerp"]
+    assert isinstance(lerp, VisemeLerpModel)
+    faulty = _FaultyModel(replace(lerp.manifest, name="broken"), lerp.poses_)
+    registry = _registry(lerp, faulty)
+    Catalog.build(registry, ServerSettings())
+    assert list(registry.models) == ["good"]
+    (failure,) = registry.failure_report()
+    assert failure["model"] == "broken" and failure["code"] == "model_invalid"
+    assert "ZeroDivisionError: a fault inside the engine" in failure["message"]
