@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from lipstream.errors import InvalidRequestError
-from lipstream.loadtest import (
+from lipstream.loadtest.clips import synthetic_clip
+from lipstream.loadtest.load import (
     LoadTestConfig,
     NotLoopbackError,
     check_config,
@@ -23,8 +24,7 @@ from lipstream.loadtest import (
     planned_duration_s,
     write_results,
 )
-from lipstream.loadtest_clips import synthetic_clip
-from lipstream.loadtest_stats import overall_summary, percentile, summarize
+from lipstream.loadtest.stats import overall_summary, percentile, summarize
 from lipstream.phonemes import PHONEMES
 from tests.helpers import run_cli
 from tests.lipstream_client.fake_server import FakeServer
