@@ -99,7 +99,7 @@ def test_rest_pose_of_viseme_lerp_is_its_silence_key_pose(catalog: Catalog) -> N
     silence_row = model.scheme.classes.index(  # type: ignore[attr-defined]
         model.scheme.viseme_of(SILENCE)
     )  # type: ignore[attr-defined]
-    expected = model.poses_[silence_row]  # type: ignore[attr-defined]
+    expected = model.poses[silence_row]  # type: ignore[attr-defined]
     for emotion in (None, "happy"):
         np.testing.assert_allclose(catalog.rest_pose(model, emotion), expected, atol=1e-7)
 

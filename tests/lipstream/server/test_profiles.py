@@ -205,7 +205,7 @@ def test_probing_viseme_lerp_returns_its_trained_key_poses(
     assert model.manifest.hyperparameters["scheme"] == "oculus15"
     np.testing.assert_allclose(
         probe_key_poses(model),
-        model.poses_,  # type: ignore[attr-defined]
+        model.poses,  # type: ignore[attr-defined]
         atol=1e-6,
     )
 
@@ -318,7 +318,7 @@ def test_presets_file_is_validated_by_the_codec(tmp_path: Path) -> None:
 def test_a_viseme_lerp_frame_projects_onto_the_two_visemes_it_blends(catalog: Catalog) -> None:
     model = catalog.model("viseme-lerp", "demo")
     projector = catalog.projector(model)
-    poses = model.poses_.astype(np.float64)  # type: ignore[attr-defined]
+    poses = model.poses.astype(np.float64)  # type: ignore[attr-defined]
     pp, aa = OCULUS15_VISEMES.index("viseme_PP"), OCULUS15_VISEMES.index("viseme_aa")
     frame = 0.7 * poses[pp] + 0.3 * poses[aa]
     expected = np.zeros(15)
