@@ -81,8 +81,8 @@ def test_the_drain_timeout_bounds_the_wait(lerp_dir: Path) -> None:
         began = time.monotonic()
         drained = served.call_soon(served.app.state.lifecycle.drain(0.3))
         messages, code, reason = ws.closed()
-        assert drained.result(5) == 1
-        assert 0.25 < time.monotonic() - began < 3.0
+        assert drained.result(5) == 1  # one session cut off ...
+        assert time.monotonic() - began >= 0.3 - 0.01  # ... only once the drain timed out
     assert (code, reason) == (1001, "shutting_down")
     assert any(isinstance(m, ErrorMessage) and m.code == "shutting_down" for m in messages)
 
