@@ -2,7 +2,8 @@
 
 Sketch: ``lipstream loadtest [options]`` is the Audio2Face-3D style load
 test (``load``); ``lipstream loadtest capacity`` searches for the most
-sessions a server holds under a lag limit (``capacity``). The options that
+sessions a server holds under a lag limit (``capacity``); ``lipstream
+loadtest soak`` runs valid sessions among hostile clients (``soak``). The options that
 name the target and shape the sessions are declared once (``_target_options``)
 and given to each. The CLI (``lipstream.cli``) builds this part of its one
 parser with ``add_loadtest_parser``; the handlers import their run lazily, so
@@ -145,13 +146,82 @@ def _add_capacity_parser(runs: Any) -> None:
     capacity.set_defaults(run=_capacity)
 
 
+def _soak(args: argparse.Namespace, settings: Settings) -> None:
+    from .soak import SoakConfig, format_report, soak, write_results
+
+    config = SoakConfig(
+        url=args.url or default_url(settings),
+        duration_s=args.duration,
+        valid_sessions=args.valid_sessions,
+        clip_s=args.clip,
+        hostile_per_kind=args.hostile,
+        kinds=tuple(args.kinds),
+        engine=args.engine,
+        character=args.character,
+        fps=args.fps,
+        encoding=args.encoding,
+        lead_ms=args.lead_ms,
+        healthz_interval_s=args.healthz_interval,
+        server_pid=args.server_pid,
+        pq_phonemes=args.pq_phonemes,
+        flood_seconds=args.flood_seconds,
+        flood_fps=args.flood_fps,
+        seed=args.seed,
+        token=args.token,
+    )
+    results = soak(config)
+    write_results(results, Path(args.results))
+    print(json.dumps(results, indent=2) if args.json else format_report(results))
+    print(f"results written to {args.results}", file=sys.stderr)
+
+
+def _add_soak_parser(runs: Any) -> None:
+    from .hostile import HOSTILE_KINDS
+
+    soak = runs.add_parser(
+        "soak",
+        help="valid real-time sessions among hostile clients, for a bounded time",
+        description="Valid real-time sessions among hostile clients (silent sockets, partial "
+        "headers, PQ searches, JSON floods, many requests, clients that stop reading, "
+        "malformed messages) against a lipstream server on this machine: the valid "
+        "sessions' lag, /healthz latency, peak server memory and undocumented errors.",
+    )
+    _target_options(soak, required_target=False)
+    soak.add_argument("--duration", type=float, default=60.0, help="seconds (at most 3600)")
+    soak.add_argument("--valid-sessions", type=int, default=10, help="concurrent valid sessions")
+    soak.add_argument("--clip", type=float, default=5.0, help="valid clip length in seconds")
+    soak.add_argument("--hostile", type=int, default=2, help="concurrent clients of each kind")
+    soak.add_argument(
+        "--kinds", nargs="+", default=list(HOSTILE_KINDS), help="hostile kinds to run"
+    )
+    soak.add_argument(
+        "--healthz-interval", type=float, default=0.1, help="seconds between /healthz polls"
+    )
+    soak.add_argument(
+        "--server-pid",
+        type=int,
+        help="read the server's memory from /proc/PID (and its children); "
+        "default: process_resident_memory_bytes from /metrics",
+    )
+    soak.add_argument(
+        "--pq-phonemes", type=int, default=1000, help="phonemes of each PQ-search request"
+    )
+    soak.add_argument(
+        "--flood-seconds", type=float, default=99.0, help="speech seconds of each JSON flood"
+    )
+    soak.add_argument("--flood-fps", type=float, default=1000.0, help="fps of each JSON flood")
+    soak.add_argument("--json", action="store_true", help="print JSON instead of a summary")
+    soak.add_argument("--results", default="bench/soak.json")
+    soak.set_defaults(run=_soak)
+
+
 def add_loadtest_parser(commands: Any) -> None:
     """Add ``loadtest`` and its runs to the CLI's subcommands ``commands``."""
     load = commands.add_parser(
         "loadtest",
         help="concurrent real-time sessions against a server on this machine",
         description="Concurrent real-time sessions against a lipstream server on this machine; "
-        "with a run name, a capacity search. Give a run's options after its name.",
+        "with a run name, a capacity search or a soak. Give a run's options after its name.",
     )
     _target_options(load, required_target=False)
     _load_options(load)
@@ -171,5 +241,6 @@ def add_loadtest_parser(commands: Any) -> None:
     load.add_argument("--json", action="store_true", help="print JSON instead of a table")
     load.add_argument("--results", default="bench/loadtest.json")
     load.set_defaults(run=_loadtest)
-    runs = load.add_subparsers(dest="loadtest_run", metavar="{capacity}")
+    runs = load.add_subparsers(dest="loadtest_run", metavar="{capacity,soak}")
     _add_capacity_parser(runs)
+    _add_soak_parser(runs)
