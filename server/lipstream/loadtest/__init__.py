@@ -4,6 +4,7 @@
 ``sessions`` drives each WebSocket session in real time, ``workers`` spreads
 them over processes, ``clips`` makes the synthetic speech, ``stats`` and
 ``cpu`` summarize what was measured. ``capacity`` searches for the most
-sessions under a lag limit (``lipstream loadtest capacity``); ``command``
-declares the command's options.
+sessions under a lag limit (``lipstream loadtest capacity``); ``soak`` runs
+valid sessions among the ``hostile`` clients (``lipstream loadtest soak``);
+``command`` declares the command's options.
 """
