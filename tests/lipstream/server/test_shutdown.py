@@ -29,7 +29,7 @@ SPANS = [("HH", 0.0, 0.1), ("AY1", 0.1, 0.4), ("M", 0.4, 0.5), ("sil", 0.5, 0.7)
 ITEMS = tuple(PhonemeItem(*span) for span in SPANS)
 
 
-def wait_for(predicate, timeout: float = 10.0) -> None:  # type: ignore[no-untyped-def]
+def wait_for(predicate, timeout: float = 30.0) -> None:  # type: ignore[no-untyped-def]
     deadline = time.monotonic() + timeout
     while not predicate():
         assert time.monotonic() < deadline, "condition not reached in time"
