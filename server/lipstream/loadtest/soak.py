@@ -1,10 +1,12 @@
 """``lipstream loadtest soak``: valid sessions among hostile clients, for a bounded time.
 
-Sketch: for ``duration_s`` seconds, on one event loop, ``valid_sessions``
-real-time sessions run clips of ``clip_s`` seconds one after another (the
-load test's sessions, ``sessions.run_share``, so their frame lag means the
-same), while ``hostile_per_kind`` clients of each hostile kind
-(``hostile``) misbehave over and over. Throughout, ``/healthz`` is polled
+Sketch: for ``duration_s`` seconds ``valid_sessions`` real-time sessions
+run clips of ``clip_s`` seconds one after another (the load test's
+sessions, ``sessions.run_share``, so their frame lag means the same; a
+request under way at the end may finish), while ``hostile_per_kind``
+clients of each hostile kind (``hostile``) misbehave over and over in a
+forked process of their own, so that their work (reading floods of frames)
+never delays the valid sessions' timestamps. Throughout, ``/healthz`` is polled
 every ``healthz_interval_s`` on a fresh connection, and the server's
 resident memory is sampled: from ``/proc/<pid>/status`` (the process and
 its children, such as uvicorn's workers) when ``server_pid`` is given, else
@@ -23,12 +25,14 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+import multiprocessing
 import os
 import platform
 import random
 import time
 from collections import Counter
 from dataclasses import asdict, dataclass, field
+from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
@@ -45,12 +49,14 @@ from .hostile import HOSTILE_KINDS, KindTally, Target, run_kind
 from .load import HTTP_TIMEOUT_S, MAX_JITTER_S, check_loopback, http_base
 from .sessions import ClipPlan, ClipShare, event_loop_name, run_coroutine, run_share
 from .stats import LAG_STATISTICS, summarize
+from .workers import WorkerFailed
 
 MAX_DURATION_S = 3600.0
 MAX_VALID_SESSIONS = 500
 MAX_HOSTILE_PER_KIND = 100
 HEALTH_TIMEOUT_S = 10.0
 RSS_INTERVAL_S = 0.5
+HOSTILE_JOIN_S = 30.0
 DEFAULT_PORTS = {"ws": 80, "wss": 443}
 _MS = 1000.0
 
@@ -263,41 +269,83 @@ def _plan(config: SoakConfig, engine: str, character: str, deadline: float) -> C
     )
 
 
-async def _soak(
+async def _measure(
     config: SoakConfig, target: Target, plan: ClipPlan
-) -> tuple[ClipShare, dict[str, KindTally], _Health, _Memory]:
+) -> tuple[ClipShare, _Health, _Memory]:
+    """The valid sessions, with the health poll and the memory samples alongside."""
     health, memory = _Health(), _Memory()
-    tallies = {kind: KindTally() for kind in config.kinds}
     background = [
         asyncio.create_task(
             _poll_health(target.host, target.port, config.healthz_interval_s, health)
         ),
         asyncio.create_task(_sample_memory(config, target.host, target.port, memory)),
     ]
-    hostile = [
-        asyncio.create_task(run_kind(kind, target, tallies[kind], plan.deadline))
-        for kind in config.kinds
-        for _ in range(config.hostile_per_kind)
-    ]
     try:
         share = await run_share(plan, range(len(plan.jitter_s)), config.valid_sessions, False)
-        await asyncio.gather(*hostile)
     finally:
-        for task in (*background, *hostile):
+        for task in background:
             task.cancel()
-        await asyncio.gather(*background, *hostile, return_exceptions=True)
-    return share, tallies, health, memory
+        await asyncio.gather(*background, return_exceptions=True)
+    return share, health, memory
 
 
-def _undocumented(share: ClipShare, tallies: dict[str, KindTally]) -> dict[str, int]:
+async def _run_hostile(config: SoakConfig, target: Target, deadline: float) -> dict[str, KindTally]:
+    tallies = {kind: KindTally() for kind in config.kinds}
+    await asyncio.gather(
+        *(
+            run_kind(kind, target, tallies[kind], deadline)
+            for kind in config.kinds
+            for _ in range(config.hostile_per_kind)
+        )
+    )
+    return tallies
+
+
+def _hostile_process(config: SoakConfig, target: Target, deadline: float, pipe: Connection) -> None:
+    tallies = run_coroutine(_run_hostile(config, target, deadline))
+    pipe.send_bytes(json.dumps({kind: t.as_dict() for kind, t in tallies.items()}).encode())
+    pipe.close()
+
+
+def _run(
+    config: SoakConfig, target: Target, plan: ClipPlan
+) -> tuple[ClipShare, dict[str, dict[str, Any]], _Health, _Memory]:
+    """The hostile clients in a forked process of their own, so that reading their floods
+    never delays the valid sessions' timestamps; the measurements in this one."""
+    context = multiprocessing.get_context("fork")
+    receiving, sending = context.Pipe(duplex=False)
+    process = context.Process(
+        target=_hostile_process,
+        name="lipstream-soak-hostile",
+        args=(config, target, plan.deadline, sending),
+    )
+    process.start()
+    sending.close()
+    try:
+        share, health, memory = run_coroutine(_measure(config, target, plan))
+        try:
+            hostile: dict[str, dict[str, Any]] = json.loads(receiving.recv_bytes())
+        except EOFError:
+            raise WorkerFailed(
+                f"the hostile clients' process ended without results (exit code {process.exitcode})"
+            ) from None
+    finally:
+        process.join(HOSTILE_JOIN_S)
+        if process.is_alive():
+            process.kill()
+            process.join()
+    return share, hostile, health, memory
+
+
+def _undocumented(share: ClipShare, hostile: dict[str, dict[str, Any]]) -> dict[str, int]:
     """Error codes outside ERROR_CODES and close codes outside CloseCode, by anyone."""
     seen: Counter[str] = Counter()
     for record in share.records:
         if record.error is not None:
             seen[record.error] += 1
-    for tally in tallies.values():
-        seen.update(tally.error_codes)
-        seen.update({f"closed_{code}": n for code, n in tally.closes.items() if code.isdigit()})
+    for tally in hostile.values():
+        seen.update(tally["error_codes"])
+        seen.update({f"closed_{code}": n for code, n in tally["closes"].items() if code.isdigit()})
     close_codes = {f"closed_{int(code)}" for code in CloseCode}
     client_side = {"deadline", "timeout", "no_error_reply"}
     return {
@@ -332,11 +380,11 @@ def soak(config: SoakConfig) -> dict[str, Any]:
     )
     began = time.perf_counter()
     plan = _plan(config, engine, character, began + config.duration_s)
-    share, tallies, health, memory = run_coroutine(_soak(config, target, plan))
+    share, hostile, health, memory = _run(config, target, plan)
     started = [record for record in share.records if record.error != "deadline"]
     lag = summarize(share.frame_lags_ms(config.fps), LAG_STATISTICS)
     health_latency = summarize(health.latencies_ms, LAG_STATISTICS)
-    undocumented = _undocumented(share, tallies)
+    undocumented = _undocumented(share, hostile)
     return {
         "tool": f"lipstream loadtest soak {__version__}",
         "machine": {
@@ -374,7 +422,7 @@ def soak(config: SoakConfig) -> dict[str, Any]:
             "samples": memory.samples,
             "peak_rss_bytes": memory.peak_bytes,
         },
-        "hostile": {kind: tally.as_dict() for kind, tally in tallies.items()},
+        "hostile": hostile,
         "undocumented_errors": undocumented,
         "summary": {
             "valid_frame_lag_p99_ms": lag["p99"],
