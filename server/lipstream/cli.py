@@ -18,8 +18,8 @@ from lipstream_client.messages import NAMINGS, VISEME_SETS
 
 from .config import Settings, load_settings
 from .errors import LipstreamError
-from .loadtest.command import add_loadtest_parser
 from .exports import FORMATS, MOHO_FPS
+from .loadtest.command import add_loadtest_parser
 
 if TYPE_CHECKING:
     from lipstream_client import OutputProfile
