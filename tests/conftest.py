@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import pytest
@@ -27,3 +28,14 @@ def trained_models(small_demo_corpus: Corpus) -> dict[str, Model]:
 
     train, _ = small_demo_corpus.split()
     return {name: train_engine(train, name) for name in engine_names()}
+
+
+@pytest.fixture(scope="session")
+def all_models_dir(
+    trained_models: dict[str, Model], tmp_path_factory: pytest.TempPathFactory
+) -> Path:
+    """Every registered engine's model of the demo character."""
+    directory = tmp_path_factory.mktemp("models-all")
+    for name, model in trained_models.items():
+        model.save(directory / name)
+    return directory

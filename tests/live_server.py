@@ -19,13 +19,14 @@ from tests.helpers import free_port
 if TYPE_CHECKING:
     from lipstream.engines.base import Model
 
-READY_TIMEOUT_S = 30.0
+READY_TIMEOUT_S = 120.0  # a bound on a busy machine, not a speed claim
 
 
 @dataclass(frozen=True)
 class LiveServer:
     http: str
     models_dir: Path
+    pid: int | None = None
 
     @property
     def ws(self) -> str:
@@ -83,7 +84,7 @@ def live_server(models_dir: Path, *extra: str) -> Iterator[LiveServer]:
                 if time.monotonic() > deadline:
                     raise RuntimeError(f"lipstream serve not ready within {READY_TIMEOUT_S} s")
                 time.sleep(0.1)
-            yield LiveServer(base, models_dir)
+            yield LiveServer(base, models_dir, process.pid)
         finally:
             stop_process(process)
 

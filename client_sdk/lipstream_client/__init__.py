@@ -6,9 +6,17 @@ back without I/O, ``errors`` lists every error and close code, and
 ``schema`` loads the JSON Schemas the codec enforces. ``client`` is the
 asyncio client (``AsyncClient``, one ``Stream`` per request), ``sync`` its
 blocking wrapper (``Client``), ``exceptions`` what they raise,
-``frame_timeline`` assembles frames by index, and ``rest`` calls the HTTP
-endpoints with the standard library.
+``frame_timeline`` assembles frames by index, ``items`` the phoneme shapes
+the clients accept, and ``rest`` calls the HTTP endpoints with the standard
+library.
+
+Importing the package, ``messages`` or ``codec`` does no I/O and imports
+neither ``websockets`` nor the asyncio client: the clients (``AsyncClient``,
+``Client`` and their streams) are imported on first use, through the module
+``__getattr__``, so a server can use the protocol core alone.
 """
+
+from typing import TYPE_CHECKING, Any
 
 from .channels import (
     OCULUS15_VISEMES,
@@ -17,7 +25,6 @@ from .channels import (
     canonical_viseme,
     rename_channel,
 )
-from .client import AsyncClient, RequestOver, Stream, StreamResult
 from .codec import (
     DEFAULT_ENCODING,
     DEFAULT_MAX_SIZE,
@@ -70,7 +77,32 @@ from .messages import (
     Start,
 )
 from .schema import load_schema
-from .sync import Client, SyncStream
+
+if TYPE_CHECKING:
+    from .client import AsyncClient, RequestOver, Stream, StreamResult
+    from .sync import Client, SyncStream
+
+_LAZY = {
+    "AsyncClient": "client",
+    "RequestOver": "client",
+    "Stream": "client",
+    "StreamResult": "client",
+    "Client": "sync",
+    "SyncStream": "sync",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """The clients, imported when first asked for (they need ``websockets``)."""
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    from importlib import import_module
+
+    value = getattr(import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
 
 __all__ = [
     "DEFAULT_ENCODING",

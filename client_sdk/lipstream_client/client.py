@@ -27,14 +27,12 @@ Usage::
 from __future__ import annotations
 
 import asyncio
-import ipaddress
 import itertools
 import time
-from collections.abc import AsyncIterator, Callable, Iterable, Mapping, Sequence
+from collections.abc import AsyncIterator, Callable, Iterable, Sequence
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Literal, Self, TypeAlias
-from urllib.parse import urlsplit
 
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed as WebSocketClosed
@@ -52,6 +50,7 @@ from .exceptions import (
     closed_error,
 )
 from .frame_timeline import FrameTimeline
+from .items import PhonemeLike, is_loopback_url, phoneme_items
 from .messages import (
     DEFAULT_FPS,
     AudioChunk,
@@ -65,7 +64,6 @@ from .messages import (
     Interrupt,
     JsonMap,
     OutputProfile,
-    PhonemeItem,
     Phonemes,
     Ready,
     ServerMessage,
@@ -77,12 +75,6 @@ DEFAULT_OPEN_TIMEOUT_S = 10.0
 DEFAULT_CLOSE_TIMEOUT_S = 5.0
 _HANDSHAKE_BODY_CHARS = 200
 
-PhonemeLike: TypeAlias = (
-    PhonemeItem
-    | tuple[str, float, float]
-    | tuple[str, float, float, str | None]
-    | Mapping[str, object]
-)
 MessageTap: TypeAlias = Callable[[ServerMessage, float], None]
 
 
@@ -121,44 +113,6 @@ class _Finished:
 
     done: Done | None
     error: LipstreamClientError | None
-
-
-def _coerce_item(item: PhonemeLike, where: str) -> PhonemeItem:
-    if isinstance(item, PhonemeItem):
-        return item
-    if isinstance(item, Mapping):
-        unknown = set(item) - {"phoneme", "start", "end", "emotion"}
-        if unknown:
-            raise ValueError(f"{where}: unknown keys {sorted(unknown)}")
-        try:
-            phoneme, start, end = item["phoneme"], item["start"], item["end"]
-        except KeyError as missing:
-            raise ValueError(f"{where}: missing key {missing}") from None
-        emotion = item.get("emotion")
-        return PhonemeItem(phoneme, start, end, emotion)  # type: ignore[arg-type]
-    if isinstance(item, tuple) and len(item) in (3, 4):
-        return PhonemeItem(*item)
-    raise ValueError(
-        f"{where}: expected a PhonemeItem, a (phoneme, start, end[, emotion]) "
-        f"tuple or a mapping, got {item!r}"
-    )
-
-
-def phoneme_items(items: Iterable[PhonemeLike]) -> tuple[PhonemeItem, ...]:
-    """``PhonemeItem``s from items, (phoneme, start, end[, emotion]) tuples or mappings;
-    ValueError naming the first item of another shape."""
-    return tuple(_coerce_item(item, f"items[{index}]") for index, item in enumerate(items))
-
-
-def is_loopback_url(url: str) -> bool:
-    """True when ``url``'s host is ``localhost`` or a loopback IP address."""
-    host = urlsplit(url).hostname or ""
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
 
 
 class Stream:

@@ -25,10 +25,10 @@ from urllib.parse import urlsplit, urlunsplit
 
 import msgpack
 
-from .client import PhonemeLike, is_loopback_url, phoneme_items
 from .codec import encode
 from .exceptions import LipstreamClientError, LipstreamServerError
 from .float32 import pack_float32
+from .items import PhonemeLike, is_loopback_url, phoneme_items
 from .messages import (
     DEFAULT_FPS,
     AudioChunk,

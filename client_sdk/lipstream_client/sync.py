@@ -33,12 +33,12 @@ from .client import (
     DEFAULT_OPEN_TIMEOUT_S,
     AsyncClient,
     MessageTap,
-    PhonemeLike,
     Stream,
     StreamResult,
 )
 from .codec import DEFAULT_ENCODING
 from .exceptions import ConnectionClosed, LipstreamClientError, LipstreamServerError
+from .items import PhonemeLike
 from .messages import (
     DEFAULT_FPS,
     ClientMessage,

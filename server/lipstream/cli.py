@@ -19,6 +19,7 @@ from lipstream_client.messages import NAMINGS, VISEME_SETS
 from .config import Settings, load_settings
 from .errors import LipstreamError
 from .exports import FORMATS, MOHO_FPS
+from .loadtest.command import add_loadtest_parser
 
 if TYPE_CHECKING:
     from lipstream_client import OutputProfile
@@ -138,7 +139,7 @@ def _inspect(args: argparse.Namespace, settings: Settings) -> None:
 
 
 def _bench(args: argparse.Namespace, settings: Settings) -> None:
-    from .bench import format_engine_benches, format_table, run_bench, write_results
+    from .bench.harness import format_engine_benches, format_table, run_bench, write_results
     from .corpus import load_corpus
     from .training import DEMO_CORPUS_DIR, build_demo
 
@@ -154,36 +155,6 @@ def _bench(args: argparse.Namespace, settings: Settings) -> None:
     else:
         print(format_table(results))
         print(format_engine_benches(results))
-
-
-def _loadtest(args: argparse.Namespace, settings: Settings) -> None:
-    from .loadtest import LoadTestConfig, format_table, loadtest, write_results
-
-    # A server bound to every interface (0.0.0.0, ::) is reached here through loopback.
-    host = "127.0.0.1" if settings.host in ("0.0.0.0", "::", "") else settings.host
-    url = args.url or f"ws://{host}:{settings.port}/v1/stream"
-    config = LoadTestConfig(
-        url=url,
-        streams=args.streams,
-        requests=args.requests,
-        clips_s=tuple(args.clips),
-        fps=args.fps,
-        engine=args.engine,
-        character=args.character,
-        encoding=args.encoding,
-        latency_budget_ms=args.latency_budget_ms,
-        lead_ms=args.lead_ms,
-        pause_s=args.pause,
-        seed=args.seed,
-        token=args.token,
-        max_duration_s=args.max_duration,
-        workers=args.workers,
-        probe_phonemes=args.probe_phonemes,
-    )
-    results = loadtest(config)
-    write_results(results, Path(args.results))
-    print(json.dumps(results, indent=2) if args.json else format_table(results))
-    print(f"results written to {args.results}", file=sys.stderr)
 
 
 def _positive_int(text: str) -> int:
@@ -265,52 +236,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     bench.set_defaults(run=_bench)
 
-    load = commands.add_parser(
-        "loadtest", help="concurrent real-time sessions against a server on this machine"
-    )
-    load.add_argument(
-        "--url",
-        help="loopback ws:// URL of /v1/stream "
-        "(default: ws://$LIPSTREAM_HOST:$LIPSTREAM_PORT/v1/stream)",
-    )
-    load.add_argument("--streams", type=int, default=10, help="concurrent sessions")
-    load.add_argument("--requests", type=int, default=30, help="requests per clip length")
-    load.add_argument(
-        "--clips", type=float, nargs="+", default=[5.0, 10.0, 20.0], help="clip lengths in seconds"
-    )
-    load.add_argument("--fps", type=float, default=60.0)
-    load.add_argument("--engine", help="default: the server's first character's first engine")
-    load.add_argument("--character", help="default: the server's first character")
-    load.add_argument("--encoding", choices=["msgpack", "json"], default="msgpack")
-    load.add_argument("--latency-budget-ms", type=float)
-    load.add_argument(
-        "--lead-ms", type=float, default=0.0, help="send each phoneme this long before its start"
-    )
-    load.add_argument("--pause", type=float, default=3.0, help="seconds between clip lengths")
-    load.add_argument("--seed", type=int, default=0, help="seed of the synthetic clips")
-    load.add_argument("--token", help="bearer token, if the server requires one")
-    load.add_argument(
-        "--max-duration",
-        type=float,
-        default=600.0,
-        help="refuse runs planned longer than this many seconds (at most 3600)",
-    )
-    load.add_argument(
-        "--workers",
-        type=int,
-        default=1,
-        help="load-generating processes sharing the sessions (one core each)",
-    )
-    load.add_argument(
-        "--probe-phonemes",
-        type=int,
-        default=0,
-        help="also time the first frame of requests of this many phonemes "
-        "sent whole, on one extra connection",
-    )
-    load.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    load.add_argument("--results", default="bench/loadtest.json")
-    load.set_defaults(run=_loadtest)
+    add_loadtest_parser(commands)
     return parser
 
 

@@ -30,13 +30,17 @@ def test_first_start_builds_the_demo_then_serves_every_engine(tmp_path: Path) ->
     base = f"http://127.0.0.1:{port}"
     try:
         deadline = time.monotonic() + BUILD_LIMIT_S
-        while time.monotonic() < deadline and process.poll() is None:
+        ready = False
+        while not ready and time.monotonic() < deadline and process.poll() is None:
             try:
-                if httpx.get(f"{base}/readyz", timeout=1.0).status_code == 200:
-                    break
+                ready = httpx.get(f"{base}/readyz", timeout=1.0).status_code == 200
             except httpx.TransportError:
+                pass
+            if not ready:
                 time.sleep(0.5)
         assert process.poll() is None, log.read_text()[-2000:]
+        assert ready, f"not ready within {BUILD_LIMIT_S} s: {log.read_text()[-2000:]}"
+        assert httpx.get(f"{base}/readyz").json() == {"ready": True}
         assert httpx.get(f"{base}/healthz").json() == {"status": "ok"}
         characters = httpx.get(f"{base}/v1/characters").json()["characters"]
         assert characters == [{"name": "demo", "engines": sorted(engine_names())}]

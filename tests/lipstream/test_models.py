@@ -21,7 +21,7 @@ def lerp() -> VisemeLerpModel:
 
 
 def _nan_copy(model: VisemeLerpModel, directory: Path) -> None:
-    save_model_dir(directory, model.manifest, {"poses": model.poses_ * np.nan})
+    save_model_dir(directory, model.manifest, {"poses": model.poses * np.nan})
 
 
 def test_a_bad_model_is_set_aside_and_the_good_one_serves(
@@ -42,7 +42,7 @@ def test_a_bad_model_is_set_aside_and_the_good_one_serves(
             "character": lerp.name,
             "code": "model_invalid",
             "where": f"nan/{ARRAYS_NAME}: poses",
-            "message": f"holds {lerp.poses_.size} NaN or infinite values (first at (0, 0))",
+            "message": f"holds {lerp.poses.size} NaN or infinite values (first at (0, 0))",
         },
         {
             "model": "unreadable",

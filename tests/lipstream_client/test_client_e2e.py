@@ -181,7 +181,7 @@ def test_errors_are_typed_and_the_connection_keeps_serving(served: LiveServer) -
 
 
 def test_loadtest_against_the_real_server(served: LiveServer, tmp_path: Path) -> None:
-    from lipstream.loadtest import LoadTestConfig, loadtest
+    from lipstream.loadtest.load import LoadTestConfig, loadtest
 
     results = loadtest(
         LoadTestConfig(

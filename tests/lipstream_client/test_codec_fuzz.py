@@ -11,8 +11,8 @@ from hypothesis import strategies as st
 
 from lipstream_client import ERROR_CODES, ProtocolError, decode, encode
 from lipstream_client.messages import MESSAGE_TYPES, Message
-from lipstream_client.strategies import messages
 from lipstream_client.wire import message_to_wire
+from tests.lipstream_client.strategies import messages
 
 MESSAGE_CLASSES = tuple(MESSAGE_TYPES.values())
 CODEC_CODES = {code for code, info in ERROR_CODES.items() if info.origin == "codec"}

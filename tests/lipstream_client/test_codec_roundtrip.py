@@ -40,7 +40,7 @@ from lipstream_client.codec import (
     subprotocol_for,
 )
 from lipstream_client.messages import CLIENT_MESSAGE_TYPES, MESSAGE_TYPES, SERVER_MESSAGE_TYPES
-from lipstream_client.strategies import (
+from tests.lipstream_client.strategies import (
     audio_chunks,
     cancels,
     dones,

@@ -31,6 +31,29 @@ print("ok")
 """
 NOT_LOADED = "import sys, lipstream_client; print(sorted(m for m in ('numpy', 'hypothesis') if m in sys.modules))"
 
+WITHOUT_IO = """
+import sys
+sys.modules["websockets"] = None  # any import of websockets now fails
+import lipstream_client.codec, lipstream_client.messages
+from lipstream_client import Frames, decode, encode, ERROR_CODES
+message = Frames.from_rows("a", 0, 0, 60.0, [[0.25]])
+assert decode(encode(message, "json"), "json") == message and ERROR_CODES
+loaded = ("asyncio", "lipstream_client.client", "lipstream_client.sync", "lipstream_client.rest")
+print(sorted(name for name in loaded if name in sys.modules))
+"""
+LAZY_CLIENTS = """
+import sys, lipstream_client
+assert "lipstream_client.client" not in sys.modules
+from lipstream_client import AsyncClient, Client
+from lipstream_client.client import AsyncClient as Direct
+assert AsyncClient is Direct and Client.__module__ == "lipstream_client.sync"
+assert "websockets" in sys.modules
+try:
+    lipstream_client.NoSuchName
+except AttributeError as error:
+    print(error)
+"""
+
 
 def run_python(code: str) -> subprocess.CompletedProcess[str]:
     env = {
@@ -57,6 +80,18 @@ def test_import_loads_neither_numpy_nor_hypothesis() -> None:
     result = run_python(NOT_LOADED)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "[]"
+
+
+def test_the_protocol_core_imports_without_websockets_or_asyncio() -> None:
+    result = run_python(WITHOUT_IO)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "[]"
+
+
+def test_the_clients_are_imported_on_first_use() -> None:
+    result = run_python(LAZY_CLIENTS)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "module 'lipstream_client' has no attribute 'NoSuchName'"
 
 
 @pytest.mark.parametrize(

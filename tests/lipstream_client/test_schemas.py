@@ -17,8 +17,8 @@ from lipstream_client import errors as codes
 from lipstream_client import messages as m
 from lipstream_client.messages import MESSAGE_TYPES, Message
 from lipstream_client.schema import schema_text
-from lipstream_client.strategies import messages
 from lipstream_client.wire import message_to_wire
+from tests.lipstream_client.strategies import messages
 
 FIELD_NAMES = (
     "id",

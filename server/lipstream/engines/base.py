@@ -40,6 +40,7 @@ one key pose per viseme and ignores emotion altogether.
 
 from __future__ import annotations
 
+import inspect
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Iterable, Iterator, Mapping, Sequence
@@ -363,7 +364,11 @@ def make_request(fps: float = 60.0, emotion: str | None = None, **options: Any) 
 
 
 class Engine(ABC):
-    """A trainer: hyperparameters in ``__init__``, ``fit`` returns a ``Model``."""
+    """A trainer: hyperparameters in ``__init__``, ``fit`` returns a ``Model``.
+
+    An engine holds only its hyperparameters, each stored under the name of its
+    constructor argument; ``fit`` leaves the engine as it was, and everything learned
+    lives in the returned ``Model``."""
 
     name: ClassVar[str]
     model_class: ClassVar[type[Model]]
@@ -386,9 +391,27 @@ class Engine(ABC):
             **fields,
         )
 
+    @classmethod
+    def hyperparameter_names(cls) -> list[str]:
+        """The constructor's parameters, in order, read from its signature as scikit-learn's
+        ``get_params`` reads them; TypeError for ``*args`` or ``**kwargs``, which name none."""
+        if cls.__init__ is object.__init__:
+            return []
+        names = []
+        for parameter in list(inspect.signature(cls.__init__).parameters.values())[1:]:
+            if parameter.kind in (parameter.VAR_POSITIONAL, parameter.VAR_KEYWORD):
+                raise TypeError(
+                    f"{cls.__name__}.__init__ takes *{parameter.name}: an engine names each "
+                    f"hyperparameter in its signature"
+                )
+            names.append(parameter.name)
+        return names
+
     def hyperparameters(self) -> dict[str, Any]:
-        """The constructor arguments, as stored in the manifest."""
-        return {key: value for key, value in vars(self).items() if not key.endswith("_")}
+        """The constructor arguments, as stored in the manifest: each is kept on the engine
+        under its own name, so ``type(engine)(**engine.hyperparameters())`` is the same
+        engine."""
+        return {name: getattr(self, name) for name in self.hyperparameter_names()}
 
 
 class RenderingSynthesizer(Synthesizer):

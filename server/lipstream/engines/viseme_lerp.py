@@ -27,7 +27,7 @@ from .base import Engine, Lookahead, Model, SynthesisRequest
 
 
 class VisemeLerpModel(Model):
-    """Key poses ``poses_`` float32 (n_visemes, n_channels), rows in ``scheme.classes`` order."""
+    """Key poses ``poses`` float32 (n_visemes, n_channels), rows in ``scheme.classes`` order."""
 
     engine = "viseme-lerp"
 
@@ -35,7 +35,7 @@ class VisemeLerpModel(Model):
         super().__init__(manifest)
         self.scheme = get_scheme(manifest.hyperparameters["scheme"])
         # A small copy, not the memmap: fancy indexing off a memmap is slow.
-        self.poses_ = np.array(poses, dtype=np.float32)
+        self.poses = np.array(poses, dtype=np.float32)
         self._pose_row = {p: self.scheme.classes.index(self.scheme.viseme_of(p)) for p in PHONEMES}
 
     @property
@@ -52,7 +52,7 @@ class VisemeLerpModel(Model):
     ) -> np.ndarray:
         window = spans[_first_key(spans, times[0]) : _last_key(spans, times[-1]) + 1]
         centres = np.array([span.centre for span in window])
-        keys = self.poses_[[self._pose_row[span.phoneme] for span in window]]
+        keys = self.poses[[self._pose_row[span.phoneme] for span in window]]
         if len(window) == 1:
             return np.repeat(keys, len(times), axis=0).astype(np.float32)
         # np.interp per channel, for all channels at once: the segment left of each time
@@ -64,7 +64,7 @@ class VisemeLerpModel(Model):
         return np.asarray(frames, dtype=np.float32)
 
     def arrays(self) -> dict[str, np.ndarray]:
-        return {"poses": self.poses_}
+        return {"poses": self.poses}
 
     @classmethod
     def from_arrays(

@@ -46,13 +46,32 @@ def _server(request: Request) -> ServerState:
     return state
 
 
+_frozen = False
+
+
+def freeze_long_lived_objects() -> None:
+    """Move every object alive now out of the cyclic collector's reach, once per process.
+
+    Called by the serving process after its models load: models, modules and the catalog
+    live as long as the process, and a full collection that walks them takes 80 ms, a lag
+    spike for every session. An app built elsewhere (tests, embedding) leaves gc alone."""
+    global _frozen
+    if not _frozen:
+        _frozen = True
+        gc.freeze()
+
+
 def create_app(
     models_path: Path,
     settings: ServerSettings | None = None,
     loaded: ModelRegistry | None = None,
+    *,
+    serving_process: bool = False,
 ) -> FastAPI:
     """An app serving every model found under ``models_path`` (or the models already
-    ``loaded`` from there) with ``settings`` (default: the ``LIPSTREAM_*`` environment)."""
+    ``loaded`` from there) with ``settings`` (default: the ``LIPSTREAM_*`` environment).
+    ``serving_process``: this process exists to serve the app, so its lifespan may change
+    process-wide state (``freeze_long_lived_objects``)."""
     settings = settings or load_server_settings()
     metrics = Metrics()
     lifecycle = Lifecycle(settings.max_sessions, on_drain=lambda: metrics.draining.set(1))
@@ -64,10 +83,8 @@ def create_app(
         server = ServerState(
             registry, Catalog.build(registry, settings), settings, metrics, lifecycle, executor
         )
-        # Models, modules and the catalog live as long as the process: moving them out of
-        # the collector's reach keeps each full collection short (80 ms otherwise, a lag
-        # spike for every session).
-        gc.freeze()
+        if serving_process:
+            freeze_long_lived_objects()
         restore_signals = install_drain_on_signals(lifecycle, settings.drain_timeout_s)
         try:
             yield {"server": server}

@@ -13,12 +13,20 @@ while sessions are open; the app keeps its own session cap. With one worker
 the app object is served directly; with ``--workers N`` uvicorn's supervisor
 starts N processes, each building the app from the environment
 (``app_from_environment``), and each maps the same model files, so their
-pages are shared.
+pages are shared. The serving process's models path and settings reach the
+workers whole, as JSON in one private variable (``WORKER_APP_ENV``) that is
+set only while uvicorn runs, so serving leaves ``os.environ`` as it found it.
+Either way the app is told it owns its process (``serving_process``), so it
+freezes the collector's view of its models once they load.
 """
 
 from __future__ import annotations
 
+import json
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -32,13 +40,51 @@ from .closing import BoundedCloseProtocol
 from .http_flush import BoundedFlushHTTPProtocol
 
 APP_FACTORY = "lipstream.server.runner:app_from_environment"
+WORKER_APP_ENV = "LIPSTREAM_WORKER_APP"
 GRACEFUL_EXIT_S = 5.0
 
 
+def encode_worker_app(models: Path, server: ServerSettings) -> str:
+    """The models path and settings of the serving process, for its workers."""
+    fields = asdict(server)
+    fields["profiles"] = None if server.profiles is None else str(server.profiles)
+    return json.dumps({"models": str(models), "server": fields})
+
+
+def decode_worker_app(text: str) -> tuple[Path, ServerSettings]:
+    """The inverse of ``encode_worker_app``."""
+    document = json.loads(text)
+    fields = document["server"]
+    fields["auth_tokens"] = tuple(fields["auth_tokens"])
+    fields["allowed_origins"] = tuple(fields["allowed_origins"])
+    fields["profiles"] = None if fields["profiles"] is None else Path(fields["profiles"])
+    return Path(document["models"]), ServerSettings(**fields)
+
+
 def app_from_environment() -> FastAPI:
-    """The app for ``LIPSTREAM_MODELS`` and the ``LIPSTREAM_*`` settings (worker entry)."""
+    """The worker entry: the app ``serve`` described in ``WORKER_APP_ENV``, else the one for
+    ``LIPSTREAM_MODELS`` and the ``LIPSTREAM_*`` settings."""
+    described = os.environ.get(WORKER_APP_ENV)
+    if described:
+        models, server = decode_worker_app(described)
+        return create_app(models, server, serving_process=True)
     settings = load_settings()
-    return create_app(settings.models, settings.server)
+    return create_app(settings.models, settings.server, serving_process=True)
+
+
+@contextmanager
+def exported(name: str, value: str) -> Iterator[None]:
+    """``os.environ[name] = value`` for the block (children started in it inherit it), then
+    the variable as it was."""
+    before = os.environ.get(name)
+    os.environ[name] = value
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop(name, None)
+        else:
+            os.environ[name] = before
 
 
 def uvicorn_options(server: ServerSettings) -> dict[str, Any]:
@@ -66,17 +112,16 @@ def serve(
     """Serve ``models`` (already loaded as ``registry``, for one worker) until SIGTERM or
     SIGINT, draining first (see ``lifecycle``)."""
     if server.workers > 1:
-        os.environ["LIPSTREAM_MODELS"] = str(models)
-        uvicorn.run(
-            APP_FACTORY,
-            factory=True,
-            host=host,
-            port=port,
-            workers=server.workers,
-            **uvicorn_options(server),
-        )
+        with exported(WORKER_APP_ENV, encode_worker_app(models, server)):
+            uvicorn.run(
+                APP_FACTORY,
+                factory=True,
+                host=host,
+                port=port,
+                workers=server.workers,
+                **uvicorn_options(server),
+            )
         return
-    config = uvicorn.Config(
-        create_app(models, server, registry), host=host, port=port, **uvicorn_options(server)
-    )
+    app = create_app(models, server, registry, serving_process=True)
+    config = uvicorn.Config(app, host=host, port=port, **uvicorn_options(server))
     uvicorn.Server(config).run()

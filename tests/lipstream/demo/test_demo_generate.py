@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import time
 from collections import Counter
 from itertools import pairwise
 
@@ -108,11 +107,8 @@ def test_bad_sentence_count_raises() -> None:
 
 
 @pytest.mark.slow
-def test_full_corpus_size_balance_and_speed() -> None:
-    started = time.perf_counter()
+def test_full_corpus_size_and_balance() -> None:
     corpus = generate_demo_corpus()
-    elapsed = time.perf_counter() - started
-    assert elapsed < 60.0
     assert len(corpus) >= 250
     minutes = sum(utterance.duration for utterance in corpus.utterances) / 60.0
     assert minutes >= 15.0

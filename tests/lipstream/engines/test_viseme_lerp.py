@@ -62,24 +62,24 @@ def corpus() -> Corpus:
 def test_key_poses_are_frame_weighted_viseme_means(corpus: Corpus) -> None:
     model = VisemeLerpEngine(scheme="oculus15").fit(corpus)
     scheme = get_scheme("oculus15")
-    aa = model.poses_[scheme.classes.index("aa")]
-    pp = model.poses_[scheme.classes.index("PP")]
+    aa = model.poses[scheme.classes.index("aa")]
+    pp = model.poses[scheme.classes.index("PP")]
     np.testing.assert_allclose(
         aa, [(20 * 0.8 + 10 * 0.6) / 30, 2 * (20 * 0.8 + 10 * 0.6) / 30], rtol=1e-6
     )
     np.testing.assert_allclose(
         pp, [(10 * 0.1 + 20 * 0.3) / 30, 2 * (10 * 0.1 + 20 * 0.3) / 30], rtol=1e-6
     )
-    unseen = model.poses_[scheme.classes.index("SS")]
-    np.testing.assert_allclose(unseen, model.poses_[scheme.classes.index("sil")])
+    unseen = model.poses[scheme.classes.index("SS")]
+    np.testing.assert_allclose(unseen, model.poses[scheme.classes.index("sil")])
 
 
 def test_frames_interpolate_linearly_between_phoneme_centres(corpus: Corpus) -> None:
     model = VisemeLerpEngine().fit(corpus)
     scheme = get_scheme("oculus15")
-    aa = float(model.poses_[scheme.classes.index("aa"), 0])
-    pp = float(model.poses_[scheme.classes.index("PP"), 0])
-    rest = float(model.poses_[scheme.classes.index("sil"), 0])
+    aa = float(model.poses[scheme.classes.index("aa"), 0])
+    pp = float(model.poses[scheme.classes.index("PP"), 0])
+    rest = float(model.poses[scheme.classes.index("sil"), 0])
     spans = [("sil", 0.0, 0.2), ("AA", 0.2, 0.4), ("B", 0.4, 0.6)]
     frames = model.synthesize(spans, fps=20).frames[:, 0]
     expected = {
@@ -112,8 +112,8 @@ def test_a_corrupt_stored_model_is_refused_naming_the_array_or_field(
 ) -> None:
     model = VisemeLerpEngine().fit(corpus)
     model.save(tmp_path)
-    assert np.array_equal(load_model(tmp_path).poses_, model.poses_)  # type: ignore[attr-defined]
-    poses, hyperparameters = corrupt(model.poses_, dict(model.manifest.hyperparameters))
+    assert np.array_equal(load_model(tmp_path).poses, model.poses)  # type: ignore[attr-defined]
+    poses, hyperparameters = corrupt(model.poses, dict(model.manifest.hyperparameters))
     manifest = replace(model.manifest, hyperparameters=hyperparameters)
     save_model_dir(tmp_path, manifest, {"poses": poses})
     with pytest.raises(ModelStoreError) as caught:

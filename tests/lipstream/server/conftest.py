@@ -16,17 +16,6 @@ if TYPE_CHECKING:
 
 
 @pytest.fixture(scope="session")
-def all_models_dir(
-    trained_models: dict[str, Model], tmp_path_factory: pytest.TempPathFactory
-) -> Path:
-    """Every registered engine's model of the demo character."""
-    directory = tmp_path_factory.mktemp("server-models-all")
-    for name, model in trained_models.items():
-        model.save(directory / name)
-    return directory
-
-
-@pytest.fixture(scope="session")
 def lerp_dir(trained_models: dict[str, Model], tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Only the viseme-lerp model: fast to load, for servers testing limits."""
     directory = tmp_path_factory.mktemp("server-models-lerp")

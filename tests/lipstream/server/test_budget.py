@@ -84,13 +84,31 @@ def test_catalog_resolves_models_and_names_the_missing_field(catalog: Catalog) -
     assert (error.value.code, error.value.where) == ("unknown_character", "character")
 
 
+# Worst-case waits (ms) of the demo models' rungs with phonemes of at most 200 ms. viseme-lerp
+# waits one phoneme. anime-graph (120 fps, 0.1 s smoothing window: half-width 12 frames)
+# waits 13 / 120 s = 108.333 ms for the next grid sample and the filter (1 / 120 s = 8.333 ms
+# unsmoothed), 32.5 ms for the audio (two 10 ms MFCC steps and half a 25 ms window), and
+# max_tile phonemes: 10 -> 2140.833, 4 -> 940.833, 2 -> 540.833, 1 -> 340.833.
+DEMO_LOOKAHEAD_MS = {
+    "viseme-lerp": {"default": 200.0},
+    "anime-graph": {
+        "greedy_tile10": 2140.833,
+        "greedy_tile4": 940.833,
+        "greedy_tile2": 540.833,
+        "greedy_tile1": 340.833,
+        "greedy_tile1_unsmoothed": 240.833,
+    },
+}
+
+
 def test_catalog_ladder_follows_each_models_declared_rungs(catalog: Catalog) -> None:
+    assert catalog.settings.max_phoneme_ms == 200.0
     for model in catalog.registry.models.values():
         rungs = catalog.ladder(model)
         assert [estimate.rung for estimate in rungs] == list(model.fidelity_ladder())
+        expected = DEMO_LOOKAHEAD_MS[model.manifest.engine]
+        assert {e.rung.name: e.lookahead_ms for e in rungs} == pytest.approx(expected, abs=1e-3)
         for estimate_ in rungs:
-            expected = lookahead_ms(estimate_.rung, catalog.settings.max_phoneme_ms)
-            assert estimate_.lookahead_ms == pytest.approx(expected)
             assert estimate_.compute_ms >= catalog.settings.compute_margin_ms
 
 
@@ -99,7 +117,7 @@ def test_rest_pose_of_viseme_lerp_is_its_silence_key_pose(catalog: Catalog) -> N
     silence_row = model.scheme.classes.index(  # type: ignore[attr-defined]
         model.scheme.viseme_of(SILENCE)
     )  # type: ignore[attr-defined]
-    expected = model.poses_[silence_row]  # type: ignore[attr-defined]
+    expected = model.poses[silence_row]  # type: ignore[attr-defined]
     for emotion in (None, "happy"):
         np.testing.assert_allclose(catalog.rest_pose(model, emotion), expected, atol=1e-7)
 

@@ -230,7 +230,7 @@ def test_metrics_of_two_workers_are_summed_exactly(
         open_scrapes = [scrape(base) for _ in range(4)]
         shares = sessions_by_worker(directory)
         runner.run(close_all(clients))
-        wait_for_value(lambda: open_sessions(base), 0, 5, "open sessions")
+        wait_for_value(lambda: open_sessions(base), 0, 30, "open sessions")
         closed_scrapes = [scrape(base) for _ in range(4)]
         worker_frames = frames_by_worker(directory)
 
@@ -263,7 +263,7 @@ def test_metrics_of_two_workers_are_summed_exactly(
         )
         after_kill = scrape(base)
         runner.run(close_all(held))
-        wait_for_value(lambda: open_sessions(base), 0, 5, "open sessions")
+        wait_for_value(lambda: open_sessions(base), 0, 30, "open sessions")
         process.terminate()
         process.wait(timeout=15)
 

@@ -205,7 +205,7 @@ def test_probing_viseme_lerp_returns_its_trained_key_poses(
     assert model.manifest.hyperparameters["scheme"] == "oculus15"
     np.testing.assert_allclose(
         probe_key_poses(model),
-        model.poses_,  # type: ignore[attr-defined]
+        model.poses,  # type: ignore[attr-defined]
         atol=1e-6,
     )
 
@@ -247,7 +247,7 @@ def test_preston_blair_key_poses_of_viseme_lerp_average_its_oculus_poses(
     trained_models: dict[str, Model],
 ) -> None:
     model = trained_models["viseme-lerp"]
-    oculus_poses = model.poses_.astype(np.float64)  # type: ignore[attr-defined]
+    oculus_poses = model.poses.astype(np.float64)  # type: ignore[attr-defined]
     expected = np.stack(
         [
             np.mean(
@@ -263,7 +263,7 @@ def test_preston_blair_key_poses_of_viseme_lerp_average_its_oculus_poses(
 def test_a_viseme_lerp_frame_projects_onto_mouth_shapes(catalog: Catalog) -> None:
     model = catalog.model("viseme-lerp", "demo")
     projector = catalog.projector(model, "preston-blair")
-    poses = model.poses_.astype(np.float64)  # type: ignore[attr-defined]
+    poses = model.poses.astype(np.float64)  # type: ignore[attr-defined]
     # Shape A is P B M (all Oculus PP); shape D is AA AY AW (all Oculus aa).
     frame = 0.7 * poses[OCULUS15.classes.index("PP")] + 0.3 * poses[OCULUS15.classes.index("aa")]
     expected = np.zeros(9)
@@ -318,7 +318,7 @@ def test_presets_file_is_validated_by_the_codec(tmp_path: Path) -> None:
 def test_a_viseme_lerp_frame_projects_onto_the_two_visemes_it_blends(catalog: Catalog) -> None:
     model = catalog.model("viseme-lerp", "demo")
     projector = catalog.projector(model)
-    poses = model.poses_.astype(np.float64)  # type: ignore[attr-defined]
+    poses = model.poses.astype(np.float64)  # type: ignore[attr-defined]
     pp, aa = OCULUS15_VISEMES.index("viseme_PP"), OCULUS15_VISEMES.index("viseme_aa")
     frame = 0.7 * poses[pp] + 0.3 * poses[aa]
     expected = np.zeros(15)

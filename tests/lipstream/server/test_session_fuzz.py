@@ -39,7 +39,7 @@ from lipstream_client import (
     decode,
     encode,
 )
-from lipstream_client import strategies as protocol
+from tests.lipstream_client import strategies as protocol
 
 IDS = ("a", "b", "c")
 ids = st.sampled_from(IDS)

@@ -245,28 +245,30 @@ def test_health_answers_while_a_long_synthesis_runs(served: Served) -> None:
         for index in range(10_000)
     ]  # the default per-request limit
     items = tuple(PhonemeItem(*span) for span in spans)
-    finished: list[float] = []
+    streamed = threading.Event()
+    done: list[Done] = []
 
     def stream() -> None:
         with client(served.ws, "msgpack") as ws:
             ws.send(Start("long", "anime-graph", "demo", fps=120))
-            started = time.perf_counter()
             ws.send(Phonemes("long", items), End("long"))
-            ws.until_done("long", limit=100_000)
-            finished.append(time.perf_counter() - started)
+            done.extend(m for m in ws.until_done("long", limit=100_000) if isinstance(m, Done))
+        streamed.set()
 
     worker = threading.Thread(target=stream)
     worker.start()
-    latencies = []
+    answered_during = 0
     with httpx.Client() as http:
-        while worker.is_alive():
-            began = time.perf_counter()
-            assert http.get(f"{served.http}/healthz").status_code == 200
-            latencies.append(time.perf_counter() - began)
+        while not streamed.is_set() and worker.is_alive():
+            assert http.get(f"{served.http}/healthz", timeout=30.0).status_code == 200
+            answered_during += not streamed.is_set()
             time.sleep(0.01)
     worker.join()
-    assert finished and finished[0] > 0.2  # the synthesis kept the server busy
-    assert len(latencies) >= 5 and max(latencies) < 0.15
+    # An event loop blocked by the synthesis would answer the health checks only after the
+    # request's ``done``; answered in between, they outnumber any race at the end. (The
+    # health latency under load is measured by ``lipstream loadtest soak``.)
+    assert done and done[0].reason == "end" and done[0].stats.frames > 0
+    assert answered_during >= 5
 
 
 def test_metrics_count_sessions_frames_latency_and_errors(served: Served) -> None:

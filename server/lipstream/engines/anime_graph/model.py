@@ -10,6 +10,7 @@ milliseconds; the suffix automata and the K-means results are stored.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, cast
@@ -80,6 +81,7 @@ class AnimeGraphModel(Model):
             raise ModelStoreError(f"the model has no {WHOLE!r} view", where="model.json")
         self.has_clusters = self.views[WHOLE].cluster_graph is not None
         self._matchers: dict[tuple[str, str], Matcher] = {}
+        self._matchers_lock = threading.Lock()
         self.cutoffs = np.asarray(arrays["cutoffs"], dtype=np.float64)
         self.half_width = round(float(settings["smoothing_window"]) * self.fps)
         self.kernels = lowpass_kernels(self.cutoffs, self.fps, self.half_width)
@@ -195,16 +197,23 @@ class AnimeGraphModel(Model):
         return view.anime_graph
 
     def matcher_of(self, view: GraphView, name: str) -> Matcher:
-        """The view's matcher (kept: the clustered one caches its edge list and label masks)."""
+        """The view's matcher, built on first use and kept (the clustered one flattens its
+        graph into CSR arrays, which takes a while and is only needed for the views a
+        request asks for). Thread-safe: every synthesis thread shares the model, so the
+        first build happens under a lock and the rest read the finished matcher."""
         key = (view.name, name)
-        if key not in self._matchers:
-            if name == "clustered" and view.cluster_graph is not None:
-                self._matchers[key] = LayeredMatcher(view.cluster_graph)
-            else:
-                self._matchers[key] = SuffixMatcher(
-                    view.index, view.anime_graph, self.max_candidates
-                )
-        return self._matchers[key]
+        matcher = self._matchers.get(key)
+        if matcher is not None:
+            return matcher
+        with self._matchers_lock:
+            if key not in self._matchers:
+                if name == "clustered" and view.cluster_graph is not None:
+                    self._matchers[key] = LayeredMatcher(view.cluster_graph)
+                else:
+                    self._matchers[key] = SuffixMatcher(
+                        view.index, view.anime_graph, self.max_candidates
+                    )
+            return self._matchers[key]
 
     def to_channels(self, coefficients: np.ndarray) -> np.ndarray:
         """PCA coefficients (n, n_pc) to channel frames (n, n_channels) float32, held inside

@@ -189,6 +189,8 @@ class LayeredMatcher:
         self.carries[owners, labels] = True
         self.step_offsets, self.step_targets = self._steps(graph)
         self.motion = np.asarray(graph.motion_of(np.arange(n_nodes)), dtype=np.int64)
+        # Scratch for ``reach``, shared by every thread using this matcher: safe because the
+        # compiled kernels hold the GIL (none is ``nogil``) and leave it all -1.
         self._slot = np.full(n_nodes, -1, dtype=np.int64)
 
     def _steps(self, graph: SearchGraph) -> tuple[np.ndarray, np.ndarray]:

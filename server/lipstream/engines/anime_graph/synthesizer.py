@@ -182,7 +182,7 @@ class AnimeGraphSynthesizer(Synthesizer):
     def _audio_ready(self, until_s: float) -> bool:
         return self.audio is None or self.audio.ready(until_s, self.finished)
 
-    def _ranking(self, graph: SearchGraph, start: int, stop: int) -> Ranking:
+    def ranking(self, graph: SearchGraph, start: int, stop: int) -> Ranking:
         """Costs over ``graph`` for query positions ``start:stop``: audio summaries are computed
         once each, in order, so those known are always positions 0..count-1."""
         if self.audio is None:
@@ -232,7 +232,7 @@ class AnimeGraphSynthesizer(Synthesizer):
                 return None
             if not self._audio_ready(self.spans[end - 1].end):
                 return None
-            ranking = self._ranking(searcher.graph, start, end)
+            ranking = self.ranking(searcher.graph, start, end)
             result = self._timed(
                 lambda: pq_window(
                     searcher.graph, ranking, self.query, start, end, ranked, self._check
@@ -253,7 +253,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         ready = self._audio_ready_stop(start, stop)
         if ready == start:
             return None
-        ranking = self._ranking(searcher.graph, start, ready)
+        ranking = self.ranking(searcher.graph, start, ready)
         cap = self.options.max_tile
         tiles = self._timed(
             lambda: searcher.matcher.tiles(
@@ -263,24 +263,6 @@ class AnimeGraphSynthesizer(Synthesizer):
         if not (ready == stop and closed) and len(tiles[-1]) != cap:
             tiles.pop()
         return [[int(node) for node in tile] for tile in tiles] or None
-
-    def search_times_ms(self, repeats: int) -> list[float]:
-        """Times (ms) of ``repeats`` back-to-back GreedyMatching runs over the whole finished
-        query of one view, as the benchmark's warm search time: the search alone, without
-        the cache misses the rest of a synthesis leaves behind."""
-        if not self.finished or len(self.nodes) < len(self.query) or self.run_starts:
-            raise InvalidRequestError(
-                "only a finished single-view request can be re-timed", code="request_unfinished"
-            )
-        searcher = self.searchers[0]
-        ranking = self._ranking(searcher.graph, 0, len(self.query))
-        cap = self.options.max_tile
-        times = []
-        for _ in range(repeats):
-            started = time.perf_counter()
-            searcher.matcher.tiles(self.query, 0, len(self.query), cap, None, ranking)
-            times.append(1000.0 * (time.perf_counter() - started))
-        return times
 
     def _audio_ready_stop(self, start: int, stop: int) -> int:
         """The largest p in [start, stop] such that the audio covers spans start..p-1."""

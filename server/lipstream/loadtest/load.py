@@ -10,8 +10,8 @@ clients), then sends ``start`` and streams the clip's phonemes **paced in
 real time**: phoneme k goes out when the utterance clock, started when
 ``start`` was sent, reaches its start time (minus ``lead_ms``), the way a
 TTS produces them; then ``end``, and it reads every frame until ``done``
-(``loadtest_run``). With ``workers`` > 1 the sessions are spread over that
-many processes (``loadtest_workers``).
+(``sessions``). With ``workers`` > 1 the sessions are spread over that
+many processes (``workers``).
 
 Per request it measures the first-packet latency (``start`` sent to the
 first server message, ``ready``: Audio2Face-3D's first packet is likewise
@@ -23,10 +23,10 @@ frame i minus (time ``start`` was sent + i / fps). Arrival times are taken
 as each message comes off the socket. Per clip it reports Audio2Face-3D's
 statistics (min, p1, p5, p10, p50, mean, p90, p95, p99, max), frame-lag
 percentiles, throughput, errors by code, the CPU seconds of the load
-generator and of the server's processes (``loadtest_cpu``), and, with
+generator and of the server's processes (``cpu``), and, with
 ``probe_phonemes``, the first-frame latency of whole utterances sent at
 once; over all clips, its headline figures
-(``loadtest_stats.overall_summary``).
+(``stats.overall_summary``).
 
 Safety: the target must be a loopback address (the tool generates load, and
 load belongs on one's own machine), the counts are bounded, and a run whose
@@ -54,11 +54,11 @@ from lipstream_client.exceptions import LipstreamClientError
 from lipstream_client.messages import Encoding
 from lipstream_client.rest import RestClient
 
-from ._version import __version__
-from .errors import InvalidRequestError, LipstreamError
-from .loadtest_clips import synthetic_clip
-from .loadtest_cpu import ServerCpu
-from .loadtest_run import (
+from .._version import __version__
+from ..errors import InvalidRequestError, LipstreamError
+from .clips import synthetic_clip
+from .cpu import ServerCpu
+from .sessions import (
     ClipPlan,
     ClipShare,
     RequestRecord,
@@ -66,8 +66,8 @@ from .loadtest_run import (
     run_coroutine,
     run_share,
 )
-from .loadtest_stats import A2F_STATISTICS, LAG_STATISTICS, overall_summary, summarize
-from .loadtest_workers import run_in_workers
+from .stats import A2F_STATISTICS, LAG_STATISTICS, overall_summary, summarize
+from .workers import run_in_workers
 
 __all__ = [
     "LoadTestConfig",

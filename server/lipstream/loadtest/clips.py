@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import random
 
-from .errors import InvalidRequestError
-from .phonemes import ARPABET, SILENCE
+from ..errors import InvalidRequestError
+from ..phonemes import ARPABET, SILENCE
 
 VOWELS: tuple[str, ...] = tuple(p for p in ARPABET if p[0] in "AEIOU")
 CONSONANTS: tuple[str, ...] = tuple(p for p in ARPABET if p not in VOWELS)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lipstream.bench import BASELINE, format_table, run_bench
+from lipstream.bench.harness import BASELINE, format_table, run_bench
 from lipstream.corpus import Corpus
 from lipstream.engines import engine_names
 from lipstream.engines.viseme_lerp import VisemeLerpEngine

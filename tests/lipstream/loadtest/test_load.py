@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from lipstream.errors import InvalidRequestError
-from lipstream.loadtest import (
+from lipstream.loadtest.clips import synthetic_clip
+from lipstream.loadtest.load import (
     LoadTestConfig,
     NotLoopbackError,
     check_config,
@@ -23,8 +24,7 @@ from lipstream.loadtest import (
     planned_duration_s,
     write_results,
 )
-from lipstream.loadtest_clips import synthetic_clip
-from lipstream.loadtest_stats import overall_summary, percentile, summarize
+from lipstream.loadtest.stats import overall_summary, percentile, summarize
 from lipstream.phonemes import PHONEMES
 from tests.helpers import run_cli
 from tests.lipstream_client.fake_server import FakeServer
@@ -173,11 +173,14 @@ def test_a_short_run_measures_every_request(tmp_path: Path) -> None:
     assert clip["requests"] == 3 and clip["successful_requests"] == 3 and clip["errors"] == {}
     # The fake server sends frames i with i / fps <= 1 s: 51 per request.
     assert clip["frames"] == 3 * 51
-    assert 0 < clip["first_packet_latency_ms"]["max"] < 200
-    assert clip["first_packet_latency_ms"]["min"] <= clip["first_frame_latency_ms"]["min"]
-    # Every frame is sent when the phoneme covering it starts, so never later than its time.
-    assert clip["frame_lag_ms"]["max"] < 50
-    assert clip["fps"]["p50"] > 45
+    # Each request's ``ready`` comes before its first frames, so every order statistic of the
+    # first-packet latency is at most the first-frame latency's. (Speeds: bench/loadtest.json.)
+    first_packet, first_frame = clip["first_packet_latency_ms"], clip["first_frame_latency_ms"]
+    assert 0 < first_packet["min"]
+    assert all(first_packet[name] <= first_frame[name] for name in results["statistics"])
+    lag = clip["frame_lag_ms"]
+    assert lag["p50"] <= lag["p95"] <= lag["p99"] <= lag["max"]
+    assert 0 < clip["fps"]["min"] <= clip["fps"]["max"]
     assert results["summary"]["requests"] == 3 and results["config"]["token"] is None
     assert set(results["statistics"]) == set(clip["fps"])
     write_results(results, tmp_path / "bench" / "loadtest.json")

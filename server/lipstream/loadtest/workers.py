@@ -22,8 +22,8 @@ from dataclasses import asdict
 from multiprocessing.connection import Connection
 from typing import Any
 
-from .errors import LipstreamError
-from .loadtest_run import ClipPlan, ClipShare, RequestRecord, run_coroutine, run_share
+from ..errors import LipstreamError
+from .sessions import ClipPlan, ClipShare, RequestRecord, run_coroutine, run_share
 
 
 class WorkerFailed(LipstreamError):

@@ -29,19 +29,19 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from ._version import __version__
-from .corpus import Corpus
-from .engines import engine_names
-from .engines.base import Model
-from .evaluation import closure_counts, closure_threshold, lip_aperture, rms_error
-from .training import train_engine
+from .._version import __version__
+from ..corpus import Corpus
+from ..engines import engine_names
+from ..engines.base import Model
+from ..evaluation import closure_counts, closure_threshold, lip_aperture, rms_error
+from ..training import train_engine
 
 BASELINE = "viseme-lerp"
 SPEED_FPS = 60.0
 ENGINE_BENCHES: dict[str, tuple[str, str]] = {
     "anime-graph": (
-        "lipstream.engines.anime_graph.bench:run_anime_graph_bench",
-        "lipstream.engines.anime_graph.bench:format_anime_graph_bench",
+        "lipstream.bench.anime_graph:run_anime_graph_bench",
+        "lipstream.bench.anime_graph:format_anime_graph_bench",
     ),
 }
 

@@ -1,20 +1,20 @@
-"""Hypothesis strategies for valid protocol messages (test-only: needs ``hypothesis``).
+"""Hypothesis strategies for valid protocol messages.
 
 Sketch: one strategy per message type builds values that satisfy every rule
 of ``validate`` (so ``decode(encode(m)) == m`` must hold for them), drawing
 ids, names, finite numbers, ordered phoneme timelines, float32 frame blocks,
 PCM16 audio and small free-form JSON maps. ``messages()`` draws any message.
-Nothing else in the package imports this module, so hypothesis stays a test
-dependency; server tests use it to fuzz sessions too.
+It lives with the tests, so hypothesis stays a test dependency of the SDK;
+server tests use it to fuzz sessions too.
 """
 
 from __future__ import annotations
 
 from hypothesis import strategies as st
 
-from .errors import ERROR_CODES
-from .float32 import pack_float32
-from .messages import (
+from lipstream_client.errors import ERROR_CODES
+from lipstream_client.float32 import pack_float32
+from lipstream_client.messages import (
     DONE_REASONS,
     MAX_FPS,
     MAX_LATENCY_BUDGET_MS,

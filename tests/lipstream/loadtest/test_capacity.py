@@ -10,8 +10,7 @@ from typing import Any
 import pytest
 
 from lipstream.errors import InvalidRequestError
-from lipstream.loadtest import LoadTestConfig, loadtest
-from lipstream.loadtest_capacity import (
+from lipstream.loadtest.capacity import (
     CapacitySearch,
     check_search,
     find_capacity,
@@ -19,8 +18,9 @@ from lipstream.loadtest_capacity import (
     next_probe,
     probe_summary,
 )
-from lipstream.loadtest_run import ClipShare, RequestRecord
-from lipstream.loadtest_workers import decode_share, encode_share, split
+from lipstream.loadtest.load import LoadTestConfig, loadtest
+from lipstream.loadtest.sessions import ClipShare, RequestRecord
+from lipstream.loadtest.workers import decode_share, encode_share, split
 from tests.lipstream_client.fake_server import FakeServer
 
 BASE = LoadTestConfig(engine="viseme-lerp", character="demo", workers=2, probe_phonemes=30)

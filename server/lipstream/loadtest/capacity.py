@@ -19,27 +19,25 @@ search replaces the one with the same engine, character, fps, lead and clip.
 
 Usage (the server already running on this machine)::
 
-    python -m lipstream.loadtest_capacity --engine viseme-lerp --character demo \\
+    lipstream loadtest capacity --engine viseme-lerp --character demo \\
         --lead-ms 300 --workers 2 --probe-phonemes 30
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
-import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from ._version import __version__
-from .errors import InvalidRequestError, LipstreamError
-from .loadtest import LoadTestConfig, check_config, loadtest
-from .loadtest_run import event_loop_name
+from .._version import __version__
+from ..errors import InvalidRequestError, LipstreamError
+from .load import LoadTestConfig, check_config, loadtest
+from .sessions import event_loop_name
 
 DEFAULT_RESULTS = "bench/capacity.json"
 MAX_PROBES = 24
@@ -235,92 +233,8 @@ def merge_results(path: Path, search: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="python -m lipstream.loadtest_capacity",
-        description="Find the most concurrent real-time sessions a lipstream server on this "
-        "machine holds with p99 frame lag under a limit.",
-    )
-    parser.add_argument(
-        "--url", default="ws://127.0.0.1:8000/v1/stream", help="loopback ws:// URL of /v1/stream"
-    )
-    parser.add_argument("--engine", required=True)
-    parser.add_argument("--character", required=True)
-    parser.add_argument("--fps", type=float, default=60.0)
-    parser.add_argument("--encoding", choices=["msgpack", "json"], default="msgpack")
-    parser.add_argument(
-        "--lead-ms", type=float, default=0.0, help="send each phoneme this long before its start"
-    )
-    parser.add_argument("--clip", type=float, default=10.0, help="clip length in seconds")
-    parser.add_argument("--lag-limit-ms", type=float, default=50.0)
-    parser.add_argument("--start", type=int, default=100, help="first session count tried")
-    parser.add_argument("--max-streams", type=int, default=1000)
-    parser.add_argument(
-        "--resolution",
-        type=int,
-        default=25,
-        help="stop when the boundary is known to this many sessions",
-    )
-    parser.add_argument(
-        "--workers", type=int, default=1, help="load-generating processes (at most one core each)"
-    )
-    parser.add_argument(
-        "--probe-phonemes",
-        type=int,
-        default=0,
-        help="also time the first frame of requests of this many phonemes sent whole",
-    )
-    parser.add_argument("--pause", type=float, default=3.0, help="seconds between probes")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the synthetic clips")
-    parser.add_argument("--token", help="bearer token, if the server requires one")
-    parser.add_argument("--results", default=DEFAULT_RESULTS)
-    return parser
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
-    base = LoadTestConfig(
-        url=args.url,
-        engine=args.engine,
-        character=args.character,
-        fps=args.fps,
-        encoding=args.encoding,
-        lead_ms=args.lead_ms,
-        seed=args.seed,
-        token=args.token,
-        workers=args.workers,
-        probe_phonemes=args.probe_phonemes,
-    )
-    search = CapacitySearch(
-        base,
-        clip_s=args.clip,
-        lag_limit_ms=args.lag_limit_ms,
-        start=args.start,
-        max_streams=args.max_streams,
-        resolution=args.resolution,
-        pause_s=args.pause,
-    )
-    try:
-        result = find_capacity(search, progress=print)
-        path = Path(args.results)
-        document = merge_results(path, result)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
-    except LipstreamError as error:
-        print(
-            f"error [{error.code}]: {error.where + ': ' if error.where else ''}{error.message}",
-            file=sys.stderr,
-        )
-        return 2
-    except OSError as error:
-        print(f"error [io_error]: {error}", file=sys.stderr)
-        return 2
-    print(
-        f"capacity: {result['capacity_streams']} sessions at {args.fps:g} fps with p99 lag "
-        f"< {args.lag_limit_ms:g} ms (lead {args.lead_ms:g} ms); written to {path}"
-    )
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+def record_search(path: Path, search: dict[str, Any]) -> None:
+    """Merge ``search`` into the results file at ``path`` (see ``merge_results``)."""
+    document = merge_results(path, search)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")

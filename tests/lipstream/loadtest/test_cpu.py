@@ -1,4 +1,4 @@
-"""``lipstream.loadtest_cpu``: finding a port's server processes in ``/proc``, and their CPU."""
+"""``lipstream.loadtest.cpu``: finding a port's server processes in ``/proc``, and their CPU."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from lipstream.loadtest_cpu import ServerCpu, cpu_seconds, listening_inodes, pids_holding
+from lipstream.loadtest.cpu import ServerCpu, cpu_seconds, listening_inodes, pids_holding
 
 HEADER = (
     "  sl  local_address rem_address   st tx_queue rx_queue tr tm->when retrnsmt   uid  "

@@ -1,0 +1,246 @@
+"""The ``lipstream loadtest`` command: its options, and one handler per run.
+
+Sketch: ``lipstream loadtest [options]`` is the Audio2Face-3D style load
+test (``load``); ``lipstream loadtest capacity`` searches for the most
+sessions a server holds under a lag limit (``capacity``); ``lipstream
+loadtest soak`` runs valid sessions among hostile clients (``soak``). The options that
+name the target and shape the sessions are declared once (``_target_options``)
+and given to each. The CLI (``lipstream.cli``) builds this part of its one
+parser with ``add_loadtest_parser``; the handlers import their run lazily, so
+building the parser imports no client code.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from ..config import Settings
+
+
+def default_url(settings: Settings) -> str:
+    """``/v1/stream`` of the configured server, reached through loopback when it binds
+    every interface (0.0.0.0, ::)."""
+    host = "127.0.0.1" if settings.host in ("0.0.0.0", "::", "") else settings.host
+    return f"ws://{host}:{settings.port}/v1/stream"
+
+
+def _target_options(parser: argparse.ArgumentParser, *, required_target: bool) -> None:
+    parser.add_argument(
+        "--url",
+        help="loopback ws:// URL of /v1/stream "
+        "(default: ws://$LIPSTREAM_HOST:$LIPSTREAM_PORT/v1/stream)",
+    )
+    if required_target:
+        parser.add_argument("--engine", required=True)
+        parser.add_argument("--character", required=True)
+    else:
+        parser.add_argument("--engine", help="default: the server's first character's first engine")
+        parser.add_argument("--character", help="default: the server's first character")
+    parser.add_argument("--fps", type=float, default=60.0)
+    parser.add_argument("--encoding", choices=["msgpack", "json"], default="msgpack")
+    parser.add_argument(
+        "--lead-ms", type=float, default=0.0, help="send each phoneme this long before its start"
+    )
+    parser.add_argument("--seed", type=int, default=0, help="seed of the synthetic clips")
+    parser.add_argument("--token", help="bearer token, if the server requires one")
+
+
+def _load_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        help="load-generating processes sharing the sessions (one core each)",
+    )
+    parser.add_argument(
+        "--probe-phonemes",
+        type=int,
+        default=0,
+        help="also time the first frame of requests of this many phonemes "
+        "sent whole, on one extra connection",
+    )
+
+
+def _config(args: argparse.Namespace, settings: Settings, **fields: Any) -> Any:
+    from .load import LoadTestConfig
+
+    return LoadTestConfig(
+        url=args.url or default_url(settings),
+        fps=args.fps,
+        engine=args.engine,
+        character=args.character,
+        encoding=args.encoding,
+        lead_ms=args.lead_ms,
+        seed=args.seed,
+        token=args.token,
+        workers=args.workers,
+        probe_phonemes=args.probe_phonemes,
+        **fields,
+    )
+
+
+def _loadtest(args: argparse.Namespace, settings: Settings) -> None:
+    from .load import format_table, loadtest, write_results
+
+    config = _config(
+        args,
+        settings,
+        streams=args.streams,
+        requests=args.requests,
+        clips_s=tuple(args.clips),
+        latency_budget_ms=args.latency_budget_ms,
+        pause_s=args.pause,
+        max_duration_s=args.max_duration,
+    )
+    results = loadtest(config)
+    write_results(results, Path(args.results))
+    print(json.dumps(results, indent=2) if args.json else format_table(results))
+    print(f"results written to {args.results}", file=sys.stderr)
+
+
+def _capacity(args: argparse.Namespace, settings: Settings) -> None:
+    from .capacity import CapacitySearch, find_capacity, record_search
+
+    search = CapacitySearch(
+        _config(args, settings),
+        clip_s=args.clip,
+        lag_limit_ms=args.lag_limit_ms,
+        start=args.start,
+        max_streams=args.max_streams,
+        resolution=args.resolution,
+        pause_s=args.pause,
+    )
+    result = find_capacity(search, progress=print)
+    record_search(Path(args.results), result)
+    print(
+        f"capacity: {result['capacity_streams']} sessions at {args.fps:g} fps with p99 lag "
+        f"< {args.lag_limit_ms:g} ms (lead {args.lead_ms:g} ms); written to {args.results}"
+    )
+
+
+def _add_capacity_parser(runs: Any) -> None:
+    capacity = runs.add_parser(
+        "capacity",
+        help="the most concurrent real-time sessions the server holds under a lag limit",
+        description="Find the most concurrent real-time sessions a lipstream server on this "
+        "machine holds with p99 frame lag under a limit.",
+    )
+    _target_options(capacity, required_target=True)
+    _load_options(capacity)
+    capacity.add_argument("--clip", type=float, default=10.0, help="clip length in seconds")
+    capacity.add_argument("--lag-limit-ms", type=float, default=50.0)
+    capacity.add_argument("--start", type=int, default=100, help="first session count tried")
+    capacity.add_argument("--max-streams", type=int, default=1000)
+    capacity.add_argument(
+        "--resolution",
+        type=int,
+        default=25,
+        help="stop when the boundary is known to this many sessions",
+    )
+    capacity.add_argument("--pause", type=float, default=3.0, help="seconds between probes")
+    capacity.add_argument("--results", default="bench/capacity.json")
+    capacity.set_defaults(run=_capacity)
+
+
+def _soak(args: argparse.Namespace, settings: Settings) -> None:
+    from .soak import SoakConfig, format_report, soak, write_results
+
+    config = SoakConfig(
+        url=args.url or default_url(settings),
+        duration_s=args.duration,
+        valid_sessions=args.valid_sessions,
+        clip_s=args.clip,
+        hostile_per_kind=args.hostile,
+        kinds=tuple(args.kinds),
+        engine=args.engine,
+        character=args.character,
+        fps=args.fps,
+        encoding=args.encoding,
+        lead_ms=args.lead_ms,
+        healthz_interval_s=args.healthz_interval,
+        server_pid=args.server_pid,
+        pq_phonemes=args.pq_phonemes,
+        flood_seconds=args.flood_seconds,
+        flood_fps=args.flood_fps,
+        seed=args.seed,
+        token=args.token,
+    )
+    results = soak(config)
+    write_results(results, Path(args.results))
+    print(json.dumps(results, indent=2) if args.json else format_report(results))
+    print(f"results written to {args.results}", file=sys.stderr)
+
+
+def _add_soak_parser(runs: Any) -> None:
+    from .hostile import HOSTILE_KINDS
+
+    soak = runs.add_parser(
+        "soak",
+        help="valid real-time sessions among hostile clients, for a bounded time",
+        description="Valid real-time sessions among hostile clients (silent sockets, partial "
+        "headers, PQ searches, JSON floods, many requests, clients that stop reading, "
+        "malformed messages) against a lipstream server on this machine: the valid "
+        "sessions' lag, /healthz latency, peak server memory and undocumented errors.",
+    )
+    _target_options(soak, required_target=False)
+    soak.add_argument("--duration", type=float, default=60.0, help="seconds (at most 3600)")
+    soak.add_argument("--valid-sessions", type=int, default=10, help="concurrent valid sessions")
+    soak.add_argument("--clip", type=float, default=5.0, help="valid clip length in seconds")
+    soak.add_argument("--hostile", type=int, default=2, help="concurrent clients of each kind")
+    soak.add_argument(
+        "--kinds", nargs="+", default=list(HOSTILE_KINDS), help="hostile kinds to run"
+    )
+    soak.add_argument(
+        "--healthz-interval", type=float, default=0.1, help="seconds between /healthz polls"
+    )
+    soak.add_argument(
+        "--server-pid",
+        type=int,
+        help="read the server's memory from /proc/PID (and its children); "
+        "default: process_resident_memory_bytes from /metrics",
+    )
+    soak.add_argument(
+        "--pq-phonemes", type=int, default=1000, help="phonemes of each PQ-search request"
+    )
+    soak.add_argument(
+        "--flood-seconds", type=float, default=99.0, help="speech seconds of each JSON flood"
+    )
+    soak.add_argument("--flood-fps", type=float, default=1000.0, help="fps of each JSON flood")
+    soak.add_argument("--json", action="store_true", help="print JSON instead of a summary")
+    soak.add_argument("--results", default="bench/soak.json")
+    soak.set_defaults(run=_soak)
+
+
+def add_loadtest_parser(commands: Any) -> None:
+    """Add ``loadtest`` and its runs to the CLI's subcommands ``commands``."""
+    load = commands.add_parser(
+        "loadtest",
+        help="concurrent real-time sessions against a server on this machine",
+        description="Concurrent real-time sessions against a lipstream server on this machine; "
+        "with a run name, a capacity search or a soak. Give a run's options after its name.",
+    )
+    _target_options(load, required_target=False)
+    _load_options(load)
+    load.add_argument("--streams", type=int, default=10, help="concurrent sessions")
+    load.add_argument("--requests", type=int, default=30, help="requests per clip length")
+    load.add_argument(
+        "--clips", type=float, nargs="+", default=[5.0, 10.0, 20.0], help="clip lengths in seconds"
+    )
+    load.add_argument("--latency-budget-ms", type=float)
+    load.add_argument("--pause", type=float, default=3.0, help="seconds between clip lengths")
+    load.add_argument(
+        "--max-duration",
+        type=float,
+        default=600.0,
+        help="refuse runs planned longer than this many seconds (at most 3600)",
+    )
+    load.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    load.add_argument("--results", default="bench/loadtest.json")
+    load.set_defaults(run=_loadtest)
+    runs = load.add_subparsers(dest="loadtest_run", metavar="{capacity,soak}")
+    _add_capacity_parser(runs)
+    _add_soak_parser(runs)

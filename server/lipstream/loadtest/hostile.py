@@ -1,0 +1,300 @@
+"""Hostile clients for the soak: each kind misbehaves in one way, again and again, until a deadline.
+
+Sketch: a kind is one coroutine that makes one attempt (``ATTACKS``);
+``run_kind`` repeats it until the soak's deadline and tallies what the server
+answered: the protocol error codes it sent, how it closed the connection,
+and what failed on the client's side. The kinds:
+
+- ``silent_tcp``: a TCP connection that never sends a byte.
+- ``partial_headers``: an HTTP request whose headers never end (one more
+  header line every second, as slowloris does).
+- ``pq_search``: an anime-graph request with ``options: {"search": "pq"}``
+  and ``pq_phonemes`` phonemes sent at once: PQ-Matching's cost grows fast
+  with the input (skipped when no character has an anime-graph model).
+- ``json_flood``: a JSON request at ``flood_fps`` over ``flood_seconds`` of
+  speech, read to the end.
+- ``many_requests``: one connection opening more requests than the
+  per-session limit, each left open for a while.
+- ``stops_reading``: a request for many frames whose client never reads
+  (its receive queue holds one message), held until the server lets go.
+- ``malformed``: undecodable, unknown and incomplete messages.
+
+The soak only measures: nothing here checks what the server should do.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import time
+from collections import Counter
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from websockets.asyncio.client import connect
+from websockets.exceptions import ConnectionClosed as WebSocketClosed
+from websockets.exceptions import InvalidHandshake
+from websockets.typing import Subprotocol
+
+from lipstream_client.client import AsyncClient
+from lipstream_client.codec import encode, subprotocol_for
+from lipstream_client.exceptions import (
+    ConnectionClosed,
+    HandshakeRejected,
+    LipstreamClientError,
+    LipstreamServerError,
+)
+from lipstream_client.messages import ClientMessage, Encoding, End, PhonemeItem, Phonemes, Start
+
+from .clips import Span, synthetic_clip
+
+HOSTILE_KINDS: tuple[str, ...] = (
+    "silent_tcp",
+    "partial_headers",
+    "pq_search",
+    "json_flood",
+    "many_requests",
+    "stops_reading",
+    "malformed",
+)
+SLOW_HEADER_S = 1.0
+HOLD_REQUESTS_S = 2.0
+MANY_REQUESTS = 80  # above the default per-session limit (64)
+STOPS_READING_S = 60.0  # of speech at the flood's fps: megabytes of frames
+REPLY_TIMEOUT_S = 5.0
+RETRY_PAUSE_S = 0.05
+MALFORMED: tuple[str | bytes, ...] = (
+    "not json",
+    b"\x00\xff binary under the JSON subprotocol",
+    "[1, 2, 3]",
+    '{"type": "bogus", "id": "x"}',
+    '{"type": "start", "id": "x"}',
+    '{"type": "phonemes", "id": "nobody", "items": [["AA", 0.0, 0.1]]}',
+    '{"type": "start", "id": "y", "engine": "none", "character": "none"}',
+)
+
+
+@dataclass(frozen=True)
+class Target:
+    """Where and what the hostile clients send."""
+
+    url: str
+    host: str
+    port: int
+    engine: str
+    character: str
+    encoding: Encoding
+    token: str | None
+    pq_character: str | None
+    pq_phonemes: int
+    flood_seconds: float
+    flood_fps: float
+    seed: int
+
+
+@dataclass
+class KindTally:
+    """What one kind's attempts met: server error codes, closes, client-side failures."""
+
+    attempts: int = 0
+    error_codes: Counter[str] = field(default_factory=Counter)
+    closes: Counter[str] = field(default_factory=Counter)
+    failures: Counter[str] = field(default_factory=Counter)
+    skipped: str | None = None
+
+    def server_error(self, error: LipstreamServerError) -> None:
+        self.error_codes[error.code] += 1
+
+    def closed(self, error: ConnectionClosed) -> None:
+        if error.error is not None:
+            self.server_error(error.error)
+        self.closes["none" if error.code is None else str(error.code)] += 1
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "attempts": self.attempts,
+            "error_codes": dict(self.error_codes),
+            "closes": dict(self.closes),
+            "client_failures": dict(self.failures),
+            "skipped": self.skipped,
+        }
+
+
+Attack = Callable[[Target, KindTally], Awaitable[None]]
+
+
+async def run_kind(kind: str, target: Target, tally: KindTally, deadline: float) -> None:
+    """Repeat ``kind``'s attack until ``deadline`` (``time.perf_counter``); an attempt
+    still under way then is cut off and not counted as a failure."""
+    attack = ATTACKS[kind]
+    while (remaining := deadline - time.perf_counter()) > 0:
+        tally.attempts += 1
+        try:
+            async with asyncio.timeout(remaining):
+                await attack(target, tally)
+        except TimeoutError:
+            if time.perf_counter() >= deadline:
+                return
+            tally.failures["timeout"] += 1
+        except ConnectionClosed as error:
+            tally.closed(error)
+        except LipstreamServerError as error:
+            tally.server_error(error)
+        except HandshakeRejected as error:
+            tally.failures[f"http_{error.status}"] += 1
+        except (OSError, LipstreamClientError, WebSocketClosed, InvalidHandshake) as error:
+            tally.failures[type(error).__name__] += 1
+        if tally.skipped is not None:
+            await asyncio.sleep(max(0.0, deadline - time.perf_counter()))
+            return
+        await asyncio.sleep(RETRY_PAUSE_S)
+
+
+async def _until_closed(reader: asyncio.StreamReader, tally: KindTally) -> None:
+    try:
+        data = await reader.read(4096)
+    except ConnectionResetError:
+        tally.closes["reset"] += 1
+        return
+    tally.closes[_http_status(data) if data else "eof"] += 1
+
+
+def _http_status(data: bytes) -> str:
+    parts = data.split(b" ", 2)
+    return f"http_{parts[1].decode('ascii', 'replace')}" if len(parts) > 1 else "data"
+
+
+async def silent_tcp(target: Target, tally: KindTally) -> None:
+    reader, writer = await asyncio.open_connection(target.host, target.port)
+    try:
+        await _until_closed(reader, tally)
+    finally:
+        writer.close()
+
+
+async def partial_headers(target: Target, tally: KindTally) -> None:
+    reader, writer = await asyncio.open_connection(target.host, target.port)
+    try:
+        writer.write(f"GET /healthz HTTP/1.1\r\nHost: {target.host}\r\n".encode())
+        for line in range(1_000_000):
+            writer.write(f"X-Slow-{line}: 1\r\n".encode())
+            await writer.drain()
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(_until_closed(reader, tally), SLOW_HEADER_S)
+                return
+    finally:
+        writer.close()
+
+
+def _client(target: Target, encoding: Encoding | None = None) -> AsyncClient:
+    return AsyncClient(target.url, encoding or target.encoding, target.token)
+
+
+async def pq_search(target: Target, tally: KindTally) -> None:
+    if target.pq_character is None:
+        tally.skipped = "no character has an anime-graph model"
+        return
+    spans = _spans(target.pq_phonemes, target.seed)
+    async with _client(target) as client:
+        stream = await client.start("anime-graph", target.pq_character, options={"search": "pq"})
+        await stream.send_phonemes(spans)
+        await stream.end()
+        async for _ in stream.frames():
+            pass
+
+
+def _spans(phonemes: int, seed: int) -> list[Span]:
+    """``phonemes`` speech-like spans (clips average about 11 phonemes a second)."""
+    seconds = 0.2
+    spans = synthetic_clip(seconds, seed)
+    while len(spans) < phonemes:
+        seconds = min(2.0 * seconds + phonemes / 10.0, 600.0)
+        spans = synthetic_clip(seconds, seed)
+    return spans[:phonemes]
+
+
+async def json_flood(target: Target, tally: KindTally) -> None:
+    async with _client(target, "json") as client:
+        stream = await client.start(target.engine, target.character, fps=target.flood_fps)
+        await stream.send_phonemes(synthetic_clip(target.flood_seconds, target.seed))
+        await stream.end()
+        async for _ in stream.frames():
+            pass
+
+
+async def many_requests(target: Target, tally: KindTally) -> None:
+    async with _client(target) as client:
+        streams = []
+        for _ in range(MANY_REQUESTS):
+            stream = await client.start(target.engine, target.character)
+            await stream.send_phonemes([("AA", 0.0, 0.1)])
+            streams.append(stream)
+        await asyncio.sleep(HOLD_REQUESTS_S)
+        for stream in streams:
+            try:
+                stream.poll()
+            except LipstreamServerError as error:
+                tally.server_error(error)
+
+
+async def stops_reading(target: Target, tally: KindTally) -> None:
+    spans = synthetic_clip(STOPS_READING_S, target.seed)
+    request: list[ClientMessage] = [
+        Start("r", target.engine, target.character, fps=target.flood_fps),
+        Phonemes("r", tuple(PhonemeItem(*span) for span in spans)),
+        End("r"),
+    ]
+    headers = {"Authorization": f"Bearer {target.token}"} if target.token else None
+    async with connect(
+        target.url,
+        subprotocols=[Subprotocol(subprotocol_for("json"))],
+        additional_headers=headers,
+        max_queue=1,
+        max_size=None,
+        proxy=None,
+    ) as connection:
+        for message in request:
+            await connection.send(encode(message, "json"))
+        await connection.wait_closed()
+        tally.closes[str(connection.close_code)] += 1
+
+
+async def malformed(target: Target, tally: KindTally) -> None:
+    headers = {"Authorization": f"Bearer {target.token}"} if target.token else None
+    async with connect(
+        target.url,
+        subprotocols=[Subprotocol(subprotocol_for("json"))],
+        additional_headers=headers,
+        proxy=None,
+    ) as connection:
+        try:
+            for payload in MALFORMED:
+                await connection.send(payload)
+                reply = await asyncio.wait_for(connection.recv(), REPLY_TIMEOUT_S)
+                code = _error_code(reply)
+                tally.error_codes[code or "no_error_reply"] += 1
+        except WebSocketClosed:
+            tally.closes[str(connection.close_code)] += 1
+
+
+def _error_code(reply: str | bytes) -> str | None:
+    try:
+        message = json.loads(reply)
+    except ValueError:
+        return None
+    if isinstance(message, dict) and message.get("type") == "error":
+        return str(message.get("code"))
+    return None
+
+
+ATTACKS: dict[str, Attack] = {
+    "silent_tcp": silent_tcp,
+    "partial_headers": partial_headers,
+    "pq_search": pq_search,
+    "json_flood": json_flood,
+    "many_requests": many_requests,
+    "stops_reading": stops_reading,
+    "malformed": malformed,
+}

@@ -1,0 +1,146 @@
+"""``lipstream loadtest soak``: a short soak against a real loopback server, its bounds and its
+accounting of memory and undocumented errors."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+from lipstream.errors import LipstreamError
+from lipstream.loadtest.hostile import HOSTILE_KINDS, KindTally
+from lipstream.loadtest.sessions import ClipShare, RequestRecord
+from lipstream.loadtest.soak import (
+    SoakConfig,
+    _undocumented,
+    check_soak,
+    format_report,
+    metrics_rss,
+    process_tree_rss,
+    soak,
+    write_results,
+)
+from tests.helpers import run_cli
+from tests.live_server import live_server
+
+SUMMARY_KEYS = {
+    "valid_frame_lag_p99_ms",
+    "healthz_latency_p99_ms",
+    "peak_server_rss_bytes",
+    "undocumented_errors",
+}
+
+
+def test_a_short_soak_reports_every_part_and_the_valid_sessions_complete(
+    all_models_dir: Path, tmp_path: Path
+) -> None:
+    with live_server(all_models_dir) as served:
+        config = SoakConfig(
+            url=served.ws,
+            duration_s=3.0,
+            valid_sessions=2,
+            clip_s=1.0,
+            hostile_per_kind=1,
+            engine="viseme-lerp",
+            character="demo",
+            healthz_interval_s=0.2,
+            server_pid=served.pid,
+            pq_phonemes=40,
+            flood_seconds=2.0,
+            flood_fps=100.0,
+        )
+        results = soak(config)
+    valid = results["valid"]
+    # Each session starts a 1 s clip within its first second, so both run at least one;
+    # a 1 s clip at 60 fps has floor(1.0 * 60) + 1 = 61 frames.
+    assert valid["requests"] >= 2 and valid["successful_requests"] == valid["requests"]
+    assert valid["errors"] == {} and valid["frames"] == 61 * valid["requests"]
+    lag = valid["frame_lag_ms"]
+    assert lag["p50"] <= lag["p95"] <= lag["p99"] <= lag["max"]
+    assert results["healthz"]["polls"] >= 1
+    assert set(results["healthz"]["latency_ms"]) == {"p50", "mean", "p95", "p99", "max"}
+    memory = results["server_memory"]
+    assert memory["source"] == f"/proc/{served.pid}" and memory["samples"] >= 1
+    assert memory["peak_rss_bytes"] > 0
+    assert set(results["hostile"]) == set(HOSTILE_KINDS)
+    for kind, tally in results["hostile"].items():
+        assert tally["attempts"] >= 1, kind
+        assert set(tally) == {"attempts", "error_codes", "closes", "client_failures", "skipped"}
+    assert results["hostile"]["pq_search"]["skipped"] is None  # the demo has anime-graph
+    assert isinstance(results["undocumented_errors"], dict)
+    assert set(results["summary"]) == SUMMARY_KEYS
+    assert results["summary"]["valid_frame_lag_p99_ms"] == lag["p99"]
+    assert results["config"]["token"] is None
+    write_results(results, tmp_path / "bench" / "soak.json")
+    assert json.loads((tmp_path / "bench" / "soak.json").read_text()) == results
+    report = format_report(results)
+    assert "valid sessions:" in report and all(kind in report for kind in HOSTILE_KINDS)
+
+
+@pytest.mark.parametrize(
+    ("change", "flag"),
+    [
+        ({"url": "ws://192.0.2.1:8000/v1/stream"}, "--url"),
+        ({"duration_s": 0.0}, "--duration"),
+        ({"duration_s": 3601.0}, "--duration"),
+        ({"valid_sessions": 0}, "--valid-sessions"),
+        ({"kinds": ("silent_tcp", "nonsense")}, "--kinds"),
+        ({"hostile_per_kind": 101}, "--hostile"),
+        ({"flood_fps": 2000.0}, "--flood-fps"),
+        ({"server_pid": 2**31 - 1}, "--server-pid"),
+    ],
+)
+def test_bounds_name_the_flag(change: dict[str, object], flag: str) -> None:
+    config = dataclasses.replace(SoakConfig(), **change)  # type: ignore[arg-type]
+    with pytest.raises(LipstreamError) as refused:
+        check_soak(config)
+    assert refused.value.where == flag
+
+
+def test_the_cli_refuses_a_remote_target_with_one_line(tmp_path: Path) -> None:
+    result = run_cli(
+        "loadtest", "soak", "--url", "ws://192.0.2.1:8000/v1/stream", "--results", str(tmp_path)
+    )
+    assert result.returncode == 2
+    assert result.stderr.startswith("error [not_loopback]: --url:")
+    assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_memory_comes_from_proc_or_from_the_metrics_exposition() -> None:
+    status = Path(f"/proc/{os.getpid()}/status").read_text()
+    own_kib = next(int(line.split()[1]) for line in status.splitlines() if line[:6] == "VmRSS:")
+    assert process_tree_rss(os.getpid()) >= 0.5 * own_kib * 1024
+    exposition = (
+        "# HELP process_resident_memory_bytes Resident memory size in bytes.\n"
+        "# TYPE process_resident_memory_bytes gauge\n"
+        'process_resident_memory_bytes{pid="1"} 1.5e+08\n'
+        'process_resident_memory_bytes{pid="2"} 5e+07\n'
+        "lipstream_sessions 3.0\n"
+    )
+    assert metrics_rss(exposition) == 200_000_000
+    assert metrics_rss("lipstream_sessions 3.0\n") is None
+
+
+def test_only_codes_outside_the_documented_tables_are_undocumented() -> None:
+    share = ClipShare(
+        records=[
+            RequestRecord(error=None),
+            RequestRecord(error="malformed"),  # documented error code
+            RequestRecord(error="closed_1011"),  # documented close code
+            RequestRecord(error="closed_4000"),
+            RequestRecord(error="timeout"),  # the client's own
+            RequestRecord(error="TimeoutError"),
+            RequestRecord(error="deadline"),
+        ]
+    )
+    tally = KindTally()
+    tally.error_codes.update({"malformed": 3, "weird_code": 2, "no_error_reply": 1})
+    tally.closes.update({"1008": 1, "4999": 1, "reset": 2, "http_408": 1})
+    assert _undocumented(share, {"malformed": tally.as_dict()}) == {
+        "closed_4000": 1,
+        "closed_4999": 1,
+        "weird_code": 2,
+    }
