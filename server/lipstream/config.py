@@ -44,7 +44,7 @@ class ServerSettings:
     max_body_bytes: int = 16 << 20
     max_phonemes_per_request: int = 10_000
     max_request_frames: int = 100_000
-    max_request_s: float = 300.0
+    max_request_s: float = 1000.0
     max_request_values: int = 4_000_000
     max_session_values: int = 16_000_000
     request_timeout_s: float = 60.0
