@@ -105,14 +105,22 @@ def decode(
             f"message of {size} bytes exceeds the limit of {max_size} bytes",
             fatal=True,
         )
-    payload = _parse(data, encoding)
+    payload = parse_payload(data, encoding)
     if isinstance(payload, ProtocolError):
         return payload
-    identifier = message_id(payload)
+    return payload_message(payload, encoding, sender)
+
+
+def payload_message(
+    payload: object, encoding: Encoding, sender: Sender | None = None
+) -> Message | ProtocolError:
+    """The message in an already parsed payload (as ``parse_payload`` returns it), or the
+    ``ProtocolError`` that rejects it: ``decode`` without the size check and the parse."""
+    _check_encoding(encoding)
     try:
         return message_from_wire(payload, encoding, sender)
     except InvalidField as error:
-        return _protocol_error(error, identifier)
+        return _protocol_error(error, message_id(payload))
 
 
 def _protocol_error(error: InvalidField, identifier: str | None) -> ProtocolError:
@@ -133,8 +141,8 @@ def _size(data: bytes | bytearray | memoryview | str, max_size: int) -> int:
     return len(data.encode("utf-8", "surrogatepass"))
 
 
-def _parse(data: bytes | bytearray | memoryview | str, encoding: Encoding) -> object:
-    """The parsed payload, or a ``malformed`` ProtocolError.
+def parse_payload(data: bytes | bytearray | memoryview | str, encoding: Encoding) -> object:
+    """The parsed payload (maps, lists, scalars), or a ``malformed`` ProtocolError.
 
     Parser failures arrive as ValueError (including UnicodeDecodeError and
     msgpack's ExtraData, FormatError, StackError), msgpack's

@@ -49,6 +49,8 @@ BUDGET_INFEASIBLE = "budget_infeasible"
 CPU_BUDGET_EXCEEDED = "cpu_budget_exceeded"
 SEARCH_TOO_LARGE = "search_too_large"
 SEARCH_TIMEOUT = "search_timeout"
+OUTPUT_TOO_LARGE = "output_too_large"
+REQUEST_TIMEOUT = "request_timeout"
 
 # Connection-level errors: the server closes the connection after sending them.
 RATE_LIMITED = "rate_limited"
@@ -209,6 +211,15 @@ ERROR_CODES: dict[str, ErrorCodeInfo] = {
         "the search ran past the request's own search budget (anime-graph's pq_budget_s)",
         "server",
         "request",
+    ),
+    OUTPUT_TOO_LARGE: ErrorCodeInfo(
+        "the request's output (frames up to the end of its input × channels) would exceed "
+        "the per-request or per-connection maximum; details name the limit",
+        "server",
+        "request",
+    ),
+    REQUEST_TIMEOUT: ErrorCodeInfo(
+        "no message for the request arrived within the request timeout", "server", "request"
     ),
     RATE_LIMITED: ErrorCodeInfo(
         "the connection exceeded its message rate",

@@ -25,6 +25,7 @@ from .float32 import FLOAT32_BYTES, pack_float32, split_rows, unpack_float32
 
 PROTOCOL_VERSION = 1
 
+MIN_FPS = 1.0
 MAX_FPS = 1000.0
 DEFAULT_FPS = 60.0
 MAX_ID_LENGTH = 128

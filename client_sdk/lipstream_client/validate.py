@@ -60,6 +60,7 @@ from .messages import (
     MAX_RETURN_MS,
     MAX_SAMPLE_RATE,
     MAX_TIME_S,
+    MIN_FPS,
     MIN_SAMPLE_RATE,
     NAMINGS,
     PCM16_BYTES,
@@ -169,7 +170,7 @@ def _start(payload: Mapping[str, Any], encoding: Encoding) -> Start:
         id=_id(obj),
         engine=read_text(obj["engine"], "engine", MAX_NAME_LENGTH),
         character=read_text(obj["character"], "character", MAX_NAME_LENGTH),
-        fps=read_number(obj["fps"], "fps", above=0.0, maximum=MAX_FPS)
+        fps=read_number(obj["fps"], "fps", minimum=MIN_FPS, maximum=MAX_FPS)
         if present(obj, "fps")
         else DEFAULT_FPS,
         channels=read_names(obj["channels"], "channels", MAX_CHANNELS)
@@ -322,7 +323,7 @@ def _ready(payload: Mapping[str, Any], encoding: Encoding) -> Ready:
         id=_id(obj),
         engine=read_text(obj["engine"], "engine", MAX_NAME_LENGTH),
         character=read_text(obj["character"], "character", MAX_NAME_LENGTH),
-        fps=read_number(obj["fps"], "fps", above=0.0, maximum=MAX_FPS),
+        fps=read_number(obj["fps"], "fps", minimum=MIN_FPS, maximum=MAX_FPS),
         channels=read_names(obj["channels"], "channels", MAX_CHANNELS),
         lookahead_ms=read_number(
             obj["lookahead_ms"], "lookahead_ms", minimum=0.0, maximum=MAX_TIME_S * 1000.0
@@ -352,7 +353,7 @@ def _frames(payload: Mapping[str, Any], encoding: Encoding) -> Frames:
         id=identifier,
         seq=read_integer(obj["seq"], "seq"),
         first_frame=read_integer(obj["first_frame"], "first_frame"),
-        fps=read_number(obj["fps"], "fps", above=0.0, maximum=MAX_FPS),
+        fps=read_number(obj["fps"], "fps", minimum=MIN_FPS, maximum=MAX_FPS),
         n_channels=n_channels,
         data=data,
     )

@@ -44,6 +44,10 @@ class ServerSettings:
     max_body_bytes: int = 16 << 20
     max_phonemes_per_request: int = 10_000
     max_request_frames: int = 100_000
+    max_request_s: float = 1000.0
+    max_request_values: int = 4_000_000
+    max_session_values: int = 16_000_000
+    request_timeout_s: float = 60.0
     message_rate: float = 500.0
     message_burst: int = 1000
     idle_timeout_s: float = 60.0
@@ -189,6 +193,32 @@ ENV_SETTINGS: tuple[EnvSetting, ...] = (
         "max_request_frames",
         _integer(1, 100_000_000),
         "frames per request, i.e. utterance length × fps (`invalid_times`)",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MAX_REQUEST_S",
+        "max_request_s",
+        _number(0.0, 86_400.0, above=True),
+        "utterance length per request in seconds, whatever the fps (`invalid_times`, "
+        "`invalid_audio`)",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MAX_REQUEST_VALUES",
+        "max_request_values",
+        _integer(1, 1_000_000_000),
+        "output values per request, frames up to the end of its phonemes × channels "
+        "(`output_too_large`)",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MAX_SESSION_VALUES",
+        "max_session_values",
+        _integer(1, 1_000_000_000),
+        "output values of all active requests of a connection together (`output_too_large`)",
+    ),
+    EnvSetting(
+        "LIPSTREAM_REQUEST_TIMEOUT_S",
+        "request_timeout_s",
+        _number(0.0, 1e9, above=True),
+        "seconds an active request may go without a message before `request_timeout`",
     ),
     EnvSetting(
         "LIPSTREAM_MESSAGE_RATE",

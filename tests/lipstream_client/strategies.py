@@ -20,6 +20,7 @@ from lipstream_client.messages import (
     MAX_LATENCY_BUDGET_MS,
     MAX_RETURN_MS,
     MAX_SAMPLE_RATE,
+    MIN_FPS,
     MIN_SAMPLE_RATE,
     NAMINGS,
     VISEME_SETS,
@@ -50,7 +51,7 @@ names = st.text(_PRINTABLE, min_size=1, max_size=24)
 phoneme_labels = st.text(_PRINTABLE, min_size=1, max_size=6)
 emotions = st.sampled_from(("neutral", "happy", "angry", "sad"))
 phoneme_sources = st.sampled_from(("arpabet", "mfa", "timit", "mocha", "espeak", "ipa", "auto"))
-fps_values = st.floats(min_value=1e-3, max_value=MAX_FPS)
+fps_values = st.floats(min_value=MIN_FPS, max_value=MAX_FPS)
 non_negative_ms = st.floats(min_value=0.0, max_value=1e6)
 counts = st.integers(min_value=0, max_value=2**53 - 1)
 finite_floats = st.floats(allow_nan=False, allow_infinity=False)

@@ -181,7 +181,10 @@ def test_unknown_type_and_wrong_direction() -> None:
         ),
         ({**START, "fps": "60"}, "fps", "must be a number"),
         ({**START, "fps": True}, "fps", "must be a number"),
-        ({**START, "fps": 0}, "fps", "must be > 0"),
+        ({**START, "fps": 0}, "fps", "must be >= 1"),
+        ({**START, "fps": 0.5}, "fps", "must be >= 1, got 0.5"),
+        ({**START, "fps": 1e-308}, "fps", "must be >= 1, got 1e-308"),
+        ({**FRAMES, "fps": 0.999}, "fps", "must be >= 1"),
         ({**START, "fps": 1001}, "fps", "must be <= 1000"),
         ({**START, "engine": ""}, "engine", "1 to 128 characters"),
         ({**START, "engine": "a\nb"}, "engine", "control characters"),
@@ -278,6 +281,57 @@ def test_json_numbers_beyond_double_range_are_invalid_times() -> None:
         "items[0].start",
         "must be finite, got inf",
     )
+
+
+@pytest.mark.parametrize(
+    ("payload", "number", "code", "where"),
+    [
+        (with_field(PHONEMES, "items.0.end", "<n>"), "-1e999", codes.INVALID_TIMES, "items[0].end"),
+        ({**START, "options": {"x": "<n>"}}, "1e400", codes.INVALID_MESSAGE, "options.x"),
+        (
+            {**START, "options": {"x": [{"y": "<n>"}]}},
+            "-1e400",
+            codes.INVALID_MESSAGE,
+            "options.x[0].y",
+        ),
+        ({**START, "fps": "<n>"}, "1e999", codes.INVALID_MESSAGE, "fps"),
+        (
+            {**START, "output": {"transforms": {"jawOpen": {"offset": "<n>"}}}},
+            "1e999",
+            codes.INVALID_MESSAGE,
+            "output.transforms.jawOpen.offset",
+        ),
+        (
+            {"v": 1, "type": "interrupt", "id": "r1", "at": "<n>"},
+            "1e999",
+            codes.INVALID_TIMES,
+            "at",
+        ),
+    ],
+)
+def test_json_overflow_anywhere_is_a_located_error(
+    payload: dict[str, Any], number: str, code: str, where: str
+) -> None:
+    text = json.dumps(payload).replace('"<n>"', number)
+    assert number in text
+    error = decode(text, "json")
+    assert isinstance(error, ProtocolError)
+    assert (error.code, error.where, error.id, error.fatal) == (code, where, "r1", True)
+    assert error.message.startswith("must be finite")
+
+
+@pytest.mark.parametrize("value", [math.inf, -math.inf, math.nan])
+@pytest.mark.parametrize("single_float", [False, True])
+def test_msgpack_non_finite_floats_of_either_width_are_located_errors(
+    value: float, single_float: bool
+) -> None:
+    for payload, code, where in (
+        ({**START, "options": {"x": value}}, codes.INVALID_MESSAGE, "options.x"),
+        ({**START, "latency_budget_ms": value}, codes.INVALID_MESSAGE, "latency_budget_ms"),
+        (with_field(PHONEMES, "items.1.end", value), codes.INVALID_TIMES, "items[1].end"),
+    ):
+        error = rejected_msgpack(msgpack.packb(payload, use_single_float=single_float))
+        assert (error.code, error.where, error.fatal) == (code, where, True)
 
 
 def test_phonemes_touching_within_tolerance_are_accepted() -> None:
@@ -385,9 +439,9 @@ def test_size_limit_counts_bytes_and_closes_the_connection() -> None:
 def test_protocol_error_becomes_an_error_message() -> None:
     error = rejected_json({**START, "fps": -1})
     assert error.to_message() == ErrorMessage(
-        codes.INVALID_MESSAGE, "fps: must be > 0, got -1.0", "r1", True
+        codes.INVALID_MESSAGE, "fps: must be >= 1, got -1.0", "r1", True
     )
-    assert str(error) == "fps: must be > 0, got -1.0 [invalid_message]"
+    assert str(error) == "fps: must be >= 1, got -1.0 [invalid_message]"
 
 
 def test_error_for_a_huge_field_name_still_encodes() -> None:

@@ -128,6 +128,7 @@ BOUNDARIES = sorted(
         for limit in (
             0,
             1,
+            m.MIN_FPS,
             m.MAX_FPS,
             m.MAX_LATENCY_BUDGET_MS,
             m.MAX_RETURN_MS,

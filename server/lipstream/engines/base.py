@@ -68,6 +68,7 @@ from ..store import (
 from ..timeline import EMOTIONS, PhonemeSpan, SpanLike, coerce_spans
 from .work import WorkGuard
 
+MIN_FPS = 1.0  # lowest request frame rate, Hz (the highest, MAX_FPS, is the store's)
 _EPS = 1e-9
 
 ModelT = TypeVar("ModelT", bound="Model")
@@ -135,9 +136,12 @@ class SynthesisRequest:
     guard: WorkGuard = field(default_factory=WorkGuard, compare=False, repr=False)
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.fps, (int, float)) and 0 < self.fps <= MAX_FPS):
+        fps = self.fps
+        if isinstance(fps, bool) or not (
+            isinstance(fps, (int, float)) and MIN_FPS <= fps <= MAX_FPS
+        ):
             raise InvalidRequestError(
-                f"fps must be in (0, {MAX_FPS:g}], got {self.fps!r}", where="fps"
+                f"fps must be in [{MIN_FPS:g}, {MAX_FPS:g}], got {fps!r}", where="fps"
             )
         if self.emotion is not None and self.emotion not in EMOTIONS:
             raise InvalidRequestError(

@@ -51,7 +51,7 @@ from typing import Any
 from urllib.parse import urlsplit, urlunsplit
 
 from lipstream_client.exceptions import LipstreamClientError
-from lipstream_client.messages import Encoding
+from lipstream_client.messages import MAX_FPS, MIN_FPS, Encoding
 from lipstream_client.rest import RestClient
 
 from .._version import __version__
@@ -168,7 +168,7 @@ def check_config(config: LoadTestConfig) -> None:
             and all(1.0 <= clip <= MAX_CLIP_S for clip in config.clips_s),
             f"1 to {MAX_CLIPS} lengths in [1, {MAX_CLIP_S:g}] s",
         ),
-        ("--fps", 0 < config.fps <= 1000, "(0, 1000]"),
+        ("--fps", MIN_FPS <= config.fps <= MAX_FPS, f"[{MIN_FPS:g}, {MAX_FPS:g}]"),
         ("--lead-ms", 0 <= config.lead_ms <= 10_000, "[0, 10000]"),
         ("--pause", 0 <= config.pause_s <= 60, "[0, 60] s"),
         (

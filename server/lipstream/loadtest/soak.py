@@ -39,7 +39,7 @@ from urllib.parse import urlsplit
 
 from lipstream_client.errors import ERROR_CODES, CloseCode
 from lipstream_client.exceptions import LipstreamClientError
-from lipstream_client.messages import Encoding
+from lipstream_client.messages import MAX_FPS, MIN_FPS, Encoding
 from lipstream_client.rest import RestClient
 
 from .._version import __version__
@@ -104,7 +104,7 @@ def check_soak(config: SoakConfig) -> None:
             f"0..{MAX_HOSTILE_PER_KIND}",
         ),
         ("--kinds", not unknown, f"among {', '.join(HOSTILE_KINDS)} (not {', '.join(unknown)})"),
-        ("--fps", 0 < config.fps <= 1000, "(0, 1000]"),
+        ("--fps", MIN_FPS <= config.fps <= MAX_FPS, f"[{MIN_FPS:g}, {MAX_FPS:g}]"),
         ("--lead-ms", 0 <= config.lead_ms <= 10_000, "[0, 10000]"),
         ("--healthz-interval", 0.01 <= config.healthz_interval_s <= 60, "[0.01, 60] s"),
         ("--pq-phonemes", 1 <= config.pq_phonemes <= 10_000, "1..10000"),

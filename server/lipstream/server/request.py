@@ -9,13 +9,21 @@ profile and leave as ``frames`` blocks of at most ``values_per_message``
 values. ``Coverage`` remembers when the input first covered each time, so
 every block carries the receipt time its lag is measured from.
 
+Memory: rows leave as they are sent; a request keeps only a ring of the
+last ``tail_values`` values sent (``SentTail``, at least one frame), which
+is all ``interrupt`` may start its return from. Its output, the frames up to
+the end of its input times its channels, is checked against ``max_values``
+(and the connection's share, which the ``Session`` passes in) before the
+engine sees the phonemes that would make it larger.
+
 Endings: ``end`` flushes the engine and sends ``done``; ``cancel`` sends
 ``done`` at once; ``interrupt`` at time ``at`` flushes the engine, sends the
 frames before ``ceil(at × fps)`` not yet sent, then a block starting at that
 frame that blends, in output space, from the face there to the rest pose
 with a smoothstep (3u² − 2u³) over ``return_ms``, whose last frame is the
 rest pose; then ``done``. A cut later than the input received so far is
-taken at the input's end, so an interrupt never synthesizes silence.
+taken at the input's end, so an interrupt never synthesizes silence; a cut
+before the oldest frame the tail still holds is taken at that frame.
 """
 
 from __future__ import annotations
@@ -35,6 +43,7 @@ from lipstream_client.errors import (
     INVALID_REQUEST,
     INVALID_TIMES,
     NON_MONOTONIC_TIMES,
+    OUTPUT_TOO_LARGE,
     TOO_MANY_PHONEMES,
     UNKNOWN_EMOTION,
     UNKNOWN_PHONEME,
@@ -51,6 +60,7 @@ from .profiles import ResolvedProfile
 
 TIME_TOLERANCE_S = 1e-9
 VALUES_PER_MESSAGE = 16_384
+SENT_TAIL_VALUES = 65_536
 _MAX_KEY = 128
 _MAX_ENTRIES = 256
 
@@ -80,12 +90,52 @@ def protocol_code(error: LipstreamError, fallback: str) -> str:
 @dataclass(frozen=True)
 class RequestLimits:
     """Per-request limits: phonemes, frames (utterance length × fps), the default
-    return-to-rest time (ms) and the values in one ``frames`` message."""
+    return-to-rest time (ms), the values in one ``frames`` message, the output values
+    (frames × channels), the values sent that ``interrupt`` can still return from, and
+    the utterance length (s: engines may hold state for every moment of it, at their own
+    rate whatever the fps). None: no limit."""
 
     max_phonemes: int
     max_frames: int
     default_return_ms: float
     values_per_message: int = VALUES_PER_MESSAGE
+    max_values: int | None = None
+    tail_values: int = SENT_TAIL_VALUES
+    max_seconds: float | None = None
+
+
+class SentTail:
+    """The last frames sent, at most ``capacity`` rows in a ring (row i of the request's
+    timeline at ``i % capacity``), grown on demand up to the capacity."""
+
+    def __init__(self, capacity: int, width: int) -> None:
+        self.capacity = capacity
+        self.rows = np.zeros((0, width), dtype=np.float32)
+        self.stop = 0
+
+    @property
+    def oldest(self) -> int:
+        """The index of the oldest frame held (0 when none was sent)."""
+        return max(0, self.stop - self.capacity)
+
+    def extend(self, rows: np.ndarray) -> None:
+        """Append ``rows``, the frames from ``stop`` on."""
+        stop = self.stop + len(rows)
+        size = min(self.capacity, stop)
+        if len(self.rows) < size:
+            capacity = min(self.capacity, max(size, 2 * len(self.rows)))
+            grown = np.zeros((capacity, self.rows.shape[1]), dtype=np.float32)
+            grown[: len(self.rows)] = self.rows
+            self.rows = grown
+        kept = rows[-self.capacity :]
+        self.rows[np.arange(stop - len(kept), stop) % self.capacity] = kept
+        self.stop = stop
+
+    def row(self, index: int) -> np.ndarray:
+        """Frame ``index``, which must lie in [oldest, stop)."""
+        if not self.oldest <= index < self.stop:
+            raise IndexError(f"frame {index} is not in the tail [{self.oldest}, {self.stop})")
+        return np.asarray(self.rows[index % self.capacity])
 
 
 class Coverage:
@@ -135,9 +185,10 @@ class ActiveRequest:
         self.audio_s = 0.0
         self.next_frame = 0
         self.seq = 0
-        self.sent: list[np.ndarray] = []
         width = spec.profile.n_channels
+        self.tail = SentTail(max(1, limits.tail_values // width), width)
         self.rows_per_message = max(1, limits.values_per_message // width)
+        self.last_input = spec.clock.started_at
 
     @property
     def id(self) -> str:
@@ -145,7 +196,24 @@ class ActiveRequest:
 
     # ---- input ----------------------------------------------------------------------------
 
-    def add_phonemes(self, items: Sequence[PhonemeItem], now: float) -> list[Outgoing]:
+    @property
+    def output_values(self) -> int:
+        """The values this request's input so far commits it to send (frames up to the
+        end of its phonemes × channels; an interrupt's return comes on top)."""
+        return self.output_values_until(self.phonemes_end) if self.n_phonemes else 0
+
+    def output_values_until(self, end_s: float) -> int:
+        return frame_count(end_s, self.spec.fps) * self.spec.profile.n_channels
+
+    def add_phonemes(
+        self,
+        items: Sequence[PhonemeItem],
+        now: float,
+        session_max_values: int | None = None,
+        others: int = 0,
+    ) -> list[Outgoing]:
+        """Take the next phonemes; the connection may send ``session_max_values`` values
+        (None: no limit), of which its other requests hold ``others``."""
         if self.n_phonemes + len(items) > self.limits.max_phonemes:
             raise RequestError(
                 f"the request would hold {self.n_phonemes + len(items)} phonemes; the server "
@@ -158,6 +226,7 @@ class ActiveRequest:
             self._span(item, f"items[{index}]", self.phonemes_end if index == 0 else None)
             for index, item in enumerate(items)
         ]
+        self._check_output(spans[-1].end, session_max_values, others)
         self._feed(spans, None, INVALID_REQUEST)
         self.n_phonemes += len(spans)
         self.ends.extend(span.end for span in spans)
@@ -193,7 +262,41 @@ class ActiveRequest:
                 where=f"{where}.end",
                 details={"max_frames": self.limits.max_frames},
             )
+        longest = self.limits.max_seconds
+        if longest is not None and item.end > longest + TIME_TOLERANCE_S:
+            raise RequestError(
+                f"ends at {item.end} s, beyond the server's limit of {longest:g} s per request",
+                code=INVALID_TIMES,
+                where=f"{where}.end",
+                details={"max_request_s": longest},
+            )
         return PhonemeSpan(phoneme, item.start, item.end, item.emotion)
+
+    def _check_output(self, end_s: float, session_max_values: int | None, others: int) -> None:
+        """OUTPUT_TOO_LARGE if input up to ``end_s`` would commit this request to more output
+        values than its limit, or the connection (whose other requests hold ``others``) to
+        more than ``session_max_values``."""
+        values = self.output_values_until(end_s)
+        made = (
+            f"input up to {end_s:g} s makes {values // self.spec.profile.n_channels} frames of "
+            f"{self.spec.profile.n_channels} channels, {values} values"
+        )
+        limit = self.limits.max_values
+        if limit is not None and values > limit:
+            raise RequestError(
+                f"{made}, beyond the server's limit of {limit} values per request",
+                code=OUTPUT_TOO_LARGE,
+                where="items",
+                details={"max_request_values": limit, "values": values},
+            )
+        if session_max_values is not None and others + values > session_max_values:
+            raise RequestError(
+                f"{made}; with the {others} values of the connection's other requests that "
+                f"exceeds the server's limit of {session_max_values} values per connection",
+                code=OUTPUT_TOO_LARGE,
+                where="items",
+                details={"max_session_values": session_max_values, "values": others + values},
+            )
 
     def add_audio(self, chunk: AudioChunk, now: float) -> list[Outgoing]:
         if self.audio_rate is not None and chunk.sample_rate != self.audio_rate:
@@ -203,6 +306,8 @@ class ActiveRequest:
                 where="sample_rate",
             )
         limit_s = self.limits.max_frames / self.spec.fps
+        if self.limits.max_seconds is not None:
+            limit_s = min(limit_s, self.limits.max_seconds)
         if self.audio_s + chunk.duration > limit_s:
             raise RequestError(
                 f"the request's audio would exceed the server's limit of {limit_s:g} s",
@@ -250,7 +355,7 @@ class ActiveRequest:
     def interrupt(self, at: float, return_ms: float | None, now: float) -> list[Outgoing]:
         fps = self.spec.fps
         cut = min(at, self.phonemes_end)
-        first_return = frames_before(cut, fps)
+        first_return = max(frames_before(cut, fps), self.tail.oldest)
         base = self.next_frame
         final = self._finish()
         unsent = self.spec.profile.apply(final) if len(final) else self._no_rows()
@@ -272,8 +377,7 @@ class ActiveRequest:
         index = min(index, total - 1)
         if index >= base:
             return np.asarray(unsent[index - base], dtype=np.float64)
-        sent = np.concatenate(self.sent)
-        return np.asarray(sent[index], dtype=np.float64)
+        return np.asarray(self.tail.row(index), dtype=np.float64)
 
     # ---- output ---------------------------------------------------------------------------
 
@@ -290,7 +394,7 @@ class ActiveRequest:
         if not len(rows):
             return []
         first = self.next_frame
-        self.sent.append(rows)
+        self.tail.extend(rows)
         self.next_frame += len(rows)
         return self._blocks(rows, first, None, now)
 

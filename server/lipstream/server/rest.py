@@ -2,8 +2,10 @@
 
 Sketch: the body, JSON or msgpack by ``Content-Type``, holds the fields of a
 ``start`` message plus ``items`` (its phonemes, as in ``phonemes``) and an
-optional ``audio`` (``{sample_rate, pcm16}`` as in ``audio``). It is split
-into those protocol messages, each decoded by the protocol codec, and played
+optional ``audio`` (``{sample_rate, pcm16}`` as in ``audio``). The protocol
+codec parses it, it is split into those protocol messages, each validated by
+the codec as parsed (never re-encoded, so a number that overflows to infinity
+is the codec's error, not a fault), and played
 through a fresh ``Session`` (start, audio, phonemes, end) in the synthesis
 thread pool. So the frames equal, value for value, what ``/v1/stream``
 sends for the same request, since engines give the same frames for any
@@ -23,7 +25,7 @@ import asyncio
 import json
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import msgpack
@@ -40,8 +42,8 @@ from lipstream_client import (
     Message,
     ProtocolError,
     Ready,
-    decode,
 )
+from lipstream_client.codec import parse_payload, payload_message
 from lipstream_client.errors import (
     INTERNAL_ERROR,
     INVALID_MESSAGE,
@@ -52,8 +54,7 @@ from lipstream_client.errors import (
 
 from ..corpus.frames_csv import frames_csv_text
 from .admission import bearer_token, token_accepted
-from .request import RequestLimits
-from .session import Session, SessionLimits
+from .session import Session
 from .state import ServerState
 
 REQUEST_ID = "synthesize"
@@ -132,9 +133,7 @@ async def synthesize(request: Request, state: ServerState) -> Response:
         response_encoding = _response_encoding(request, request_encoding)
         _authorize(request, state)
         body = await _read_body(request, state.settings.max_body_bytes)
-        messages = _messages(
-            _parse(body, request_encoding), request_encoding, state.settings.max_body_bytes
-        )
+        messages = _messages(_parse(body, request_encoding), request_encoding)
         loop = asyncio.get_running_loop()
         response = await loop.run_in_executor(
             state.executor, _answer, messages, state, response_encoding
@@ -216,13 +215,9 @@ def _too_large(size: int, limit: int) -> HttpError:
 
 
 def _parse(body: bytes, encoding: Encoding) -> dict[str, Any]:
-    try:
-        if encoding == "msgpack":
-            parsed = msgpack.unpackb(body, raw=False, strict_map_key=True, max_ext_len=0)
-        else:
-            parsed = json.loads(body.decode("utf-8"), parse_constant=_no_constant)
-    except (ValueError, TypeError, RecursionError, msgpack.UnpackException) as error:
-        raise HttpError(MALFORMED, f"the body is not valid {encoding}: {error}") from None
+    parsed = parse_payload(body, encoding)
+    if isinstance(parsed, ProtocolError):
+        raise HttpError(parsed.code, f"the body is {parsed.message}")
     if not isinstance(parsed, dict):
         raise HttpError(INVALID_MESSAGE, "the body must be an object")
     unknown = sorted(str(key) for key in parsed if key not in BODY_FIELDS)
@@ -236,12 +231,8 @@ def _parse(body: bytes, encoding: Encoding) -> dict[str, Any]:
     return parsed
 
 
-def _no_constant(name: str) -> float:
-    raise ValueError(f"{name} is not a JSON number")
-
-
-def _messages(body: dict[str, Any], encoding: Encoding, limit: int) -> list[Message]:
-    """The body as protocol messages, each decoded (so validated) by the codec."""
+def _messages(body: dict[str, Any], encoding: Encoding) -> list[Message]:
+    """The body as protocol messages, each validated by the codec."""
     start = {key: body[key] for key in START_FIELDS if key in body}
     parts: list[tuple[str, dict[str, Any]]] = [("start", start)]
     audio = body.get("audio")
@@ -250,17 +241,14 @@ def _messages(body: dict[str, Any], encoding: Encoding, limit: int) -> list[Mess
             raise HttpError(INVALID_MESSAGE, "audio: must be an object {sample_rate, pcm16}")
         parts.append(("audio", audio))
     parts.append(("phonemes", {"items": body["items"]}))
-    return [_decoded(kind, fields, encoding, limit) for kind, fields in parts] + [End(REQUEST_ID)]
+    return [_decoded(kind, fields, encoding) for kind, fields in parts] + [End(REQUEST_ID)]
 
 
-def _decoded(kind: str, fields: dict[str, Any], encoding: Encoding, limit: int) -> Message:
+def _decoded(kind: str, fields: dict[str, Any], encoding: Encoding) -> Message:
+    """One message of the body, validated as parsed: no number is re-encoded, so an
+    out-of-range one (``1e999`` parses as infinity) gets the codec's error, not a fault."""
     payload = {"v": 1, "type": kind, "id": REQUEST_ID, **fields}
-    wire: bytes | str = (
-        msgpack.packb(payload, use_bin_type=True)
-        if encoding == "msgpack"
-        else json.dumps(payload, allow_nan=False)
-    )
-    decoded = decode(wire, encoding, max_size=2 * limit, sender="client")
+    decoded = payload_message(payload, encoding, sender="client")
     if isinstance(decoded, ProtocolError):
         prefix = "audio." if kind == "audio" else ""
         located = f"{prefix}{decoded.where}: " if decoded.where else ""
@@ -270,15 +258,7 @@ def _decoded(kind: str, fields: dict[str, Any], encoding: Encoding, limit: int) 
 
 def _run(messages: list[Message], state: ServerState) -> Synthesis:
     """Play the messages through a one-request session (in the thread pool)."""
-    settings = state.settings
-    limits = SessionLimits(
-        1,
-        RequestLimits(
-            settings.max_phonemes_per_request, settings.max_request_frames, settings.return_ms
-        ),
-        cpu_budget_s=settings.request_cpu_s,
-    )
-    session = Session(state.catalog, limits)
+    session = Session(state.catalog, replace(state.session_limits, max_requests=1))
     ready: Ready | None = None
     done: Done | None = None
     blocks: list[np.ndarray] = []

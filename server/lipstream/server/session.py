@@ -13,8 +13,12 @@ ids with no active request are answered by what last happened to the id:
 input after ``end`` gets ``request_finished``, input after ``interrupt`` is
 ignored, anything else gets ``unknown_request``. No exception leaves
 ``handle``: an unexpected fault becomes ``internal_error`` for the request
-(or, with no request to blame, for the connection). Sockets, timers,
-threads, rate limits and closing belong to the connection layer.
+(or, with no request to blame, for the connection). A request's output
+may not outgrow its limit, nor the connection's active requests together
+theirs (``output_too_large``). ``expire`` ends the requests that have had no
+message for ``request_timeout_s`` (``request_timeout``); the connection
+layer calls it once ``next_expiry`` has passed. Sockets, timers, threads,
+rate limits and closing belong to the connection layer.
 
 Engine work: each request has a ``WorkGuard`` that meters its engine calls
 against the CPU budget (``cpu_budget_exceeded`` ends the request) and that
@@ -34,6 +38,7 @@ from bisect import bisect_right
 from collections import OrderedDict
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from itertools import takewhile
 from typing import Any, TypeAlias
 
 from lipstream_client import (
@@ -53,6 +58,7 @@ from lipstream_client.errors import (
     INTERNAL_ERROR,
     INVALID_REQUEST,
     REQUEST_FINISHED,
+    REQUEST_TIMEOUT,
     SHUTTING_DOWN,
     TOO_MANY_REQUESTS,
     UNKNOWN_EMOTION,
@@ -89,13 +95,16 @@ RequestInput: TypeAlias = Phonemes | AudioChunk | End | Cancel | Interrupt
 
 @dataclass(frozen=True)
 class SessionLimits:
-    """How many requests a connection may hold at once, and each request's limits (its
-    engine work's CPU seconds: ``cpu_budget_s``, None for no budget)."""
+    """How many requests a connection may hold at once, each request's limits, its engine
+    work's CPU seconds (``cpu_budget_s``), the output values its active requests may commit
+    to in all, and how long a request may go without a message (None: no limit)."""
 
     max_requests: int
     request: RequestLimits
     remembered_ids: int = REMEMBERED_IDS
     cpu_budget_s: float | None = None
+    max_values: int | None = None
+    request_timeout_s: float | None = None
 
 
 class Session:
@@ -110,6 +119,7 @@ class Session:
         self.ended: OrderedDict[str, DoneReason] = OrderedDict()
         self.draining = False
         self.stopped_work = 0
+        self.output_values = 0
 
     @property
     def active_requests(self) -> int:
@@ -127,6 +137,7 @@ class Session:
         self.requests.clear()
         self.costs.clear()
         self.guards.clear()
+        self.output_values = 0
         return dropped
 
     def estimated_work_ms(self, received: InputMessage) -> float:
@@ -168,6 +179,36 @@ class Session:
         """Stop the work of every active request at its next step (the connection is over)."""
         for guard in list(self.guards.values()):
             guard.cancel()
+
+    def next_expiry(self) -> float | None:
+        """The monotonic time at which the longest-silent active request times out; None
+        without a request timeout or an active request. (``requests`` is kept in the order
+        of their last message, so that request is the first.)"""
+        timeout = self.limits.request_timeout_s
+        if timeout is None or not self.requests:
+            return None
+        return next(iter(self.requests.values())).last_input + timeout
+
+    def expire(self, now: float) -> list[Outgoing]:
+        """End every request that has had no message for the request timeout by ``now``:
+        the fatal ``request_timeout`` errors to send."""
+        timeout = self.limits.request_timeout_s
+        if timeout is None:
+            return []
+        expired = list(takewhile(lambda r: now - r.last_input >= timeout, self.requests.values()))
+        for request in expired:
+            self._forget(request.id)
+        return [
+            _error(
+                REQUEST_TIMEOUT,
+                f"no message for request {request.id!r} in {timeout:g} s; it has ended",
+                request.id,
+                fatal=True,
+                details={"request_timeout_s": timeout},
+                clock=request.spec.clock,
+            )
+            for request in expired
+        ]
 
     def handle(self, received: InputMessage, now: float) -> list[Outgoing]:
         """The messages that answer ``received``, which arrived at monotonic time ``now``."""
@@ -213,6 +254,8 @@ class Session:
         if request is None:
             return self._orphan(received)
         guard = self.guards[request.id]
+        request.last_input = now
+        self.requests[request.id] = self.requests.pop(request.id)
         try:
             outgoing = self._metered(guard, request, received, now)
         except LipstreamError as error:
@@ -251,7 +294,13 @@ class Session:
 
     def _apply(self, request: ActiveRequest, received: RequestInput, now: float) -> list[Outgoing]:
         if isinstance(received, Phonemes):
-            return request.add_phonemes(received.items, now)
+            before = request.output_values
+            try:
+                return request.add_phonemes(
+                    received.items, now, self.limits.max_values, self.output_values - before
+                )
+            finally:
+                self.output_values += request.output_values - before
         if isinstance(received, AudioChunk):
             return request.add_audio(received, now)
         if isinstance(received, End):
@@ -281,7 +330,9 @@ class Session:
         ]
 
     def _forget(self, identifier: str) -> None:
-        self.requests.pop(identifier, None)
+        request = self.requests.pop(identifier, None)
+        if request is not None:
+            self.output_values -= request.output_values
         self.costs.pop(identifier, None)
         self.guards.pop(identifier, None)
 

@@ -38,7 +38,13 @@ class ServerState:
         return SessionLimits(
             max_requests=settings.max_requests_per_session,
             request=RequestLimits(
-                settings.max_phonemes_per_request, settings.max_request_frames, settings.return_ms
+                settings.max_phonemes_per_request,
+                settings.max_request_frames,
+                settings.return_ms,
+                max_values=settings.max_request_values,
+                max_seconds=settings.max_request_s,
             ),
             cpu_budget_s=settings.request_cpu_s,
+            max_values=settings.max_session_values,
+            request_timeout_s=settings.request_timeout_s,
         )

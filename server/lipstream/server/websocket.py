@@ -24,7 +24,10 @@ deadline (``deadline.SendDeadline``) closes the connection with 1008
 ``slow_consumer``: a client that stops reading would otherwise pin
 ``await send`` forever. Frames are never dropped silently. A connection
 with no message and no active request for ``idle_timeout_s`` closes with
-1000; a draining one closes with 1001 as soon as its requests are done.
+1000; a request with no message for ``request_timeout_s`` ends with
+``request_timeout`` (the wait for the next message ends at the session's
+``next_expiry``); a draining one closes with 1001 as soon as its requests are
+done.
 """
 
 from __future__ import annotations
@@ -225,6 +228,8 @@ class Connection:
                 return
             received = await self._next_event()
             if received is _WAKE:
+                if not await self._send_all(self._expired(time.monotonic())):
+                    return
                 continue
             if received is _IDLE:
                 await self._close(
@@ -235,6 +240,8 @@ class Connection:
                 return
             assert isinstance(received, Received)
             if received.event["type"] == "websocket.disconnect":
+                return
+            if not await self._send_all(self._expired(received.at)):
                 return
             if not self.bucket.take(received.at):
                 await self._close(
@@ -264,20 +271,31 @@ class Connection:
             payload, self.encoding, max_size=self.settings.max_message_bytes, sender="client"
         )
 
+    def _expired(self, now: float) -> list[Outgoing]:
+        """The errors of the requests that had no message for the request timeout by
+        ``now`` (``Session.expire``)."""
+        expired = self.session.expire(now)
+        self._track_active()
+        return expired
+
     async def _next_event(self) -> object:
         """The client's next message (those read ahead first); ``_IDLE`` after
         ``idle_timeout_s`` without one while no request is active, ``_WAKE`` when ``_wake``
-        interrupted the wait."""
+        interrupted the wait or an active request's timeout (``Session.next_expiry``) came
+        first."""
         ahead = self.read_ahead.pop()
         if ahead is not None:
             return ahead
         self._receiving = True
-        timeout = None if self.session.active_requests else self.settings.idle_timeout_s
+        timeout: float | None = self.settings.idle_timeout_s
+        if self.session.active_requests:
+            expiry = self.session.next_expiry()
+            timeout = None if expiry is None else max(0.0, expiry - time.monotonic())
         try:
             if self._receive_task is not None:
                 done, _ = await asyncio.wait({self._receive_task}, timeout=timeout)
                 if not done:
-                    return _IDLE
+                    return _WAKE if self.session.active_requests else _IDLE
                 task, self._receive_task = self._receive_task, None
                 return task.result()
             if timeout is None:  # no timer per message while requests are active
@@ -285,7 +303,7 @@ class Connection:
             async with asyncio.timeout(timeout):
                 return await self._receive()
         except TimeoutError:
-            return _IDLE
+            return _WAKE if self.session.active_requests else _IDLE
         except asyncio.CancelledError:
             if not self._woken or self._task is None or self._task.uncancel():
                 raise

@@ -12,7 +12,14 @@ from hypothesis import strategies as st
 
 from lipstream.corpus import Corpus
 from lipstream.engines import engine_names, load_model
-from lipstream.engines.base import Model, frame_count, frames_before
+from lipstream.engines.base import (
+    MAX_FPS,
+    MIN_FPS,
+    Model,
+    SynthesisRequest,
+    frame_count,
+    frames_before,
+)
 from lipstream.errors import InvalidRequestError
 from lipstream.timeline import PhonemeSpan
 
@@ -169,3 +176,15 @@ def test_each_engine_declares_the_options_it_reads(trained_models: dict[str, Mod
     }  # fmt: skip
     anime = trained_models["anime-graph"]
     assert anime.start(fps=60, smooth=False, max_tile=4) is not None
+
+
+@pytest.mark.parametrize("fps", [1e-308, 0.5, 0.999, 1000.5, float("nan"), float("inf"), True])
+def test_a_request_outside_the_frame_rate_range_is_refused(fps: float) -> None:
+    with pytest.raises(InvalidRequestError, match=r"fps must be in \[1, 1000\]") as raised:
+        SynthesisRequest(fps=fps)
+    assert raised.value.where == "fps"
+
+
+@pytest.mark.parametrize("fps", [MIN_FPS, 1.5, MAX_FPS])
+def test_the_frame_rate_range_is_closed(fps: float) -> None:
+    assert SynthesisRequest(fps=fps).fps == fps

@@ -136,6 +136,7 @@ def test_other_targets_are_refused(url: str) -> None:
         ({"clips_s": (5.0, 61.0)}, "--clips"),
         ({"clips_s": ()}, "--clips"),
         ({"fps": 0.0}, "--fps"),
+        ({"fps": 0.5}, "--fps"),
         ({"max_duration_s": 4000.0}, "--max-duration"),
         ({"streams": 1, "requests": 100}, "--max-duration"),
     ],

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import json
 import socket
 import time
 from pathlib import Path
 from urllib.parse import urlsplit
 
 import httpx
+import msgpack
 import pytest
 
 from lipstream.config import ServerSettings
@@ -16,13 +18,14 @@ from lipstream_client import (
     End,
     ErrorMessage,
     Frames,
+    Message,
     PhonemeItem,
     Phonemes,
     Ready,
     Start,
     encode,
 )
-from tests.lipstream.server.harness import client, serving
+from tests.lipstream.server.harness import Client, client, serving
 
 ITEMS = (PhonemeItem("HH", 0.0, 0.1), PhonemeItem("AY1", 0.1, 0.3))
 
@@ -183,3 +186,107 @@ def test_limits_do_not_touch_well_behaved_clients(lerp_dir: Path, payload: bytes
         ws.send(Phonemes("a", ITEMS), End("a"))
         answers = ws.until_done("a")
     assert isinstance(answers[0], Ready) and isinstance(answers[-1], Done)
+
+
+def request_error(answers: list) -> tuple[str, bool, str | None, dict]:  # type: ignore[type-arg]
+    [error] = [m for m in answers if isinstance(m, ErrorMessage)]
+    return error.code, error.fatal, error.id, dict(error.details or {})
+
+
+def test_output_per_request_and_per_connection_is_limited(lerp_dir: Path) -> None:
+    # At 60 fps, phonemes to t s commit floor(60 t) + 1 frames of the demo's 28 channels.
+    settings = ServerSettings(max_request_values=2000, max_session_values=3000)
+    with serving(lerp_dir, settings) as served, client(served.ws) as ws:
+        ws.send(Start("a", "viseme-lerp", "demo"))
+        ready = ws.recv()
+        assert isinstance(ready, Ready) and len(ready.channels) == 28
+        ws.send(Phonemes("a", (PhonemeItem("AA", 0.0, 1.0),)))  # 61 × 28 = 1708 values
+        ws.send(Phonemes("a", (PhonemeItem("M", 1.0, 2.0),)))  # 121 × 28 = 3388 values
+        answers = ws.until_done("a")
+        assert request_error(answers) == (
+            "output_too_large",
+            True,
+            "a",
+            {"max_request_values": 2000, "values": 3388},
+        )
+        ws.send(Start("b", "viseme-lerp", "demo"), Start("c", "viseme-lerp", "demo"))
+        ws.send(Phonemes("b", (PhonemeItem("AA", 0.0, 1.0),)))  # 1708 values
+        ws.send(Phonemes("c", (PhonemeItem("AA", 0.0, 0.5),)))  # 31 × 28 = 868: 2576 in all
+        ws.send(Phonemes("c", (PhonemeItem("M", 0.5, 1.0),)))  # 1708 + 1708 = 3416 > 3000
+        answers = ws.until_done("c")
+        assert request_error(answers) == (
+            "output_too_large",
+            True,
+            "c",
+            {"max_session_values": 3000, "values": 3416},
+        )
+        ws.send(End("b"))
+        assert isinstance(ws.until_done("b")[-1], Done)
+        # b's output is no longer held: a new request may take as much.
+        ws.send(Start("d", "viseme-lerp", "demo"), Phonemes("d", (PhonemeItem("AA", 0, 1.0),)))
+        ws.send(End("d"))
+        done = ws.until_done("d")[-1]
+        assert isinstance(done, Done) and done.stats.frames == 61
+
+
+def pending(ws: Client, wait_s: float) -> list[Message]:
+    """The messages that arrive within ``wait_s``."""
+    messages: list[Message] = []
+    deadline = time.monotonic() + wait_s
+    while (left := deadline - time.monotonic()) > 0:
+        try:
+            messages.append(ws.recv(timeout=left))
+        except TimeoutError:
+            break
+    return messages
+
+
+def test_a_request_without_messages_times_out_while_others_go_on(lerp_dir: Path) -> None:
+    with serving(lerp_dir, ServerSettings(request_timeout_s=0.5)) as served:
+        with client(served.ws) as ws:
+            ws.send(Start("quiet", "viseme-lerp", "demo"), Start("busy", "viseme-lerp", "demo"))
+            # busy sends a phoneme every 0.1 s until quiet has timed out (at most 5 s).
+            end = 0.0
+            errors: list[ErrorMessage] = []
+            for _ in range(50):
+                ws.send(Phonemes("busy", (PhonemeItem("AA", end, end + 0.1),)))
+                end += 0.1
+                errors += [m for m in pending(ws, 0.1) if isinstance(m, ErrorMessage)]
+                if errors:
+                    break
+            assert [(e.code, e.id, e.fatal, e.details) for e in errors] == [
+                ("request_timeout", "quiet", True, {"request_timeout_s": 0.5})
+            ]
+            ws.send(End("busy"))
+            assert isinstance(ws.until_done("busy")[-1], Done)
+            # A request started later times out in its turn.
+            ws.send(Start("late", "viseme-lerp", "demo"))
+            answers = ws.until_done("late")
+        assert request_error(answers)[:3] == ("request_timeout", True, "late")
+
+
+@pytest.mark.parametrize("fps", [1e-308, 0.5])
+@pytest.mark.parametrize("encoding", ["msgpack", "json"])
+def test_fps_below_one_is_refused_before_ready(lerp_dir: Path, fps: float, encoding: str) -> None:
+    start = {"v": 1, "type": "start", "id": "a", "engine": "viseme-lerp", "character": "demo"}
+    payload = {**start, "fps": fps}
+    wire = msgpack.packb(payload) if encoding == "msgpack" else json.dumps(payload)
+    with serving(lerp_dir) as served, client(served.ws, encoding) as ws:  # type: ignore[arg-type]
+        ws.send_raw(wire)
+        error = ws.recv()
+        assert isinstance(error, ErrorMessage)
+        assert (error.code, error.id, error.fatal) == ("invalid_message", "a", True)
+        assert error.message.startswith("fps: must be >= 1")
+        ws.send(Start("b", "viseme-lerp", "demo", fps=1.0), Phonemes("b", ITEMS), End("b"))
+        answers = ws.until_done("b")
+    assert isinstance(answers[0], Ready) and answers[0].fps == 1.0
+    assert isinstance(answers[-1], Done) and answers[-1].stats.frames == 1  # frame 0 only
+
+
+def test_an_utterance_longer_than_the_limit_is_refused(lerp_dir: Path) -> None:
+    with serving(lerp_dir, ServerSettings(max_request_s=2.0)) as served, client(served.ws) as ws:
+        ws.send(Start("a", "viseme-lerp", "demo", fps=1.0))
+        ws.send(Phonemes("a", (PhonemeItem("AA", 0.0, 2.0), PhonemeItem("M", 2.0, 2.5))))
+        answers = ws.until_done("a")
+    assert isinstance(answers[0], Ready)
+    assert request_error(answers) == ("invalid_times", True, "a", {"max_request_s": 2.0})

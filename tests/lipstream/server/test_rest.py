@@ -238,6 +238,68 @@ def test_preston_blair_mouth_shapes_as_csv(served: Served) -> None:
     assert rows[0][1 + int(np.argmax(weights[10]))] == "D"
 
 
+OVERFLOW = "<overflow>"  # stands for a number beyond the double range; JSON reads infinity
+
+
+@pytest.mark.parametrize(
+    ("body", "code", "where"),
+    [
+        ({**BODY, "items": [{**ITEMS[0], "end": "-" + OVERFLOW}]}, "invalid_times", "items[0].end"),
+        ({**BODY, "items": [{**ITEMS[0], "start": OVERFLOW}]}, "invalid_times", "items[0].start"),
+        ({**BODY, "options": {"x": OVERFLOW}}, "invalid_message", "options.x"),
+        ({**BODY, "options": {"x": [{"y": "-" + OVERFLOW}]}}, "invalid_message", "options.x"),
+        ({**BODY, "fps": OVERFLOW}, "invalid_message", "fps"),
+        ({**BODY, "latency_budget_ms": OVERFLOW}, "invalid_message", "latency_budget_ms"),
+        (
+            {**BODY, "output": {"transforms": {"jawOpen": {"multiplier": OVERFLOW}}}},
+            "invalid_message",
+            "multiplier",
+        ),
+    ],
+)
+@pytest.mark.parametrize("text", ["1e999", "1e400"])
+def test_a_number_that_overflows_is_a_400_with_the_error_body(
+    served: Served, body: dict[str, Any], code: str, where: str, text: str
+) -> None:
+    encoded = json.dumps(body).replace(f'"-{OVERFLOW}"', f"-{text}").replace(f'"{OVERFLOW}"', text)
+    assert OVERFLOW not in encoded and text in encoded
+    answer = post(served, encoded)
+    assert (answer.status_code, answer.headers["content-type"]) == (400, "application/json")
+    error = answer.json()["error"]
+    assert error["code"] == code and where in error["message"] and "finite" in error["message"]
+
+
+@pytest.mark.parametrize("value", [float("inf"), float("-inf"), float("nan")])
+def test_msgpack_infinity_and_nan_are_a_400(served: Served, value: float) -> None:
+    for body in (
+        {**BODY, "options": {"x": value}},
+        {**BODY, "items": [{**ITEMS[0], "end": value}]},
+        {**BODY, "fps": value},
+    ):
+        answer = post(served, body, "application/msgpack")
+        assert answer.status_code == 400
+        error = msgpack.unpackb(answer.content)["error"]
+        assert error["code"] in ("invalid_message", "invalid_times")
+        assert "finite" in error["message"]
+
+
+@pytest.mark.parametrize("fps", [1e-308, 0.5, 0.999])
+def test_fps_below_one_is_refused(served: Served, fps: float) -> None:
+    answer = post(served, {**BODY, "fps": fps})
+    assert answer.status_code == 400
+    error = answer.json()["error"]
+    assert error["code"] == "invalid_message" and error["message"].startswith("fps: must be >= 1")
+
+
+@pytest.mark.parametrize(("fps", "frames"), [(1, 3), (1.5, 4)])
+def test_the_lowest_frame_rates_synthesize(served: Served, fps: float, frames: int) -> None:
+    # Frames i with i / fps <= 2 s: 0, 1, 2 at 1 fps; 0 to 3 at 1.5 fps.
+    items = [ITEMS[0], {**ITEMS[1], "end": 2.0}]
+    answer = post(served, {**BODY, "fps": fps, "items": items})
+    assert answer.status_code == 200
+    assert answer.json()["n_frames"] == frames
+
+
 def test_budget_infeasible_carries_the_smallest_feasible_budget(served: Served) -> None:
     answer = post(
         served, {**BODY, "latency_budget_ms": 10}, "application/json", "application/msgpack"

@@ -2,39 +2,66 @@
 
 Sketch: the rows live in a buffer that doubles when full, so appending n
 rows one call at a time costs O(n) copies in all, and ``view()`` hands the
-filled part to numpy or a compiled kernel without a copy.
+held rows to numpy or a compiled kernel without a copy. Rows are numbered
+from 0 in the order they were appended; ``drop_before`` forgets the oldest
+ones once a stream has consumed them (moving the rest to the front, and
+shrinking a buffer left mostly empty), so state that is only read near its
+end stays as small as that window.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+_MIN_ROWS = 16
+
 
 class Growable:
-    """Rows of shape ``row_shape`` and ``dtype``; ``view()`` is (count, *row_shape)."""
+    """Rows of shape ``row_shape`` and ``dtype``; ``view()`` is (count - first, *row_shape):
+    rows ``first`` to ``count`` - 1."""
 
     def __init__(self, dtype: type = np.float64, row_shape: tuple[int, ...] = ()) -> None:
-        self.data: np.ndarray = np.zeros((16, *row_shape), dtype=dtype)
+        self.data: np.ndarray = np.zeros((_MIN_ROWS, *row_shape), dtype=dtype)
         self.count = 0
+        self.first = 0
+
+    @property
+    def held(self) -> int:
+        return self.count - self.first
 
     def _reserve(self, needed: int) -> None:
         if needed > len(self.data):
             grown = np.zeros(
                 (max(needed, 2 * len(self.data)), *self.data.shape[1:]), dtype=self.data.dtype
             )
-            grown[: self.count] = self.data[: self.count]
+            grown[: self.held] = self.data[: self.held]
             self.data = grown
 
     def append(self, row: float | np.ndarray) -> None:
-        self._reserve(self.count + 1)
-        self.data[self.count] = row
+        self._reserve(self.held + 1)
+        self.data[self.held] = row
         self.count += 1
 
     def extend(self, rows: np.ndarray | list[float] | list[int]) -> None:
-        needed = self.count + len(rows)
-        self._reserve(needed)
-        self.data[self.count : needed] = rows
-        self.count = needed
+        held = self.held
+        self._reserve(held + len(rows))
+        self.data[held : held + len(rows)] = rows
+        self.count += len(rows)
 
     def view(self) -> np.ndarray:
-        return self.data[: self.count]
+        return self.data[: self.held]
+
+    def drop_before(self, index: int) -> None:
+        """Forget the rows before row ``index``."""
+        index = min(max(index, self.first), self.count)
+        if index == self.first:
+            return
+        kept = self.data[index - self.first : self.held]
+        if len(self.data) > 4 * max(_MIN_ROWS, len(kept)):
+            rows = max(_MIN_ROWS, 2 * len(kept))
+            smaller = np.zeros((rows, *self.data.shape[1:]), dtype=self.data.dtype)
+            smaller[: len(kept)] = kept
+            self.data = smaller
+        else:
+            self.data[: len(kept)] = kept.copy()
+        self.first = index

@@ -411,7 +411,8 @@ class AnimeGraphSynthesizer(Synthesizer):
         if count <= have:
             return
         width = 2 * self.half_width + 1
-        block = self.raw.view()[have : count - 1 + width]
+        offset = self.raw.first
+        block = self.raw.view()[have - offset : count - 1 + width - offset]
         self.smoothed.extend(_filter(block, self.kernels))
 
     def _advance(self) -> None:
@@ -448,12 +449,20 @@ class AnimeGraphSynthesizer(Synthesizer):
         positions = np.where(np.abs(positions - snapped) < _SNAP, snapped, positions)
         low = np.floor(positions).astype(np.int64)
         fraction = (positions - low)[:, None]
-        curve = self.smoothed.view()
-        high = np.minimum(low + 1, len(curve) - 1)
-        values = (1.0 - fraction) * curve[low] + fraction * curve[high]
+        curve, offset = self.smoothed.view(), self.smoothed.first
+        high = np.minimum(low + 1, self.smoothed.count - 1)
+        values = (1.0 - fraction) * curve[low - offset] + fraction * curve[high - offset]
         self.emitted = stop
         self.stats["frames"] = stop
+        self._forget_consumed()
         return self.model.to_channels(values)
+
+    def _forget_consumed(self) -> None:
+        """Drop the samples no later frame reads: raw ones already smoothed, smoothed ones
+        before the sample below the next frame (so a request holds a window, not its
+        whole utterance at the model's rate)."""
+        self.raw.drop_before(self.smoothed.count)
+        self.smoothed.drop_before(math.floor(self.emitted * self.model.fps / self.fps) - 1)
 
 
 def _samples_needed(frame: int, fps_model: float, fps: float) -> int:

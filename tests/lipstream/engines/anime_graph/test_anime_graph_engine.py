@@ -270,3 +270,24 @@ def test_pq_takes_at_most_256_window_phonemes(
     assert (raised.value.code, raised.value.where) == ("search_too_large", "options.search")
     greedy = model.start(fps=60)
     greedy.feed(spans)  # the cap is PQ's only
+
+
+def test_a_long_request_holds_a_window_of_samples_not_its_utterance(
+    model: AnimeGraphModel,
+) -> None:
+    spans = [
+        PhonemeSpan(("AA", "M", "S", "IY")[i % 4], i * 0.08, (i + 1) * 0.08) for i in range(600)
+    ]
+    synthesizer = model.start(fps=1000.0)
+    frames = 0
+    held: list[int] = []
+    for span in spans:
+        synthesizer.feed([span])
+        frames += len(synthesizer.frames())
+        held.append(len(synthesizer.raw.data) + len(synthesizer.smoothed.data))
+    frames += len(synthesizer.finish())
+    assert frames == 48_001  # 48 s at 1000 fps
+    # 48 s at the model's rate are thousands of samples; the buffers stay at a window.
+    samples = 48 * model.fps
+    assert samples > 5000
+    assert max(held) < samples / 20
