@@ -93,7 +93,7 @@ def create_app(
         registry = loaded or ModelRegistry.load(models_path, strict=settings.strict_models)
         executor = ThreadPoolExecutor(settings.synth_threads, thread_name_prefix="lipstream-synth")
         catalog = Catalog.build(registry, settings)
-        overload = overload_for(settings, catalog)
+        overload = overload_for(settings, catalog, metrics.observe_load)
         server = ServerState(registry, catalog, settings, metrics, lifecycle, executor, overload)
         _log_limits(server)
         overload.monitor.start()

@@ -21,6 +21,8 @@ protocol with ``http_flush``'s bound on unsent bytes) adds:
   while the worker holds as many connections as it can. At most ``PROBE_LANE`` connections
   wait over the cap at once; one beyond that gets the 503 at once and is closed, before the
   server reads anything from it;
+- both counted in ``lipstream_connections_refused`` (codes ``handshake_timeout`` and
+  ``too_many_connections``);
 - ``GET /healthz`` answered by a bare ASGI callable in front of the app: no routing, no
   middleware, no lifespan state, the cheapest answer the event loop can give.
 """
@@ -41,6 +43,8 @@ from .http_flush import BoundedFlushHTTPProtocol
 from .open_files import connection_cap, open_file_limit
 from .state import ServerState
 
+HANDSHAKE_TIMEOUT = "handshake_timeout"
+TOO_MANY_CONNECTIONS = "too_many_connections"
 HEALTHZ_PATH = "/healthz"
 HEALTHZ_BODY = json.dumps({"status": "ok"}, separators=(",", ":")).encode()
 PROBE_LANE = 64
@@ -64,6 +68,13 @@ BUSY_RESPONSE = (
 
 _over_cap: weakref.WeakKeyDictionary[UvicornState, set[GuardedHTTPProtocol]]
 _over_cap = weakref.WeakKeyDictionary()
+
+
+def refused(app_state: Mapping[str, Any], code: str) -> None:
+    """Count a connection the protocol turned away (``lipstream_connections_refused``)."""
+    server = app_state.get("server")
+    if isinstance(server, ServerState):
+        server.metrics.labelled(server.metrics.refused, code).inc()
 
 
 def head_limits(app_state: Mapping[str, Any]) -> tuple[float, int]:
@@ -140,6 +151,7 @@ class GuardedHTTPProtocol(BoundedFlushHTTPProtocol):
         if scope["type"] == "http" and scope["method"] == "GET" and scope["path"] == HEALTHZ_PATH:
             app = answer_healthz
         elif self.over_cap:
+            refused(self.app_state, TOO_MANY_CONNECTIONS)
             app = answer_busy
         await app(scope, receive, send)
 
@@ -159,11 +171,13 @@ class GuardedHTTPProtocol(BoundedFlushHTTPProtocol):
         self.head_timer = None
         self._head_done()
         if not self.transport.is_closing():
+            refused(self.app_state, HANDSHAKE_TIMEOUT)
             self.transport.close()
 
     def _refuse(self) -> None:
         """HTTP 503 and close, whatever the client sent or will send."""
         self.over_cap = True
         if not self.transport.is_closing():
+            refused(self.app_state, TOO_MANY_CONNECTIONS)
             self.transport.write(BUSY_RESPONSE)
             self.transport.close()

@@ -21,6 +21,7 @@ import statistics
 import sys
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -53,8 +54,15 @@ class _Tick:
 class LoadMonitor:
     """Samples the event loop it is started on, every ``interval_s``."""
 
-    def __init__(self, interval_s: float = INTERVAL_S, window_s: float = WINDOW_S) -> None:
+    def __init__(
+        self,
+        interval_s: float = INTERVAL_S,
+        window_s: float = WINDOW_S,
+        on_sample: Callable[[LoadSample], None] | None = None,
+    ) -> None:
+        """``on_sample`` gets the new sample after every tick (to publish it as metrics)."""
         self.interval_s = interval_s
+        self.on_sample = on_sample
         self.ticks: deque[_Tick] = deque(maxlen=max(2, round(window_s / interval_s) + 1))
         self.rss_mb = resident_mb()
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -65,6 +73,8 @@ class LoadMonitor:
         """Start sampling the running loop."""
         self._loop = asyncio.get_running_loop()
         self._schedule(self._loop.time())
+        if self.on_sample is not None:
+            self.on_sample(self.sample())
 
     def stop(self) -> None:
         if self._timer is not None:
@@ -91,6 +101,8 @@ class LoadMonitor:
         self.ticks.append(_Tick(time.monotonic(), time.thread_time(), max(0.0, now - self._due)))
         self.rss_mb = resident_mb()
         self._schedule(now)
+        if self.on_sample is not None:
+            self.on_sample(self.sample())
 
 
 def resident_mb() -> float:

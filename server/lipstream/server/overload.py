@@ -32,7 +32,7 @@ from __future__ import annotations
 import random
 import time
 from collections import deque
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 
 from lipstream_client.errors import SERVER_BUSY
@@ -186,9 +186,13 @@ def memory_ceiling_mb(settings: ServerSettings) -> float:
     return AUTO_MEMORY_SHARE * machine_memory_mb() / settings.workers
 
 
-def overload_for(settings: ServerSettings, catalog: Catalog) -> Overload:
+def overload_for(
+    settings: ServerSettings,
+    catalog: Catalog,
+    on_sample: Callable[[LoadSample], None] | None = None,
+) -> Overload:
     """The admission of a server with ``settings`` serving ``catalog``'s models, its monitor
-    not yet started."""
+    (which passes each sample to ``on_sample``) not yet started."""
     ladders = [facts.ladder for facts in catalog.facts.values()]
     limits = LoadLimits(
         memory_ceiling_mb(settings),
@@ -196,4 +200,4 @@ def overload_for(settings: ServerSettings, catalog: Catalog) -> Overload:
         settings.max_loop_busy,
         calibrated_session_cost(ladders),
     )
-    return Overload(OverloadPolicy(limits), LoadMonitor())
+    return Overload(OverloadPolicy(limits), LoadMonitor(on_sample=on_sample))

@@ -3,6 +3,7 @@ connection cap, and ``/healthz`` past it."""
 
 from __future__ import annotations
 
+import re
 import socket
 import time
 from contextlib import ExitStack
@@ -39,11 +40,19 @@ def read_until_closed(sock: socket.socket) -> bytes:
     return received
 
 
+def refused_count(base: str, code: str) -> float:
+    """``lipstream_connections_refused_total`` for ``code`` (0 before the first)."""
+    text = httpx.get(f"{base}/metrics").text
+    match = re.search(rf'^lipstream_connections_refused_total{{code="{code}"}} (\S+)$', text, re.M)
+    return float(match.group(1)) if match else 0.0
+
+
 def test_a_silent_connection_is_closed_after_the_head_deadline(lerp_dir: Path) -> None:
     with serving(lerp_dir, ServerSettings(handshake_timeout_s=0.3)) as served:
         with raw_socket(served.http) as silent:
             assert read_until_closed(silent) == b""
         assert httpx.get(f"{served.http}/healthz").json() == {"status": "ok"}
+        assert refused_count(served.http, "handshake_timeout") >= 1
 
 
 def test_a_partial_request_head_is_closed_after_the_head_deadline(lerp_dir: Path) -> None:
@@ -99,6 +108,7 @@ def test_past_the_connection_cap_only_healthz_is_answered(lerp_dir: Path) -> Non
             time.sleep(0.05)
         else:
             raise AssertionError("the cap did not free once the sessions closed")
+        assert refused_count(served.http, "too_many_connections") >= 2  # request, upgrade
 
 
 def test_past_the_probe_lane_a_connection_is_refused_before_it_speaks(lerp_dir: Path) -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import math
 import random
+import re
 from pathlib import Path
 
 import httpx
@@ -151,6 +152,10 @@ def test_an_overloaded_server_refuses_sessions_with_retry_after(lerp_dir: Path) 
         assert httpx.get(f"{served.http}/healthz").json() == {"status": "ok"}
         metrics = httpx.get(f"{served.http}/metrics").text
         assert 'lipstream_connections_refused_total{code="server_busy"} 1.0' in metrics
+        resident = re.search(r"^lipstream_resident_memory_bytes (\S+)$", metrics, re.M)
+        assert resident is not None and float(resident.group(1)) > 1 << 20
+        busy = re.search(r"^lipstream_event_loop_busy_ratio (\S+)$", metrics, re.M)
+        assert busy is not None and 0.0 <= float(busy.group(1)) <= 1.0
 
 
 def test_above_the_memory_ceiling_nothing_new_is_taken_on(lerp_dir: Path) -> None:
