@@ -204,7 +204,7 @@ ENV_SETTINGS: tuple[EnvSetting, ...] = (
         "max_loop_busy",
         _number(0.0, 1.0, above=True),
         "fraction of one core the event loop may be busy, counting the sessions admitted in "
-        "the last second at their calibrated cost, before new sessions are refused",
+        "the last second at their estimated cost, before new sessions are refused",
     ),
     EnvSetting(
         "LIPSTREAM_MAX_REQUESTS_PER_SESSION",

@@ -9,15 +9,18 @@ measured load (``load.LoadSample``) leaves room:
 - resident memory at most ``max_memory_mb`` (also checked for every ``start`` and
   ``POST /v1/synthesize``: past it nothing new is taken on, while work under way finishes);
 - the median event-loop lag at most ``max_lag_ms``;
-- the loop's busy fraction, plus the cost of the sessions admitted within the last
-  ``RECENT_S`` (their load is not measured yet: a burst of connections would otherwise all
-  be admitted before the first of them streams), at most ``max_busy``. A session's cost is
-  the larger of the calibrated one (``calibrated_session_cost``: the costliest loaded model's
-  default rung, at one phoneme per ``PHONEME_S`` of speech, as start-up calibration measured
-  it, plus ``MESSAGE_OVERHEAD_MS`` per message for the work outside the engine, as profiled
-  in docs/server.md's *Throughput*) and the learned one: the busy fraction per open
-  session, averaged over the samples taken with at least ``LEARN_FROM_SESSIONS`` sessions
-  open (fewer say more about the clients than about the sessions).
+- the loop's busy fraction over the last ``RECENT_S`` (the monitor's window), plus the cost
+  of this session and of those admitted within that window, at most ``max_busy``. A session
+  admitted ``age`` seconds ago counts with weight ``1 - age / RECENT_S``: the window has
+  measured that part of it streaming already. Without this a burst of connections would all
+  be admitted before the first of them shows in the measurement. A session's cost is the
+  learned one once there is one: the busy fraction per open session, averaged over the
+  samples taken with at least ``LEARN_FROM_SESSIONS`` sessions open (fewer say more about
+  the clients than about the sessions); before that, the calibrated one
+  (``calibrated_session_cost``: the costliest loaded model's default rung, at one phoneme per
+  ``PHONEME_S`` of speech, as start-up calibration measured it, plus
+  ``MESSAGE_OVERHEAD_MS`` per message for the work outside the engine, as profiled in
+  docs/server.md's *Throughput*).
 
 Left at 0, the memory ceiling is ``AUTO_MEMORY_SHARE`` of the memory the process may use
 (the machine's, or a smaller container limit) divided among the workers. A refusal is
@@ -98,7 +101,7 @@ class OverloadPolicy:
 
     @property
     def session_cost(self) -> float:
-        return max(self.limits.session_cost, self.learned_cost)
+        return self.learned_cost or self.limits.session_cost
 
     def request_refusal(self, load: LoadSample) -> Refusal | None:
         """A refusal for a new request (``start``, ``POST /v1/synthesize``) while memory is
@@ -117,11 +120,12 @@ class OverloadPolicy:
         """A refusal for a new session with ``sessions`` open, or None after counting it as
         admitted at ``now``."""
         self._learn(load, sessions)
-        while self.recent and now - self.recent[0] > RECENT_S:
+        while self.recent and now - self.recent[0] >= RECENT_S:
             self.recent.popleft()
         refusal = self.request_refusal(load)
         limits = self.limits
-        projected = load.loop_busy + (len(self.recent) + 1) * self.session_cost
+        unmeasured = sum(1.0 - (now - admitted) / RECENT_S for admitted in self.recent)
+        projected = load.loop_busy + (unmeasured + 1.0) * self.session_cost
         if refusal is None and load.lag_ms > limits.max_lag_ms:
             refusal = self._refusal(
                 "loop_lag",

@@ -58,9 +58,16 @@ def admitted_in_a_burst(overload: OverloadPolicy, load: LoadSample, now: float) 
 def test_a_burst_is_admitted_up_to_the_busy_limit_then_again_after_the_window() -> None:
     overload = policy()
     assert admitted_in_a_burst(overload, QUIET, now=0.0) == 6  # 6 x 0.125 = 0.75
+    # Half a window later the window has measured half of each: 6 x 0.5 x 0.125 = 0.375 of
+    # the 0.75 is unmeasured, room for 3 more.
+    assert admitted_in_a_burst(overload, QUIET, now=RECENT_S / 2) == 3
+    # A window after the first six only the last three are unmeasured, by half.
+    assert admitted_in_a_burst(overload, QUIET, now=RECENT_S) == 4  # (1.5 + 4) x 0.125
     refusal = overload.session_refusal(QUIET, 0, now=RECENT_S)
     assert refusal is not None and refusal.reason == "loop_busy"
-    assert admitted_in_a_burst(overload, QUIET, now=RECENT_S + 0.01) == 6
+    later = policy()
+    admitted_in_a_burst(later, QUIET, now=0.0)
+    assert admitted_in_a_burst(later, QUIET, now=RECENT_S) == 6
     busy = LoadSample(lag_ms=1.0, loop_busy=0.5, rss_mb=100.0)
     assert admitted_in_a_burst(policy(), busy, now=0.0) == 2  # 0.5 + 2 x 0.125 = 0.75
 
@@ -93,15 +100,16 @@ def test_retry_after_is_spread_over_one_more_base() -> None:
 
 
 def test_the_session_cost_is_learned_from_enough_open_sessions() -> None:
-    cheap = LoadLimits(1000.0, 50.0, 0.75, session_cost=0.01)
-    overload = policy(cheap)
+    overload = policy(LoadLimits(1000.0, 50.0, 0.75, session_cost=0.01))
     overload.session_refusal(LoadSample(1.0, 0.6, 1.0), LEARN_FROM_SESSIONS - 1, 0.0)
-    assert overload.session_cost == 0.01  # too few sessions to learn from
+    assert overload.session_cost == 0.01  # too few sessions to learn from: the calibrated
     overload.session_refusal(LoadSample(1.0, 0.64, 1.0), 16, 10.0)
     assert math.isclose(overload.session_cost, 0.04)  # 0.64 / 16
     overload.session_refusal(LoadSample(1.0, 0.64, 1.0), 32, 20.0)
     assert math.isclose(overload.session_cost, 0.038)  # 0.04 + 0.1 x (0.02 - 0.04)
-    assert policy(LIMITS).session_cost == 0.125
+    dear = policy(LoadLimits(1000.0, 50.0, 0.75, session_cost=0.125))
+    dear.session_refusal(LoadSample(1.0, 0.32, 1.0), 16, 0.0)
+    assert math.isclose(dear.session_cost, 0.02)  # measured beats the calibrated estimate
 
 
 def test_the_calibrated_cost_is_the_costliest_default_rung_plus_message_overhead() -> None:
