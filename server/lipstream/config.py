@@ -197,7 +197,8 @@ ENV_SETTINGS: tuple[EnvSetting, ...] = (
         "LIPSTREAM_MAX_LOOP_LAG_MS",
         "max_loop_lag_ms",
         _number(0.0, 60_000.0, above=True),
-        "event-loop lag above which new sessions are refused with `server_busy`",
+        "event-loop lag above which new sessions are refused with `server_busy` (once 16 "
+        "sessions are open)",
     ),
     EnvSetting(
         "LIPSTREAM_MAX_LOOP_BUSY",

@@ -6,8 +6,10 @@ waits behind the others), the CPU time the loop's thread has used (``time.thread
 inside the callback, so only the loop's thread counts: the synthesis pool's threads do not
 delay the loop's callbacks) and the resident set size (``/proc/self/statm`` on Linux, else the
 peak ``ru_maxrss``). ``sample`` summarises the last ``window_s``: the median lag (one stall
-of another thread holding the GIL does not count; a saturated loop lags on every tick), the
-loop's busy fraction of one core over the window, and the latest RSS. ``machine_memory_mb``
+of another thread holding the GIL does not count; a saturated loop lags on every tick), or
+more if the next tick is overdue already (a long batch of callbacks, say a burst of
+handshakes admitted one after another, holds the ticks back while it runs), the loop's busy
+fraction of one core over the window, and the latest RSS. ``machine_memory_mb``
 is the memory this process may use: the physical memory, or a smaller cgroup limit
 (a container's).
 """
@@ -19,6 +21,7 @@ import os
 import resource
 import statistics
 import sys
+import threading
 import time
 from collections import deque
 from collections.abc import Callable
@@ -66,12 +69,14 @@ class LoadMonitor:
         self.ticks: deque[_Tick] = deque(maxlen=max(2, round(window_s / interval_s) + 1))
         self.rss_mb = resident_mb()
         self._loop: asyncio.AbstractEventLoop | None = None
+        self._thread: int | None = None
         self._timer: asyncio.TimerHandle | None = None
         self._due = 0.0
 
     def start(self) -> None:
         """Start sampling the running loop."""
         self._loop = asyncio.get_running_loop()
+        self._thread = threading.get_ident()
         self._schedule(self._loop.time())
         if self.on_sample is not None:
             self.on_sample(self.sample())
@@ -82,13 +87,21 @@ class LoadMonitor:
             self._timer = None
 
     def sample(self) -> LoadSample:
+        """The load over the window; on the loop's own thread, up to this moment: the next
+        tick, if already overdue, is a lag the loop has now (a batch of callbacks that runs
+        for seconds holds the ticks back, and would otherwise leave the sample stale), and
+        the busy fraction runs to now."""
         ticks = list(self.ticks)
+        overdue_s = 0.0
+        if self._loop is not None and threading.get_ident() == self._thread:
+            overdue_s = max(0.0, self._loop.time() - self._due)
+            ticks.append(_Tick(time.monotonic(), time.thread_time(), overdue_s))
         if len(ticks) < 2:
-            return LoadSample(rss_mb=self.rss_mb)
+            return LoadSample(lag_ms=1000.0 * overdue_s, rss_mb=self.rss_mb)
         first, last = ticks[0], ticks[-1]
         busy = (last.cpu - first.cpu) / max(last.wall - first.wall, 1e-9)
-        lag_ms = 1000.0 * statistics.median(tick.lag_s for tick in ticks[1:])
-        return LoadSample(lag_ms, min(busy, 1.0), self.rss_mb)
+        lag_s = max(statistics.median(tick.lag_s for tick in ticks[1:]), overdue_s)
+        return LoadSample(1000.0 * lag_s, min(busy, 1.0), self.rss_mb)
 
     def _schedule(self, now: float) -> None:
         assert self._loop is not None

@@ -8,7 +8,9 @@ measured load (``load.LoadSample``) leaves room:
 
 - resident memory at most ``max_memory_mb`` (also checked for every ``start`` and
   ``POST /v1/synthesize``: past it nothing new is taken on, while work under way finishes);
-- the median event-loop lag at most ``max_lag_ms``;
+- the event-loop lag at most ``max_lag_ms``, once ``LAG_FROM_SESSIONS`` sessions are open
+  (with fewer, a lagging loop says more about the machine, other processes taking its
+  cores, than about the sessions, and refusing more would not relieve it);
 - the loop's busy fraction over the last ``RECENT_S`` (the monitor's window), plus the cost
   of this session and of those admitted within that window, at most ``max_busy``. A session
   admitted ``age`` seconds ago counts with weight ``1 - age / RECENT_S``: the window has
@@ -51,6 +53,7 @@ RECENT_S = 1.0
 RETRY_AFTER_MS = 1000
 MEMORY_RETRY_AFTER_MS = 5000
 LEARN_FROM_SESSIONS = 16
+LAG_FROM_SESSIONS = 16
 LEARN_WEIGHT = 0.1
 AUTO_MEMORY_SHARE = 0.8
 MESSAGE_OVERHEAD_MS = 0.13  # uvicorn, websockets, codec and session per message in and out
@@ -126,7 +129,8 @@ class OverloadPolicy:
         limits = self.limits
         unmeasured = sum(1.0 - (now - admitted) / RECENT_S for admitted in self.recent)
         projected = load.loop_busy + (unmeasured + 1.0) * self.session_cost
-        if refusal is None and load.lag_ms > limits.max_lag_ms:
+        lagging = load.lag_ms > limits.max_lag_ms and sessions >= LAG_FROM_SESSIONS
+        if refusal is None and lagging:
             refusal = self._refusal(
                 "loop_lag",
                 f"the server's event loop lags {load.lag_ms:.0f} ms behind, more than "

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import os
+import time
 from collections import deque
 
 from lipstream.server.load import LoadMonitor, LoadSample, _Tick, machine_memory_mb, resident_mb
@@ -61,3 +62,18 @@ def test_memory_figures_are_of_this_process_and_this_machine() -> None:
     assert low * page / (1 << 20) * 0.9 <= resident <= high * page / (1 << 20) * 1.1
     physical = os.sysconf("SC_PHYS_PAGES") * page / (1 << 20)
     assert resident < machine_memory_mb() <= physical
+
+
+def test_a_loop_held_up_shows_its_lag_before_the_next_tick_runs() -> None:
+    """A long batch of callbacks holds the ticks back; sampled from inside it, the overdue
+    tick is the lag (at least the hold minus one interval)."""
+
+    async def held() -> LoadSample:
+        monitor = LoadMonitor(interval_s=0.1, window_s=1.0)
+        monitor.start()
+        time.sleep(0.3)  # the loop is held: no tick can run
+        during = monitor.sample()
+        monitor.stop()
+        return during
+
+    assert asyncio.run(held()).lag_ms >= 200.0

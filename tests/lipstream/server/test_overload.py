@@ -17,6 +17,7 @@ from lipstream.server.budget import RungEstimate
 from lipstream.server.catalog import Catalog
 from lipstream.server.load import LoadSample
 from lipstream.server.overload import (
+    LAG_FROM_SESSIONS,
     LEARN_FROM_SESSIONS,
     MEMORY_RETRY_AFTER_MS,
     RECENT_S,
@@ -74,9 +75,12 @@ def test_a_burst_is_admitted_up_to_the_busy_limit_then_again_after_the_window() 
 
 def test_lag_and_memory_refuse_at_their_limits() -> None:
     at_limits = LoadSample(lag_ms=50.0, loop_busy=0.0, rss_mb=1000.0)
-    assert policy().session_refusal(at_limits, 0, 0.0) is None
-    lagging = policy().session_refusal(LoadSample(50.5, 0.0, 100.0), 0, 0.0)
+    assert policy().session_refusal(at_limits, LAG_FROM_SESSIONS, 0.0) is None
+    lagging = policy().session_refusal(LoadSample(50.5, 0.0, 100.0), LAG_FROM_SESSIONS, 0.0)
     assert lagging is not None and lagging.reason == "loop_lag"
+    # With fewer sessions open the lag is the machine's, not theirs: no refusal.
+    few = policy().session_refusal(LoadSample(500.0, 0.0, 100.0), LAG_FROM_SESSIONS - 1, 0.0)
+    assert few is None
     full = LoadSample(lag_ms=1.0, loop_busy=0.0, rss_mb=1000.5)
     for refusal in (policy().session_refusal(full, 0, 0.0), policy().request_refusal(full)):
         assert refusal is not None and refusal.reason == "memory"
@@ -90,7 +94,7 @@ def test_retry_after_is_spread_over_one_more_base() -> None:
     lagging = LoadSample(lag_ms=99.0, loop_busy=0.0, rss_mb=1.0)
     waits = []
     for _ in range(40):
-        refusal = overload.session_refusal(lagging, 0, 0.0)
+        refusal = overload.session_refusal(lagging, LAG_FROM_SESSIONS, 0.0)
         assert refusal is not None
         assert refusal.details == {"retry_after_ms": refusal.retry_after_ms, "reason": "loop_lag"}
         assert f"retry in {refusal.retry_after_ms} ms" in refusal.message
