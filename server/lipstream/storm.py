@@ -7,7 +7,8 @@ every ``PHONEME_S`` (real time) for ``duration_s``, then end it. Meanwhile a pro
 ``GET /healthz`` every ``PROBE_EVERY_S`` with a ``PROBE_TIMEOUT_S`` timeout. The report
 counts how the connections ended (admitted and finished, refused with ``server_busy`` by
 ``details.reason``, upgrade refused with HTTP 503, closed by the server before their head,
-other failures), the probe's answers and slowest answer, and, for sessions, the server's
+other failures), the probe's answers and slowest answer (the probe runs in a process of its
+own, so the storm's load on its own process does not delay it), and, for sessions, the server's
 own frame lag over the storm: the difference of its ``lipstream_frame_lag_seconds``
 histogram before and after, read from ``/metrics``, as the bucket bounds the 50th and 99th
 percentiles fall under. One process drives every connection: beyond a few hundred
@@ -21,10 +22,13 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import multiprocessing
 import time
 import urllib.request
 from collections import Counter
 from dataclasses import asdict, dataclass, field
+from multiprocessing.connection import Connection
+from multiprocessing.synchronize import Event as EventType
 from urllib.parse import urlsplit
 
 from lipstream_client import AsyncClient, HandshakeRejected, LipstreamClientError, ServerBusy
@@ -33,6 +37,7 @@ PHONEME_S = 0.08
 PHONEMES = ("HH", "AH0", "L", "OW1", "W", "ER1", "L", "D", "sil")
 PROBE_EVERY_S = 0.5
 PROBE_TIMEOUT_S = 1.0
+PROBE_START_S = 30.0  # a spawned process imports the standard library first
 LAG_METRIC = "lipstream_frame_lag_seconds_bucket"
 KINDS = ("silent", "partial", "sessions")
 
@@ -67,15 +72,22 @@ async def storm(
     report = StormReport(kind, connections)
     lag_before = _lag_buckets(base)
     started = time.monotonic()
-    done = asyncio.Event()
-    probe = asyncio.create_task(_probe(base, report, done))
+    context = multiprocessing.get_context("spawn")
+    stop = context.Event()
+    answers, sender = context.Pipe(duplex=False)
+    probe = context.Process(target=_probe, args=(base, stop, sender), daemon=True)
+    probe.start()
+    if answers.poll(PROBE_START_S):
+        answers.recv()  # probing from now on
     if kind == "sessions":
         jobs = [_session(url, engine, character, duration_s) for _ in range(connections)]
     else:
         jobs = [_raw(url, kind == "partial", duration_s) for _ in range(connections)]
     outcomes = await asyncio.gather(*jobs)
-    done.set()
-    await probe
+    stop.set()
+    if answers.poll(PROBE_EVERY_S + PROBE_TIMEOUT_S + PROBE_START_S):
+        report.probes, report.probes_failed, report.slowest_probe_ms = answers.recv()
+    probe.join(PROBE_START_S)
     report.elapsed_s = time.monotonic() - started
     report.outcomes = dict(Counter(outcomes))
     if kind == "sessions":
@@ -130,18 +142,21 @@ async def _raw(url: str, partial: bool, duration_s: float) -> str:
         writer.close()
 
 
-async def _probe(base: str, report: StormReport, done: asyncio.Event) -> None:
-    loop = asyncio.get_running_loop()
-    while not done.is_set():
+def _probe(base: str, stop: EventType, answers: Connection) -> None:
+    """Ask ``/healthz`` until ``stop`` is set (at least once); send "probing" when it starts
+    and (probes, failed, slowest ms) at the end. Runs in a process of its own, so the
+    storm's own load does not delay it."""
+    answers.send("probing")
+    probes, failed, slowest_ms = 0, 0, 0.0
+    while True:
         began = time.monotonic()
-        ok = await loop.run_in_executor(None, _healthy, base)
-        report.probes += 1
-        report.probes_failed += not ok
-        report.slowest_probe_ms = max(report.slowest_probe_ms, 1000 * (time.monotonic() - began))
-        try:
-            await asyncio.wait_for(done.wait(), PROBE_EVERY_S)
-        except TimeoutError:
-            continue
+        ok = _healthy(base)
+        probes += 1
+        failed += not ok
+        slowest_ms = max(slowest_ms, 1000 * (time.monotonic() - began))
+        if stop.wait(PROBE_EVERY_S):
+            break
+    answers.send((probes, failed, slowest_ms))
 
 
 def _healthy(base: str) -> bool:
