@@ -6,7 +6,9 @@ returned instead, with the monotonic time it arrived, and returns the
 ``Outgoing`` messages to send, in order. Requests are multiplexed by id;
 each active one is an ``ActiveRequest``. ``start`` is validated against the
 ``Catalog`` (engine, character, phoneme notation, emotion, output profile,
-latency budget, engine options) and answered with ``ready``; every later
+latency budget, engine options) and answered with ``ready``, unless the
+injected ``refuse_start`` refuses new work (the server's memory ceiling,
+``overload``); every later
 message goes to its request, and any ``LipstreamError`` it raises ends that
 request with a fatal ``error`` of the matching protocol code. Messages for
 ids with no active request are answered by what last happened to the id:
