@@ -43,7 +43,7 @@ class ServerSettings:
     handshake_timeout_s: float = 10.0
     max_memory_mb: int = 0
     max_loop_lag_ms: float = 50.0
-    max_loop_busy: float = 0.8
+    max_loop_busy: float = 0.9
     max_requests_per_session: int = 64
     max_message_bytes: int = 1 << 20
     max_body_bytes: int = 16 << 20
