@@ -1,4 +1,5 @@
-"""The open-file limit, raised in a subprocess started with a low soft limit."""
+"""The open-file limit, raised in subprocesses (and ``lipstream serve``) started with a low
+soft limit."""
 
 from __future__ import annotations
 
@@ -6,8 +7,14 @@ import json
 import resource
 import subprocess
 import sys
+import time
+from pathlib import Path
+
+import httpx
 
 from lipstream.server.open_files import FILE_RESERVE, OpenFileLimit, connection_cap
+from tests.helpers import free_port
+from tests.live_server import stop_process
 
 RAISE = """
 import json, resource
@@ -56,3 +63,35 @@ def test_the_connection_cap_leaves_descriptors_free() -> None:
     assert connection_cap(500, OpenFileLimit(1024, 4096)) == 500
     assert connection_cap(4096, OpenFileLimit(100, 100)) == 1
     assert connection_cap(4096, OpenFileLimit(resource.RLIM_INFINITY, -1)) == 4096
+
+
+def test_lipstream_serve_raises_its_limit_at_start(lerp_dir: Path) -> None:
+    _, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    expected = hard if hard == resource.RLIM_INFINITY else min(hard, 1 << 20)
+    port = free_port()
+    process = subprocess.Popen(
+        [sys.executable, "-m", "lipstream.cli", "serve", "--models", str(lerp_dir)]
+        + ["--host", "127.0.0.1", "--port", str(port), "--log-level", "warning"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_NOFILE, (256, hard)),
+    )
+    try:
+        for _ in range(600):
+            if process.poll() is not None or _answers(f"http://127.0.0.1:{port}/healthz"):
+                break
+            time.sleep(0.1)
+        assert process.poll() is None, "lipstream serve exited"
+        limits = Path(f"/proc/{process.pid}/limits").read_text()
+        [row] = [line for line in limits.splitlines() if line.startswith("Max open files")]
+        soft = row.split()[3]
+        assert soft == ("unlimited" if expected == resource.RLIM_INFINITY else str(expected))
+    finally:
+        stop_process(process)
+
+
+def _answers(url: str) -> bool:
+    try:
+        return httpx.get(url, timeout=1.0).status_code == 200
+    except httpx.TransportError:
+        return False
