@@ -8,9 +8,9 @@ each active one is an ``ActiveRequest``. ``start`` is validated against the
 ``Catalog`` (engine, character, phoneme notation, emotion, output profile,
 latency budget, engine options) and answered with ``ready``, unless the
 injected ``refuse_start`` refuses new work (the server's memory ceiling,
-``overload``); every later
-message goes to its request, and any ``LipstreamError`` it raises ends that
-request with a fatal ``error`` of the matching protocol code. Messages for
+``overload``); every later message goes to its request, and any
+``LipstreamError`` it raises ends that request with a fatal ``error`` of the
+matching protocol code. Messages for
 ids with no active request are answered by what last happened to the id:
 input after ``end`` gets ``request_finished``, input after ``interrupt`` is
 ignored, anything else gets ``unknown_request``. No exception leaves

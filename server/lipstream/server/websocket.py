@@ -1,28 +1,28 @@
 """The WebSocket endpoint ``/v1/stream``: the only asynchronous part of streaming.
 
 Sketch: a handshake is checked before anything is allocated. The offered
-subprotocols pick the encoding (an offer naming none that we speak is refused
-with HTTP 403); then come the Origin allow-list, the bearer token, the drain,
-the measured load (``overload``: memory, event-loop lag and busy time) and the
-session cap. A refused connection is accepted only to receive an ``error``
-(for ``server_busy`` with ``details.retry_after_ms``) and its close code. An
-admitted connection is one task that takes
-one message at a time: rate limit (token bucket), decode (size-limited,
-sans I/O), then ``Session.handle``, inline when the engine's estimate of its
-work is below ``inline_work_ms`` and in the synthesis thread pool otherwise
-(with its frames encoded there too), so the event loop never waits on a
-long synthesis; answers of more than ``JSON_INLINE_VALUES`` JSON numbers are
+subprotocols pick the encoding (an offer naming none that we speak is
+refused with HTTP 403); then come the Origin allow-list, the bearer token,
+the drain, the measured load (``overload``: memory, event-loop lag and busy
+time) and the session cap. A refused connection is accepted only to receive
+an ``error`` (for ``server_busy`` with ``details.retry_after_ms``) and its
+close code. An admitted connection is one task that takes one message at a
+time: rate limit (token bucket), decode (size-limited, sans I/O), then
+``Session.handle``, inline when the engine's estimate of its work is below
+``inline_work_ms`` and in the synthesis thread pool otherwise (with its
+frames encoded there too), so the event loop never waits on a long
+synthesis; answers of more than ``JSON_INLINE_VALUES`` JSON numbers are
 encoded in the pool as well. While work runs in the pool the connection
 keeps receiving (``read_ahead``): the socket is read and pings answered, a
 ``cancel`` stops its request's work at once (``Session.stop_work``), a
 closed socket stops all of it, and the messages read wait, in order, for
-their turn. Then the task stamps and sends the answers itself. Sending
-from the same task, rather than handing
-each answer to a writer task, saves a task switch and a queue round trip
-per message, the largest cost left once the engine is fast. A send waits
-only when the client's socket buffers are full; the connection then reads
-nothing more from that client (backpressure), and a send that misses its
-deadline (``deadline.SendDeadline``) closes the connection with 1008
+their turn. Then the task stamps and sends the answers itself. Sending from
+the same task, rather than handing each answer to a writer task, saves a
+task switch and a queue round trip per message, the largest cost left once
+the engine is fast. A send waits only when the client's socket buffers are
+full; the connection then reads nothing more from that client
+(backpressure), and a send that misses its deadline
+(``deadline.SendDeadline``) closes the connection with 1008
 ``slow_consumer``: a client that stops reading would otherwise pin
 ``await send`` forever. Frames are never dropped silently. A connection
 with no message and no active request for ``idle_timeout_s`` closes with
