@@ -21,10 +21,11 @@ protocol with ``http_flush``'s bound on unsent bytes) adds:
   while the worker holds as many connections as it can. At most ``PROBE_LANE`` connections
   wait over the cap at once; one beyond that gets the 503 at once and is closed, before the
   server reads anything from it;
-- both counted in ``lipstream_connections_refused`` (codes ``handshake_timeout`` and
-  ``too_many_connections``);
 - ``GET /healthz`` answered by a bare ASGI callable in front of the app: no routing, no
   middleware, no lifespan state, the cheapest answer the event loop can give.
+
+Connections closed at the deadline and refused past the cap are counted in
+``lipstream_connections_refused`` (codes ``handshake_timeout`` and ``too_many_connections``).
 """
 
 from __future__ import annotations
