@@ -21,11 +21,14 @@ protocol with ``http_flush``'s bound on unsent bytes) adds:
   while the worker holds as many connections as it can. At most ``PROBE_LANE`` connections
   wait over the cap at once; one beyond that gets the 503 at once and is closed, before the
   server reads anything from it;
+- *shedding*: while the event loop lags far behind (``overload.OverloadPolicy.shedding``),
+  a WebSocket upgrade gets the same 503 at once, with no WebSocket work;
 - ``GET /healthz`` answered by a bare ASGI callable in front of the app: no routing, no
   middleware, no lifespan state, the cheapest answer the event loop can give.
 
-Connections closed at the deadline and refused past the cap are counted in
-``lipstream_connections_refused`` (codes ``handshake_timeout`` and ``too_many_connections``).
+Connections closed at the deadline, refused past the cap and shed are counted in
+``lipstream_connections_refused`` (codes ``handshake_timeout``, ``too_many_connections`` and
+``shedding``).
 """
 
 from __future__ import annotations
@@ -46,6 +49,7 @@ from .state import ServerState
 
 HANDSHAKE_TIMEOUT = "handshake_timeout"
 TOO_MANY_CONNECTIONS = "too_many_connections"
+SHEDDING = "shedding"
 HEALTHZ_PATH = "/healthz"
 HEALTHZ_BODY = json.dumps({"status": "ok"}, separators=(",", ":")).encode()
 PROBE_LANE = 64
@@ -53,7 +57,7 @@ PROBE_HEAD_S = 1.0
 RETRY_AFTER_S = 1
 DEFAULT_HANDSHAKE_TIMEOUT_S = 10.0
 DEFAULT_MAX_CONNECTIONS = 4096
-BUSY_BODY = b"the server holds as many connections as it can; retry later\n"
+BUSY_BODY = b"the server is at its capacity; retry later\n"
 BUSY_HEADERS = [
     (b"content-type", b"text/plain; charset=utf-8"),
     (b"content-length", str(len(BUSY_BODY)).encode()),
@@ -76,6 +80,15 @@ def refused(app_state: Mapping[str, Any], code: str) -> None:
     server = app_state.get("server")
     if isinstance(server, ServerState):
         server.metrics.labelled(server.metrics.refused, code).inc()
+
+
+def shedding(app_state: Mapping[str, Any]) -> bool:
+    """Whether the app's event loop lags too far behind for any WebSocket work
+    (``overload.OverloadPolicy.shedding``)."""
+    server = app_state.get("server")
+    return isinstance(server, ServerState) and server.overload.shedding(
+        len(server.lifecycle.connections)
+    )
 
 
 def head_limits(app_state: Mapping[str, Any]) -> tuple[float, int]:
@@ -118,7 +131,7 @@ class GuardedHTTPProtocol(BoundedFlushHTTPProtocol):
         if len(self.connections) > cap:
             waiting = _over_cap.setdefault(self.server_state, set())
             if len(waiting) >= PROBE_LANE:
-                self._refuse()
+                self._refuse(TOO_MANY_CONNECTIONS)
                 return
             waiting.add(self)
             self.over_cap = True
@@ -139,7 +152,10 @@ class GuardedHTTPProtocol(BoundedFlushHTTPProtocol):
     def handle_websocket_upgrade(self, *request: Any) -> None:
         self._head_done()
         if self.over_cap:
-            self._refuse()
+            self._refuse(TOO_MANY_CONNECTIONS)
+            return
+        if shedding(self.app_state):
+            self._refuse(SHEDDING)
             return
         super().handle_websocket_upgrade(*request)
 
@@ -175,10 +191,10 @@ class GuardedHTTPProtocol(BoundedFlushHTTPProtocol):
             refused(self.app_state, HANDSHAKE_TIMEOUT)
             self.transport.close()
 
-    def _refuse(self) -> None:
-        """HTTP 503 and close, whatever the client sent or will send."""
+    def _refuse(self, code: str) -> None:
+        """HTTP 503 and close, whatever the client sent or will send; counted as ``code``."""
         self.over_cap = True
         if not self.transport.is_closing():
-            refused(self.app_state, TOO_MANY_CONNECTIONS)
+            refused(self.app_state, code)
             self.transport.write(BUSY_RESPONSE)
             self.transport.close()

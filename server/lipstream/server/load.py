@@ -9,7 +9,8 @@ peak ``ru_maxrss``). ``sample`` summarises the last ``window_s``: the median lag
 of another thread holding the GIL does not count; a saturated loop lags on every tick), or
 more if the next tick is overdue already (a long batch of callbacks, say a burst of
 handshakes admitted one after another, holds the ticks back while it runs), the loop's busy
-fraction of one core over the window, and the latest RSS. ``machine_memory_mb``
+fraction of one core over the window (at least a whole window, so the first moments after
+start do not count as busy all the time), and the latest RSS. ``machine_memory_mb``
 is the memory this process may use: the physical memory, or a smaller cgroup limit
 (a container's).
 """
@@ -65,6 +66,7 @@ class LoadMonitor:
     ) -> None:
         """``on_sample`` gets the new sample after every tick (to publish it as metrics)."""
         self.interval_s = interval_s
+        self.window_s = window_s
         self.on_sample = on_sample
         self.ticks: deque[_Tick] = deque(maxlen=max(2, round(window_s / interval_s) + 1))
         self.rss_mb = resident_mb()
@@ -99,7 +101,9 @@ class LoadMonitor:
         if len(ticks) < 2:
             return LoadSample(lag_ms=1000.0 * overdue_s, rss_mb=self.rss_mb)
         first, last = ticks[0], ticks[-1]
-        busy = (last.cpu - first.cpu) / max(last.wall - first.wall, 1e-9)
+        # Over at least a whole window: a few milliseconds after start the handshake under
+        # way would otherwise count as a loop busy all the time.
+        busy = (last.cpu - first.cpu) / max(last.wall - first.wall, self.window_s)
         lag_s = max(statistics.median(tick.lag_s for tick in ticks[1:]), overdue_s)
         return LoadSample(1000.0 * lag_s, min(busy, 1.0), self.rss_mb)
 

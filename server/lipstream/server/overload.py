@@ -24,6 +24,12 @@ measured load (``load.LoadSample``) leaves room:
   ``MESSAGE_OVERHEAD_MS`` per message for the work outside the engine, as profiled in
   docs/server.md's *Throughput*).
 
+A refusal through the WebSocket (accept, ``error``, close) costs the loop about as much as
+a short request; in a storm of connections those refusals alone keep the loop behind. So
+while the lag exceeds ``SHED_FACTOR`` times its limit (``shedding``), the HTTP protocol
+answers new upgrades with 503 and ``Retry-After`` before any WebSocket work
+(``handshake``).
+
 Left at 0, the memory ceiling is ``AUTO_MEMORY_SHARE`` of the memory the process may use
 (the machine's, or a smaller container limit) divided among the workers. A refusal is
 ``server_busy`` with ``retry_after_ms``: ``RETRY_AFTER_MS`` (the time the load
@@ -54,6 +60,7 @@ RETRY_AFTER_MS = 1000
 MEMORY_RETRY_AFTER_MS = 5000
 LEARN_FROM_SESSIONS = 16
 LAG_FROM_SESSIONS = 16
+SHED_FACTOR = 4.0
 LEARN_WEIGHT = 0.1
 AUTO_MEMORY_SHARE = 0.8
 MESSAGE_OVERHEAD_MS = 0.13  # uvicorn, websockets, codec and session per message in and out
@@ -148,6 +155,12 @@ class OverloadPolicy:
             self.recent.append(now)
         return refusal
 
+    def shedding(self, load: LoadSample, sessions: int) -> bool:
+        """Whether the loop lags so far behind (``SHED_FACTOR`` x ``max_lag_ms``, with
+        ``LAG_FROM_SESSIONS`` sessions open) that even refusing a WebSocket with an
+        ``error`` costs too much: new upgrades then get HTTP 503 before any WebSocket work."""
+        return sessions >= LAG_FROM_SESSIONS and load.lag_ms > SHED_FACTOR * self.limits.max_lag_ms
+
     def sessions_refusal(self, max_sessions: int) -> Refusal:
         return self._refusal(
             "sessions",
@@ -179,6 +192,9 @@ class Overload:
 
     def session_refusal(self, sessions: int) -> Refusal | None:
         return self.policy.session_refusal(self.monitor.sample(), sessions, time.monotonic())
+
+    def shedding(self, sessions: int) -> bool:
+        return self.policy.shedding(self.monitor.sample(), sessions)
 
     def request_refusal(self) -> Refusal | None:
         """Memory only, from the monitor's latest figure: safe from the synthesis pool's

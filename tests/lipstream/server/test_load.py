@@ -77,3 +77,10 @@ def test_a_loop_held_up_shows_its_lag_before_the_next_tick_runs() -> None:
         return during
 
     assert asyncio.run(held()).lag_ms >= 200.0
+
+
+def test_busy_time_is_spread_over_at_least_a_whole_window() -> None:
+    monitor = LoadMonitor(interval_s=0.1, window_s=1.0)
+    # 4 ms of CPU within 5 ms just after start: 0.4 % of the window, not 80 % of a core
+    monitor.ticks = deque([_Tick(10.0, 5.0, 0.0), _Tick(10.005, 5.004, 0.0)], maxlen=11)
+    assert abs(monitor.sample().loop_busy - 0.004) < 1e-9

@@ -7,7 +7,12 @@ import asyncio
 import math
 import random
 import re
+import socket
+import threading
+import time
+from contextlib import ExitStack
 from pathlib import Path
+from urllib.parse import urlsplit
 
 import httpx
 
@@ -199,3 +204,52 @@ def test_the_client_sdk_reports_the_servers_retry_after(lerp_dir: Path) -> None:
     assert isinstance(wait_ms, int)
     assert closed.retry_after_s == wait_ms / 1000
     assert retry_delay_s(closed, attempt=5) == wait_ms / 1000
+
+
+def test_shedding_needs_a_far_lagging_loop_and_enough_sessions() -> None:
+    overload = policy()  # max_lag_ms 50: shedding beyond 4 x 50 ms
+    assert overload.shedding(LoadSample(200.5, 0.0, 1.0), LAG_FROM_SESSIONS)
+    assert not overload.shedding(LoadSample(200.0, 0.0, 1.0), LAG_FROM_SESSIONS)
+    assert not overload.shedding(LoadSample(9999.0, 0.0, 1.0), LAG_FROM_SESSIONS - 1)
+
+
+UPGRADE = (
+    b"GET /v1/stream HTTP/1.1\r\nHost: test\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+    b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
+    b"Sec-WebSocket-Protocol: lipstream.v1.msgpack\r\n\r\n"
+)
+
+
+def test_a_loop_held_far_behind_sheds_upgrades_with_http_503(lerp_dir: Path) -> None:
+    """With 16 sessions open, an upgrade that arrives while the loop is held for 0.5 s (ten
+    times the 10 ms lag limit, above the 4x of shedding) is answered 503 before any
+    WebSocket work."""
+    held = threading.Event()
+
+    async def hold_the_loop() -> None:
+        held.set()
+        time.sleep(0.5)
+
+    with serving(lerp_dir, ServerSettings(max_loop_lag_ms=10.0)) as served, ExitStack() as stack:
+        for _ in range(LAG_FROM_SESSIONS):
+            ws = stack.enter_context(client(served.ws))
+            ws.send(Start("a", "viseme-lerp", "demo"))
+            assert isinstance(ws.recv(), Ready)
+        parts = urlsplit(served.http)
+        sock = stack.enter_context(socket.create_connection((parts.hostname, parts.port)))
+        sock.settimeout(10.0)
+        connections = served.server.server_state.connections
+        for _ in range(500):  # accepted by the server before the hold
+            if len(connections) > LAG_FROM_SESSIONS:
+                break
+            time.sleep(0.02)
+        assert len(connections) == LAG_FROM_SESSIONS + 1
+        served.call_soon(hold_the_loop())
+        assert held.wait(10.0)
+        sock.sendall(UPGRADE)
+        answer = b""
+        while chunk := sock.recv(65536):
+            answer += chunk
+        assert answer.startswith(b"HTTP/1.1 503 Service Unavailable\r\n")
+        metrics = httpx.get(f"{served.http}/metrics").text
+        assert 'lipstream_connections_refused_total{code="shedding"} 1.0' in metrics
