@@ -53,6 +53,7 @@ from .exceptions import (
     ProtocolViolation,
     ServerBusy,
     ServerGoingAway,
+    retry_delay_s,
 )
 from .frame_timeline import FrameTimeline
 from .messages import (
@@ -158,6 +159,7 @@ __all__ = [
     "encoding_for_subprotocol",
     "load_schema",
     "rename_channel",
+    "retry_delay_s",
     "select_subprotocol",
     "subprotocol_for",
 ]

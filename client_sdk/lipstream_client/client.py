@@ -354,7 +354,9 @@ class AsyncClient:
         except InvalidStatus as error:
             response = error.response
             body = response.body.decode("utf-8", "replace")[:_HANDSHAKE_BODY_CHARS]
-            raise HandshakeRejected(response.status_code, body.strip()) from None
+            raise HandshakeRejected(
+                response.status_code, body.strip(), response.headers.get("Retry-After")
+            ) from None
         except InvalidHandshake as error:
             raise LipstreamClientError(
                 f"WebSocket handshake with {self.url} failed: {error}"

@@ -86,7 +86,8 @@ CLOSE_CODE_MEANINGS: dict[CloseCode, str] = {
     CloseCode.MESSAGE_TOO_BIG: "a message exceeded the server's maximum message size",
     CloseCode.INTERNAL_ERROR: "an unexpected server fault; the server keeps running",
     CloseCode.SERVICE_RESTART: "sent by the ASGI server itself when it stops without a drain",
-    CloseCode.TRY_AGAIN_LATER: "the server is at its concurrent-session cap; retry with backoff",
+    CloseCode.TRY_AGAIN_LATER: "the server is at its capacity (sessions, load or memory); "
+    "retry after details.retry_after_ms",
 }
 
 _CLIPPED = "..."
@@ -234,7 +235,9 @@ ERROR_CODES: dict[str, ErrorCodeInfo] = {
         CloseCode.NORMAL,
     ),
     SERVER_BUSY: ErrorCodeInfo(
-        "the server is at its concurrent-session cap",
+        "the server is at its capacity: its session cap, its measured load (event-loop lag "
+        "or busy time) or its memory ceiling; details.retry_after_ms says when to retry. "
+        "Refusing a `start` (memory), it ends only that request",
         "server",
         "connection",
         CloseCode.TRY_AGAIN_LATER,

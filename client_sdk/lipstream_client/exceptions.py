@@ -5,19 +5,24 @@ carrying its stable ``code``; a closed connection becomes a
 ``ConnectionClosed`` whose subclass names the close code's meaning
 (``ServerBusy`` for 1013, ``ServerGoingAway`` for 1001 and 1012), with
 ``retryable`` telling the caller whether a retry with backoff may succeed
-(``errors.RETRYABLE_CLOSE_CODES``). A refused HTTP upgrade is a
-``HandshakeRejected``; a server message the codec rejects is a
+(``errors.RETRYABLE_CLOSE_CODES``) and ``retry_after_s`` how long the server
+asked it to wait first (``details.retry_after_ms`` of ``server_busy``, or an
+HTTP ``Retry-After``), which ``retry_delay_s`` honours. A refused HTTP upgrade
+is a ``HandshakeRejected``; a server message the codec rejects is a
 ``ProtocolViolation``.
 """
 
 from __future__ import annotations
 
+import random
 from collections.abc import Mapping
 
 from .errors import ERROR_CODES, RETRYABLE_CLOSE_CODES, CloseCode, ProtocolError
 from .messages import ErrorMessage, JsonValue
 
 _RETRYABLE_HTTP_STATUSES = frozenset({429, 502, 503, 504})
+DEFAULT_BACKOFF_S = 0.5
+MAX_BACKOFF_S = 30.0
 
 
 class LipstreamClientError(Exception):
@@ -27,6 +32,11 @@ class LipstreamClientError(Exception):
     def retryable(self) -> bool:
         """Whether repeating the operation later, with backoff, may succeed."""
         return False
+
+    @property
+    def retry_after_s(self) -> float | None:
+        """How long the server asked the client to wait before retrying, if it said."""
+        return None
 
 
 class LipstreamServerError(LipstreamClientError):
@@ -59,6 +69,13 @@ class LipstreamServerError(LipstreamClientError):
         info = ERROR_CODES.get(self.code)
         return info is not None and info.close_code in RETRYABLE_CLOSE_CODES
 
+    @property
+    def retry_after_s(self) -> float | None:
+        value = self.details.get("retry_after_ms")
+        if isinstance(value, (int, float)) and not isinstance(value, bool) and value >= 0:
+            return value / 1000.0
+        return None
+
 
 class ConnectionClosed(LipstreamClientError):
     """The WebSocket closed with ``code`` and ``reason`` (the error code that caused it,
@@ -78,9 +95,14 @@ class ConnectionClosed(LipstreamClientError):
     def retryable(self) -> bool:
         return self.code in RETRYABLE_CLOSE_CODES
 
+    @property
+    def retry_after_s(self) -> float | None:
+        return self.error.retry_after_s if self.error is not None else None
+
 
 class ServerBusy(ConnectionClosed):
-    """Closed with 1013: the server is at its session cap. Retry with exponential backoff."""
+    """Closed with 1013: the server is at its capacity. Retry after ``retry_after_s``, or
+    with exponential backoff (``retry_delay_s`` does both)."""
 
 
 class ServerGoingAway(ConnectionClosed):
@@ -89,11 +111,13 @@ class ServerGoingAway(ConnectionClosed):
 
 class HandshakeRejected(LipstreamClientError):
     """The server refused the WebSocket upgrade with HTTP ``status`` (403 when it speaks
-    none of the offered subprotocols)."""
+    none of the offered subprotocols, 503 when it holds as many connections as it can);
+    ``retry_after`` is its ``Retry-After`` header, if any."""
 
-    def __init__(self, status: int, body: str = "") -> None:
+    def __init__(self, status: int, body: str = "", retry_after: str | None = None) -> None:
         self.status = status
         self.body = body
+        self.retry_after = retry_after
         super().__init__(
             f"WebSocket upgrade refused with HTTP {status}" + (f": {body}" if body else "")
         )
@@ -101,6 +125,10 @@ class HandshakeRejected(LipstreamClientError):
     @property
     def retryable(self) -> bool:
         return self.status in _RETRYABLE_HTTP_STATUSES
+
+    @property
+    def retry_after_s(self) -> float | None:
+        return retry_after_header_s(self.retry_after)
 
 
 class ProtocolViolation(LipstreamClientError):
@@ -120,3 +148,27 @@ def closed_error(
     if code in (CloseCode.GOING_AWAY, CloseCode.SERVICE_RESTART):
         return ServerGoingAway(code, reason, error)
     return ConnectionClosed(code, reason, error)
+
+
+def retry_after_header_s(value: str | None) -> float | None:
+    """An HTTP ``Retry-After`` in seconds (the delay form; a date or garbage gives None)."""
+    if value is None or not value.strip().isdigit():
+        return None
+    return float(value.strip())
+
+
+def retry_delay_s(
+    error: LipstreamClientError,
+    attempt: int,
+    base_s: float = DEFAULT_BACKOFF_S,
+    cap_s: float = MAX_BACKOFF_S,
+    rng: random.Random | None = None,
+) -> float:
+    """How long to wait before retry number ``attempt`` (0 for the first) after ``error``:
+    the server's ``retry_after_s`` when it gave one, else exponential backoff with full
+    jitter (uniform in [0, min(cap_s, base_s * 2**attempt)])."""
+    asked = error.retry_after_s
+    if asked is not None:
+        return asked
+    ceiling = min(cap_s, base_s * 2.0 ** max(0, attempt))
+    return (rng or random).uniform(0.0, ceiling)

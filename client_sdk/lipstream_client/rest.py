@@ -26,7 +26,7 @@ from urllib.parse import urlsplit, urlunsplit
 import msgpack
 
 from .codec import encode
-from .exceptions import LipstreamClientError, LipstreamServerError
+from .exceptions import LipstreamClientError, LipstreamServerError, retry_after_header_s
 from .float32 import pack_float32
 from .items import PhonemeLike, is_loopback_url, phoneme_items
 from .messages import (
@@ -56,15 +56,22 @@ class HttpError(LipstreamClientError):
     """An HTTP endpoint answered ``status`` (not 2xx); ``raw`` is the body, ``body`` its
     first characters as text."""
 
-    def __init__(self, method: str, url: str, status: int, raw: bytes) -> None:
+    def __init__(
+        self, method: str, url: str, status: int, raw: bytes, retry_after: str | None = None
+    ) -> None:
         self.status = status
         self.raw = raw
+        self.retry_after = retry_after
         self.body = raw.decode("utf-8", "replace")[:_BODY_CHARS].strip()
         super().__init__(f"{method} {url} answered HTTP {status}: {self.body}")
 
     @property
     def retryable(self) -> bool:
         return self.status in (429, 502, 503, 504)
+
+    @property
+    def retry_after_s(self) -> float | None:
+        return retry_after_header_s(self.retry_after)
 
 
 class RestServerError(LipstreamServerError):
@@ -231,7 +238,11 @@ class RestClient:
             return self._opener.open(request, timeout=self._timeout)
         except urllib.error.HTTPError as error:
             raise HttpError(
-                request.get_method(), request.full_url, error.code, error.read()
+                request.get_method(),
+                request.full_url,
+                error.code,
+                error.read(),
+                error.headers.get("Retry-After"),
             ) from None
 
 

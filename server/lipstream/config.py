@@ -38,7 +38,12 @@ class ServerSettings:
 
     workers: int = 1
     log_level: str = "info"
-    max_sessions: int = 1000
+    max_sessions: int = 500
+    max_connections: int = 4096
+    handshake_timeout_s: float = 10.0
+    max_memory_mb: int = 0
+    max_loop_lag_ms: float = 50.0
+    max_loop_busy: float = 0.9
     max_requests_per_session: int = 64
     max_message_bytes: int = 1 << 20
     max_body_bytes: int = 16 << 20
@@ -162,7 +167,45 @@ ENV_SETTINGS: tuple[EnvSetting, ...] = (
         "LIPSTREAM_MAX_SESSIONS",
         "max_sessions",
         _integer(1, 1_000_000),
-        "concurrent WebSocket connections per worker; beyond: `server_busy`, close 1013",
+        "concurrent WebSocket sessions per worker, a hard ceiling above load-based "
+        "admission; beyond: `server_busy`, close 1013",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MAX_CONNECTIONS",
+        "max_connections",
+        _integer(1, 10_000_000),
+        "open TCP connections per worker (HTTP, WebSocket, and those still sending their "
+        "request head), at most the open-file limit less a reserve; beyond: HTTP 503 with "
+        "`Retry-After`, only `/healthz` answered",
+    ),
+    EnvSetting(
+        "LIPSTREAM_HANDSHAKE_TIMEOUT_S",
+        "handshake_timeout_s",
+        _number(0.0, 3600.0, above=True),
+        "seconds a connection has to send a complete request head (or WebSocket upgrade) "
+        "after it opens or after its previous response; then it is closed",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MAX_MEMORY_MB",
+        "max_memory_mb",
+        _integer(0, 1 << 30),
+        "resident memory (MiB) per worker above which new sessions, `start`s and "
+        "`POST /v1/synthesize` are refused with `server_busy`; 0 = 80 % of the machine's "
+        "(or container's) memory divided by the workers",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MAX_LOOP_LAG_MS",
+        "max_loop_lag_ms",
+        _number(0.0, 60_000.0, above=True),
+        "event-loop lag above which new sessions are refused with `server_busy` (once 16 "
+        "sessions are open)",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MAX_LOOP_BUSY",
+        "max_loop_busy",
+        _number(0.0, 1.0, above=True),
+        "fraction of one core the event loop may be busy, counting the sessions admitted in "
+        "the last second at their estimated cost, before new sessions are refused",
     ),
     EnvSetting(
         "LIPSTREAM_MAX_REQUESTS_PER_SESSION",

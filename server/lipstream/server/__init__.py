@@ -7,6 +7,9 @@ endings), and its only asynchronous shell, ``websocket``. Around them:
 ``catalog`` (resident models, ``calibration`` and ``budget`` for latency
 ladders), ``profiles`` and ``viseme_projection`` (output profiles),
 ``outgoing`` (send-side timing), ``admission`` (tokens, Origin, rate),
-``lifecycle`` (session cap, drain on SIGTERM), ``rest``, ``openapi``,
-``metrics`` and ``state``.
+``lifecycle`` (session cap, drain on SIGTERM), ``load`` and ``overload``
+(the load monitor and the admission that follows it), ``handshake`` (the
+request-head deadline, the connection cap, ``/healthz`` before the app),
+``open_files`` (the open-file limit), ``log_throttle`` (repeated log lines),
+``rest``, ``openapi``, ``metrics`` and ``state``.
 """

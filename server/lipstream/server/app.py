@@ -4,7 +4,11 @@ Models load once when the process starts, and the ``Catalog`` measures and
 probes them; ``/readyz`` turns ready only after that, and turns 503 again
 while the process drains for shutdown, while ``/healthz`` answers as soon as
 the process serves HTTP and keeps answering under load (engine work that
-could stall the event loop runs in the synthesis thread pool). Routes:
+could stall the event loop runs in the synthesis thread pool, and the HTTP
+protocol answers ``GET /healthz`` itself, before the app: ``handshake``).
+The lifespan also starts the load monitor that admission follows
+(``overload``), throttles repeated log lines (``log_throttle``) and logs
+the limits in force. Routes:
 ``/healthz``, ``/readyz``, ``/v1/engines``, ``/v1/characters``,
 ``POST /v1/synthesize``, ``GET /metrics``, the WebSocket ``/v1/stream`` and
 the OpenAPI docs (``/docs``, ``/openapi.json``).
@@ -13,6 +17,7 @@ the OpenAPI docs (``/docs``, ``/openapi.json``).
 from __future__ import annotations
 
 import gc
+import logging
 from collections.abc import AsyncIterator
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
@@ -28,13 +33,19 @@ from ..engines import ENGINES
 from ..models import ModelRegistry
 from . import openapi
 from .catalog import Catalog
+from .handshake import head_limits
 from .lifecycle import Lifecycle, install_drain_on_signals
+from .log_throttle import install as throttle_repeated_log_lines
 from .metrics import Metrics, forget_this_process
+from .open_files import open_file_limit
+from .overload import overload_for
 from .rest import synthesize
 from .state import ServerState
 from .websocket import stream_endpoint
 
 __all__ = ["LifespanState", "ServerState", "create_app"]
+
+startup_log = logging.getLogger("uvicorn.error")
 
 
 class LifespanState(TypedDict):
@@ -78,17 +89,21 @@ def create_app(
 
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[LifespanState]:
+        throttle_repeated_log_lines()
         registry = loaded or ModelRegistry.load(models_path, strict=settings.strict_models)
         executor = ThreadPoolExecutor(settings.synth_threads, thread_name_prefix="lipstream-synth")
-        server = ServerState(
-            registry, Catalog.build(registry, settings), settings, metrics, lifecycle, executor
-        )
+        catalog = Catalog.build(registry, settings)
+        overload = overload_for(settings, catalog, metrics.observe_load)
+        server = ServerState(registry, catalog, settings, metrics, lifecycle, executor, overload)
+        _log_limits(server)
+        overload.monitor.start()
         if serving_process:
             freeze_long_lived_objects()
         restore_signals = install_drain_on_signals(lifecycle, settings.drain_timeout_s)
         try:
             yield {"server": server}
         finally:
+            overload.monitor.stop()
             restore_signals()
             server.loaded = False
             executor.shutdown(wait=False, cancel_futures=True)
@@ -152,3 +167,22 @@ def create_app(
         await stream_endpoint(websocket)
 
     return app
+
+
+def _log_limits(server: ServerState) -> None:
+    files = open_file_limit()
+    _, connections = head_limits({"server": server})
+    limits = server.overload.policy.limits
+    startup_log.info(
+        "limits: %d open files (hard limit %d), %d connections, %d sessions, "
+        "%.0f MiB of memory; admission refuses at %g ms of event-loop lag or %.0f %% busy "
+        "(a session's calibrated cost: %.2f %%)",
+        files.soft,
+        files.hard,
+        connections,
+        server.settings.max_sessions,
+        limits.max_memory_mb,
+        limits.max_lag_ms,
+        100 * limits.max_busy,
+        100 * limits.session_cost,
+    )

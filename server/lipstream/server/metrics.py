@@ -40,6 +40,8 @@ from prometheus_client import (
 from prometheus_client.metrics import MetricWrapperBase
 from prometheus_client.multiprocess import MultiProcessCollector, mark_process_dead
 
+from .load import MIB, LoadSample
+
 LATENCY_BUCKETS_S = (0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0)
 MULTIPROCESS_ENV = "PROMETHEUS_MULTIPROC_DIR"
 LIVE_GAUGE_FILES = "gauge_live*_*.db"
@@ -69,6 +71,24 @@ class Metrics:
             "1 while the process (with several workers: any worker) drains for shutdown.",
             registry=registry,
             multiprocess_mode="livemax",
+        )
+        self.loop_lag = Gauge(
+            "lipstream_event_loop_lag_seconds",
+            "Median event-loop lag over the last second (with several workers: the worst).",
+            registry=registry,
+            multiprocess_mode="livemax",
+        )
+        self.loop_busy = Gauge(
+            "lipstream_event_loop_busy_ratio",
+            "Fraction of one core the event loop used over the last second (the worst worker).",
+            registry=registry,
+            multiprocess_mode="livemax",
+        )
+        self.resident_memory = Gauge(
+            "lipstream_resident_memory_bytes",
+            "Resident memory of the server (summed over the workers).",
+            registry=registry,
+            multiprocess_mode="livesum",
         )
         self.requests = Counter(
             "lipstream_requests",
@@ -117,6 +137,12 @@ class Metrics:
             buckets=LATENCY_BUCKETS_S,
             registry=registry,
         )
+
+    def observe_load(self, load: LoadSample) -> None:
+        """Publish a load sample (the load monitor calls this on every tick)."""
+        self.loop_lag.set(load.lag_ms / 1000.0)
+        self.loop_busy.set(load.loop_busy)
+        self.resident_memory.set(load.rss_mb * MIB)
 
     def labelled(self, metric: MetricWrapperBase, *values: str) -> Any:
         """``metric.labels(*values)``, cached: the hot path avoids the label lookup."""

@@ -16,13 +16,16 @@ in JSON) and ``done``'s stats; with ``Accept: text/csv`` it is the frames
 alone as the corpus frame CSV (``time`` and one column per output channel,
 ``%.6f``). Errors answer with an HTTP status and
 ``{"error": {"code", "message", "details"}}`` in the response's type (JSON
-when CSV was asked for).
+when CSV was asked for); above the memory ceiling (``overload``) the request
+is refused before its body is read, with 503 ``server_busy``,
+``details.retry_after_ms`` and ``Retry-After``.
 """
 
 from __future__ import annotations
 
 import asyncio
 import json
+import math
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
@@ -49,6 +52,7 @@ from lipstream_client.errors import (
     INVALID_MESSAGE,
     MALFORMED,
     MESSAGE_TOO_LARGE,
+    SERVER_BUSY,
     UNAUTHORIZED,
 )
 
@@ -94,6 +98,7 @@ STATUS = {
     "unsupported_media_type": 415,
     "not_acceptable": 406,
     INTERNAL_ERROR: 500,
+    SERVER_BUSY: 503,
 }
 UNPROCESSABLE = 422
 
@@ -132,6 +137,7 @@ async def synthesize(request: Request, state: ServerState) -> Response:
         request_encoding = _request_encoding(request)
         response_encoding = _response_encoding(request, request_encoding)
         _authorize(request, state)
+        _admit(state)
         body = await _read_body(request, state.settings.max_body_bytes)
         messages = _messages(_parse(body, request_encoding), request_encoding)
         loop = asyncio.get_running_loop()
@@ -182,6 +188,13 @@ def _response_encoding(request: Request, default: Encoding) -> ResponseFormat:
     raise HttpError(
         "not_acceptable", "Accept must allow application/json, application/msgpack or text/csv"
     )
+
+
+def _admit(state: ServerState) -> None:
+    """503 ``server_busy`` while the server is above its memory ceiling (``overload``)."""
+    refusal = state.overload.request_refusal()
+    if refusal is not None:
+        raise HttpError(refusal.code, refusal.message, details=refusal.details)
 
 
 def _authorize(request: Request, state: ServerState) -> None:
@@ -316,6 +329,9 @@ def _error_response(error: HttpError, encoding: Encoding) -> Response:
     if error.details:
         content["details"] = error.details
     headers = {"WWW-Authenticate": "Bearer"} if error.status == 401 else None
+    retry_after_ms = error.details.get("retry_after_ms")
+    if isinstance(retry_after_ms, int):
+        headers = {"Retry-After": str(math.ceil(retry_after_ms / 1000))}
     if encoding == "msgpack":
         return Response(
             msgpack.packb({"error": content}, use_bin_type=True),

@@ -7,9 +7,13 @@ protocol's message limit (so a message between the two gets a
 cut off by the WebSocket layer itself), the WebSocket and HTTP protocols are
 uvicorn's own with a bound on how long a client that stops reading may hold
 its socket (``closing.BoundedCloseProtocol``,
-``http_flush.BoundedFlushHTTPProtocol``), and uvicorn's ``limit_concurrency``
+``http_flush.BoundedFlushHTTPProtocol``), the HTTP one also with a deadline
+for the request head and a cap on open connections
+(``handshake.GuardedHTTPProtocol``), and uvicorn's ``limit_concurrency``
 stays unset: it does not cap WebSockets and would make plain HTTP answer 503
-while sessions are open; the app keeps its own session cap. With one worker
+while sessions are open; the app keeps its own session cap. Before uvicorn
+starts, the soft open-file limit is raised as far as the hard one allows
+(``open_files``); the workers inherit it. With one worker
 the app object is served directly; with ``--workers N`` uvicorn's supervisor
 starts N processes, each building the app from the environment
 (``app_from_environment``), and each maps the same model files, so their
@@ -37,7 +41,8 @@ from ..config import ServerSettings, load_settings
 from ..models import ModelRegistry
 from .app import create_app
 from .closing import BoundedCloseProtocol
-from .http_flush import BoundedFlushHTTPProtocol
+from .handshake import GuardedHTTPProtocol
+from .open_files import raise_open_file_limit
 
 APP_FACTORY = "lipstream.server.runner:app_from_environment"
 WORKER_APP_ENV = "LIPSTREAM_WORKER_APP"
@@ -91,7 +96,7 @@ def uvicorn_options(server: ServerSettings) -> dict[str, Any]:
     """Keyword arguments for ``uvicorn.Config`` that every way of serving shares."""
     return {
         "log_level": server.log_level,
-        "http": BoundedFlushHTTPProtocol,
+        "http": GuardedHTTPProtocol,
         "ws": BoundedCloseProtocol,
         "ws_max_size": 2 * server.max_message_bytes,
         "ws_per_message_deflate": False,
@@ -111,6 +116,7 @@ def serve(
 ) -> None:
     """Serve ``models`` (already loaded as ``registry``, for one worker) until SIGTERM or
     SIGINT, draining first (see ``lifecycle``)."""
+    raise_open_file_limit()
     if server.workers > 1:
         with exported(WORKER_APP_ENV, encode_worker_app(models, server)):
             uvicorn.run(

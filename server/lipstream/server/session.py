@@ -6,9 +6,11 @@ returned instead, with the monotonic time it arrived, and returns the
 ``Outgoing`` messages to send, in order. Requests are multiplexed by id;
 each active one is an ``ActiveRequest``. ``start`` is validated against the
 ``Catalog`` (engine, character, phoneme notation, emotion, output profile,
-latency budget, engine options) and answered with ``ready``; every later
-message goes to its request, and any ``LipstreamError`` it raises ends that
-request with a fatal ``error`` of the matching protocol code. Messages for
+latency budget, engine options) and answered with ``ready``, unless the
+injected ``refuse_start`` refuses new work (the server's memory ceiling,
+``overload``); every later message goes to its request, and any
+``LipstreamError`` it raises ends that request with a fatal ``error`` of the
+matching protocol code. Messages for
 ids with no active request are answered by what last happened to the id:
 input after ``end`` gets ``request_finished``, input after ``interrupt`` is
 ignored, anything else gets ``unknown_request``. No exception leaves
@@ -36,7 +38,7 @@ import logging
 import math
 from bisect import bisect_right
 from collections import OrderedDict
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from itertools import takewhile
 from typing import Any, TypeAlias
@@ -77,6 +79,7 @@ from .budget import BudgetInfeasible, RungEstimate, choose_rung, lookahead_ms
 from .calibration import PHONEME_S
 from .catalog import Catalog
 from .outgoing import Outgoing, RequestClock
+from .overload import Refusal
 from .profiles import requested_profile, resolve_profile
 from .request import ActiveRequest, RequestError, RequestLimits, RequestSpec, protocol_code
 
@@ -110,9 +113,17 @@ class SessionLimits:
 class Session:
     """The requests of one connection and the rules that govern them."""
 
-    def __init__(self, catalog: Catalog, limits: SessionLimits) -> None:
+    def __init__(
+        self,
+        catalog: Catalog,
+        limits: SessionLimits,
+        refuse_start: Callable[[], Refusal | None] = lambda: None,
+    ) -> None:
+        """``refuse_start`` says whether the server takes on a new request now (its memory
+        ceiling: ``overload``); a refusal ends the ``start`` with its code and details."""
         self.catalog = catalog
         self.limits = limits
+        self.refuse_start = refuse_start
         self.requests: dict[str, ActiveRequest] = {}
         self.costs: dict[str, CallCost] = {}
         self.guards: dict[str, WorkGuard] = {}
@@ -363,6 +374,11 @@ class Session:
                     start.id,
                     fatal=True,
                 )
+            ]
+        refusal = self.refuse_start()
+        if refusal is not None:
+            return [
+                _error(refusal.code, refusal.message, start.id, fatal=True, details=refusal.details)
             ]
         if len(self.requests) >= self.limits.max_requests:
             return [

@@ -10,6 +10,7 @@ from ..models import ModelRegistry
 from .catalog import Catalog
 from .lifecycle import Lifecycle
 from .metrics import Metrics
+from .overload import Overload
 from .request import RequestLimits
 from .session import SessionLimits
 
@@ -17,7 +18,7 @@ from .session import SessionLimits
 @dataclass
 class ServerState:
     """Resident models and what was derived from them, settings, metrics, the connections'
-    lifecycle and the synthesis thread pool."""
+    lifecycle, the synthesis thread pool and the load-based admission."""
 
     registry: ModelRegistry
     catalog: Catalog
@@ -25,6 +26,7 @@ class ServerState:
     metrics: Metrics
     lifecycle: Lifecycle
     executor: ThreadPoolExecutor
+    overload: Overload
     loaded: bool = True
 
     @property

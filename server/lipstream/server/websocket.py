@@ -1,26 +1,28 @@
 """The WebSocket endpoint ``/v1/stream``: the only asynchronous part of streaming.
 
 Sketch: a handshake is checked before anything is allocated. The offered
-subprotocols pick the encoding (an offer naming none that we speak is refused
-with HTTP 403); then come the Origin allow-list, the bearer token, the drain
-and the session cap. A refused connection is accepted only to receive an
-``error`` and its close code. An admitted connection is one task that takes
-one message at a time: rate limit (token bucket), decode (size-limited,
-sans I/O), then ``Session.handle``, inline when the engine's estimate of its
-work is below ``inline_work_ms`` and in the synthesis thread pool otherwise
-(with its frames encoded there too), so the event loop never waits on a
-long synthesis; answers of more than ``JSON_INLINE_VALUES`` JSON numbers are
+subprotocols pick the encoding (an offer naming none that we speak is
+refused with HTTP 403); then come the Origin allow-list, the bearer token,
+the drain, the measured load (``overload``: memory, event-loop lag and busy
+time) and the session cap. A refused connection is accepted only to receive
+an ``error`` (for ``server_busy`` with ``details.retry_after_ms``) and its
+close code. An admitted connection is one task that takes one message at a
+time: rate limit (token bucket), decode (size-limited, sans I/O), then
+``Session.handle``, inline when the engine's estimate of its work is below
+``inline_work_ms`` and in the synthesis thread pool otherwise (with its
+frames encoded there too), so the event loop never waits on a long
+synthesis; answers of more than ``JSON_INLINE_VALUES`` JSON numbers are
 encoded in the pool as well. While work runs in the pool the connection
 keeps receiving (``read_ahead``): the socket is read and pings answered, a
 ``cancel`` stops its request's work at once (``Session.stop_work``), a
 closed socket stops all of it, and the messages read wait, in order, for
-their turn. Then the task stamps and sends the answers itself. Sending
-from the same task, rather than handing
-each answer to a writer task, saves a task switch and a queue round trip
-per message, the largest cost left once the engine is fast. A send waits
-only when the client's socket buffers are full; the connection then reads
-nothing more from that client (backpressure), and a send that misses its
-deadline (``deadline.SendDeadline``) closes the connection with 1008
+their turn. Then the task stamps and sends the answers itself. Sending from
+the same task, rather than handing each answer to a writer task, saves a
+task switch and a queue round trip per message, the largest cost left once
+the engine is fast. A send waits only when the client's socket buffers are
+full; the connection then reads nothing more from that client
+(backpressure), and a send that misses its deadline
+(``deadline.SendDeadline``) closes the connection with 1008
 ``slow_consumer``: a client that stops reading would otherwise pin
 ``await send`` forever. Frames are never dropped silently. A connection
 with no message and no active request for ``idle_timeout_s`` closes with
@@ -59,11 +61,11 @@ from lipstream_client.errors import (
     IDLE_TIMEOUT,
     ORIGIN_NOT_ALLOWED,
     RATE_LIMITED,
-    SERVER_BUSY,
     SHUTTING_DOWN,
     SLOW_CONSUMER,
     UNAUTHORIZED,
 )
+from lipstream_client.messages import JsonValue
 
 from .admission import TokenBucket, bearer_token, origin_allowed, token_accepted
 from .deadline import SendDeadline
@@ -97,17 +99,18 @@ async def stream_endpoint(websocket: WebSocket) -> None:
         return
     refusal = _refusal(websocket, state)
     connection = Connection(websocket, encoding, state)
-    if refusal is None and not state.lifecycle.admit(connection):
-        busy = (
-            f"the server is at its limit of {state.settings.max_sessions} sessions; "
-            "retry with exponential backoff"
-        )
-        refusal = (SERVER_BUSY, busy)
+    details: dict[str, JsonValue] | None = None
+    if refusal is None:
+        busy = state.overload.session_refusal(len(state.lifecycle.connections))
+        if busy is None and not state.lifecycle.admit(connection):
+            busy = state.overload.policy.sessions_refusal(state.settings.max_sessions)
+        if busy is not None:
+            refusal, details = (busy.code, busy.message), busy.details
     try:
         await websocket.accept(subprotocol=subprotocol)
         if refusal is not None:
             state.metrics.refused.labels(refusal[0]).inc()
-            await _refuse(websocket, encoding, refusal[0], refusal[1], state)
+            await _refuse(websocket, encoding, refusal[0], refusal[1], state, details)
             return
         state.metrics.sessions.inc()
         try:
@@ -134,9 +137,15 @@ def _refusal(websocket: WebSocket, state: ServerState) -> tuple[str, str] | None
 
 
 async def _refuse(
-    websocket: WebSocket, encoding: Encoding, code: str, message: str, state: ServerState
+    websocket: WebSocket,
+    encoding: Encoding,
+    code: str,
+    message: str,
+    state: ServerState,
+    details: dict[str, JsonValue] | None = None,
 ) -> None:
-    payload = encode(ErrorMessage(code, message, None, True), encoding, validate=False)
+    error = ErrorMessage(code, message, None, True, details or {})
+    payload = encode(error, encoding, validate=False)
     close_code = ERROR_CODES[code].close_code or CloseCode.POLICY_VIOLATION
     try:
         async with asyncio.timeout(state.settings.send_timeout_s):
@@ -162,7 +171,7 @@ class Connection:
         self.state = state
         self.settings = state.settings
         self.metrics = state.metrics
-        self.session = Session(state.catalog, state.session_limits)
+        self.session = Session(state.catalog, state.session_limits, state.overload.request_refusal)
         self.bucket = TokenBucket(
             self.settings.message_rate, self.settings.message_burst, time.monotonic()
         )

@@ -1,6 +1,7 @@
-"""What ``closing`` and ``http_flush`` take from uvicorn, named on real protocol objects.
+"""What ``closing``, ``http_flush`` and ``handshake`` take from uvicorn, named on real protocol
+objects.
 
-Both subclass uvicorn's protocols, override their hooks and read their private
+They subclass uvicorn's protocols, override their hooks and read their private
 state. uvicorn is pinned in ``pyproject.toml`` to the series tested here; an
 upgrade that renames or drops any of these fails this file.
 """
@@ -22,6 +23,7 @@ from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIO
 from uvicorn.server import ServerState
 
 from lipstream.server.closing import BoundedCloseProtocol
+from lipstream.server.handshake import GuardedHTTPProtocol
 from lipstream.server.http_flush import BoundedFlushHTTPProtocol
 
 PYPROJECT = Path(__file__).resolve().parents[3] / "pyproject.toml"
@@ -57,6 +59,7 @@ def test_the_installed_uvicorn_is_in_the_pinned_range() -> None:
 def test_the_hooks_overridden_are_uvicorn_s() -> None:
     for base, ours, hooks in (
         (AutoHTTPProtocol, BoundedFlushHTTPProtocol, HTTP_HOOKS),
+        (AutoHTTPProtocol, GuardedHTTPProtocol, HTTP_HOOKS),
         (WebSocketsSansIOProtocol, BoundedCloseProtocol, WS_HOOKS),
     ):
         assert issubclass(ours, base)
@@ -104,3 +107,30 @@ def test_the_websocket_protocol_state_read_by_closing() -> None:
         client_end.close()
 
     asyncio.run(connect())
+
+
+async def _other(scope: dict[str, Any], receive: Any, send: Any) -> None:
+    await send({"type": "http.response.start", "status": 200, "headers": []})
+    await send({"type": "http.response.body", "body": b"other"})
+
+
+def test_the_http_protocol_state_read_by_handshake() -> None:
+    """``handshake`` counts ``connections`` (the server state's set) and puts its own
+    callable in ``app``, which uvicorn reads when a request head is complete."""
+
+    async def exchange() -> None:
+        loop = asyncio.get_running_loop()
+        state = ServerState()
+        protocol = AutoHTTPProtocol(config=_config(), server_state=state, app_state={}, _loop=loop)
+        server_end, client_end = socket.socketpair()
+        await loop.connect_accepted_socket(lambda: protocol, server_end)
+        assert protocol.server_state is state
+        assert protocol.connections is state.connections and protocol in state.connections
+        protocol.app = _other
+        reader, writer = await asyncio.open_connection(sock=client_end)
+        writer.write(b"GET / HTTP/1.1\r\nHost: test\r\n\r\n")
+        await asyncio.wait_for(reader.readuntil(b"other"), timeout=5.0)
+        writer.close()
+        protocol.transport.close()
+
+    asyncio.run(exchange())

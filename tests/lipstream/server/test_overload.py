@@ -1,0 +1,255 @@
+"""Load-based admission: the sans-I/O policy with hand-computed load, the ``start`` refusal of
+a session, and ``server_busy`` with ``retry_after_ms`` from a real server."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import random
+import re
+import socket
+import threading
+import time
+from contextlib import ExitStack
+from pathlib import Path
+from urllib.parse import urlsplit
+
+import httpx
+
+from lipstream.config import ServerSettings
+from lipstream.engines.base import Lookahead, Rung
+from lipstream.server.budget import RungEstimate
+from lipstream.server.catalog import Catalog
+from lipstream.server.load import LoadSample
+from lipstream.server.overload import (
+    LAG_FROM_SESSIONS,
+    LEARN_FROM_SESSIONS,
+    MEMORY_RETRY_AFTER_MS,
+    RECENT_S,
+    RETRY_AFTER_MS,
+    LoadLimits,
+    OverloadPolicy,
+    Refusal,
+    calibrated_session_cost,
+)
+from lipstream.server.request import RequestLimits
+from lipstream.server.session import Session, SessionLimits
+from lipstream_client import (
+    AsyncClient,
+    ConnectionClosed,
+    ErrorMessage,
+    Ready,
+    ServerBusy,
+    Start,
+    retry_delay_s,
+)
+from tests.lipstream.server.harness import client, serving
+
+# Binary fractions, so the hand-computed admission counts are exact.
+LIMITS = LoadLimits(max_memory_mb=1000.0, max_lag_ms=50.0, max_busy=0.75, session_cost=0.125)
+QUIET = LoadSample(lag_ms=1.0, loop_busy=0.0, rss_mb=100.0)
+
+
+def policy(limits: LoadLimits = LIMITS) -> OverloadPolicy:
+    return OverloadPolicy(limits, random.Random(7))
+
+
+def admitted_in_a_burst(overload: OverloadPolicy, load: LoadSample, now: float) -> int:
+    for count in range(1000):
+        if overload.session_refusal(load, 0, now) is not None:
+            return count
+    raise AssertionError("the burst was never refused")
+
+
+def test_a_burst_is_admitted_up_to_the_busy_limit_then_again_after_the_window() -> None:
+    overload = policy()
+    assert admitted_in_a_burst(overload, QUIET, now=0.0) == 6  # 6 x 0.125 = 0.75
+    # Half a window later the window has measured half of each: 6 x 0.5 x 0.125 = 0.375 of
+    # the 0.75 is unmeasured, room for 3 more.
+    assert admitted_in_a_burst(overload, QUIET, now=RECENT_S / 2) == 3
+    # A window after the first six only the last three are unmeasured, by half.
+    assert admitted_in_a_burst(overload, QUIET, now=RECENT_S) == 4  # (1.5 + 4) x 0.125
+    refusal = overload.session_refusal(QUIET, 0, now=RECENT_S)
+    assert refusal is not None and refusal.reason == "loop_busy"
+    later = policy()
+    admitted_in_a_burst(later, QUIET, now=0.0)
+    assert admitted_in_a_burst(later, QUIET, now=RECENT_S) == 6
+    busy = LoadSample(lag_ms=1.0, loop_busy=0.5, rss_mb=100.0)
+    assert admitted_in_a_burst(policy(), busy, now=0.0) == 2  # 0.5 + 2 x 0.125 = 0.75
+
+
+def test_lag_and_memory_refuse_at_their_limits() -> None:
+    at_limits = LoadSample(lag_ms=50.0, loop_busy=0.0, rss_mb=1000.0)
+    assert policy().session_refusal(at_limits, LAG_FROM_SESSIONS, 0.0) is None
+    lagging = policy().session_refusal(LoadSample(50.5, 0.0, 100.0), LAG_FROM_SESSIONS, 0.0)
+    assert lagging is not None and lagging.reason == "loop_lag"
+    # With fewer sessions open the lag is the machine's, not theirs: no refusal.
+    few = policy().session_refusal(LoadSample(500.0, 0.0, 100.0), LAG_FROM_SESSIONS - 1, 0.0)
+    assert few is None
+    full = LoadSample(lag_ms=1.0, loop_busy=0.0, rss_mb=1000.5)
+    for refusal in (policy().session_refusal(full, 0, 0.0), policy().request_refusal(full)):
+        assert refusal is not None and refusal.reason == "memory"
+        assert refusal.code == "server_busy"
+        assert MEMORY_RETRY_AFTER_MS <= refusal.retry_after_ms < 2 * MEMORY_RETRY_AFTER_MS
+    assert policy().request_refusal(LoadSample(lag_ms=500.0, loop_busy=1.0, rss_mb=10.0)) is None
+
+
+def test_retry_after_is_spread_over_one_more_base() -> None:
+    overload = policy()
+    lagging = LoadSample(lag_ms=99.0, loop_busy=0.0, rss_mb=1.0)
+    waits = []
+    for _ in range(40):
+        refusal = overload.session_refusal(lagging, LAG_FROM_SESSIONS, 0.0)
+        assert refusal is not None
+        assert refusal.details == {"retry_after_ms": refusal.retry_after_ms, "reason": "loop_lag"}
+        assert f"retry in {refusal.retry_after_ms} ms" in refusal.message
+        waits.append(refusal.retry_after_ms)
+    assert all(RETRY_AFTER_MS <= wait < 2 * RETRY_AFTER_MS for wait in waits)
+    assert len(set(waits)) > 1
+
+
+def test_the_session_cost_is_learned_from_enough_open_sessions() -> None:
+    overload = policy(LoadLimits(1000.0, 50.0, 0.75, session_cost=0.01))
+    overload.session_refusal(LoadSample(1.0, 0.6, 1.0), LEARN_FROM_SESSIONS - 1, 0.0)
+    assert overload.session_cost == 0.01  # too few sessions to learn from: the calibrated
+    overload.session_refusal(LoadSample(1.0, 0.64, 1.0), 16, 10.0)
+    assert math.isclose(overload.session_cost, 0.04)  # 0.64 / 16
+    overload.session_refusal(LoadSample(1.0, 0.64, 1.0), 32, 20.0)
+    assert math.isclose(overload.session_cost, 0.038)  # 0.04 + 0.1 x (0.02 - 0.04)
+    dear = policy(LoadLimits(1000.0, 50.0, 0.75, session_cost=0.125))
+    dear.session_refusal(LoadSample(1.0, 0.32, 1.0), 16, 0.0)
+    assert math.isclose(dear.session_cost, 0.02)  # measured beats the calibrated estimate
+
+
+def test_the_calibrated_cost_is_the_costliest_default_rung_plus_message_overhead() -> None:
+    rung = Rung("full", Lookahead())
+    ladders = [
+        (RungEstimate(rung, 0.0, 1.0, 0.05), RungEstimate(rung, 0.0, 1.0, 9.0)),
+        (RungEstimate(rung, 0.0, 1.0, 0.2),),
+    ]
+    # (0.2 ms + 0.13 ms per message) per 80 ms of speech, as a fraction of one core
+    assert math.isclose(calibrated_session_cost(ladders), 0.33 / 80)
+
+
+def test_a_refused_start_ends_only_that_request(catalog: Catalog) -> None:
+    refusals: list[Refusal | None] = [Refusal("memory", "the server is full", 5000)]
+    limits = SessionLimits(4, RequestLimits(1000, 100_000, 150.0))
+    session = Session(catalog, limits, lambda: refusals[-1])
+    [answer] = session.handle(Start("a", "viseme-lerp", "demo"), 0.0)
+    assert answer.message == ErrorMessage(
+        "server_busy",
+        "the server is full",
+        "a",
+        True,
+        {"retry_after_ms": 5000, "reason": "memory"},
+    )
+    assert session.active_requests == 0
+    refusals.append(None)
+    [ready] = session.handle(Start("a", "viseme-lerp", "demo"), 0.1)
+    assert isinstance(ready.message, Ready) and session.active_requests == 1
+
+
+def test_an_overloaded_server_refuses_sessions_with_retry_after(lerp_dir: Path) -> None:
+    # Any measured busy time at all exceeds this limit, and a session's cost alone does.
+    with serving(lerp_dir, ServerSettings(max_loop_busy=1e-9)) as served:
+        with client(served.ws) as ws:
+            messages, code, reason = ws.closed()
+        [error] = messages
+        assert isinstance(error, ErrorMessage)
+        assert (error.code, error.fatal, error.id, code, reason) == (
+            "server_busy",
+            True,
+            None,
+            1013,
+            "server_busy",
+        )
+        assert error.details["reason"] == "loop_busy"
+        wait = error.details["retry_after_ms"]
+        assert isinstance(wait, int) and RETRY_AFTER_MS <= wait < 2 * RETRY_AFTER_MS
+        assert httpx.get(f"{served.http}/healthz").json() == {"status": "ok"}
+        metrics = httpx.get(f"{served.http}/metrics").text
+        assert 'lipstream_connections_refused_total{code="server_busy"} 1.0' in metrics
+        resident = re.search(r"^lipstream_resident_memory_bytes (\S+)$", metrics, re.M)
+        assert resident is not None and float(resident.group(1)) > 1 << 20
+        busy = re.search(r"^lipstream_event_loop_busy_ratio (\S+)$", metrics, re.M)
+        assert busy is not None and 0.0 <= float(busy.group(1)) <= 1.0
+
+
+def test_above_the_memory_ceiling_nothing_new_is_taken_on(lerp_dir: Path) -> None:
+    with serving(lerp_dir, ServerSettings(max_memory_mb=1)) as served:
+        with client(served.ws) as ws:
+            messages, code, _ = ws.closed()
+        [error] = messages
+        assert isinstance(error, ErrorMessage) and code == 1013
+        assert error.details["reason"] == "memory"
+        body = {"engine": "viseme-lerp", "character": "demo", "items": []}
+        refused = httpx.post(f"{served.http}/v1/synthesize", json=body)
+        assert refused.status_code == 503
+        detail = refused.json()["error"]
+        assert detail["code"] == "server_busy" and detail["details"]["reason"] == "memory"
+        wait_ms = detail["details"]["retry_after_ms"]
+        assert MEMORY_RETRY_AFTER_MS <= wait_ms < 2 * MEMORY_RETRY_AFTER_MS
+        assert refused.headers["retry-after"] == str(math.ceil(wait_ms / 1000))
+
+
+def test_the_client_sdk_reports_the_servers_retry_after(lerp_dir: Path) -> None:
+    async def refused(url: str) -> ConnectionClosed:
+        async with AsyncClient(url, open_timeout=10) as sdk:
+            return await sdk.wait_closed()
+
+    with serving(lerp_dir, ServerSettings(max_memory_mb=1)) as served:
+        closed = asyncio.run(refused(served.ws))
+    assert isinstance(closed, ServerBusy) and closed.error is not None
+    wait_ms = closed.error.details["retry_after_ms"]
+    assert isinstance(wait_ms, int)
+    assert closed.retry_after_s == wait_ms / 1000
+    assert retry_delay_s(closed, attempt=5) == wait_ms / 1000
+
+
+def test_shedding_needs_a_far_lagging_loop_and_enough_sessions() -> None:
+    overload = policy()  # max_lag_ms 50: shedding beyond 4 x 50 ms
+    assert overload.shedding(LoadSample(200.5, 0.0, 1.0), LAG_FROM_SESSIONS)
+    assert not overload.shedding(LoadSample(200.0, 0.0, 1.0), LAG_FROM_SESSIONS)
+    assert not overload.shedding(LoadSample(9999.0, 0.0, 1.0), LAG_FROM_SESSIONS - 1)
+
+
+UPGRADE = (
+    b"GET /v1/stream HTTP/1.1\r\nHost: test\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+    b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
+    b"Sec-WebSocket-Protocol: lipstream.v1.msgpack\r\n\r\n"
+)
+
+
+def test_a_loop_held_far_behind_sheds_upgrades_with_http_503(lerp_dir: Path) -> None:
+    """With 16 sessions open, an upgrade that arrives while the loop is held for 0.5 s (ten
+    times the 10 ms lag limit, above the 4x of shedding) is answered 503 before any
+    WebSocket work."""
+    held = threading.Event()
+
+    async def hold_the_loop() -> None:
+        held.set()
+        time.sleep(0.5)
+
+    with serving(lerp_dir, ServerSettings(max_loop_lag_ms=10.0)) as served, ExitStack() as stack:
+        for _ in range(LAG_FROM_SESSIONS):
+            ws = stack.enter_context(client(served.ws))
+            ws.send(Start("a", "viseme-lerp", "demo"))
+            assert isinstance(ws.recv(), Ready)
+        parts = urlsplit(served.http)
+        sock = stack.enter_context(socket.create_connection((parts.hostname, parts.port)))
+        sock.settimeout(10.0)
+        connections = served.server.server_state.connections
+        for _ in range(500):  # accepted by the server before the hold
+            if len(connections) > LAG_FROM_SESSIONS:
+                break
+            time.sleep(0.02)
+        assert len(connections) == LAG_FROM_SESSIONS + 1
+        served.call_soon(hold_the_loop())
+        assert held.wait(10.0)
+        sock.sendall(UPGRADE)
+        answer = b""
+        while chunk := sock.recv(65536):
+            answer += chunk
+        assert answer.startswith(b"HTTP/1.1 503 Service Unavailable\r\n")
+        metrics = httpx.get(f"{served.http}/metrics").text
+        assert 'lipstream_connections_refused_total{code="shedding"} 1.0' in metrics
