@@ -3,7 +3,8 @@
 Sketch: ``lipstream loadtest [options]`` is the Audio2Face-3D style load
 test (``load``); ``lipstream loadtest capacity`` searches for the most
 sessions a server holds under a lag limit (``capacity``); ``lipstream
-loadtest soak`` runs valid sessions among hostile clients (``soak``). The options that
+loadtest soak`` runs valid sessions among hostile clients (``soak``); ``lipstream
+loadtest storm`` opens a burst of connections of one kind at once (``storm``). The options that
 name the target and shape the sessions are declared once (``_target_options``)
 and given to each. The CLI (``lipstream.cli``) builds this part of its one
 parser with ``add_loadtest_parser``; the handlers import their run lazily, so
@@ -215,13 +216,45 @@ def _add_soak_parser(runs: Any) -> None:
     soak.set_defaults(run=_soak)
 
 
+def _storm(args: argparse.Namespace, settings: Settings) -> None:
+    import asyncio
+    from dataclasses import asdict
+
+    from .storm import storm
+
+    url = args.url or default_url(settings)
+    engine, character = args.engine or "viseme-lerp", args.character or "demo"
+    report = asyncio.run(storm(url, args.kind, args.connections, args.duration, engine, character))
+    print(json.dumps(asdict(report), indent=2))
+
+
+def _add_storm_parser(runs: Any) -> None:
+    from .storm import KINDS
+
+    storm = runs.add_parser(
+        "storm",
+        help="a burst of connections of one kind at once: does admission hold?",
+        description="Open many connections at once, all of one kind (streaming sessions, "
+        "silent sockets or half-sent request heads), probe /healthz from another process "
+        "meanwhile, and report how the connections ended and the server's frame lag.",
+    )
+    _target_options(storm, required_target=False)
+    storm.add_argument("--kind", choices=KINDS, default="sessions", help="connection kind")
+    storm.add_argument(
+        "-n", "--connections", type=int, default=1100, help="connections opened at once"
+    )
+    storm.add_argument("--duration", type=float, default=20.0, help="seconds per connection")
+    storm.set_defaults(run=_storm)
+
+
 def add_loadtest_parser(commands: Any) -> None:
     """Add ``loadtest`` and its runs to the CLI's subcommands ``commands``."""
     load = commands.add_parser(
         "loadtest",
         help="concurrent real-time sessions against a server on this machine",
         description="Concurrent real-time sessions against a lipstream server on this machine; "
-        "with a run name, a capacity search or a soak. Give a run's options after its name.",
+        "with a run name, a capacity search, a soak or a storm. "
+        "Give a run's options after its name.",
     )
     _target_options(load, required_target=False)
     _load_options(load)
@@ -241,6 +274,7 @@ def add_loadtest_parser(commands: Any) -> None:
     load.add_argument("--json", action="store_true", help="print JSON instead of a table")
     load.add_argument("--results", default="bench/loadtest.json")
     load.set_defaults(run=_loadtest)
-    runs = load.add_subparsers(dest="loadtest_run", metavar="{capacity,soak}")
+    runs = load.add_subparsers(dest="loadtest_run", metavar="{capacity,soak,storm}")
     _add_capacity_parser(runs)
     _add_soak_parser(runs)
+    _add_storm_parser(runs)

@@ -47,6 +47,7 @@ from .open_files import raise_open_file_limit
 APP_FACTORY = "lipstream.server.runner:app_from_environment"
 WORKER_APP_ENV = "LIPSTREAM_WORKER_APP"
 GRACEFUL_EXIT_S = 5.0
+WORKER_HEALTHCHECK_S = 30
 
 
 def encode_worker_app(models: Path, server: ServerSettings) -> str:
@@ -103,6 +104,9 @@ def uvicorn_options(server: ServerSettings) -> dict[str, Any]:
         "ws_ping_interval": server.ping_interval_s,
         "ws_ping_timeout": server.ping_timeout_s,
         "timeout_graceful_shutdown": GRACEFUL_EXIT_S,
+        # a worker importing numpy, numba and the models on a busy machine needs more than
+        # uvicorn's default 5 s to answer the supervisor's first health check
+        "timeout_worker_healthcheck": WORKER_HEALTHCHECK_S,
         "lifespan": "on",
     }
 

@@ -14,19 +14,17 @@ histogram before and after, read from ``/metrics``, as the bucket bounds the 50t
 percentiles fall under. One process drives every connection: beyond a few hundred
 streaming sessions, run several stormers at once so the generator is not the bottleneck.
 
-    python -m lipstream.storm --url ws://127.0.0.1:8000/v1/stream --kind sessions -n 1100
+    lipstream loadtest storm --url ws://127.0.0.1:8000/v1/stream --kind sessions -n 1100
 """
 
 from __future__ import annotations
 
-import argparse
 import asyncio
-import json
 import multiprocessing
 import time
 import urllib.request
 from collections import Counter
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from multiprocessing.synchronize import Event as EventType
 from urllib.parse import urlsplit
@@ -205,22 +203,3 @@ def _quantile(cumulative: dict[float, float], q: float) -> float | None:
         if cumulative[bound] >= q * total:
             return bound
     return None
-
-
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog="python -m lipstream.storm", description=__doc__)
-    parser.add_argument("--url", default="ws://127.0.0.1:8000/v1/stream")
-    parser.add_argument("--kind", choices=KINDS, default="sessions")
-    parser.add_argument("-n", "--connections", type=int, default=1100)
-    parser.add_argument("--duration", type=float, default=20.0, help="seconds per connection")
-    parser.add_argument("--engine", default="viseme-lerp")
-    parser.add_argument("--character", default="demo")
-    args = parser.parse_args(argv)
-    report = asyncio.run(
-        storm(args.url, args.kind, args.connections, args.duration, args.engine, args.character)
-    )
-    print(json.dumps(asdict(report), indent=2))
-
-
-if __name__ == "__main__":
-    main()

@@ -7,7 +7,7 @@ import asyncio
 from pathlib import Path
 
 from lipstream.config import ServerSettings
-from lipstream.storm import _quantile, storm
+from lipstream.loadtest.storm import _quantile, storm
 from tests.lipstream.server.conftest import lerp_dir
 from tests.lipstream.server.harness import serving
 
