@@ -31,6 +31,7 @@ from .._version import __version__
 from ..config import ServerSettings, load_server_settings
 from ..engines import ENGINES
 from ..models import ModelRegistry
+from ..status import phase
 from . import openapi
 from .catalog import Catalog
 from .handshake import head_limits
@@ -90,9 +91,13 @@ def create_app(
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[LifespanState]:
         throttle_repeated_log_lines()
-        registry = loaded or ModelRegistry.load(models_path, strict=settings.strict_models)
+        report = startup_log.info  # start-up steps, beside uvicorn's own start-up lines
+        registry = loaded
+        if registry is None:
+            with phase(f"loading the models in {models_path}", report):
+                registry = ModelRegistry.load(models_path, strict=settings.strict_models)
         executor = ThreadPoolExecutor(settings.synth_threads, thread_name_prefix="lipstream-synth")
-        catalog = Catalog.build(registry, settings)
+        catalog = Catalog.build(registry, settings, report)
         overload = overload_for(settings, catalog, metrics.observe_load)
         server = ServerState(registry, catalog, settings, metrics, lifecycle, executor, overload)
         _log_limits(server)
