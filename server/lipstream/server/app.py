@@ -11,7 +11,8 @@ The lifespan also starts the load monitor that admission follows
 the limits in force. Routes:
 ``/healthz``, ``/readyz``, ``/v1/engines``, ``/v1/characters``,
 ``POST /v1/synthesize``, ``GET /metrics``, the WebSocket ``/v1/stream`` and
-the OpenAPI docs (``/docs``, ``/openapi.json``).
+the OpenAPI docs (``/docs``, served with its assets so it works offline,
+and ``/openapi.json``).
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ from ..config import ServerSettings, load_server_settings
 from ..engines import ENGINES
 from ..models import ModelRegistry
 from ..status import phase
-from . import openapi
+from . import docs_page, openapi
 from .catalog import Catalog
 from .handshake import head_limits
 from .lifecycle import Lifecycle, install_drain_on_signals
@@ -118,6 +119,8 @@ def create_app(
         title="lipstream",
         version=__version__,
         lifespan=lifespan,
+        docs_url=None,
+        redoc_url=None,
         description="Real-time lip sync: phoneme-aligned speech in, facial control "
         "frames out. Streaming is the WebSocket /v1/stream "
         "(docs/protocol.md); this document covers the HTTP routes.",
@@ -125,6 +128,7 @@ def create_app(
     app.state.lifecycle = lifecycle
     app.state.metrics = metrics
     openapi.install(app)
+    docs_page.install(app, app.title)
 
     @app.get("/healthz")
     async def healthz() -> dict[str, str]:
