@@ -11,6 +11,7 @@ that (``...`` matches anything).
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -141,4 +142,11 @@ def test_server_example_runs(example: Example, checkout: Path, server: LiveServe
     base = server.http.removeprefix("http://")
     result = run(example, checkout, base)
     assert result.returncode == 0, result.stderr
-    assert result.stdout.strip(), "the example printed nothing"
+    if "curl" in example.code:
+        body = json.loads(result.stdout)
+        assert body["fps"] == 30 and body["channels"][:2] == ["viseme_sil", "viseme_PP"]
+        assert body["stats"]["frames"] == 11  # 0.35 s at 30 fps
+    elif "game_loop.py" in example.code:
+        assert re.search(r"done: end, \d+ frames", result.stdout), result.stdout
+    else:
+        assert result.stdout.startswith("('jawOpen', 'mouthClose', "), result.stdout

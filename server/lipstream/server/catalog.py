@@ -147,7 +147,7 @@ class Catalog:
         settings = self.settings
         ladder = model.fidelity_ladder()
         label = f"{model.manifest.engine} ({model.name})"
-        with phase(f"warming up {label}; a first start compiles its kernels here", report):
+        with phase(f"warming up {label}", report):
             warm_up(model, ladder[0])
         rungs = []
         with phase(f"calibrating {label}: timing {len(ladder)} fidelity rung(s)", report):
