@@ -3,7 +3,7 @@
 Method: the page holds one transcript (the block after ``<!-- exchange -->``):
 ``→`` lines are what a client sends on the JSON subprotocol, each followed by
 the ``←`` lines the server answers with. The test sends each client line to a
-live loopback server of the demo's ``viseme-lerp`` model and reads as many
+live loopback server of the demo's models and reads as many
 answers as the page lists, then compares them field by field. Only the fields
 named in ``VARIABLE`` may differ: measured timings, the frame values (which
 depend on the trained model; their shape is still compared) and the numbers
@@ -129,8 +129,8 @@ STEPS = parse_transcript(DOC)
 
 
 @pytest.fixture(scope="module")
-def served(lerp_dir: Path) -> Iterator[LiveServer]:
-    with live_server(lerp_dir) as server:
+def served(all_models_dir: Path) -> Iterator[LiveServer]:
+    with live_server(all_models_dir) as server:
         yield server
 
 
