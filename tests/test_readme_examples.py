@@ -63,6 +63,8 @@ def expected_outputs(code: str) -> list[re.Pattern[str]]:
 def checkout(trained_models: dict[str, Model], tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A working directory laid out like the checkout after command (a), with a home whose
     demo models are the small trained ones."""
+    if not (Path(sys.prefix) / "bin" / "lipstream").is_file():
+        pytest.fail(f"no lipstream script in {sys.prefix}: run the tests with command (b)'s venv")
     work = tmp_path_factory.mktemp("readme")
     save_models(trained_models, work / "home" / "demo" / "models")
     (work / ".venv").symlink_to(Path(sys.prefix), target_is_directory=True)
