@@ -96,6 +96,7 @@ def _serve(args: argparse.Namespace, settings: Settings) -> None:
     from .models import ModelRegistry
     from .server.metrics import multiprocess_directory
     from .server.runner import serve
+    from .status import phase, to_stderr
     from .training import build_demo
 
     models = Path(args.models) if args.models else settings.models
@@ -110,9 +111,10 @@ def _serve(args: argparse.Namespace, settings: Settings) -> None:
     )
     # Loaded here, so a model set that cannot be served stops the command with one line;
     # one worker serves these very models, several load their own.
-    registry: ModelRegistry | None = ModelRegistry.load(
-        models.resolve(), strict=server.strict_models
-    )
+    with phase(f"loading the models in {models.resolve()}", to_stderr):
+        registry: ModelRegistry | None = ModelRegistry.load(
+            models.resolve(), strict=server.strict_models
+        )
     if server.workers > 1:
         registry = None
     with multiprocess_directory(server.workers):

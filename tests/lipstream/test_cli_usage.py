@@ -12,12 +12,16 @@ from lipstream.cli import _parser, main
 from tests.helpers import run_cli
 
 
-def _subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
-    choices: dict[str, argparse.ArgumentParser] = {}
+def _subcommands(
+    parser: argparse.ArgumentParser, prefix: str = "lipstream"
+) -> dict[str, argparse.ArgumentParser]:
+    """Every (sub)command's parser by its command line, nested ones too."""
+    found = {prefix: parser}
     for action in parser._actions:
         if isinstance(action, argparse._SubParsersAction):
-            choices.update(action.choices)
-    return choices
+            for name, sub in action.choices.items():
+                found.update(_subcommands(sub, f"{prefix} {name}"))
+    return found
 
 
 def _undocumented(parser: argparse.ArgumentParser) -> list[str]:
@@ -30,14 +34,12 @@ def _undocumented(parser: argparse.ArgumentParser) -> list[str]:
 
 
 def test_every_option_of_every_subcommand_has_help() -> None:
-    parser = _parser()
-    commands = _subcommands(parser)
-    assert {"build-demo", "train", "synth", "serve", "inspect", "bench", "loadtest", "path"} <= set(
-        commands
-    )
+    commands = _subcommands(_parser())
+    expected = ("build-demo", "train", "synth", "serve", "inspect", "bench", "loadtest", "path")
+    assert {f"lipstream {name}" for name in expected} <= set(commands)
+    assert {"lipstream loadtest capacity", "lipstream loadtest soak"} <= set(commands)
     missing = {name: _undocumented(sub) for name, sub in commands.items()}
     assert {name: options for name, options in missing.items() if options} == {}
-    assert _undocumented(parser) == []
 
 
 def test_help_walk_finds_an_option_without_help() -> None:
