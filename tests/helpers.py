@@ -2,14 +2,21 @@
 
 from __future__ import annotations
 
+import os
 import socket
 import subprocess
 import sys
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared"
-LIVELINK_DIR = SHARED / "data" / "livelink-face"
+# Real Live Link Face exports, when present: .ci/run points it at ../shared/data/livelink-face.
+LIVELINK_DIR_VARIABLE = "LIPSTREAM_LIVELINK_DIR"
+
+
+def real_livelink_takes() -> list[Path]:
+    """The ``*.csv`` exports in ``$LIPSTREAM_LIVELINK_DIR``; none when the variable is unset."""
+    directory = os.environ.get(LIVELINK_DIR_VARIABLE, "").strip()
+    return sorted(Path(directory).glob("*.csv")) if directory else []
 
 
 def run_cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:

@@ -22,11 +22,16 @@ CANNED_LINE: list[tuple[str, float, float]] = [
 ]  # fmt: skip
 
 
-def add_server_arguments(parser: argparse.ArgumentParser) -> None:
+def add_server_arguments(parser: argparse.ArgumentParser, engine: str | None = None) -> None:
+    """--url, --engine (default ``engine``, else the server's first), --character, --token."""
     parser.add_argument(
         "--url", default=DEFAULT_URL, help=f"/v1/stream URL (default {DEFAULT_URL})"
     )
-    parser.add_argument("--engine", help="default: the first engine of the first character")
+    parser.add_argument(
+        "--engine",
+        default=engine,
+        help=f"default: {engine}" if engine else "default: the first engine of the first character",
+    )
     parser.add_argument("--character", help="default: the server's first character")
     parser.add_argument("--token", help="bearer token, if the server requires one")
 

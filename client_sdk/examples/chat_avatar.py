@@ -2,14 +2,25 @@
 
 Method: for each reply the backend asks a TTS for speech with phoneme timing
 (espeak-ng through ``lipstream.demo.espeak`` when it is installed, else a
-canned line), then plays it: a feeder task sends each phoneme when the
-playback clock reaches its start, as a streaming TTS emits phoneme events,
-and optionally the PCM16 audio in 100 ms chunks, each at its start time
-(audio first at equal times); a consumer task reads the
-frames as they come and measures how late each one is against its
-scheduled time (start sent + i / fps). ``--interrupt-at`` cuts the first
-reply off there, as when the user talks over the avatar: the face returns to
-rest and ``done`` reports reason ``interrupt``.
+canned line), then plays it: a feeder task sends each phoneme ``--lead-ms``
+before the playback clock reaches its start, as a streaming TTS emits phoneme
+events ahead of the audio it plays, and optionally the PCM16 audio in 100 ms
+chunks, each as early (audio first at equal times); a consumer task reads the
+frames as they come and measures how late each one is against its scheduled
+time (playback start + i / fps; negative is early, ready to play).
+``--interrupt-at`` cuts the first reply off there, as when the user talks over
+the avatar: the face returns to rest and ``done`` reports reason ``interrupt``.
+
+Why the defaults, ``viseme-lerp`` with a 400 ms lead: a frame is final only
+once the input its engine looks ahead to has arrived. ``viseme-lerp`` waits for
+the phoneme after the frame's own, so with each phoneme sent as it is spoken
+(no lead) a frame is late by up to its phoneme's length; sending every phoneme
+400 ms early, longer than the phonemes of ordinary speech (espeak-ng's longest
+in the default replies lasts 0.30 s), means no frame waits.
+``anime-graph``'s best rung waits for up to 10 phonemes (``ready.lookahead_ms``,
+about 2.1 s on the demo), so streamed with no lead its frames arrive most of a
+second late; use it with ``--lead-ms 2200``, or with ``--latency-budget-ms`` to
+pick a faster rung (docs/protocol.md, *Latency budgets*).
 
     python client_sdk/examples/chat_avatar.py --url ws://127.0.0.1:8000/v1/stream
 """
@@ -28,6 +39,8 @@ from lipstream_client import AsyncClient, Done, LipstreamClientError, Stream
 
 AUDIO_CHUNK_S = 0.1
 PCM16_BYTES = 2
+DEFAULT_ENGINE = "viseme-lerp"
+DEFAULT_LEAD_MS = 400.0
 DEFAULT_REPLIES = ("Hello there, how are you today?", "I can help you with that.")
 
 
@@ -86,15 +99,21 @@ def input_events(speech: Speech, with_audio: bool) -> list[tuple[float, int, byt
 
 
 async def feed(
-    stream: Stream, speech: Speech, origin: float, with_audio: bool, stop_at: float | None
+    stream: Stream,
+    speech: Speech,
+    origin: float,
+    lead_s: float,
+    with_audio: bool,
+    stop_at: float | None,
 ) -> None:
-    """Send the input as the playback clock reaches it; interrupt at ``stop_at``."""
+    """Send the input ``lead_s`` before the playback clock reaches it; interrupt when
+    playback reaches ``stop_at``."""
     for moment, _, payload in input_events(speech, with_audio):
-        if stop_at is not None and moment >= stop_at:
+        if stop_at is not None and moment - lead_s >= stop_at:
             await sleep_until(origin + stop_at)
             await stream.interrupt(stop_at)
             return
-        await sleep_until(origin + moment)
+        await sleep_until(origin + moment - lead_s)
         if isinstance(payload, bytes):
             await stream.send_audio(payload, speech.sample_rate)
         else:
@@ -103,7 +122,8 @@ async def feed(
 
 
 async def consume(stream: Stream, origin: float, fps: float) -> tuple[int, float]:
-    """(frames received, largest lateness in ms against each frame's scheduled time)."""
+    """(frames received, largest lateness in ms against each frame's scheduled time;
+    negative when every frame came early)."""
     frames, worst = 0, float("-inf")
     async for block in stream.frames():
         arrived = time.perf_counter()
@@ -120,15 +140,23 @@ async def reply(
     args: argparse.Namespace,
     stop_at: float | None,
 ) -> Done:
-    origin = time.perf_counter()
-    stream = await client.start(engine, character, fps=args.fps, emotion=args.emotion)
+    lead_s = args.lead_ms / 1000.0
+    origin = time.perf_counter() + lead_s  # playback starts one lead after the request
+    stream = await client.start(
+        engine,
+        character,
+        fps=args.fps,
+        emotion=args.emotion,
+        latency_budget_ms=args.latency_budget_ms,
+    )
     _, (frames, worst) = await asyncio.gather(
-        feed(stream, speech, origin, args.send_audio, stop_at), consume(stream, origin, args.fps)
+        feed(stream, speech, origin, lead_s, args.send_audio, stop_at),
+        consume(stream, origin, args.fps),
     )
     done = await stream.done()
     print(
         f"  {len(speech.spans)} phonemes over {speech.spans[-1][2]:.2f} s, {frames} frames, "
-        f"latest frame {worst:.0f} ms after its time; done: {done.reason}, "
+        f"latest frame {worst:+.0f} ms against its time; done: {done.reason}, "
         f"first frame after {done.stats.first_frame_latency_ms} ms (server)"
     )
     return done
@@ -137,6 +165,7 @@ async def reply(
 async def run(args: argparse.Namespace) -> int:
     engine, character = await asyncio.to_thread(resolve_target, args)
     replies = args.text or list(DEFAULT_REPLIES)
+    print(f"{engine}/{character}, each phoneme sent {args.lead_ms:g} ms before it is spoken")
     async with AsyncClient(args.url, token=args.token) as client:
         for number, text in enumerate(replies):
             speech = await asyncio.to_thread(speak, text, args.voice)
@@ -148,7 +177,19 @@ async def run(args: argparse.Namespace) -> int:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    add_server_arguments(parser)
+    add_server_arguments(parser, engine=DEFAULT_ENGINE)
+    parser.add_argument(
+        "--lead-ms",
+        type=float,
+        default=DEFAULT_LEAD_MS,
+        help=f"send each phoneme this long before it is spoken (default {DEFAULT_LEAD_MS:g}: "
+        f"{DEFAULT_ENGINE} then never waits for input; see the module docstring)",
+    )
+    parser.add_argument(
+        "--latency-budget-ms",
+        type=float,
+        help="latency_budget_ms of each reply: the server picks the best rung that meets it",
+    )
     parser.add_argument("--text", action="append", help="a reply to speak (repeatable)")
     parser.add_argument("--voice", default="en-us", help="espeak-ng voice")
     parser.add_argument("--fps", type=float, default=60.0)

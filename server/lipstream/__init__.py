@@ -6,11 +6,13 @@ Public, stable API for in-process use::
     model = lipstream.load_model("models/viseme-lerp")
     frames, channels, fps = model.synthesize([("HH", 0.0, 0.1), ("AY", 0.1, 0.3)], fps=60)
     synthesizer = model.start(fps=60)   # streaming: feed(), frames(), finish()
+    lipstream.demo_model_path("viseme-lerp")  # where the demo character's model is
 """
 
 from __future__ import annotations
 
 from ._version import __version__
+from .config import demo_model_path
 from .engines import load_model
 from .engines.base import (
     Lookahead,
@@ -31,5 +33,6 @@ __all__ = [
     "SynthesisResult",
     "Synthesizer",
     "__version__",
+    "demo_model_path",
     "load_model",
 ]

@@ -1,7 +1,9 @@
 """The ``lipstream`` command line.
 
-Subcommands: build-demo, train, synth, serve, inspect, bench, loadtest. A user-facing
-failure prints one line (``error [code]: where: message``) and exits 2.
+Subcommands: build-demo, train, synth, serve, inspect, bench, loadtest, path. Every
+option has a help line (``lipstream <command> --help``); ``--version`` prints the
+version. A user-facing failure prints one line (``error [code]: where: message``) and
+exits 2.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from typing import TYPE_CHECKING
 
 from lipstream_client.messages import NAMINGS, VISEME_SETS
 
+from ._version import __version__
 from .config import Settings, load_settings
 from .errors import LipstreamError
 from .exports import FORMATS, MOHO_FPS
@@ -93,13 +96,14 @@ def _serve(args: argparse.Namespace, settings: Settings) -> None:
     from .models import ModelRegistry
     from .server.metrics import multiprocess_directory
     from .server.runner import serve
-    from .training import DEMO_MODELS_DIR, build_demo
+    from .status import phase, to_stderr
+    from .training import build_demo
 
     models = Path(args.models) if args.models else settings.models
     if args.models is None and not models.exists():
         print(f"no models in {models}: building the demo character first", file=sys.stderr)
         build_demo(settings.demo_dir, progress=True)
-        models = settings.demo_dir / DEMO_MODELS_DIR
+        models = settings.demo_models_dir
     server = settings.server.with_changes(
         workers=args.workers or settings.server.workers,
         log_level=args.log_level or settings.server.log_level,
@@ -107,9 +111,10 @@ def _serve(args: argparse.Namespace, settings: Settings) -> None:
     )
     # Loaded here, so a model set that cannot be served stops the command with one line;
     # one worker serves these very models, several load their own.
-    registry: ModelRegistry | None = ModelRegistry.load(
-        models.resolve(), strict=server.strict_models
-    )
+    with phase(f"loading the models in {models.resolve()}", to_stderr):
+        registry: ModelRegistry | None = ModelRegistry.load(
+            models.resolve(), strict=server.strict_models
+        )
     if server.workers > 1:
         registry = None
     with multiprocess_directory(server.workers):
@@ -157,6 +162,12 @@ def _bench(args: argparse.Namespace, settings: Settings) -> None:
         print(format_engine_benches(results))
 
 
+def _path(args: argparse.Namespace, settings: Settings) -> None:
+    from .config import demo_model_path
+
+    print(demo_model_path(args.engine, settings) if args.engine else settings.demo_models_dir)
+
+
 def _positive_int(text: str) -> int:
     value = int(text)
     if value < 1:
@@ -166,6 +177,7 @@ def _positive_int(text: str) -> int:
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="lipstream", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"lipstream {__version__}")
     commands = parser.add_subparsers(dest="command", required=True)
 
     demo = commands.add_parser("build-demo", help="generate the demo corpus and train every engine")
@@ -173,21 +185,33 @@ def _parser() -> argparse.ArgumentParser:
     demo.set_defaults(run=_build_demo)
 
     train = commands.add_parser("train", help="train engines on a corpus directory")
-    train.add_argument("--corpus", required=True)
+    train.add_argument("--corpus", required=True, help="corpus directory (docs/corpus-formats.md)")
     train.add_argument("--engine", required=True, help="an engine name, or all")
-    train.add_argument("--out", required=True)
+    train.add_argument(
+        "--out",
+        required=True,
+        help="model directory to write; with --engine all, one subdirectory per engine",
+    )
     train.add_argument(
         "--tier", help="TextGrid phone tier (default: corpus.json's tier, else phones/MAU/...)"
     )
     train.set_defaults(run=_train)
 
     synth = commands.add_parser("synth", help="synthesize frames for a phones file")
-    synth.add_argument("--model", required=True)
+    synth.add_argument(
+        "--model", required=True, help="a model directory (lipstream path demo --engine E)"
+    )
     synth.add_argument("--phones", required=True, help=".TextGrid, .lab or .json")
-    synth.add_argument("--audio")
-    synth.add_argument("--fps", type=float, default=60.0)
-    synth.add_argument("--emotion", choices=["neutral", "happy", "angry", "sad"])
-    synth.add_argument("--out", required=True, help=".csv, .json, .tsv, .xml or .dat")
+    synth.add_argument("--audio", help="mono WAV of the speech, for engines that use audio")
+    synth.add_argument("--fps", type=float, default=60.0, help="output frame rate (default 60)")
+    synth.add_argument(
+        "--emotion",
+        choices=["neutral", "happy", "angry", "sad"],
+        help="emotion of every phoneme (default: none)",
+    )
+    synth.add_argument(
+        "--out", required=True, help="frames file to write: .csv, .json, .tsv, .xml or .dat"
+    )
     synth.add_argument(
         "--format", choices=FORMATS, help="output format (default: by the --out extension)"
     )
@@ -202,16 +226,26 @@ def _parser() -> argparse.ArgumentParser:
     synth.set_defaults(run=_synth)
 
     serve = commands.add_parser("serve", help="run the server")
-    serve.add_argument("--models", help="a model directory or a directory of them")
-    serve.add_argument("--host")
-    serve.add_argument("--port", type=int)
+    serve.add_argument(
+        "--models",
+        help="a model directory or a directory of them (default: $LIPSTREAM_MODELS, "
+        "else the demo character, built on first use)",
+    )
+    serve.add_argument(
+        "--host", help="interface to listen on (default: $LIPSTREAM_HOST or 127.0.0.1)"
+    )
+    serve.add_argument(
+        "--port", type=int, help="TCP port to listen on (default: $LIPSTREAM_PORT or 8000)"
+    )
     serve.add_argument(
         "--workers",
         type=_positive_int,
         help="worker processes sharing the memory-mapped models (default: $LIPSTREAM_WORKERS or 1)",
     )
     serve.add_argument(
-        "--log-level", choices=["critical", "error", "warning", "info", "debug", "trace"]
+        "--log-level",
+        choices=["critical", "error", "warning", "info", "debug", "trace"],
+        help="uvicorn log level (default: $LIPSTREAM_LOG_LEVEL or info)",
     )
     serve.add_argument(
         "--strict-models",
@@ -222,13 +256,17 @@ def _parser() -> argparse.ArgumentParser:
     serve.set_defaults(run=_serve)
 
     inspect = commands.add_parser("inspect", help="summarize a model directory")
-    inspect.add_argument("dir")
+    inspect.add_argument("dir", help="a model directory or a directory of them")
     inspect.set_defaults(run=_inspect)
 
     bench = commands.add_parser("bench", help="benchmark every engine on held-out utterances")
     bench.add_argument("--corpus", help="corpus directory (default: the demo corpus)")
     bench.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    bench.add_argument("--results", default="bench/results.json")
+    bench.add_argument(
+        "--results",
+        default="bench/results.json",
+        help="JSON file to write the results to (default bench/results.json)",
+    )
     bench.add_argument(
         "--no-engine-benches",
         action="store_true",
@@ -237,6 +275,15 @@ def _parser() -> argparse.ArgumentParser:
     bench.set_defaults(run=_bench)
 
     add_loadtest_parser(commands)
+
+    path = commands.add_parser(
+        "path", help="print where the demo character's models are (or will be built)"
+    )
+    path.add_argument("what", choices=["demo"], help="demo: the demo character's model directory")
+    path.add_argument(
+        "--engine", help="print this engine's model directory (e.g. viseme-lerp) instead"
+    )
+    path.set_defaults(run=_path)
     return parser
 
 

@@ -16,9 +16,11 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
-from .errors import LipstreamError
+from .errors import LipstreamError, UnknownEngineError
 
 ENV_PREFIX = "LIPSTREAM_"
+DEMO_DIR = "demo"
+DEMO_MODELS_DIR = "models"
 
 
 def _home(environ: Mapping[str, str]) -> Path:
@@ -88,7 +90,11 @@ class Settings:
 
     @property
     def demo_dir(self) -> Path:
-        return self.home / "demo"
+        return self.home / DEMO_DIR
+
+    @property
+    def demo_models_dir(self) -> Path:
+        return self.demo_dir / DEMO_MODELS_DIR
 
 
 Parser = Callable[[str, str], Any]
@@ -384,7 +390,7 @@ def load_server_settings(environ: Mapping[str, str] | None = None) -> ServerSett
 def load_settings(environ: Mapping[str, str] | None = None) -> Settings:
     environ = os.environ if environ is None else environ
     home = _home(environ)
-    models = Path(environ.get("LIPSTREAM_MODELS") or home / "demo" / "models")
+    models = Path(environ.get("LIPSTREAM_MODELS") or home / DEMO_DIR / DEMO_MODELS_DIR)
     return Settings(
         home=home,
         models=models,
@@ -392,6 +398,19 @@ def load_settings(environ: Mapping[str, str] | None = None) -> Settings:
         port=_integer(0, 65535)("LIPSTREAM_PORT", environ.get("LIPSTREAM_PORT", "8000")),
         server=load_server_settings(environ),
     )
+
+
+def demo_model_path(engine: str = "viseme-lerp", settings: Settings | None = None) -> Path:
+    """Where the demo character's ``engine`` model is, or will be once built:
+    ``$LIPSTREAM_HOME/demo/models/<engine>`` (``~/.cache/lipstream`` without the variable).
+    An engine that is not registered is an ``UnknownEngineError``."""
+    from .engines import engine_names
+
+    if engine not in engine_names():
+        raise UnknownEngineError(
+            f"unknown engine {engine!r}; available: {', '.join(engine_names())}", where="engine"
+        )
+    return (settings or load_settings()).demo_models_dir / engine
 
 
 def server_setting_fields() -> tuple[str, ...]:

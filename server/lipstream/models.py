@@ -28,7 +28,7 @@ def model_dirs(path: Path) -> list[Path]:
     if (path / MANIFEST_NAME).is_file():
         return [path]
     if not path.is_dir():
-        raise ModelStoreError("no such model directory", where=str(path))
+        raise ModelStoreError("no such directory", where=str(path))
     found = sorted(child for child in path.iterdir() if (child / MANIFEST_NAME).is_file())
     if not found:
         raise ModelStoreError("holds no model directories (none has model.json)", where=str(path))

@@ -134,6 +134,9 @@ def save_model_dir(path: Path, manifest: ModelManifest, arrays: Mapping[str, np.
 def read_manifest(path: Path) -> ModelManifest:
     """Read and check ``model.json`` of a model directory."""
     manifest_path = path / MANIFEST_NAME
+    if not path.is_dir():
+        reason = "not a directory" if path.exists() else "no such directory"
+        raise ModelStoreError(reason, where=str(path))
     if not manifest_path.is_file():
         raise ModelStoreError("not a model directory (no model.json)", where=str(path))
     where = str(manifest_path)

@@ -1,4 +1,8 @@
-"""The ``lipstream`` command line on a corpus another tool wrote: Live Link Face CSV + TextGrid."""
+"""The ``lipstream`` command line on a corpus another tool wrote: Live Link Face CSV + TextGrid.
+
+The Live Link Face takes are written by the test in the app's format; with
+``LIPSTREAM_LIVELINK_DIR`` set, the real exports form a second corpus.
+"""
 
 from __future__ import annotations
 
@@ -11,7 +15,8 @@ import numpy as np
 import pytest
 
 from lipstream.engines.base import frame_count
-from tests.helpers import LIVELINK_DIR, run_cli, textgrid_long
+from tests.helpers import real_livelink_takes, run_cli, textgrid_long
+from tests.livelink_takes import TAKES, write_take
 
 PHONES = ["HH", "AH0", "L", "OW1", "W", "ER1", "L", "D", "M", "AA1", "P", "S", "IY1"]
 
@@ -27,13 +32,25 @@ def _phone_intervals(duration: float, seed: int) -> list[tuple[float, float, str
     return intervals
 
 
-@pytest.fixture(scope="module")
-def livelink_corpus(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    root = tmp_path_factory.mktemp("livelink_corpus")
-    for seed, source in enumerate(sorted(LIVELINK_DIR.glob("*.csv"))):
-        shutil.copy(source, root / source.name)
+REAL_TAKE_PHONES_S = 29.0  # the real exports run about 30 s
+
+
+def _takes(source: str, root: Path) -> list[tuple[Path, float]]:
+    """(CSV in ``root``, seconds to cover with phones) of each take of ``source``."""
+    if source == "synthetic":
+        return [(write_take(root, take), take.span_s - 0.1) for take in TAKES]
+    copies = [Path(shutil.copy(path, root / path.name)) for path in real_livelink_takes()]
+    return [(copy, REAL_TAKE_PHONES_S) for copy in copies]
+
+
+@pytest.fixture(scope="module", params=["synthetic", *(["real"] if real_livelink_takes() else [])])
+def livelink_corpus(
+    request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
+) -> Path:
+    root = tmp_path_factory.mktemp(f"livelink_corpus_{request.param}")
+    for seed, (source, phones_s) in enumerate(_takes(request.param, root)):
         (root / source.with_suffix(".TextGrid").name).write_text(
-            textgrid_long(_phone_intervals(29.0, seed))
+            textgrid_long(_phone_intervals(phones_s, seed))
         )
         (root / source.with_suffix(".json").name).write_text(
             json.dumps({"emotion": ["sad", "angry"][seed % 2], "speaker": "capture"})

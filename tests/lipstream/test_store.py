@@ -5,6 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import lipstream
 from lipstream.errors import ModelStoreError
 from lipstream.store import (
     ARRAYS_NAME,
@@ -218,3 +219,13 @@ def test_an_array_header_claiming_more_data_than_the_file_holds(tmp_path: Path) 
     (tmp_path / ARRAYS_NAME).write_bytes(raw.replace(b"'shape': (10,), }", b"'shape': (9999,)}"))
     with pytest.raises(ModelStoreError, match="cannot read arrays"):
         load_arrays(tmp_path)
+
+
+def test_missing_model_path_says_no_such_directory(tmp_path: Path) -> None:
+    missing = tmp_path / "models" / "viseme-lerp"
+    with pytest.raises(ModelStoreError, match="no such directory") as raised:
+        lipstream.load_model(missing)
+    assert raised.value.where == str(missing)
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(ModelStoreError, match="not a directory"):
+        read_manifest(tmp_path / "file")

@@ -88,6 +88,27 @@ def test_chat_avatar_streams_replies_and_handles_barge_in(served: LiveServer) ->
     dones = re.findall(r"done: (\w+)", result.stdout)
     assert dones == ["interrupt", "end"], result.stdout
     assert "reply 2: 'Goodbye.'" in result.stdout  # spoken by espeak-ng, not the canned line
+    # The default engine and lead: viseme-lerp, which then never waits for input.
+    assert result.stdout.startswith("viseme-lerp/demo, each phoneme sent 400 ms before")
+
+
+def test_chat_avatar_lead_outlasts_every_phoneme_of_its_replies() -> None:
+    """viseme-lerp's frame waits for the phoneme after its own, so a lead longer than every
+    phoneme of the speech means no frame waits for input."""
+    sys.path.insert(0, str(EXAMPLES))
+    try:
+        import chat_avatar
+    finally:
+        sys.path.remove(str(EXAMPLES))
+    assert chat_avatar.DEFAULT_ENGINE == "viseme-lerp"
+    spans = [
+        span
+        for text in chat_avatar.DEFAULT_REPLIES
+        for span in chat_avatar.speak(text, "en-us").spans
+    ]
+    assert len(spans) > 20
+    longest = max(end - start for _, start, end in spans)
+    assert 0.2 < longest < chat_avatar.DEFAULT_LEAD_MS / 1000.0
 
 
 def test_phones_to_csv_matches_lipstream_synth(served: LiveServer, tmp_path: Path) -> None:

@@ -36,13 +36,18 @@ def _target_options(parser: argparse.ArgumentParser, *, required_target: bool) -
         "(default: ws://$LIPSTREAM_HOST:$LIPSTREAM_PORT/v1/stream)",
     )
     if required_target:
-        parser.add_argument("--engine", required=True)
-        parser.add_argument("--character", required=True)
+        parser.add_argument("--engine", required=True, help="engine of every session")
+        parser.add_argument("--character", required=True, help="character of every session")
     else:
         parser.add_argument("--engine", help="default: the server's first character's first engine")
         parser.add_argument("--character", help="default: the server's first character")
-    parser.add_argument("--fps", type=float, default=60.0)
-    parser.add_argument("--encoding", choices=["msgpack", "json"], default="msgpack")
+    parser.add_argument("--fps", type=float, default=60.0, help="frame rate requested (default 60)")
+    parser.add_argument(
+        "--encoding",
+        choices=["msgpack", "json"],
+        default="msgpack",
+        help="wire encoding (default msgpack)",
+    )
     parser.add_argument(
         "--lead-ms", type=float, default=0.0, help="send each phoneme this long before its start"
     )
@@ -133,9 +138,16 @@ def _add_capacity_parser(runs: Any) -> None:
     _target_options(capacity, required_target=True)
     _load_options(capacity)
     capacity.add_argument("--clip", type=float, default=10.0, help="clip length in seconds")
-    capacity.add_argument("--lag-limit-ms", type=float, default=50.0)
+    capacity.add_argument(
+        "--lag-limit-ms",
+        type=float,
+        default=50.0,
+        help="a session count passes when its p99 frame lag is under this (default 50)",
+    )
     capacity.add_argument("--start", type=int, default=100, help="first session count tried")
-    capacity.add_argument("--max-streams", type=int, default=1000)
+    capacity.add_argument(
+        "--max-streams", type=int, default=1000, help="largest session count tried (default 1000)"
+    )
     capacity.add_argument(
         "--resolution",
         type=int,
@@ -143,7 +155,11 @@ def _add_capacity_parser(runs: Any) -> None:
         help="stop when the boundary is known to this many sessions",
     )
     capacity.add_argument("--pause", type=float, default=3.0, help="seconds between probes")
-    capacity.add_argument("--results", default="bench/capacity.json")
+    capacity.add_argument(
+        "--results",
+        default="bench/capacity.json",
+        help="JSON file to write the results to (default bench/capacity.json)",
+    )
     capacity.set_defaults(run=_capacity)
 
 
@@ -212,7 +228,11 @@ def _add_soak_parser(runs: Any) -> None:
     )
     soak.add_argument("--flood-fps", type=float, default=1000.0, help="fps of each JSON flood")
     soak.add_argument("--json", action="store_true", help="print JSON instead of a summary")
-    soak.add_argument("--results", default="bench/soak.json")
+    soak.add_argument(
+        "--results",
+        default="bench/soak.json",
+        help="JSON file to write the results to (default bench/soak.json)",
+    )
     soak.set_defaults(run=_soak)
 
 
@@ -263,7 +283,9 @@ def add_loadtest_parser(commands: Any) -> None:
     load.add_argument(
         "--clips", type=float, nargs="+", default=[5.0, 10.0, 20.0], help="clip lengths in seconds"
     )
-    load.add_argument("--latency-budget-ms", type=float)
+    load.add_argument(
+        "--latency-budget-ms", type=float, help="latency_budget_ms of every request (default none)"
+    )
     load.add_argument("--pause", type=float, default=3.0, help="seconds between clip lengths")
     load.add_argument(
         "--max-duration",
@@ -272,7 +294,11 @@ def add_loadtest_parser(commands: Any) -> None:
         help="refuse runs planned longer than this many seconds (at most 3600)",
     )
     load.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    load.add_argument("--results", default="bench/loadtest.json")
+    load.add_argument(
+        "--results",
+        default="bench/loadtest.json",
+        help="JSON file to write the results to (default bench/loadtest.json)",
+    )
     load.set_defaults(run=_loadtest)
     runs = load.add_subparsers(dest="loadtest_run", metavar="{capacity,soak,storm}")
     _add_capacity_parser(runs)

@@ -11,7 +11,8 @@ The lifespan also starts the load monitor that admission follows
 the limits in force. Routes:
 ``/healthz``, ``/readyz``, ``/v1/engines``, ``/v1/characters``,
 ``POST /v1/synthesize``, ``GET /metrics``, the WebSocket ``/v1/stream`` and
-the OpenAPI docs (``/docs``, ``/openapi.json``).
+the OpenAPI docs (``/docs``, served with its assets so it works offline,
+and ``/openapi.json``).
 """
 
 from __future__ import annotations
@@ -31,7 +32,8 @@ from .._version import __version__
 from ..config import ServerSettings, load_server_settings
 from ..engines import ENGINES
 from ..models import ModelRegistry
-from . import openapi
+from ..status import phase
+from . import docs_page, openapi
 from .catalog import Catalog
 from .handshake import head_limits
 from .lifecycle import Lifecycle, install_drain_on_signals
@@ -90,9 +92,13 @@ def create_app(
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[LifespanState]:
         throttle_repeated_log_lines()
-        registry = loaded or ModelRegistry.load(models_path, strict=settings.strict_models)
+        report = startup_log.info  # start-up steps, beside uvicorn's own start-up lines
+        registry = loaded
+        if registry is None:
+            with phase(f"loading the models in {models_path}", report):
+                registry = ModelRegistry.load(models_path, strict=settings.strict_models)
         executor = ThreadPoolExecutor(settings.synth_threads, thread_name_prefix="lipstream-synth")
-        catalog = Catalog.build(registry, settings)
+        catalog = Catalog.build(registry, settings, report)
         overload = overload_for(settings, catalog, metrics.observe_load)
         server = ServerState(registry, catalog, settings, metrics, lifecycle, executor, overload)
         _log_limits(server)
@@ -113,6 +119,8 @@ def create_app(
         title="lipstream",
         version=__version__,
         lifespan=lifespan,
+        docs_url=None,
+        redoc_url=None,
         description="Real-time lip sync: phoneme-aligned speech in, facial control "
         "frames out. Streaming is the WebSocket /v1/stream "
         "(docs/protocol.md); this document covers the HTTP routes.",
@@ -120,6 +128,7 @@ def create_app(
     app.state.lifecycle = lifecycle
     app.state.metrics = metrics
     openapi.install(app)
+    docs_page.install(app, app.title)
 
     @app.get("/healthz")
     async def healthz() -> dict[str, str]:

@@ -70,6 +70,17 @@ def calibration_audio(spans: list[PhonemeSpan]) -> Audio:
     return Audio((tone + noise).astype(np.float32), CALIBRATION_RATE)
 
 
+def warm_up(model: Model, rung: Rung) -> None:
+    """Stream the calibration utterance through ``rung`` once, unmeasured (with the
+    calibration audio too when the engine uses audio): an engine's first calls compile
+    or load its kernels, which must not count as compute time."""
+    spans = calibration_spans()
+    request = SynthesisRequest(fps=CALIBRATION_FPS, options=dict(rung.options))
+    _stream(model, request, spans, None)
+    if model.uses_audio:
+        _stream(model, request, spans, calibration_audio(spans))
+
+
 def measure(model: Model, rung: Rung) -> ComputeCost:
     """Stream the calibration utterance through ``rung`` and time every call (with the
     calibration audio too when the engine uses audio; the costlier run counts)."""

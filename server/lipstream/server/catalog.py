@@ -4,7 +4,10 @@ Sketch: the ``Catalog`` wraps the ``ModelRegistry`` and precomputes, per
 model, the latency estimate of every fidelity rung (``budget``,
 ``calibration``), the rest pose for each emotion (the frame in the middle of
 one second of silence), and, per character, the viseme projectors (one per
-output viseme set) and the preset output profile. After ``build`` it is read-only, so sessions on
+output viseme set) and the preset output profile. Each model is warmed up
+first (its first calls compile or load its kernels) and then calibrated;
+``build`` reports both steps through ``report`` when given. After ``build`` it
+is read-only, so sessions on
 the event loop and in the synthesis thread pool share it without locks.
 """
 
@@ -26,10 +29,11 @@ from ..engines.base import CallCost, Model
 from ..errors import LipstreamError, ModelStoreError
 from ..models import ModelRegistry
 from ..phonemes import SILENCE
+from ..status import Report, phase
 from ..store import MANIFEST_NAME
 from ..timeline import EMOTIONS, PhonemeSpan
 from .budget import RungEstimate, estimate
-from .calibration import measure
+from .calibration import measure, warm_up
 from .profiles import ProfileError, ProfileRequest, load_presets, parse_profile, resolve_profile
 from .viseme_projection import VisemeProjector, build_projectors
 
@@ -65,10 +69,13 @@ class Catalog:
     presets: dict[str, OutputProfile] = field(default_factory=dict)
 
     @classmethod
-    def build(cls, registry: ModelRegistry, settings: ServerSettings) -> Catalog:
-        """Measure and probe every model; a model whose probes or stored preset fail is
-        dropped from ``registry`` (see ``ModelRegistry.require_models`` for when that
-        raises); LipstreamError for a preset from ``settings`` that does not fit."""
+    def build(
+        cls, registry: ModelRegistry, settings: ServerSettings, report: Report | None = None
+    ) -> Catalog:
+        """Measure and probe every model, reporting each step to ``report``; a model whose
+        probes or stored preset fail is dropped from ``registry`` (see
+        ``ModelRegistry.require_models`` for when that raises); LipstreamError for a preset
+        from ``settings`` that does not fit."""
         catalog = cls(registry, settings)
         probed: dict[int, dict[str, VisemeProjector]] = {}
         for name, model in list(registry.models.items()):
@@ -77,7 +84,7 @@ class Catalog:
                 if id(source) not in probed:
                     probed[id(source)] = build_projectors(source)
                 catalog.facts[id(model)] = ModelFacts(
-                    catalog._ladder(model), _rest_poses(model), probed[id(source)]
+                    catalog._ladder(model, report), _rest_poses(model), probed[id(source)]
                 )
             except LipstreamError as error:
                 registry.drop(name, error)
@@ -136,20 +143,25 @@ class Catalog:
     def preset(self, character: str) -> OutputProfile | None:
         return self.presets.get(character)
 
-    def _ladder(self, model: Model) -> tuple[RungEstimate, ...]:
+    def _ladder(self, model: Model, report: Report | None) -> tuple[RungEstimate, ...]:
         settings = self.settings
+        ladder = model.fidelity_ladder()
+        label = f"{model.manifest.engine} ({model.name})"
+        with phase(f"warming up {label}", report):
+            warm_up(model, ladder[0])
         rungs = []
-        for rung in model.fidelity_ladder():
-            cost = measure(model, rung)
-            rungs.append(
-                estimate(
-                    rung,
-                    settings.max_phoneme_ms,
-                    cost.max_call_ms,
-                    settings.compute_margin_ms,
-                    cost.call_cost,
+        with phase(f"calibrating {label}: timing {len(ladder)} fidelity rung(s)", report):
+            for rung in ladder:
+                cost = measure(model, rung)
+                rungs.append(
+                    estimate(
+                        rung,
+                        settings.max_phoneme_ms,
+                        cost.max_call_ms,
+                        settings.compute_margin_ms,
+                        cost.call_cost,
+                    )
                 )
-            )
         return tuple(rungs)
 
     def _check_presets(self) -> None:

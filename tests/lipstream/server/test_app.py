@@ -82,4 +82,4 @@ def test_serving_a_missing_directory_fails_with_one_line(tmp_path: Path) -> None
         timeout=60,
     )
     assert result.returncode != 0
-    assert "no such model directory" in result.stderr
+    assert "no such directory" in result.stderr

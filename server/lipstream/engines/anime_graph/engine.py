@@ -103,12 +103,15 @@ class AnimeGraphEngine(Engine):
             file=sys.stderr,
             disable=not progress,
         )
+        bar.set_postfix_str("pca")
         all_frames = np.concatenate([u.frames for u in utterances])
         basis, explained = fit_basis(all_frames, self.variance, self.variance_per_channel)
         bar.update()
+        bar.set_postfix_str("animes: segmenting the corpus")
         use_audio = self.use_audio and all(u.audio is not None for u in utterances)
         animes = segment_corpus(corpus, basis, DEFAULT_MFCC, use_audio)
         bar.update()
+        bar.set_postfix_str("views: one search index per emotion")
         views = view_members([u.emotion for u in utterances], animes.utterance)
         shapes = animes.shapes() if self.clusters else np.zeros((animes.size, 0))
         arrays: dict[str, np.ndarray] = {}
@@ -116,6 +119,7 @@ class AnimeGraphEngine(Engine):
             k = view_clusters(self.clusters, len(members), animes.size)
             arrays |= fit_view(name, members, animes.labels, animes.utterance, shapes, k, self.seed)
         bar.update()
+        bar.set_postfix_str("cutoffs: low-pass filter")
         curves = [animes.motion.rows(u) for u in range(len(utterances))]
         cutoffs = learn_cutoffs(curves, animes.motion.rate, self.energy)
         bar.update()
