@@ -36,6 +36,7 @@ the file and the field or array. Key-pose pairs files (JSON) are read by
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import cached_property
@@ -64,6 +65,7 @@ MAX_CONTROLS = 1024
 MAX_PAIRS_BYTES = 4 << 20
 TARGETS = ("oculus15", "arkit52")
 """The shipped targets, built from any model by ``target_pairs``."""
+_MAP_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
 _ARRAYS = ("source_rest", "control_rest", "source_keys", "control_keys", "channel_weights")
 
 
@@ -167,7 +169,14 @@ def fit_controls(
 
 
 def fit_map(name: str, pairs: KeyPosePairs) -> RetargetMap:
-    """The map of ``pairs`` (checked: shapes, finite values, controls in [0,1])."""
+    """The map of ``pairs`` (checked: shapes, finite values, controls in [0,1]); ``name`` is
+    also its directory's name, so letters, digits, ``.``, ``_`` and ``-`` only."""
+    if not _MAP_NAME.match(name):
+        raise ModelStoreError(
+            "a retarget map name is 1 to 64 letters, digits, '.', '_' or '-', "
+            f"not starting with '.', '_' or '-'; got {name!r}",
+            where="name",
+        )
     _check_pairs(pairs, f"retarget map {name}")
     return RetargetMap(name, pairs)
 
@@ -388,6 +397,37 @@ def read_pairs(path: Path, channels: Sequence[str]) -> KeyPosePairs:
     )
     _check_pairs(pairs, where)
     return pairs
+
+
+def write_pairs(path: Path, pairs: KeyPosePairs) -> None:
+    """Write ``pairs`` as a key-pose pairs file that ``read_pairs`` reads back exactly: each
+    pose lists only the values that differ from rest."""
+
+    def sparse(values: np.ndarray, names: Sequence[str], rest: np.ndarray) -> dict[str, float]:
+        return {name: float(v) for name, v, r in zip(names, values, rest) if v != r}
+
+    zeros_c, zeros_k = np.zeros(len(pairs.channels)), np.zeros(len(pairs.controls))
+    data = {
+        "controls": list(pairs.controls),
+        "rest": {
+            "source": sparse(pairs.source_rest, pairs.channels, zeros_c),
+            "controls": sparse(pairs.control_rest, pairs.controls, zeros_k),
+        },
+        "keys": [
+            {
+                "name": name,
+                "source": sparse(source, pairs.channels, pairs.source_rest),
+                "controls": sparse(controls, pairs.controls, pairs.control_rest),
+            }
+            for name, source, controls in zip(
+                pairs.key_names, pairs.source_keys, pairs.control_keys
+            )
+        ],
+        "channel_weights": sparse(
+            pairs.channel_weights, pairs.channels, np.ones(len(pairs.channels))
+        ),
+    }
+    path.write_text(json.dumps(data, indent=1, allow_nan=False) + "\n", encoding="utf-8")
 
 
 def _pose(
