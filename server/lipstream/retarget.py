@@ -219,6 +219,10 @@ def _oculus15_pairs(model: Model, viseme_poses: np.ndarray | None) -> KeyPosePai
     from .server.viseme_projection import mouth_channels, probe_key_poses
 
     poses = probe_key_poses(model, OCULUS15) if viseme_poses is None else viseme_poses
+    if not np.isfinite(poses).all():
+        raise ModelStoreError(
+            "synthesizes NaN or infinite viseme key poses", where=f"model {model.name}"
+        )
     silence = OCULUS15.classes.index("sil")
     weights = mouth_channels(model.channels).astype(np.float64)
     control_rest = np.eye(len(poses))[silence]

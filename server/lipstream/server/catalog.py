@@ -86,11 +86,12 @@ class Catalog:
                         key_poses(poses, OCULUS15),
                     )
                 projectors, viseme_poses = probed[id(source)]
+                rest = _rest_poses(model)
                 retargets = model_maps(
                     model, registry.directories.get(name), viseme_poses=viseme_poses
                 )
                 catalog.facts[id(model)] = ModelFacts(
-                    catalog._ladder(model), _rest_poses(model), projectors, retargets
+                    catalog._ladder(model), rest, projectors, retargets
                 )
             except LipstreamError as error:
                 registry.drop(name, error)
