@@ -6,7 +6,10 @@ the rig show that pose, plus a rest pair (s_0, c_0). Stage 1, per frame x:
 the frame is expressed as a non-negative blend of the key poses' deltas from
 rest, α = argmin_{α≥0} ||W (D α − (x − s_0))||² with D = [s_k − s_0] and W
 the per-channel fit weights (Lawson–Hanson NNLS, ``scipy.optimize.nnls``;
-K is at most ``MAX_KEYS``, so a frame costs one small solve). Stage 2: the
+K is at most ``MAX_KEYS``). A block of frames is first solved without the
+bound by one product with the pseudo-inverse of W D; a frame whose solution
+is already non-negative has its NNLS optimum there (the unconstrained
+minimum is feasible), and only the others are solved one by one. Stage 2: the
 rig controls are the same blend of the key controls, c = c_0 + Σ α_k (c_k −
 c_0), projected onto [0,1] — the bounded least-squares solution of
 min ||c − c_0 − Σ α_k (c_k − c_0)||² over c ∈ [0,1], which is a clip. A
@@ -111,6 +114,11 @@ class RetargetMap:
         return np.asarray(deltas[fitted] * pairs.channel_weights[fitted, None], dtype=np.float64)
 
     @cached_property
+    def _pseudo_inverse(self) -> np.ndarray:
+        """(K, fitted channels): the unconstrained least-squares solve of stage 1."""
+        return np.linalg.pinv(self._system)
+
+    @cached_property
     def _diagonal(self) -> tuple[np.ndarray, np.ndarray] | None:
         """(row of each key, its delta) when every key moves one fitted channel of its own."""
         system = self._system
@@ -133,9 +141,9 @@ class RetargetMap:
             diagonal: np.ndarray = np.maximum(targets[:, rows] / scale, 0.0)
             return diagonal
         system = self._system
-        weights = np.empty((len(targets), system.shape[1]))
-        for index, target in enumerate(targets):
-            weights[index], _ = nnls(system, target)
+        weights: np.ndarray = targets @ self._pseudo_inverse.T
+        for index in np.flatnonzero((weights < 0).any(axis=1)):
+            weights[index], _ = nnls(system, targets[index])
         return weights
 
     def apply(self, frames: np.ndarray) -> np.ndarray:

@@ -97,8 +97,13 @@ def test_blend_weights_are_the_nonnegative_least_squares_optimum() -> None:
     weights = np.array([1.0, 2.0, 1.0, 0.5, 1.0, 0.0])
     pairs = KeyPosePairs(**{**pairs.__dict__, "channel_weights": weights})
     retarget = fit_map("gen", pairs)
-    frames = np.random.default_rng(2).normal(0.3, 0.5, (12, len(CHANNELS)))
+    generator = np.random.default_rng(2)
+    inside = generator.uniform(0.1, 1.0, (6, 4)) @ pairs.source_keys
+    frames = np.vstack([inside, generator.normal(0.3, 0.5, (12, len(CHANNELS)))])
     system = pairs.source_keys.T * weights[:, None]
+    free = np.linalg.lstsq(system, (frames * weights).T, rcond=None)[0].T
+    negative = (free < 0).any(axis=1)
+    assert negative.any() and not negative.all()  # both the direct and the NNLS path
     for frame, found in zip(frames, retarget.blend_weights(frames)):
         np.testing.assert_allclose(found, brute_force_nnls(system, frame * weights), atol=1e-8)
 
