@@ -142,7 +142,9 @@ class RetargetMap:
             return diagonal
         system = self._system
         weights: np.ndarray = targets @ self._pseudo_inverse.T
-        for index in np.flatnonzero((weights < 0).any(axis=1)):
+        # A non-finite frame (an engine fault) stays non-finite, for the caller to report.
+        bounded = (weights < 0).any(axis=1) & np.isfinite(targets).all(axis=1)
+        for index in np.flatnonzero(bounded):
             weights[index], _ = nnls(system, targets[index])
         return weights
 

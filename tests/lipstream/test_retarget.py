@@ -76,6 +76,14 @@ def test_controls_stay_in_the_unit_interval_for_any_frame() -> None:
     assert controls.max() == 1.0  # large frames do drive controls to the bound
 
 
+def test_a_non_finite_frame_stays_non_finite_for_the_caller_to_report() -> None:
+    pairs, _ = generated_rig()
+    frames = np.full((2, len(CHANNELS)), -0.5)
+    frames[0, 2] = np.nan
+    controls = fit_map("gen", pairs).apply(frames)
+    assert np.isnan(controls[0]).all() and np.isfinite(controls[1]).all()
+
+
 def brute_force_nnls(system: np.ndarray, target: np.ndarray) -> np.ndarray:
     """The best non-negative solution over every support set, by plain least squares."""
     best, best_error = np.zeros(system.shape[1]), float(np.sum(target**2))
