@@ -85,14 +85,17 @@ class OutputProfile:
 
     ``naming`` renames the model's ARKit channels (None keeps ARKit);
     ``visemes`` replaces them by a viseme set (then ``naming`` must be None);
-    ``channels`` picks and orders a subset, and ``transforms`` maps an output
-    channel name to its ``ChannelTransform``. Names use the output naming.
+    ``retarget`` names a rig cross-mapping whose controls replace them (then
+    ``naming`` and ``visemes`` must be None); ``channels`` picks and orders a
+    subset, and ``transforms`` maps an output channel name to its
+    ``ChannelTransform``. Names use the output naming.
     """
 
     naming: Naming | None = None
     channels: tuple[str, ...] | None = None
     transforms: Mapping[str, ChannelTransform] = field(default_factory=dict)
     visemes: VisemeSet | None = None
+    retarget: str | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -188,10 +188,16 @@ def _start(payload: Mapping[str, Any], encoding: Encoding) -> Start:
 
 def _output(value: object) -> OutputProfile:
     where = "output"
-    obj = read_object(value, where, (), ("naming", "channels", "transforms", "visemes"))
+    obj = read_object(value, where, (), ("naming", "channels", "transforms", "visemes", "retarget"))
     if present(obj, "naming") and present(obj, "visemes"):
         raise InvalidField(
             INVALID_MESSAGE, where, "'naming' applies to blendshapes; omit it with 'visemes'"
+        )
+    if present(obj, "retarget") and (present(obj, "naming") or present(obj, "visemes")):
+        raise InvalidField(
+            INVALID_MESSAGE,
+            where,
+            "'retarget' names the output controls; omit 'naming' and 'visemes'",
         )
     naming = (
         read_choice(obj["naming"], f"{where}.naming", NAMINGS) if present(obj, "naming") else None
@@ -208,6 +214,9 @@ def _output(value: object) -> OutputProfile:
         else None,
         transforms=_transforms(obj["transforms"]) if present(obj, "transforms") else {},
         visemes=cast(VisemeSet | None, visemes),
+        retarget=read_text(obj["retarget"], f"{where}.retarget", MAX_NAME_LENGTH)
+        if present(obj, "retarget")
+        else None,
     )
 
 

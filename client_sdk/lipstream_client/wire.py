@@ -77,6 +77,7 @@ def _output(profile: OutputProfile) -> Payload:
             "transforms": {name: _transform(spec) for name, spec in profile.transforms.items()}
             or None,
             "visemes": profile.visemes,
+            "retarget": profile.retarget,
         }
     )
 

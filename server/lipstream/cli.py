@@ -1,6 +1,6 @@
 """The ``lipstream`` command line.
 
-Subcommands: build-demo, train, synth, serve, inspect, bench, loadtest, path. Every
+Subcommands: build-demo, train, synth, serve, inspect, bench, loadtest, path, retarget. Every
 option has a help line (``lipstream <command> --help``); ``--version`` prints the
 version. A user-facing failure prints one line (``error [code]: where: message``) and
 exits 2.
@@ -70,24 +70,24 @@ def _synth(args: argparse.Namespace, settings: Settings) -> None:
     spans = read_phones(Path(args.phones), args.tier)
     audio = read_wav(Path(args.audio)) if args.audio else None
     result = model.synthesize(spans, fps=args.fps, audio=audio, emotion=args.emotion)
-    result = apply_to_result(model, result, profile)
+    result = apply_to_result(model, result, profile, directory=Path(args.model))
     export = ExportSettings(sound_file=args.audio or "", moho_fps=args.moho_fps)
     write_frames(out, result, format_name, export)
     print(f"wrote {len(result.frames)} frames at {result.fps:g} fps to {args.out} ({format_name})")
 
 
 def _output_profile(args: argparse.Namespace, *, shapes: bool) -> OutputProfile | None:
-    """The output profile of ``--profile`` with ``--naming``, ``--channels`` and ``--visemes``
-    laid over it, validated as the server validates ``start.output``; Rhubarb and Moho
-    formats (``shapes``) default to the Preston Blair visemes."""
+    """The output profile of ``--profile`` with ``--naming``, ``--channels``, ``--visemes`` and
+    ``--retarget`` laid over it, validated as the server validates ``start.output``; Rhubarb
+    and Moho formats (``shapes``) default to the Preston Blair visemes."""
     from .server.profiles import parse_profile, profile_fields
 
     fields = profile_fields(Path(args.profile)) if args.profile else {}
-    for key in ("naming", "channels", "visemes"):
+    for key in ("naming", "channels", "visemes", "retarget"):
         value = getattr(args, key)
         if value is not None:
             fields[key] = value
-    if shapes and "visemes" not in fields and "naming" not in fields:
+    if shapes and not {"visemes", "naming", "retarget"} & set(fields):
         fields["visemes"] = "preston-blair"
     return parse_profile(fields, args.profile or "command line") if fields else None
 
@@ -141,6 +141,44 @@ def _inspect(args: argparse.Namespace, settings: Settings) -> None:
         print(f"  corpus digest: {manifest.corpus_digest}")
         print(f"  metrics: {json.dumps(manifest.metrics, sort_keys=True)}")
         print(f"  channels: {', '.join(manifest.channels)}")
+
+
+def _retarget(args: argparse.Namespace, settings: Settings) -> None:
+    from .engines import load_model
+    from .retarget import (
+        RETARGET_DIR,
+        fit_map,
+        model_maps,
+        read_pairs,
+        save_map,
+        target_pairs,
+        write_pairs,
+    )
+
+    directory = Path(args.model)
+    model = load_model(directory)
+    if args.action == "show":
+        for name, retarget in model_maps(model, directory, only=args.name).items():
+            errors = retarget.reproduction_error()
+            print(
+                f"{name}: {len(retarget.channels)} channels -> {len(retarget.controls)} controls, "
+                f"{len(errors)} key poses, largest key-pose error {max(errors.values()):.3g}"
+            )
+            print(f"  controls: {', '.join(retarget.controls)}")
+            print(f"  keys: {', '.join(retarget.pairs.key_names)}")
+        return
+    if args.action == "fit":
+        pairs = read_pairs(Path(args.pairs), model.channels)
+        name = args.name
+    else:
+        pairs = target_pairs(model, args.target)
+        name = args.name or args.target
+        if args.pairs_out:
+            write_pairs(Path(args.pairs_out), pairs)
+    retarget = fit_map(name, pairs)
+    out = save_map(Path(args.out) if args.out else directory / RETARGET_DIR / name, retarget)
+    worst = max(retarget.reproduction_error().values())
+    print(f"wrote retarget map {name} to {out} (largest key-pose error {worst:.3g})")
 
 
 def _bench(args: argparse.Namespace, settings: Settings) -> None:
@@ -220,6 +258,7 @@ def _parser() -> argparse.ArgumentParser:
     synth.add_argument("--naming", choices=NAMINGS, help="channel naming")
     synth.add_argument("--channels", nargs="+", metavar="NAME", help="output these channels")
     synth.add_argument("--visemes", choices=VISEME_SETS, help="output visemes, not blendshapes")
+    synth.add_argument("--retarget", metavar="MAP", help="output a retarget map's rig controls")
     synth.add_argument(
         "--moho-fps", type=float, default=MOHO_FPS, help="frame rate of a Moho .dat (24-100)"
     )
@@ -259,6 +298,8 @@ def _parser() -> argparse.ArgumentParser:
     inspect.add_argument("dir", help="a model directory or a directory of them")
     inspect.set_defaults(run=_inspect)
 
+    _add_retarget_parser(commands)
+
     bench = commands.add_parser("bench", help="benchmark every engine on held-out utterances")
     bench.add_argument("--corpus", help="corpus directory (default: the demo corpus)")
     bench.add_argument("--json", action="store_true", help="print JSON instead of a table")
@@ -285,6 +326,25 @@ def _parser() -> argparse.ArgumentParser:
     )
     path.set_defaults(run=_path)
     return parser
+
+
+def _add_retarget_parser(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    retarget = commands.add_parser("retarget", help="fit, build or show a model's rig maps")
+    actions = retarget.add_subparsers(dest="action", required=True)
+    fit = actions.add_parser("fit", help="fit a map from a key-pose pairs file")
+    fit.add_argument("--pairs", required=True, help="key-pose pairs JSON (docs/retarget.md)")
+    fit.add_argument("--name", required=True, help="the map's name (output.retarget)")
+    build = actions.add_parser("build", help="store a shipped target fitted on the model")
+    build.add_argument("--target", required=True, help="a shipped target: oculus15 or arkit52")
+    build.add_argument("--name", help="the map's name (default: the target's)")
+    build.add_argument("--pairs-out", help="also write its key-pose pairs to this JSON file")
+    show = actions.add_parser("show", help="list the maps the model is served through")
+    show.add_argument("name", nargs="?", help="only this map")
+    for action in (fit, build, show):
+        action.add_argument("--model", required=True, help="the model directory")
+    for action in (fit, build):
+        action.add_argument("--out", help="map directory (default: MODEL/retarget/NAME)")
+    retarget.set_defaults(run=_retarget)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -40,7 +40,7 @@ def test_first_start_builds_the_demo_then_serves_every_engine(tmp_path: Path) ->
                 time.sleep(0.5)
         assert process.poll() is None, log.read_text()[-2000:]
         assert ready, f"not ready within {BUILD_LIMIT_S} s: {log.read_text()[-2000:]}"
-        assert httpx.get(f"{base}/readyz").json() == {"ready": True}
+        assert httpx.get(f"{base}/readyz").json() == {"ready": True, "failed_models": []}
         assert httpx.get(f"{base}/healthz").json() == {"status": "ok"}
         characters = httpx.get(f"{base}/v1/characters").json()["characters"]
         assert characters == [{"name": "demo", "engines": sorted(engine_names())}]

@@ -103,12 +103,14 @@ channel_transforms = st.builds(
 
 @st.composite
 def output_profiles(draw: st.DrawFn) -> OutputProfile:
-    visemes = draw(st.none() | st.sampled_from(VISEME_SETS))
+    retarget = draw(st.none() | names)
+    visemes = None if retarget else draw(st.none() | st.sampled_from(VISEME_SETS))
     return OutputProfile(
-        naming=None if visemes else draw(st.none() | st.sampled_from(NAMINGS)),
+        naming=None if visemes or retarget else draw(st.none() | st.sampled_from(NAMINGS)),
         channels=draw(st.none() | channel_lists),
         transforms=draw(st.dictionaries(names, channel_transforms, max_size=3)),
         visemes=visemes,
+        retarget=retarget,
     )
 
 

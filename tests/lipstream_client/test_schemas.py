@@ -48,6 +48,7 @@ FIELD_NAMES = (
     "clamp",
     "naming",
     "visemes",
+    "retarget",
     "transforms",
     "multiplier",
     "lookahead_ms",

@@ -3,7 +3,9 @@
 Sketch: the ``Catalog`` wraps the ``ModelRegistry`` and precomputes, per
 model, the latency estimate of every fidelity rung (``budget``,
 ``calibration``), the rest pose for each emotion (the frame in the middle of
-one second of silence), and, per character, the viseme projectors (one per
+one second of silence), the retarget maps it can be served through (the
+shipped ``oculus15`` and ``arkit52`` fitted on the same viseme probe, and those
+stored in its directory), and, per character, the viseme projectors (one per
 output viseme set) and the preset output profile. Each model is warmed up
 first (its first calls compile or load its kernels) and then calibrated;
 ``build`` reports both steps through ``report`` when given. After ``build`` it
@@ -29,13 +31,15 @@ from ..engines.base import CallCost, Model
 from ..errors import LipstreamError, ModelStoreError
 from ..models import ModelRegistry
 from ..phonemes import SILENCE
+from ..retarget import RetargetMap, model_maps
 from ..status import Report, phase
 from ..store import MANIFEST_NAME
 from ..timeline import EMOTIONS, PhonemeSpan
+from ..visemes import OCULUS15
 from .budget import RungEstimate, estimate
 from .calibration import measure, warm_up
 from .profiles import ProfileError, ProfileRequest, load_presets, parse_profile, resolve_profile
-from .viseme_projection import VisemeProjector, build_projectors
+from .viseme_projection import VisemeProjector, key_poses, probe_phoneme_poses, projectors_from
 
 logger = logging.getLogger("lipstream.server")
 
@@ -57,6 +61,7 @@ class ModelFacts:
     ladder: tuple[RungEstimate, ...]
     rest: dict[str | None, np.ndarray]
     projectors: dict[str, VisemeProjector]
+    retargets: dict[str, RetargetMap]
 
 
 @dataclass
@@ -77,14 +82,23 @@ class Catalog:
         ``ModelRegistry.require_models`` for when that raises); LipstreamError for a preset
         from ``settings`` that does not fit."""
         catalog = cls(registry, settings)
-        probed: dict[int, dict[str, VisemeProjector]] = {}
+        probed: dict[int, tuple[dict[str, VisemeProjector], np.ndarray]] = {}
         for name, model in list(registry.models.items()):
             try:
                 source = _viseme_source(registry, model)
                 if id(source) not in probed:
-                    probed[id(source)] = build_projectors(source)
+                    poses = probe_phoneme_poses(source)
+                    probed[id(source)] = (
+                        projectors_from(poses, source.channels),
+                        key_poses(poses, OCULUS15),
+                    )
+                projectors, viseme_poses = probed[id(source)]
+                rest = _rest_poses(model)
+                retargets = model_maps(
+                    model, registry.directories.get(name), viseme_poses=viseme_poses
+                )
                 catalog.facts[id(model)] = ModelFacts(
-                    catalog._ladder(model, report), _rest_poses(model), probed[id(source)]
+                    catalog._ladder(model, report), rest, projectors, retargets
                 )
             except LipstreamError as error:
                 registry.drop(name, error)
@@ -137,6 +151,10 @@ class Catalog:
         """The projector of ``model``'s frames onto the viseme set ``visemes``."""
         return self.facts[id(model)].projectors[visemes]
 
+    def retargets(self, model: Model) -> dict[str, RetargetMap]:
+        """The retarget maps ``model`` can be served through, by name."""
+        return self.facts[id(model)].retargets
+
     def _projector_of(self, model: Model) -> Callable[[str], VisemeProjector]:
         return lambda visemes: self.projector(model, visemes)
 
@@ -171,7 +189,10 @@ class Catalog:
                     continue
                 try:
                     resolve_profile(
-                        model.channels, ProfileRequest(preset, "preset"), self._projector_of(model)
+                        model.channels,
+                        ProfileRequest(preset, "preset"),
+                        self._projector_of(model),
+                        self.retargets(model),
                     )
                 except ProfileError as error:
                     raise LipstreamError(

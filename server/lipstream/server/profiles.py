@@ -3,8 +3,10 @@
 Sketch: a profile (``lipstream_client.OutputProfile``) is resolved once per
 request against the model's ARKit channel names, into a column gather (or a
 viseme projection: Oculus 15 or Preston Blair) and per-column multiplier, offset and clamp
-vectors. Applying it to a float32 block (n_frames, n_model_channels) is then
-one gather, one multiply-add and one clip in numpy. The profile comes from
+vectors, or, when it names a ``retarget`` map (``lipstream.retarget``), into
+that map's rig controls. Applying it to a float32 block (n_frames,
+n_model_channels) is then one gather, one multiply-add and one clip in numpy
+(after the projection or the map, when there is one). The profile comes from
 ``start`` (its ``channels`` shorthand or its ``output``), else from the
 character's preset, else it is ARKit naming with every channel. Presets are
 read from the ``LIPSTREAM_PROFILES`` JSON file (``{"character": {output
@@ -30,6 +32,7 @@ from lipstream_client.messages import VisemeSet
 
 from ..engines.base import Model, SynthesisResult
 from ..errors import LipstreamError
+from ..retarget import RetargetMap, model_maps
 from .viseme_projection import VISEME_SCHEMES, VisemeProjector, mouth_channels, probe_key_poses
 
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
@@ -47,7 +50,8 @@ class ResolvedProfile:
     """A profile bound to one model's channels.
 
     ``columns`` picks model columns or, in viseme mode (``projector`` set),
-    columns of the viseme weights the projector computes first; then
+    columns of the viseme weights the projector computes first, or, with a
+    ``retarget`` map, columns of the rig controls it computes first; then
     output column j is ``clip(value * multiplier[j] + offset[j], low[j], high[j])``.
     """
 
@@ -58,6 +62,7 @@ class ResolvedProfile:
     offset: np.ndarray
     low: np.ndarray
     high: np.ndarray
+    retarget: RetargetMap | None = None
 
     @property
     def n_channels(self) -> int:
@@ -68,6 +73,7 @@ class ResolvedProfile:
         """True when the profile passes model frames through unchanged."""
         return (
             self.projector is None
+            and self.retarget is None
             and np.array_equal(self.columns, np.arange(len(self.columns)))
             and bool(np.all(self.multiplier == 1.0))
             and not np.any(self.offset)
@@ -85,11 +91,12 @@ class ResolvedProfile:
             if not np.isfinite(frames).all():
                 raise ValueError("the engine produced non-finite values")
             return np.asarray(frames, dtype=np.float32)
-        source = (
-            self.projector.weights(frames)
-            if self.projector is not None
-            else np.asarray(frames, dtype=np.float64)
-        )
+        if self.retarget is not None:
+            source = self.retarget.apply(frames)
+        elif self.projector is not None:
+            source = self.projector.weights(frames)
+        else:
+            source = np.asarray(frames, dtype=np.float64)
         selected = source[:, self.columns]
         values = np.clip(selected * self.multiplier + self.offset, self.low, self.high)
         if not np.all(np.abs(values) <= _FLOAT32_MAX):
@@ -103,6 +110,8 @@ class ResolvedProfile:
 
 Lookup = Callable[[str, tuple[str, ...]], int | None]
 ProjectorSource = Callable[[VisemeSet], VisemeProjector]
+RetargetSource = Mapping[str, RetargetMap]
+"""The retarget maps a model can be served through, by name."""
 
 
 @dataclass(frozen=True)
@@ -130,16 +139,21 @@ def resolve_profile(
     model_channels: tuple[str, ...],
     request: ProfileRequest,
     projector: ProjectorSource,
+    retargets: RetargetSource | None = None,
 ) -> ResolvedProfile:
     """Bind the requested profile to ``model_channels``; ``projector`` is called, with the
-    viseme set, only for visemes.
+    viseme set, only for visemes; ``retargets`` holds the maps ``retarget`` may name.
 
     ProfileError: ``unknown_channel`` naming the field and name the rig lacks,
     ``invalid_request`` for names that collide after renaming or canonicalising.
     """
     profile = request.profile or OutputProfile()
     lookup: Lookup
-    if profile.visemes is not None:
+    retarget = None
+    if profile.retarget is not None:
+        retarget = _retarget(retargets or {}, profile.retarget, model_channels, request)
+        available, lookup = retarget.controls, _exact_lookup
+    elif profile.visemes is not None:
         available = VISEME_CHANNELS[profile.visemes]
         lookup = _viseme_lookup(profile.visemes)
     else:
@@ -158,7 +172,26 @@ def resolve_profile(
         offset=offset,
         low=low,
         high=high,
+        retarget=retarget,
     )
+
+
+def _retarget(
+    retargets: RetargetSource, name: str, model_channels: tuple[str, ...], request: ProfileRequest
+) -> RetargetMap:
+    found = retargets.get(name)
+    if found is None:
+        known = ", ".join(sorted(retargets)) or "none"
+        raise ProfileError(
+            f"no retarget map {name!r} for this model; its maps: {known}",
+            where=request.where("retarget"),
+        )
+    if found.channels != model_channels:
+        raise ProfileError(
+            f"retarget map {name!r} was fitted for other channels than this model's",
+            where=request.where("retarget"),
+        )
+    return found
 
 
 def _checked_projector(
@@ -293,12 +326,18 @@ def _json_object(path: Path, what: str, holding: str) -> Mapping[str, object]:
 
 
 def apply_to_result(
-    model: Model, result: SynthesisResult, profile: OutputProfile | None, field: str = "profile"
+    model: Model,
+    result: SynthesisResult,
+    profile: OutputProfile | None,
+    field: str = "profile",
+    directory: Path | None = None,
 ) -> SynthesisResult:
     """A whole synthesis of ``model`` through ``profile`` (errors located under ``field``).
 
     The command line's path: visemes are projected onto key poses probed from ``model``
-    itself, as the server does for a character without a ``viseme-lerp`` model."""
+    itself, as the server does for a character without a ``viseme-lerp`` model; a
+    ``retarget`` map is found as the server finds it, stored in the model's ``directory`` or
+    shipped."""
     if profile is None:
         return result
 
@@ -306,7 +345,10 @@ def apply_to_result(
         poses = probe_key_poses(model, VISEME_SCHEMES[visemes])
         return VisemeProjector(poses, mouth_channels(model.channels))
 
-    resolved = resolve_profile(model.channels, ProfileRequest(profile, field), projector)
+    retargets = (
+        model_maps(model, directory, only=profile.retarget) if profile.retarget is not None else {}
+    )
+    resolved = resolve_profile(model.channels, ProfileRequest(profile, field), projector, retargets)
     return SynthesisResult(
         resolved.apply(result.frames), resolved.channels, result.fps, dict(result.stats)
     )

@@ -428,6 +428,7 @@ class Session:
             model.channels,
             requested_profile(start, catalog.preset(start.character)),
             lambda visemes: catalog.projector(model, visemes),
+            catalog.retargets(model),
         )
         options = _merged_options(
             start.options, estimate.rung.options, budgeted=start.latency_budget_ms is not None

@@ -87,10 +87,11 @@ def probe_key_poses(model: Model, scheme: VisemeScheme = OCULUS15) -> np.ndarray
     return key_poses(probe_phoneme_poses(model), scheme)
 
 
-def build_projectors(model: Model) -> dict[str, VisemeProjector]:
-    """A projector per output viseme set, from one probe of ``model``."""
-    poses = probe_phoneme_poses(model)
-    mask = mouth_channels(model.channels)
+def projectors_from(
+    phoneme_poses: dict[str, np.ndarray], channels: tuple[str, ...]
+) -> dict[str, VisemeProjector]:
+    """A projector per output viseme set, from probed phoneme poses."""
+    poses, mask = phoneme_poses, mouth_channels(channels)
     return {
         name: VisemeProjector(key_poses(poses, scheme), mask)
         for name, scheme in VISEME_SCHEMES.items()

@@ -1,0 +1,105 @@
+"""``lipstream retarget`` fit/build/show and ``lipstream synth --retarget`` on real files."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pytest
+
+from lipstream.corpus.livelink import ARKIT_BLENDSHAPES
+from tests.helpers import run_cli
+
+if TYPE_CHECKING:
+    from lipstream.engines.base import Model
+
+PHONES = [
+    {"phoneme": "sil", "start": 0.0, "end": 0.3},
+    {"phoneme": "M", "start": 0.3, "end": 0.5},
+    {"phoneme": "AA", "start": 0.5, "end": 0.9},
+    {"phoneme": "sil", "start": 0.9, "end": 1.2},
+]
+PAIRS = {
+    "controls": ["open", "shut"],
+    "keys": [
+        {"name": "open", "source": {"jawOpen": 1.0}, "controls": {"open": 1.0}},
+        {"name": "shut", "source": {"mouthClose": 1.0}, "controls": {"shut": 1.0}},
+    ],
+}
+
+
+@pytest.fixture
+def lerp_model(trained_models: dict[str, Model], tmp_path: Path) -> Path:
+    directory = tmp_path / "viseme-lerp"
+    trained_models["viseme-lerp"].save(directory)
+    return directory
+
+
+def synth_json(model: Path, tmp_path: Path, *extra: str) -> dict[str, list[object]]:
+    phones = tmp_path / "phones.json"
+    phones.write_text(json.dumps(PHONES))
+    out = tmp_path / f"out{len(extra)}.json"
+    result = run_cli(
+        "synth", "--model", str(model), "--phones", str(phones), "--out", str(out), *extra
+    )
+    assert result.returncode == 0, result.stderr
+    data: dict[str, list[object]] = json.loads(out.read_text())
+    return data
+
+
+def test_a_fitted_map_is_stored_beside_the_model_and_synth_serves_its_controls(
+    lerp_model: Path, tmp_path: Path
+) -> None:
+    pairs = tmp_path / "pairs.json"
+    pairs.write_text(json.dumps(PAIRS))
+    fitted = run_cli(
+        "retarget", "fit", "--model", str(lerp_model), "--pairs", str(pairs), "--name", "jaw"
+    )
+    assert fitted.returncode == 0, fitted.stderr
+    assert (lerp_model / "retarget" / "jaw" / "retarget.json").is_file()
+    plain = synth_json(lerp_model, tmp_path)
+    mapped = synth_json(lerp_model, tmp_path, "--retarget", "jaw")
+    assert mapped["channels"] == ["open", "shut"]
+    raw = np.array(plain["frames"], dtype=np.float64)
+    columns = [plain["channels"].index("jawOpen"), plain["channels"].index("mouthClose")]
+    expected = np.clip(raw[:, columns], 0.0, 1.0)
+    np.testing.assert_allclose(np.array(mapped["frames"]), expected, atol=1e-6)
+
+
+def test_build_writes_a_shipped_target_and_its_pairs_and_show_lists_the_maps(
+    lerp_model: Path, tmp_path: Path
+) -> None:
+    pairs = tmp_path / "arkit.json"
+    built = run_cli(
+        "retarget", "build", "--model", str(lerp_model), "--target", "arkit52",
+        "--pairs-out", str(pairs),
+    )  # fmt: skip
+    assert built.returncode == 0, built.stderr
+    written = json.loads(pairs.read_text())
+    assert tuple(written["controls"]) == ARKIT_BLENDSHAPES
+    assert all(len(key["controls"]) == 1 for key in written["keys"])
+    shown = run_cli("retarget", "show", "--model", str(lerp_model))
+    assert shown.returncode == 0, shown.stderr
+    headers = [line.split(":")[0] for line in shown.stdout.splitlines() if not line[0].isspace()]
+    assert headers == ["oculus15", "arkit52"]
+    assert "52 controls" in shown.stdout and "15 controls" in shown.stdout
+
+
+def test_a_malformed_pairs_file_exits_with_the_code_file_and_field(
+    lerp_model: Path, tmp_path: Path
+) -> None:
+    pairs = tmp_path / "pairs.json"
+    bad = json.loads(json.dumps(PAIRS))
+    bad["keys"][1]["source"]["noSuchChannel"] = 1.0
+    pairs.write_text(json.dumps(bad))
+    result = run_cli(
+        "retarget", "fit", "--model", str(lerp_model), "--pairs", str(pairs), "--name", "jaw"
+    )
+    assert result.returncode == 2
+    assert result.stderr.strip().startswith(
+        f"error [model_invalid]: {pairs}: keys[1].source.noSuchChannel:"
+    )
+    unknown = run_cli("retarget", "build", "--model", str(lerp_model), "--target", "rig9")
+    assert unknown.returncode == 2 and "target: no shipped retarget target" in unknown.stderr
