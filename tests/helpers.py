@@ -30,6 +30,23 @@ def run_cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[
     )
 
 
+def serve_command(models: Path, port: int, *flags: str) -> list[str]:
+    """The real ``lipstream serve`` of ``models`` on loopback ``port``, as a subprocess argv."""
+    return [
+        sys.executable,
+        "-m",
+        "lipstream.cli",
+        "serve",
+        "--models",
+        str(models),
+        "--host",
+        "127.0.0.1",
+        "--port",
+        str(port),
+        *flags,
+    ]
+
+
 def free_port() -> int:
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))

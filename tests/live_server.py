@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import subprocess
-import sys
 import tempfile
 import time
 import urllib.error
@@ -14,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from tests.helpers import free_port
+from tests.helpers import free_port, serve_command
 
 if TYPE_CHECKING:
     from lipstream.engines.base import Model
@@ -57,19 +56,7 @@ def live_server(models_dir: Path, *extra: str) -> Iterator[LiveServer]:
     # pipe would block it.
     with tempfile.TemporaryFile(mode="w+") as log:
         process = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "lipstream.cli",
-                "serve",
-                "--models",
-                str(models_dir),
-                "--host",
-                "127.0.0.1",
-                "--port",
-                str(port),
-                *extra,
-            ],
+            serve_command(models_dir, port, *extra),
             stdout=log,
             stderr=subprocess.STDOUT,
             text=True,

@@ -13,7 +13,7 @@ import pytest
 
 from lipstream.corpus import Corpus
 from lipstream.training import train_engine
-from tests.helpers import free_port
+from tests.helpers import free_port, serve_command
 
 
 @pytest.fixture(scope="module")
@@ -22,18 +22,7 @@ def served(small_demo_corpus: Corpus, tmp_path_factory: pytest.TempPathFactory) 
     train_engine(small_demo_corpus, "viseme-lerp", models / "viseme-lerp")
     port = free_port()
     process = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "lipstream.cli",
-            "serve",
-            "--models",
-            str(models),
-            "--host",
-            "127.0.0.1",
-            "--port",
-            str(port),
-        ],
+        serve_command(models, port),
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
     )

@@ -29,7 +29,7 @@ from prometheus_client.parser import text_string_to_metric_families
 from lipstream.engines.base import Model
 from lipstream.server.metrics import MULTIPROCESS_ENV, multiprocess_directory
 from lipstream_client import AsyncClient, StreamResult
-from tests.helpers import free_port
+from tests.helpers import free_port, serve_command
 from tests.live_server import stop_process
 
 FPS = 60.0
@@ -86,20 +86,7 @@ def lipstream_serve(
     env = {**os.environ, "LIPSTREAM_LOG_LEVEL": "info", "LIPSTREAM_DRAIN_TIMEOUT_S": "5", **environ}
     with log.open("ab") as output:
         process = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "lipstream.cli",
-                "serve",
-                "--models",
-                str(models),
-                "--host",
-                "127.0.0.1",
-                "--port",
-                str(port),
-                "--workers",
-                str(workers),
-            ],
+            serve_command(models, port, "--workers", str(workers)),
             env=env,
             stdout=output,
             stderr=subprocess.STDOUT,

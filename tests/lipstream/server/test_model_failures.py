@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import os
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -16,7 +15,7 @@ import numpy as np
 import pytest
 
 from lipstream.store import ARRAYS_NAME, load_arrays, save_model_dir
-from tests.helpers import free_port
+from tests.helpers import free_port, serve_command
 from tests.live_server import READY_TIMEOUT_S, stop_process
 
 if TYPE_CHECKING:
@@ -53,22 +52,6 @@ def only_bad_dir(
     return directory
 
 
-def _serve_command(models: Path, port: int, *extra: str) -> list[str]:
-    return [
-        sys.executable,
-        "-m",
-        "lipstream.cli",
-        "serve",
-        "--models",
-        str(models),
-        "--host",
-        "127.0.0.1",
-        "--port",
-        str(port),
-        *extra,
-    ]
-
-
 @pytest.fixture(scope="module")
 def served(mixed_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Any]]:
     """``lipstream serve`` of the mixed directory, and the file its log goes to."""
@@ -77,7 +60,7 @@ def served(mixed_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterato
     base = f"http://127.0.0.1:{port}"
     with open(log_path, "w") as log:
         process = subprocess.Popen(
-            _serve_command(mixed_dir, port), stdout=log, stderr=subprocess.STDOUT
+            serve_command(mixed_dir, port), stdout=log, stderr=subprocess.STDOUT
         )
         try:
             deadline = time.monotonic() + READY_TIMEOUT_S
@@ -143,7 +126,7 @@ def test_the_good_model_serves_and_the_bad_one_is_reported(served: dict[str, Any
 
 def _run_serve(models: Path, *extra: str, env: dict[str, str] | None = None) -> Any:
     return subprocess.run(
-        _serve_command(models, free_port(), *extra),
+        serve_command(models, free_port(), *extra),
         capture_output=True,
         text=True,
         timeout=120,

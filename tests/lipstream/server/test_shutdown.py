@@ -9,7 +9,6 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -22,7 +21,7 @@ import pytest
 from lipstream.config import ServerSettings
 from lipstream.server.catalog import Catalog
 from lipstream_client import Done, End, ErrorMessage, PhonemeItem, Phonemes, Ready, Start
-from tests.helpers import free_port
+from tests.helpers import free_port, serve_command
 from tests.lipstream.server.harness import client, frame_rows, serving
 
 SPANS = [("HH", 0.0, 0.1), ("AY1", 0.1, 0.4), ("M", 0.4, 0.5), ("sil", 0.5, 0.7)]
@@ -92,19 +91,7 @@ def lipstream_serve(models: Path, *flags: str) -> Iterator[tuple[subprocess.Pope
     port = free_port()
     env = {**os.environ, "LIPSTREAM_DRAIN_TIMEOUT_S": "20", "LIPSTREAM_LOG_LEVEL": "warning"}
     process = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "lipstream.cli",
-            "serve",
-            "--models",
-            str(models),
-            "--host",
-            "127.0.0.1",
-            "--port",
-            str(port),
-            *flags,
-        ],
+        serve_command(models, port, *flags),
         env=env,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
