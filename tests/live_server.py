@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
+import signal
 import subprocess
 import tempfile
 import time
@@ -77,7 +80,10 @@ def live_server(models_dir: Path, *extra: str) -> Iterator[LiveServer]:
 
 
 def stop_process(process: subprocess.Popen) -> None:  # type: ignore[type-arg]
-    """SIGTERM, then SIGKILL if the process has not exited within 15 s."""
+    """SIGTERM, then SIGKILL if the process has not exited within 15 s; then SIGKILL to any
+    of its descendants still running (workers of a supervisor that was killed, or failed to
+    stop them), so no server outlives its test."""
+    descendants = _descendants(process.pid)
     if process.poll() is None:
         process.terminate()
     try:
@@ -85,3 +91,16 @@ def stop_process(process: subprocess.Popen) -> None:  # type: ignore[type-arg]
     except subprocess.TimeoutExpired:
         process.kill()
         process.wait(timeout=5)
+    for pid in descendants + _descendants(process.pid):
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+
+
+def _descendants(pid: int) -> list[int]:
+    """Every live descendant of ``pid`` (from /proc), children before their children."""
+    found: list[int] = []
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        with contextlib.suppress(OSError):
+            for child in (task / "children").read_text().split():
+                found += [int(child), *_descendants(int(child))]
+    return found
