@@ -68,6 +68,8 @@ class ServerSettings:
     inline_work_ms: float = 2.0
     request_cpu_s: float = 10.0
     synth_threads: int = 2
+    heavy_work_ms: float = 50.0
+    heavy_threads: int = 1
     profiles: Path | None = None
     ping_interval_s: float = 20.0
     ping_timeout_s: float = 20.0
@@ -348,7 +350,20 @@ ENV_SETTINGS: tuple[EnvSetting, ...] = (
         "LIPSTREAM_SYNTH_THREADS",
         "synth_threads",
         _integer(1, 256),
-        "threads of the synthesis pool (large messages, `POST /v1/synthesize`)",
+        "threads of the synthesis pool (messages above `LIPSTREAM_INLINE_WORK_MS`)",
+    ),
+    EnvSetting(
+        "LIPSTREAM_HEAVY_WORK_MS",
+        "heavy_work_ms",
+        _number(0.0, 86_400_000.0),
+        "estimated engine work above which a message runs in the heavy lane, apart from "
+        "the synthesis pool",
+    ),
+    EnvSetting(
+        "LIPSTREAM_HEAVY_THREADS",
+        "heavy_threads",
+        _integer(1, 256),
+        "threads of the heavy lane (costly messages, large JSON answers, `POST /v1/synthesize`)",
     ),
     EnvSetting(
         "LIPSTREAM_PROFILES", "profiles", _path, "JSON file of preset output profiles per character"

@@ -142,7 +142,7 @@ async def synthesize(request: Request, state: ServerState) -> Response:
         messages = _messages(_parse(body, request_encoding), request_encoding)
         loop = asyncio.get_running_loop()
         response = await loop.run_in_executor(
-            state.executor, _answer, messages, state, response_encoding
+            state.heavy, _answer, messages, state, response_encoding
         )
     except HttpError as error:
         state.metrics.errors.labels(error.code).inc()

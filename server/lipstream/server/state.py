@@ -18,7 +18,9 @@ from .session import SessionLimits
 @dataclass
 class ServerState:
     """Resident models and what was derived from them, settings, metrics, the connections'
-    lifecycle, the synthesis thread pool and the load-based admission."""
+    lifecycle, the two thread pools (``executor`` for ordinary engine work, ``heavy`` for
+    costly messages, large JSON answers and REST, so those never queue ordinary sessions
+    behind them) and the load-based admission."""
 
     registry: ModelRegistry
     catalog: Catalog
@@ -26,6 +28,7 @@ class ServerState:
     metrics: Metrics
     lifecycle: Lifecycle
     executor: ThreadPoolExecutor
+    heavy: ThreadPoolExecutor
     overload: Overload
     loaded: bool = True
 

@@ -9,10 +9,12 @@ an ``error`` (for ``server_busy`` with ``details.retry_after_ms``) and its
 close code. An admitted connection is one task that takes one message at a
 time: rate limit (token bucket), decode (size-limited, sans I/O), then
 ``Session.handle``, inline when the engine's estimate of its work is below
-``inline_work_ms`` and in the synthesis thread pool otherwise (with its
-frames encoded there too), so the event loop never waits on a long
-synthesis; answers of more than ``JSON_INLINE_VALUES`` JSON numbers are
-encoded in the pool as well. While work runs in the pool the connection
+``inline_work_ms``, in the synthesis thread pool up to ``heavy_work_ms``,
+and in the heavy lane (a pool of its own) above (with its frames encoded
+there too), so the event loop never waits on a long synthesis and ordinary
+sessions never queue behind a costly one; answers of more than
+``JSON_INLINE_VALUES`` JSON numbers are encoded in the pool as well (in the
+heavy lane above ``JSON_HEAVY_VALUES``). While work runs in the pool the connection
 keeps receiving (``read_ahead``): the socket is read and pings answered, a
 ``cancel`` stops its request's work at once (``Session.stop_work``), a
 closed socket stops all of it, and the messages read wait, in order, for
@@ -38,6 +40,7 @@ import asyncio
 import logging
 import time
 from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any, TypeAlias, TypeVar
 
 from starlette.websockets import WebSocket, WebSocketDisconnect
@@ -82,6 +85,7 @@ _IDLE = object()
 _WAKE = object()
 _PEER_GONE = (WebSocketDisconnect, RuntimeError, OSError)
 JSON_INLINE_VALUES = 512  # about 4 ms of JSON encoding: more goes to the pool
+JSON_HEAVY_VALUES = 65_536  # about 0.5 s of JSON encoding: the heavy lane's
 Payload: TypeAlias = bytes | str
 Answers: TypeAlias = tuple[list[Outgoing], list[Payload | None]]
 T = TypeVar("T")
@@ -331,12 +335,21 @@ class Connection:
     async def _handle(self, decoded: InputMessage, now: float) -> Answers:
         """The answers to ``decoded``, with the payloads encoded in the pool (None: encode
         when sending)."""
-        if self.session.estimated_work_ms(decoded) > self.settings.inline_work_ms:
-            return await self._in_pool(lambda: self._encoded(self.session.handle(decoded, now)))
+        work_ms = self.session.estimated_work_ms(decoded)
+        if work_ms > self.settings.inline_work_ms:
+            pool = self._pool(work_ms > self.settings.heavy_work_ms)
+            return await self._in_pool(
+                lambda: self._encoded(self.session.handle(decoded, now)), pool
+            )
         outgoing = self.session.handle(decoded, now)
-        if self.encoding == "json" and _values(outgoing) > JSON_INLINE_VALUES:
-            return await self._in_pool(lambda: self._encoded(outgoing))
+        values = _values(outgoing) if self.encoding == "json" else 0
+        if values > JSON_INLINE_VALUES:
+            pool = self._pool(values > JSON_HEAVY_VALUES)
+            return await self._in_pool(lambda: self._encoded(outgoing), pool)
         return outgoing, [None] * len(outgoing)
+
+    def _pool(self, heavy: bool) -> ThreadPoolExecutor:
+        return self.state.heavy if heavy else self.state.executor
 
     def _encoded(self, outgoing: list[Outgoing]) -> Answers:
         """``outgoing`` with each frames block encoded (stamping leaves those unchanged);
@@ -352,9 +365,9 @@ class Connection:
             )
         return outgoing, payloads
 
-    async def _in_pool(self, job: Callable[[], T]) -> T:
-        """Run ``job`` in the synthesis pool, reading the client's messages ahead meanwhile."""
-        future = self.loop.run_in_executor(self.state.executor, job)
+    async def _in_pool(self, job: Callable[[], T], pool: ThreadPoolExecutor) -> T:
+        """Run ``job`` in ``pool``, reading the client's messages ahead meanwhile."""
+        future = self.loop.run_in_executor(pool, job)
         while not future.done() and not self._peer_gone and self.read_ahead.has_room():
             if self._receive_task is None:
                 self._receive_task = asyncio.create_task(self._receive())

@@ -203,3 +203,30 @@ def test_a_large_json_answer_does_not_stall_other_connections(all_models_dir: Pa
         finally:
             stop.set()
             worker.join()
+
+
+def test_ordinary_work_does_not_queue_behind_a_costly_request(all_models_dir: Path) -> None:
+    # One thread in each pool, and every costed message off the loop: were there one pool,
+    # the short request's work would wait behind the search (600 s of budget).
+    settings = ServerSettings(
+        request_cpu_s=600.0, synth_threads=1, heavy_threads=1, inline_work_ms=0.0
+    )
+    with serving(all_models_dir, settings) as served:
+        with client(served.ws) as costly:
+            costly.send(Start("pq", "anime-graph", "demo", options=PQ))
+            assert isinstance(costly.recv(timeout=WORK_BOUND_S), Ready)
+            before = _pool_threads()
+            costly.send(Phonemes("pq", ITEMS))  # unbounded cost: the heavy lane
+            # A pool starts its thread when its first job is submitted: the search runs.
+            eventually(lambda: len(_pool_threads() - before) == 1, "the search in a pool")
+            short_request_completes(served, "short", {})
+            costly.send(Cancel("pq"))
+            done = final(costly, "pq")[-1]
+        # The search was still running when the short request finished: it was stopped.
+        assert isinstance(done, Done) and done.reason == "cancel"
+        assert metric(served, "lipstream_work_stopped_total") == 1.0
+
+
+def _pool_threads() -> set[int]:
+    """The live threads of every server pool in this process (the test server runs here)."""
+    return {t.ident or 0 for t in threading.enumerate() if t.name.startswith("lipstream-")}
