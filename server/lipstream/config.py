@@ -74,6 +74,8 @@ class ServerSettings:
     ping_interval_s: float = 20.0
     ping_timeout_s: float = 20.0
     strict_models: bool = False
+    health_port: int = 0
+    liveness_stall_s: float = 30.0
 
     def with_changes(self, **changes: Any) -> ServerSettings:
         """A copy with some fields replaced (tests and the CLI use it)."""
@@ -386,6 +388,19 @@ ENV_SETTINGS: tuple[EnvSetting, ...] = (
         _flag,
         "refuse to start when any model fails to load (`--strict-models`); otherwise the "
         "others are served and the failure is reported",
+    ),
+    EnvSetting(
+        "LIPSTREAM_HEALTH_PORT",
+        "health_port",
+        _integer(0, 65535),
+        "a second port answering only `GET /healthz`, from a thread, for liveness probes (0: none)",
+    ),
+    EnvSetting(
+        "LIPSTREAM_LIVENESS_STALL_S",
+        "liveness_stall_s",
+        _number(0.0, 86400.0, above=True),
+        "the health port answers 503 once the event loop has not run its load monitor for "
+        "this long",
     ),
 )
 

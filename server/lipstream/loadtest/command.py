@@ -244,7 +244,9 @@ def _storm(args: argparse.Namespace, settings: Settings) -> None:
 
     url = args.url or default_url(settings)
     engine, character = args.engine or "viseme-lerp", args.character or "demo"
-    report = asyncio.run(storm(url, args.kind, args.connections, args.duration, engine, character))
+    report = asyncio.run(
+        storm(url, args.kind, args.connections, args.duration, engine, character, args.healthz_url)
+    )
     print(json.dumps(asdict(report), indent=2))
 
 
@@ -264,6 +266,11 @@ def _add_storm_parser(runs: Any) -> None:
         "-n", "--connections", type=int, default=1100, help="connections opened at once"
     )
     storm.add_argument("--duration", type=float, default=20.0, help="seconds per connection")
+    storm.add_argument(
+        "--healthz-url",
+        help="what the probe asks (default: /healthz of the serving port; "
+        "e.g. http://127.0.0.1:8081/healthz for LIPSTREAM_HEALTH_PORT=8081)",
+    )
     storm.set_defaults(run=_storm)
 
 

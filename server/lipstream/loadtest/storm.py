@@ -62,8 +62,10 @@ async def storm(
     duration_s: float = 20.0,
     engine: str = "viseme-lerp",
     character: str = "demo",
+    healthz_url: str | None = None,
 ) -> StormReport:
-    """Open ``connections`` of ``kind`` against the WebSocket ``url`` at once (see above)."""
+    """Open ``connections`` of ``kind`` against the WebSocket ``url`` at once (see above);
+    the probe asks ``healthz_url`` (default: ``/healthz`` of the serving port)."""
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {', '.join(KINDS)}, not {kind!r}")
     base = _http_base(url)
@@ -73,7 +75,8 @@ async def storm(
     context = multiprocessing.get_context("spawn")
     stop = context.Event()
     answers, sender = context.Pipe(duplex=False)
-    probe = context.Process(target=_probe, args=(base, stop, sender), daemon=True)
+    probe_url = healthz_url or f"{base}/healthz"
+    probe = context.Process(target=_probe, args=(probe_url, stop, sender), daemon=True)
     probe.start()
     if answers.poll(PROBE_START_S):
         answers.recv()  # probing from now on
@@ -140,15 +143,15 @@ async def _raw(url: str, partial: bool, duration_s: float) -> str:
         writer.close()
 
 
-def _probe(base: str, stop: EventType, answers: Connection) -> None:
-    """Ask ``/healthz`` until ``stop`` is set (at least once); send "probing" when it starts
-    and (probes, failed, slowest ms) at the end. Runs in a process of its own, so the
-    storm's own load does not delay it."""
+def _probe(url: str, stop: EventType, answers: Connection) -> None:
+    """Ask ``url`` (a ``/healthz``) until ``stop`` is set (at least once); send "probing"
+    when it starts and (probes, failed, slowest ms) at the end. Runs in a process of its
+    own, so the storm's own load does not delay it."""
     answers.send("probing")
     probes, failed, slowest_ms = 0, 0, 0.0
     while True:
         began = time.monotonic()
-        ok = _healthy(base)
+        ok = _healthy(url)
         probes += 1
         failed += not ok
         slowest_ms = max(slowest_ms, 1000 * (time.monotonic() - began))
@@ -157,10 +160,10 @@ def _probe(base: str, stop: EventType, answers: Connection) -> None:
     answers.send((probes, failed, slowest_ms))
 
 
-def _healthy(base: str) -> bool:
+def _healthy(url: str) -> bool:
     opener = urllib.request.build_opener(urllib.request.ProxyHandler({}))
     try:
-        with opener.open(f"{base}/healthz", timeout=PROBE_TIMEOUT_S) as answer:
+        with opener.open(url, timeout=PROBE_TIMEOUT_S) as answer:
             return bool(answer.status == 200)
     except OSError:
         return False

@@ -20,7 +20,7 @@ from __future__ import annotations
 import gc
 import logging
 import sys
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -32,12 +32,14 @@ from fastapi.responses import JSONResponse, Response
 from .._version import __version__
 from ..config import ServerSettings, load_server_settings
 from ..engines import ENGINES
+from ..errors import LipstreamError
 from ..models import ModelRegistry
 from ..status import phase
 from . import docs_page, openapi
 from .catalog import Catalog
 from .handshake import head_limits
 from .lifecycle import Lifecycle, install_drain_on_signals
+from .liveness import LivenessServer
 from .log_throttle import install as throttle_repeated_log_lines
 from .metrics import Metrics, forget_this_process
 from .open_files import open_file_limit
@@ -114,6 +116,7 @@ def create_app(
         )
         _log_limits(server)
         overload.monitor.start()
+        liveness = _liveness(settings, overload.monitor.last_tick)
         if serving_process:
             freeze_long_lived_objects()
         restore_signals = install_drain_on_signals(lifecycle, settings.drain_timeout_s)
@@ -121,6 +124,8 @@ def create_app(
             yield {"server": server}
         finally:
             overload.monitor.stop()
+            if liveness is not None:
+                liveness.stop()
             restore_signals()
             server.loaded = False
             executor.shutdown(wait=False, cancel_futures=True)
@@ -207,3 +212,21 @@ def _log_limits(server: ServerState) -> None:
         100 * limits.max_busy,
         100 * limits.session_cost,
     )
+
+
+def _liveness(settings: ServerSettings, last_tick: Callable[[], float]) -> LivenessServer | None:
+    """The health port's server, started, when ``LIPSTREAM_HEALTH_PORT`` names one."""
+    if not settings.health_port:
+        return None
+    try:
+        liveness = LivenessServer(
+            "0.0.0.0", settings.health_port, last_tick, settings.liveness_stall_s
+        )
+    except OSError as error:
+        raise LipstreamError(
+            f"cannot listen on the health port {settings.health_port}: {error}",
+            where="LIPSTREAM_HEALTH_PORT",
+            code="invalid_setting",
+        ) from None
+    liveness.start()
+    return liveness

@@ -74,6 +74,7 @@ class LoadMonitor:
         self._thread: int | None = None
         self._timer: asyncio.TimerHandle | None = None
         self._due = 0.0
+        self.last_tick_s = time.monotonic()
 
     def start(self) -> None:
         """Start sampling the running loop."""
@@ -82,6 +83,10 @@ class LoadMonitor:
         self._schedule(self._loop.time())
         if self.on_sample is not None:
             self.on_sample(self.sample())
+
+    def last_tick(self) -> float:
+        """Monotonic seconds of the loop's last tick (read from any thread)."""
+        return self.last_tick_s
 
     def stop(self) -> None:
         if self._timer is not None:
@@ -116,6 +121,7 @@ class LoadMonitor:
         assert self._loop is not None
         now = self._loop.time()
         self.ticks.append(_Tick(time.monotonic(), time.thread_time(), max(0.0, now - self._due)))
+        self.last_tick_s = time.monotonic()
         self.rss_mb = resident_mb()
         self._schedule(now)
         if self.on_sample is not None:
