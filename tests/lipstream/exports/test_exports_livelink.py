@@ -14,7 +14,8 @@ from lipstream.engines.base import SynthesisResult
 from lipstream.errors import InvalidRequestError
 from lipstream.exports.livelink import livelink_csv, timecode
 from lipstream.exports.writer import write_export
-from tests.helpers import LIVELINK_DIR
+from tests.helpers import real_livelink_takes
+from tests.livelink_takes import APP_HEADER
 
 
 @pytest.mark.parametrize(
@@ -33,9 +34,10 @@ def test_timecode_counts_60_fps_frames_to_the_thousandth(seconds: float, expecte
 
 
 def test_header_is_the_iphone_apps_header() -> None:
-    app_header = next(iter(sorted(LIVELINK_DIR.glob("*.csv")))).read_text().splitlines()[0]
     text = livelink_csv(np.zeros((1, 1), dtype=np.float32), ("jawOpen",), 60.0)
-    assert text.splitlines()[0] == app_header
+    assert text.splitlines()[0] == APP_HEADER
+    for export in real_livelink_takes():  # the real exports, when LIPSTREAM_LIVELINK_DIR is set
+        assert text.splitlines()[0] == export.read_text().splitlines()[0]
 
 
 def test_round_trip_through_the_corpus_reader(tmp_path: Path) -> None:
