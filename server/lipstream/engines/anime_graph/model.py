@@ -23,6 +23,7 @@ from ...features import MfccConfig
 from ...store import ModelManifest, require_arrays
 from ...timeline import PhonemeSpan
 from ..base import Lookahead, Model, Rung, SynthesisRequest
+from ..damped import omega_for_cutoff
 from .animes import AnimeTable, Curves
 from .basis import MotionBasis
 from .checks import check_stored_model
@@ -40,6 +41,8 @@ REQUIRED_ARRAYS = [
     "feature_offsets", "anime_summary", "cutoffs",
 ]  # fmt: skip
 LADDER_TILES = (10, 4, 2, 1)
+CAUSAL_LEADS_MS = (120.0, 60.0, 30.0, 0.0)
+MIN_CAUSAL_CUTOFF_HZ = 2.0
 
 
 class AnimeGraphModel(Model):
@@ -85,6 +88,7 @@ class AnimeGraphModel(Model):
         self.cutoffs = np.asarray(arrays["cutoffs"], dtype=np.float64)
         self.half_width = round(float(settings["smoothing_window"]) * self.fps)
         self.kernels = lowpass_kernels(self.cutoffs, self.fps, self.half_width)
+        self.causal_omegas = omega_for_cutoff(np.maximum(self.cutoffs, MIN_CAUSAL_CUTOFF_HZ))
 
     @property
     def n_components(self) -> int:
@@ -119,6 +123,8 @@ class AnimeGraphModel(Model):
         the end of the input), or PQ, whose window of h phonemes decides its first
         fragments; the filter's reach only when ``smooth``."""
         parsed = parse_options(options, self.default_graph, self.has_clusters, self.max_tile)
+        if parsed.causal:
+            return Lookahead(seconds=parsed.lead_ms / 1000.0)
         if parsed.search == "pq":
             smoothing = self.half_width if parsed.smooth else 0
             return Lookahead(
@@ -142,8 +148,11 @@ class AnimeGraphModel(Model):
     def fidelity_ladder(self) -> tuple[Rung, ...]:
         """GreedyMatching with ever shorter tiles, the model's ``max_tile`` first (fewest
         jumps), then 10, 4, 2 and 1 phonemes below it; last, one-phoneme tiles without the
-        low-pass filter, which waits H frames. A rung pins ``search`` and ``max_tile`` (and
-        ``smooth`` off on the last), the options its lookahead depends on."""
+        low-pass filter, which waits H frames; below it the causal search following the
+        track 120, 60 and 30 ms ahead, and last the causal floor, which waits for nothing
+        past t. A rung pins ``search`` and ``max_tile`` (``smooth`` off on the unsmoothed
+        one, ``causal`` and ``lead_ms`` on the causal ones), the options its lookahead
+        depends on."""
         tiles = sorted(
             {self.max_tile, *(t for t in LADDER_TILES if t < self.max_tile)}, reverse=True
         )
@@ -163,6 +172,14 @@ class AnimeGraphModel(Model):
                     {"search": "greedy", "max_tile": 1, "smooth": False},
                 )
             )
+        rungs.extend(
+            Rung(
+                "causal" if lead == 0 else f"causal_lead{lead:g}",
+                Lookahead(seconds=lead / 1000.0),
+                {"search": "greedy", "causal": True, "lead_ms": lead},
+            )
+            for lead in CAUSAL_LEADS_MS
+        )
         return tuple(rungs)
 
     def rung_for(self, options: Mapping[str, Any]) -> Rung | None:
