@@ -423,6 +423,7 @@ class Session:
                 where="emotion",
                 code=UNKNOWN_EMOTION,
             )
+        emotion = start.emotion or catalog.default_emotion(model)
         estimate = choose_rung(catalog.ladder(model), start.latency_budget_ms)
         profile = resolve_profile(
             model.channels,
@@ -434,8 +435,8 @@ class Session:
             start.options, estimate.rung.options, budgeted=start.latency_budget_ms is not None
         )
         guard = WorkGuard(self.limits.cpu_budget_s)
-        synthesizer = model.start(SynthesisRequest(start.fps, start.emotion, options, guard))
-        rest = profile.apply(catalog.rest_pose(model, start.emotion)[None])[0]
+        synthesizer = model.start(SynthesisRequest(start.fps, emotion, options, guard))
+        rest = profile.apply(catalog.rest_pose(model, emotion)[None])[0]
         clock = RequestClock(model.manifest.engine, now, start.latency_budget_ms)
         spec = RequestSpec(
             start.id,
@@ -456,7 +457,7 @@ class Session:
             channels=profile.channels,
             lookahead_ms=lookahead,
             fidelity=fidelity,
-            emotion=start.emotion,
+            emotion=emotion,
             latency_budget_ms=start.latency_budget_ms,
             options=options,
             phoneme_source=source,
