@@ -1,0 +1,130 @@
+"""The causal floor and the default emotion, on a real catalog and over a live server."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lipstream.config import ServerSettings
+from lipstream.engines.base import Model, frame_count
+from lipstream.server.budget import choose_rung
+from lipstream.server.catalog import Catalog
+from lipstream.timeline import PhonemeSpan
+from lipstream_client import End, Frames, PhonemeItem, Phonemes, Ready, Start
+from tests.lipstream.server.harness import Served, client, frame_rows, serving
+
+ENGINES = ("viseme-lerp", "anime-graph")
+SPANS = [
+    ("sil", 0.0, 0.05),
+    ("B", 0.05, 0.11),
+    ("AA1", 0.11, 0.3),
+    ("M", 0.3, 0.38),
+    ("sil", 0.38, 0.5),
+]
+ITEMS = tuple(PhonemeItem(label, start, end) for label, start, end in SPANS)
+
+
+@pytest.fixture(scope="module")
+def served(all_models_dir: Path) -> Iterator[Served]:
+    with serving(all_models_dir, ServerSettings()) as running:
+        yield running
+
+
+@pytest.fixture(scope="module")
+def happy_presets(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("presets") / "profiles.json"
+    path.write_text(json.dumps({"demo": {"default_emotion": "happy"}}), encoding="utf-8")
+    return path
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_a_20_ms_budget_takes_the_causal_rung_of_every_engine(
+    catalog: Catalog, engine: str
+) -> None:
+    chosen = choose_rung(catalog.ladder(catalog.model(engine, "demo")), 20.0)
+    assert chosen.rung.name == "causal"
+    assert chosen.lookahead_ms == 0.0
+    assert chosen.worst_case_ms <= 20.0
+
+
+@pytest.mark.parametrize(
+    ("budget", "expected"), [(45.0, "lead30"), (85.0, "lead60"), (150.0, "lead120")]
+)
+def test_budgets_between_the_floor_and_the_best_rung_buy_the_longest_lead_that_fits(
+    catalog: Catalog, budget: float, expected: str
+) -> None:
+    # Each lead rung waits its lead and computes a few milliseconds, well under the gap to
+    # the next lead's wait.
+    for engine in ENGINES:
+        chosen = choose_rung(catalog.ladder(catalog.model(engine, "demo")), budget)
+        assert chosen.rung.name.endswith(expected), (engine, chosen.rung.name)
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_ready_reports_the_causal_rung_and_every_frame_arrives_as_its_span_does(
+    served: Served, engine: str, trained_models: dict[str, Model]
+) -> None:
+    with client(served.ws, "json") as ws:
+        ws.send(Start("r", engine, "demo", fps=60, latency_budget_ms=20))
+        ready = ws.recv()
+        assert isinstance(ready, Ready)
+        assert (ready.fidelity, ready.lookahead_ms) == ("causal", 0.0)
+        received: list = []  # type: ignore[type-arg]
+        for item in ITEMS:
+            ws.send(Phonemes("r", (item,)))
+            # The frames up to the span's end come before anything waits for more input.
+            while len(frame_rows(received)) < frame_count(item.end, 60.0):
+                message = ws.recv()
+                assert isinstance(message, Frames), message
+                received.append(message)
+        ws.send(End("r"))
+        received.extend(ws.until_done("r"))
+    rows = frame_rows(received)
+    assert sorted(rows) == list(range(frame_count(SPANS[-1][2], 60.0)))
+    spans = [PhonemeSpan(label.rstrip("1"), start, end) for label, start, end in SPANS]
+    model = trained_models[engine]
+    options = dict(ready.options)
+    expected = model.synthesize(spans, fps=60, emotion="neutral", **options).frames
+    np.testing.assert_allclose([rows[i] for i in sorted(rows)], expected, atol=1e-6)
+
+
+def test_a_request_without_emotion_gets_neutral(served: Served) -> None:
+    with client(served.ws, "json") as ws:
+        ws.send(Start("r", "anime-graph", "demo", fps=30), End("r"))
+        ready = ws.recv()
+        ws.until_done("r")
+    assert isinstance(ready, Ready) and ready.emotion == "neutral"
+
+
+def test_a_preset_default_emotion_is_used_and_a_stated_one_wins(
+    all_models_dir: Path, happy_presets: Path
+) -> None:
+    with serving(all_models_dir, ServerSettings(profiles=happy_presets)) as running:
+        with client(running.ws, "json") as ws:
+            ws.send(Start("a", "anime-graph", "demo", fps=30), End("a"))
+            unnamed = ws.recv()
+            ws.until_done("a")
+            ws.send(Start("b", "anime-graph", "demo", fps=30, emotion="sad"), End("b"))
+            stated = ws.recv()
+            ws.until_done("b")
+    assert isinstance(unnamed, Ready) and unnamed.emotion == "happy"
+    assert isinstance(stated, Ready) and stated.emotion == "sad"
+
+
+def test_the_default_emotion_searches_only_that_emotions_recordings(
+    trained_models: dict[str, Model],
+) -> None:
+    model = trained_models["anime-graph"]
+    spans = [PhonemeSpan(label.rstrip("1"), start, end) for label, start, end in SPANS]
+    synthesizer = model.start(fps=60)
+    synthesizer.feed(spans)
+    synthesizer.finish()
+    assert synthesizer.stats["view"] == "neutral"
+    np.testing.assert_array_equal(
+        model.synthesize(spans, fps=60).frames,
+        model.synthesize(spans, fps=60, emotion="neutral").frames,
+    )
