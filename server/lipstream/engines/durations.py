@@ -71,6 +71,8 @@ class DurationModel:
         count = reader.integers("duration_count", shape)
         log_mean = reader.floats("duration_log_mean", shape)
         log_std = reader.floats("duration_log_std", shape)
-        if np.any(count < 0) or np.any(log_std < 0):
-            raise reader.error("duration_count", "counts and spreads must not be negative")
+        if np.any(count < 0):
+            raise reader.error("duration_count", "counts must not be negative")
+        if np.any(log_std < 0):
+            raise reader.error("duration_log_std", "spreads must not be negative")
         return cls(count.astype(np.int64), log_mean.astype(np.float64), log_std.astype(np.float64))

@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 
 from lipstream.engines.durations import DurationModel
+from lipstream.errors import ModelStoreError
+from lipstream.model_checks import ArrayReader
 from lipstream.phonemes import PHONEME_INDEX
 from lipstream.timeline import PhonemeSpan
 
@@ -48,6 +50,22 @@ def test_unseen_phonemes_borrow_the_pooled_median() -> None:
 
 def test_the_statistics_survive_the_array_round_trip() -> None:
     model = DurationModel.fit(_alignment(seed=5, utterances=5))
-    again = DurationModel.from_arrays(model.arrays())
+    again = DurationModel.from_arrays(ArrayReader(model.arrays(), "arrays.npz"))
     np.testing.assert_array_equal(again.log_mean, model.log_mean)
     np.testing.assert_array_equal(again.count, model.count)
+
+
+@pytest.mark.parametrize(
+    ("name", "value"),
+    [
+        ("duration_count", np.full(3, 1)),
+        ("duration_log_mean", np.full(len(PHONEME_INDEX), np.nan)),
+        ("duration_log_std", np.full(len(PHONEME_INDEX), -1.0)),
+    ],
+)
+def test_bad_stored_statistics_are_refused_naming_the_array(name: str, value: np.ndarray) -> None:
+    arrays = {**DurationModel.fit(_alignment(seed=5, utterances=5)).arrays(), name: value}
+    with pytest.raises(ModelStoreError) as caught:
+        DurationModel.from_arrays(ArrayReader(arrays, "arrays.npz"))
+    assert caught.value.code == "model_invalid"
+    assert caught.value.where.startswith("arrays.npz: duration_")

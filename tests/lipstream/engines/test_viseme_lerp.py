@@ -186,3 +186,23 @@ def test_bad_damped_options_get_a_coded_error(
     with pytest.raises(InvalidRequestError) as caught:
         model.start(fps=FPS, **options)
     assert caught.value.code == "invalid_request" and caught.value.where == where
+
+
+@pytest.mark.parametrize(
+    ("name", "value"),
+    [
+        ("lead_ms", np.array([120.0, 60.0, -5.0, 0.0])),
+        ("kappa", np.array([2.0, 0.0, 1.0, 1.0])),
+        ("kappa", np.array([2.0])),
+        ("duration_log_mean", np.array([0.1])),
+    ],
+)
+def test_bad_damped_rung_arrays_are_refused_naming_the_array(
+    corpus: Corpus, tmp_path: Path, name: str, value: np.ndarray
+) -> None:
+    model = VisemeLerpEngine().fit(corpus)
+    save_model_dir(tmp_path, model.manifest, {**model.arrays(), name: value})
+    with pytest.raises(ModelStoreError) as caught:
+        load_model(tmp_path)
+    assert caught.value.code == "model_invalid"
+    assert caught.value.where == f"{tmp_path}/arrays.npz: {name}"
