@@ -90,13 +90,23 @@ def test_catalog_resolves_models_and_names_the_missing_field(catalog: Catalog) -
 # unsmoothed), 32.5 ms for the audio (two 10 ms MFCC steps and half a 25 ms window), and
 # max_tile phonemes: 10 -> 2140.833, 4 -> 940.833, 2 -> 540.833, 1 -> 340.833.
 DEMO_LOOKAHEAD_MS = {
-    "viseme-lerp": {"default": 200.0},
+    "viseme-lerp": {
+        "lerp": 200.0,
+        "damped_lead120": 120.0,
+        "damped_lead60": 60.0,
+        "damped_lead30": 30.0,
+        "causal": 0.0,
+    },
     "anime-graph": {
         "greedy_tile10": 2140.833,
         "greedy_tile4": 940.833,
         "greedy_tile2": 540.833,
         "greedy_tile1": 340.833,
         "greedy_tile1_unsmoothed": 240.833,
+        "causal_lead120": 120.0,
+        "causal_lead60": 60.0,
+        "causal_lead30": 30.0,
+        "causal": 0.0,
     },
 }
 
