@@ -128,3 +128,22 @@ def test_the_default_emotion_searches_only_that_emotions_recordings(
         model.synthesize(spans, fps=60).frames,
         model.synthesize(spans, fps=60, emotion="neutral").frames,
     )
+
+
+def test_a_budget_that_takes_a_causal_rung_overrides_a_clients_tile_cap(served: Served) -> None:
+    with client(served.ws, "json") as ws:
+        ws.send(
+            Start(
+                "r", "anime-graph", "demo", fps=60, latency_budget_ms=150, options={"max_tile": 4}
+            ),
+            Phonemes("r", ITEMS),
+            End("r"),
+        )
+        ready = ws.recv()
+        messages = ws.until_done("r")
+    assert isinstance(ready, Ready) and ready.fidelity == "causal_lead120"
+    assert ready.lookahead_ms == 120.0
+    assert dict(ready.options) == {
+        "max_tile": 1, "search": "greedy", "causal": True, "lead_ms": 120.0,
+    }  # fmt: skip
+    assert len(frame_rows(messages)) == frame_count(SPANS[-1][2], 60.0)

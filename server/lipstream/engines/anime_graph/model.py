@@ -151,8 +151,8 @@ class AnimeGraphModel(Model):
         low-pass filter, which waits H frames; below it the causal search following the
         track 120, 60 and 30 ms ahead, and last the causal floor, which waits for nothing
         past t. A rung pins ``search`` and ``max_tile`` (``smooth`` off on the unsmoothed
-        one, ``causal`` and ``lead_ms`` on the causal ones), the options its lookahead
-        depends on."""
+        one, ``causal``, ``lead_ms`` and ``max_tile`` 1 on the causal ones, so a client's
+        ``max_tile`` cannot clash with them), the options its lookahead depends on."""
         tiles = sorted(
             {self.max_tile, *(t for t in LADDER_TILES if t < self.max_tile)}, reverse=True
         )
@@ -176,7 +176,7 @@ class AnimeGraphModel(Model):
             Rung(
                 "causal" if lead == 0 else f"causal_lead{lead:g}",
                 Lookahead(seconds=lead / 1000.0),
-                {"search": "greedy", "causal": True, "lead_ms": lead},
+                {"search": "greedy", "max_tile": 1, "causal": True, "lead_ms": lead},
             )
             for lead in CAUSAL_LEADS_MS
         )

@@ -26,11 +26,23 @@ CAUSAL = [
     Rung(
         "causal_lead120",
         Lookahead(0.12),
-        {"search": "greedy", "causal": True, "lead_ms": 120.0},
+        {"search": "greedy", "max_tile": 1, "causal": True, "lead_ms": 120.0},
     ),
-    Rung("causal_lead60", Lookahead(0.06), {"search": "greedy", "causal": True, "lead_ms": 60.0}),
-    Rung("causal_lead30", Lookahead(0.03), {"search": "greedy", "causal": True, "lead_ms": 30.0}),
-    Rung("causal", Lookahead(0.0), {"search": "greedy", "causal": True, "lead_ms": 0.0}),
+    Rung(
+        "causal_lead60",
+        Lookahead(0.06),
+        {"search": "greedy", "max_tile": 1, "causal": True, "lead_ms": 60.0},
+    ),
+    Rung(
+        "causal_lead30",
+        Lookahead(0.03),
+        {"search": "greedy", "max_tile": 1, "causal": True, "lead_ms": 30.0},
+    ),
+    Rung(
+        "causal",
+        Lookahead(0.0),
+        {"search": "greedy", "max_tile": 1, "causal": True, "lead_ms": 0.0},
+    ),
 ]
 CAUSAL_NAMES = [rung.name for rung in CAUSAL]
 
