@@ -61,6 +61,13 @@ class DurationModel:
         """The median duration (s) of every phoneme, ``PHONEMES`` order, (n_phonemes,)."""
         return np.asarray(np.exp(self.log_mean))
 
+    def pooled_median_s(self) -> float:
+        """The median duration (s) of every span seen, pooled over the phonemes."""
+        weights = self.count.astype(np.float64)
+        if weights.sum() == 0:
+            return float(np.exp(self.log_mean.mean()))
+        return float(np.exp(np.sum(weights * self.log_mean) / weights.sum()))
+
     def arrays(self) -> dict[str, np.ndarray]:
         return dict(zip(ARRAY_NAMES, (self.count, self.log_mean, self.log_std)))
 

@@ -7,11 +7,16 @@ channels are interpolated linearly between consecutive centres, holding the
 first and last keys flat. Every other engine is measured against this one.
 
 Fidelity ladder: the interpolation waits for the centre of the next span.
-Below it, ``mode: damped`` rungs follow the key pose of the span at t + lead
+Below it, ``mode: damped`` rungs follow the key pose of the span at t + shift
 with a critically damped filter (``damped``), each phoneme's rate
 ω = κ / its median duration (``durations``), so a short closure is reached
-within its span; the frame at t is final once the input covers t + lead.
-The leads are ``LEADS_MS`` (0 is the causal floor); κ of each lead is the
+within its span. The shift makes up the filter's lag (2 / ω at low
+frequencies, taken at the pooled median duration) as far as the rung's lead
+allows: shift = min(lead, 2 d / κ), never more, since a target moved ahead of
+its phoneme skips short closures. The frame at t is final once the input
+covers t + shift.
+The rungs' leads are ``LEADS_MS``: ``damped_lead`` (at most 120 ms) and
+``causal`` (0, the floor); κ of each is the
 value of ``KAPPAS`` with the least squared error on every ``VALIDATION_STEP``th
 training utterance (at most ``MAX_VALIDATION`` of them), stored in the model.
 """
@@ -37,7 +42,7 @@ from .damped_synthesis import DampedTargets, DampedTimelineSynthesizer
 from .durations import DurationModel
 
 MODES = ("lerp", "damped")
-LEADS_MS = (120.0, 60.0, 30.0, 0.0)
+LEADS_MS = (120.0, 0.0)
 KAPPAS = (1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0)
 MAX_LEAD_MS = 1000.0
 VALIDATION_STEP = 4
@@ -76,14 +81,15 @@ class VisemeLerpModel(Model):
 
     def lookahead_for(self, options: Mapping[str, Any]) -> Lookahead | None:
         mode, lead_ms = _parse_options(options)
-        return self.lookahead if mode == "lerp" else Lookahead(seconds=lead_ms / 1000.0)
+        return self.lookahead if mode == "lerp" else Lookahead(seconds=self.shift_s(lead_ms))
 
     def fidelity_ladder(self) -> tuple[Rung, ...]:
-        """Interpolation first, then the damped rungs by falling lead; the last is causal."""
+        """Interpolation first, then the damped rung that makes up its lag, then the causal
+        one."""
         damped = tuple(
             Rung(
-                "causal" if lead == 0 else f"damped_lead{lead:g}",
-                Lookahead(seconds=lead / 1000.0),
+                "causal" if lead == 0 else "damped_lead",
+                Lookahead(seconds=self.shift_s(lead)),
                 {"mode": "damped", "lead_ms": lead},
             )
             for lead in self.leads_ms.tolist()
@@ -105,12 +111,18 @@ class VisemeLerpModel(Model):
         """The fitted κ of the nearest fitted lead."""
         return float(self.kappas[int(np.argmin(np.abs(self.leads_ms - lead_ms)))])
 
+    def shift_s(self, lead_ms: float, kappa: float | None = None) -> float:
+        """How far ahead (s) a damped rung with ``lead_ms`` follows the targets: the filter's
+        lag at the pooled median duration, at most the lead."""
+        rate = self.kappa_for(lead_ms) if kappa is None else kappa
+        return min(lead_ms / 1000.0, 2.0 * self.durations.pooled_median_s() / rate)
+
     def damped_targets(self, lead_ms: float, kappa: float | None = None) -> DampedTargets:
         """The damped rung's targets: each phoneme's key pose, at rate κ / median duration."""
         rate = self.kappa_for(lead_ms) if kappa is None else kappa
         omegas = rate / self.durations.expected_all_s()
         return DampedTargets(
-            self.poses[self._pose_rows].astype(np.float64), omegas, lead_ms / 1000.0
+            self.poses[self._pose_rows].astype(np.float64), omegas, self.shift_s(lead_ms, rate)
         )
 
     def synthesizer(self, request: SynthesisRequest) -> Synthesizer:

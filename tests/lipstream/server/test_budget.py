@@ -92,9 +92,6 @@ def test_catalog_resolves_models_and_names_the_missing_field(catalog: Catalog) -
 DEMO_LOOKAHEAD_MS = {
     "viseme-lerp": {
         "lerp": 200.0,
-        "damped_lead120": 120.0,
-        "damped_lead60": 60.0,
-        "damped_lead30": 30.0,
         "causal": 0.0,
     },
     "anime-graph": {
@@ -103,9 +100,6 @@ DEMO_LOOKAHEAD_MS = {
         "greedy_tile2": 540.833,
         "greedy_tile1": 340.833,
         "greedy_tile1_unsmoothed": 240.833,
-        "causal_lead120": 120.0,
-        "causal_lead60": 60.0,
-        "causal_lead30": 30.0,
         "causal": 0.0,
     },
 }
@@ -117,7 +111,11 @@ def test_catalog_ladder_follows_each_models_declared_rungs(catalog: Catalog) -> 
         rungs = catalog.ladder(model)
         assert [estimate.rung for estimate in rungs] == list(model.fidelity_ladder())
         expected = DEMO_LOOKAHEAD_MS[model.manifest.engine]
-        assert {e.rung.name: e.lookahead_ms for e in rungs} == pytest.approx(expected, abs=1e-3)
+        waits = {e.rung.name: e.lookahead_ms for e in rungs}
+        # The lead rung waits its filter's lag, a trained figure, of at most 120 ms.
+        lead = waits.pop(rungs[-2].rung.name)
+        assert rungs[-2].rung.name.endswith("_lead") and 0.0 < lead <= 120.0
+        assert waits == pytest.approx(expected, abs=1e-3)
         for estimate_ in rungs:
             assert estimate_.compute_ms >= catalog.settings.compute_margin_ms
 

@@ -41,7 +41,7 @@ REQUIRED_ARRAYS = [
     "feature_offsets", "anime_summary", "cutoffs",
 ]  # fmt: skip
 LADDER_TILES = (10, 4, 2, 1)
-CAUSAL_LEADS_MS = (120.0, 60.0, 30.0, 0.0)
+CAUSAL_LEADS_MS = (120.0, 0.0)
 MIN_CAUSAL_CUTOFF_HZ = 2.0
 
 
@@ -124,7 +124,7 @@ class AnimeGraphModel(Model):
         fragments; the filter's reach only when ``smooth``."""
         parsed = parse_options(options, self.default_graph, self.has_clusters, self.max_tile)
         if parsed.causal:
-            return Lookahead(seconds=parsed.lead_ms / 1000.0)
+            return Lookahead(seconds=self.causal_shift_s(parsed.lead_ms))
         if parsed.search == "pq":
             smoothing = self.half_width if parsed.smooth else 0
             return Lookahead(
@@ -145,14 +145,20 @@ class AnimeGraphModel(Model):
             return 0.0
         return 2.0 / self.mfcc.rate + self.mfcc.window_s / 2.0
 
+    def causal_shift_s(self, lead_ms: float) -> float:
+        """How far ahead (s) the causal search's filter follows the track: its lag at low
+        frequencies (2 / ω) for the first, most varied, PCA component, at most the lead."""
+        return min(lead_ms / 1000.0, 2.0 / float(self.causal_omegas[0]))
+
     def fidelity_ladder(self) -> tuple[Rung, ...]:
         """GreedyMatching with ever shorter tiles, the model's ``max_tile`` first (fewest
         jumps), then 10, 4, 2 and 1 phonemes below it; last, one-phoneme tiles without the
         low-pass filter, which waits H frames; below it the causal search following the
-        track 120, 60 and 30 ms ahead, and last the causal floor, which waits for nothing
-        past t. A rung pins ``search`` and ``max_tile`` (``smooth`` off on the unsmoothed
-        one, ``causal``, ``lead_ms`` and ``max_tile`` 1 on the causal ones, so a client's
-        ``max_tile`` cannot clash with them), the options its lookahead depends on."""
+        track as far ahead as its filter lags (at most 120 ms), and last the causal floor,
+        which waits for nothing past t. A rung pins ``search`` and ``max_tile``
+        (``smooth`` off on the unsmoothed one, ``causal``, ``lead_ms`` and ``max_tile`` 1 on
+        the causal ones, so a client's ``max_tile`` cannot clash with them), the options its
+        lookahead depends on."""
         tiles = sorted(
             {self.max_tile, *(t for t in LADDER_TILES if t < self.max_tile)}, reverse=True
         )
@@ -174,8 +180,8 @@ class AnimeGraphModel(Model):
             )
         rungs.extend(
             Rung(
-                "causal" if lead == 0 else f"causal_lead{lead:g}",
-                Lookahead(seconds=lead / 1000.0),
+                "causal" if lead == 0 else "causal_lead",
+                Lookahead(seconds=self.causal_shift_s(lead)),
                 {"search": "greedy", "max_tile": 1, "causal": True, "lead_ms": lead},
             )
             for lead in CAUSAL_LEADS_MS

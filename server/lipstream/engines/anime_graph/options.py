@@ -15,8 +15,9 @@ exponentially with its window, so a request may hold at most
 ``MAX_PQ_STEPS`` // ``pq_window`` phonemes (``search_too_large`` beyond).
 ``causal`` (default off) selects the causal search: one-phoneme greedy tiles
 committed as their span arrives, forward joins, no audio, and a critically
-damped filter following the track ``lead_ms`` (0-1000, default 0) ahead, so
-a frame waits for the input to cover t + lead only; it takes no ``search``
+damped filter following the track ahead by its own lag, at most ``lead_ms``
+(0-1000, default 0), so a frame waits for the input to cover t + that shift
+only; it takes no ``search``
 but greedy and no ``max_tile`` but 1.
 """
 

@@ -30,8 +30,10 @@ no audio (linear warps); forward joins (``blending``), so the track is final
 up to the end of the last decided span; and instead of the zero-phase
 low-pass, a critically damped filter per PCA component (``damped``, rate
 from the component's learned cutoff) steps from frame to frame toward the
-track at t + lead, evaluated at the output frame times themselves. So the
-frame at t is final once the input covers t + lead.
+track at t + shift, evaluated at the output frame times themselves; the
+shift makes up the filter's lag as far as ``lead_ms`` allows
+(``AnimeGraphModel.causal_shift_s``). So the frame at t is final once the
+input covers t + shift.
 """
 
 from __future__ import annotations
@@ -115,7 +117,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         self.emitted = 0
         self.finished = False
         self.damped: DampedState | None = None
-        self.lead_s = options.lead_ms / 1000.0
+        self.lead_s = model.causal_shift_s(options.lead_ms)
         self.guard = request.guard
         self.search_guard = WorkGuard(options.pq_budget_s, time.perf_counter, _search_timeout)
         self.stats: dict[str, Any] = {

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from itertools import pairwise
 
 import numpy as np
@@ -22,29 +23,19 @@ from tests.lipstream.engines.anime_graph.anime_synthetic import (
 FPS = 120.0  # the corpus's rate, so output frames sit on the model grid
 OFF_GRID_FPS = 97.0  # frames between model samples, which interpolation waits one more for
 H = 12  # smoothing half-width in model frames: round(0.1 s * 120 fps)
-CAUSAL = [
-    Rung(
-        "causal_lead120",
-        Lookahead(0.12),
-        {"search": "greedy", "max_tile": 1, "causal": True, "lead_ms": 120.0},
-    ),
-    Rung(
-        "causal_lead60",
-        Lookahead(0.06),
-        {"search": "greedy", "max_tile": 1, "causal": True, "lead_ms": 60.0},
-    ),
-    Rung(
-        "causal_lead30",
-        Lookahead(0.03),
-        {"search": "greedy", "max_tile": 1, "causal": True, "lead_ms": 30.0},
-    ),
-    Rung(
-        "causal",
-        Lookahead(0.0),
-        {"search": "greedy", "max_tile": 1, "causal": True, "lead_ms": 0.0},
-    ),
-]
-CAUSAL_NAMES = [rung.name for rung in CAUSAL]
+CAUSAL_OPTIONS = {"search": "greedy", "max_tile": 1, "causal": True}
+CAUSAL_NAMES = ["causal_lead", "causal"]
+
+
+def causal_rungs(model: AnimeGraphModel) -> list[Rung]:
+    """The causal rungs, their lead worked out by hand: the damped filter's lag 2 / omega
+    for the first PCA component, omega = 2 pi f / sqrt(sqrt(2) - 1) with f its learned
+    cutoff (at least 2 Hz), at most 120 ms."""
+    omega = 2 * math.pi * max(float(model.cutoffs[0]), 2.0) / math.sqrt(math.sqrt(2) - 1)
+    return [
+        Rung("causal_lead", Lookahead(min(0.12, 2 / omega)), {**CAUSAL_OPTIONS, "lead_ms": 120.0}),
+        Rung("causal", Lookahead(0.0), {**CAUSAL_OPTIONS, "lead_ms": 0.0}),
+    ]
 
 
 @pytest.fixture(scope="module")
@@ -72,7 +63,7 @@ def test_the_ladder_shortens_tiles_then_drops_smoothing(model: AnimeGraphModel) 
             Lookahead(raw, 1),
             {"search": "greedy", "max_tile": 1, "smooth": False},
         ),
-        *CAUSAL,
+        *causal_rungs(model),
     )
 
 
@@ -114,7 +105,7 @@ def test_the_top_rung_is_the_models_own_tile_cap(max_tile: int, expected: list[s
     )
     ladder = lean.fidelity_ladder()
     assert [rung.name for rung in ladder] == expected  # no smoothing: no unsmoothed rung
-    greedy = ladder[: -len(CAUSAL)]
+    greedy = ladder[: -len(CAUSAL_NAMES)]
     assert all(rung.lookahead.seconds == 1 / lean.fps for rung in greedy)
 
 
@@ -134,7 +125,7 @@ def _stream_one_by_one(
 
 @pytest.mark.parametrize("fps", [FPS, OFF_GRID_FPS])
 @pytest.mark.parametrize("graph", ["unclustered", "clustered"])
-@pytest.mark.parametrize("rung_index", range(5 + len(CAUSAL)))
+@pytest.mark.parametrize("rung_index", range(5 + len(CAUSAL_NAMES)))
 def test_a_rung_emits_every_frame_its_lookahead_promises(
     model: AnimeGraphModel, graph: str, rung_index: int, fps: float
 ) -> None:
@@ -192,7 +183,7 @@ def test_the_synthesizer_takes_max_tile_and_smoothing_from_the_request(
     model: AnimeGraphModel,
 ) -> None:
     spans = make_spans(np.random.default_rng(7), 20)
-    for rung in model.fidelity_ladder()[: -len(CAUSAL)]:
+    for rung in model.fidelity_ladder()[: -len(CAUSAL_NAMES)]:
         synthesizer = model.start(fps=FPS, **rung.options)
         assert synthesizer.options.max_tile == rung.options["max_tile"]
         assert synthesizer.half_width == (H if rung.options.get("smooth", True) else 0)
@@ -200,7 +191,7 @@ def test_the_synthesizer_takes_max_tile_and_smoothing_from_the_request(
         synthesizer.finish()
         tile = rung.options["max_tile"]
         assert synthesizer.stats["tiles"] >= -(-len(synthesizer.nodes) // tile)
-    for rung in CAUSAL:
+    for rung in causal_rungs(model):
         causal = model.start(fps=FPS, **rung.options)
         assert causal.options.max_tile == 1
         causal.feed(spans)
