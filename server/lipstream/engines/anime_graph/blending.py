@@ -16,10 +16,11 @@ Sketch, for a jump from anime A_i (p frames) to A_i+1 (q frames):
 Written as corrections added to each fragment, a fragment between two jumps
 takes both, each vanishing at the fragment's far end.
 
-*Forward (causal rungs).* The join looks at nothing after the jump: across
-A_i+1's span only, the recording that follows A_i is blended out, its weight
-falling 1 -> 0, so the motion is continuous at the join and A_i's own span
-never changes once it is decided.
+*Forward (causal rungs).* The join looks at nothing after the jump: over the
+first half of A_i+1's span only, the recording that follows A_i is blended
+out, its weight falling 1 -> 0, so the motion is continuous at the join, a
+short span still reaches its own fragment's pose, and A_i's own span never
+changes once it is decided.
 """
 
 from __future__ import annotations

@@ -43,6 +43,9 @@ REQUIRED_ARRAYS = [
 LADDER_TILES = (10, 4, 2, 1)
 CAUSAL_LEADS_MS = (120.0, 0.0)
 MIN_CAUSAL_CUTOFF_HZ = 2.0
+CAUSAL_CUTOFF_FACTOR = 2.0
+"""The causal filter's -3 dB point over the learned cutoff: a second-order filter already
+damps below its -3 dB point, and at twice the cutoff it keeps 90% of the gain there."""
 
 
 class AnimeGraphModel(Model):
@@ -88,7 +91,9 @@ class AnimeGraphModel(Model):
         self.cutoffs = np.asarray(arrays["cutoffs"], dtype=np.float64)
         self.half_width = round(float(settings["smoothing_window"]) * self.fps)
         self.kernels = lowpass_kernels(self.cutoffs, self.fps, self.half_width)
-        self.causal_omegas = omega_for_cutoff(np.maximum(self.cutoffs, MIN_CAUSAL_CUTOFF_HZ))
+        self.causal_omegas = omega_for_cutoff(
+            CAUSAL_CUTOFF_FACTOR * np.maximum(self.cutoffs, MIN_CAUSAL_CUTOFF_HZ)
+        )
 
     @property
     def n_components(self) -> int:

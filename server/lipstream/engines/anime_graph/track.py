@@ -28,6 +28,9 @@ from .warp import Warp
 
 _NO_CORRECTION, _PAIR, _EXTEND, _FORWARD = 0, 1, 2, 3
 _KIND_CODES = {JoinKind.PAIR: _PAIR, JoinKind.EXTEND: _EXTEND, JoinKind.FORWARD: _FORWARD}
+FORWARD_BLEND_SHARE = 0.5
+"""A forward join blends the previous recording out over this share of the next span, so a
+short span (a closure) still reaches its own fragment's pose."""
 
 
 @dataclass(frozen=True)
@@ -187,7 +190,7 @@ def _correction(
     if kind == _FORWARD:
         before = animes[index - 1]
         return (
-            1.0 - (time - start) / (end - start),
+            1.0 - (time - start) / (FORWARD_BLEND_SHARE * (end - start)),
             before,
             anime_end[before] + time - ends[index - 1],
         )

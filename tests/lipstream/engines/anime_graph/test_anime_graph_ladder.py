@@ -29,9 +29,10 @@ CAUSAL_NAMES = ["causal_lead", "causal"]
 
 def causal_rungs(model: AnimeGraphModel) -> list[Rung]:
     """The causal rungs, their lead worked out by hand: the damped filter's lag 2 / omega
-    for the first PCA component, omega = 2 pi f / sqrt(sqrt(2) - 1) with f its learned
-    cutoff (at least 2 Hz), at most 120 ms."""
-    omega = 2 * math.pi * max(float(model.cutoffs[0]), 2.0) / math.sqrt(math.sqrt(2) - 1)
+    for the first PCA component, omega = 2 pi f / sqrt(sqrt(2) - 1) with f twice its
+    learned cutoff (at least 2 Hz), at most 120 ms."""
+    cutoff = 2.0 * max(float(model.cutoffs[0]), 2.0)
+    omega = 2 * math.pi * cutoff / math.sqrt(math.sqrt(2) - 1)
     return [
         Rung("causal_lead", Lookahead(min(0.12, 2 / omega)), {**CAUSAL_OPTIONS, "lead_ms": 120.0}),
         Rung("causal", Lookahead(0.0), {**CAUSAL_OPTIONS, "lead_ms": 0.0}),
