@@ -17,8 +17,8 @@ best first, each with the engine options that select it and the
 ``Lookahead`` those options need; a server takes the best rung that fits a
 latency budget. The last rung is causal: its lookahead is zero (no
 phonemes, no seconds, at most a few milliseconds of audio window), so the
-frame for t is final once the input covers t. Rungs between wait a fixed
-time (for example 120, 60 and 30 ms) rather than whole phonemes.
+frame for t is final once the input covers t. Rungs between may wait a fixed
+time (a lead) rather than whole phonemes.
 
 Options: a model declares the engine options it takes in ``option_names``;
 ``start`` refuses any other name through ``check_options`` (one coded
