@@ -469,9 +469,11 @@ class Session:
         self, model: Model, estimate: RungEstimate, options: Mapping[str, JsonValue]
     ) -> tuple[str, float]:
         """The rung's name and lookahead (ms), or, when the client's options change one the
-        rung pins (possible without a budget), ``custom`` and the lookahead of those options
-        (a frame that may wait for the end of the input: the longest request)."""
-        if all(
+        rung pins or select another rung (possible without a budget: say ``causal: true``),
+        ``custom`` and the lookahead of those options (a frame that may wait for the end of
+        the input: the longest request)."""
+        resolved = model.rung_for(options)
+        if (resolved is None or resolved.name == estimate.rung.name) and all(
             options.get(key) == _json_value(value) for key, value in estimate.rung.options.items()
         ):
             return estimate.rung.name, estimate.lookahead_ms

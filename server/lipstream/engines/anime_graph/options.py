@@ -17,8 +17,8 @@ exponentially with its window, so a request may hold at most
 committed as their span arrives, forward joins, no audio, and a critically
 damped filter following the track ahead by its own lag, at most ``lead_ms``
 (0-1000, default 0), so a frame waits for the input to cover t + that shift
-only; it takes no ``search``
-but greedy and no ``max_tile`` but 1.
+only; it takes no ``search`` but greedy, and its tiles are one phoneme
+whatever ``max_tile`` says.
 """
 
 from __future__ import annotations
@@ -125,7 +125,7 @@ def parse_options(
         lead_ms=_lead(options, causal),
     )
     if causal:
-        _check_causal(options, parsed)
+        _check_causal(parsed)
         return replace(parsed, max_tile=1)
     return parsed
 
@@ -145,15 +145,10 @@ def _lead(options: Mapping[str, Any], causal: bool) -> float:
     return float(value)
 
 
-def _check_causal(options: Mapping[str, Any], parsed: SearchOptions) -> None:
+def _check_causal(parsed: SearchOptions) -> None:
     if parsed.search != "greedy":
         raise InvalidRequestError(
             "causal takes search greedy (PQ-Matching looks ahead)", where="options.search"
-        )
-    if "max_tile" in options and options["max_tile"] != 1:
-        raise InvalidRequestError(
-            "causal commits one-phoneme tiles: max_tile must be 1 or left out",
-            where="options.max_tile",
         )
 
 

@@ -192,6 +192,7 @@ def test_the_synthesizer_takes_max_tile_and_smoothing_from_the_request(
         synthesizer.finish()
         tile = rung.options["max_tile"]
         assert synthesizer.stats["tiles"] >= -(-len(synthesizer.nodes) // tile)
+    assert model.start(fps=FPS, causal=True, max_tile=4).options.max_tile == 1
     for rung in causal_rungs(model):
         causal = model.start(fps=FPS, **rung.options)
         assert causal.options.max_tile == 1
@@ -272,7 +273,6 @@ def test_an_uncapped_tile_has_no_bounded_lookahead(model: AnimeGraphModel) -> No
     ("options", "where"),
     [
         ({"causal": True, "search": "pq"}, "options.search"),
-        ({"causal": True, "max_tile": 4}, "options.max_tile"),
         ({"causal": True, "lead_ms": 2000}, "options.lead_ms"),
         ({"lead_ms": 30}, "options.lead_ms"),
         ({"causal": "yes"}, "options.causal"),
