@@ -183,6 +183,7 @@ def _retarget(args: argparse.Namespace, settings: Settings) -> None:
 
 def _bench(args: argparse.Namespace, settings: Settings) -> None:
     from .bench.harness import format_engine_benches, format_table, run_bench, write_results
+    from .bench.rungs import format_rungs
     from .corpus import load_corpus
     from .training import DEMO_CORPUS_DIR, build_demo
 
@@ -197,6 +198,8 @@ def _bench(args: argparse.Namespace, settings: Settings) -> None:
         print(json.dumps(results, indent=2))
     else:
         print(format_table(results))
+        print()
+        print(format_rungs(results["rungs"]))
         print(format_engine_benches(results))
 
 

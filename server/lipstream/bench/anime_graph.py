@@ -35,8 +35,9 @@ from ..engines.anime_graph.pq import SearchTimeout
 from ..engines.anime_graph.synthesizer import AnimeGraphSynthesizer
 from ..engines.viseme_lerp import VisemeLerpEngine
 from ..errors import InvalidRequestError
-from ..evaluation import closure_counts, closure_threshold, lip_aperture, rms_error
+from ..evaluation import rms_error
 from ..timeline import PhonemeSpan
+from .closure import closure_rate, learned_threshold
 
 PAPER_LENGTHS = (22, 38, 37)
 SPEED_FPS = 60.0
@@ -350,27 +351,9 @@ def speed(model: AnimeGraphModel, heldout: Corpus, repeats: int = 30) -> dict[st
     return figures
 
 
-def _closure_rate(
-    predictions: list[np.ndarray], heldout: Corpus, threshold: float | None
-) -> float | None:
-    if threshold is None:
-        return None
-    closed = total = 0
-    for frames, utterance in zip(predictions, heldout.utterances):
-        aperture = lip_aperture(frames, heldout.channels)
-        if aperture is None:
-            return None
-        got, count = closure_counts(aperture, utterance.phones, heldout.fps, threshold)
-        closed, total = closed + got, total + count
-    return closed / total if total else None
-
-
 def quality(model: AnimeGraphModel, train: Corpus, heldout: Corpus) -> dict[str, Any]:
     """RMS and /p b m/ closure of greedy (each graph) and of ``viseme-lerp``."""
-    apertures = [(lip_aperture(u.frames, train.channels), u.phones) for u in train.utterances]
-    threshold = None
-    if all(aperture is not None for aperture, _ in apertures):
-        threshold = closure_threshold([(a, p) for a, p in apertures if a is not None], train.fps)
+    threshold = learned_threshold(train)
     baseline = VisemeLerpEngine().fit(train)
     runs: dict[str, list[np.ndarray]] = {
         "viseme-lerp": [
@@ -390,9 +373,9 @@ def quality(model: AnimeGraphModel, train: Corpus, heldout: Corpus) -> dict[str,
             "rms": float(
                 np.mean([rms_error(p, u.frames) for p, u in zip(predictions, heldout.utterances)])
             ),
-            "closure_rate": _closure_rate(predictions, heldout, threshold),
+            "closure_rate": closure_rate(predictions, heldout, threshold),
         }
-    figures["recorded_closure_rate"] = _closure_rate(
+    figures["recorded_closure_rate"] = closure_rate(
         [u.frames for u in heldout.utterances], heldout, threshold
     )
     return figures

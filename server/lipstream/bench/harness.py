@@ -5,7 +5,8 @@ held-out utterance from its recorded phone spans, and compare with the
 recording: RMS error over all channels, and the share of /p b m/ spans whose
 lips close (``lipstream.evaluation``). Speed is the synthesis time per
 phoneme and the real-time factor (synthesis time / utterance duration) at
-60 fps. Each figure is also given as a ratio to the baseline. Requests carry
+60 fps. Each figure is also given as a ratio to the baseline. Then every rung
+of every engine's ladder is measured the same way (``rungs``). Requests carry
 the utterance's emotion (and its audio, for engines that use audio), as a
 chat-avatar backend's requests would. Everything runs on one BLAS thread.
 
@@ -33,8 +34,10 @@ from .._version import __version__
 from ..corpus import Corpus
 from ..engines import engine_names
 from ..engines.base import Model
-from ..evaluation import closure_counts, closure_threshold, lip_aperture, rms_error
+from ..evaluation import rms_error
 from ..training import train_engine
+from .closure import closure_rate, learned_threshold
+from .rungs import RungRow, rung_rows
 
 BASELINE = "viseme-lerp"
 SPEED_FPS = 60.0
@@ -62,20 +65,6 @@ class EngineRow:
     closure_ratio: float | None = 1.0
 
 
-def _closure_rate(
-    frames: list[np.ndarray], corpus: Corpus, threshold: float | None
-) -> float | None:
-    if threshold is None:
-        return None
-    closed = total = 0
-    for predicted, utterance in zip(frames, corpus.utterances):
-        aperture = lip_aperture(predicted, corpus.channels)
-        assert aperture is not None
-        got, count = closure_counts(aperture, utterance.phones, corpus.fps, threshold)
-        closed, total = closed + got, total + count
-    return closed / total if total else None
-
-
 def _time_synthesis(model: Model, heldout: Corpus) -> tuple[float, float]:
     """(ms per phoneme, real-time factor) at ``SPEED_FPS``."""
     elapsed = 0.0
@@ -89,8 +78,7 @@ def _time_synthesis(model: Model, heldout: Corpus) -> tuple[float, float]:
     return 1000.0 * elapsed / phonemes, elapsed / duration
 
 
-def bench_engine(engine: str, train: Corpus, heldout: Corpus, threshold: float | None) -> EngineRow:
-    model = train_engine(train, engine)
+def bench_engine(model: Model, heldout: Corpus, threshold: float | None) -> EngineRow:
     predictions = []
     for utterance in heldout.utterances:
         audio = utterance.audio if model.uses_audio else None
@@ -101,12 +89,12 @@ def bench_engine(engine: str, train: Corpus, heldout: Corpus, threshold: float |
     errors = [rms_error(p, u.frames) for p, u in zip(predictions, heldout.utterances)]
     ms_per_phoneme, rtf = _time_synthesis(model, heldout)
     return EngineRow(
-        engine=engine,
+        engine=model.manifest.engine,
         train_seconds=float(model.manifest.metrics["train_seconds"]),
         ms_per_phoneme=ms_per_phoneme,
         real_time_factor=rtf,
         rms_error=float(np.mean(errors)),
-        closure_rate=_closure_rate(predictions, heldout, threshold),
+        closure_rate=closure_rate(predictions, heldout, threshold),
     )
 
 
@@ -127,15 +115,8 @@ def _with_ratios(rows: list[EngineRow]) -> list[EngineRow]:
 
 
 def _recorded_reference(heldout: Corpus, threshold: float | None) -> dict[str, Any]:
-    rate = _closure_rate([u.frames for u in heldout.utterances], heldout, threshold)
+    rate = closure_rate([u.frames for u in heldout.utterances], heldout, threshold)
     return {"closure_rate": rate, "closure_threshold": threshold}
-
-
-def _threshold(train: Corpus) -> float | None:
-    apertures = [(lip_aperture(u.frames, train.channels), u.phones) for u in train.utterances]
-    if apertures[0][0] is None:
-        return None
-    return closure_threshold([(a, p) for a, p in apertures if a is not None], train.fps)
 
 
 def _resolve(target: str) -> Any:
@@ -162,12 +143,16 @@ def run_bench(
 ) -> dict[str, Any]:
     """Benchmark ``engines`` (default: all registered) on ``corpus``'s held-out split."""
     train, heldout = corpus.split()
-    threshold = _threshold(train)
+    threshold = learned_threshold(train)
     names = engines or engine_names()
     if BASELINE not in names:
         names = [BASELINE, *names]
+    rungs: list[RungRow] = []
     with threadpool_limits(limits=1):
-        rows = _with_ratios([bench_engine(name, train, heldout, threshold) for name in names])
+        models = [train_engine(train, name) for name in names]
+        rows = _with_ratios([bench_engine(model, heldout, threshold) for model in models])
+        for model in models:
+            rungs.extend(rung_rows(model, heldout, threshold))
     extra = run_engine_benches(corpus, names) if engine_benches else {}
     return {
         "lipstream_version": __version__,
@@ -186,6 +171,7 @@ def run_bench(
         },
         "recorded": _recorded_reference(heldout, threshold),
         "engines": [asdict(row) for row in rows],
+        "rungs": [asdict(row) for row in rungs],
         "engine_benches": extra,
     }
 

@@ -15,7 +15,10 @@ silence, spoken with the emotion of the span after the gap.
 Fidelity: ``Model.fidelity_ladder`` lists the ``Rung``s an engine serves at,
 best first, each with the engine options that select it and the
 ``Lookahead`` those options need; a server takes the best rung that fits a
-latency budget. Engines with one fidelity inherit a one-rung ladder.
+latency budget. The last rung is causal: its lookahead is zero (no
+phonemes, no seconds, at most a few milliseconds of audio window), so the
+frame for t is final once the input covers t. Rungs between may wait a fixed
+time (a lead) rather than whole phonemes.
 
 Options: a model declares the engine options it takes in ``option_names``;
 ``start`` refuses any other name through ``check_options`` (one coded
@@ -32,7 +35,10 @@ request's cancellation and CPU-budget token: a synthesizer checks it between
 the steps of its long loops, and stops there.
 
 Emotion: ``SynthesisRequest.emotion`` is the request's; a span's own
-``PhonemeSpan.emotion`` overrides it for that span (``emotion_of``). Engines
+``PhonemeSpan.emotion`` overrides it for that span (``emotion_of``). A
+request that names none is spoken with the model's ``default_emotion``
+(``start`` fills it in): the manifest's ``extra.default_emotion``, else
+``neutral``, so a search never mixes the moods of every recording. Engines
 that model emotion honour both (anime-graph searches each run of equal
 emotion among that emotion's recordings); the ``viseme-lerp`` baseline has
 one key pose per viseme and ignores emotion altogether.
@@ -44,7 +50,7 @@ import inspect
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, ClassVar, Self, TypeVar
 
@@ -69,6 +75,8 @@ from ..timeline import EMOTIONS, PhonemeSpan, SpanLike, coerce_spans
 from .work import WorkGuard
 
 MIN_FPS = 1.0  # lowest request frame rate, Hz (the highest, MAX_FPS, is the store's)
+DEFAULT_EMOTION = "neutral"
+DEFAULT_EMOTION_KEY = "default_emotion"
 _EPS = 1e-9
 
 ModelT = TypeVar("ModelT", bound="Model")
@@ -299,12 +307,22 @@ class Model(ABC):
             return measured[rung.name]
         return UNBOUNDED_COST
 
+    @property
+    def default_emotion(self) -> str:
+        """The emotion of a request that names none: the manifest's ``extra.default_emotion``,
+        else ``neutral``."""
+        value = self.manifest.extra.get(DEFAULT_EMOTION_KEY, DEFAULT_EMOTION)
+        return str(value) if value in EMOTIONS else DEFAULT_EMOTION  # ``load`` checks it
+
     def start(self, request: SynthesisRequest | None = None, **settings: Any) -> Synthesizer:
-        """A streaming synthesizer; pass a ``SynthesisRequest`` or its fields.
+        """A streaming synthesizer; pass a ``SynthesisRequest`` or its fields. A request
+        without an emotion gets ``default_emotion``.
 
         InvalidRequestError if the request names an option outside ``option_names``."""
         if request is None:
             request = make_request(**settings)
+        if request.emotion is None:
+            request = replace(request, emotion=self.default_emotion)
         check_options(self.engine, self.option_names, request.options)
         return self.synthesizer(request)
 
@@ -347,6 +365,13 @@ class Model(ABC):
                 "phoneme_set",
                 "differs from this lipstream's phoneme set (lipstream.phonemes.PHONEMES), "
                 "which every engine's stored labels index; retrain the model",
+            )
+        emotion = manifest.extra.get(DEFAULT_EMOTION_KEY, DEFAULT_EMOTION)
+        if emotion not in EMOTIONS:
+            raise field_error(
+                str(directory / MANIFEST_NAME),
+                f"extra.{DEFAULT_EMOTION_KEY}",
+                f"must be one of {', '.join(EMOTIONS)}, got {emotion!r}",
             )
         return cls.from_arrays(manifest, load_arrays(directory), directory)
 

@@ -5,6 +5,20 @@ the mean of every training frame that falls inside a phoneme of that class.
 At synthesis a key is placed at the centre of each phoneme span and the
 channels are interpolated linearly between consecutive centres, holding the
 first and last keys flat. Every other engine is measured against this one.
+
+Fidelity ladder: the interpolation waits for the centre of the next span.
+Below it, ``mode: damped`` rungs follow the key pose of the span at t + shift
+with a critically damped filter (``damped``), each phoneme's rate
+ω = κ / its median duration (``durations``), so a short closure is reached
+within its span. The shift makes up the filter's lag (2 / ω at low
+frequencies, taken at the pooled median duration) as far as the rung's lead
+allows: shift = min(lead, 2 d / κ), never more, since a target moved ahead of
+its phoneme skips short closures. The frame at t is final once the input
+covers t + shift.
+The rungs' leads are ``LEADS_MS``: ``damped_lead`` (at most 120 ms) and
+``causal`` (0, the floor); κ of each is the
+value of ``KAPPAS`` with the least squared error on every ``VALIDATION_STEP``th
+training utterance (at most ``MAX_VALIDATION`` of them), stored in the model.
 """
 
 from __future__ import annotations
@@ -17,31 +31,105 @@ from typing import Any
 import numpy as np
 
 from ..audio import Audio
-from ..errors import CorpusError, LipstreamError
+from ..errors import CorpusError, InvalidRequestError, LipstreamError
 from ..model_checks import ArrayReader, FieldReader
 from ..phonemes import PHONEMES, SILENCE
 from ..store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
 from ..timeline import PhonemeSpan
 from ..visemes import get_scheme
-from .base import Engine, Lookahead, Model, SynthesisRequest
+from .base import Engine, Lookahead, Model, Rung, SynthesisRequest, Synthesizer
+from .damped_synthesis import DampedTargets, DampedTimelineSynthesizer
+from .durations import DurationModel
+
+MODES = ("lerp", "damped")
+LEADS_MS = (120.0, 0.0)
+KAPPAS = (1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0)
+MAX_LEAD_MS = 1000.0
+VALIDATION_STEP = 4
+MAX_VALIDATION = 50
 
 
 class VisemeLerpModel(Model):
-    """Key poses ``poses`` float32 (n_visemes, n_channels), rows in ``scheme.classes`` order."""
+    """Key poses ``poses`` float32 (n_visemes, n_channels), rows in ``scheme.classes`` order;
+    phoneme ``durations``; the damped rungs' ``leads_ms`` and their fitted ``kappas``."""
 
     engine = "viseme-lerp"
+    option_names = ("mode", "lead_ms")
 
-    def __init__(self, manifest: ModelManifest, poses: np.ndarray) -> None:
+    def __init__(
+        self,
+        manifest: ModelManifest,
+        poses: np.ndarray,
+        durations: DurationModel,
+        leads_ms: np.ndarray,
+        kappas: np.ndarray,
+    ) -> None:
         super().__init__(manifest)
         self.scheme = get_scheme(manifest.hyperparameters["scheme"])
         # A small copy, not the memmap: fancy indexing off a memmap is slow.
         self.poses = np.array(poses, dtype=np.float32)
         self._pose_row = {p: self.scheme.classes.index(self.scheme.viseme_of(p)) for p in PHONEMES}
+        self.durations = durations
+        self.leads_ms = np.array(leads_ms, dtype=np.float64)
+        self.kappas = np.array(kappas, dtype=np.float64)
+        self._pose_rows = np.array([self._pose_row[p] for p in PHONEMES], dtype=np.int64)
 
     @property
     def lookahead(self) -> Lookahead:
         """The key after t sits at the centre of the next span."""
         return Lookahead(phonemes=1)
+
+    def lookahead_for(self, options: Mapping[str, Any]) -> Lookahead | None:
+        mode, lead_ms = _parse_options(options)
+        return self.lookahead if mode == "lerp" else Lookahead(seconds=self.shift_s(lead_ms))
+
+    def fidelity_ladder(self) -> tuple[Rung, ...]:
+        """Interpolation first, then the damped rung that makes up its lag, then the causal
+        one."""
+        damped = tuple(
+            Rung(
+                "causal" if lead == 0 else "damped_lead",
+                Lookahead(seconds=self.shift_s(lead)),
+                {"mode": "damped", "lead_ms": lead},
+            )
+            for lead in self.leads_ms.tolist()
+        )
+        return (Rung("lerp", self.lookahead, {"mode": "lerp"}), *damped)
+
+    def rung_for(self, options: Mapping[str, Any]) -> Rung | None:
+        mode, lead_ms = _parse_options(options)
+        return next(
+            (
+                rung
+                for rung in self.fidelity_ladder()
+                if _parse_options(rung.options) == (mode, lead_ms)
+            ),
+            None,
+        )
+
+    def kappa_for(self, lead_ms: float) -> float:
+        """The fitted κ of the nearest fitted lead."""
+        return float(self.kappas[int(np.argmin(np.abs(self.leads_ms - lead_ms)))])
+
+    def shift_s(self, lead_ms: float, kappa: float | None = None) -> float:
+        """How far ahead (s) a damped rung with ``lead_ms`` follows the targets: the filter's
+        lag at the pooled median duration, at most the lead."""
+        rate = self.kappa_for(lead_ms) if kappa is None else kappa
+        return min(lead_ms / 1000.0, 2.0 * self.durations.pooled_median_s() / rate)
+
+    def damped_targets(self, lead_ms: float, kappa: float | None = None) -> DampedTargets:
+        """The damped rung's targets: each phoneme's key pose, at rate κ / median duration."""
+        rate = self.kappa_for(lead_ms) if kappa is None else kappa
+        omegas = rate / self.durations.expected_all_s()
+        return DampedTargets(
+            self.poses[self._pose_rows].astype(np.float64), omegas, self.shift_s(lead_ms, rate)
+        )
+
+    def synthesizer(self, request: SynthesisRequest) -> Synthesizer:
+        mode, lead_ms = _parse_options(request.options)
+        if mode == "lerp":
+            return super().synthesizer(request)
+        return DampedTimelineSynthesizer(self.damped_targets(lead_ms), request, self.channels)
 
     def render(
         self,
@@ -64,7 +152,12 @@ class VisemeLerpModel(Model):
         return np.asarray(frames, dtype=np.float32)
 
     def arrays(self) -> dict[str, np.ndarray]:
-        return {"poses": self.poses}
+        return {
+            "poses": self.poses,
+            "lead_ms": self.leads_ms,
+            "kappa": self.kappas,
+            **self.durations.arrays(),
+        }
 
     @classmethod
     def from_arrays(
@@ -79,7 +172,13 @@ class VisemeLerpModel(Model):
             raise fields.error(field, error.message) from None
         reader = ArrayReader(arrays, str(path / ARRAYS_NAME))
         poses = reader.floats("poses", (len(scheme.classes), len(manifest.channels)))
-        return cls(manifest, poses)
+        leads = reader.floats("lead_ms", (None,))
+        kappas = reader.floats("kappa", (len(leads),))
+        if len(leads) == 0 or not (np.all(leads >= 0) and np.all(leads <= MAX_LEAD_MS)):
+            raise reader.error("lead_ms", f"must hold leads in [0, {MAX_LEAD_MS:g}] ms")
+        if not np.all(kappas > 0):
+            raise reader.error("kappa", "must be positive")
+        return cls(manifest, poses, DurationModel.from_arrays(reader), leads, kappas)
 
 
 class VisemeLerpEngine(Engine):
@@ -104,10 +203,53 @@ class VisemeLerpEngine(Engine):
                 sums[row] += utterance.frames[first:stop].sum(axis=0)
                 counts[row] += max(0, stop - first)
         poses = _mean_poses(sums, counts, scheme.classes.index(scheme.viseme_of(SILENCE)))
+        durations = DurationModel.fit(utterance.phones for utterance in corpus.utterances)
         manifest = self.new_manifest(
             corpus, metrics={"frames_per_viseme": counts.astype(int).tolist()}
         )
-        return VisemeLerpModel(manifest, poses)
+        leads = np.array(LEADS_MS)
+        model = VisemeLerpModel(manifest, poses, durations, leads, np.full(len(leads), KAPPAS[0]))
+        validation = corpus.utterances[::VALIDATION_STEP][:MAX_VALIDATION]
+        model.kappas = np.array([_fit_kappa(model, lead, validation) for lead in LEADS_MS])
+        manifest.metrics["damped_kappa"] = dict(
+            zip([f"{lead:g}" for lead in LEADS_MS], model.kappas.tolist())
+        )
+        return model
+
+
+def _fit_kappa(model: VisemeLerpModel, lead_ms: float, utterances: Sequence[Any]) -> float:
+    """The κ of ``KAPPAS`` whose damped rung at ``lead_ms`` has the least squared error."""
+    errors = []
+    for kappa in KAPPAS:
+        targets = model.damped_targets(lead_ms, kappa)
+        total = 0.0
+        for utterance in utterances:
+            request = SynthesisRequest(fps=float(utterance.fps))
+            synthesizer = DampedTimelineSynthesizer(targets, request, model.channels)
+            synthesizer.feed(utterance.phones)
+            frames = synthesizer.finish()
+            count = min(len(frames), len(utterance.frames))
+            total += float(np.sum((frames[:count] - utterance.frames[:count]) ** 2))
+        errors.append(total)
+    return KAPPAS[int(np.argmin(errors))]
+
+
+def _parse_options(options: Mapping[str, Any]) -> tuple[str, float]:
+    """(mode, lead_ms) of validated options; lead_ms is 0 in ``lerp`` mode."""
+    mode = options.get("mode", "lerp")
+    if mode not in MODES:
+        raise InvalidRequestError(
+            f"mode must be one of {', '.join(MODES)}, got {mode!r}", where="options.mode"
+        )
+    lead = options.get("lead_ms", 0.0)
+    if isinstance(lead, bool) or not isinstance(lead, (int, float)) or not 0 <= lead <= MAX_LEAD_MS:
+        raise InvalidRequestError(
+            f"lead_ms must be a number of milliseconds in [0, {MAX_LEAD_MS:g}], got {lead!r}",
+            where="options.lead_ms",
+        )
+    if mode == "lerp" and "lead_ms" in options:
+        raise InvalidRequestError("lead_ms applies to mode damped only", where="options.lead_ms")
+    return str(mode), float(lead) if mode == "damped" else 0.0
 
 
 def _first_key(spans: Sequence[PhonemeSpan], t: float) -> int:

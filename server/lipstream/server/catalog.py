@@ -6,11 +6,11 @@ model, the latency estimate of every fidelity rung (``budget``,
 one second of silence), the retarget maps it can be served through (the
 shipped ``oculus15`` and ``arkit52`` fitted on the same viseme probe, and those
 stored in its directory), and, per character, the viseme projectors (one per
-output viseme set) and the preset output profile. Each model is warmed up
-first (its first calls compile or load its kernels) and then calibrated;
-``build`` reports both steps through ``report`` when given. After ``build`` it
-is read-only, so sessions on
-the event loop and in the synthesis thread pool share it without locks.
+output viseme set), the preset output profile and the default emotion. Each
+model is warmed up first (its first calls compile or load its kernels) and
+then calibrated; ``build`` reports both steps through ``report`` when given.
+After ``build`` it is read-only, so sessions on the event loop and in the
+synthesis thread pool share it without locks.
 """
 
 from __future__ import annotations
@@ -38,7 +38,14 @@ from ..timeline import EMOTIONS, PhonemeSpan
 from ..visemes import OCULUS15
 from .budget import RungEstimate, estimate
 from .calibration import measure, warm_up
-from .profiles import ProfileError, ProfileRequest, load_presets, parse_profile, resolve_profile
+from .profiles import (
+    ProfileError,
+    ProfileRequest,
+    load_default_emotions,
+    load_presets,
+    parse_profile,
+    resolve_profile,
+)
 from .viseme_projection import VisemeProjector, key_poses, probe_phoneme_poses, projectors_from
 
 logger = logging.getLogger("lipstream.server")
@@ -72,6 +79,7 @@ class Catalog:
     settings: ServerSettings
     facts: dict[int, ModelFacts] = field(default_factory=dict)
     presets: dict[str, OutputProfile] = field(default_factory=dict)
+    default_emotions: dict[str, str] = field(default_factory=dict)
 
     @classmethod
     def build(
@@ -108,6 +116,8 @@ class Catalog:
                 registry.drop(name, ModelStoreError(fault, where=name))
         catalog.presets = _presets(registry, settings)
         registry.require_models(strict=settings.strict_models)
+        if settings.profiles is not None:
+            catalog.default_emotions = load_default_emotions(settings.profiles)
         catalog._check_presets()
         return catalog
 
@@ -160,6 +170,11 @@ class Catalog:
 
     def preset(self, character: str) -> OutputProfile | None:
         return self.presets.get(character)
+
+    def default_emotion(self, model: Model) -> str:
+        """The emotion of a request that names none: the character's preset's
+        ``default_emotion``, else the model's (``Model.default_emotion``)."""
+        return self.default_emotions.get(model.name, model.default_emotion)
 
     def _ladder(self, model: Model, report: Report | None) -> tuple[RungEstimate, ...]:
         settings = self.settings

@@ -30,9 +30,10 @@ from lipstream_client.channels import VISEME_CHANNELS, canonical_viseme, rename_
 from lipstream_client.errors import INVALID_REQUEST, UNKNOWN_CHANNEL
 from lipstream_client.messages import VisemeSet
 
-from ..engines.base import Model, SynthesisResult
+from ..engines.base import DEFAULT_EMOTION_KEY, Model, SynthesisResult
 from ..errors import LipstreamError
 from ..retarget import RetargetMap, model_maps
+from ..timeline import EMOTIONS
 from .viseme_projection import VISEME_SCHEMES, VisemeProjector, mouth_channels, probe_key_poses
 
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
@@ -300,9 +301,38 @@ def parse_profile(value: object, where: str) -> OutputProfile:
 
 
 def load_presets(path: Path) -> dict[str, OutputProfile]:
-    """Per-character presets from a JSON file ``{"character": {output profile}, ...}``."""
+    """Per-character presets from a JSON file ``{"character": {output profile}, ...}``; a
+    preset's ``default_emotion`` is not part of its profile (``load_default_emotions``)."""
     data = _json_object(path, "output profiles", "mapping characters to output profiles")
-    return {str(name): parse_profile(value, f"{path}: {name}") for name, value in data.items()}
+    return {
+        str(name): parse_profile(_without_emotion(value), f"{path}: {name}")
+        for name, value in data.items()
+    }
+
+
+def load_default_emotions(path: Path) -> dict[str, str]:
+    """Per-character ``default_emotion`` of the presets in ``path`` that name one;
+    ``invalid_setting`` for an emotion outside ``EMOTIONS``."""
+    data = _json_object(path, "output profiles", "mapping characters to output profiles")
+    emotions: dict[str, str] = {}
+    for name, value in data.items():
+        if not isinstance(value, Mapping) or DEFAULT_EMOTION_KEY not in value:
+            continue
+        emotion = value[DEFAULT_EMOTION_KEY]
+        if emotion not in EMOTIONS:
+            raise LipstreamError(
+                f"default_emotion must be one of {', '.join(EMOTIONS)}, got {emotion!r}",
+                where=f"{path}: {name}.{DEFAULT_EMOTION_KEY}",
+                code="invalid_setting",
+            )
+        emotions[str(name)] = str(emotion)
+    return emotions
+
+
+def _without_emotion(value: object) -> object:
+    if isinstance(value, Mapping):
+        return {key: item for key, item in value.items() if key != DEFAULT_EMOTION_KEY}
+    return value
 
 
 def profile_fields(path: Path) -> dict[str, object]:

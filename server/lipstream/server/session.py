@@ -423,6 +423,7 @@ class Session:
                 where="emotion",
                 code=UNKNOWN_EMOTION,
             )
+        emotion = start.emotion or catalog.default_emotion(model)
         estimate = choose_rung(catalog.ladder(model), start.latency_budget_ms)
         profile = resolve_profile(
             model.channels,
@@ -434,8 +435,8 @@ class Session:
             start.options, estimate.rung.options, budgeted=start.latency_budget_ms is not None
         )
         guard = WorkGuard(self.limits.cpu_budget_s)
-        synthesizer = model.start(SynthesisRequest(start.fps, start.emotion, options, guard))
-        rest = profile.apply(catalog.rest_pose(model, start.emotion)[None])[0]
+        synthesizer = model.start(SynthesisRequest(start.fps, emotion, options, guard))
+        rest = profile.apply(catalog.rest_pose(model, emotion)[None])[0]
         clock = RequestClock(model.manifest.engine, now, start.latency_budget_ms)
         spec = RequestSpec(
             start.id,
@@ -456,7 +457,7 @@ class Session:
             channels=profile.channels,
             lookahead_ms=lookahead,
             fidelity=fidelity,
-            emotion=start.emotion,
+            emotion=emotion,
             latency_budget_ms=start.latency_budget_ms,
             options=options,
             phoneme_source=source,
@@ -468,9 +469,11 @@ class Session:
         self, model: Model, estimate: RungEstimate, options: Mapping[str, JsonValue]
     ) -> tuple[str, float]:
         """The rung's name and lookahead (ms), or, when the client's options change one the
-        rung pins (possible without a budget), ``custom`` and the lookahead of those options
-        (a frame that may wait for the end of the input: the longest request)."""
-        if all(
+        rung pins or select another rung (possible without a budget: say ``causal: true``),
+        ``custom`` and the lookahead of those options (a frame that may wait for the end of
+        the input: the longest request)."""
+        resolved = model.rung_for(options)
+        if (resolved is None or resolved.name == estimate.rung.name) and all(
             options.get(key) == _json_value(value) for key, value in estimate.rung.options.items()
         ):
             return estimate.rung.name, estimate.lookahead_ms

@@ -169,10 +169,10 @@ def test_unknown_options_get_one_coded_error_listing_the_known_ones(
 
 
 def test_each_engine_declares_the_options_it_reads(trained_models: dict[str, Model]) -> None:
-    assert trained_models["viseme-lerp"].option_names == ()
+    assert trained_models["viseme-lerp"].option_names == ("mode", "lead_ms")
     assert set(trained_models["anime-graph"].option_names) == {
         "graph", "search", "pq_window", "pq_advance", "blend", "smooth", "match_emotion",
-        "max_tile", "pq_budget_s",
+        "max_tile", "pq_budget_s", "causal", "lead_ms",
     }  # fmt: skip
     anime = trained_models["anime-graph"]
     assert anime.start(fps=60, smooth=False, max_tile=4) is not None
@@ -188,3 +188,60 @@ def test_a_request_outside_the_frame_rate_range_is_refused(fps: float) -> None:
 @pytest.mark.parametrize("fps", [MIN_FPS, 1.5, MAX_FPS])
 def test_the_frame_rate_range_is_closed(fps: float) -> None:
     assert SynthesisRequest(fps=fps).fps == fps
+
+
+CAUSAL_AUDIO_S = 0.005
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_the_ladder_ends_in_a_causal_rung_and_waits_less_going_down(
+    engine: str, trained_models: dict[str, Model]
+) -> None:
+    ladder = trained_models[engine].fidelity_ladder()
+    floor = ladder[-1].lookahead
+    assert floor.phonemes == 0 and floor.seconds == 0.0
+    assert floor.audio_seconds <= CAUSAL_AUDIO_S
+    # Just above it, a rung that waits a fixed time, a fraction of a phoneme.
+    lead = ladder[-2].lookahead
+    assert lead.phonemes == 0 and 0.0 < lead.seconds <= 0.12 and lead.audio_seconds == 0.0
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize("fps", [30.0, 60.0, 100.0])
+def test_a_causal_rung_never_holds_a_frame_back_and_streams_the_offline_frames(
+    engine: str, fps: float, trained_models: dict[str, Model], small_demo_corpus: Corpus
+) -> None:
+    model = trained_models[engine]
+    rung = model.fidelity_ladder()[-1]
+    spans = _heldout_spans(small_demo_corpus)
+    synthesizer = model.start(fps=fps, **rung.options)
+    pieces = []
+    for index, span in enumerate(spans):
+        synthesizer.feed([span])
+        pieces.append(synthesizer.frames())
+        emitted = sum(len(piece) for piece in pieces)
+        assert emitted == frame_count(span.end, fps), f"held back at span {index}"
+    pieces.append(synthesizer.finish())
+    assert len(pieces[-1]) == 0
+    offline = model.synthesize(spans, fps=fps, **rung.options).frames
+    np.testing.assert_array_equal(np.concatenate(pieces), offline)
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_a_lead_rung_emits_the_frame_at_t_once_the_input_covers_t_plus_the_lead(
+    engine: str, trained_models: dict[str, Model], small_demo_corpus: Corpus
+) -> None:
+    model = trained_models[engine]
+    rung = model.fidelity_ladder()[-2]
+    lead = rung.lookahead.seconds
+    spans = _heldout_spans(small_demo_corpus)
+    synthesizer = model.start(fps=60.0, **rung.options)
+    pieces = []
+    for span in spans:
+        synthesizer.feed([span])
+        pieces.append(synthesizer.frames())
+        emitted = sum(len(piece) for piece in pieces)
+        assert emitted == (frame_count(span.end - lead, 60.0) if span.end >= lead else 0)
+    pieces.append(synthesizer.finish())
+    offline = model.synthesize(spans, fps=60.0, **rung.options).frames
+    np.testing.assert_array_equal(np.concatenate(pieces), offline)

@@ -90,13 +90,17 @@ def test_catalog_resolves_models_and_names_the_missing_field(catalog: Catalog) -
 # unsmoothed), 32.5 ms for the audio (two 10 ms MFCC steps and half a 25 ms window), and
 # max_tile phonemes: 10 -> 2140.833, 4 -> 940.833, 2 -> 540.833, 1 -> 340.833.
 DEMO_LOOKAHEAD_MS = {
-    "viseme-lerp": {"default": 200.0},
+    "viseme-lerp": {
+        "lerp": 200.0,
+        "causal": 0.0,
+    },
     "anime-graph": {
         "greedy_tile10": 2140.833,
         "greedy_tile4": 940.833,
         "greedy_tile2": 540.833,
         "greedy_tile1": 340.833,
         "greedy_tile1_unsmoothed": 240.833,
+        "causal": 0.0,
     },
 }
 
@@ -107,7 +111,11 @@ def test_catalog_ladder_follows_each_models_declared_rungs(catalog: Catalog) -> 
         rungs = catalog.ladder(model)
         assert [estimate.rung for estimate in rungs] == list(model.fidelity_ladder())
         expected = DEMO_LOOKAHEAD_MS[model.manifest.engine]
-        assert {e.rung.name: e.lookahead_ms for e in rungs} == pytest.approx(expected, abs=1e-3)
+        waits = {e.rung.name: e.lookahead_ms for e in rungs}
+        # The lead rung waits its filter's lag, a trained figure, of at most 120 ms.
+        lead = waits.pop(rungs[-2].rung.name)
+        assert rungs[-2].rung.name.endswith("_lead") and 0.0 < lead <= 120.0
+        assert waits == pytest.approx(expected, abs=1e-3)
         for estimate_ in rungs:
             assert estimate_.compute_ms >= catalog.settings.compute_margin_ms
 
@@ -155,11 +163,62 @@ def test_an_engine_that_uses_audio_is_also_calibrated_with_audio_under_each_span
     streamed = [fed for fed in model.passes if len(fed) > 1]
     with_audio = [fed for fed in streamed if fed[0][1] is not None]
     without = [fed for fed in streamed if fed[0][1] is None]
-    assert len(with_audio) == len(without) == 3  # warm-up + CALIBRATION_PASSES each
+    assert len(with_audio) == len(without) == 4  # warm-up + CALIBRATION_PASSES each
     # The frame cost: the whole utterance in one feed, at two frame rates, 3 passes each.
     offline = [fed for fed in model.passes if len(fed) == 1]
-    assert len(offline) == 6 and all(fed[0][1] is None for fed in offline)
+    assert len(offline) == 8 and all(fed[0][1] is None for fed in offline)
     for fed in with_audio:
         ends = [round(span.end * audio.sample_rate) for span, audio in fed]
         assert [len(audio.samples) for _, audio in fed] == np.diff([0, *ends]).tolist()
         assert all(np.abs(audio.samples).max() > 0.2 for _, audio in fed)  # voiced, not silence
+
+
+class _Clock:
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def perf_counter(self) -> float:
+        return self.now
+
+
+class _TimedSynthesizer:
+    """Each feed takes 1 ms of the fake clock, or 10 ms at the call index its pass names."""
+
+    def __init__(self, clock: _Clock, slow_call: int | None) -> None:
+        self.clock, self.slow_call, self.calls = clock, slow_call, 0
+
+    def feed(self, spans: list, audio: object = None) -> None:  # type: ignore[type-arg]
+        self.clock.now += 0.010 if self.calls == self.slow_call else 0.001
+        self.calls += 1
+
+    def frames(self) -> None:
+        return None
+
+    def finish(self) -> None:
+        return None
+
+
+class _PreemptedModel:
+    """Streamed passes (warm-up, then three measured) each preempted at a different call."""
+
+    uses_audio = False
+
+    def __init__(self, clock: _Clock) -> None:
+        self.clock, self.started = clock, 0
+
+    def start(self, request: object) -> _TimedSynthesizer:
+        slow = [None, 5, 17, 30][self.started] if self.started < 4 else None
+        self.started += 1
+        return _TimedSynthesizer(self.clock, slow)
+
+
+def test_compute_time_is_the_slowest_call_at_its_fastest_over_the_passes(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    clock = _Clock()
+    monkeypatch.setattr("lipstream.server.calibration.time", clock)
+    cost = measure(_PreemptedModel(clock), GREEDY)  # type: ignore[arg-type]
+    # Every call takes 1 ms in some pass; the finish calls take no time.
+    assert cost.max_call_ms == pytest.approx(1.0)
+    # 48 calls at their fastest, 1 ms each, over 48 phonemes.
+    assert cost.per_phoneme_ms == pytest.approx(1.0)

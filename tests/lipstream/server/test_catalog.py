@@ -30,7 +30,9 @@ def _registry(good: Model, broken: Model) -> ModelRegistry:
 def _nan_model(lerp: VisemeLerpModel) -> VisemeLerpModel:
     """Built in memory, past the load-time checks, as a model the checks missed would be."""
     manifest = replace(lerp.manifest, name="broken")
-    return VisemeLerpModel(manifest, lerp.poses * np.nan)
+    return VisemeLerpModel(
+        manifest, lerp.poses * np.nan, lerp.durations, lerp.leads_ms, lerp.kappas
+    )
 
 
 def test_a_model_synthesizing_non_finite_silence_is_set_aside(
@@ -63,7 +65,9 @@ def test_a_stored_preset_that_does_not_parse_sets_its_model_aside(
     manifest = replace(
         lerp.manifest, name="broken", extra={"output_profile": {"channels": "jawOpen"}}
     )
-    registry = _registry(lerp, VisemeLerpModel(manifest, lerp.poses))
+    registry = _registry(
+        lerp, VisemeLerpModel(manifest, lerp.poses, lerp.durations, lerp.leads_ms, lerp.kappas)
+    )
     Catalog.build(registry, ServerSettings())
     assert list(registry.models) == ["good"]
     error = registry.failures["broken"].error
@@ -97,7 +101,13 @@ def test_an_unexpected_fault_in_a_probe_sets_only_that_model_aside(
 ) -> None:
     lerp = trained_models["viseme-lerp"]
     assert isinstance(lerp, VisemeLerpModel)
-    faulty = _FaultyModel(replace(lerp.manifest, name="broken"), lerp.poses)
+    faulty = _FaultyModel(
+        replace(lerp.manifest, name="broken"),
+        lerp.poses,
+        lerp.durations,
+        lerp.leads_ms,
+        lerp.kappas,
+    )
     registry = _registry(lerp, faulty)
     Catalog.build(registry, ServerSettings())
     assert list(registry.models) == ["good"]

@@ -34,7 +34,8 @@ from tests.lipstream.server.harness import Client, Served, client, serving
 
 ANSWER_BOUND_S = 5.0  # whether the server answers at all, not how fast
 WORK_BOUND_S = 60.0  # a budget of CPU seconds takes longer on a busy machine
-PQ = {"search": "pq", "pq_window": 6}
+# The whole corpus: a request naming no emotion searches only its default emotion's recordings.
+PQ = {"search": "pq", "pq_window": 6, "match_emotion": False}
 PQ_PHONEMES = 42  # 6 × 42 = 252, within the cap of 256
 ITEMS = tuple(PhonemeItem("AA1", 0.08 * i, 0.08 * (i + 1)) for i in range(PQ_PHONEMES))
 SHORT = tuple(

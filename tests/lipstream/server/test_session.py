@@ -89,9 +89,9 @@ def test_ready_reports_the_resolved_request(catalog: Catalog) -> None:
         fps=50,
         channels=model.channels,
         lookahead_ms=200.0,
-        fidelity="default",
+        fidelity="lerp",
         emotion="happy",
-        options={},
+        options={"mode": "lerp"},
         phoneme_source="auto",
     )
 
@@ -251,14 +251,17 @@ def test_start_errors_are_fatal_for_the_request_and_name_the_field(
 
 def test_budget_infeasible_gives_the_smallest_feasible_budget(catalog: Catalog) -> None:
     session = new_session(catalog)
-    [error] = play(session, Start("a", "viseme-lerp", "demo", latency_budget_ms=50))
+    # Below the margin, which even the causal rung's worst case includes.
+    budget = catalog.settings.compute_margin_ms - 1.0
+    [error] = play(session, Start("a", "viseme-lerp", "demo", latency_budget_ms=budget))
     assert isinstance(error, ErrorMessage) and error.code == "budget_infeasible"
-    worst = catalog.ladder(catalog.model("viseme-lerp", "demo"))[0].worst_case_ms
+    worst = catalog.ladder(catalog.model("viseme-lerp", "demo"))[-1].worst_case_ms
     assert error.details == {"min_budget_ms": math.ceil(worst)}
     [ready] = play(
         session, Start("a", "viseme-lerp", "demo", latency_budget_ms=float(math.ceil(worst)))
     )
     assert isinstance(ready, Ready) and ready.latency_budget_ms == math.ceil(worst)
+    assert (ready.fidelity, ready.lookahead_ms) == ("causal", 0.0)
 
 
 @pytest.mark.parametrize(

@@ -293,7 +293,7 @@ def test_metrics_count_sessions_frames_latency_and_errors(served: Served) -> Non
 @pytest.mark.parametrize(
     ("engine", "options", "known"),
     [
-        ("viseme-lerp", {"bogus": 1}, "none"),
+        ("viseme-lerp", {"bogus": 1}, "mode, lead_ms"),
         ("anime-graph", {"bogus": 1}, "graph, search, pq_window"),
     ],
 )

@@ -15,6 +15,12 @@ Sketch, for a jump from anime A_i (p frames) to A_i+1 (q frames):
 
 Written as corrections added to each fragment, a fragment between two jumps
 takes both, each vanishing at the fragment's far end.
+
+*Forward (causal rungs).* The join looks at nothing after the jump: over the
+first half of A_i+1's span only, the recording that follows A_i is blended
+out, its weight falling 1 -> 0, so the motion is continuous at the join, a
+short span still reaches its own fragment's pose, and A_i's own span never
+changes once it is decided.
 """
 
 from __future__ import annotations
@@ -33,6 +39,7 @@ class JoinKind(Enum):
     CUT = "cut"
     PAIR = "pair"
     EXTEND = "extend"
+    FORWARD = "forward"
 
 
 @dataclass(frozen=True)
@@ -86,12 +93,16 @@ def plan_join(
     pairs: PairIndex,
     limit: int | None,
     blend: bool,
+    forward: bool = False,
 ) -> Join:
-    """The join from fragment anime ``left`` to ``right`` shown for query ``labels``."""
+    """The join from fragment anime ``left`` to ``right`` shown for query ``labels``
+    (``forward``: blended inside ``right``'s span only)."""
     if int(poses.successor[left]) == right:
         return Join(JoinKind.SEAMLESS)
     if not blend:
         return Join(JoinKind.CUT)
+    if forward:
+        return Join(JoinKind.FORWARD)
     candidates = pairs.pairs(labels[0], labels[1], limit)
     if not len(candidates):
         return Join(JoinKind.EXTEND)

@@ -23,6 +23,7 @@ from ...features import MfccConfig
 from ...store import ModelManifest, require_arrays
 from ...timeline import PhonemeSpan
 from ..base import Lookahead, Model, Rung, SynthesisRequest
+from ..damped import omega_for_cutoff
 from .animes import AnimeTable, Curves
 from .basis import MotionBasis
 from .checks import check_stored_model
@@ -40,6 +41,11 @@ REQUIRED_ARRAYS = [
     "feature_offsets", "anime_summary", "cutoffs",
 ]  # fmt: skip
 LADDER_TILES = (10, 4, 2, 1)
+CAUSAL_LEADS_MS = (120.0, 0.0)
+MIN_CAUSAL_CUTOFF_HZ = 2.0
+CAUSAL_CUTOFF_FACTOR = 2.0
+"""The causal filter's -3 dB point over the learned cutoff: a second-order filter already
+damps below its -3 dB point, and at twice the cutoff it keeps 90% of the gain there."""
 
 
 class AnimeGraphModel(Model):
@@ -85,6 +91,9 @@ class AnimeGraphModel(Model):
         self.cutoffs = np.asarray(arrays["cutoffs"], dtype=np.float64)
         self.half_width = round(float(settings["smoothing_window"]) * self.fps)
         self.kernels = lowpass_kernels(self.cutoffs, self.fps, self.half_width)
+        self.causal_omegas = omega_for_cutoff(
+            CAUSAL_CUTOFF_FACTOR * np.maximum(self.cutoffs, MIN_CAUSAL_CUTOFF_HZ)
+        )
 
     @property
     def n_components(self) -> int:
@@ -119,6 +128,8 @@ class AnimeGraphModel(Model):
         the end of the input), or PQ, whose window of h phonemes decides its first
         fragments; the filter's reach only when ``smooth``."""
         parsed = parse_options(options, self.default_graph, self.has_clusters, self.max_tile)
+        if parsed.causal:
+            return Lookahead(seconds=self.causal_shift_s(parsed.lead_ms))
         if parsed.search == "pq":
             smoothing = self.half_width if parsed.smooth else 0
             return Lookahead(
@@ -139,11 +150,20 @@ class AnimeGraphModel(Model):
             return 0.0
         return 2.0 / self.mfcc.rate + self.mfcc.window_s / 2.0
 
+    def causal_shift_s(self, lead_ms: float) -> float:
+        """How far ahead (s) the causal search's filter follows the track: its lag at low
+        frequencies (2 / ω) for the first, most varied, PCA component, at most the lead."""
+        return min(lead_ms / 1000.0, 2.0 / float(self.causal_omegas[0]))
+
     def fidelity_ladder(self) -> tuple[Rung, ...]:
         """GreedyMatching with ever shorter tiles, the model's ``max_tile`` first (fewest
         jumps), then 10, 4, 2 and 1 phonemes below it; last, one-phoneme tiles without the
-        low-pass filter, which waits H frames. A rung pins ``search`` and ``max_tile`` (and
-        ``smooth`` off on the last), the options its lookahead depends on."""
+        low-pass filter, which waits H frames; below it the causal search following the
+        track as far ahead as its filter lags (at most 120 ms), and last the causal floor,
+        which waits for nothing past t. A rung pins ``search`` and ``max_tile``
+        (``smooth`` off on the unsmoothed one, ``causal``, ``lead_ms`` and ``max_tile`` 1 on
+        the causal ones, so a client's ``max_tile`` cannot clash with them), the options its
+        lookahead depends on."""
         tiles = sorted(
             {self.max_tile, *(t for t in LADDER_TILES if t < self.max_tile)}, reverse=True
         )
@@ -163,6 +183,14 @@ class AnimeGraphModel(Model):
                     {"search": "greedy", "max_tile": 1, "smooth": False},
                 )
             )
+        rungs.extend(
+            Rung(
+                "causal" if lead == 0 else "causal_lead",
+                Lookahead(seconds=self.causal_shift_s(lead)),
+                {"search": "greedy", "max_tile": 1, "causal": True, "lead_ms": lead},
+            )
+            for lead in CAUSAL_LEADS_MS
+        )
         return tuple(rungs)
 
     def rung_for(self, options: Mapping[str, Any]) -> Rung | None:

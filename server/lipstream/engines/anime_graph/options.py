@@ -13,12 +13,18 @@ PQ-Matching request fail with ``search_timeout`` once its search has run that
 long, since PQ-Matching can take minutes. PQ-Matching's work grows
 exponentially with its window, so a request may hold at most
 ``MAX_PQ_STEPS`` // ``pq_window`` phonemes (``search_too_large`` beyond).
+``causal`` (default off) selects the causal search: one-phoneme greedy tiles
+committed as their span arrives, forward joins, no audio, and a critically
+damped filter following the track ahead by its own lag, at most ``lead_ms``
+(0-1000, default 0), so a frame waits for the input to cover t + that shift
+only; it takes no ``search`` but greedy, and its tiles are one phoneme
+whatever ``max_tile`` says.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from ...errors import InvalidRequestError
@@ -28,6 +34,7 @@ GRAPHS = ("unclustered", "clustered")
 SEARCHES = ("greedy", "pq")
 MAX_PQ_WINDOW = 6
 MAX_PQ_STEPS = 256
+MAX_LEAD_MS = 1000.0
 SEARCH_TOO_LARGE = "search_too_large"
 
 
@@ -42,6 +49,8 @@ class SearchOptions:
     match_emotion: bool = True
     max_tile: int | None = 10
     pq_budget_s: float | None = None
+    causal: bool = False
+    lead_ms: float = 0.0
 
     def check_size(self, phonemes: int) -> None:
         """``InvalidRequestError`` (``search_too_large``) when a PQ-Matching request would hold
@@ -78,8 +87,8 @@ def _integer(options: Mapping[str, Any], name: str, low: int, high: int, default
     return value
 
 
-def _flag(options: Mapping[str, Any], name: str) -> bool:
-    value = options.get(name, True)
+def _flag(options: Mapping[str, Any], name: str, default: bool = True) -> bool:
+    value = options.get(name, default)
     if not isinstance(value, bool):
         raise InvalidRequestError(
             f"{name} must be true or false, got {value!r}", where=f"options.{name}"
@@ -99,7 +108,8 @@ def parse_options(
             "this model was trained without a clustered graph (clusters=0)", where="options.graph"
         )
     window = _integer(options, "pq_window", 1, MAX_PQ_WINDOW, SearchOptions.pq_window)
-    return SearchOptions(
+    causal = _flag(options, "causal", default=False)
+    parsed = SearchOptions(
         graph=graph,
         search=_choice(options, "search", SEARCHES, "greedy"),
         pq_window=window,
@@ -111,7 +121,35 @@ def parse_options(
         match_emotion=_flag(options, "match_emotion"),
         max_tile=_integer(options, "max_tile", 0, 10**6, default_max_tile) or None,
         pq_budget_s=_budget(options),
+        causal=causal,
+        lead_ms=_lead(options, causal),
     )
+    if causal:
+        _check_causal(parsed)
+        return replace(parsed, max_tile=1)
+    return parsed
+
+
+def _lead(options: Mapping[str, Any], causal: bool) -> float:
+    value = options.get("lead_ms", 0.0)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        value = None
+    if value is None or not 0 <= value <= MAX_LEAD_MS:
+        raise InvalidRequestError(
+            f"lead_ms must be a number of milliseconds in [0, {MAX_LEAD_MS:g}], "
+            f"got {options.get('lead_ms')!r}",
+            where="options.lead_ms",
+        )
+    if not causal and "lead_ms" in options:
+        raise InvalidRequestError("lead_ms applies to causal: true only", where="options.lead_ms")
+    return float(value)
+
+
+def _check_causal(parsed: SearchOptions) -> None:
+    if parsed.search != "greedy":
+        raise InvalidRequestError(
+            "causal takes search greedy (PQ-Matching looks ahead)", where="options.search"
+        )
 
 
 def _budget(options: Mapping[str, Any]) -> float | None:

@@ -24,6 +24,16 @@ The first tile of a run continues from the anime shown last when the new
 view holds it (unclustered node ids are anime ids in every view); the join
 across the change of view is blended with the whole corpus's recorded pairs,
 since no one emotion's recordings hold it.
+
+Causal search (``causal``): one-phoneme tiles, final as their span arrives;
+no audio (linear warps); forward joins (``blending``), so the track is final
+up to the end of the last decided span; and instead of the zero-phase
+low-pass, a critically damped filter per PCA component (``damped``, rate
+from the component's learned cutoff) steps from frame to frame toward the
+track at t + shift, evaluated at the output frame times themselves; the
+shift makes up the filter's lag as far as ``lead_ms`` allows
+(``AnimeGraphModel.causal_shift_s``). So the frame at t is final once the
+input covers t + shift.
 """
 
 from __future__ import annotations
@@ -43,6 +53,7 @@ from ...errors import InvalidRequestError
 from ...phonemes import PHONEME_INDEX, SILENCE
 from ...timeline import PhonemeSpan, SpanLike, coerce_spans
 from ..base import SynthesisRequest, Synthesizer, fill_gaps, frame_count
+from ..damped import DampedState
 from ..work import WorkGuard
 from .animes import summarize
 from .blending import Join, PairIndex, plan_join
@@ -105,6 +116,8 @@ class AnimeGraphSynthesizer(Synthesizer):
         self.smoothed = Growable(np.float64, (model.n_components,))
         self.emitted = 0
         self.finished = False
+        self.damped: DampedState | None = None
+        self.lead_s = model.causal_shift_s(options.lead_ms)
         self.guard = request.guard
         self.search_guard = WorkGuard(options.pq_budget_s, time.perf_counter, _search_timeout)
         self.stats: dict[str, Any] = {
@@ -154,6 +167,9 @@ class AnimeGraphSynthesizer(Synthesizer):
         return self._by_view[view.name]
 
     def _take_audio(self, audio: Audio | None) -> None:
+        if self.options.causal:
+            self.audio_mode = False
+            return
         if self.audio_mode is None:
             self.audio_mode = audio is not None and self.model.has_audio
             if self.audio_mode:
@@ -169,13 +185,15 @@ class AnimeGraphSynthesizer(Synthesizer):
             self.audio.add(audio)
 
     def frames(self) -> np.ndarray:
+        if self.options.causal:
+            self._decide()
+            return self._emit_causal()
         self._advance()
         return self._emit()
 
     def finish(self) -> np.ndarray:
         self.finished = True
-        self._advance()
-        return self._emit()
+        return self.frames()
 
     # ---- search --------------------------------------------------------------------------
 
@@ -371,6 +389,7 @@ class AnimeGraphSynthesizer(Synthesizer):
                 pairs,
                 self.model.max_candidates,
                 self.options.blend,
+                forward=self.options.causal,
             )
         self.track.append(Placement(span.start, span.end, anime, warp), join)
 
@@ -463,6 +482,39 @@ class AnimeGraphSynthesizer(Synthesizer):
         whole utterance at the model's rate)."""
         self.raw.drop_before(self.smoothed.count)
         self.smoothed.drop_before(math.floor(self.emitted * self.model.fps / self.fps) - 1)
+
+    def _emit_causal(self) -> np.ndarray:
+        """Frames whose time plus the lead lies within the decided spans (all, once
+        finished): the damped filter stepped toward the track there."""
+        total = frame_count(self.covered_until, self.fps) if self.spans else 0
+        if self.finished and len(self.nodes) == len(self.query):
+            stop = total
+        elif self.nodes and self.spans[len(self.nodes) - 1].end >= self.lead_s:
+            stop = min(
+                total, frame_count(self.spans[len(self.nodes) - 1].end - self.lead_s, self.fps)
+            )
+        else:
+            stop = self.emitted
+        if stop <= self.emitted:
+            return np.zeros((0, len(self.model.channels)), dtype=np.float32)
+        self.guard.check()
+        times = np.arange(self.emitted, stop, dtype=np.float64) / self.fps
+        targets = self.track.evaluate(
+            np.minimum(times + self.lead_s, self.covered_until), left_continuous=True
+        )
+        pieces = []
+        if self.damped is None:
+            self.damped = DampedState.at_rest(targets[0], 0.0)
+            pieces.append(self.damped.x[None].copy())
+            times, targets = times[1:], targets[1:]
+        if len(times):
+            steps = np.diff(np.concatenate(([self.damped.t], times)))
+            omegas = np.broadcast_to(self.model.causal_omegas, targets.shape)
+            pieces.append(self.damped.run(targets, omegas, steps, np.ones(len(times), bool)))
+            self.damped.t = float(times[-1])
+        self.emitted = stop
+        self.stats["frames"] = stop
+        return self.model.to_channels(np.concatenate(pieces))
 
 
 def _samples_needed(frame: int, fps_model: float, fps: float) -> int:

@@ -5,7 +5,10 @@ Sketch: position j of the query shows anime A_j over the target span
 fragment's value is the recording's PCA curve there. Each join adds the
 corrections planned by ``blending`` (pair example or extension), so the
 track is a continuous function of time, evaluated wherever the synthesizer
-needs samples. Evaluating position j needs the joins on both of its sides.
+needs samples. Evaluating position j needs the joins on both of its sides,
+except with forward joins (causal rungs), which correct only the span after
+them; those rungs also evaluate left-continuously (a span's end belongs to
+it), so a decided span is evaluated up to its end.
 Placements and joins are also kept as flat, growing arrays, so one compiled
 call (``_evaluate``) samples any stretch of the track: it runs on every
 streamed message, where per-fragment numpy calls cost more than the samples.
@@ -23,8 +26,11 @@ from .blending import Join, JoinKind
 from .growable import Growable
 from .warp import Warp
 
-_NO_CORRECTION, _PAIR, _EXTEND = 0, 1, 2
-_KIND_CODES = {JoinKind.PAIR: _PAIR, JoinKind.EXTEND: _EXTEND}
+_NO_CORRECTION, _PAIR, _EXTEND, _FORWARD = 0, 1, 2, 3
+_KIND_CODES = {JoinKind.PAIR: _PAIR, JoinKind.EXTEND: _EXTEND, JoinKind.FORWARD: _FORWARD}
+FORWARD_BLEND_SHARE = 0.5
+"""A forward join blends the previous recording out over this share of the next span, so a
+short span (a closure) still reaches its own fragment's pose."""
 
 
 @dataclass(frozen=True)
@@ -74,9 +80,9 @@ class MotionTrack:
         self._knot_sources.extend(placement.warp.source)
         self._knot_offsets.append(self._knot_targets.count)
 
-    def evaluate(self, times: np.ndarray) -> np.ndarray:
+    def evaluate(self, times: np.ndarray, left_continuous: bool = False) -> np.ndarray:
         """Track values (n, n_pc) at ascending ``times``; a time belongs to the last
-        placement starting at or before it."""
+        placement starting at or before it (``left_continuous``: strictly before it)."""
         animes, motion = self.animes, self.animes.motion
         return _evaluate(
             np.asarray(times, dtype=np.float64),
@@ -95,6 +101,7 @@ class MotionTrack:
             motion.values,
             motion.offsets,
             float(motion.rate),
+            left_continuous,
         )
 
 
@@ -116,6 +123,7 @@ def _evaluate(
     values: np.ndarray,
     offsets: np.ndarray,
     rate: float,
+    left_continuous: bool,
 ) -> np.ndarray:
     """Each time's fragment value plus the corrections of the joins on either side:
     out = base + w_left (left - base) + w_right (right - base), w clipped to [0, 1]."""
@@ -124,7 +132,10 @@ def _evaluate(
     other = np.empty(values.shape[1])
     for row in range(len(times)):
         time = times[row]
-        index = max(np.searchsorted(starts, time, side="right") - 1, 0)
+        if left_continuous:
+            index = max(np.searchsorted(starts, time, side="left") - 1, 0)
+        else:
+            index = max(np.searchsorted(starts, time, side="right") - 1, 0)
         low, high = knot_offsets[index], knot_offsets[index + 1]
         recording = np.interp(time, knot_targets[low:high], knot_sources[low:high])
         sample_into(base, values, offsets, utterance[animes[index]], recording, rate, True)
@@ -132,6 +143,8 @@ def _evaluate(
         for side in range(2):
             join = index - 1 if side == 0 else index
             if join < 0 or join >= len(join_kinds) or join_kinds[join] == _NO_CORRECTION:
+                continue
+            if join_kinds[join] == _FORWARD and side == 1:
                 continue
             weight, anime, recording = _correction(
                 side,
@@ -174,6 +187,13 @@ def _correction(
         relative = (time - start) / (end - start)
         recording = anime_start[example] + relative * (anime_end[example] - anime_start[example])
         return (1.0 - relative if side == 0 else relative), example, recording
+    if kind == _FORWARD:
+        before = animes[index - 1]
+        return (
+            1.0 - (time - start) / (FORWARD_BLEND_SHARE * (end - start)),
+            before,
+            anime_end[before] + time - ends[index - 1],
+        )
     if side == 0:
         before = animes[index - 1]
         weight = 1.0 - (time - starts[index - 1]) / (end - starts[index - 1])

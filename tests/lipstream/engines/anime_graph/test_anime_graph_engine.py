@@ -154,7 +154,7 @@ def test_an_emotion_is_searched_among_its_own_recordings(model: AnimeGraphModel)
     for emotion, view in [
         ("happy", "happy"),
         ("neutral", "neutral"),
-        (None, "all"),
+        (None, "neutral"),  # the default emotion
         ("sad", "all"),
     ]:
         synthesizer = model.start(fps=60.0, emotion=emotion)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from itertools import pairwise
 
 import numpy as np
@@ -22,6 +23,20 @@ from tests.lipstream.engines.anime_graph.anime_synthetic import (
 FPS = 120.0  # the corpus's rate, so output frames sit on the model grid
 OFF_GRID_FPS = 97.0  # frames between model samples, which interpolation waits one more for
 H = 12  # smoothing half-width in model frames: round(0.1 s * 120 fps)
+CAUSAL_OPTIONS = {"search": "greedy", "max_tile": 1, "causal": True}
+CAUSAL_NAMES = ["causal_lead", "causal"]
+
+
+def causal_rungs(model: AnimeGraphModel) -> list[Rung]:
+    """The causal rungs, their lead worked out by hand: the damped filter's lag 2 / omega
+    for the first PCA component, omega = 2 pi f / sqrt(sqrt(2) - 1) with f twice its
+    learned cutoff (at least 2 Hz), at most 120 ms."""
+    cutoff = 2.0 * max(float(model.cutoffs[0]), 2.0)
+    omega = 2 * math.pi * cutoff / math.sqrt(math.sqrt(2) - 1)
+    return [
+        Rung("causal_lead", Lookahead(min(0.12, 2 / omega)), {**CAUSAL_OPTIONS, "lead_ms": 120.0}),
+        Rung("causal", Lookahead(0.0), {**CAUSAL_OPTIONS, "lead_ms": 0.0}),
+    ]
 
 
 @pytest.fixture(scope="module")
@@ -49,25 +64,40 @@ def test_the_ladder_shortens_tiles_then_drops_smoothing(model: AnimeGraphModel) 
             Lookahead(raw, 1),
             {"search": "greedy", "max_tile": 1, "smooth": False},
         ),
+        *causal_rungs(model),
     )
 
 
 def test_each_rung_waits_less_than_the_one_above(model: AnimeGraphModel) -> None:
     ladder = model.fidelity_ladder()
-    for upper, lower in pairwise(ladder):
+    greedy = [rung for rung in ladder if not rung.options.get("causal")]
+    for upper, lower in pairwise(greedy):
         assert lower.lookahead.seconds <= upper.lookahead.seconds
         assert lower.lookahead.phonemes <= upper.lookahead.phonemes
         assert lower.lookahead != upper.lookahead
         for longest_phoneme_ms in (50.0, 200.0):
             assert lookahead_ms(lower, longest_phoneme_ms) < lookahead_ms(upper, longest_phoneme_ms)
+    # Ordered by fidelity: below a phoneme's wait only with phonemes of a realistic length.
+    for upper, lower in pairwise(ladder):
+        assert lookahead_ms(lower, 200.0) < lookahead_ms(upper, 200.0)
 
 
 @pytest.mark.parametrize(
     ("max_tile", "expected"),
     [
-        (6, ["greedy_tile6", "greedy_tile4", "greedy_tile2", "greedy_tile1"]),
-        (12, ["greedy_tile12", "greedy_tile10", "greedy_tile4", "greedy_tile2", "greedy_tile1"]),
-        (1, ["greedy_tile1"]),
+        (6, ["greedy_tile6", "greedy_tile4", "greedy_tile2", "greedy_tile1", *CAUSAL_NAMES]),
+        (
+            12,
+            [
+                "greedy_tile12",
+                "greedy_tile10",
+                "greedy_tile4",
+                "greedy_tile2",
+                "greedy_tile1",
+                *CAUSAL_NAMES,
+            ],
+        ),
+        (1, ["greedy_tile1", *CAUSAL_NAMES]),
     ],
 )
 def test_the_top_rung_is_the_models_own_tile_cap(max_tile: int, expected: list[str]) -> None:
@@ -76,7 +106,8 @@ def test_the_top_rung_is_the_models_own_tile_cap(max_tile: int, expected: list[s
     )
     ladder = lean.fidelity_ladder()
     assert [rung.name for rung in ladder] == expected  # no smoothing: no unsmoothed rung
-    assert all(rung.lookahead.seconds == 1 / lean.fps for rung in ladder)
+    greedy = ladder[: -len(CAUSAL_NAMES)]
+    assert all(rung.lookahead.seconds == 1 / lean.fps for rung in greedy)
 
 
 def _stream_one_by_one(
@@ -95,7 +126,7 @@ def _stream_one_by_one(
 
 @pytest.mark.parametrize("fps", [FPS, OFF_GRID_FPS])
 @pytest.mark.parametrize("graph", ["unclustered", "clustered"])
-@pytest.mark.parametrize("rung_index", range(5))
+@pytest.mark.parametrize("rung_index", range(5 + len(CAUSAL_NAMES)))
 def test_a_rung_emits_every_frame_its_lookahead_promises(
     model: AnimeGraphModel, graph: str, rung_index: int, fps: float
 ) -> None:
@@ -153,7 +184,7 @@ def test_the_synthesizer_takes_max_tile_and_smoothing_from_the_request(
     model: AnimeGraphModel,
 ) -> None:
     spans = make_spans(np.random.default_rng(7), 20)
-    for rung in model.fidelity_ladder():
+    for rung in model.fidelity_ladder()[: -len(CAUSAL_NAMES)]:
         synthesizer = model.start(fps=FPS, **rung.options)
         assert synthesizer.options.max_tile == rung.options["max_tile"]
         assert synthesizer.half_width == (H if rung.options.get("smooth", True) else 0)
@@ -161,6 +192,13 @@ def test_the_synthesizer_takes_max_tile_and_smoothing_from_the_request(
         synthesizer.finish()
         tile = rung.options["max_tile"]
         assert synthesizer.stats["tiles"] >= -(-len(synthesizer.nodes) // tile)
+    assert model.start(fps=FPS, causal=True, max_tile=4).options.max_tile == 1
+    for rung in causal_rungs(model):
+        causal = model.start(fps=FPS, **rung.options)
+        assert causal.options.max_tile == 1
+        causal.feed(spans)
+        causal.finish()
+        assert causal.stats["tiles"] == len(causal.nodes) == len(spans)
     with pytest.raises(InvalidRequestError):
         model.greedy_lookahead(0, smooth=True)
 
@@ -229,3 +267,61 @@ def test_the_lookahead_of_any_options_is_kept(model: AnimeGraphModel, options: d
 def test_an_uncapped_tile_has_no_bounded_lookahead(model: AnimeGraphModel) -> None:
     assert model.lookahead_for({"max_tile": 0}) is None
     assert model.lookahead_for({}) == model.fidelity_ladder()[0].lookahead
+
+
+@pytest.mark.parametrize(
+    ("options", "where"),
+    [
+        ({"causal": True, "search": "pq"}, "options.search"),
+        ({"causal": True, "lead_ms": 2000}, "options.lead_ms"),
+        ({"lead_ms": 30}, "options.lead_ms"),
+        ({"causal": "yes"}, "options.causal"),
+    ],
+)
+def test_causal_options_that_would_look_ahead_are_refused(
+    model: AnimeGraphModel, options: dict[str, object], where: str
+) -> None:
+    with pytest.raises(InvalidRequestError) as caught:
+        model.start(fps=FPS, **options)
+    assert caught.value.code == "invalid_request" and caught.value.where == where
+
+
+def test_forward_joins_are_continuous_and_never_change_a_decided_span(
+    model: AnimeGraphModel,
+) -> None:
+    spans = make_spans(np.random.default_rng(9), 25)
+    synthesizer = model.start(fps=FPS, causal=True)
+    seen: list[tuple[np.ndarray, np.ndarray]] = []
+    for span in spans:
+        synthesizer.feed([span])
+        synthesizer.frames()
+        decided_end = synthesizer.spans[len(synthesizer.nodes) - 1].end
+        grid = np.linspace(0.0, decided_end, 200)
+        values = synthesizer.track.evaluate(grid, left_continuous=True)
+        for earlier_grid, earlier in seen:
+            np.testing.assert_array_equal(
+                synthesizer.track.evaluate(earlier_grid, left_continuous=True), earlier
+            )
+        seen = [(grid, values)]
+    boundaries = np.array([span.start for span in synthesizer.spans[1:]])
+    kinds = {join.kind.value for join in synthesizer.track.joins}
+    assert "forward" in kinds  # the search jumped somewhere, so a join was blended
+    np.testing.assert_allclose(
+        synthesizer.track.evaluate(boundaries),
+        synthesizer.track.evaluate(boundaries, left_continuous=True),
+        atol=1e-9,
+    )
+
+
+def test_cut_joins_are_where_the_track_jumps(model: AnimeGraphModel) -> None:
+    """The continuity check above can fail: without blending a jump is a step."""
+    spans = make_spans(np.random.default_rng(9), 25)
+    synthesizer = model.start(fps=FPS, causal=True, blend=False)
+    synthesizer.feed(spans)
+    synthesizer.finish()
+    boundaries = np.array([span.start for span in synthesizer.spans[1:]])
+    gap = np.abs(
+        synthesizer.track.evaluate(boundaries)
+        - synthesizer.track.evaluate(boundaries, left_continuous=True)
+    )
+    assert gap.max() > 1e-3
