@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from ...store import ModelManifest
 from ..base import Engine
 from . import em
 from .model import CohenMassaroModel, DamModel
@@ -104,12 +105,10 @@ class DamEngine(Engine):
             "count_following": modes.following,
             "count_emotion": modes.emotion,
         }
-        model_class: type[DamModel] = (
-            CohenMassaroModel
-            if self.polynomial_degree() == 0 and self.name == "cohen-massaro"
-            else DamModel
-        )
-        return model_class(manifest, arrays)
+        return self.make_model(manifest, arrays)
+
+    def make_model(self, manifest: ModelManifest, arrays: dict[str, np.ndarray]) -> DamModel:
+        return DamModel(manifest, arrays)
 
 
 class CohenMassaroEngine(DamEngine):
@@ -143,3 +142,6 @@ class CohenMassaroEngine(DamEngine):
 
     def polynomial_degree(self) -> int:
         return 0
+
+    def make_model(self, manifest: ModelManifest, arrays: dict[str, np.ndarray]) -> DamModel:
+        return CohenMassaroModel(manifest, arrays)

@@ -46,6 +46,13 @@ from .modes import EMOTION_INDEX, PHONEME_INDEX
 from .selection import Costs, Layer, best_path, end_derivatives
 
 OPTION_LIMIT = 16
+NUMBER_FIELDS = (  # name, low, high, low excluded
+    ("eps", 0.0, 1.0, False),
+    ("tol", 0.0, 0.5, True),
+    ("alpha", 0.0, 1e6, True),
+    ("w_context", 0.0, 1e9, False),
+    ("w_smooth", 0.0, 1e9, False),
+)
 NEUTRAL = EMOTION_INDEX["neutral"]
 SILENCE_INDEX = PHONEME_INDEX[SILENCE]
 
@@ -56,6 +63,7 @@ class DamModel(Model):
     and ``reference_duration`` in the manifest's extra."""
 
     engine = "dam"
+    fixed_degree: int | None = None
     option_names = ("search_ahead", "tail_ahead")
 
     def __init__(self, manifest: ModelManifest, arrays: Mapping[str, np.ndarray]) -> None:
@@ -210,49 +218,25 @@ class DamModel(Model):
     def from_arrays(
         cls, manifest: ModelManifest, arrays: Mapping[str, np.ndarray], path: Path
     ) -> DamModel:
-        manifest_path = str(path / MANIFEST_NAME)
-        fields = FieldReader(manifest_path)
+        fields = FieldReader(str(path / MANIFEST_NAME))
         hyper = fields.mapping(manifest.hyperparameters, "hyperparameters")
-        degree = fields.integer(
-            fields.member(hyper, "degree", "hyperparameters.degree"),
-            "hyperparameters.degree",
-            0,
-            12,
-        )
-        for name, low, high, above in (
-            ("eps", 0.0, 1.0, False),
-            ("tol", 0.0, 0.5, True),
-            ("alpha", 0.0, 1e6, True),
-            ("w_context", 0.0, 1e9, False),
-            ("w_smooth", 0.0, 1e9, False),
-        ):
-            fields.number(
-                fields.member(hyper, name, f"hyperparameters.{name}"),
-                f"hyperparameters.{name}",
-                low,
-                high,
-                above=above,
-            )
-        for name in ("search_behind", "search_ahead"):
-            fields.integer(
-                fields.member(hyper, name, f"hyperparameters.{name}"),
-                f"hyperparameters.{name}",
-                0,
-                OPTION_LIMIT,
-            )
         extra = fields.mapping(manifest.extra, "extra")
-        fields.integer(fields.member(extra, "tail", "extra.tail"), "extra.tail", 0, OPTION_LIMIT)
-        fields.number(
-            fields.member(extra, "reference_duration", "extra.reference_duration"),
-            "extra.reference_duration",
-            0.0,
-            60.0,
-            above=True,
-        )
-        checked = check_arrays(
-            ArrayReader(arrays, str(path / ARRAYS_NAME)), degree, len(manifest.channels)
-        )
-        return cls(manifest, checked)
+
+        def member(mapping: Mapping[str, Any], prefix: str, name: str) -> tuple[Any, str]:
+            field = f"{prefix}.{name}"
+            return fields.member(mapping, name, field), field
+
+        degree = cls.fixed_degree
+        if degree is None:
+            degree = fields.integer(*member(hyper, "hyperparameters", "degree"), 0, 12)
+        for name, low, high, above in NUMBER_FIELDS:
+            fields.number(*member(hyper, "hyperparameters", name), low, high, above=above)
+        for name in ("search_behind", "search_ahead"):
+            fields.integer(*member(hyper, "hyperparameters", name), 0, OPTION_LIMIT)
+        fields.integer(*member(extra, "extra", "tail"), 0, OPTION_LIMIT)
+        fields.number(*member(extra, "extra", "reference_duration"), 0.0, 60.0, above=True)
+        reader = ArrayReader(arrays, str(path / ARRAYS_NAME))
+        return cls(manifest, check_arrays(reader, degree, len(manifest.channels)))
 
 
 def check_arrays(reader: ArrayReader, degree: int, n_channels: int) -> dict[str, np.ndarray]:
@@ -304,3 +288,4 @@ class CohenMassaroModel(DamModel):
     """The same model with constant animemes (M = 0)."""
 
     engine = "cohen-massaro"
+    fixed_degree = 0
