@@ -13,7 +13,7 @@ one mode (the documented fallback: too few examples to split).
 Per mode we count the contexts its occurrences were seen in: the previous and
 next phoneme (silence at an utterance's ends) and the utterance's emotion. A
 phoneme never seen in training stands in for a seen phoneme of the same viseme
-class (oculus15), else silence.
+class (oculus15), else silence, else the phoneme with the most modes.
 """
 
 from __future__ import annotations
@@ -177,27 +177,20 @@ def assign_modes(
 
 def stand_ins(offsets: np.ndarray) -> np.ndarray:
     """For each phoneme, itself if it has modes, else a seen phoneme of its viseme class
-    (oculus15), else silence; CorpusError when silence has no modes either."""
+    (oculus15), else silence, else the phoneme with the most modes."""
     scheme = get_scheme("oculus15")
-    seen = [offsets[p + 1] > offsets[p] for p in range(len(PHONEMES))]
+    n_modes = np.diff(offsets)
+    if not n_modes.any():
+        raise CorpusError("the corpus has no phoneme spans to learn modes from")
     silence = PHONEME_INDEX[SILENCE]
+    last_resort = silence if n_modes[silence] else int(np.argmax(n_modes))
     result = np.empty(len(PHONEMES), dtype=np.int64)
     for phoneme, label in enumerate(PHONEMES):
-        if seen[phoneme]:
-            result[phoneme] = phoneme
-            continue
         viseme = scheme.viseme_of(label)
         same = [
-            p for p, other in enumerate(PHONEMES) if seen[p] and scheme.viseme_of(other) == viseme
+            p
+            for p, other in enumerate(PHONEMES)
+            if n_modes[p] and scheme.viseme_of(other) == viseme
         ]
-        if same:
-            result[phoneme] = same[0]
-        elif seen[silence]:
-            result[phoneme] = silence
-        else:
-            raise CorpusError(
-                f"phoneme {label} has no training occurrence and the corpus has no silence "
-                f"({SILENCE}) to stand in for it",
-                where=f"phoneme {label}",
-            )
+        result[phoneme] = phoneme if n_modes[phoneme] else (same[0] if same else last_resort)
     return result
