@@ -139,6 +139,7 @@ class CohenMassaroEngine(DamEngine):
             0, points, min_occurrences, eps, tol, ridge, sigma_init, sigma_max, n_iter, em_tol,
             truncation_bound, alpha, w_context, w_smooth, search_behind, search_ahead,
         )  # fmt: skip
+        del self.degree  # M is no hyperparameter here: it is 0
 
     def polynomial_degree(self) -> int:
         return 0
