@@ -1,6 +1,8 @@
 """The ``dam`` and ``cohen-massaro`` engines: ``fit`` is the paper's training loop.
 
-modes (resample + affinity propagation + contexts) -> EM (E-step, then M-step
+the motion basis (PCA keeping ``variance`` of every channel's variance, see
+docs/engines/dam.md for why components rather than channels) -> modes
+(resample + affinity propagation + contexts) -> EM (E-step, then M-step
 and E-step until converged) -> the tail that bounds streaming's truncation error.
 ``cohen-massaro`` is the same code with constant animemes (M = 0).
 """
@@ -12,6 +14,7 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from ...numerics.basis import fit_basis
 from ...store import ModelManifest
 from ..base import Engine
 from . import em
@@ -29,6 +32,7 @@ class DamEngine(Engine):
     def __init__(
         self,
         degree: int = 4,
+        variance: float = 0.99,
         points: int = 8,
         min_occurrences: int = 3,
         eps: float = 1e-4,
@@ -46,6 +50,7 @@ class DamEngine(Engine):
         search_ahead: int = 2,
     ) -> None:
         self.degree = degree
+        self.variance = variance
         self.points = points
         self.min_occurrences = min_occurrences
         self.eps = eps
@@ -66,7 +71,9 @@ class DamEngine(Engine):
         return self.degree
 
     def fit(self, corpus: Any, *, progress: bool = False) -> DamModel:
-        occurrences, frames = collect_occurrences(corpus)
+        occurrences, recorded = collect_occurrences(corpus)
+        basis, _ = fit_basis(recorded, self.variance)
+        frames = basis.project(recorded)
         modes, mode_of = assign_modes(
             occurrences, resample(occurrences, frames, self.points), self.min_occurrences
         )
@@ -78,7 +85,9 @@ class DamEngine(Engine):
                 occurrences, mode_of, modes.count, frames, settings, self.n_iter, self.em_tol,
                 self.sigma_init,
             )  # fmt: skip
-            args = (occurrences, mode_of, fitted.sigma, fitted.coefficients, frames, settings)
+            args = (
+                occurrences, mode_of, fitted.sigma, fitted.coefficients, basis, recorded, settings,
+            )  # fmt: skip
             tail, tail_error = choose_tail(*args, self.truncation_bound)
             rung_errors = {
                 f"tail_ahead={ahead}": float(truncation_errors(*args, (tail, ahead)).max())
@@ -88,14 +97,17 @@ class DamEngine(Engine):
             corpus,
             metrics={
                 "modes": modes.count,
+                "basis_components": basis.n_components,
                 "occurrences": len(occurrences.start),
                 "em_objective": [round(value, 6) for value in fitted.history],
-                "fit_rms": float(np.sqrt(fitted.history[-1] / frames.size)),
+                "fit_rms": float(np.sqrt(fitted.history[-1] / recorded.size)),
                 "truncation_error": {"tail": tail_error, **rung_errors},
             },
             extra={"tail": tail, "reference_duration": float(np.mean(occurrences.duration))},
         )
         arrays = {
+            "basis_mean": basis.mean,
+            "basis_components": basis.components,
             "mode_phoneme": modes.phoneme,
             "mode_offsets": modes.offsets,
             "stand_in": modes.stand_in,
@@ -119,6 +131,7 @@ class CohenMassaroEngine(DamEngine):
 
     def __init__(
         self,
+        variance: float = 0.99,
         points: int = 8,
         min_occurrences: int = 3,
         eps: float = 1e-4,
@@ -136,8 +149,8 @@ class CohenMassaroEngine(DamEngine):
         search_ahead: int = 2,
     ) -> None:
         super().__init__(
-            0, points, min_occurrences, eps, tol, ridge, sigma_init, sigma_max, n_iter, em_tol,
-            truncation_bound, alpha, w_context, w_smooth, search_behind, search_ahead,
+            0, variance, points, min_occurrences, eps, tol, ridge, sigma_init, sigma_max, n_iter,
+            em_tol, truncation_bound, alpha, w_context, w_smooth, search_behind, search_ahead,
         )  # fmt: skip
         del self.degree  # M is no hyperparameter here: it is 0
 

@@ -4,7 +4,8 @@ Synthesis of a frame at time t inside span i: each phoneme k from i - behind to
 i + ahead picks a mode (``select_mode``: the exact search of ``selection`` over
 the window of spans k - search_behind .. k + search_ahead, taking its choice at
 k), and the frame is the sum of D·A over those phonemes (Eq. 2), each cut where
-its dominance falls below ``tol`` (see ``tails``). Everything a frame reads lies
+its dominance falls below ``tol`` (see ``tails``), summed over motion-basis
+components and mapped back to channels. Everything a frame reads lies
 within ``tail_ahead + search_ahead`` spans after its own, which is the
 lookahead. The frames are a pure function of the spans, so streaming is the
 generic ``RenderingSynthesizer`` waiting for the lookahead of the request's
@@ -28,6 +29,7 @@ import numpy as np
 from ...audio import Audio
 from ...errors import InvalidRequestError
 from ...model_checks import ArrayReader, FieldReader
+from ...numerics.basis import MotionBasis, read_components
 from ...phonemes import PHONEMES, SILENCE
 from ...store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
 from ...timeline import EMOTIONS, PhonemeSpan
@@ -58,9 +60,10 @@ SILENCE_INDEX = PHONEME_INDEX[SILENCE]
 
 
 class DamModel(Model):
-    """Modes grouped by phoneme (``mode_offsets``), ``sigma`` (modes,), ``coefficients``
-    (modes, M+1, channels), context counts and ``stand_in``; ``tail`` phonemes each side
-    and ``reference_duration`` in the manifest's extra."""
+    """The motion basis (``basis_mean``, ``basis_components``), modes grouped by phoneme
+    (``mode_offsets``), ``sigma`` (modes,), ``coefficients`` (modes, M+1, components),
+    context counts and ``stand_in``; ``tail`` phonemes each side and ``reference_duration``
+    in the manifest's extra."""
 
     engine = "dam"
     fixed_degree: int | None = None
@@ -70,6 +73,7 @@ class DamModel(Model):
         super().__init__(manifest)
         hyper = manifest.hyperparameters
         self.stored = {name: np.array(value) for name, value in arrays.items()}
+        self.basis = MotionBasis(self.stored["basis_mean"], self.stored["basis_components"])
         self.sigma = self.stored["sigma"]
         self.coefficients = self.stored["coefficients"]
         self.offsets = self.stored["mode_offsets"]
@@ -193,7 +197,7 @@ class DamModel(Model):
         ends = np.array([span.end for span in spans[first : last + 1]])
         owner = first + np.minimum(np.searchsorted(ends, times, side="right"), len(ends) - 1)
         owner = np.minimum(owner, len(spans) - 1)
-        frames = np.zeros((len(times), len(self.channels)))
+        frames = np.zeros((len(times), self.coefficients.shape[2]))
         for k in range(first, last + 1):
             request.guard.check()
             span = spans[k]
@@ -207,7 +211,7 @@ class DamModel(Model):
                 frames[near] += weight[:, None] * (
                     powers(u, self.coefficients.shape[1] - 1) @ self.coefficients[mode]
                 )
-        return frames.astype(np.float32)
+        return self.basis.reconstruct(frames).astype(np.float32)
 
     # -- store ----------------------------------------------------------------------------
 
@@ -242,6 +246,8 @@ class DamModel(Model):
 def check_arrays(reader: ArrayReader, degree: int, n_channels: int) -> dict[str, np.ndarray]:
     """Every array read with kind, shape and range checked; the modes grouped by phoneme."""
     n_phonemes = len(PHONEMES)
+    mean = reader.floats("basis_mean", (n_channels,))
+    components = read_components(reader, "basis_components", n_channels)
     phoneme = reader.integers("mode_phoneme", (None,), 0, n_phonemes)
     n_modes = len(phoneme)
     if n_modes == 0:
@@ -263,7 +269,9 @@ def check_arrays(reader: ArrayReader, degree: int, n_channels: int) -> dict[str,
         "mode_offsets": offsets,
         "stand_in": stand_in,
         "sigma": sigma,
-        "coefficients": reader.floats("coefficients", (n_modes, degree + 1, n_channels)),
+        "coefficients": reader.floats("coefficients", (n_modes, degree + 1, len(components))),
+        "basis_mean": mean,
+        "basis_components": components,
     }
     for name, width in (
         ("count_previous", n_phonemes),

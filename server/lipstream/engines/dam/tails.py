@@ -6,6 +6,8 @@ for the whole utterance, so the sum a frame sees is cut twice:
 - by dominance: a phoneme contributes only where D >= ``tol`` (its reach);
 - by phoneme count: a frame inside span i takes the phonemes i - behind .. i + ahead.
 
+The sums run over motion-basis components; errors are measured in channels.
+
 Both cuts are part of the model, so streaming and offline synthesis compute the
 same truncated sum. ``truncation_errors`` measures, on the training utterances
 with their fitted modes, the largest error of the cut sum against the sum cut
@@ -18,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...numerics.basis import MotionBasis
 from .dominance import dominance, powers
 from .em import Settings, pairs
 from .modes import Occurrences
@@ -69,14 +72,16 @@ def truncation_errors(
     mode: np.ndarray,
     sigma: np.ndarray,
     coefficients: np.ndarray,
+    basis: MotionBasis,
     frames: np.ndarray,
     s: Settings,
     window: tuple[int, int],
 ) -> np.ndarray:
-    """Per channel, the largest |cut - uncut| over the training frames over the channel's
-    range in those frames."""
+    """Per channel, the largest |cut - uncut| over the training ``frames`` (channels; the
+    model sums in ``basis`` components) over the channel's range in those frames."""
     args = (occurrences, mode, sigma, coefficients, len(frames), s)
-    error = np.abs(truncated_sum(*args, window) - truncated_sum(*args, None)).max(axis=0)
+    difference = truncated_sum(*args, window) - truncated_sum(*args, None)
+    error = np.abs(difference @ basis.components).max(axis=0)
     span = np.maximum(frames.max(axis=0) - frames.min(axis=0), 1e-9)
     return np.asarray(error / span)
 
@@ -86,6 +91,7 @@ def choose_tail(
     mode: np.ndarray,
     sigma: np.ndarray,
     coefficients: np.ndarray,
+    basis: MotionBasis,
     frames: np.ndarray,
     s: Settings,
     bound: float,
@@ -95,7 +101,9 @@ def choose_tail(
     error = 0.0
     for tail in range(MAX_TAIL + 1):
         error = float(
-            truncation_errors(occurrences, mode, sigma, coefficients, frames, s, (tail, tail)).max()
+            truncation_errors(
+                occurrences, mode, sigma, coefficients, basis, frames, s, (tail, tail)
+            ).max()
         )
         if error < bound:
             return tail, error

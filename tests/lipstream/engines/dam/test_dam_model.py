@@ -40,7 +40,7 @@ def _by_loops(model: DamModel, spans: list[PhonemeSpan], fps: float) -> np.ndarr
     modes = [model.select_mode(spans, k, model.search_ahead, request) for k in range(len(spans))]
     tol = float(model.manifest.hyperparameters["tol"])
     eps = float(model.manifest.hyperparameters["eps"])
-    out = np.zeros((frame_count(spans[-1].end, fps), len(model.channels)))
+    out = np.zeros((frame_count(spans[-1].end, fps), model.coefficients.shape[2]))
     for i in range(len(out)):
         t = i / fps
         owner = next((k for k, s in enumerate(spans) if s.end > t), len(spans) - 1)
@@ -51,7 +51,7 @@ def _by_loops(model: DamModel, spans: list[PhonemeSpan], fps: float) -> np.ndarr
             weight = math.exp(-gap * gap / (2 * model.sigma[mode] ** 2 + eps))
             if weight >= tol:
                 out[i] += weight * model.coefficients[mode, 0]
-    return out
+    return out @ model.basis.components + model.basis.mean
 
 
 def test_cohen_massaro_is_the_dam_with_m_zero(
@@ -199,6 +199,8 @@ def _corrupt(directory: Path, name: str, change: object) -> None:
         ("count_previous", lambda a: a - 5),
         ("count_emotion", lambda a: a.astype(np.float64)),
         ("count_following", None),
+        ("basis_components", lambda a: 2.0 * a),
+        ("basis_mean", lambda a: a[:-1]),
     ],
 )
 def test_corrupt_arrays_are_refused_naming_the_array(
