@@ -45,7 +45,7 @@ from ..base import (
 from .dominance import dominance, powers, reach
 from .em import SIGMA_MIN
 from .modes import EMOTION_INDEX, PHONEME_INDEX
-from .selection import Costs, Layer, best_path, end_derivatives
+from .selection import Costs, Layer, cheapest_path, context_cost, end_derivatives, smooth_cost
 
 OPTION_LIMIT = 16
 NUMBER_FIELDS = (  # name, low, high, low excluded
@@ -170,17 +170,24 @@ class DamModel(Model):
         return Layer(candidates, span.end - span.start, previous, following, emotion_index)
 
     def select_mode(
-        self, spans: Sequence[PhonemeSpan], index: int, ahead: int, request: SynthesisRequest
+        self,
+        spans: Sequence[PhonemeSpan],
+        index: int,
+        ahead: int,
+        request: SynthesisRequest,
+        memo: ModeMemo | None = None,
     ) -> int:
         """The mode of span ``index``: the exact search over spans index - search_behind ..
-        index + ``ahead`` (those that exist), its choice at ``index``."""
+        index + ``ahead`` (those that exist), its choice at ``index``. ``memo`` keeps the
+        layers and costs of one call's overlapping windows."""
+        memo = ModeMemo(self, spans, request) if memo is None else memo
         first = max(0, index - self.search_behind)
         last = index + ahead
-        layers = [
-            self.layer(spans, k, last, request) for k in range(first, min(last, len(spans) - 1) + 1)
-        ]
-        path = best_path(self.costs, layers)
-        return int(layers[index - first].candidates[path[index - first]])
+        indices = range(first, min(last, len(spans) - 1) + 1)
+        nodes = [memo.node(k, k + 1 > last) for k in indices]
+        edges = [memo.edge(k) for k in indices[:-1]]
+        path = cheapest_path(self.costs, nodes, edges)
+        return int(memo.layer(index, False).candidates[path[index - first]])
 
     def render(
         self,
@@ -198,10 +205,11 @@ class DamModel(Model):
         owner = first + np.minimum(np.searchsorted(ends, times, side="right"), len(ends) - 1)
         owner = np.minimum(owner, len(spans) - 1)
         frames = np.zeros((len(times), self.coefficients.shape[2]))
+        memo = ModeMemo(self, spans, request)
         for k in range(first, last + 1):
             request.guard.check()
             span = spans[k]
-            mode = self.select_mode(spans, k, search, request)
+            mode = self.select_mode(spans, k, search, request, memo)
             local = (times - span.start) / (span.end - span.start)
             near = (owner - self.tail <= k) & (k <= owner + ahead)
             near &= (local >= -self.reach[mode]) & (local <= 1.0 + self.reach[mode])
@@ -280,6 +288,44 @@ def check_arrays(reader: ArrayReader, degree: int, n_channels: int) -> dict[str,
     ):
         result[name] = reader.integers(name, (n_modes, width), 0, 2**62)
     return result
+
+
+class ModeMemo:
+    """Layers, E_c and E_s of one synthesis call, shared by its overlapping search windows.
+
+    A layer depends on its span, its neighbours and whether the next span lies beyond the
+    window (``cut``): then the next phoneme counts as unknown."""
+
+    def __init__(
+        self, model: DamModel, spans: Sequence[PhonemeSpan], request: SynthesisRequest
+    ) -> None:
+        self.model = model
+        self.spans = spans
+        self.request = request
+        self.layers: dict[tuple[int, bool], Layer] = {}
+        self.nodes: dict[tuple[int, bool], np.ndarray] = {}
+        self.edges: dict[int, np.ndarray] = {}
+
+    def layer(self, index: int, cut: bool) -> Layer:
+        key = (index, cut)
+        if key not in self.layers:
+            last = index if cut else index + 1
+            self.layers[key] = self.model.layer(self.spans, index, last, self.request)
+        return self.layers[key]
+
+    def node(self, index: int, cut: bool) -> np.ndarray:
+        key = (index, cut)
+        if key not in self.nodes:
+            self.nodes[key] = context_cost(self.model.costs, self.layer(index, cut))
+        return self.nodes[key]
+
+    def edge(self, index: int) -> np.ndarray:
+        """E_s between span ``index`` and the next (candidates do not depend on the window)."""
+        if index not in self.edges:
+            self.edges[index] = smooth_cost(
+                self.model.costs, self.layer(index, False), self.layer(index + 1, False)
+            )
+        return self.edges[index]
 
 
 class DamSynthesizer(RenderingSynthesizer):

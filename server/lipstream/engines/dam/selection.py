@@ -90,15 +90,22 @@ def smooth_cost(costs: Costs, left: Layer, right: Layer) -> np.ndarray:
 
 def best_path(costs: Costs, layers: Sequence[Layer]) -> np.ndarray:
     """The candidate position chosen in each layer, minimizing w_c·E_c + w_s·E_s."""
-    total = costs.w_context * context_cost(costs, layers[0])
+    nodes = [context_cost(costs, layer) for layer in layers]
+    edges = [smooth_cost(costs, a, b) for a, b in zip(layers, layers[1:], strict=False)]
+    return cheapest_path(costs, nodes, edges)
+
+
+def cheapest_path(
+    costs: Costs, nodes: Sequence[np.ndarray], edges: Sequence[np.ndarray]
+) -> np.ndarray:
+    """The min-plus programme over E_c of each layer's nodes and E_s of each join."""
+    total = costs.w_context * nodes[0]
     back: list[np.ndarray] = []
-    for left, right in zip(layers, layers[1:], strict=False):
-        step = total[:, None] + costs.w_smooth * smooth_cost(costs, left, right)
+    for node, edge in zip(nodes[1:], edges, strict=True):
+        step = total[:, None] + costs.w_smooth * edge
         choice = np.argmin(step, axis=0)
         back.append(choice)
-        total = step[choice, np.arange(step.shape[1])] + costs.w_context * context_cost(
-            costs, right
-        )
+        total = step[choice, np.arange(step.shape[1])] + costs.w_context * node
     path = [int(np.argmin(total))]
     for choice in reversed(back):
         path.append(int(choice[path[-1]]))
