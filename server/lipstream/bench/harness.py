@@ -3,12 +3,13 @@
 For each registered engine: train on the train split (timed), synthesize each
 held-out utterance from its recorded phone spans, and compare with the
 recording: RMS error over all channels, and the share of /p b m/ spans whose
-lips close (``lipstream.evaluation``). Speed is the synthesis time per
-phoneme and the real-time factor (synthesis time / utterance duration) at
-60 fps. Each figure is also given as a ratio to the baseline. Then every rung
-of every engine's ladder is measured the same way (``rungs``). Requests carry
-the utterance's emotion (and its audio, for engines that use audio), as a
-chat-avatar backend's requests would. Everything runs on one BLAS thread.
+lips close (``lipstream.evaluation``), and the RMS of each emotion's lines.
+Speed is the synthesis time per phoneme and the real-time factor (synthesis
+time / utterance duration) at 60 fps. Each figure is also given as a ratio to
+the baseline. Then every rung of every engine's ladder is measured the same
+way (``rungs``). Requests carry the utterance's emotion (and its audio, for
+engines that use audio), as a chat-avatar backend's requests would.
+Everything runs on one BLAS thread.
 
 Engines may add their own benchmark (``ENGINE_BENCHES``, lazy import strings
 of a ``run(corpus) -> dict`` and a ``format(dict) -> str``), such as the
@@ -22,7 +23,7 @@ import json
 import platform
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -46,6 +47,7 @@ ENGINE_BENCHES: dict[str, tuple[str, str]] = {
         "lipstream.bench.anime_graph:run_anime_graph_bench",
         "lipstream.bench.anime_graph:format_anime_graph_bench",
     ),
+    "dam": ("lipstream.bench.dam:run_dam_bench", "lipstream.bench.dam:format_dam_bench"),
 }
 
 
@@ -59,6 +61,7 @@ class EngineRow:
     real_time_factor: float
     rms_error: float
     closure_rate: float | None
+    rms_by_emotion: dict[str, float] = field(default_factory=dict)
     train_ratio: float = 1.0
     speed_ratio: float = 1.0
     rms_ratio: float = 1.0
@@ -95,7 +98,16 @@ def bench_engine(model: Model, heldout: Corpus, threshold: float | None) -> Engi
         real_time_factor=rtf,
         rms_error=float(np.mean(errors)),
         closure_rate=closure_rate(predictions, heldout, threshold),
+        rms_by_emotion=_by_emotion(errors, heldout),
     )
+
+
+def _by_emotion(errors: list[float], heldout: Corpus) -> dict[str, float]:
+    """The mean RMS of the held-out lines of each emotion."""
+    grouped: dict[str, list[float]] = {}
+    for error, utterance in zip(errors, heldout.utterances, strict=True):
+        grouped.setdefault(utterance.emotion, []).append(error)
+    return {emotion: float(np.mean(values)) for emotion, values in sorted(grouped.items())}
 
 
 def _ratio(value: float | None, baseline: float | None) -> float | None:

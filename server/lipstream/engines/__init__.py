@@ -12,6 +12,8 @@ from .base import Engine, Model
 ENGINES: dict[str, str] = {
     "viseme-lerp": "lipstream.engines.viseme_lerp:VisemeLerpEngine",
     "anime-graph": "lipstream.engines.anime_graph:AnimeGraphEngine",
+    "dam": "lipstream.engines.dam:DamEngine",
+    "cohen-massaro": "lipstream.engines.dam:CohenMassaroEngine",
 }
 
 

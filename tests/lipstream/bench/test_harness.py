@@ -44,3 +44,15 @@ def test_table_names_every_engine_benchmarked(results: dict) -> None:
     assert table.splitlines()[2].startswith(BASELINE)
     assert "recorded" in table.splitlines()[-1]
     assert set(engine_names()) >= {row["engine"] for row in results["engines"]}
+
+
+def test_rms_per_emotion_is_the_mean_of_each_emotions_lines(
+    results: dict, small_demo_corpus: Corpus
+) -> None:
+    _, heldout = small_demo_corpus.split()
+    row = results["engines"][0]
+    emotions = sorted({u.emotion for u in heldout.utterances})
+    assert sorted(row["rms_by_emotion"]) == emotions
+    weights = [sum(u.emotion == e for u in heldout.utterances) for e in emotions]
+    weighted = sum(w * row["rms_by_emotion"][e] for w, e in zip(weights, emotions, strict=True))
+    assert weighted / len(heldout.utterances) == pytest.approx(row["rms_error"], rel=1e-9)

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from lipstream.config import ServerSettings
+from lipstream.engines import engine_names
 from lipstream.server.catalog import Catalog
 from tests.lipstream.server.harness import Served, serving
 
@@ -344,4 +345,4 @@ def test_health_readiness_and_listings(served: Served) -> None:
     assert httpx.get(f"{served.http}/healthz").json() == {"status": "ok"}
     assert httpx.get(f"{served.http}/readyz").json() == {"ready": True, "failed_models": []}
     characters = httpx.get(f"{served.http}/v1/characters").json()["characters"]
-    assert characters == [{"name": "demo", "engines": ["anime-graph", "viseme-lerp"]}]
+    assert characters == [{"name": "demo", "engines": sorted(engine_names())}]

@@ -22,8 +22,8 @@ from numba import njit
 from ...audio import Audio
 from ...errors import CorpusError
 from ...features import MfccConfig, frame_count, mfcc
+from ...numerics.basis import MotionBasis
 from ...phonemes import PHONEME_INDEX
-from .basis import MotionBasis
 
 if TYPE_CHECKING:
     from ...corpus import Corpus

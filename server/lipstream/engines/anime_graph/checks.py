@@ -37,6 +37,7 @@ import numpy as np
 from ...errors import ModelStoreError
 from ...features import MfccConfig
 from ...model_checks import ArrayReader, FieldReader, check_ascending, check_indices
+from ...numerics.basis import read_components
 from ...phonemes import PHONEMES
 from ...store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
 from .animes import SUMMARY_POINTS
@@ -160,12 +161,8 @@ def _check_animes(
     mean = reader.floats("basis_mean", (n_channels,))
     if ((mean < low - slack) | (mean > high + slack)).any():
         raise reader.error("basis_mean", "lies outside [channel_low, channel_high]")
-    components = np.asarray(reader.floats("basis_components", (None, n_channels)), np.float64)
+    components = read_components(reader, "basis_components", n_channels)
     n_components = len(components)
-    if n_components < 1:
-        raise reader.error("basis_components", "holds no component")
-    if np.abs(components @ components.T - np.eye(n_components)).max() > 1e-4:
-        raise reader.error("basis_components", "is not orthonormal")
     labels = reader.integers("anime_label", (None,), 0, len(PHONEMES))
     n_animes = len(labels)
     if n_animes < 1:

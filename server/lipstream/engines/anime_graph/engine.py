@@ -19,10 +19,10 @@ from tqdm import tqdm
 
 from ...errors import CorpusError, LipstreamError
 from ...features import DEFAULT_MFCC
+from ...numerics.basis import fit_basis
 from ...phonemes import PHONEMES
 from ..base import Engine
 from .animes import AnimeTable, segment_corpus
-from .basis import fit_basis
 from .graph import ClusterGraph
 from .model import AnimeGraphModel
 from .options import GRAPHS

@@ -20,12 +20,12 @@ import numpy as np
 from ...audio import Audio
 from ...errors import InvalidRequestError, ModelStoreError
 from ...features import MfccConfig
+from ...numerics.basis import MotionBasis
 from ...store import ModelManifest, require_arrays
 from ...timeline import PhonemeSpan
 from ..base import Lookahead, Model, Rung, SynthesisRequest
 from ..damped import omega_for_cutoff
 from .animes import AnimeTable, Curves
-from .basis import MotionBasis
 from .checks import check_stored_model
 from .costs import Poses
 from .graph import SearchGraph

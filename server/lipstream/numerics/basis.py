@@ -18,7 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 from sklearn.decomposition import PCA
 
-from ...errors import CorpusError
+from ..errors import CorpusError
+from ..model_checks import ArrayReader
 
 
 @dataclass(frozen=True)
@@ -84,3 +85,13 @@ def _components_needed(
         reached = np.cumsum(eigenvalues) / eigenvalues.sum()
     enough = np.flatnonzero(reached >= variance - 1e-12)
     return int(enough[0]) + 1 if len(enough) else len(eigenvalues)
+
+
+def read_components(reader: ArrayReader, name: str, n_channels: int) -> np.ndarray:
+    """The array ``name`` of a model: at least one orthonormal component (k, n_channels)."""
+    components = np.asarray(reader.floats(name, (None, n_channels)), np.float64)
+    if len(components) < 1:
+        raise reader.error(name, "holds no component")
+    if np.abs(components @ components.T - np.eye(len(components))).max() > 1e-4:
+        raise reader.error(name, "is not orthonormal")
+    return components

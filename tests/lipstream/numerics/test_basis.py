@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from sklearn.decomposition import PCA
 
-from lipstream.engines.anime_graph.basis import channel_shares, fit_basis
+from lipstream.numerics.basis import channel_shares, fit_basis
 
 
 def _frames(seed: int = 0) -> np.ndarray:

@@ -1,0 +1,161 @@
+"""The ``dam`` and ``cohen-massaro`` engines: ``fit`` is the paper's training loop.
+
+the motion basis (PCA keeping ``variance`` of every channel's variance, see
+docs/engines/dam.md for why components rather than channels) -> modes
+(resample + affinity propagation + contexts) -> EM (E-step, then M-step
+and E-step until converged) -> the tail that bounds streaming's truncation error.
+``cohen-massaro`` is the same code with constant animemes (M = 0).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from ...numerics.basis import fit_basis
+from ...store import ModelManifest
+from ..base import Engine
+from . import em
+from .model import CohenMassaroModel, DamModel
+from .modes import assign_modes, collect_occurrences, resample
+from .tails import choose_tail, truncation_errors
+
+
+class DamEngine(Engine):
+    """Dominated Animeme Models (Lin et al.); hyperparameters as in docs/engines/dam.md."""
+
+    name = "dam"
+    model_class = DamModel
+
+    def __init__(
+        self,
+        degree: int = 4,
+        variance: float = 0.99,
+        points: int = 8,
+        min_occurrences: int = 3,
+        eps: float = 1e-4,
+        tol: float = 1e-3,
+        ridge: float = 1e-6,
+        sigma_init: float = 0.2,
+        sigma_max: float = 0.6,
+        n_iter: int = 3,
+        em_tol: float = 1e-4,
+        truncation_bound: float = 0.01,
+        alpha: float = 1.0,
+        w_context: float = 1000.0,
+        w_smooth: float = 1.0,
+        search_behind: int = 2,
+        search_ahead: int = 2,
+    ) -> None:
+        self.degree = degree
+        self.variance = variance
+        self.points = points
+        self.min_occurrences = min_occurrences
+        self.eps = eps
+        self.tol = tol
+        self.ridge = ridge
+        self.sigma_init = sigma_init
+        self.sigma_max = sigma_max
+        self.n_iter = n_iter
+        self.em_tol = em_tol
+        self.truncation_bound = truncation_bound
+        self.alpha = alpha
+        self.w_context = w_context
+        self.w_smooth = w_smooth
+        self.search_behind = search_behind
+        self.search_ahead = search_ahead
+
+    def polynomial_degree(self) -> int:
+        return self.degree
+
+    def fit(self, corpus: Any, *, progress: bool = False) -> DamModel:
+        occurrences, recorded = collect_occurrences(corpus)
+        basis, _ = fit_basis(recorded, self.variance)
+        frames = basis.project(recorded)
+        modes, mode_of = assign_modes(
+            occurrences, resample(occurrences, frames, self.points), self.min_occurrences
+        )
+        settings = em.Settings(
+            self.polynomial_degree(), self.eps, self.tol, self.ridge, self.sigma_max
+        )
+        with threadpool_limits(limits=1):
+            fitted = em.fit(
+                occurrences, mode_of, modes.count, frames, settings, self.n_iter, self.em_tol,
+                self.sigma_init,
+            )  # fmt: skip
+            args = (
+                occurrences, mode_of, fitted.sigma, fitted.coefficients, basis, recorded, settings,
+            )  # fmt: skip
+            tail, tail_error = choose_tail(*args, self.truncation_bound)
+            rung_errors = {
+                f"tail_ahead={ahead}": float(truncation_errors(*args, (tail, ahead)).max())
+                for ahead in sorted({tail, min(1, tail), 0})
+            }
+        manifest = self.new_manifest(
+            corpus,
+            metrics={
+                "modes": modes.count,
+                "basis_components": basis.n_components,
+                "occurrences": len(occurrences.start),
+                "em_objective": [round(value, 6) for value in fitted.history],
+                "fit_rms": float(np.sqrt(fitted.history[-1] / recorded.size)),
+                "truncation_error": {"tail": tail_error, **rung_errors},
+            },
+            extra={"tail": tail, "reference_duration": float(np.mean(occurrences.duration))},
+        )
+        arrays = {
+            "basis_mean": basis.mean,
+            "basis_components": basis.components,
+            "mode_phoneme": modes.phoneme,
+            "mode_offsets": modes.offsets,
+            "stand_in": modes.stand_in,
+            "sigma": fitted.sigma,
+            "coefficients": fitted.coefficients,
+            "count_previous": modes.previous,
+            "count_following": modes.following,
+            "count_emotion": modes.emotion,
+        }
+        return self.make_model(manifest, arrays)
+
+    def make_model(self, manifest: ModelManifest, arrays: dict[str, np.ndarray]) -> DamModel:
+        return DamModel(manifest, arrays)
+
+
+class CohenMassaroEngine(DamEngine):
+    """Cohen-Massaro: the DAM code with constant targets (M = 0), served as its own engine."""
+
+    name = "cohen-massaro"
+    model_class = CohenMassaroModel
+
+    def __init__(
+        self,
+        variance: float = 0.99,
+        points: int = 8,
+        min_occurrences: int = 3,
+        eps: float = 1e-4,
+        tol: float = 1e-3,
+        ridge: float = 1e-6,
+        sigma_init: float = 0.2,
+        sigma_max: float = 0.6,
+        n_iter: int = 3,
+        em_tol: float = 1e-4,
+        truncation_bound: float = 0.01,
+        alpha: float = 1.0,
+        w_context: float = 1000.0,
+        w_smooth: float = 1.0,
+        search_behind: int = 2,
+        search_ahead: int = 2,
+    ) -> None:
+        super().__init__(
+            0, variance, points, min_occurrences, eps, tol, ridge, sigma_init, sigma_max, n_iter,
+            em_tol, truncation_bound, alpha, w_context, w_smooth, search_behind, search_ahead,
+        )  # fmt: skip
+        del self.degree  # M is no hyperparameter here: it is 0
+
+    def polynomial_degree(self) -> int:
+        return 0
+
+    def make_model(self, manifest: ModelManifest, arrays: dict[str, np.ndarray]) -> DamModel:
+        return CohenMassaroModel(manifest, arrays)

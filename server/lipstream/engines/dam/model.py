@@ -1,0 +1,345 @@
+"""The trained DAM model: modes, their dominance and animemes, synthesis by Eq. 2.
+
+Synthesis of a frame at time t inside span i: each phoneme k from i - behind to
+i + ahead picks a mode (``select_mode``: the exact search of ``selection`` over
+the window of spans k - search_behind .. k + search_ahead, taking its choice at
+k), and the frame is the sum of D·A over those phonemes (Eq. 2), each cut where
+its dominance falls below ``tol`` (see ``tails``), summed over motion-basis
+components and mapped back to channels. Everything a frame reads lies
+within ``tail_ahead + search_ahead`` spans after its own, which is the
+lookahead. The frames are a pure function of the spans, so streaming is the
+generic ``RenderingSynthesizer`` waiting for the lookahead of the request's
+options.
+
+Emotion: a span's emotion (its own, else the request's, else neutral) limits the
+candidates to modes seen with that emotion, falling back to all the phoneme's
+modes when that emotion never said it. A phoneme never trained stands in for
+another (``modes.stand_ins``).
+"""
+
+from __future__ import annotations
+
+from bisect import bisect_right
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...audio import Audio
+from ...errors import InvalidRequestError
+from ...model_checks import ArrayReader, FieldReader
+from ...numerics.basis import MotionBasis, read_components
+from ...phonemes import PHONEMES, SILENCE
+from ...store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
+from ...timeline import EMOTIONS, PhonemeSpan
+from ..base import (
+    Lookahead,
+    Model,
+    RenderingSynthesizer,
+    Rung,
+    SynthesisRequest,
+    Synthesizer,
+    final_until,
+)
+from .dominance import dominance, powers, reach
+from .em import SIGMA_MIN
+from .modes import EMOTION_INDEX, PHONEME_INDEX
+from .selection import Costs, Layer, cheapest_path, context_cost, end_derivatives, smooth_cost
+
+OPTION_LIMIT = 16
+NUMBER_FIELDS = (  # name, low, high, low excluded
+    ("eps", 0.0, 1.0, False),
+    ("tol", 0.0, 0.5, True),
+    ("alpha", 0.0, 1e6, True),
+    ("w_context", 0.0, 1e9, False),
+    ("w_smooth", 0.0, 1e9, False),
+)
+NEUTRAL = EMOTION_INDEX["neutral"]
+SILENCE_INDEX = PHONEME_INDEX[SILENCE]
+
+
+class DamModel(Model):
+    """The motion basis (``basis_mean``, ``basis_components``), modes grouped by phoneme
+    (``mode_offsets``), ``sigma`` (modes,), ``coefficients`` (modes, M+1, components),
+    context counts and ``stand_in``; ``tail`` phonemes each side and ``reference_duration``
+    in the manifest's extra."""
+
+    engine = "dam"
+    fixed_degree: int | None = None
+    option_names = ("search_ahead", "tail_ahead")
+
+    def __init__(self, manifest: ModelManifest, arrays: Mapping[str, np.ndarray]) -> None:
+        super().__init__(manifest)
+        hyper = manifest.hyperparameters
+        self.stored = {name: np.array(value) for name, value in arrays.items()}
+        self.basis = MotionBasis(self.stored["basis_mean"], self.stored["basis_components"])
+        self.sigma = self.stored["sigma"]
+        self.coefficients = self.stored["coefficients"]
+        self.offsets = self.stored["mode_offsets"]
+        self.stand_in = self.stored["stand_in"]
+        self.count_emotion = self.stored["count_emotion"]
+        self.eps = float(hyper["eps"])
+        self.reach = reach(self.sigma, self.eps, float(hyper["tol"]))
+        self.tail = int(manifest.extra["tail"])
+        self.search_behind = int(hyper["search_behind"])
+        self.search_ahead = int(hyper["search_ahead"])
+        self.costs = Costs(
+            previous=self.stored["count_previous"],
+            following=self.stored["count_following"],
+            emotion=self.count_emotion,
+            starts=end_derivatives(self.coefficients, 0.0),
+            ends=end_derivatives(self.coefficients, 1.0),
+            reference_duration=float(manifest.extra["reference_duration"]),
+            alpha=float(hyper["alpha"]),
+            w_context=float(hyper["w_context"]),
+            w_smooth=float(hyper["w_smooth"]),
+        )
+
+    # -- options, lookahead, ladder -------------------------------------------------------
+
+    def resolve(self, options: Mapping[str, Any]) -> tuple[int, int]:
+        """(search_ahead, tail_ahead) of ``options``, defaults filled in."""
+        values = []
+        for name, default in (("search_ahead", self.search_ahead), ("tail_ahead", self.tail)):
+            value = options.get(name, default)
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise InvalidRequestError(
+                    f"{name} must be an integer in [0, {OPTION_LIMIT}], got {value!r}",
+                    where=f"options.{name}",
+                )
+            if not 0 <= value <= OPTION_LIMIT:
+                raise InvalidRequestError(
+                    f"{name} must be an integer in [0, {OPTION_LIMIT}], got {value!r}",
+                    where=f"options.{name}",
+                )
+            values.append(value)
+        return values[0], values[1]
+
+    @property
+    def lookahead(self) -> Lookahead:
+        return Lookahead(phonemes=self.search_ahead + self.tail)
+
+    def lookahead_for(self, options: Mapping[str, Any]) -> Lookahead | None:
+        search, tail = self.resolve(options)
+        return Lookahead(phonemes=search + tail)
+
+    def fidelity_ladder(self) -> tuple[Rung, ...]:
+        """Mode searches looking ``search_ahead`` phonemes ahead, then fewer, then none; the
+        tails stay whole on every rung (cutting them costs far more than 1 % of a channel's
+        range, see docs/engines/dam.md)."""
+        rungs = []
+        for search in range(self.search_ahead, -1, -1):
+            name = "full" if search == self.search_ahead else f"search-{search}"
+            options = {"search_ahead": search, "tail_ahead": self.tail}
+            rungs.append(Rung(name, Lookahead(phonemes=search + self.tail), options))
+        return tuple(rungs)
+
+    def rung_for(self, options: Mapping[str, Any]) -> Rung | None:
+        resolved = self.resolve(options)
+        for rung in self.fidelity_ladder():
+            if self.resolve(rung.options) == resolved:
+                return rung
+        return None
+
+    def synthesizer(self, request: SynthesisRequest) -> Synthesizer:
+        self.resolve(request.options)
+        return DamSynthesizer(self, request)
+
+    # -- synthesis ------------------------------------------------------------------------
+
+    def layer(
+        self, spans: Sequence[PhonemeSpan], index: int, last: int, request: SynthesisRequest
+    ) -> Layer:
+        """Layer ``index`` of a window ending at span ``last``."""
+        span = spans[index]
+        phoneme = int(self.stand_in[PHONEME_INDEX[span.phoneme]])
+        candidates = np.arange(self.offsets[phoneme], self.offsets[phoneme + 1])
+        emotion = request.emotion_of(span)
+        emotion_index = NEUTRAL if emotion is None else EMOTION_INDEX[emotion]
+        said = candidates[self.count_emotion[candidates, emotion_index] > 0]
+        if len(said):
+            candidates = said
+        previous = PHONEME_INDEX[spans[index - 1].phoneme] if index > 0 else SILENCE_INDEX
+        if index + 1 > last:
+            following = -1
+        elif index + 1 < len(spans):
+            following = PHONEME_INDEX[spans[index + 1].phoneme]
+        else:
+            following = SILENCE_INDEX
+        return Layer(candidates, span.end - span.start, previous, following, emotion_index)
+
+    def select_mode(
+        self,
+        spans: Sequence[PhonemeSpan],
+        index: int,
+        ahead: int,
+        request: SynthesisRequest,
+        memo: ModeMemo | None = None,
+    ) -> int:
+        """The mode of span ``index``: the exact search over spans index - search_behind ..
+        index + ``ahead`` (those that exist), its choice at ``index``. ``memo`` keeps the
+        layers and costs of one call's overlapping windows."""
+        memo = ModeMemo(self, spans, request) if memo is None else memo
+        first = max(0, index - self.search_behind)
+        last = index + ahead
+        indices = range(first, min(last, len(spans) - 1) + 1)
+        nodes = [memo.node(k, k + 1 > last) for k in indices]
+        edges = [memo.edge(k) for k in indices[:-1]]
+        path = cheapest_path(self.costs, nodes, edges)
+        return int(memo.layer(index, False).candidates[path[index - first]])
+
+    def render(
+        self,
+        spans: Sequence[PhonemeSpan],
+        times: np.ndarray,
+        request: SynthesisRequest,
+        audio: Audio | None,
+    ) -> np.ndarray:
+        search, ahead = self.resolve(request.options)
+        owner_low = min(bisect_right(spans, times[0], key=lambda s: s.end), len(spans) - 1)
+        owner_high = min(bisect_right(spans, times[-1], key=lambda s: s.end), len(spans) - 1)
+        first = max(0, owner_low - self.tail)
+        last = min(len(spans) - 1, owner_high + ahead)
+        ends = np.array([span.end for span in spans[first : last + 1]])
+        owner = first + np.minimum(np.searchsorted(ends, times, side="right"), len(ends) - 1)
+        owner = np.minimum(owner, len(spans) - 1)
+        frames = np.zeros((len(times), self.coefficients.shape[2]))
+        memo = ModeMemo(self, spans, request)
+        for k in range(first, last + 1):
+            request.guard.check()
+            span = spans[k]
+            mode = self.select_mode(spans, k, search, request, memo)
+            local = (times - span.start) / (span.end - span.start)
+            near = (owner - self.tail <= k) & (k <= owner + ahead)
+            near &= (local >= -self.reach[mode]) & (local <= 1.0 + self.reach[mode])
+            if near.any():
+                u = local[near]
+                weight = dominance(u, self.sigma[mode], self.eps)
+                frames[near] += weight[:, None] * (
+                    powers(u, self.coefficients.shape[1] - 1) @ self.coefficients[mode]
+                )
+        return self.basis.reconstruct(frames).astype(np.float32)
+
+    # -- store ----------------------------------------------------------------------------
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return dict(self.stored)
+
+    @classmethod
+    def from_arrays(
+        cls, manifest: ModelManifest, arrays: Mapping[str, np.ndarray], path: Path
+    ) -> DamModel:
+        fields = FieldReader(str(path / MANIFEST_NAME))
+        hyper = fields.mapping(manifest.hyperparameters, "hyperparameters")
+        extra = fields.mapping(manifest.extra, "extra")
+
+        def member(mapping: Mapping[str, Any], prefix: str, name: str) -> tuple[Any, str]:
+            field = f"{prefix}.{name}"
+            return fields.member(mapping, name, field), field
+
+        degree = cls.fixed_degree
+        if degree is None:
+            degree = fields.integer(*member(hyper, "hyperparameters", "degree"), 0, 12)
+        for name, low, high, above in NUMBER_FIELDS:
+            fields.number(*member(hyper, "hyperparameters", name), low, high, above=above)
+        for name in ("search_behind", "search_ahead"):
+            fields.integer(*member(hyper, "hyperparameters", name), 0, OPTION_LIMIT)
+        fields.integer(*member(extra, "extra", "tail"), 0, OPTION_LIMIT)
+        fields.number(*member(extra, "extra", "reference_duration"), 0.0, 60.0, above=True)
+        reader = ArrayReader(arrays, str(path / ARRAYS_NAME))
+        return cls(manifest, check_arrays(reader, degree, len(manifest.channels)))
+
+
+def check_arrays(reader: ArrayReader, degree: int, n_channels: int) -> dict[str, np.ndarray]:
+    """Every array read with kind, shape and range checked; the modes grouped by phoneme."""
+    n_phonemes = len(PHONEMES)
+    mean = reader.floats("basis_mean", (n_channels,))
+    components = read_components(reader, "basis_components", n_channels)
+    phoneme = reader.integers("mode_phoneme", (None,), 0, n_phonemes)
+    n_modes = len(phoneme)
+    if n_modes == 0:
+        raise reader.error("mode_phoneme", "is empty: a model needs at least one mode")
+    offsets = reader.offsets("mode_offsets", n_phonemes, n_modes, nonempty=False)
+    expected = np.repeat(np.arange(n_phonemes), np.diff(offsets))
+    if not np.array_equal(phoneme, expected):
+        raise reader.error(
+            "mode_phoneme", "does not group the modes by phoneme as mode_offsets says"
+        )
+    stand_in = reader.integers("stand_in", (n_phonemes,), 0, n_phonemes)
+    if (np.diff(offsets)[stand_in] == 0).any():
+        raise reader.error("stand_in", "names a phoneme without modes")
+    sigma = reader.floats("sigma", (n_modes,))
+    if (sigma < SIGMA_MIN).any() or (sigma > 100.0).any():
+        raise reader.error("sigma", f"must lie in [{SIGMA_MIN}, 100]")
+    result = {
+        "mode_phoneme": phoneme,
+        "mode_offsets": offsets,
+        "stand_in": stand_in,
+        "sigma": sigma,
+        "coefficients": reader.floats("coefficients", (n_modes, degree + 1, len(components))),
+        "basis_mean": mean,
+        "basis_components": components,
+    }
+    for name, width in (
+        ("count_previous", n_phonemes),
+        ("count_following", n_phonemes),
+        ("count_emotion", len(EMOTIONS)),
+    ):
+        result[name] = reader.integers(name, (n_modes, width), 0, 2**62)
+    return result
+
+
+class ModeMemo:
+    """Layers, E_c and E_s of one synthesis call, shared by its overlapping search windows.
+
+    A layer depends on its span, its neighbours and whether the next span lies beyond the
+    window (``cut``): then the next phoneme counts as unknown."""
+
+    def __init__(
+        self, model: DamModel, spans: Sequence[PhonemeSpan], request: SynthesisRequest
+    ) -> None:
+        self.model = model
+        self.spans = spans
+        self.request = request
+        self.layers: dict[tuple[int, bool], Layer] = {}
+        self.nodes: dict[tuple[int, bool], np.ndarray] = {}
+        self.edges: dict[int, np.ndarray] = {}
+
+    def layer(self, index: int, cut: bool) -> Layer:
+        key = (index, cut)
+        if key not in self.layers:
+            last = index if cut else index + 1
+            self.layers[key] = self.model.layer(self.spans, index, last, self.request)
+        return self.layers[key]
+
+    def node(self, index: int, cut: bool) -> np.ndarray:
+        key = (index, cut)
+        if key not in self.nodes:
+            self.nodes[key] = context_cost(self.model.costs, self.layer(index, cut))
+        return self.nodes[key]
+
+    def edge(self, index: int) -> np.ndarray:
+        """E_s between span ``index`` and the next (candidates do not depend on the window)."""
+        if index not in self.edges:
+            self.edges[index] = smooth_cost(
+                self.model.costs, self.layer(index, False), self.layer(index + 1, False)
+            )
+        return self.edges[index]
+
+
+class DamSynthesizer(RenderingSynthesizer):
+    """The generic rendering synthesizer, waiting for the lookahead of the request's options."""
+
+    def final_until(self) -> float:
+        lookahead = self.model.lookahead_for(self.request.options)
+        if not self.spans or lookahead is None:
+            return 0.0
+        return final_until(self.spans, lookahead)
+
+
+class CohenMassaroModel(DamModel):
+    """The same model with constant animemes (M = 0)."""
+
+    engine = "cohen-massaro"
+    fixed_degree = 0

@@ -1,0 +1,2 @@
+"""Numerical kernels shared by engines (numpy/scipy, no engine imports): ``basis``, the
+motion basis (PCA)."""

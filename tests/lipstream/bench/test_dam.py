@@ -1,0 +1,23 @@
+"""The dam bench: rungs and truncation errors as the models record them."""
+
+from __future__ import annotations
+
+from lipstream.bench.dam import format_dam_bench, run_dam_bench
+from lipstream.corpus import Corpus
+from lipstream.engines.dam import DamEngine
+
+
+def test_dam_bench_reports_every_rung_with_its_truncation_error(
+    small_demo_corpus: Corpus,
+) -> None:
+    results = run_dam_bench(small_demo_corpus)
+    assert set(results) == {"dam", "cohen-massaro"}
+    model = DamEngine().fit(small_demo_corpus.split()[0])
+    figures = results["dam"]
+    assert figures["tail"] == model.tail and figures["modes"] == model.manifest.metrics["modes"]
+    assert [r["name"] for r in figures["rungs"]] == [r.name for r in model.fidelity_ladder()]
+    for rung, declared in zip(figures["rungs"], model.fidelity_ladder(), strict=True):
+        assert rung["lookahead_phonemes"] == declared.lookahead.phonemes
+        assert rung["truncation_error"] < DamEngine().truncation_bound
+    assert max(figures["cut_tail_errors"].values()) > DamEngine().truncation_bound
+    assert "rung full" in format_dam_bench(results)

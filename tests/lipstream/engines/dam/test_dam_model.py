@@ -1,0 +1,251 @@
+"""The trained dam and cohen-massaro models: M = 0 is Cohen-Massaro, rungs stream as offline,
+truncation within the bound, emotion, options and load-time checks."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lipstream.corpus import Corpus
+from lipstream.engines import load_model
+from lipstream.engines.base import Model, SynthesisRequest, frame_count, frames_before
+from lipstream.engines.dam import CohenMassaroEngine, DamEngine, DamModel
+from lipstream.engines.dam.modes import PHONEME_INDEX
+from lipstream.engines.dam.selection import path_cost
+from lipstream.errors import InvalidRequestError, ModelStoreError
+from lipstream.phonemes import PHONEMES as PHONEMES_BY_INDEX
+from lipstream.timeline import PhonemeSpan
+
+
+def _spans(corpus: Corpus) -> list[PhonemeSpan]:
+    return corpus.split()[1].utterances[0].phones
+
+
+def _dam(models: dict[str, Model], name: str = "dam") -> DamModel:
+    model = models[name]
+    assert isinstance(model, DamModel)
+    return model
+
+
+def _by_loops(model: DamModel, spans: list[PhonemeSpan], fps: float) -> np.ndarray:
+    """Eq. 2 with constant targets, frame by frame: sum over phonemes k with
+    owner - tail <= k <= owner + tail of D_k(t) * T_k where D_k >= tol."""
+    request = SynthesisRequest(fps=fps)
+    modes = [model.select_mode(spans, k, model.search_ahead, request) for k in range(len(spans))]
+    tol = float(model.manifest.hyperparameters["tol"])
+    eps = float(model.manifest.hyperparameters["eps"])
+    out = np.zeros((frame_count(spans[-1].end, fps), model.coefficients.shape[2]))
+    for i in range(len(out)):
+        t = i / fps
+        owner = next((k for k, s in enumerate(spans) if s.end > t), len(spans) - 1)
+        for k in range(max(0, owner - model.tail), min(len(spans), owner + model.tail + 1)):
+            span, mode = spans[k], modes[k]
+            u = (t - span.start) / (span.end - span.start)
+            gap = u if u < 0 else (u - 1 if u > 1 else 0.0)
+            weight = math.exp(-gap * gap / (2 * model.sigma[mode] ** 2 + eps))
+            if weight >= tol:
+                out[i] += weight * model.coefficients[mode, 0]
+    return out @ model.basis.components + model.basis.mean
+
+
+def test_cohen_massaro_is_the_dam_with_m_zero(
+    trained_models: dict[str, Model], small_demo_corpus: Corpus
+) -> None:
+    cohen = _dam(trained_models, "cohen-massaro")
+    assert cohen.coefficients.shape[1] == 1
+    train = small_demo_corpus.split()[0]
+    zero = DamEngine(degree=0).fit(train)
+    for name, array in cohen.arrays().items():
+        np.testing.assert_array_equal(zero.arrays()[name], array, err_msg=name)
+    spans = _spans(small_demo_corpus)
+    frames = cohen.synthesize(spans, fps=60).frames
+    np.testing.assert_array_equal(zero.synthesize(spans, fps=60).frames, frames)
+    np.testing.assert_allclose(frames, _by_loops(cohen, spans, 60.0), atol=1e-5)
+    assert CohenMassaroEngine().hyperparameters()["sigma_init"] == DamEngine().sigma_init
+
+
+def test_dam_fits_better_than_cohen_massaro_on_its_training_data(
+    trained_models: dict[str, Model],
+) -> None:
+    dam, cohen = _dam(trained_models), _dam(trained_models, "cohen-massaro")
+    assert dam.manifest.metrics["fit_rms"] < cohen.manifest.metrics["fit_rms"]
+    for model in (dam, cohen):
+        history = model.manifest.metrics["em_objective"]
+        assert all(b <= a for a, b in itertools.pairwise(history))
+
+
+@pytest.mark.parametrize("name", ["dam", "cohen-massaro"])
+def test_every_rung_streams_its_offline_frames_as_soon_as_its_lookahead_allows(
+    name: str, trained_models: dict[str, Model], small_demo_corpus: Corpus
+) -> None:
+    model = _dam(trained_models, name)
+    spans = _spans(small_demo_corpus)
+    ladder = model.fidelity_ladder()
+    assert [rung.lookahead.phonemes for rung in ladder] == sorted(
+        (rung.lookahead.phonemes for rung in ladder), reverse=True
+    )
+    assert ladder[0].lookahead == model.lookahead
+    assert ladder[-1].lookahead.phonemes == model.tail
+    for rung in ladder:
+        assert model.rung_for(rung.options) == rung
+        offline = model.synthesize(spans, fps=60, **rung.options).frames
+        synthesizer = model.start(fps=60, **rung.options)
+        pieces = []
+        for index, span in enumerate(spans):
+            synthesizer.feed([span])
+            pieces.append(synthesizer.frames())
+            back = index - rung.lookahead.phonemes
+            promised = spans[back].end if back >= 0 else 0.0
+            assert sum(map(len, pieces)) >= frames_before(promised, 60.0)
+        pieces.append(synthesizer.finish())
+        np.testing.assert_array_equal(np.concatenate(pieces), offline)
+
+
+@pytest.mark.parametrize("name", ["dam", "cohen-massaro"])
+def test_tail_cut_stays_within_the_declared_bound(
+    name: str, trained_models: dict[str, Model], small_demo_corpus: Corpus
+) -> None:
+    model = _dam(trained_models, name)
+    bound = float(model.manifest.hyperparameters["truncation_bound"])
+    errors = model.manifest.metrics["truncation_error"]
+    assert errors["tail"] < bound < errors["tail_ahead=0"]  # no tail at all would break it
+    manifest = dataclasses.replace(model.manifest, extra={**model.manifest.extra, "tail": 16})
+    uncut = type(model)(manifest, model.arrays())
+    train = small_demo_corpus.split()[0]
+    frames = np.concatenate([u.frames for u in train.utterances])
+    span = frames.max(axis=0) - frames.min(axis=0)
+    for utterance in train.utterances[:4]:
+        spans = utterance.phones
+        cut = model.synthesize(spans, fps=train.fps).frames
+        full = uncut.synthesize(spans, fps=train.fps, tail_ahead=16).frames
+        assert np.all(np.abs(cut - full).max(axis=0) <= bound * span + 1e-6)
+
+
+def test_mode_choice_on_short_inputs_is_the_exhaustive_optimum(
+    trained_models: dict[str, Model],
+) -> None:
+    model = _dam(trained_models)
+    request = SynthesisRequest()
+    for phonemes in (["HH", "AH"], ["M", "AA", "P"], ["S", "IY", "T"]):
+        spans = [PhonemeSpan(p, 0.1 * i, 0.1 * i + 0.1) for i, p in enumerate(phonemes)]
+        layers = [model.layer(spans, k, len(spans) - 1, request) for k in range(len(spans))]
+        every = itertools.product(*(range(len(layer.candidates)) for layer in layers))
+        best = min(every, key=lambda path: path_cost(model.costs, layers, path))
+        for k in range(len(spans)):
+            if k + model.search_ahead >= len(spans) - 1 and k - model.search_behind <= 0:
+                chosen = model.select_mode(spans, k, model.search_ahead, request)
+                assert chosen == layers[k].candidates[best[k]]
+
+
+def test_emotion_selects_that_emotions_modes_and_falls_back(
+    trained_models: dict[str, Model],
+) -> None:
+    model = _dam(trained_models)
+    counts = model.count_emotion
+    for emotion, column in (("happy", 1), ("sad", 3), (None, 0)):
+        request = SynthesisRequest(emotion=emotion)
+        for phoneme in ("AA", "M", "S", "IY"):
+            spans = [PhonemeSpan(phoneme, 0.0, 0.1)]
+            layer = model.layer(spans, 0, 0, request)
+            own = np.arange(
+                model.offsets[PHONEME_INDEX[phoneme]], model.offsets[PHONEME_INDEX[phoneme] + 1]
+            )
+            said = own[counts[own, column] > 0]
+            expected = said if len(said) else own
+            np.testing.assert_array_equal(layer.candidates, expected)
+    per_span = [PhonemeSpan("AA", 0.0, 0.1, "angry")]
+    np.testing.assert_array_equal(
+        model.layer(per_span, 0, 0, SynthesisRequest(emotion="happy")).candidates,
+        model.layer(per_span, 0, 0, SynthesisRequest(emotion="angry")).candidates,
+    )
+
+
+@pytest.mark.parametrize("value", [-1, 17, 1.5, True, "2"])
+def test_bad_option_values_are_coded_errors(
+    trained_models: dict[str, Model], value: object
+) -> None:
+    model = _dam(trained_models)
+    for name in ("search_ahead", "tail_ahead"):
+        with pytest.raises(InvalidRequestError) as caught:
+            model.start(fps=60, **{name: value})
+        assert caught.value.where == f"options.{name}"
+    assert model.lookahead_for({"search_ahead": 0, "tail_ahead": 1}).phonemes == 1
+
+
+def _corrupt(directory: Path, name: str, change: object) -> None:
+    arrays = dict(np.load(directory / "arrays.npz"))
+    if callable(change):
+        arrays[name] = change(arrays[name])
+    else:
+        del arrays[name]
+    np.savez(directory / "arrays.npz", **arrays)
+
+
+@pytest.mark.parametrize(
+    ("name", "change"),
+    [
+        ("sigma", lambda a: np.where(np.arange(len(a)) == 0, np.nan, a)),
+        ("sigma", lambda a: a * 0.0),
+        ("coefficients", lambda a: a[:, :-1]),
+        ("mode_offsets", lambda a: a[::-1].copy()),
+        ("mode_phoneme", lambda a: (a + 1) % 40),
+        ("stand_in", lambda a: a + 100),
+        ("count_previous", lambda a: a - 5),
+        ("count_emotion", lambda a: a.astype(np.float64)),
+        ("count_following", None),
+        ("basis_components", lambda a: 2.0 * a),
+        ("basis_mean", lambda a: a[:-1]),
+    ],
+)
+def test_corrupt_arrays_are_refused_naming_the_array(
+    trained_models: dict[str, Model], tmp_path: Path, name: str, change: object
+) -> None:
+    _dam(trained_models).save(tmp_path / "dam")
+    _corrupt(tmp_path / "dam", name, change)
+    with pytest.raises(ModelStoreError) as caught:
+        load_model(tmp_path / "dam")
+    assert caught.value.code == "model_invalid"
+    assert caught.value.where is not None and caught.value.where.endswith(f"arrays.npz: {name}")
+
+
+@pytest.mark.parametrize(
+    ("section", "field", "value"),
+    [
+        ("hyperparameters", "degree", -1),
+        ("hyperparameters", "tol", 0.0),
+        ("hyperparameters", "search_behind", "two"),
+        ("extra", "tail", 99),
+        ("extra", "reference_duration", None),
+    ],
+)
+def test_bad_manifest_fields_are_refused_naming_the_field(
+    trained_models: dict[str, Model], tmp_path: Path, section: str, field: str, value: object
+) -> None:
+    _dam(trained_models).save(tmp_path / "dam")
+    path = tmp_path / "dam" / "model.json"
+    manifest = json.loads(path.read_text())
+    manifest[section][field] = value
+    path.write_text(json.dumps(manifest))
+    with pytest.raises(ModelStoreError) as caught:
+        load_model(tmp_path / "dam")
+    assert caught.value.where == f"{path}: {section}.{field}"
+
+
+def test_a_phoneme_never_trained_is_spoken_by_its_stand_in(small_demo_corpus: Corpus) -> None:
+    few = small_demo_corpus.split()[0]
+    few = dataclasses.replace(few, utterances=few.utterances[:2], heldout=())
+    model = DamEngine(n_iter=1).fit(few)
+    offsets = model.offsets
+    unseen = [p for p, k in PHONEME_INDEX.items() if offsets[k + 1] == offsets[k]]
+    assert unseen
+    for phoneme in unseen[:4]:
+        stand_in = PHONEMES_BY_INDEX[int(model.stand_in[PHONEME_INDEX[phoneme]])]
+        assert stand_in != phoneme
+        frames = model.synthesize([(phoneme, 0.0, 0.2)]).frames
+        np.testing.assert_array_equal(frames, model.synthesize([(stand_in, 0.0, 0.2)]).frames)
