@@ -1,4 +1,5 @@
-"""The README's examples run as written, against a small trained demo in a temporary home.
+"""The README's examples, and the docs' marked ones, run as written, against a small
+trained demo in a temporary home.
 
 Each example block is marked with an HTML comment: ``<!-- example: offline -->``
 runs with only ``LIPSTREAM_HOME`` pointing at the demo models, ``<!-- example:
@@ -46,7 +47,10 @@ class Example:
         return f"{self.where}-{self.language}-{first[:40]}"
 
 
-EXAMPLES = [Example(*match.groups()) for match in MARKED.finditer(README)]
+DOCS = [README] + [
+    path.read_text(encoding="utf-8") for path in sorted((REPO / "docs").rglob("*.md"))
+]
+EXAMPLES = [Example(*match.groups()) for text in DOCS for match in MARKED.finditer(text)]
 
 
 def expected_outputs(code: str) -> list[re.Pattern[str]]:
@@ -144,7 +148,10 @@ def test_server_example_runs(example: Example, checkout: Path, server: LiveServe
     base = server.http.removeprefix("http://")
     result = run(example, checkout, base)
     assert result.returncode == 0, result.stderr
-    if "curl" in example.code:
+    if "text/csv" in example.code:
+        rows = result.stdout.splitlines()
+        assert rows[0] == "time,A,B,C,D,E,F,G,H,X" and len(rows) == 1 + 11  # 0.35 s at 30 fps
+    elif "curl" in example.code:
         body = json.loads(result.stdout)
         assert body["fps"] == 30 and body["channels"][:2] == ["viseme_sil", "viseme_PP"]
         assert body["stats"]["frames"] == 11  # 0.35 s at 30 fps
