@@ -9,7 +9,9 @@ components and mapped back to channels. Everything a frame reads lies
 within ``tail_ahead + search_ahead`` spans after its own, which is the
 lookahead. The frames are a pure function of the spans, so streaming is the
 generic ``RenderingSynthesizer`` waiting for the lookahead of the request's
-options.
+options. Below these search rungs, ``causal: true`` selects the causal rungs
+(``causal``: modes committed as spans arrive, Eq. 2 over the spans begun, a
+critically damped filter), which wait for ``lead_ms`` at most.
 
 Emotion: a span's emotion (its own, else the request's, else neutral) limits the
 candidates to modes seen with that emotion, falling back to all the phoneme's
