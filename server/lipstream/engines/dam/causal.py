@@ -26,6 +26,7 @@ the input was cut, so streaming gives the offline frames.
 
 from __future__ import annotations
 
+from bisect import bisect_left
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -55,6 +56,7 @@ class CausalCurve:
         self.request = request
         self.positions: list[int] = []
         self.modes: list[int] = []
+        self.starts: list[float] = []
 
     def commit(self, spans: Sequence[PhonemeSpan]) -> None:
         """Commit the mode of every span not yet committed, in order."""
@@ -69,12 +71,16 @@ class CausalCurve:
             position = int(np.argmin(cost))
             self.positions.append(position)
             self.modes.append(int(layer.candidates[position]))
+            self.starts.append(spans[index].start)
 
     def raw(self, spans: Sequence[PhonemeSpan], at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """r at times ``at`` (components) and the index of the latest span begun at each."""
+        """r at times ``at`` (ascending, components) and the index of the latest span begun at
+        each; every span of ``spans`` is committed."""
         model = self.model
-        starts = np.array([span.start for span in spans])
-        begun = np.maximum(np.searchsorted(starts, at - _STARTED, side="left") - 1, 0)
+        low = max(0, bisect_left(self.starts, float(at[0]) - _STARTED) - 1)
+        high = bisect_left(self.starts, float(at[-1]) - _STARTED)
+        starts = np.asarray(self.starts[low:high])
+        begun = low + np.maximum(np.searchsorted(starts, at - _STARTED, side="left") - 1, 0)
         first = max(0, int(begun[0]) - model.tail)
         values = np.zeros((len(at), model.coefficients.shape[2]))
         for k in range(first, int(begun[-1]) + 1):
@@ -162,7 +168,7 @@ def fit_causal_kappa(model: DamModel, utterances: Sequence[Any]) -> float:
     def synthesize(kappa: float, utterance: Any) -> np.ndarray:
         key = id(utterance)
         if key not in curves:
-            request = SynthesisRequest(fps=float(utterance.fps))
+            request = SynthesisRequest(fps=float(utterance.fps), emotion=utterance.emotion)
             spans = fill_gaps(utterance.phones)
             times = np.arange(frame_count(spans[-1].end, request.fps)) / request.fps
             curve = CausalCurve(model, request)
