@@ -17,8 +17,8 @@ its phoneme skips short closures. The frame at t is final once the input
 covers t + shift.
 The rungs' leads are ``LEADS_MS``: ``damped_lead`` (at most 120 ms) and
 ``causal`` (0, the floor); κ of each is the
-value of ``KAPPAS`` with the least squared error on every ``VALIDATION_STEP``th
-training utterance (at most ``MAX_VALIDATION`` of them), stored in the model.
+value of ``KAPPAS`` with the least squared error on training utterances
+(``damped_fit``), stored in the model.
 """
 
 from __future__ import annotations
@@ -38,15 +38,13 @@ from ..store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
 from ..timeline import PhonemeSpan
 from ..visemes import get_scheme
 from .base import Engine, Lookahead, Model, Rung, SynthesisRequest, Synthesizer
+from .damped_fit import KAPPAS, best_kappa, validation_utterances
 from .damped_synthesis import DampedTargets, DampedTimelineSynthesizer
 from .durations import DurationModel
 
 MODES = ("lerp", "damped")
 LEADS_MS = (120.0, 0.0)
-KAPPAS = (1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0)
 MAX_LEAD_MS = 1000.0
-VALIDATION_STEP = 4
-MAX_VALIDATION = 50
 
 
 class VisemeLerpModel(Model):
@@ -209,7 +207,7 @@ class VisemeLerpEngine(Engine):
         )
         leads = np.array(LEADS_MS)
         model = VisemeLerpModel(manifest, poses, durations, leads, np.full(len(leads), KAPPAS[0]))
-        validation = corpus.utterances[::VALIDATION_STEP][:MAX_VALIDATION]
+        validation = validation_utterances(corpus)
         model.kappas = np.array([_fit_kappa(model, lead, validation) for lead in LEADS_MS])
         manifest.metrics["damped_kappa"] = dict(
             zip([f"{lead:g}" for lead in LEADS_MS], model.kappas.tolist())
@@ -219,19 +217,16 @@ class VisemeLerpEngine(Engine):
 
 def _fit_kappa(model: VisemeLerpModel, lead_ms: float, utterances: Sequence[Any]) -> float:
     """The κ of ``KAPPAS`` whose damped rung at ``lead_ms`` has the least squared error."""
-    errors = []
-    for kappa in KAPPAS:
-        targets = model.damped_targets(lead_ms, kappa)
-        total = 0.0
-        for utterance in utterances:
-            request = SynthesisRequest(fps=float(utterance.fps))
-            synthesizer = DampedTimelineSynthesizer(targets, request, model.channels)
-            synthesizer.feed(utterance.phones)
-            frames = synthesizer.finish()
-            count = min(len(frames), len(utterance.frames))
-            total += float(np.sum((frames[:count] - utterance.frames[:count]) ** 2))
-        errors.append(total)
-    return KAPPAS[int(np.argmin(errors))]
+
+    def synthesize(kappa: float, utterance: Any) -> np.ndarray:
+        request = SynthesisRequest(fps=float(utterance.fps))
+        synthesizer = DampedTimelineSynthesizer(
+            model.damped_targets(lead_ms, kappa), request, model.channels
+        )
+        synthesizer.feed(utterance.phones)
+        return synthesizer.finish()
+
+    return best_kappa(synthesize, utterances)
 
 
 def _parse_options(options: Mapping[str, Any]) -> tuple[str, float]:

@@ -175,7 +175,9 @@ def test_each_engine_declares_the_options_it_reads(trained_models: dict[str, Mod
         "max_tile", "pq_budget_s", "causal", "lead_ms",
     }  # fmt: skip
     for name in ("dam", "cohen-massaro"):
-        assert trained_models[name].option_names == ("search_ahead", "tail_ahead")
+        assert trained_models[name].option_names == (
+            "search_ahead", "tail_ahead", "causal", "lead_ms",
+        )  # fmt: skip
     anime = trained_models["anime-graph"]
     assert anime.start(fps=60, smooth=False, max_tile=4) is not None
 

@@ -120,9 +120,9 @@ def test_catalog_ladder_follows_each_models_declared_rungs(catalog: Catalog) -> 
             expected["causal"] = 0.0
         else:
             expected = DEMO_LOOKAHEAD_MS[engine]
-            # The lead rung waits its filter's lag, a trained figure, of at most 120 ms.
-            lead = waits.pop(rungs[-2].rung.name)
-            assert rungs[-2].rung.name.endswith("_lead") and 0.0 < lead <= 120.0
+        # The lead rung waits its filter's lag, a trained figure, of at most 120 ms.
+        lead = waits.pop(rungs[-2].rung.name)
+        assert rungs[-2].rung.name.endswith("_lead") and 0.0 < lead <= 120.0
         assert waits == pytest.approx(expected, abs=1e-3)
         for estimate_ in rungs:
             assert estimate_.compute_ms >= catalog.settings.compute_margin_ms

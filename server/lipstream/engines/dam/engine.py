@@ -3,7 +3,8 @@
 the motion basis (PCA keeping ``variance`` of every channel's variance, see
 docs/engines/dam.md for why components rather than channels) -> modes
 (resample + affinity propagation + contexts) -> EM (E-step, then M-step
-and E-step until converged) -> the tail that bounds streaming's truncation error.
+and E-step until converged) -> the tail that bounds streaming's truncation error ->
+phoneme durations and the causal rungs' filter speed κ (``causal``).
 ``cohen-massaro`` is the same code with constant animemes (M = 0).
 """
 
@@ -17,7 +18,10 @@ from threadpoolctl import threadpool_limits
 from ...numerics.basis import fit_basis
 from ...store import ModelManifest
 from ..base import Engine
+from ..damped_fit import KAPPAS, validation_utterances
+from ..durations import DurationModel
 from . import em
+from .causal import fit_causal_kappa
 from .model import CohenMassaroModel, DamModel
 from .modes import assign_modes, collect_occurrences, resample
 from .tails import choose_tail, truncation_errors
@@ -116,8 +120,15 @@ class DamEngine(Engine):
             "count_previous": modes.previous,
             "count_following": modes.following,
             "count_emotion": modes.emotion,
+            **DurationModel.fit(utterance.phones for utterance in corpus.utterances).arrays(),
+            "causal_kappa": np.array([KAPPAS[0]]),
         }
-        return self.make_model(manifest, arrays)
+        model = self.make_model(manifest, arrays)
+        kappa = fit_causal_kappa(model, validation_utterances(corpus))
+        model.causal_kappa = kappa
+        model.stored["causal_kappa"] = np.array([kappa])
+        manifest.metrics["causal_kappa"] = kappa
+        return model
 
     def make_model(self, manifest: ModelManifest, arrays: dict[str, np.ndarray]) -> DamModel:
         return DamModel(manifest, arrays)

@@ -9,7 +9,9 @@ components and mapped back to channels. Everything a frame reads lies
 within ``tail_ahead + search_ahead`` spans after its own, which is the
 lookahead. The frames are a pure function of the spans, so streaming is the
 generic ``RenderingSynthesizer`` waiting for the lookahead of the request's
-options.
+options. Below these search rungs, ``causal: true`` selects the causal rungs
+(``causal``: modes committed as spans arrive, Eq. 2 over the spans begun, a
+critically damped filter), which wait for ``lead_ms`` at most.
 
 Emotion: a span's emotion (its own, else the request's, else neutral) limits the
 candidates to modes seen with that emotion, falling back to all the phoneme's
@@ -42,6 +44,8 @@ from ..base import (
     Synthesizer,
     final_until,
 )
+from ..durations import DurationModel
+from .causal import CausalSynthesizer
 from .dominance import dominance, powers, reach
 from .em import SIGMA_MIN
 from .modes import EMOTION_INDEX, PHONEME_INDEX
@@ -55,6 +59,8 @@ NUMBER_FIELDS = (  # name, low, high, low excluded
     ("w_context", 0.0, 1e9, False),
     ("w_smooth", 0.0, 1e9, False),
 )
+MAX_LEAD_MS = 1000.0
+CAUSAL_LEAD_MS = 120.0
 NEUTRAL = EMOTION_INDEX["neutral"]
 SILENCE_INDEX = PHONEME_INDEX[SILENCE]
 
@@ -67,7 +73,7 @@ class DamModel(Model):
 
     engine = "dam"
     fixed_degree: int | None = None
-    option_names = ("search_ahead", "tail_ahead")
+    option_names = ("search_ahead", "tail_ahead", "causal", "lead_ms")
 
     def __init__(self, manifest: ModelManifest, arrays: Mapping[str, np.ndarray]) -> None:
         super().__init__(manifest)
@@ -84,6 +90,12 @@ class DamModel(Model):
         self.tail = int(manifest.extra["tail"])
         self.search_behind = int(hyper["search_behind"])
         self.search_ahead = int(hyper["search_ahead"])
+        self.durations = DurationModel(
+            self.stored["duration_count"],
+            self.stored["duration_log_mean"],
+            self.stored["duration_log_std"],
+        )
+        self.causal_kappa = float(self.stored["causal_kappa"][0])
         self.costs = Costs(
             previous=self.stored["count_previous"],
             following=self.stored["count_following"],
@@ -98,8 +110,31 @@ class DamModel(Model):
 
     # -- options, lookahead, ladder -------------------------------------------------------
 
-    def resolve(self, options: Mapping[str, Any]) -> tuple[int, int]:
-        """(search_ahead, tail_ahead) of ``options``, defaults filled in."""
+    def resolve(self, options: Mapping[str, Any]) -> tuple[int, int] | float:
+        """(search_ahead, tail_ahead) of ``options``, defaults filled in; with ``causal: true``
+        the lead (ms) instead, which ignores the other two (a server merges a rung's options
+        over the client's)."""
+        causal = options.get("causal", False)
+        if not isinstance(causal, bool):
+            raise InvalidRequestError(
+                f"causal must be true or false, got {causal!r}", where="options.causal"
+            )
+        lead = options.get("lead_ms", 0.0)
+        if (
+            isinstance(lead, bool)
+            or not isinstance(lead, (int, float))
+            or not 0 <= lead <= MAX_LEAD_MS
+        ):
+            raise InvalidRequestError(
+                f"lead_ms must be a number of milliseconds in [0, {MAX_LEAD_MS:g}], got {lead!r}",
+                where="options.lead_ms",
+            )
+        if causal:
+            return float(lead)
+        if "lead_ms" in options:
+            raise InvalidRequestError(
+                "lead_ms applies with causal: true only", where="options.lead_ms"
+            )
         values = []
         for name, default in (("search_ahead", self.search_ahead), ("tail_ahead", self.tail)):
             value = options.get(name, default)
@@ -116,23 +151,35 @@ class DamModel(Model):
             values.append(value)
         return values[0], values[1]
 
+    def shift_s(self, lead_ms: float) -> float:
+        """How far ahead (s) a causal rung with ``lead_ms`` follows its raw curve: the filter's
+        lag at the pooled median duration, at most the lead."""
+        return min(lead_ms / 1000.0, 2.0 * self.durations.pooled_median_s() / self.causal_kappa)
+
     @property
     def lookahead(self) -> Lookahead:
         return Lookahead(phonemes=self.search_ahead + self.tail)
 
     def lookahead_for(self, options: Mapping[str, Any]) -> Lookahead | None:
-        search, tail = self.resolve(options)
+        resolved = self.resolve(options)
+        if isinstance(resolved, float):
+            return Lookahead(seconds=self.shift_s(resolved))
+        search, tail = resolved
         return Lookahead(phonemes=search + tail)
 
     def fidelity_ladder(self) -> tuple[Rung, ...]:
         """Mode searches looking ``search_ahead`` phonemes ahead, then fewer, then none; the
-        tails stay whole on every rung (cutting them costs far more than 1 % of a channel's
-        range, see docs/engines/dam.md)."""
+        tails stay whole on these rungs (cutting them costs far more than 1 % of a channel's
+        range, see docs/engines/dam.md). Below them the causal rungs (``causal``): one
+        following its curve ``CAUSAL_LEAD_MS`` ahead, then the causal floor."""
         rungs = []
         for search in range(self.search_ahead, -1, -1):
             name = "full" if search == self.search_ahead else f"search-{search}"
             options = {"search_ahead": search, "tail_ahead": self.tail}
             rungs.append(Rung(name, Lookahead(phonemes=search + self.tail), options))
+        for name, lead in (("causal_lead", CAUSAL_LEAD_MS), ("causal", 0.0)):
+            causal: dict[str, Any] = {"causal": True, "lead_ms": lead}
+            rungs.append(Rung(name, Lookahead(seconds=self.shift_s(lead)), causal))
         return tuple(rungs)
 
     def rung_for(self, options: Mapping[str, Any]) -> Rung | None:
@@ -143,7 +190,9 @@ class DamModel(Model):
         return None
 
     def synthesizer(self, request: SynthesisRequest) -> Synthesizer:
-        self.resolve(request.options)
+        resolved = self.resolve(request.options)
+        if isinstance(resolved, float):
+            return CausalSynthesizer(self, request, self.shift_s(resolved))
         return DamSynthesizer(self, request)
 
     # -- synthesis ------------------------------------------------------------------------
@@ -196,7 +245,9 @@ class DamModel(Model):
         request: SynthesisRequest,
         audio: Audio | None,
     ) -> np.ndarray:
-        search, ahead = self.resolve(request.options)
+        resolved = self.resolve(request.options)
+        assert not isinstance(resolved, float), "causal rungs stream with CausalSynthesizer"
+        search, ahead = resolved
         owner_low = min(bisect_right(spans, times[0], key=lambda s: s.end), len(spans) - 1)
         owner_high = min(bisect_right(spans, times[-1], key=lambda s: s.end), len(spans) - 1)
         first = max(0, owner_low - self.tail)
@@ -287,6 +338,10 @@ def check_arrays(reader: ArrayReader, degree: int, n_channels: int) -> dict[str,
         ("count_emotion", len(EMOTIONS)),
     ):
         result[name] = reader.integers(name, (n_modes, width), 0, 2**62)
+    result.update(DurationModel.from_arrays(reader).arrays())
+    result["causal_kappa"] = reader.floats("causal_kappa", (1,))
+    if not result["causal_kappa"][0] > 0:
+        raise reader.error("causal_kappa", "must be positive")
     return result
 
 

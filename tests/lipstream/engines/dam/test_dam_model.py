@@ -91,7 +91,9 @@ def test_every_rung_streams_its_offline_frames_as_soon_as_its_lookahead_allows(
         (rung.lookahead.phonemes for rung in ladder), reverse=True
     )
     assert ladder[0].lookahead == model.lookahead
-    assert ladder[-1].lookahead.phonemes == model.tail
+    searches = [rung for rung in ladder if "causal" not in rung.options]
+    assert searches[-1].lookahead.phonemes == model.tail
+    assert [rung.name for rung in ladder[len(searches) :]] == ["causal_lead", "causal"]
     for rung in ladder:
         assert model.rung_for(rung.options) == rung
         offline = model.synthesize(spans, fps=60, **rung.options).frames
@@ -101,7 +103,7 @@ def test_every_rung_streams_its_offline_frames_as_soon_as_its_lookahead_allows(
             synthesizer.feed([span])
             pieces.append(synthesizer.frames())
             back = index - rung.lookahead.phonemes
-            promised = spans[back].end if back >= 0 else 0.0
+            promised = spans[back].end - rung.lookahead.seconds if back >= 0 else 0.0
             assert sum(map(len, pieces)) >= frames_before(promised, 60.0)
         pieces.append(synthesizer.finish())
         np.testing.assert_array_equal(np.concatenate(pieces), offline)
@@ -178,6 +180,97 @@ def test_bad_option_values_are_coded_errors(
     assert model.lookahead_for({"search_ahead": 0, "tail_ahead": 1}).phonemes == 1
 
 
+def _damped_by_hand(raw: np.ndarray, omegas: np.ndarray, dt: float) -> np.ndarray:
+    """x'' = -2ω x' - ω²(x - u) from rest on raw[0], u = raw[i] held over each step, by the
+    exact solution written out: e = x - u, c = v + ω e, x(dt) = u + (e + c dt) e^{-ω dt}."""
+    x, v = raw[0].copy(), np.zeros_like(raw[0])
+    out = [x.copy()]
+    for target, w in zip(raw[1:], omegas[1:], strict=True):
+        error = x - target
+        pull = v + w * error
+        decay = math.exp(-w * dt)
+        x = target + (error + pull * dt) * decay
+        v = (v - w * pull * dt) * decay
+        out.append(x.copy())
+    return np.array(out)
+
+
+@pytest.mark.parametrize("name", ["dam", "cohen-massaro"])
+def test_the_causal_rung_commits_modes_on_arrival_and_sums_only_begun_spans(
+    name: str, trained_models: dict[str, Model], small_demo_corpus: Corpus
+) -> None:
+    model = _dam(trained_models, name)
+    spans = _spans(small_demo_corpus)
+    fps = 60.0
+    request = SynthesisRequest(fps=fps)
+    # Modes: each span's choice minimizes E over the prefix cut at it, earlier choices fixed.
+    chosen: list[int] = []
+    modes = []
+    for k in range(len(spans)):
+        layers = [model.layer(spans, j, k, request) for j in range(k + 1)]
+        best = min(
+            range(len(layers[k].candidates)),
+            key=lambda c: path_cost(model.costs, layers, [*chosen, c]),
+        )
+        chosen.append(best)
+        modes.append(int(layers[k].candidates[best]))
+    tol = float(model.manifest.hyperparameters["tol"])
+    eps = float(model.manifest.hyperparameters["eps"])
+    degree = model.coefficients.shape[1] - 1
+    n = frame_count(spans[-1].end, fps)
+    raw = np.zeros((n, model.coefficients.shape[2]))
+    omegas = np.zeros(n)
+    for i in range(n):
+        t = i / fps
+        begun = max([k for k, s in enumerate(spans) if s.start < t - 1e-9], default=0)
+        omegas[i] = model.causal_kappa / model.durations.expected_s(spans[begun].phoneme)
+        for k in range(max(0, begun - model.tail), begun + 1):
+            span, mode = spans[k], modes[k]
+            u = (t - span.start) / (span.end - span.start)
+            gap = u if u < 0 else (u - 1 if u > 1 else 0.0)
+            weight = math.exp(-gap * gap / (2 * model.sigma[mode] ** 2 + eps))
+            if weight >= tol:
+                clamped = min(max(u, 0.0), 1.0)
+                animeme = sum(clamped**m * model.coefficients[mode, m] for m in range(degree + 1))
+                raw[i] += weight * animeme
+    expected = _damped_by_hand(raw, omegas, 1.0 / fps) @ model.basis.components
+    expected += model.basis.mean
+    frames = model.synthesize(spans, fps=fps, causal=True, lead_ms=0).frames
+    np.testing.assert_allclose(frames, expected, atol=1e-5)
+    # The raw sum jumps at span starts; the filter's output is continuous in time, so at a
+    # high frame rate its steps shrink well below those jumps.
+    raw_steps = np.abs(np.diff(raw @ model.basis.components, axis=0)).max()
+    fine = model.synthesize(spans, fps=1000.0, causal=True).frames
+    assert np.abs(np.diff(fine, axis=0)).max() < 0.25 * raw_steps
+    # A span never changes a frame before it starts: cut the input, the frames are the same.
+    for cut in (3, len(spans) // 2):
+        prefix = model.synthesize(spans[:cut], fps=fps, causal=True).frames
+        np.testing.assert_array_equal(prefix, frames[: len(prefix)])
+
+
+def test_causal_options_are_checked_and_select_the_causal_rungs(
+    trained_models: dict[str, Model],
+) -> None:
+    model = _dam(trained_models)
+    for options, where in (
+        ({"causal": 1}, "options.causal"),
+        ({"causal": True, "lead_ms": -1}, "options.lead_ms"),
+        ({"causal": True, "lead_ms": "5"}, "options.lead_ms"),
+        ({"lead_ms": 50}, "options.lead_ms"),
+    ):
+        with pytest.raises(InvalidRequestError) as caught:
+            model.start(fps=60, **options)
+        assert caught.value.where == where
+    causal = model.rung_for({"causal": True, "search_ahead": 2, "tail_ahead": 3})
+    assert causal is not None and causal.name == "causal"
+    lead = model.rung_for({"causal": True, "lead_ms": 120})
+    assert lead is not None and lead.name == "causal_lead"
+    median = model.durations.pooled_median_s()
+    assert lead.lookahead.seconds == min(0.12, 2.0 * median / model.causal_kappa)
+    assert model.rung_for({"causal": True, "lead_ms": 50}) is None
+    assert model.lookahead_for({"causal": True, "lead_ms": 50}).seconds > 0.0
+
+
 def _corrupt(directory: Path, name: str, change: object) -> None:
     arrays = dict(np.load(directory / "arrays.npz"))
     if callable(change):
@@ -201,6 +294,10 @@ def _corrupt(directory: Path, name: str, change: object) -> None:
         ("count_following", None),
         ("basis_components", lambda a: 2.0 * a),
         ("basis_mean", lambda a: a[:-1]),
+        ("causal_kappa", lambda a: -a),
+        ("causal_kappa", None),
+        ("duration_log_std", lambda a: a - 10.0),
+        ("duration_count", None),
     ],
 )
 def test_corrupt_arrays_are_refused_naming_the_array(
