@@ -104,6 +104,13 @@ def _serve(args: argparse.Namespace, settings: Settings) -> None:
         print(f"no models in {models}: building the demo character first", file=sys.stderr)
         build_demo(settings.demo_dir, progress=True)
         models = settings.demo_models_dir
+    elif args.models is None and models == settings.demo_models_dir and _stale_demo(models):
+        print(
+            f"the demo character in {models} lacks an engine or was built by an older "
+            "lipstream: building it again",
+            file=sys.stderr,
+        )
+        build_demo(settings.demo_dir, progress=True)
     server = settings.server.with_changes(
         workers=args.workers or settings.server.workers,
         log_level=args.log_level or settings.server.log_level,
@@ -125,6 +132,20 @@ def _serve(args: argparse.Namespace, settings: Settings) -> None:
             server,
             registry,
         )
+
+
+def _stale_demo(models: Path) -> bool:
+    """Whether the cached demo character cannot serve every registered engine (a model
+    that no longer loads, or an engine added since it was built)."""
+    from .engines import engine_names
+    from .models import ModelRegistry
+
+    try:
+        registry = ModelRegistry.load(models)
+    except LipstreamError:
+        return True
+    served = {model.manifest.engine for model in registry.models.values()}
+    return bool(registry.failures) or not set(engine_names()) <= served
 
 
 def _inspect(args: argparse.Namespace, settings: Settings) -> None:
