@@ -1,0 +1,100 @@
+"""The banded windowed least squares against dense solves built independently."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lipstream.numerics.banded import solve_spd_banded, windowed_least_squares
+
+
+def window_matrix(stencil: np.ndarray, frames: int) -> np.ndarray:
+    """Dense rows of W for the frames whose stencil fits, one row per such frame."""
+    half = len(stencil) // 2
+    rows = []
+    for centre in range(half, frames - half):
+        row = np.zeros(frames)
+        row[centre - half : centre + half + 1] = stencil
+        rows.append(row)
+    return np.array(rows).reshape(-1, frames)
+
+
+def dense_solution(windows, means, precisions) -> np.ndarray:
+    """Stack every window row over time ⊗ dimensions and solve the weighted normal equations."""
+    _, frames, dims = means.shape
+    normal = np.zeros((frames * dims, frames * dims))
+    rhs = np.zeros(frames * dims)
+    for stencil, mean, precision in zip(windows, means, precisions, strict=True):
+        half = len(stencil) // 2
+        for row_index, row in enumerate(window_matrix(np.asarray(stencil, float), frames)):
+            centre = row_index + half
+            lifted = np.kron(row[:, None], np.eye(dims)).T  # (D, T·D), time-major
+            weight = precision[centre] if precision.ndim == 3 else np.diag(precision[centre])
+            normal += lifted.T @ weight @ lifted
+            rhs += lifted.T @ weight @ mean[centre]
+    return np.linalg.solve(normal, rhs).reshape(frames, dims)
+
+
+def random_spd(rng: np.random.Generator, count: int, dims: int) -> np.ndarray:
+    factors = rng.normal(size=(count, dims, dims))
+    return factors @ factors.transpose(0, 2, 1) + 0.1 * np.eye(dims)
+
+
+@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("diagonal", [False, True])
+def test_matches_a_dense_solve(seed: int, diagonal: bool) -> None:
+    rng = np.random.default_rng(seed)
+    frames, dims = int(rng.integers(6, 14)), int(rng.integers(1, 4))
+    windows = [np.array([1.0]), np.array([-0.5, 0.0, 0.5])]
+    if seed % 2:
+        windows.append(np.array([0.3, -1.0, 2.0, -1.0, 0.3]))
+    means = rng.normal(size=(len(windows), frames, dims))
+    if diagonal:
+        precisions = rng.uniform(0.2, 3.0, size=(len(windows), frames, dims))
+    else:
+        precisions = np.stack([random_spd(rng, frames, dims) for _ in windows])
+    got = windowed_least_squares(windows, means, precisions)
+    np.testing.assert_allclose(got, dense_solution(windows, means, precisions), atol=1e-9)
+
+
+def test_position_only_reproduces_the_targets() -> None:
+    means = np.arange(12.0).reshape(1, 6, 2)
+    got = windowed_least_squares([np.array([1.0])], means, np.ones((1, 6, 2, 2)) * np.eye(2))
+    np.testing.assert_allclose(got, means[0])
+
+
+def test_curvature_penalty_leaves_a_straight_line_alone() -> None:
+    line = np.linspace(-1.0, 2.0, 20)[:, None]
+    means = np.stack([line, np.zeros_like(line)])
+    precisions = np.stack([np.ones_like(line), np.full_like(line, 50.0)])
+    got = windowed_least_squares([np.array([1.0]), np.array([1.0, -2.0, 1.0])], means, precisions)
+    np.testing.assert_allclose(got, line, atol=1e-10)
+
+
+def test_a_frame_without_precision_is_refused() -> None:
+    precisions = np.ones((1, 5, 1))
+    precisions[0, 2] = 0.0
+    with pytest.raises(np.linalg.LinAlgError, match="not positive definite"):
+        windowed_least_squares([np.array([1.0])], np.zeros((1, 5, 1)), precisions)
+
+
+def test_solve_spd_banded_matches_dense() -> None:
+    rng = np.random.default_rng(3)
+    size, width = 9, 2
+    dense = np.zeros((size, size))
+    for offset in range(width + 1):
+        values = rng.uniform(-0.3, 0.3, size - offset)
+        dense += np.diag(values, -offset) + (np.diag(values, offset) if offset else 0)
+    dense += 2.0 * np.eye(size)
+    bands = np.array([np.pad(np.diag(dense, -k), (0, k)) for k in range(width + 1)])
+    rhs = rng.normal(size=(size, 2))
+    np.testing.assert_allclose(solve_spd_banded(bands, rhs), np.linalg.solve(dense, rhs))
+
+
+def test_malformed_input_is_a_value_error() -> None:
+    with pytest.raises(ValueError, match="odd length"):
+        windowed_least_squares([np.array([1.0, 2.0])], np.zeros((1, 4, 1)), np.ones((1, 4, 1)))
+    with pytest.raises(ValueError, match="means must be"):
+        windowed_least_squares([np.array([1.0])], np.zeros((4, 1)), np.ones((1, 4, 1)))
+    with pytest.raises(ValueError, match="non-finite"):
+        solve_spd_banded(np.array([[np.nan, 1.0]]), np.ones(2))
