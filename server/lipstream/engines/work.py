@@ -9,13 +9,18 @@ tiles, frame rendering) call ``check()``, which raises ``WorkCancelled`` once
 ``cancel()`` was called (from any thread: it only sets a flag) and the
 guard's ``exceeded`` error once the budget is spent. A synthesizer that raised
 either is left mid-step: its request must end.
+
+A call may be metered on another clock (``metering(clock)``): the server meters
+the short calls it runs on the event loop by wall time, because reading a
+thread's CPU clock is a system call that costs several microseconds on virtual
+machines, and was most of the loop's cost of a cheap message.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
+from types import TracebackType
 
 from ..errors import LipstreamError
 
@@ -50,6 +55,7 @@ class WorkGuard:
         self.cancelled = False
         self.spent_s = 0.0
         self._since: float | None = None
+        self._block_clock = clock
 
     def cancel(self) -> None:
         """Stop the work at its next ``check`` (safe from any thread)."""
@@ -57,7 +63,7 @@ class WorkGuard:
 
     def used_s(self) -> float:
         """Seconds spent so far, including the call being metered."""
-        running = 0.0 if self._since is None else self.clock() - self._since
+        running = 0.0 if self._since is None else self._block_clock() - self._since
         return self.spent_s + running
 
     def check(self) -> None:
@@ -69,16 +75,38 @@ class WorkGuard:
             if used > self.budget_s:
                 raise self.exceeded(used, self.budget_s)
 
-    @contextmanager
-    def metering(self) -> Iterator[None]:
-        """Count the block's time as spent (blocks do not nest); it starts with a ``check``."""
-        self.check()
-        self._since = self.clock()
-        try:
-            yield
-        finally:
-            self.spent_s += self.clock() - self._since
-            self._since = None
+    def metering(self, clock: Callable[[], float] | None = None) -> Metering:
+        """Count the block's time (on ``clock``, by default the guard's) as spent; blocks do
+        not nest, and each starts with a ``check``."""
+        return Metering(self, clock or self.clock)
+
+
+class Metering:
+    """The context manager of ``WorkGuard.metering`` (a class, not a generator: it wraps
+    every message a session handles)."""
+
+    __slots__ = ("guard", "clock")
+
+    def __init__(self, guard: WorkGuard, clock: Callable[[], float]) -> None:
+        self.guard = guard
+        self.clock = clock
+
+    def __enter__(self) -> None:
+        guard = self.guard
+        guard.check()
+        guard._block_clock = self.clock
+        guard._since = self.clock()
+
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        guard = self.guard
+        if guard._since is not None:
+            guard.spent_s += self.clock() - guard._since
+        guard._since = None
 
 
 def _cpu_budget_exceeded(spent_s: float, budget_s: float) -> LipstreamError:

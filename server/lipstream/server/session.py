@@ -221,12 +221,16 @@ class Session:
             for request in expired
         ]
 
-    def handle(self, received: InputMessage, now: float) -> list[Outgoing]:
-        """The messages that answer ``received``, which arrived at monotonic time ``now``."""
+    def handle(
+        self, received: InputMessage, now: float, meter_clock: Callable[[], float] | None = None
+    ) -> list[Outgoing]:
+        """The messages that answer ``received``, which arrived at monotonic time ``now``;
+        the engine's time is counted against the request's CPU budget on ``meter_clock``
+        (by default the calling thread's CPU time)."""
         try:
             if isinstance(received, ProtocolError):
                 return self._rejected(received)
-            return self._dispatch(received, now)
+            return self._dispatch(received, now, meter_clock)
         except Exception:
             identifier = getattr(received, "id", None)
             logger.exception(
@@ -256,7 +260,9 @@ class Session:
         self._forget(request.id)
         return [Outgoing(error.to_message(), request.spec.clock)]
 
-    def _dispatch(self, received: Message, now: float) -> list[Outgoing]:
+    def _dispatch(
+        self, received: Message, now: float, meter_clock: Callable[[], float] | None
+    ) -> list[Outgoing]:
         if isinstance(received, Start):
             return self._start(received, now)
         if not isinstance(received, (Phonemes, AudioChunk, End, Cancel, Interrupt)):
@@ -268,7 +274,7 @@ class Session:
         request.last_input = now
         self.requests[request.id] = self.requests.pop(request.id)
         try:
-            outgoing = self._metered(guard, request, received, now)
+            outgoing = self._metered(guard, request, received, now, meter_clock)
         except LipstreamError as error:
             if guard.cancelled and not isinstance(received, Cancel):
                 # Stopped by the client's cancel, which follows in order and ends it, or by
@@ -294,13 +300,18 @@ class Session:
         return outgoing
 
     def _metered(
-        self, guard: WorkGuard, request: ActiveRequest, received: RequestInput, now: float
+        self,
+        guard: WorkGuard,
+        request: ActiveRequest,
+        received: RequestInput,
+        now: float,
+        meter_clock: Callable[[], float] | None,
     ) -> list[Outgoing]:
         """``_apply`` with the engine's time counted against the request's CPU budget
         (``cancel`` does no engine work, so it runs even when the work was stopped)."""
         if isinstance(received, Cancel):
             return self._apply(request, received, now)
-        with guard.metering():
+        with guard.metering(meter_clock):
             return self._apply(request, received, now)
 
     def _apply(self, request: ActiveRequest, received: RequestInput, now: float) -> list[Outgoing]:

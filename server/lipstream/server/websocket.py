@@ -341,7 +341,9 @@ class Connection:
             return await self._in_pool(
                 lambda: self._encoded(self.session.handle(decoded, now)), pool
             )
-        outgoing = self.session.handle(decoded, now)
+        # Inline work is short and on the loop's thread: wall time meters it, and costs a
+        # fraction of a CPU-clock read (see engines.work).
+        outgoing = self.session.handle(decoded, now, time.perf_counter)
         values = _values(outgoing) if self.encoding == "json" else 0
         if values > JSON_INLINE_VALUES:
             pool = self._pool(values > JSON_HEAVY_VALUES)

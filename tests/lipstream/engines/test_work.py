@@ -55,3 +55,16 @@ def test_an_engine_budget_raises_its_own_error() -> None:
     with pytest.raises(LipstreamError) as raised:
         guard.check()
     assert (raised.value.code, raised.value.message) == ("search_timeout", "0.5 of 0.25")
+
+
+def test_a_block_metered_on_another_clock_counts_that_clock_only() -> None:
+    cpu, wall = FakeClock(), FakeClock()
+    guard = WorkGuard(1.0, cpu)
+    with guard.metering(wall):
+        wall.now += 0.3
+        cpu.now += 7.0  # the guard's own clock is not read for this block
+        assert guard.used_s() == pytest.approx(0.3)
+    with guard.metering():
+        cpu.now += 0.5
+        wall.now += 9.0
+    assert guard.spent_s == pytest.approx(0.8)
