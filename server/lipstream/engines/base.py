@@ -443,12 +443,11 @@ class Engine(ABC):
         return {name: getattr(self, name) for name in self.hyperparameter_names()}
 
 
-class RenderingSynthesizer(Synthesizer):
-    """Streams a model's ``render`` by its declared ``Lookahead``."""
+class SpanSynthesizer(Synthesizer):
+    """A synthesizer that keeps its request's spans, gaps filled with silence, and its audio
+    as they are fed; ``_accepted(span)`` sees each new span."""
 
-    def __init__(self, model: Model, request: SynthesisRequest) -> None:
-        self.model = model
-        self.request = request
+    def __init__(self) -> None:
         self.spans: list[PhonemeSpan] = []
         self.audio: Audio | None = None
         self.emitted = 0
@@ -463,9 +462,23 @@ class RenderingSynthesizer(Synthesizer):
         if self.finished:
             raise InvalidRequestError("input fed after finish()", code="request_finished")
         new = coerce_spans(spans, after=self.covered_until, first_index=len(self.spans))
-        self.spans.extend(fill_gaps(new, self.covered_until))
+        for span in fill_gaps(new, self.covered_until):
+            self.spans.append(span)
+            self._accepted(span)
         if audio is not None:
             self.audio = audio if self.audio is None else self.audio.concat(audio)
+
+    def _accepted(self, span: PhonemeSpan) -> None:
+        """Called with each span as it joins ``spans``."""
+
+
+class RenderingSynthesizer(SpanSynthesizer):
+    """Streams a model's ``render`` by its declared ``Lookahead``."""
+
+    def __init__(self, model: Model, request: SynthesisRequest) -> None:
+        super().__init__()
+        self.model = model
+        self.request = request
 
     def final_until(self) -> float:
         """Time (s) before which every frame is final."""

@@ -14,16 +14,13 @@ end of the input the last phoneme's target holds.
 from __future__ import annotations
 
 from bisect import bisect_right
-from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..audio import Audio
-from ..errors import InvalidRequestError
 from ..phonemes import PHONEME_INDEX
-from ..timeline import PhonemeSpan, SpanLike, coerce_spans
-from .base import SynthesisRequest, Synthesizer, fill_gaps, frame_count
+from ..timeline import PhonemeSpan
+from .base import SpanSynthesizer, SynthesisRequest, frame_count
 from .damped import DampedState
 
 
@@ -37,36 +34,24 @@ class DampedTargets:
     lead_s: float
 
 
-class DampedTimelineSynthesizer(Synthesizer):
+class DampedTimelineSynthesizer(SpanSynthesizer):
     """One request of a damped rung: frames final once the input covers t + lead."""
 
     def __init__(
         self, targets: DampedTargets, request: SynthesisRequest, channels: tuple[str, ...]
     ) -> None:
+        super().__init__()
         self.targets = targets
         self.request = request
         self.channels = channels
         self.fps = float(request.fps)
-        self.spans: list[PhonemeSpan] = []
         self._shifted: list[float] = []
         self._rows: list[int] = []
         self.state: DampedState | None = None
-        self.emitted = 0
-        self.finished = False
-        self.stats = {"frames": 0}
 
-    @property
-    def covered_until(self) -> float:
-        return self.spans[-1].end if self.spans else 0.0
-
-    def feed(self, spans: Iterable[SpanLike], audio: Audio | None = None) -> None:
-        if self.finished:
-            raise InvalidRequestError("input fed after finish()", code="request_finished")
-        new = coerce_spans(spans, after=self.covered_until, first_index=len(self.spans))
-        for span in fill_gaps(new, self.covered_until):
-            self.spans.append(span)
-            self._shifted.append(span.start - self.targets.lead_s)
-            self._rows.append(PHONEME_INDEX[span.phoneme])
+    def _accepted(self, span: PhonemeSpan) -> None:
+        self._shifted.append(span.start - self.targets.lead_s)
+        self._rows.append(PHONEME_INDEX[span.phoneme])
 
     def frames(self) -> np.ndarray:
         reach = self.covered_until - self.targets.lead_s
