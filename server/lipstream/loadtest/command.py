@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -36,7 +37,11 @@ def _target_options(parser: argparse.ArgumentParser, *, required_target: bool) -
         "(default: ws://$LIPSTREAM_HOST:$LIPSTREAM_PORT/v1/stream)",
     )
     if required_target:
-        parser.add_argument("--engine", required=True, help="engine of every session")
+        parser.add_argument(
+            "--engine",
+            required=True,
+            help="engine of every session; capacity also takes 'all' (each of the character's)",
+        )
         parser.add_argument("--character", required=True, help="character of every session")
     else:
         parser.add_argument("--engine", help="default: the server's first character's first engine")
@@ -111,21 +116,54 @@ def _loadtest(args: argparse.Namespace, settings: Settings) -> None:
 def _capacity(args: argparse.Namespace, settings: Settings) -> None:
     from .capacity import CapacitySearch, find_capacity, record_search
 
-    search = CapacitySearch(
-        _config(args, settings),
-        clip_s=args.clip,
-        lag_limit_ms=args.lag_limit_ms,
-        start=args.start,
-        max_streams=args.max_streams,
-        resolution=args.resolution,
-        pause_s=args.pause,
+    base = _config(args, settings)
+    engines = _capacity_engines(base.url, args.engine, args.character, args.token)
+    references: dict[Any, dict[str, Any]] = {}
+    for engine in engines:
+        search = CapacitySearch(
+            replace(base, engine=engine),
+            clip_s=args.clip,
+            lag_limit_ms=args.lag_limit_ms,
+            start=args.start,
+            max_streams=args.max_streams,
+            resolution=args.resolution,
+            pause_s=args.pause,
+            reference=not args.no_reference,
+        )
+        print(f"{engine}:")
+        result = find_capacity(search, progress=print, references=references)
+        record_search(Path(args.results), result)
+        print(_capacity_line(result, args))
+
+
+def _capacity_engines(url: str, engine: str, character: str, token: str | None) -> list[str]:
+    """``engine``, or with ``all`` every engine the server has a model of ``character`` for."""
+    if engine != "all":
+        return [engine]
+    from lipstream_client.rest import RestClient
+
+    from ..errors import InvalidRequestError
+    from .load import HTTP_TIMEOUT_S
+
+    for listed in RestClient(url, token, timeout=HTTP_TIMEOUT_S).characters():
+        if listed.name == character and listed.engines:
+            return list(listed.engines)
+    raise InvalidRequestError(f"the server has no model of {character!r}", where="--character")
+
+
+def _capacity_line(result: dict[str, Any], args: argparse.Namespace) -> str:
+    line = (
+        f"capacity of {result['engine']}: {result['capacity_streams']} sessions at "
+        f"{args.fps:g} fps with p99 lag < {args.lag_limit_ms:g} ms (lead {args.lead_ms:g} ms)"
     )
-    result = find_capacity(search, progress=print)
-    record_search(Path(args.results), result)
-    print(
-        f"capacity: {result['capacity_streams']} sessions at {args.fps:g} fps with p99 lag "
-        f"< {args.lag_limit_ms:g} ms (lead {args.lead_ms:g} ms); written to {args.results}"
-    )
+    reference = result.get("reference")
+    if reference is not None:
+        ratio = result["capacity_ratio"]
+        line += (
+            f"; reference server {reference['capacity_streams']} sessions, ratio "
+            f"{'-' if ratio is None else f'{ratio:.2f}'}"
+        )
+    return f"{line}; written to {args.results}"
 
 
 def _add_capacity_parser(runs: Any) -> None:
@@ -155,6 +193,11 @@ def _add_capacity_parser(runs: Any) -> None:
         help="stop when the boundary is known to this many sessions",
     )
     capacity.add_argument("--pause", type=float, default=3.0, help="seconds between probes")
+    capacity.add_argument(
+        "--no-reference",
+        action="store_true",
+        help="skip the reference server's search (no capacity ratio)",
+    )
     capacity.add_argument(
         "--results",
         default="bench/capacity.json",
