@@ -51,7 +51,16 @@ from .sessions import event_loop_name
 
 DEFAULT_RESULTS = "bench/capacity.json"
 MAX_PROBES = 24
-_SEARCH_KEY = ("engine", "character", "fps", "lead_ms", "clip_s", "encoding", "server_processes")
+_SEARCH_KEY = (
+    "engine",
+    "character",
+    "fps",
+    "lead_ms",
+    "latency_budget_ms",
+    "clip_s",
+    "encoding",
+    "server_processes",
+)
 
 
 @dataclass(frozen=True)
@@ -243,6 +252,7 @@ def search_sessions(search: CapacitySearch, run: Run, progress: Progress | None)
         "character": base.character,
         "fps": base.fps,
         "lead_ms": base.lead_ms,
+        "latency_budget_ms": base.latency_budget_ms,
         "clip_s": search.clip_s,
         "encoding": base.encoding,
         "workers": base.workers,
@@ -289,7 +299,7 @@ def merge_results(path: Path, search: dict[str, Any]) -> dict[str, Any]:
                 where=str(path),
                 code="invalid_results_file",
             ) from None
-    key = tuple(search[name] for name in _SEARCH_KEY)
+    key = tuple(search.get(name) for name in _SEARCH_KEY)
     kept = [
         old
         for old in document.get("searches", [])

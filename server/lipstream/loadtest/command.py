@@ -60,6 +60,12 @@ def _target_options(parser: argparse.ArgumentParser, *, required_target: bool) -
     parser.add_argument("--token", help="bearer token, if the server requires one")
 
 
+def _budget_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--latency-budget-ms", type=float, help="latency_budget_ms of every request (default none)"
+    )
+
+
 def _load_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--workers",
@@ -116,7 +122,7 @@ def _loadtest(args: argparse.Namespace, settings: Settings) -> None:
 def _capacity(args: argparse.Namespace, settings: Settings) -> None:
     from .capacity import CapacitySearch, find_capacity, record_search
 
-    base = _config(args, settings)
+    base = _config(args, settings, latency_budget_ms=args.latency_budget_ms)
     engines = _capacity_engines(base.url, args.engine, args.character, args.token)
     references: dict[Any, dict[str, Any]] = {}
     for engine in engines:
@@ -175,6 +181,7 @@ def _add_capacity_parser(runs: Any) -> None:
     )
     _target_options(capacity, required_target=True)
     _load_options(capacity)
+    _budget_option(capacity)
     capacity.add_argument("--clip", type=float, default=10.0, help="clip length in seconds")
     capacity.add_argument(
         "--lag-limit-ms",
@@ -333,9 +340,7 @@ def add_loadtest_parser(commands: Any) -> None:
     load.add_argument(
         "--clips", type=float, nargs="+", default=[5.0, 10.0, 20.0], help="clip lengths in seconds"
     )
-    load.add_argument(
-        "--latency-budget-ms", type=float, help="latency_budget_ms of every request (default none)"
-    )
+    _budget_option(load)
     load.add_argument("--pause", type=float, default=3.0, help="seconds between clip lengths")
     load.add_argument(
         "--max-duration",

@@ -173,6 +173,9 @@ def test_searches_accumulate_in_one_file_by_key(tmp_path: Path) -> None:
         ("anime-graph", 200),
         ("viseme-lerp", 575),
     ]
+    path.write_text(json.dumps(document))
+    budgeted = merge_results(path, {**key, "latency_budget_ms": 20.0, "capacity_streams": 90})
+    assert [s["capacity_streams"] for s in budgeted["searches"]] == [200, 575, 90]
 
 
 def test_search_bounds_are_checked() -> None:
