@@ -356,12 +356,16 @@ def _add_retarget_parser(commands: argparse._SubParsersAction[argparse.ArgumentP
     retarget = commands.add_parser("retarget", help="fit, build or show a model's rig maps")
     actions = retarget.add_subparsers(dest="action", required=True)
     fit = actions.add_parser("fit", help="fit a map from a key-pose pairs file")
-    fit.add_argument("--pairs", required=True, help="key-pose pairs JSON (docs/retarget.md)")
+    fit.add_argument(
+        "--pairs", required=True, help="key-pose pairs, JSON or .csv (docs/retarget.md)"
+    )
     fit.add_argument("--name", required=True, help="the map's name (output.retarget)")
     build = actions.add_parser("build", help="store a shipped target fitted on the model")
     build.add_argument("--target", required=True, help="a shipped target: oculus15 or arkit52")
     build.add_argument("--name", help="the map's name (default: the target's)")
-    build.add_argument("--pairs-out", help="also write its key-pose pairs to this JSON file")
+    build.add_argument(
+        "--pairs-out", help="also write its key-pose pairs to this file (.csv for CSV, else JSON)"
+    )
     show = actions.add_parser("show", help="list the maps the model is served through")
     show.add_argument("name", nargs="?", help="only this map")
     for action in (fit, build, show):

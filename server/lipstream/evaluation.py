@@ -71,3 +71,32 @@ def closure_counts(
         total += 1
         closed += int(window.min() <= threshold)
     return closed, total
+
+
+LAG_WINDOW_S = 0.1
+"""How far around a /p b m/ span the closure is looked for: real lips close before the
+acoustic onset, and a model that does not anticipate closes after it."""
+
+
+def closure_lags(
+    recorded: np.ndarray,
+    predicted: np.ndarray,
+    spans: Sequence[PhonemeSpan],
+    fps: float,
+    window_s: float = LAG_WINDOW_S,
+) -> list[float]:
+    """Per /p b m/ span, the time (s) of the predicted aperture's minimum less the recorded
+    aperture's, both within the span widened by ``window_s`` each side (the first minimum
+    on ties); positive when the prediction closes late."""
+    n_frames = min(len(recorded), len(predicted))
+    lags = []
+    for span in spans:
+        if span.phoneme not in BILABIALS:
+            continue
+        first = max(0, int(np.ceil((span.start - window_s) * fps)))
+        stop = min(int(np.ceil((span.end + window_s) * fps)), n_frames)
+        if stop <= first:
+            continue
+        shift = int(np.argmin(predicted[first:stop])) - int(np.argmin(recorded[first:stop]))
+        lags.append(shift / fps)
+    return lags

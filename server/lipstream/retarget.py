@@ -32,12 +32,13 @@ channels the model lacks stay at rest, 0).
 A map is stored as a directory (``retarget.json`` manifest plus uncompressed
 ``arrays.npz``, never pickle), read with the load-time checks of
 ``model_checks``: a malformed or mismatched file is ``model_invalid`` naming
-the file and the field or array. Key-pose pairs files (JSON) are read by
-``read_pairs``; the format is in docs/retarget.md.
+the file and the field or array. Key-pose pairs files (JSON, or CSV:
+``pairs_csv``) are read by ``read_pairs``; the formats are in docs/retarget.md.
 """
 
 from __future__ import annotations
 
+import csv
 import json
 import re
 from collections.abc import Mapping, Sequence
@@ -55,6 +56,7 @@ from .corpus.livelink import ARKIT_BLENDSHAPES
 from .engines.base import Model
 from .errors import ModelStoreError
 from .model_checks import ArrayReader, FieldReader
+from .pairs_csv import csv_document, document_csv
 from .store import load_arrays
 from .visemes import OCULUS15
 
@@ -371,10 +373,11 @@ def stored_maps(model_directory: Path, channels: Sequence[str]) -> dict[str, Ret
 
 
 def read_pairs(path: Path, channels: Sequence[str]) -> KeyPosePairs:
-    """Key-pose pairs from a JSON file (docs/retarget.md) for a model with ``channels``;
-    ``model_invalid`` naming the file and field."""
+    """Key-pose pairs from a JSON file, or a CSV file when its name ends in ``.csv``
+    (docs/retarget.md, ``pairs_csv``), for a model with ``channels``; ``model_invalid``
+    naming the file and field."""
     where = str(path)
-    data = _read_json(path)
+    data = _read_csv(path) if _is_csv(path) else _read_json(path)
     fields = FieldReader(where)
     controls = fields.strings(
         fields.member(data, "controls", "controls"), "controls", unique=True, min_count=1
@@ -414,8 +417,9 @@ def read_pairs(path: Path, channels: Sequence[str]) -> KeyPosePairs:
 
 
 def write_pairs(path: Path, pairs: KeyPosePairs) -> None:
-    """Write ``pairs`` as a key-pose pairs file that ``read_pairs`` reads back exactly: each
-    pose lists only the values that differ from rest."""
+    """Write ``pairs`` as a key-pose pairs file (CSV when the name ends in ``.csv``, else
+    JSON) that ``read_pairs`` reads back exactly: each pose lists only the values that
+    differ from rest."""
 
     def sparse(values: np.ndarray, names: Sequence[str], rest: np.ndarray) -> dict[str, float]:
         return {name: float(v) for name, v, r in zip(names, values, rest) if v != r}
@@ -441,7 +445,14 @@ def write_pairs(path: Path, pairs: KeyPosePairs) -> None:
             pairs.channel_weights, pairs.channels, np.ones(len(pairs.channels))
         ),
     }
+    if _is_csv(path):
+        path.write_text(document_csv(data, pairs.channels), encoding="utf-8")
+        return
     path.write_text(json.dumps(data, indent=1, allow_nan=False) + "\n", encoding="utf-8")
+
+
+def _is_csv(path: Path) -> bool:
+    return path.suffix.lower() == ".csv"
 
 
 def _pose(
@@ -462,7 +473,7 @@ def _pose(
     return pose
 
 
-def _read_json(path: Path) -> Mapping[str, Any]:
+def _read_bytes(path: Path) -> bytes:
     try:
         with open(path, "rb") as handle:
             raw = handle.read(MAX_PAIRS_BYTES + 1)
@@ -470,6 +481,23 @@ def _read_json(path: Path) -> Mapping[str, Any]:
         raise ModelStoreError(f"cannot read: {error}", where=str(path)) from None
     if len(raw) > MAX_PAIRS_BYTES:
         raise ModelStoreError(f"is larger than {MAX_PAIRS_BYTES} bytes", where=str(path))
+    return raw
+
+
+def _read_csv(path: Path) -> Mapping[str, Any]:
+    raw = _read_bytes(path)
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as error:
+        raise ModelStoreError(f"is not UTF-8 text: {error}", where=str(path)) from None
+    try:
+        return csv_document(text, str(path))
+    except csv.Error as error:
+        raise ModelStoreError(f"is not valid CSV: {error}", where=str(path)) from None
+
+
+def _read_json(path: Path) -> Mapping[str, Any]:
+    raw = _read_bytes(path)
     try:
         data = json.loads(raw.decode("utf-8"), parse_constant=_refuse_constant)
     except (ValueError, UnicodeDecodeError, RecursionError) as error:

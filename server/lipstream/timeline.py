@@ -12,9 +12,9 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Union
+from typing import Any, TypeGuard, Union
 
-from .errors import InvalidRequestError
+from .errors import InvalidRequestError, LipstreamError
 from .phonemes import normalize_phoneme
 
 SpanLike = Union["PhonemeSpan", Sequence[Any], Mapping[str, Any]]
@@ -91,6 +91,21 @@ def coerce_span(span: SpanLike, where: str = "span", source: str = "request") ->
     )
 
 
+def _valid_as_is(span: SpanLike, source: str) -> TypeGuard[PhonemeSpan]:
+    """Whether ``span`` is a ``PhonemeSpan`` that ``coerce_span`` would return unchanged: the
+    check costs a fraction of building a new span, and engines re-check spans they are fed."""
+    if type(span) is not PhonemeSpan or type(span.start) is not float:
+        return False
+    if type(span.end) is not float or not (0.0 <= span.start < span.end < math.inf):
+        return False
+    if span.emotion is not None and span.emotion not in EMOTIONS:
+        return False
+    try:
+        return normalize_phoneme(span.phoneme, source=source) == span.phoneme
+    except LipstreamError:
+        return False
+
+
 def coerce_spans(
     spans: Iterable[SpanLike],
     *,
@@ -106,12 +121,14 @@ def coerce_spans(
     result: list[PhonemeSpan] = []
     previous_end = after
     for offset, raw in enumerate(spans):
-        where = f"spans[{first_index + offset}]"
-        span = coerce_span(raw, where, source)
+        if _valid_as_is(raw, source):
+            span = raw
+        else:
+            span = coerce_span(raw, f"spans[{first_index + offset}]", source)
         if span.start < previous_end - 1e-9:
             raise InvalidRequestError(
                 f"span starts at {span.start} before the previous span ends at {previous_end}",
-                where=where,
+                where=f"spans[{first_index + offset}]",
                 code="non_monotonic_times",
             )
         result.append(span)

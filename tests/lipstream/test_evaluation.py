@@ -4,6 +4,7 @@ import pytest
 from lipstream.evaluation import (
     CLOSURE_FRACTION,
     closure_counts,
+    closure_lags,
     closure_threshold,
     lip_aperture,
     rms_error,
@@ -40,3 +41,23 @@ def test_closure_counts_only_bilabials_with_frames() -> None:
         PhonemeSpan("B", 0.55, 0.58),
     ]
     assert closure_counts(aperture, spans, fps, threshold=0.05) == (1, 2)
+
+
+def test_closure_lags_are_the_shift_of_the_aperture_minimum_at_each_bilabial() -> None:
+    fps = 100.0
+    times = np.arange(120) / fps
+    # recorded lips shut at 0.30 s (in the /b/ span) and 0.80 s (in the /m/ span)
+    recorded = np.minimum(np.abs(times - 0.30), np.abs(times - 0.80))
+    predicted = np.minimum(np.abs(times - 0.34), np.abs(times - 0.77))  # 40 ms late, 30 early
+    spans = [
+        PhonemeSpan("AA", 0.0, 0.28),
+        PhonemeSpan("B", 0.28, 0.36),
+        PhonemeSpan("IY", 0.36, 0.75),
+        PhonemeSpan("M", 0.75, 0.85),
+        PhonemeSpan("sil", 0.85, 1.2),
+    ]
+    assert closure_lags(recorded, predicted, spans, fps) == pytest.approx([0.04, -0.03])
+    # each minimum is looked for near its span only: mirrored in time, the predicted
+    # closures fall at 0.39 s and 0.89 s, each 90 ms after the recorded one nearest it
+    mirrored = recorded[::-1].copy()
+    assert closure_lags(recorded, mirrored, spans, fps) == pytest.approx([0.09, 0.09])

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..corpus import Corpus
-from ..evaluation import closure_counts, closure_threshold, lip_aperture
+from ..evaluation import closure_counts, closure_lags, closure_threshold, lip_aperture
 
 
 def closure_rate(frames: list[np.ndarray], corpus: Corpus, threshold: float | None) -> float | None:
@@ -37,3 +37,17 @@ def learned_threshold(train: Corpus) -> float | None:
     if len(known) < len(apertures):
         return None
     return closure_threshold(known, train.fps)
+
+
+def closure_lag_ms(frames: list[np.ndarray], corpus: Corpus) -> float | None:
+    """Mean lag (ms) of the lips' closure in ``frames`` (one array per utterance) behind the
+    recordings of ``corpus`` at its /p b m/ spans; None without a lip aperture or such
+    spans."""
+    lags: list[float] = []
+    for predicted, utterance in zip(frames, corpus.utterances):
+        synthesized = lip_aperture(predicted, corpus.channels)
+        recorded = lip_aperture(utterance.frames, corpus.channels)
+        if synthesized is None or recorded is None:
+            return None
+        lags.extend(closure_lags(recorded, synthesized, utterance.phones, corpus.fps))
+    return 1000.0 * float(np.mean(lags)) if lags else None

@@ -4,11 +4,13 @@ For each registered engine: train on the train split (timed), synthesize each
 held-out utterance from its recorded phone spans, and compare with the
 recording: RMS error over all channels, and the share of /p b m/ spans whose
 lips close (``lipstream.evaluation``), and the RMS of each emotion's lines.
-Speed is the synthesis time per phoneme and the real-time factor (synthesis
-time / utterance duration) at 60 fps. Each figure is also given as a ratio to
-the baseline. Then every rung of every engine's ladder is measured the same
-way (``rungs``). Requests carry the utterance's emotion (and its audio, for
-engines that use audio), as a chat-avatar backend's requests would.
+The lip timing is the mean lag of the synthesized /p b m/ closures behind the
+recorded ones (``closure.closure_lag_ms``). Speed is the synthesis time per
+phoneme and the real-time factor (synthesis time / utterance duration) at 60
+fps. Each figure is also given as a ratio to the baseline. Then every rung of
+every engine's ladder is measured the same way (``rungs``). Requests carry the
+utterance's emotion (and its audio, for engines that use audio), as a
+chat-avatar backend's requests would.
 Everything runs on one BLAS thread.
 
 Engines may add their own benchmark (``ENGINE_BENCHES``, lazy import strings
@@ -37,7 +39,7 @@ from ..engines import engine_names
 from ..engines.base import Model
 from ..evaluation import rms_error
 from ..training import train_engine
-from .closure import closure_rate, learned_threshold
+from .closure import closure_lag_ms, closure_rate, learned_threshold
 from .rungs import RungRow, rung_rows
 
 BASELINE = "viseme-lerp"
@@ -62,6 +64,7 @@ class EngineRow:
     rms_error: float
     closure_rate: float | None
     rms_by_emotion: dict[str, float] = field(default_factory=dict)
+    closure_lag_ms: float | None = None
     train_ratio: float = 1.0
     speed_ratio: float = 1.0
     rms_ratio: float = 1.0
@@ -99,6 +102,7 @@ def bench_engine(model: Model, heldout: Corpus, threshold: float | None) -> Engi
         rms_error=float(np.mean(errors)),
         closure_rate=closure_rate(predictions, heldout, threshold),
         rms_by_emotion=_by_emotion(errors, heldout),
+        closure_lag_ms=closure_lag_ms(predictions, heldout),
     )
 
 
@@ -195,7 +199,7 @@ def _fmt(value: float | None, pattern: str) -> str:
 def format_table(results: dict[str, Any]) -> str:
     header = (
         f"{'engine':<16}{'train s':>9}{'ms/phon':>9}{'RTF':>9}{'RMS':>9}"
-        f"{'closure':>9}{'RMS÷base':>10}{'speed÷base':>12}{'close÷base':>12}"
+        f"{'closure':>9}{'RMS÷base':>10}{'speed÷base':>12}{'close÷base':>12}{'lip lag ms':>12}"
     )
     lines = [header, "-" * len(header)]
     for row in results["engines"]:
@@ -204,6 +208,7 @@ def format_table(results: dict[str, Any]) -> str:
             f"{row['real_time_factor']:>9.5f}{row['rms_error']:>9.4f}"
             f"{_fmt(row['closure_rate'], '.1%'):>9}{row['rms_ratio']:>10.3f}"
             f"{row['speed_ratio']:>12.3f}{_fmt(row['closure_ratio'], '.3f'):>12}"
+            f"{_fmt(row.get('closure_lag_ms'), '.1f'):>12}"
         )
     recorded = results["recorded"]
     lines.append(f"{'recorded':<16}{'':>45}{_fmt(recorded['closure_rate'], '.1%'):>9}")

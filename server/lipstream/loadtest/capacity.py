@@ -17,6 +17,14 @@ ran out of CPU.
 Searches accumulate in one results file (``bench/capacity.json``): a new
 search replaces the one with the same engine, character, fps, lead and clip.
 
+Capacity as a ratio: an absolute count says as much about the machine as
+about the code, so the same run also searches the capacity of the
+reference server (``reference``: the same messages at the same rate, no
+synthesis), started with as many workers as the measured server has, and
+reports the engine's count over the reference's (``capacity_ratio``). Runs
+for several engines (``--engine all``) share one reference search per
+distinct traffic (channels, lookahead, rung).
+
 Usage (the server already running on this machine)::
 
     lipstream loadtest capacity --engine viseme-lerp --character demo \\
@@ -30,6 +38,7 @@ import os
 import platform
 import time
 from collections.abc import Callable
+from contextlib import AbstractContextManager
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -37,11 +46,21 @@ from typing import Any
 from .._version import __version__
 from ..errors import InvalidRequestError, LipstreamError
 from .load import LoadTestConfig, check_config, loadtest
+from .reference import ReferenceTraffic, engine_traffic, reference_server
 from .sessions import event_loop_name
 
 DEFAULT_RESULTS = "bench/capacity.json"
 MAX_PROBES = 24
-_SEARCH_KEY = ("engine", "character", "fps", "lead_ms", "clip_s", "encoding", "server_processes")
+_SEARCH_KEY = (
+    "engine",
+    "character",
+    "fps",
+    "lead_ms",
+    "latency_budget_ms",
+    "clip_s",
+    "encoding",
+    "server_processes",
+)
 
 
 @dataclass(frozen=True)
@@ -56,6 +75,7 @@ class CapacitySearch:
     max_streams: int = 1000
     resolution: int = 25
     pause_s: float = 3.0
+    reference: bool = True
 
 
 def check_search(search: CapacitySearch) -> None:
@@ -142,13 +162,76 @@ def next_probe(passed: dict[int, bool], search: CapacitySearch) -> int | None:
     )
 
 
+Run = Callable[[LoadTestConfig], dict[str, Any]]
+Progress = Callable[[str], None]
+ServeReference = Callable[[ReferenceTraffic, int], AbstractContextManager[str]]
+LearnTraffic = Callable[[LoadTestConfig], ReferenceTraffic]
+_REFERENCE_FIELDS = ("capacity_streams", "upper_bound_streams", "idle", "at_capacity", "probes")
+
+
+def traffic_of(base: LoadTestConfig) -> ReferenceTraffic:
+    """The traffic the measured engine sends for the search's requests (one ``ready``)."""
+    if base.engine is None or base.character is None:
+        raise InvalidRequestError("a capacity search names its engine", where="--engine")
+    return engine_traffic(
+        base.url,
+        base.engine,
+        base.character,
+        base.fps,
+        base.latency_budget_ms,
+        base.token,
+        base.encoding,
+    )
+
+
+def reference_workers(server_processes: int) -> int:
+    """uvicorn workers matching a server found as ``server_processes`` listening processes
+    (a supervisor and its workers, or one process)."""
+    return server_processes - 1 if server_processes > 1 else 1
+
+
 def find_capacity(
     search: CapacitySearch,
-    run: Callable[[LoadTestConfig], dict[str, Any]] = loadtest,
-    progress: Callable[[str], None] | None = None,
+    run: Run = loadtest,
+    progress: Progress | None = None,
+    learn_traffic: LearnTraffic = traffic_of,
+    serve_reference: ServeReference = reference_server,
+    references: dict[tuple[ReferenceTraffic, int], dict[str, Any]] | None = None,
 ) -> dict[str, Any]:
-    """Run the search; its document (see docs/loadtest.md, "Capacity")."""
+    """Run the search, then the reference's unless ``search.reference`` is off (or an
+    equal one is in ``references``, which collects them); the document (see
+    docs/loadtest.md, "Capacity")."""
     check_search(search)
+    document = search_sessions(search, run, progress)
+    if not search.reference:
+        return document
+    traffic = learn_traffic(search.base)
+    workers = reference_workers(document["server_processes"])
+    known = {} if references is None else references
+    if (traffic, workers) not in known:
+        if progress is not None:
+            progress(f"reference server ({workers} worker(s), {len(traffic.channels)} channels)")
+        with serve_reference(traffic, workers) as url:
+            measured = search_sessions(
+                replace(search, base=replace(search.base, url=url)), run, progress
+            )
+        known[(traffic, workers)] = {
+            "traffic": asdict(traffic),
+            "workers": workers,
+            **{name: measured[name] for name in _REFERENCE_FIELDS},
+        }
+    reference = known[(traffic, workers)]
+    document["reference"] = reference
+    document["capacity_ratio"] = (
+        document["capacity_streams"] / reference["capacity_streams"]
+        if reference["capacity_streams"]
+        else None
+    )
+    return document
+
+
+def search_sessions(search: CapacitySearch, run: Run, progress: Progress | None) -> dict[str, Any]:
+    """The session-count search on ``search.base.url`` alone."""
     passed: dict[int, bool] = {}
     probes: list[dict[str, Any]] = []
     began = time.perf_counter()
@@ -169,6 +252,7 @@ def find_capacity(
         "character": base.character,
         "fps": base.fps,
         "lead_ms": base.lead_ms,
+        "latency_budget_ms": base.latency_budget_ms,
         "clip_s": search.clip_s,
         "encoding": base.encoding,
         "workers": base.workers,
@@ -215,7 +299,7 @@ def merge_results(path: Path, search: dict[str, Any]) -> dict[str, Any]:
                 where=str(path),
                 code="invalid_results_file",
             ) from None
-    key = tuple(search[name] for name in _SEARCH_KEY)
+    key = tuple(search.get(name) for name in _SEARCH_KEY)
     kept = [
         old
         for old in document.get("searches", [])

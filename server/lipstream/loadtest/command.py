@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -36,7 +37,11 @@ def _target_options(parser: argparse.ArgumentParser, *, required_target: bool) -
         "(default: ws://$LIPSTREAM_HOST:$LIPSTREAM_PORT/v1/stream)",
     )
     if required_target:
-        parser.add_argument("--engine", required=True, help="engine of every session")
+        parser.add_argument(
+            "--engine",
+            required=True,
+            help="engine of every session; capacity also takes 'all' (each of the character's)",
+        )
         parser.add_argument("--character", required=True, help="character of every session")
     else:
         parser.add_argument("--engine", help="default: the server's first character's first engine")
@@ -53,6 +58,12 @@ def _target_options(parser: argparse.ArgumentParser, *, required_target: bool) -
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of the synthetic clips")
     parser.add_argument("--token", help="bearer token, if the server requires one")
+
+
+def _budget_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--latency-budget-ms", type=float, help="latency_budget_ms of every request (default none)"
+    )
 
 
 def _load_options(parser: argparse.ArgumentParser) -> None:
@@ -111,21 +122,54 @@ def _loadtest(args: argparse.Namespace, settings: Settings) -> None:
 def _capacity(args: argparse.Namespace, settings: Settings) -> None:
     from .capacity import CapacitySearch, find_capacity, record_search
 
-    search = CapacitySearch(
-        _config(args, settings),
-        clip_s=args.clip,
-        lag_limit_ms=args.lag_limit_ms,
-        start=args.start,
-        max_streams=args.max_streams,
-        resolution=args.resolution,
-        pause_s=args.pause,
+    base = _config(args, settings, latency_budget_ms=args.latency_budget_ms)
+    engines = _capacity_engines(base.url, args.engine, args.character, args.token)
+    references: dict[Any, dict[str, Any]] = {}
+    for engine in engines:
+        search = CapacitySearch(
+            replace(base, engine=engine),
+            clip_s=args.clip,
+            lag_limit_ms=args.lag_limit_ms,
+            start=args.start,
+            max_streams=args.max_streams,
+            resolution=args.resolution,
+            pause_s=args.pause,
+            reference=not args.no_reference,
+        )
+        print(f"{engine}:")
+        result = find_capacity(search, progress=print, references=references)
+        record_search(Path(args.results), result)
+        print(_capacity_line(result, args))
+
+
+def _capacity_engines(url: str, engine: str, character: str, token: str | None) -> list[str]:
+    """``engine``, or with ``all`` every engine the server has a model of ``character`` for."""
+    if engine != "all":
+        return [engine]
+    from lipstream_client.rest import RestClient
+
+    from ..errors import InvalidRequestError
+    from .load import HTTP_TIMEOUT_S
+
+    for listed in RestClient(url, token, timeout=HTTP_TIMEOUT_S).characters():
+        if listed.name == character and listed.engines:
+            return list(listed.engines)
+    raise InvalidRequestError(f"the server has no model of {character!r}", where="--character")
+
+
+def _capacity_line(result: dict[str, Any], args: argparse.Namespace) -> str:
+    line = (
+        f"capacity of {result['engine']}: {result['capacity_streams']} sessions at "
+        f"{args.fps:g} fps with p99 lag < {args.lag_limit_ms:g} ms (lead {args.lead_ms:g} ms)"
     )
-    result = find_capacity(search, progress=print)
-    record_search(Path(args.results), result)
-    print(
-        f"capacity: {result['capacity_streams']} sessions at {args.fps:g} fps with p99 lag "
-        f"< {args.lag_limit_ms:g} ms (lead {args.lead_ms:g} ms); written to {args.results}"
-    )
+    reference = result.get("reference")
+    if reference is not None:
+        ratio = result["capacity_ratio"]
+        line += (
+            f"; reference server {reference['capacity_streams']} sessions, ratio "
+            f"{'-' if ratio is None else f'{ratio:.2f}'}"
+        )
+    return f"{line}; written to {args.results}"
 
 
 def _add_capacity_parser(runs: Any) -> None:
@@ -137,6 +181,7 @@ def _add_capacity_parser(runs: Any) -> None:
     )
     _target_options(capacity, required_target=True)
     _load_options(capacity)
+    _budget_option(capacity)
     capacity.add_argument("--clip", type=float, default=10.0, help="clip length in seconds")
     capacity.add_argument(
         "--lag-limit-ms",
@@ -155,6 +200,11 @@ def _add_capacity_parser(runs: Any) -> None:
         help="stop when the boundary is known to this many sessions",
     )
     capacity.add_argument("--pause", type=float, default=3.0, help="seconds between probes")
+    capacity.add_argument(
+        "--no-reference",
+        action="store_true",
+        help="skip the reference server's search (no capacity ratio)",
+    )
     capacity.add_argument(
         "--results",
         default="bench/capacity.json",
@@ -290,9 +340,7 @@ def add_loadtest_parser(commands: Any) -> None:
     load.add_argument(
         "--clips", type=float, nargs="+", default=[5.0, 10.0, 20.0], help="clip lengths in seconds"
     )
-    load.add_argument(
-        "--latency-budget-ms", type=float, help="latency_budget_ms of every request (default none)"
-    )
+    _budget_option(load)
     load.add_argument("--pause", type=float, default=3.0, help="seconds between clip lengths")
     load.add_argument(
         "--max-duration",

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from lipstream.bench.dam import format_dam_bench, run_dam_bench
+from lipstream.bench.dam import format_dam_bench, run_dam_bench, sentence
 from lipstream.corpus import Corpus
 from lipstream.engines.dam import DamEngine
 
@@ -23,5 +23,14 @@ def test_dam_bench_reports_every_rung_with_its_truncation_error(
         else:
             assert rung["truncation_error"] < DamEngine().truncation_bound
     assert max(figures["cut_tail_errors"].values()) > DamEngine().truncation_bound
+    speed = figures["synthesis"]
+    assert (speed["phonemes"], speed["fps"], speed["repeats"]) == (40, 60.0, 200)
     text = format_dam_bench(results)
     assert "rung full" in text and "rung causal      lookahead 0 phonemes" in text
+    assert "synthesis of a 40-phoneme sentence at 60 fps" in text
+
+
+def test_the_speed_sentence_is_40_contiguous_phonemes() -> None:
+    spans = sentence()
+    assert len(spans) == 40 and spans[0][1] == 0.0
+    assert all(a[2] == b[1] for a, b in zip(spans, spans[1:]))

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import json
 from array import array
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -19,10 +22,12 @@ from lipstream.loadtest.capacity import (
     probe_summary,
 )
 from lipstream.loadtest.load import LoadTestConfig, loadtest
+from lipstream.loadtest.reference import ReferenceTraffic
 from lipstream.loadtest.sessions import ClipShare, RequestRecord
 from lipstream.loadtest.workers import decode_share, encode_share, split
 from tests.lipstream_client.fake_server import FakeServer
 
+REFERENCE_URL = "ws://127.0.0.1:9/v1/stream"
 BASE = LoadTestConfig(engine="viseme-lerp", character="demo", workers=2, probe_phonemes=30)
 
 
@@ -88,7 +93,9 @@ def test_find_capacity_runs_probes_and_documents_the_boundary() -> None:
         p99 = -30.0 + max(0, config.streams - 300) * 0.5  # crosses 50 ms at 460 sessions
         return _results(config.streams, p99)
 
-    search = CapacitySearch(BASE, start=100, max_streams=1000, resolution=25, pause_s=0.0)
+    search = CapacitySearch(
+        BASE, start=100, max_streams=1000, resolution=25, pause_s=0.0, reference=False
+    )
     document = find_capacity(search, run)
     assert [c.streams for c in configs] == [1, 100, 200, 400, 800, 600, 500, 450, 475]
     assert all(c.requests == c.streams and c.clips_s == (10.0,) for c in configs)
@@ -99,6 +106,46 @@ def test_find_capacity_runs_probes_and_documents_the_boundary() -> None:
     assert document["at_capacity"]["server_cores"] == pytest.approx(0.8)
     assert document["at_capacity"]["probe_first_frame_latency_ms"]["p99"] == 9.0
     assert document["server_processes"] == 1 and document["lead_ms"] == 0.0
+    assert "reference" not in document
+
+
+def test_the_reference_is_searched_once_per_traffic_and_the_ratio_is_engine_over_it() -> None:
+    urls: list[str] = []
+    served: list[tuple[ReferenceTraffic, int]] = []
+    traffic = ReferenceTraffic(("jawOpen", "mouthClose"), 0.0, "causal")
+
+    def run(config: LoadTestConfig) -> dict[str, Any]:
+        urls.append(config.url)
+        crossing = 600 if config.url == REFERENCE_URL else 300  # where p99 crosses 50 ms
+        results = _results(config.streams, 50.0 * config.streams / crossing - 0.01)
+        results["summary"]["server_processes"] = 3  # a supervisor and two workers
+        return results
+
+    @contextmanager
+    def serve(traffic: ReferenceTraffic, workers: int) -> Iterator[str]:
+        served.append((traffic, workers))
+        yield REFERENCE_URL
+
+    search = CapacitySearch(BASE, start=100, max_streams=1000, resolution=25, pause_s=0.0)
+    references: dict[Any, dict[str, Any]] = {}
+    documents = [
+        find_capacity(
+            replace(search, base=replace(BASE, engine=engine)),
+            run,
+            None,
+            lambda base: traffic,
+            serve,
+            references,
+        )
+        for engine in ("viseme-lerp", "dam")
+    ]
+    assert served == [(traffic, 2)]  # one reference search, as many workers as the server
+    assert urls.count(REFERENCE_URL) == len(documents[0]["reference"]["probes"]) + 1
+    for document in documents:
+        assert document["capacity_streams"] == 300
+        assert document["reference"]["capacity_streams"] == 600
+        assert list(document["reference"]["traffic"]["channels"]) == ["jawOpen", "mouthClose"]
+        assert document["capacity_ratio"] == pytest.approx(0.5)
 
 
 def test_a_probe_with_failed_requests_fails_however_low_its_lag() -> None:
@@ -126,6 +173,9 @@ def test_searches_accumulate_in_one_file_by_key(tmp_path: Path) -> None:
         ("anime-graph", 200),
         ("viseme-lerp", 575),
     ]
+    path.write_text(json.dumps(document))
+    budgeted = merge_results(path, {**key, "latency_budget_ms": 20.0, "capacity_streams": 90})
+    assert [s["capacity_streams"] for s in budgeted["searches"]] == [200, 575, 90]
 
 
 def test_search_bounds_are_checked() -> None:

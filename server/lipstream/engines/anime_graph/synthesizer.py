@@ -47,6 +47,7 @@ from itertools import groupby
 from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
+from numba import njit
 
 from ...audio import Audio
 from ...errors import InvalidRequestError
@@ -463,14 +464,14 @@ class AnimeGraphSynthesizer(Synthesizer):
         if stop <= self.emitted:
             return np.zeros((0, len(self.model.channels)), dtype=np.float32)
         self.guard.check()
-        positions = np.arange(self.emitted, stop) * (self.model.fps / self.fps)
-        snapped = np.round(positions)
-        positions = np.where(np.abs(positions - snapped) < _SNAP, snapped, positions)
-        low = np.floor(positions).astype(np.int64)
-        fraction = (positions - low)[:, None]
-        curve, offset = self.smoothed.view(), self.smoothed.first
-        high = np.minimum(low + 1, self.smoothed.count - 1)
-        values = (1.0 - fraction) * curve[low - offset] + fraction * curve[high - offset]
+        values = _interpolate(
+            self.emitted,
+            stop,
+            self.model.fps / self.fps,
+            self.smoothed.view(),
+            self.smoothed.first,
+            self.smoothed.count,
+        )
         self.emitted = stop
         self.stats["frames"] = stop
         self._forget_consumed()
@@ -526,11 +527,41 @@ def _samples_needed(frame: int, fps_model: float, fps: float) -> int:
     return math.floor(position) + 2
 
 
+@njit(cache=True)
+def _interpolate(
+    first: int, stop: int, ratio: float, curve: np.ndarray, offset: int, count: int
+) -> np.ndarray:
+    """Output frames first .. stop - 1 interpolated linearly between the smoothed samples
+    (``curve`` holds samples offset .. offset + len - 1 of ``count``) at frame * ``ratio``,
+    a position within ``_SNAP`` of a sample taken as that sample."""
+    values = np.empty((stop - first, curve.shape[1]))
+    for row in range(stop - first):
+        position = (first + row) * ratio
+        snapped = np.round(position)
+        if abs(position - snapped) < _SNAP:
+            position = snapped
+        low = int(np.floor(position))
+        fraction = position - low
+        high = min(low + 1, count - 1)
+        for column in range(curve.shape[1]):
+            values[row, column] = (1.0 - fraction) * curve[low - offset, column] + (
+                fraction * curve[high - offset, column]
+            )
+    return values
+
+
+@njit(cache=True)
 def _filter(block: np.ndarray, kernels: np.ndarray) -> np.ndarray:
+    """Each component of ``block`` filtered by its kernel ('valid' correlation: output i
+    reads block rows i .. i + width - 1)."""
     width = kernels.shape[1]
     out = np.empty((len(block) - width + 1, block.shape[1]))
     for component in range(block.shape[1]):
-        out[:, component] = np.convolve(block[:, component], kernels[component][::-1], "valid")
+        for row in range(len(out)):
+            total = 0.0
+            for tap in range(width):
+                total += block[row + tap, component] * kernels[component, tap]
+            out[row, component] = total
     return out
 
 

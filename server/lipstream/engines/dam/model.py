@@ -46,8 +46,9 @@ from ..base import (
 )
 from ..durations import DurationModel
 from .causal import CausalSynthesizer
-from .dominance import dominance, powers, reach
+from .dominance import reach
 from .em import SIGMA_MIN
+from .kernels import choose_modes, dam_sum, search_tables
 from .modes import EMOTION_INDEX, PHONEME_INDEX
 from .selection import Costs, Layer, cheapest_path, context_cost, end_derivatives, smooth_cost
 
@@ -106,6 +107,14 @@ class DamModel(Model):
             alpha=float(hyper["alpha"]),
             w_context=float(hyper["w_context"]),
             w_smooth=float(hyper["w_smooth"]),
+        )
+        self.tables = search_tables(
+            self.offsets,
+            self.stand_in,
+            self.stored["count_previous"],
+            self.stored["count_following"],
+            self.count_emotion,
+            self.costs.alpha,
         )
 
     # -- options, lookahead, ladder -------------------------------------------------------
@@ -238,6 +247,52 @@ class DamModel(Model):
         path = cheapest_path(self.costs, nodes, edges)
         return int(memo.layer(index, False).candidates[path[index - first]])
 
+    def choose_modes(
+        self,
+        spans: Sequence[PhonemeSpan],
+        first: int,
+        last: int,
+        ahead: int,
+        request: SynthesisRequest,
+    ) -> np.ndarray:
+        """``select_mode`` of spans ``first`` .. ``last``, by the compiled search (``kernels``)."""
+        low = max(0, first - self.search_behind)
+        high = min(len(spans) - 1, last + ahead)
+        window = spans[low : high + 1]
+        phonemes = [PHONEME_INDEX[span.phoneme] for span in window]
+        before = PHONEME_INDEX[spans[low - 1].phoneme] if low > 0 else SILENCE_INDEX
+        after = PHONEME_INDEX[spans[high + 1].phoneme] if high + 1 < len(spans) else SILENCE_INDEX
+        emotions = [request.emotion_of(span) for span in window]
+        emotion = np.array(
+            [NEUTRAL if name is None else EMOTION_INDEX[name] for name in emotions], dtype=np.int64
+        )
+        phoneme = np.array(phonemes, dtype=np.int64)
+        tables, costs = self.tables, self.costs
+        return np.asarray(
+            choose_modes(
+                phoneme * tables.set_start.shape[1] + emotion,
+                np.array([before, *phonemes[:-1]], dtype=np.int64),
+                np.array([*phonemes[1:], after], dtype=np.int64),
+                emotion,
+                np.array([span.end - span.start for span in window]),
+                first - low,
+                last - low,
+                self.search_behind,
+                ahead,
+                tables.set_start,
+                tables.set_stop,
+                tables.modes,
+                tables.log_previous,
+                tables.log_following,
+                tables.log_emotion,
+                costs.ends,
+                costs.starts,
+                costs.reference_duration,
+                costs.w_context,
+                costs.w_smooth,
+            )
+        )
+
     def render(
         self,
         spans: Sequence[PhonemeSpan],
@@ -248,28 +303,29 @@ class DamModel(Model):
         resolved = self.resolve(request.options)
         assert not isinstance(resolved, float), "causal rungs stream with CausalSynthesizer"
         search, ahead = resolved
-        owner_low = min(bisect_right(spans, times[0], key=lambda s: s.end), len(spans) - 1)
-        owner_high = min(bisect_right(spans, times[-1], key=lambda s: s.end), len(spans) - 1)
+        request.guard.check()
+        owner_low = min(bisect_right(spans, times[0], key=_end), len(spans) - 1)
+        owner_high = min(bisect_right(spans, times[-1], key=_end), len(spans) - 1)
         first = max(0, owner_low - self.tail)
         last = min(len(spans) - 1, owner_high + ahead)
-        ends = np.array([span.end for span in spans[first : last + 1]])
-        owner = first + np.minimum(np.searchsorted(ends, times, side="right"), len(ends) - 1)
-        owner = np.minimum(owner, len(spans) - 1)
-        frames = np.zeros((len(times), self.coefficients.shape[2]))
-        memo = ModeMemo(self, spans, request)
-        for k in range(first, last + 1):
-            request.guard.check()
-            span = spans[k]
-            mode = self.select_mode(spans, k, search, request, memo)
-            local = (times - span.start) / (span.end - span.start)
-            near = (owner - self.tail <= k) & (k <= owner + ahead)
-            near &= (local >= -self.reach[mode]) & (local <= 1.0 + self.reach[mode])
-            if near.any():
-                u = local[near]
-                weight = dominance(u, self.sigma[mode], self.eps)
-                frames[near] += weight[:, None] * (
-                    powers(u, self.coefficients.shape[1] - 1) @ self.coefficients[mode]
-                )
+        window = spans[first : last + 1]
+        starts = np.array([span.start for span in window])
+        ends = np.array([span.end for span in window])
+        owner = np.minimum(np.searchsorted(ends, times, side="right"), len(ends) - 1)
+        modes = self.choose_modes(spans, first, last, search, request)
+        frames = dam_sum(
+            np.asarray(times, dtype=np.float64),
+            owner,
+            starts,
+            ends,
+            modes,
+            self.tail,
+            ahead,
+            self.sigma,
+            self.reach,
+            self.eps,
+            self.coefficients,
+        )
         return self.basis.reconstruct(frames).astype(np.float32)
 
     # -- store ----------------------------------------------------------------------------
@@ -343,6 +399,10 @@ def check_arrays(reader: ArrayReader, degree: int, n_channels: int) -> dict[str,
     if not result["causal_kappa"][0] > 0:
         raise reader.error("causal_kappa", "must be positive")
     return result
+
+
+def _end(span: PhonemeSpan) -> float:
+    return span.end
 
 
 class ModeMemo:

@@ -1,0 +1,289 @@
+"""Compiled synthesis of a DAM (numba): the windowed mode searches and the sum of Eq. 2.
+
+Sketch: interpreting ``selection`` and ``model.render`` phoneme by phoneme
+cost about 0.4 ms per phoneme, nearly all of it Python and small-array
+overhead. Everything that does not depend on a request is tabulated when the
+model loads (``SearchTables``): for each phoneme (after its stand-in) and
+emotion, the candidate modes in one flat array, and for each candidate and
+each previous phoneme, next phoneme and emotion, the log share of
+``selection._log_share``, computed by the same numpy expression, so the
+context costs E_c are the reference's to the bit. A request then reduces to a
+few integer arrays per span, and two kernels do the rest:
+
+- ``choose_modes``: for each span k of a range, the min-plus programme over
+  its window k - search_behind .. k + ahead exactly as
+  ``selection.cheapest_path`` runs it (E_c with the next phoneme unknown on
+  the window's last layer, E_s per join, first minimum on ties), with the
+  joins' E_s computed once per pair of neighbouring spans;
+- ``dam_sum``: for each frame, Eq. 2 over the spans owner - tail .. owner +
+  ahead whose dominance reaches it, each term D·A with A on the clamped local
+  time, in the order ``model.render`` adds them.
+
+Sums of squares and polynomial products run in plain loops, so E_s and the
+frames may differ from numpy's (pairwise, BLAS) summation in the last bits;
+the tests hold the modes equal and the frames within 1e-12 of the
+straightforward implementation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ...phonemes import PHONEMES
+from ...timeline import EMOTIONS
+
+
+@dataclass(frozen=True)
+class SearchTables:
+    """Candidates and context costs of every (phoneme, emotion), flat.
+
+    ``set_start``/``set_stop`` (phonemes, emotions) bound the candidates of a span of that
+    canonical phoneme (its stand-in's modes, those said with the emotion if any) in
+    ``modes``; ``log_previous`` / ``log_following`` (positions, phonemes) and
+    ``log_emotion`` (positions, emotions) hold each candidate's log share."""
+
+    set_start: np.ndarray
+    set_stop: np.ndarray
+    modes: np.ndarray
+    log_previous: np.ndarray
+    log_following: np.ndarray
+    log_emotion: np.ndarray
+
+
+def _log_shares(table: np.ndarray, candidates: np.ndarray, alpha: float) -> np.ndarray:
+    """log(share) of each candidate (rows) for every context (columns), each column as
+    ``selection._log_share`` computes it."""
+    counts = np.ascontiguousarray(table[candidates].astype(np.float64).T) + alpha
+    return np.asarray(np.log(counts / counts.sum(axis=1)[:, None]).T)
+
+
+def search_tables(
+    offsets: np.ndarray,
+    stand_in: np.ndarray,
+    count_previous: np.ndarray,
+    count_following: np.ndarray,
+    count_emotion: np.ndarray,
+    alpha: float,
+) -> SearchTables:
+    """The tables of a model's modes (see ``SearchTables``)."""
+    n_phonemes, n_emotions = len(PHONEMES), len(EMOTIONS)
+    set_start = np.zeros((n_phonemes, n_emotions), dtype=np.int64)
+    set_stop = np.zeros((n_phonemes, n_emotions), dtype=np.int64)
+    chunks: list[np.ndarray] = []
+    shares: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    placed: dict[tuple[int, int], tuple[int, int]] = {}
+    size = 0
+    for phoneme in range(n_phonemes):
+        own = int(stand_in[phoneme])
+        for emotion in range(n_emotions):
+            candidates = np.arange(offsets[own], offsets[own + 1])
+            said = candidates[count_emotion[candidates, emotion] > 0]
+            if len(said):
+                candidates = said
+            key = (own, emotion)
+            if key not in placed:
+                placed[key] = (size, size + len(candidates))
+                size += len(candidates)
+                chunks.append(candidates)
+                shares.append(
+                    (
+                        _log_shares(count_previous, candidates, alpha),
+                        _log_shares(count_following, candidates, alpha),
+                        _log_shares(count_emotion, candidates, alpha),
+                    )
+                )
+            set_start[phoneme, emotion], set_stop[phoneme, emotion] = placed[key]
+    return SearchTables(
+        set_start,
+        set_stop,
+        np.concatenate(chunks).astype(np.int64),
+        np.concatenate([share[0] for share in shares]),
+        np.concatenate([share[1] for share in shares]),
+        np.concatenate([share[2] for share in shares]),
+    )
+
+
+@njit(cache=True)
+def _node(
+    start: int,
+    stop: int,
+    previous: int,
+    following: int,
+    emotion: int,
+    log_previous: np.ndarray,
+    log_following: np.ndarray,
+    log_emotion: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """E_c of one layer's candidates into ``out``, term by term as
+    ``selection.context_cost``."""
+    for position in range(start, stop):
+        value = 0.0
+        if previous >= 0:
+            value -= log_previous[position, previous]
+        if following >= 0:
+            value -= log_following[position, following]
+        if emotion >= 0:
+            value -= log_emotion[position, emotion]
+        out[position - start] = value
+
+
+@njit(cache=True)
+def _joins(
+    left: np.ndarray,
+    right: np.ndarray,
+    left_duration: float,
+    right_duration: float,
+    ends: np.ndarray,
+    starts: np.ndarray,
+    reference_duration: float,
+    out: np.ndarray,
+) -> None:
+    """E_s of each (left, right) candidate pair into ``out``, as ``selection.smooth_cost``."""
+    scale = np.array([1.0, reference_duration, reference_duration**2])
+    left_factor = np.empty(3)
+    right_factor = np.empty(3)
+    for order in range(3):
+        left_factor[order] = scale[order] / left_duration**order
+        right_factor[order] = scale[order] / right_duration**order
+    channels = ends.shape[2]
+    for a in range(len(left)):
+        for b in range(len(right)):
+            total = 0.0
+            for order in range(3):
+                for channel in range(channels):
+                    jump = (
+                        ends[left[a], order, channel] * left_factor[order]
+                        - starts[right[b], order, channel] * right_factor[order]
+                    )
+                    total += jump * jump
+            out[a, b] = total
+
+
+@njit(cache=True)
+def choose_modes(
+    span_set: np.ndarray,
+    previous: np.ndarray,
+    following: np.ndarray,
+    emotion: np.ndarray,
+    durations: np.ndarray,
+    chosen_first: int,
+    chosen_last: int,
+    search_behind: int,
+    ahead: int,
+    set_start: np.ndarray,
+    set_stop: np.ndarray,
+    modes: np.ndarray,
+    log_previous: np.ndarray,
+    log_following: np.ndarray,
+    log_emotion: np.ndarray,
+    ends: np.ndarray,
+    starts: np.ndarray,
+    reference_duration: float,
+    w_context: float,
+    w_smooth: float,
+) -> np.ndarray:
+    """The mode of each span chosen_first .. chosen_last (indices into the per-span arrays,
+    which hold every span a window reaches; ``following`` is the next span's phoneme,
+    silence after the utterance's last); ``span_set`` indexes ``set_start``/``set_stop``
+    flattened as phoneme * emotions + emotion."""
+    n = len(span_set)
+    flat_start = set_start.ravel()
+    flat_stop = set_stop.ravel()
+    size = np.empty(n, dtype=np.int64)
+    for j in range(n):
+        size[j] = flat_stop[span_set[j]] - flat_start[span_set[j]]
+    width = size.max()
+    open_nodes = np.zeros((n, width))
+    cut_nodes = np.zeros((n, width))
+    for j in range(n):
+        start, stop = flat_start[span_set[j]], flat_stop[span_set[j]]
+        shares = (log_previous, log_following, log_emotion)
+        _node(start, stop, previous[j], following[j], emotion[j], *shares, open_nodes[j])
+        _node(start, stop, previous[j], -1, emotion[j], *shares, cut_nodes[j])
+    joins = np.zeros((max(n - 1, 0), width, width))
+    for j in range(n - 1):
+        left = modes[flat_start[span_set[j]] : flat_stop[span_set[j]]]
+        right = modes[flat_start[span_set[j + 1]] : flat_stop[span_set[j + 1]]]
+        _joins(
+            left, right, durations[j], durations[j + 1], ends, starts, reference_duration, joins[j]
+        )
+    chosen = np.empty(chosen_last - chosen_first + 1, dtype=np.int64)
+    total = np.empty(width)
+    following_total = np.empty(width)
+    backs = np.zeros((n, width), dtype=np.int64)
+    for k in range(chosen_first, chosen_last + 1):
+        first = max(0, k - search_behind)
+        last = k + ahead
+        stop = min(last, n - 1)
+        node = cut_nodes[first] if first == last else open_nodes[first]
+        for a in range(size[first]):
+            total[a] = w_context * node[a]
+        for j in range(first + 1, stop + 1):
+            node = cut_nodes[j] if j == last else open_nodes[j]
+            join = joins[j - 1]
+            for b in range(size[j]):
+                best = 0
+                best_step = total[0] + w_smooth * join[0, b]
+                for a in range(1, size[j - 1]):
+                    step = total[a] + w_smooth * join[a, b]
+                    if step < best_step:
+                        best, best_step = a, step
+                backs[j, b] = best
+                following_total[b] = best_step + w_context * node[b]
+            total[: size[j]] = following_total[: size[j]]
+        position = 0
+        for a in range(1, size[stop]):
+            if total[a] < total[position]:
+                position = a
+        for j in range(stop, k, -1):
+            position = backs[j, position]
+        chosen[k - chosen_first] = modes[flat_start[span_set[k]] + position]
+    return chosen
+
+
+@njit(cache=True)
+def dam_sum(
+    times: np.ndarray,
+    owner: np.ndarray,
+    span_start: np.ndarray,
+    span_end: np.ndarray,
+    span_mode: np.ndarray,
+    tail: int,
+    ahead: int,
+    sigma: np.ndarray,
+    reach: np.ndarray,
+    eps: float,
+    coefficients: np.ndarray,
+) -> np.ndarray:
+    """Eq. 2 at ``times`` (components): frame i sums, over spans k (indices into the per-span
+    arrays) from owner[i] - tail to owner[i] + ahead, D·A of span k's mode wherever its local
+    time lies within the mode's reach."""
+    n_terms, n_components = coefficients.shape[1], coefficients.shape[2]
+    n_spans = len(span_mode)
+    frames = np.zeros((len(times), n_components))
+    animeme = np.empty(n_components)
+    for i in range(len(times)):
+        for k in range(max(0, owner[i] - tail), min(n_spans - 1, owner[i] + ahead) + 1):
+            mode = span_mode[k]
+            local = (times[i] - span_start[k]) / (span_end[k] - span_start[k])
+            if local < -reach[mode] or local > 1.0 + reach[mode]:
+                continue
+            gap = local if local < 0.0 else (local - 1.0 if local > 1.0 else 0.0)
+            weight = 1.0  # exp(-0 / w), exactly
+            if gap != 0.0:
+                weight = np.exp(-(gap * gap) / (2.0 * sigma[mode] * sigma[mode] + eps))
+            clamped = min(max(local, 0.0), 1.0)
+            # A = sum_m clamped^m a_m, in increasing m as ``powers(u) @ coefficients`` adds
+            animeme[:] = coefficients[mode, 0]
+            power = 1.0
+            for m in range(1, n_terms):
+                power *= clamped
+                for c in range(n_components):
+                    animeme[c] += power * coefficients[mode, m, c]
+            for c in range(n_components):
+                frames[i, c] += weight * animeme[c]
+    return frames

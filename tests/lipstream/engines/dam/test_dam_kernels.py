@@ -1,0 +1,93 @@
+"""The compiled synthesis (``kernels``) against the straightforward search and sum, on random
+inputs: the same modes, and the same frames."""
+
+from __future__ import annotations
+
+import random
+from bisect import bisect_right
+
+import numpy as np
+import pytest
+
+from lipstream.engines.base import Model, SynthesisRequest, fill_gaps, frame_count
+from lipstream.engines.dam import DamModel
+from lipstream.engines.dam.dominance import dominance, powers
+from lipstream.engines.dam.model import ModeMemo
+from lipstream.phonemes import PHONEMES
+from lipstream.timeline import EMOTIONS, PhonemeSpan
+
+FPS = 60.0
+CASES = 12
+
+
+def _random_spans(generator: random.Random, count: int) -> list[PhonemeSpan]:
+    spans, clock = [], 0.0
+    for _ in range(count):
+        length = generator.uniform(0.02, 0.3)
+        emotion = generator.choice([None, None, *EMOTIONS])
+        spans.append(PhonemeSpan(generator.choice(PHONEMES), clock, clock + length, emotion))
+        clock += length + (generator.uniform(0.01, 0.2) if generator.random() < 0.1 else 0.0)
+    return fill_gaps(spans)
+
+
+def _reference_render(
+    model: DamModel, spans: list[PhonemeSpan], times: np.ndarray, request: SynthesisRequest
+) -> np.ndarray:
+    """Eq. 2 span by span with numpy, each mode from ``select_mode`` (the implementation the
+    kernels replaced)."""
+    resolved = model.resolve(request.options)
+    assert not isinstance(resolved, float)
+    search, ahead = resolved
+    owner_low = min(bisect_right(spans, times[0], key=lambda s: s.end), len(spans) - 1)
+    owner_high = min(bisect_right(spans, times[-1], key=lambda s: s.end), len(spans) - 1)
+    first = max(0, owner_low - model.tail)
+    last = min(len(spans) - 1, owner_high + ahead)
+    ends = np.array([span.end for span in spans[first : last + 1]])
+    owner = first + np.minimum(np.searchsorted(ends, times, side="right"), len(ends) - 1)
+    frames = np.zeros((len(times), model.coefficients.shape[2]))
+    memo = ModeMemo(model, spans, request)
+    for k in range(first, last + 1):
+        span = spans[k]
+        mode = model.select_mode(spans, k, search, request, memo)
+        local = (times - span.start) / (span.end - span.start)
+        near = (owner - model.tail <= k) & (k <= owner + ahead)
+        near &= (local >= -model.reach[mode]) & (local <= 1.0 + model.reach[mode])
+        if near.any():
+            u = local[near]
+            weight = dominance(u, model.sigma[mode], model.eps)
+            frames[near] += weight[:, None] * (
+                powers(u, model.coefficients.shape[1] - 1) @ model.coefficients[mode]
+            )
+    return np.asarray(model.basis.reconstruct(frames))
+
+
+@pytest.mark.parametrize("name", ["dam", "cohen-massaro"])
+def test_the_compiled_search_and_sum_match_the_straightforward_ones(
+    name: str, trained_models: dict[str, Model]
+) -> None:
+    model = trained_models[name]
+    assert isinstance(model, DamModel)
+    generator = random.Random(7)
+    for _ in range(CASES):
+        spans = _random_spans(generator, generator.randint(1, 30))
+        search = generator.randint(0, model.search_ahead)
+        tail = generator.randint(0, model.tail)
+        request = SynthesisRequest(
+            fps=FPS,
+            emotion=generator.choice([None, *EMOTIONS]),
+            options={"search_ahead": search, "tail_ahead": tail},
+        )
+        memo = ModeMemo(model, spans, request)
+        expected = [model.select_mode(spans, k, search, request, memo) for k in range(len(spans))]
+        low = generator.randint(0, len(spans) - 1)
+        high = generator.randint(low, len(spans) - 1)
+        chosen = model.choose_modes(spans, low, high, search, request)
+        assert chosen.tolist() == expected[low : high + 1]
+        times = np.arange(frame_count(spans[-1].end, FPS)) / FPS
+        begin = generator.randint(0, len(times) - 1)
+        stop = generator.randint(begin + 1, len(times))
+        window = times[begin:stop]  # a streamed call renders a run of frames
+        got = model.render(spans, window, request, None)
+        np.testing.assert_allclose(
+            got, _reference_render(model, spans, window, request), rtol=0, atol=1e-6
+        )
