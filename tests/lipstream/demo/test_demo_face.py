@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from lipstream.demo.espeak import EspeakSynthesizer
+from lipstream.speech.espeak import EspeakSynthesizer
 from lipstream.demo.face import DEMO_CHANNELS, DEMO_SPEAKERS, JAW_MAX_SPEED, generate_face
 from lipstream.demo.speakers import Speaker
 from lipstream.errors import InvalidRequestError, UnknownPhonemeError

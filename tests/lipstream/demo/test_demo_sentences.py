@@ -6,7 +6,7 @@ from collections import Counter
 
 import pytest
 
-from lipstream.demo.espeak import EspeakSynthesizer
+from lipstream.speech.espeak import EspeakSynthesizer
 from lipstream.demo.sentences import load_sentences, parse_sentences
 from lipstream.demo.speech_batch import speak_batch
 from lipstream.errors import CorpusError
