@@ -18,8 +18,8 @@ from lipstream_client.messages import (
     DONE_REASONS,
     MAX_FPS,
     MAX_LATENCY_BUDGET_MS,
-    MAX_RETURN_MS,
     MAX_RATE_WPM,
+    MAX_RETURN_MS,
     MAX_SAMPLE_RATE,
     MIN_FPS,
     MIN_RATE_WPM,
@@ -206,9 +206,7 @@ error_messages = st.builds(
 
 
 def client_messages() -> st.SearchStrategy[ClientMessage]:
-    return st.one_of(
-        starts(), phonemes_messages, audio_chunks, texts, ends, cancels, interrupts
-    )
+    return st.one_of(starts(), phonemes_messages, audio_chunks, texts, ends, cancels, interrupts)
 
 
 def server_messages() -> st.SearchStrategy[ServerMessage]:

@@ -80,9 +80,7 @@ def speak(page: Any, text: str, engine: str | None = None) -> dict[str, Any]:
     page.fill("#text", text)
     done_before = page.evaluate("window.lipstreamDemo.log.done.length")
     page.click("#speak")
-    page.wait_for_function(
-        f"window.lipstreamDemo.log.done.length > {done_before}", timeout=WAIT_MS
-    )
+    page.wait_for_function(f"window.lipstreamDemo.log.done.length > {done_before}", timeout=WAIT_MS)
     return dict(
         page.evaluate(
             "({frames: window.lipstreamDemo.frames(), channels: window.lipstreamDemo.channels(),"
@@ -147,9 +145,7 @@ def mouth_height_during(page: Any, phoneme: str) -> float:
     page.set_input_files("#phones-file", files=[lab_file(phoneme)])
     done_before = page.evaluate("window.lipstreamDemo.log.done.length")
     page.click("#play-file")
-    page.wait_for_function(
-        f"window.lipstreamDemo.log.done.length > {done_before}", timeout=WAIT_MS
-    )
+    page.wait_for_function(f"window.lipstreamDemo.log.done.length > {done_before}", timeout=WAIT_MS)
     page.evaluate("window.lipstreamDemo.showAt(0.6)")
     return float(page.evaluate("window.lipstreamDemo.mouthOpening().height"))
 

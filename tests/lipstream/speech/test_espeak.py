@@ -9,10 +9,10 @@ from itertools import pairwise
 import numpy as np
 import pytest
 
-from lipstream.speech import libespeak
-from lipstream.speech.espeak import EspeakSynthesizer, phoneme_spans
 from lipstream.demo.speech_batch import speak_batch
 from lipstream.errors import SpeechError
+from lipstream.speech import libespeak
+from lipstream.speech.espeak import EspeakSynthesizer, phoneme_spans
 from lipstream.timeline import PhonemeSpan
 
 VOWELS = {"AA", "AE", "AH", "AO", "AW", "AY", "EH", "ER", "EY", "IH", "IY", "OW", "OY", "UH", "UW"}
