@@ -114,13 +114,15 @@ export class Face {
       };
     }
     const upperMid = MOUTH_Y - gapCenter * 0.15 - 2 * v("mouthShrugUpper");
-    const lowerMid = MOUTH_Y + gapCenter * 0.85 - 3 * v("mouthShrugLower");
+    // Beyond meeting the upper lip, mouthClose presses the lower lip up against it.
+    const lowerMid = MOUTH_Y + gapCenter * 0.85 - 3 * v("mouthShrugLower") - 2 * close;
     const thickUpper =
       6.5 * (1 - 0.75 * v("mouthRollUpper")) * (1 + 0.7 * pucker + 0.3 * round) *
       (1 - 0.35 * (side.Left.press + side.Right.press) / 2);
     const thickLower =
       8 * (1 - 0.75 * v("mouthRollLower")) * (1 + 0.7 * pucker + 0.3 * round) *
-      (1 - 0.35 * (side.Left.press + side.Right.press) / 2) * (1 + 0.3 * v("mouthShrugLower"));
+      (1 - 0.35 * (side.Left.press + side.Right.press) / 2) * (1 + 0.3 * v("mouthShrugLower")) *
+      (1 - 0.2 * close);
     const L = side.Left;
     const R = side.Right;
     const at = (s, f) => CX + s.sign * s.half * f;
@@ -166,20 +168,18 @@ export class Face {
   }
 
   drawEyes(v) {
+    // Quadratic lids: a control point at y puts the curve's middle at (200 + 2y) / 4.
     for (const [side, eye] of Object.entries(this.eyes)) {
-      const blink = v(`eyeBlink${side}`);
-      const squint = v(`eyeSquint${side}`);
-      const top = 91;
-      const lidEdge = top + 19 * blink;
+      const upperEdge = 80 + 40 * v(`eyeBlink${side}`);
       eye.lid.setAttribute(
         "d",
-        `M${eye.x - 16},100 Q${eye.x},${fmt(top - 9)} ${eye.x + 16},100 ` +
-          `Q${eye.x},${fmt(lidEdge + 1)} ${eye.x - 16},100 Z`
+        `M${eye.x - 16},100 Q${eye.x},78 ${eye.x + 16},100 ` +
+          `Q${eye.x},${fmt(upperEdge)} ${eye.x - 16},100 Z`
       );
-      const lowerEdge = 110 - 8 * squint;
+      const lowerEdge = 120 - 22 * v(`eyeSquint${side}`);
       eye.lower.setAttribute(
         "d",
-        `M${eye.x - 16},100 Q${eye.x},${fmt(119)} ${eye.x + 16},100 ` +
+        `M${eye.x - 16},100 Q${eye.x},121 ${eye.x + 16},100 ` +
           `Q${eye.x},${fmt(lowerEdge)} ${eye.x - 16},100 Z`
       );
     }
