@@ -4,7 +4,9 @@ typed text, moves the face, follows the engine control and shows the server's er
 Debian's ``chromium`` (README command (b) installs it) is driven by Playwright's Python
 package through ``executable_path``: nothing is downloaded. One browser and one server
 serve the whole module. Set ``LIPSTREAM_DEMO_SCREENSHOT`` to a path to keep the
-mid-sentence screenshot there (``bench/demo-page.png`` in the README is made so).
+screenshot the typing test takes mid-sentence, on an open vowel; the README's
+``bench/demo-page.png`` is the same view taken the same way of ``lipstream serve`` with
+the full demo character (engine ``anime-graph``).
 """
 
 from __future__ import annotations
