@@ -217,3 +217,29 @@ def test_every_channel_of_the_demo_character_moves_the_face(page: Any) -> None:
         list(DEMO_CHANNELS),
     )
     assert len(DEMO_CHANNELS) == 28 and unchanged == []
+
+
+def test_a_textgrid_with_its_wav_plays_the_file(page: Any, tmp_path: Path) -> None:
+    import math
+    import wave
+
+    from tests.helpers import REPO
+
+    wav = tmp_path / "hello.wav"
+    rate = 16000
+    with wave.open(str(wav), "wb") as out:
+        out.setnchannels(1)
+        out.setsampwidth(2)
+        out.setframerate(rate)
+        tone = (int(8000 * math.sin(2 * math.pi * 220 * i / rate)) for i in range(int(0.7 * rate)))
+        out.writeframes(b"".join(v.to_bytes(2, "little", signed=True) for v in tone))
+    page.select_option("#engine", "viseme-lerp")
+    page.set_input_files("#phones-file", str(REPO / "examples" / "hello.TextGrid"))
+    page.set_input_files("#wav-file", str(wav))
+    page.click("#play-file")
+    page.wait_for_function("window.lipstreamDemo.log.done.length === 1", timeout=WAIT_MS)
+    done = page.evaluate("window.lipstreamDemo.log.done[0]")
+    assert done["reason"] == "end"
+    assert done["stats"]["frames"] == math.floor(0.7 * 60) + 1  # the TextGrid's 0.7 s
+    assert page.evaluate("window.lipstreamDemo.request().sources.length") == 1  # the WAV
+    assert page.text_content("#errors") == ""

@@ -22,7 +22,9 @@ export function parseLab(text) {
 }
 
 export function parseTextGrid(text) {
-  const tokens = [...text.matchAll(/"((?:[^"]|"")*)"|([-+]?\d*\.?\d+(?:[eE][-+]?\d+)?)/g)].map(
+  // The long format numbers its items and intervals ("item [1]:"); those are not values.
+  const values = text.replace(/\[\d*\]/g, "");
+  const tokens = [...values.matchAll(/"((?:[^"]|"")*)"|([-+]?\d*\.?\d+(?:[eE][-+]?\d+)?)/g)].map(
     (m) => (m[1] !== undefined ? { text: m[1].replace(/""/g, '"') } : { number: Number(m[2]) })
   );
   // Tokens: "ooTextFile" "TextGrid" xmin xmax <exists> size, then per tier:
