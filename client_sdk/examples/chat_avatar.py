@@ -1,7 +1,7 @@
 """A chat-avatar backend: text reply -> TTS -> phonemes streamed as they are spoken -> face.
 
 Method: for each reply the backend asks a TTS for speech with phoneme timing
-(espeak-ng through ``lipstream.demo.espeak`` when it is installed, else a
+(espeak-ng through ``lipstream.speech.espeak`` when it is installed, else a
 canned line), then plays it: a feeder task sends each phoneme ``--lead-ms``
 before the playback clock reaches its start, as a streaming TTS emits phoneme
 events ahead of the audio it plays, and optionally the PCM16 audio in 100 ms
@@ -61,8 +61,8 @@ def speak(text: str, voice: str) -> Speech:
     """espeak-ng's speech and phoneme timing for ``text``; the canned line when espeak-ng
     (or lipstream, which drives it) is not there."""
     try:
-        from lipstream.demo.espeak import EspeakSynthesizer, speech_result
         from lipstream.errors import LipstreamError
+        from lipstream.speech.espeak import EspeakSynthesizer, speech_result
     except ImportError:
         return Speech("(canned) " + text, list(CANNED_LINE))
     try:

@@ -76,6 +76,7 @@ from .messages import (
     Ready,
     ServerMessage,
     Start,
+    Text,
 )
 from .schema import load_schema
 
@@ -153,6 +154,7 @@ __all__ = [
     "Stream",
     "StreamResult",
     "SyncStream",
+    "Text",
     "canonical_viseme",
     "decode",
     "encode",

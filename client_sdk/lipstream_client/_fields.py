@@ -93,7 +93,7 @@ def read_text(
         raise InvalidField(
             INVALID_MESSAGE, where, f"must be 1 to {max_length} characters, got {len(value)}"
         )
-    _require_utf8(value, where)
+    require_utf8(value, where)
     if not control and _CONTROL.search(value):
         raise InvalidField(INVALID_MESSAGE, where, "must not contain control characters")
     if pattern is not None and not pattern.fullmatch(value):
@@ -235,12 +235,12 @@ def _check_scalar(node: object, path: str) -> None:
         if not math.isfinite(node):
             raise InvalidField(INVALID_MESSAGE, path, f"must be finite, got {node!r}")
     elif isinstance(node, str):
-        _require_utf8(node, path)
+        require_utf8(node, path)
     else:
         raise InvalidField(INVALID_MESSAGE, path, f"must be a JSON value, got {_kind(node)}")
 
 
-def _require_utf8(value: str, where: str) -> None:
+def require_utf8(value: str, where: str) -> None:
     if value.isascii():
         return
     try:

@@ -68,6 +68,7 @@ from .messages import (
     Ready,
     ServerMessage,
     Start,
+    Text,
 )
 
 DEFAULT_MAX_MESSAGE_BYTES = 16 << 20
@@ -85,11 +86,17 @@ class RequestOver(LipstreamClientError):
 @dataclass(frozen=True, slots=True)
 class StreamResult:
     """Everything one request produced: its ``ready``, its ``frames`` blocks in arrival
-    order, and its ``done``."""
+    order, its ``done``, and the speech the server sent for its ``text`` messages."""
 
     ready: Ready
     frames: tuple[Frames, ...]
     done: Done
+    audio: tuple[AudioChunk, ...] = ()
+
+    def speech_pcm16(self) -> bytes:
+        """The server's speech as one PCM16 stream from the first chunk's ``start``
+        (chunks in order of their ``start``; empty without ``text`` input)."""
+        return b"".join(chunk.pcm16 for chunk in sorted(self.audio, key=_chunk_start))
 
     @property
     def channels(self) -> tuple[str, ...]:
@@ -107,6 +114,10 @@ class StreamResult:
         return self.timeline().rows()
 
 
+def _chunk_start(chunk: AudioChunk) -> float:
+    return chunk.start or 0.0
+
+
 @dataclass(frozen=True, slots=True)
 class _Finished:
     """Queue terminator: the request ended with ``done`` or with ``error``."""
@@ -118,9 +129,10 @@ class _Finished:
 class Stream:
     """One request on an ``AsyncClient`` connection, named by ``id``.
 
-    Input: ``send_phonemes``, ``send_audio``, then ``end``; or ``cancel`` or
-    ``interrupt`` at any time. Output: ``ready()``, the ``frames()`` blocks
-    (or ``poll()`` without waiting), and ``done()``. A fatal error for this
+    Input: ``send_phonemes``, ``send_audio`` or ``send_text``, then ``end``; or
+    ``cancel`` or ``interrupt`` at any time. Output: ``ready()``, the ``frames()``
+    blocks (or ``poll()`` without waiting), ``audio`` (the speech the server sent
+    for ``send_text``, each chunk with its ``start``), and ``done()``. A fatal error for this
     request or the loss of the connection raises from all three.
     """
 
@@ -134,6 +146,8 @@ class Stream:
         self._finished: _Finished | None = None
         self.warnings: list[LipstreamServerError] = []
         """Non-fatal errors about this request (e.g. ``request_finished``)."""
+        self.audio: list[AudioChunk] = []
+        """The speech chunks the server sent for this request's ``text``, in arrival order."""
 
     @property
     def id(self) -> str:
@@ -157,6 +171,12 @@ class Stream:
     async def send_audio(self, pcm16: bytes | bytearray | memoryview, sample_rate: int) -> None:
         """Send the next chunk of mono signed 16-bit little-endian audio at ``sample_rate`` Hz."""
         await self._send(AudioChunk(self.id, sample_rate, bytes(pcm16)))
+
+    async def send_text(self, text: str, voice: str | None = None, rate: int | None = None) -> None:
+        """Have the server speak ``text`` (espeak-ng ``voice``, ``rate`` in words per minute;
+        None: its defaults) as the next input: it sends the speech back as ``audio``
+        chunks with their start times (``audio``) and the frames as usual."""
+        await self._send(Text(self.id, text, voice, rate))
 
     async def end(self) -> None:
         """No more input: the server sends the remaining frames, then ``done``."""
@@ -225,7 +245,7 @@ class Stream:
         """Wait for the whole request: ``ready``, every block, and ``done``."""
         ready = await self.ready()
         blocks = [block async for block in self.frames()]
-        return StreamResult(ready, tuple(blocks), await self.done())
+        return StreamResult(ready, tuple(blocks), await self.done(), tuple(self.audio))
 
     def _raise_error(self) -> None:
         if self._finished is not None and self._finished.error is not None:
@@ -237,6 +257,9 @@ class Stream:
         """Handle one message for this request; True when the request has ended."""
         if isinstance(message, Frames):
             self._queue.put_nowait(message)
+            return False
+        if isinstance(message, AudioChunk):
+            self.audio.append(message)
             return False
         if isinstance(message, Ready):
             if not self._ready.done():
@@ -502,7 +525,7 @@ class AsyncClient:
                     )
                 )
             return
-        assert not isinstance(message, (Start, Phonemes, AudioChunk, End, Cancel, Interrupt))
+        assert not isinstance(message, (Start, Phonemes, Text, End, Cancel, Interrupt))
         if stream._on_message(message):
             del self._streams[stream.id]
 

@@ -51,6 +51,10 @@ SEARCH_TOO_LARGE = "search_too_large"
 SEARCH_TIMEOUT = "search_timeout"
 OUTPUT_TOO_LARGE = "output_too_large"
 REQUEST_TIMEOUT = "request_timeout"
+EMPTY_TEXT = "empty_text"
+TEXT_TOO_LONG = "text_too_long"
+UNSPEAKABLE_TEXT = "unspeakable_text"
+SPEECH_FAILED = "speech_failed"
 
 # Connection-level errors: the server closes the connection after sending them.
 RATE_LIMITED = "rate_limited"
@@ -194,6 +198,26 @@ ERROR_CODES: dict[str, ErrorCodeInfo] = {
     BUDGET_INFEASIBLE: ErrorCodeInfo(
         "no fidelity rung meets latency_budget_ms; details.min_budget_ms is the smallest "
         "feasible budget",
+        "server",
+        "request",
+    ),
+    EMPTY_TEXT: ErrorCodeInfo(
+        "a `text` message holds nothing to speak (empty or only white space)", "server", "request"
+    ),
+    TEXT_TOO_LONG: ErrorCodeInfo(
+        "a `text` message holds more characters than the server speaks at once "
+        "(details.max_text_chars)",
+        "server",
+        "request",
+    ),
+    UNSPEAKABLE_TEXT: ErrorCodeInfo(
+        "espeak-ng said nothing for a `text` message, or a sound the phoneme set lacks",
+        "server",
+        "request",
+    ),
+    SPEECH_FAILED: ErrorCodeInfo(
+        "espeak-ng failed (crashed, timed out, or is missing) speaking a `text` message; "
+        "the server keeps serving",
         "server",
         "request",
     ),

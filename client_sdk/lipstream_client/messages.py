@@ -1,9 +1,11 @@
 """Typed messages of the lipstream wire protocol, version 1.
 
 Sketch: one frozen dataclass per message ``type``. A client opens requests
-with ``Start``, feeds ``Phonemes`` (and optionally ``AudioChunk``) and closes
-them with ``End``, ``Cancel`` or ``Interrupt``; the server answers with
-``Ready``, a stream of ``Frames`` and one ``Done``, or an ``ErrorMessage``.
+with ``Start``, feeds ``Phonemes`` (and optionally ``AudioChunk``), or ``Text``
+for the server to speak, and closes them with ``End``, ``Cancel`` or
+``Interrupt``; the server answers with ``Ready``, a stream of ``Frames`` (and,
+for ``Text``, the speech as ``AudioChunk``s with their ``start``) and one
+``Done``, or an ``ErrorMessage``.
 Requests are multiplexed on one connection by their ``id``.
 
 Times are seconds on the utterance clock (frame i is at i / fps seconds),
@@ -44,6 +46,9 @@ MAX_TIME_S = 86_400.0
 MIN_SAMPLE_RATE = 8_000
 MAX_SAMPLE_RATE = 192_000
 MAX_INTEGER = 2**53 - 1
+MAX_VOICE_LENGTH = 64
+MIN_RATE_WPM = 80
+MAX_RATE_WPM = 450
 PCM16_BYTES = 2
 
 Encoding = Literal["msgpack", "json"]
@@ -151,7 +156,9 @@ class Phonemes:
 class AudioChunk:
     """The next mono audio of request ``id``: ``pcm16`` signed 16-bit little-endian samples.
 
-    Chunks are contiguous from t = 0 at one ``sample_rate`` (Hz) per request.
+    From a client, chunks are contiguous from t = 0 at one ``sample_rate`` (Hz) per
+    request. From the server, a chunk is speech it synthesized for a ``Text``, and
+    ``start`` says where on the utterance clock (seconds) it begins.
     """
 
     type: ClassVar[str] = "audio"
@@ -160,6 +167,7 @@ class AudioChunk:
     id: str
     sample_rate: int
     pcm16: bytes
+    start: float | None = None
 
     @property
     def n_samples(self) -> int:
@@ -178,6 +186,11 @@ class AudioChunk:
             values.byteswap()
         return values.tolist()
 
+    @property
+    def end(self) -> float | None:
+        """Where the chunk ends on the utterance clock, when it says where it starts."""
+        return None if self.start is None else self.start + self.duration
+
     @classmethod
     def from_samples(cls, id: str, sample_rate: int, samples: Sequence[int]) -> AudioChunk:
         """Pack int samples in [-32768, 32767] (OverflowError outside) as PCM16 little-endian."""
@@ -185,6 +198,25 @@ class AudioChunk:
         if sys.byteorder == "big":
             values.byteswap()
         return cls(id, sample_rate, values.tobytes())
+
+
+@dataclass(frozen=True, slots=True)
+class Text:
+    """Text for the server to speak as request ``id``'s next input, instead of phonemes.
+
+    The server speaks it with espeak-ng (``voice``, ``rate`` in words per minute;
+    None: the server's defaults) from the end of the request's input so far, sends
+    the speech back as ``AudioChunk``s with their ``start``, and feeds the engine
+    the phonemes espeak-ng spoke.
+    """
+
+    type: ClassVar[str] = "text"
+    v: ClassVar[int] = PROTOCOL_VERSION
+
+    id: str
+    text: str
+    voice: str | None = None
+    rate: int | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -346,14 +378,14 @@ class ErrorMessage:
     details: JsonMap = field(default_factory=_empty_map)
 
 
-ClientMessage: TypeAlias = Start | Phonemes | AudioChunk | End | Cancel | Interrupt
-ServerMessage: TypeAlias = Ready | Frames | Done | ErrorMessage
+ClientMessage: TypeAlias = Start | Phonemes | AudioChunk | Text | End | Cancel | Interrupt
+ServerMessage: TypeAlias = Ready | Frames | AudioChunk | Done | ErrorMessage
 Message: TypeAlias = ClientMessage | ServerMessage
 
 CLIENT_MESSAGE_TYPES: dict[str, type[ClientMessage]] = {
-    cls.type: cls for cls in (Start, Phonemes, AudioChunk, End, Cancel, Interrupt)
+    cls.type: cls for cls in (Start, Phonemes, AudioChunk, Text, End, Cancel, Interrupt)
 }
 SERVER_MESSAGE_TYPES: dict[str, type[ServerMessage]] = {
-    cls.type: cls for cls in (Ready, Frames, Done, ErrorMessage)
+    cls.type: cls for cls in (Ready, Frames, AudioChunk, Done, ErrorMessage)
 }
 MESSAGE_TYPES: dict[str, type[Message]] = {**CLIENT_MESSAGE_TYPES, **SERVER_MESSAGE_TYPES}

@@ -13,6 +13,7 @@ integer limits of free-form maps.
 
 from __future__ import annotations
 
+import re
 import struct
 from collections.abc import Callable, Mapping
 from typing import Any, cast
@@ -32,6 +33,7 @@ from ._fields import (
     read_number,
     read_object,
     read_text,
+    require_utf8,
 )
 from .errors import (
     INVALID_AUDIO,
@@ -57,10 +59,13 @@ from .messages import (
     MAX_NAME_LENGTH,
     MAX_PHONEME_LENGTH,
     MAX_PHONEME_SOURCE_LENGTH,
+    MAX_RATE_WPM,
     MAX_RETURN_MS,
     MAX_SAMPLE_RATE,
     MAX_TIME_S,
+    MAX_VOICE_LENGTH,
     MIN_FPS,
+    MIN_RATE_WPM,
     MIN_SAMPLE_RATE,
     NAMINGS,
     PCM16_BYTES,
@@ -86,11 +91,15 @@ from .messages import (
     Ready,
     Sender,
     Start,
+    Text,
     VisemeSet,
 )
 
 ENVELOPE = ("v", "type")
 TIME_TOLERANCE_S = 1e-9
+
+
+_VOICE = re.compile(r"[A-Za-z0-9_.+-]+")
 
 
 def message_id(payload: object) -> str | None:
@@ -288,7 +297,7 @@ def _phoneme_item(value: object, where: str) -> PhonemeItem:
 
 
 def _audio(payload: Mapping[str, Any], encoding: Encoding) -> AudioChunk:
-    obj = _object(payload, ("id", "sample_rate", "pcm16"))
+    obj = _object(payload, ("id", "sample_rate", "pcm16"), ("start",))
     identifier = _id(obj)
     rate = read_integer(
         obj["sample_rate"], "sample_rate", minimum=MIN_SAMPLE_RATE, maximum=MAX_SAMPLE_RATE
@@ -302,7 +311,28 @@ def _audio(payload: Mapping[str, Any], encoding: Encoding) -> AudioChunk:
         raise InvalidField(
             INVALID_AUDIO, "pcm16", f"must hold whole 16-bit samples, got {len(pcm)} bytes"
         )
-    return AudioChunk(identifier, rate, pcm)
+    start = _optional_number(obj, "start", minimum=0.0, maximum=MAX_TIME_S, code=INVALID_TIMES)
+    return AudioChunk(identifier, rate, pcm, start)
+
+
+def _text(payload: Mapping[str, Any], encoding: Encoding) -> Text:
+    obj = _object(payload, ("id", "text"), ("voice", "rate"))
+    identifier = _id(obj)
+    text = obj["text"]
+    if not isinstance(text, str):
+        raise InvalidField(INVALID_MESSAGE, "text", "must be a string")
+    require_utf8(text, "text")
+    voice = (
+        read_text(obj["voice"], "voice", MAX_VOICE_LENGTH, pattern=_VOICE)
+        if present(obj, "voice")
+        else None
+    )
+    rate = (
+        read_integer(obj["rate"], "rate", minimum=MIN_RATE_WPM, maximum=MAX_RATE_WPM)
+        if present(obj, "rate")
+        else None
+    )
+    return Text(identifier, text, voice, rate)
 
 
 def _end(payload: Mapping[str, Any], encoding: Encoding) -> End:
@@ -446,6 +476,7 @@ _PARSERS: dict[str, Callable[[Mapping[str, Any], Encoding], Message]] = {
     "start": _start,
     "phonemes": _phonemes,
     "audio": _audio,
+    "text": _text,
     "end": _end,
     "cancel": _cancel,
     "interrupt": _interrupt,

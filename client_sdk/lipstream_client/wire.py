@@ -35,6 +35,7 @@ from .messages import (
     Phonemes,
     Ready,
     Start,
+    Text,
 )
 
 Payload = dict[str, Any]
@@ -106,7 +107,15 @@ def _audio(message: AudioChunk, encoding: Encoding) -> Payload:
     pcm: bytes | str = (
         message.pcm16 if encoding == "msgpack" else base64.b64encode(message.pcm16).decode("ascii")
     )
-    return {"id": message.id, "sample_rate": message.sample_rate, "pcm16": pcm}
+    return _compact(
+        {"id": message.id, "sample_rate": message.sample_rate, "pcm16": pcm, "start": message.start}
+    )
+
+
+def _text(message: Text, encoding: Encoding) -> Payload:
+    return _compact(
+        {"id": message.id, "text": message.text, "voice": message.voice, "rate": message.rate}
+    )
 
 
 def _end(message: End, encoding: Encoding) -> Payload:
@@ -190,6 +199,7 @@ _ENCODERS: dict[str, Callable[[Any, Encoding], Payload]] = {
     "start": _start,
     "phonemes": _phonemes,
     "audio": _audio,
+    "text": _text,
     "end": _end,
     "cancel": _cancel,
     "interrupt": _interrupt,

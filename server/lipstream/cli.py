@@ -19,13 +19,15 @@ from typing import TYPE_CHECKING
 from lipstream_client.messages import NAMINGS, VISEME_SETS
 
 from ._version import __version__
-from .config import Settings, load_settings
+from .config import Settings, demo_model_path, load_settings
 from .errors import LipstreamError
 from .exports import FORMATS, MOHO_FPS
 from .loadtest.command import add_loadtest_parser
 
 if TYPE_CHECKING:
     from lipstream_client import OutputProfile
+
+    from .audio import Audio
 
 
 def _build_demo(args: argparse.Namespace, settings: Settings) -> None:
@@ -56,7 +58,7 @@ def _train(args: argparse.Namespace, settings: Settings) -> None:
 
 
 def _synth(args: argparse.Namespace, settings: Settings) -> None:
-    from .audio import read_wav
+    from .audio import read_wav, write_wav
     from .engines import load_model
     from .exports import SHAPE_FORMATS, format_for
     from .exports.writer import ExportSettings
@@ -66,14 +68,45 @@ def _synth(args: argparse.Namespace, settings: Settings) -> None:
     out = Path(args.out)
     format_name = format_for(out, args.format)
     profile = _output_profile(args, shapes=format_name in SHAPE_FORMATS)
-    model = load_model(args.model)
-    spans = read_phones(Path(args.phones), args.tier)
-    audio = read_wav(Path(args.audio)) if args.audio else None
+    model_dir = Path(args.model) if args.model else demo_model_path(args.engine, settings)
+    model = load_model(model_dir)
+    sound_file = args.audio or ""
+    audio: Audio | None
+    if args.text is not None:
+        from .speech.text_frontend import speak_text
+
+        _check_text_options(args)
+        spoken = speak_text(args.text, args.voice, args.rate)
+        spans, audio = spoken.spans, spoken.audio
+        if args.wav:
+            write_wav(Path(args.wav), spoken.audio)
+            sound_file = args.wav
+    else:
+        _check_phones_options(args)
+        spans = read_phones(Path(args.phones), args.tier)
+        audio = read_wav(Path(args.audio)) if args.audio else None
     result = model.synthesize(spans, fps=args.fps, audio=audio, emotion=args.emotion)
-    result = apply_to_result(model, result, profile, directory=Path(args.model))
-    export = ExportSettings(sound_file=args.audio or "", moho_fps=args.moho_fps)
+    result = apply_to_result(model, result, profile, directory=model_dir)
+    export = ExportSettings(sound_file=sound_file, moho_fps=args.moho_fps)
     write_frames(out, result, format_name, export)
     print(f"wrote {len(result.frames)} frames at {result.fps:g} fps to {args.out} ({format_name})")
+    if args.text is not None and args.wav:
+        print(f"wrote the speech to {args.wav}")
+
+
+def _check_text_options(args: argparse.Namespace) -> None:
+    if args.audio:
+        raise LipstreamError(
+            "--audio goes with --phones; with --text the speech is espeak-ng's (--wav saves it)",
+            where="--audio",
+            code="invalid_request",
+        )
+
+
+def _check_phones_options(args: argparse.Namespace) -> None:
+    for option, value in (("--wav", args.wav), ("--voice", args.voice), ("--rate", args.rate)):
+        if value is not None:
+            raise LipstreamError(f"{option} goes with --text", where=option, code="invalid_request")
 
 
 def _output_profile(args: argparse.Namespace, *, shapes: bool) -> OutputProfile | None:
@@ -259,12 +292,28 @@ def _parser() -> argparse.ArgumentParser:
     )
     train.set_defaults(run=_train)
 
-    synth = commands.add_parser("synth", help="synthesize frames for a phones file")
+    synth = commands.add_parser("synth", help="synthesize frames for a phones file or a text")
     synth.add_argument(
-        "--model", required=True, help="a model directory (lipstream path demo --engine E)"
+        "--model",
+        help="a model directory (default: the demo character's model of --engine; "
+        "lipstream path demo --engine E prints where it is)",
     )
-    synth.add_argument("--phones", required=True, help=".TextGrid, .lab or .json")
+    synth.add_argument(
+        "--engine",
+        default="viseme-lerp",
+        help="engine of the demo character's model, without --model (default viseme-lerp)",
+    )
+    given = synth.add_mutually_exclusive_group(required=True)
+    given.add_argument("--phones", help=".TextGrid, .lab or .json")
+    given.add_argument(
+        "--text", help="text to speak with espeak-ng (at most 1000 characters), instead of phones"
+    )
     synth.add_argument("--audio", help="mono WAV of the speech, for engines that use audio")
+    synth.add_argument("--wav", help="with --text: write espeak-ng's speech to this WAV file")
+    synth.add_argument("--voice", help="with --text: espeak-ng voice (default en-us)")
+    synth.add_argument(
+        "--rate", type=int, help="with --text: words per minute, 80-450 (default 175)"
+    )
     synth.add_argument("--fps", type=float, default=60.0, help="output frame rate (default 60)")
     synth.add_argument(
         "--emotion",

@@ -18,9 +18,11 @@ from lipstream_client.messages import (
     DONE_REASONS,
     MAX_FPS,
     MAX_LATENCY_BUDGET_MS,
+    MAX_RATE_WPM,
     MAX_RETURN_MS,
     MAX_SAMPLE_RATE,
     MIN_FPS,
+    MIN_RATE_WPM,
     MIN_SAMPLE_RATE,
     NAMINGS,
     VISEME_SETS,
@@ -42,6 +44,7 @@ from lipstream_client.messages import (
     Ready,
     ServerMessage,
     Start,
+    Text,
 )
 
 _PRINTABLE = st.characters(exclude_categories=("Cc", "Cs"))
@@ -137,6 +140,14 @@ audio_chunks = st.builds(
     id=ids,
     sample_rate=st.integers(MIN_SAMPLE_RATE, MAX_SAMPLE_RATE),
     pcm16=st.binary(min_size=1, max_size=32).map(lambda raw: raw + raw[:1] * (len(raw) % 2)),
+    start=st.none() | st.floats(0.0, 3600.0),
+)
+texts = st.builds(
+    Text,
+    id=ids,
+    text=st.text(_UNICODE, max_size=80),
+    voice=st.none() | st.from_regex(r"[A-Za-z0-9_.+-]{1,64}", fullmatch=True),
+    rate=st.none() | st.integers(MIN_RATE_WPM, MAX_RATE_WPM),
 )
 ends = st.builds(End, id=ids)
 cancels = st.builds(Cancel, id=ids)
@@ -195,11 +206,11 @@ error_messages = st.builds(
 
 
 def client_messages() -> st.SearchStrategy[ClientMessage]:
-    return st.one_of(starts(), phonemes_messages, audio_chunks, ends, cancels, interrupts)
+    return st.one_of(starts(), phonemes_messages, audio_chunks, texts, ends, cancels, interrupts)
 
 
 def server_messages() -> st.SearchStrategy[ServerMessage]:
-    return st.one_of(readies, frames_messages(), dones, error_messages)
+    return st.one_of(readies, frames_messages(), audio_chunks, dones, error_messages)
 
 
 def messages() -> st.SearchStrategy[Message]:

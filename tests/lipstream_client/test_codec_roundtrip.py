@@ -52,6 +52,7 @@ from tests.lipstream_client.strategies import (
     phonemes_messages,
     readies,
     starts,
+    texts,
 )
 
 ENCODINGS: tuple[Encoding, ...] = ("msgpack", "json")
@@ -59,6 +60,7 @@ PER_TYPE: dict[str, st.SearchStrategy[Message]] = {
     "start": starts(),
     "phonemes": phonemes_messages,
     "audio": audio_chunks,
+    "text": texts,
     "end": ends,
     "cancel": cancels,
     "interrupt": interrupts,
@@ -71,8 +73,16 @@ PER_TYPE: dict[str, st.SearchStrategy[Message]] = {
 
 def test_every_message_type_has_a_strategy() -> None:
     assert set(PER_TYPE) == set(MESSAGE_TYPES)
-    assert set(CLIENT_MESSAGE_TYPES) == {"start", "phonemes", "audio", "end", "cancel", "interrupt"}
-    assert set(SERVER_MESSAGE_TYPES) == {"ready", "frames", "done", "error"}
+    assert set(CLIENT_MESSAGE_TYPES) == {
+        "start",
+        "phonemes",
+        "audio",
+        "text",
+        "end",
+        "cancel",
+        "interrupt",
+    }
+    assert set(SERVER_MESSAGE_TYPES) == {"ready", "frames", "audio", "done", "error"}
 
 
 @pytest.mark.parametrize("message_type", sorted(PER_TYPE))

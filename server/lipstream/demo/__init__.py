@@ -6,7 +6,7 @@ blinks) performs them as ARKit-style blendshape curves; ``generate`` puts
 both together into a ``Corpus``. See docs/demo-character.md.
 """
 
-from .espeak import EspeakSynthesizer
+from ..speech.espeak import EspeakSynthesizer
 from .face import DEMO_CHANNELS, generate_face
 from .generate import generate_demo_corpus
 from .sentences import load_sentences

@@ -26,8 +26,8 @@ from ..audio import Audio
 from ..corpus import EMOTIONS, Corpus, Utterance
 from ..errors import InvalidRequestError
 from ..phonemes import SILENCE
+from ..speech.espeak import PITCH_RANGE, RATE_RANGE_WPM, EspeakSynthesizer
 from ..timeline import PhonemeSpan
-from .espeak import PITCH_RANGE, RATE_RANGE_WPM, EspeakSynthesizer
 from .expression import emotion_style
 from .face import DEMO_CHANNELS, generate_face
 from .sentences import load_sentences

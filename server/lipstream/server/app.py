@@ -12,7 +12,7 @@ the limits in force. Routes:
 ``/healthz``, ``/readyz``, ``/v1/engines``, ``/v1/characters``,
 ``POST /v1/synthesize``, ``GET /metrics``, the WebSocket ``/v1/stream`` and
 the OpenAPI docs (``/docs``, served with its assets so it works offline,
-and ``/openapi.json``).
+and ``/openapi.json``), and the demo page ``/`` (``demo_page``).
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from ..engines import ENGINES
 from ..errors import LipstreamError
 from ..models import ModelRegistry
 from ..status import phase
-from . import docs_page, openapi
+from . import demo_page, docs_page, openapi
 from .catalog import Catalog
 from .handshake import head_limits
 from .lifecycle import Lifecycle, install_drain_on_signals
@@ -146,6 +146,7 @@ def create_app(
     app.state.metrics = metrics
     openapi.install(app)
     docs_page.install(app, app.title)
+    demo_page.install(app)
 
     @app.get("/healthz")
     async def healthz() -> dict[str, str]:

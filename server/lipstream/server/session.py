@@ -54,10 +54,12 @@ from lipstream_client import (
     ProtocolError,
     Ready,
     Start,
+    Text,
 )
 from lipstream_client.errors import (
     DUPLICATE_REQUEST,
     INTERNAL_ERROR,
+    INVALID_AUDIO,
     INVALID_REQUEST,
     REQUEST_FINISHED,
     REQUEST_TIMEOUT,
@@ -82,6 +84,14 @@ from .outgoing import Outgoing, RequestClock
 from .overload import Refusal
 from .profiles import requested_profile, resolve_profile
 from .request import ActiveRequest, RequestError, RequestLimits, RequestSpec, protocol_code
+from .text_input import (
+    engine_audio,
+    phoneme_items,
+    reading_arpabet,
+    speak,
+    speech_messages,
+    speech_start,
+)
 
 logger = logging.getLogger("lipstream.server")
 
@@ -93,7 +103,7 @@ _MAX_TEXT = 4096
 _CLIPPED = "..."
 
 InputMessage: TypeAlias = Message | ProtocolError
-RequestInput: TypeAlias = Phonemes | AudioChunk | End | Cancel | Interrupt
+RequestInput: TypeAlias = Phonemes | AudioChunk | Text | End | Cancel | Interrupt
 
 
 @dataclass(frozen=True)
@@ -155,11 +165,13 @@ class Session:
         """How long ``handle(received)`` may keep the engine busy, in milliseconds: the engine's
         call cost for the request's options (``Model.call_cost``) for the phonemes the message
         decides and the frames it may release (``math.inf`` when the engine knows no bound)."""
-        if not isinstance(received, (Phonemes, AudioChunk, End, Interrupt)):
+        if not isinstance(received, (Phonemes, AudioChunk, Text, End, Interrupt)):
             return 0.0
         request = self.requests.get(received.id)
         if request is None:
             return 0.0
+        if isinstance(received, Text):
+            return math.inf  # speech synthesis in a worker process: the heavy lane's
         fps = request.spec.fps
         until = request.phonemes_end
         extra_frames = 0
@@ -265,7 +277,7 @@ class Session:
     ) -> list[Outgoing]:
         if isinstance(received, Start):
             return self._start(received, now)
-        if not isinstance(received, (Phonemes, AudioChunk, End, Cancel, Interrupt)):
+        if not isinstance(received, (Phonemes, AudioChunk, Text, End, Cancel, Interrupt)):
             return [_error(UNKNOWN_TYPE, f"a client may not send {received.type!r}", None)]
         request = self.requests.get(received.id)
         if request is None:
@@ -324,12 +336,27 @@ class Session:
             finally:
                 self.output_values += request.output_values - before
         if isinstance(received, AudioChunk):
+            _check_audio_start(request, received)
             return request.add_audio(received, now)
+        if isinstance(received, Text):
+            return self._speak(request, received, now)
         if isinstance(received, End):
             return request.end(now)
         if isinstance(received, Cancel):
             return request.cancel()
         return request.interrupt(received.at, received.return_ms, now)
+
+    def _speak(self, request: ActiveRequest, received: Text, now: float) -> list[Outgoing]:
+        """Speak ``received`` (``text_input``): its ``audio`` messages, then the frames of the
+        audio and phonemes it feeds the engine."""
+        speech = speak(received)
+        start = speech_start(request)
+        outgoing = speech_messages(request, speech, start)
+        outgoing += request.add_audio(engine_audio(request, speech, start), now)
+        with reading_arpabet(request):
+            phonemes = Phonemes(request.id, phoneme_items(speech, start))
+            outgoing += self._apply(request, phonemes, now)
+        return outgoing
 
     def _orphan(self, received: RequestInput) -> list[Outgoing]:
         reason = self.ended.get(received.id)
@@ -500,6 +527,17 @@ class Session:
 
 
 _REASONS: dict[type, DoneReason] = {End: "end", Cancel: "cancel", Interrupt: "interrupt"}
+
+
+def _check_audio_start(request: ActiveRequest, chunk: AudioChunk) -> None:
+    """A client's chunk that names its ``start`` must start where the request's audio ends."""
+    if chunk.start is not None and abs(chunk.start - request.audio_s) > 0.5 / chunk.sample_rate:
+        raise RequestError(
+            f"starts at {chunk.start:g} s, but the request's audio so far ends at "
+            f"{request.audio_s:g} s (chunks are contiguous)",
+            code=INVALID_AUDIO,
+            where="start",
+        )
 
 
 def _phoneme_source(requested: str | None) -> str:

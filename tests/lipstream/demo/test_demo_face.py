@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from lipstream.demo.espeak import EspeakSynthesizer
 from lipstream.demo.face import DEMO_CHANNELS, DEMO_SPEAKERS, JAW_MAX_SPEED, generate_face
 from lipstream.demo.speakers import Speaker
 from lipstream.errors import InvalidRequestError, UnknownPhonemeError
+from lipstream.speech.espeak import EspeakSynthesizer
 from lipstream.timeline import PhonemeSpan
 
 CHANNEL = {name: index for index, name in enumerate(DEMO_CHANNELS)}

@@ -6,11 +6,11 @@ from collections import Counter
 
 import pytest
 
-from lipstream.demo.espeak import EspeakSynthesizer
 from lipstream.demo.sentences import load_sentences, parse_sentences
 from lipstream.demo.speech_batch import speak_batch
 from lipstream.errors import CorpusError
 from lipstream.phonemes import ARPABET
+from lipstream.speech.espeak import EspeakSynthesizer
 
 
 def test_at_least_300_distinct_sentences_of_6_to_20_words() -> None:

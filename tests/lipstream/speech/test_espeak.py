@@ -9,10 +9,10 @@ from itertools import pairwise
 import numpy as np
 import pytest
 
-from lipstream.demo import espeak
-from lipstream.demo.espeak import EspeakSynthesizer, phoneme_spans
 from lipstream.demo.speech_batch import speak_batch
 from lipstream.errors import SpeechError
+from lipstream.speech import libespeak
+from lipstream.speech.espeak import EspeakSynthesizer, phoneme_spans
 from lipstream.timeline import PhonemeSpan
 
 VOWELS = {"AA", "AE", "AH", "AO", "AW", "AY", "EH", "ER", "EY", "IH", "IY", "OW", "OY", "UH", "UW"}
@@ -34,9 +34,9 @@ def _rms(audio_samples: np.ndarray, rate: int, span: PhonemeSpan) -> float:
 
 def test_event_struct_matches_the_lp64_header_layout() -> None:
     # speak_lib.h: six 4-byte ints, a pointer at offset 24, the 8-byte union at 32.
-    assert ctypes.sizeof(espeak._Event) == 40
-    assert espeak._Event.user_data.offset == 24
-    assert espeak._Event.id.offset == 32
+    assert ctypes.sizeof(libespeak.Event) == 40
+    assert libespeak.Event.user_data.offset == 24
+    assert libespeak.Event.id.offset == 32
 
 
 def test_word_map_gives_m_ae_p_and_plausible_audio() -> None:
@@ -172,8 +172,8 @@ def test_unknown_voice_and_empty_text_raise() -> None:
 
 
 def test_missing_library_names_the_debian_package(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(espeak, "LIBRARY_NAME", "libespeak-ng-missing.so.9")
-    monkeypatch.setattr(espeak, "_library", None)
+    monkeypatch.setattr(libespeak, "LIBRARY_NAME", "libespeak-ng-missing.so.9")
+    monkeypatch.setattr(libespeak, "_library", None)
     with pytest.raises(SpeechError, match="install the Debian package espeak-ng") as raised:
         EspeakSynthesizer().speak("hello")
     assert raised.value.code == "speech_failed"

@@ -1,0 +1,42 @@
+"""``GET /``: the demo page, a face that speaks what you type, served from package data.
+
+Sketch: plain HTML, CSS and JavaScript modules in ``static/`` (no build step,
+nothing loaded from elsewhere, so it works without internet). ``/`` is
+``index.html``; ``/demo/<file>`` serves the page's other files, found by name
+among the files the package ships, so no other path can be reached. The page
+talks to the server only through the public protocol: ``GET /v1/engines`` and
+``/v1/characters`` for its controls and the WebSocket ``/v1/stream`` (JSON
+subprotocol, ``text`` and ``phonemes`` requests) for frames and speech.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from fastapi import FastAPI, HTTPException
+from fastapi.responses import FileResponse
+
+STATIC_DIR = Path(__file__).resolve().parent / "static"
+PAGE_URL = "/"
+ASSETS_URL = "/demo"
+MEDIA_TYPES = {".js": "text/javascript", ".css": "text/css", ".html": "text/html"}
+ASSETS = {
+    path.name: MEDIA_TYPES[path.suffix]
+    for path in sorted(STATIC_DIR.iterdir())
+    if path.suffix in MEDIA_TYPES and path.name != "index.html"
+}
+
+
+def install(app: FastAPI) -> None:
+    """Add the demo page ``/`` and its files under ``/demo/`` to ``app``."""
+
+    @app.get(PAGE_URL, include_in_schema=False)
+    async def page() -> FileResponse:
+        return FileResponse(STATIC_DIR / "index.html", media_type="text/html")
+
+    @app.get(ASSETS_URL + "/{name}", include_in_schema=False)
+    async def asset(name: str) -> FileResponse:
+        media_type = ASSETS.get(name)
+        if media_type is None:
+            raise HTTPException(404, f"no demo page file {name!r}")
+        return FileResponse(STATIC_DIR / name, media_type=media_type)

@@ -1,0 +1,415 @@
+// The demo page: controls, the lipstream protocol over a WebSocket (JSON subprotocol),
+// Web Audio scheduling, the face and the readouts.
+//
+// Sound and face share one clock: the first `audio` or `frames` message of a request fixes
+// t0 on the AudioContext's clock (plus a short lead); speech chunks are scheduled at
+// t0 + their `start`, an uploaded WAV at t0, and every animation frame shows the frame for
+// the audio clock's time (currentTime - t0), not the last frame that arrived.
+
+import { Face } from "./face.js";
+import { parseLab, parseTextGrid } from "./phones.js";
+import { Plot } from "./plot.js";
+
+const SUBPROTOCOL = "lipstream.v1.json";
+const LEAD_S = 0.15;
+const AUDIO_CHUNK_S = 0.25;
+const PHONEMES_PER_MESSAGE = 256;
+const DEFAULT_PLOTTED = ["jawOpen", "mouthClose", "mouthFunnel", "mouthSmileLeft"];
+
+const $ = (id) => document.getElementById(id);
+const face = new Face($("face"));
+const plot = new Plot($("plot"));
+let audioContext = null;
+let socket = null;
+let requestNumber = 0;
+let current = null;
+const log = { errors: [], done: [] };
+
+// ---- clock ---------------------------------------------------------------------------
+
+function ensureAudio() {
+  if (audioContext === null) audioContext = new AudioContext();
+  if (audioContext.state === "suspended") audioContext.resume();
+  return audioContext;
+}
+
+// The audio clock when it runs; the page's monotonic clock when there is no sound device.
+function now() {
+  if (audioContext !== null && audioContext.state === "running") return audioContext.currentTime;
+  return performance.now() / 1000;
+}
+
+function clockName() {
+  return audioContext !== null && audioContext.state === "running"
+    ? `audio (${audioContext.sampleRate} Hz)`
+    : "page (audio not running)";
+}
+
+// ---- protocol ------------------------------------------------------------------------
+
+function socketUrl() {
+  const scheme = location.protocol === "https:" ? "wss:" : "ws:";
+  return `${scheme}//${location.host}/v1/stream${location.search}`;
+}
+
+function connect() {
+  if (socket !== null && socket.readyState <= WebSocket.OPEN) return socket.opened;
+  const ws = new WebSocket(socketUrl(), [SUBPROTOCOL]);
+  socket = ws;
+  ws.opened = new Promise((resolve, reject) => {
+    ws.onopen = () => resolve(ws);
+    ws.onerror = () => reject(new Error("cannot open the WebSocket /v1/stream"));
+  });
+  ws.onmessage = (event) => receive(JSON.parse(event.data));
+  ws.onclose = (event) => {
+    if (socket === ws) socket = null;
+    if (event.code !== 1000 && event.code !== 1001) {
+      showError(`connection closed (${event.code}${event.reason ? ": " + event.reason : ""})`);
+    }
+  };
+  return ws.opened;
+}
+
+function send(message) {
+  socket.send(JSON.stringify({ v: 1, ...message }));
+}
+
+function receive(message) {
+  if (message.type === "error") {
+    // After a fatal error, the server answers the request's pipelined messages with
+    // unknown_request: the first error said it all.
+    const over = current !== null && message.id === current.id && current.state === "error";
+    if (!over && (message.id === null || current === null || message.id === current.id)) {
+      showError(`${message.code}: ${message.message}`);
+      if (current !== null && message.fatal && message.id === current.id) finish("error");
+    }
+    return;
+  }
+  if (current === null || message.id !== current.id) return; // an abandoned request
+  const handlers = { ready: onReady, frames: onFrames, audio: onAudio, done: onDone };
+  handlers[message.type]?.(message);
+}
+
+// ---- a request ------------------------------------------------------------------------
+
+async function startRequest(input) {
+  clearErrors();
+  ensureAudio();
+  stopCurrent();
+  try {
+    await connect();
+  } catch (error) {
+    showError(error.message);
+    return;
+  }
+  const id = `demo-${++requestNumber}`;
+  const fps = Number($("fps").value) || 60;
+  const start = { type: "start", id, engine: $("engine").value, character: $("character").value, fps };
+  if ($("emotion").value) start.emotion = $("emotion").value;
+  if ($("budget").value) start.latency_budget_ms = Number($("budget").value);
+  current = {
+    id,
+    fps,
+    channels: [],
+    frames: [],
+    sources: [],
+    t0: null,
+    sentAt: performance.now(),
+    firstFrameMs: null,
+    localAudio: input.audioBuffer ?? null,
+    state: "starting",
+    frozen: false,
+  };
+  setStatus("waiting for the server");
+  $("latency").textContent = "–";
+  $("rung").textContent = "–";
+  $("stats").textContent = "–";
+  send(start);
+  input.send(id);
+  send({ type: "end", id });
+}
+
+function stopCurrent() {
+  if (current === null) return;
+  for (const source of current.sources) {
+    try {
+      source.stop();
+    } catch (_) {
+      // not started yet
+    }
+  }
+  if (current.state !== "done" && current.state !== "error" && socket !== null) {
+    send({ type: "cancel", id: current.id });
+  }
+  current = null;
+}
+
+function onReady(message) {
+  current.channels = message.channels;
+  current.fps = message.fps;
+  current.state = "streaming";
+  $("rung").textContent = `${message.fidelity} (lookahead ${message.lookahead_ms.toFixed(1)} ms)`;
+  fillPlotChannels(message.channels);
+}
+
+function fixClock() {
+  if (current.t0 !== null) return;
+  current.t0 = now() + LEAD_S;
+  $("clock").textContent = clockName();
+  if (current.localAudio !== null && audioContext.state === "running") {
+    const source = audioContext.createBufferSource();
+    source.buffer = current.localAudio;
+    source.connect(audioContext.destination);
+    source.start(current.t0);
+    current.sources.push(source);
+  }
+}
+
+function onFrames(message) {
+  if (current.firstFrameMs === null) {
+    current.firstFrameMs = performance.now() - current.sentAt;
+    $("latency").textContent = `${current.firstFrameMs.toFixed(0)} ms (measured by the page)`;
+  }
+  fixClock();
+  message.data.forEach((row, r) => {
+    current.frames[message.first_frame + r] = row;
+  });
+  drawPlot();
+}
+
+function onAudio(message) {
+  fixClock();
+  if (audioContext.state !== "running") return;
+  const samples = pcm16ToFloat(message.pcm16);
+  const buffer = audioContext.createBuffer(1, samples.length, message.sample_rate);
+  buffer.copyToChannel(samples, 0);
+  const source = audioContext.createBufferSource();
+  source.buffer = buffer;
+  source.connect(audioContext.destination);
+  const at = current.t0 + (message.start ?? 0);
+  const late = now() - at;
+  source.start(Math.max(at, now()), Math.max(0, late));
+  current.sources.push(source);
+}
+
+function onDone(message) {
+  log.done.push(message);
+  const stats = message.stats;
+  if (stats.first_frame_latency_ms != null) {
+    $("latency").textContent =
+      `${(current.firstFrameMs ?? 0).toFixed(0)} ms at the page, ` +
+      `${stats.first_frame_latency_ms.toFixed(0)} ms at the server`;
+  }
+  $("stats").textContent = JSON.stringify({ reason: message.reason, ...stats }, null, 2);
+  current.frames.length = Math.min(current.frames.length, stats.frames);
+  finish("done");
+}
+
+function finish(state) {
+  current.state = state;
+  setStatus(state === "done" ? "all frames received" : "ended by an error");
+  drawPlot();
+}
+
+// ---- inputs ---------------------------------------------------------------------------
+
+function textInput() {
+  const message = { type: "text", text: $("text").value };
+  if ($("voice").value.trim()) message.voice = $("voice").value.trim();
+  if ($("rate").value) message.rate = Number($("rate").value);
+  return { send: (id) => send({ ...message, id }) };
+}
+
+async function fileInput() {
+  const phonesFile = $("phones-file").files[0];
+  if (!phonesFile) throw new Error("choose a .TextGrid or .lab file first");
+  const text = await phonesFile.text();
+  const items = /\.lab$/i.test(phonesFile.name) ? parseLab(text) : parseTextGrid(text);
+  let audioBuffer = null;
+  const wavFile = $("wav-file").files[0];
+  if (wavFile) audioBuffer = await ensureAudio().decodeAudioData(await wavFile.arrayBuffer());
+  return {
+    audioBuffer,
+    send: (id) => {
+      if (audioBuffer !== null) sendAudio(id, audioBuffer);
+      for (let i = 0; i < items.length; i += PHONEMES_PER_MESSAGE) {
+        send({ type: "phonemes", id, items: items.slice(i, i + PHONEMES_PER_MESSAGE) });
+      }
+    },
+  };
+}
+
+function sendAudio(id, buffer) {
+  const samples = buffer.getChannelData(0);
+  const step = Math.round(buffer.sampleRate * AUDIO_CHUNK_S);
+  for (let offset = 0; offset < samples.length; offset += step) {
+    const chunk = samples.subarray(offset, offset + step);
+    send({ type: "audio", id, sample_rate: buffer.sampleRate, pcm16: floatToPcm16(chunk) });
+  }
+}
+
+function pcm16ToFloat(base64) {
+  const bytes = Uint8Array.from(atob(base64), (c) => c.charCodeAt(0));
+  const view = new DataView(bytes.buffer);
+  const samples = new Float32Array(bytes.length >> 1);
+  for (let i = 0; i < samples.length; i++) samples[i] = view.getInt16(2 * i, true) / 32768;
+  return samples;
+}
+
+function floatToPcm16(samples) {
+  const view = new DataView(new ArrayBuffer(samples.length * 2));
+  samples.forEach((value, i) => {
+    view.setInt16(2 * i, Math.max(-32768, Math.min(32767, Math.round(value * 32767))), true);
+  });
+  let text = "";
+  const bytes = new Uint8Array(view.buffer);
+  for (let i = 0; i < bytes.length; i += 0x8000) {
+    text += String.fromCharCode(...bytes.subarray(i, i + 0x8000));
+  }
+  return btoa(text);
+}
+
+// ---- drawing --------------------------------------------------------------------------
+
+// The latest frame at or before `index` that has arrived.
+function frameAt(index) {
+  if (current === null) return null;
+  for (let i = Math.min(index, current.frames.length - 1); i >= 0; i--) {
+    if (current.frames[i]) return current.frames[i];
+  }
+  return null;
+}
+
+function showFrame(row) {
+  if (row === null) return;
+  const values = {};
+  current.channels.forEach((name, k) => {
+    values[name] = row[k];
+  });
+  face.apply(values);
+}
+
+function playbackTime() {
+  return current === null || current.t0 === null ? null : now() - current.t0;
+}
+
+function tick() {
+  const t = playbackTime();
+  if (t !== null && t >= 0 && !current.frozen) {
+    showFrame(frameAt(Math.floor(t * current.fps)));
+    const end = current.frames.length / current.fps;
+    if (current.state === "streaming" || current.state === "done") {
+      setStatus(t < end ? `speaking: ${t.toFixed(2)} s` : "done");
+    }
+    drawPlot();
+  }
+  requestAnimationFrame(tick);
+}
+
+function drawPlot() {
+  if (current === null) return;
+  const chosen = [...$("plot-channels").selectedOptions].map((o) => o.value);
+  plot.draw(current.frames, current.fps, current.channels, chosen, playbackTime());
+}
+
+function fillPlotChannels(channels) {
+  const select = $("plot-channels");
+  const before = new Set([...select.selectedOptions].map((o) => o.value));
+  select.replaceChildren();
+  for (const name of channels) {
+    const option = new Option(name, name);
+    option.selected = before.size ? before.has(name) : DEFAULT_PLOTTED.includes(name);
+    select.add(option);
+  }
+}
+
+// ---- status and errors ----------------------------------------------------------------
+
+function setStatus(text) {
+  $("status").textContent = text;
+}
+
+function showError(text) {
+  log.errors.push(text);
+  const line = document.createElement("div");
+  line.className = "error";
+  line.textContent = text;
+  $("errors").appendChild(line);
+}
+
+function clearErrors() {
+  $("errors").replaceChildren();
+}
+
+// ---- controls -------------------------------------------------------------------------
+
+async function getJson(path) {
+  const answer = await fetch(path);
+  if (!answer.ok) throw new Error(`${path}: HTTP ${answer.status}`);
+  return answer.json();
+}
+
+async function loadControls() {
+  let engines;
+  let characters;
+  try {
+    [engines, characters] = await Promise.all([getJson("/v1/engines"), getJson("/v1/characters")]);
+  } catch (error) {
+    showError(`cannot list the engines: ${error.message}`);
+    return;
+  }
+  const select = $("engine");
+  for (const engine of engines.engines) {
+    const option = new Option(engine.loaded ? engine.name : `${engine.name} (not loaded)`, engine.name);
+    option.disabled = !engine.loaded;
+    select.add(option);
+  }
+  select.value = engines.engines.find((e) => e.loaded)?.name ?? "";
+  const fillCharacters = () => {
+    const chosen = $("character");
+    const previous = chosen.value;
+    chosen.replaceChildren();
+    for (const character of characters.characters) {
+      if (character.engines.includes(select.value)) chosen.add(new Option(character.name));
+    }
+    if ([...chosen.options].some((o) => o.value === previous)) chosen.value = previous;
+  };
+  select.addEventListener("change", fillCharacters);
+  fillCharacters();
+  document.body.dataset.ready = "true";
+}
+
+$("text-form").addEventListener("submit", (event) => {
+  event.preventDefault();
+  startRequest(textInput());
+});
+
+$("file-form").addEventListener("submit", async (event) => {
+  event.preventDefault();
+  try {
+    await startRequest(await fileInput());
+  } catch (error) {
+    showError(error.message);
+  }
+});
+
+$("plot-channels").addEventListener("change", drawPlot);
+
+// For tests and the console: what the page received and drew.
+window.lipstreamDemo = {
+  face,
+  log,
+  request: () => current,
+  frames: () => (current === null ? [] : current.frames.slice()),
+  channels: () => (current === null ? [] : current.channels.slice()),
+  // Draw the face for utterance time t (s), as playback would at that moment.
+  // Stops following playback.
+  showAt: (t) => {
+    current.frozen = true;
+    showFrame(frameAt(Math.floor(t * current.fps)));
+  },
+  mouthOpening: () => face.mouthOpening(),
+};
+
+loadControls();
+requestAnimationFrame(tick);

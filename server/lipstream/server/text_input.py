@@ -1,0 +1,85 @@
+"""A request's ``text`` message: the server speaks it and feeds the engine what it said.
+
+Sketch: ``speak`` runs the text front end (espeak-ng in a worker process, so a
+failure ends this request only) and turns its coded errors into request
+errors. The speech starts where the request's input so far ends (the later of
+its phonemes' and its audio's end, 0 for the first input). ``speech_messages``
+cuts the PCM16 into ``audio`` messages of at most ``AUDIO_CHUNK_S`` with their
+``start`` on the utterance clock, sent before the frames they drive, so a
+client can schedule sound and face on one clock. ``engine_audio`` is the same
+speech for the engine, preceded by silence where the request's audio stopped
+short of the speech's start (audio is contiguous from 0); ``phoneme_items``
+are espeak-ng's spans moved to the speech's start, in canonical ARPAbet,
+which ``reading_arpabet`` makes the request read whatever its notation.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+from lipstream_client import AudioChunk, PhonemeItem, Text
+from lipstream_client.errors import TEXT_TOO_LONG
+
+from ..errors import LipstreamError
+from ..speech.text_frontend import MAX_TEXT_CHARS, SpokenText, speak_text
+from .outgoing import Outgoing
+from .request import ActiveRequest, RequestError
+
+AUDIO_CHUNK_S = 0.5
+_PCM16_BYTES = 2
+
+
+def speak(message: Text) -> SpokenText:
+    """espeak-ng's speech for ``message``; a ``RequestError`` with the front end's code."""
+    try:
+        return speak_text(message.text, message.voice, message.rate)
+    except LipstreamError as error:
+        details = {"max_text_chars": MAX_TEXT_CHARS} if error.code == TEXT_TOO_LONG else None
+        raise RequestError(
+            error.message, code=error.code, where=error.where, details=details
+        ) from None
+
+
+def speech_start(request: ActiveRequest) -> float:
+    """Where new speech begins on the request's clock: the end of its input so far."""
+    return max(request.phonemes_end, request.audio_s)
+
+
+def speech_messages(request: ActiveRequest, speech: SpokenText, start: float) -> list[Outgoing]:
+    """The speech as ``audio`` messages of at most ``AUDIO_CHUNK_S``, each with its start."""
+    rate = speech.sample_rate
+    step = max(1, round(AUDIO_CHUNK_S * rate)) * _PCM16_BYTES
+    pcm = speech.pcm16
+    return [
+        Outgoing(
+            AudioChunk(request.id, rate, pcm[offset : offset + step], start + offset / 2 / rate),
+            request.spec.clock,
+        )
+        for offset in range(0, len(pcm) - len(pcm) % _PCM16_BYTES, step)
+    ]
+
+
+def engine_audio(request: ActiveRequest, speech: SpokenText, start: float) -> AudioChunk:
+    """The speech as the request's next audio input, with silence before it where the
+    request's audio ends before ``start``."""
+    gap = max(0, round((start - request.audio_s) * speech.sample_rate))
+    return AudioChunk(request.id, speech.sample_rate, bytes(gap * _PCM16_BYTES) + speech.pcm16)
+
+
+def phoneme_items(speech: SpokenText, start: float) -> tuple[PhonemeItem, ...]:
+    """espeak-ng's spans, contiguous from ``start``."""
+    return tuple(
+        PhonemeItem(span.phoneme, start + span.start, start + span.end) for span in speech.spans
+    )
+
+
+@contextmanager
+def reading_arpabet(request: ActiveRequest) -> Iterator[None]:
+    """The request reads phoneme labels as ARPAbet inside the block."""
+    source = request.spec.phoneme_source
+    request.spec.phoneme_source = "arpabet"
+    try:
+        yield
+    finally:
+        request.spec.phoneme_source = source
