@@ -5,13 +5,14 @@ prometheus directory, whose per-process gauge files say which worker holds
 a session. For each of ``--utterances`` utterances (a synthetic 3 s line at
 60 fps), a client with a ``ResumePolicy`` sends the first half of the
 phonemes, waits for its first frames, and the worker holding the session is
-SIGKILLed (uvicorn's supervisor starts a new one in its place). The resume
-time runs from the kill to the arrival of the resumed request's ``ready``
-(the connection is open again, on the surviving worker, and the server has
-replayed the input); the client then sends the rest and ``end``. Frames
-lost are the frame indices of the uninterrupted timeline (``done.stats.frames``)
-that never arrived, and duplicates those that arrived twice; both should
-be 0.
+SIGKILLed (uvicorn's supervisor starts a new one in its place, and the next
+utterance waits until it has started, so that two workers serve each one).
+The resume time runs from the kill to the arrival of the resumed request's
+``ready`` (the connection is open again, on the surviving worker, and the
+server has replayed the input); the client then sends the rest and ``end``.
+Frames lost are the frame indices of the uninterrupted timeline
+(``done.stats.frames``) that never arrived, and duplicates those that
+arrived twice; both should be 0.
 
     python -m lipstream.bench.resume_time --models DIR [--utterances 20] [--json out.json]
 """
@@ -32,19 +33,22 @@ from prometheus_client.multiprocess import MultiProcessCollector
 
 from lipstream_client import AsyncClient, Frames, Ready, ResumePolicy, ServerMessage
 
-from .serving import serving
+from .serving import Served, serving
 
 FPS = 60.0
 LINE = ["sil", "HH", "AH", "L", "OW", "W", "ER", "L", "D", "sil"] * 3
 PHONEME_S = 0.1
 SESSION_WAIT_S = 30.0
+RESUME_WAIT_S = 60.0
 
 
 def sessions_by_pid(directory: Path) -> dict[int, float]:
-    """Open sessions of each worker, from its own prometheus gauge file."""
+    """Open sessions of each live worker, from its own prometheus gauge file."""
     found: dict[int, float] = {}
     for path in directory.glob("gauge_livesum_*.db"):
         pid = int(path.stem.rsplit("_", 1)[1])
+        if not Path(f"/proc/{pid}").exists():
+            continue  # a killed worker's file, until a scrape removes it
         merged = MultiProcessCollector.merge([str(path)], accumulate=True)  # type: ignore[no-untyped-call]
         found[pid] = sum(
             sample.value
@@ -84,8 +88,11 @@ async def one_utterance(url: str, directory: Path) -> tuple[float, int, int]:
         blocks: list[Frames] = [first] if first is not None else []
         os.kill(await holder(directory), signal.SIGKILL)
         killed_at = time.perf_counter()
-        while len(readies) < 2:
+        deadline = time.monotonic() + RESUME_WAIT_S
+        while len(readies) < 2 and not stream.is_over and time.monotonic() < deadline:
             await asyncio.sleep(0.001)
+        if len(readies) < 2:
+            raise RuntimeError(f"the request did not resume within {RESUME_WAIT_S} s")
         await stream.send_phonemes(spans[half:])
         await stream.end()
         result = await stream.collect()
@@ -96,11 +103,13 @@ async def one_utterance(url: str, directory: Path) -> tuple[float, int, int]:
     return readies[1] - killed_at, lost, len(indices) - len(set(indices))
 
 
-async def run(url: str, directory: Path, utterances: int) -> list[tuple[float, int, int]]:
+async def run(served: Served, directory: Path, utterances: int) -> list[tuple[float, int, int]]:
     results = []
-    for _ in range(utterances):
-        results.append(await one_utterance(url, directory))
-        await asyncio.sleep(0.5)  # the supervisor replaces the killed worker meanwhile
+    for killed in range(1, utterances + 1):
+        results.append(await one_utterance(served.ws, directory))
+        # Two workers again before the next kill: the supervisor's replacement has started.
+        while served.workers_started() < 2 + killed:
+            await asyncio.sleep(0.1)
     return results
 
 
@@ -117,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as directory:
         with serving(args.models, 2, {"PROMETHEUS_MULTIPROC_DIR": directory}) as served:
-            results = asyncio.run(run(served.ws, Path(directory), args.utterances))
+            results = asyncio.run(run(served, Path(directory), args.utterances))
     times_ms = [1000.0 * seconds for seconds, _, _ in results]
     summary = {
         "utterances": len(results),

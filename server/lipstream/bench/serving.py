@@ -21,6 +21,7 @@ from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import IO
 
 START_TIMEOUT_S = 600.0
 STARTED = "Application startup complete."
@@ -28,10 +29,16 @@ STARTED = "Application startup complete."
 
 @dataclass(frozen=True)
 class Served:
-    """A running server: its process and port."""
+    """A running server: its process, port and log."""
 
     process: subprocess.Popen[bytes]
     port: int
+    log: IO[str]
+
+    def workers_started(self) -> int:
+        """How many workers have completed their start-up so far (replacements too)."""
+        self.log.seek(0)
+        return self.log.read().count(STARTED)
 
     @property
     def ws(self) -> str:
@@ -79,7 +86,7 @@ def serving(models: Path, workers: int, environ: Mapping[str, str] = {}) -> Iter
                     log.seek(0)
                     raise RuntimeError(f"the server did not start: {log.read()[-2000:]}")
                 time.sleep(0.5)
-            yield Served(process, port)
+            yield Served(process, port, log)
         finally:
             process.send_signal(signal.SIGTERM)
             try:
