@@ -33,6 +33,7 @@ from prometheus_client.multiprocess import MultiProcessCollector
 
 from lipstream_client import AsyncClient, Frames, Ready, ResumePolicy, ServerMessage
 
+from ..loadtest.stats import percentile
 from .serving import Served, serving
 
 FPS = 60.0
@@ -113,11 +114,6 @@ async def run(served: Served, directory: Path, utterances: int) -> list[tuple[fl
     return results
 
 
-def percentile(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, round(q * (len(ordered) - 1)))]
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--models", type=Path, required=True)
@@ -131,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     summary = {
         "utterances": len(results),
         "resume_ms_p50": statistics.median(times_ms),
-        "resume_ms_p99": percentile(times_ms, 0.99),
+        "resume_ms_p99": percentile(sorted(times_ms), 99.0),
         "resume_ms_max": max(times_ms),
         "frames_lost": sum(lost for _, lost, _ in results),
         "frames_duplicated": sum(duplicated for _, _, duplicated in results),
