@@ -12,7 +12,9 @@ messages are merged into a few large ones, since a server answers the same
 frames however its input is chunked and a burst of many small messages could
 meet its message-rate limit. A request that was cancelled or interrupted is
 not resumable: its remaining frames depend on when the server read those
-messages. ``ResumePolicy`` says how hard the client tries to reconnect.
+messages; nor is one that sent ``text``, whose speech the server sent back
+as ``audio`` that a replay would send again. ``ResumePolicy`` says how hard
+the client tries to reconnect.
 """
 
 from __future__ import annotations
@@ -32,9 +34,10 @@ from .messages import (
     Ready,
     Resume,
     Start,
+    Text,
 )
 
-RequestInput: TypeAlias = Phonemes | AudioChunk | End | Cancel | Interrupt
+RequestInput: TypeAlias = Phonemes | AudioChunk | Text | End | Cancel | Interrupt
 
 MAX_REPLAY_ITEMS = 512
 """Phonemes per replayed ``phonemes`` message (about 20 KB of msgpack, far below 1 MiB)."""
@@ -77,8 +80,8 @@ class RequestLog:
 
     @property
     def resumable(self) -> bool:
-        """False once ``cancel`` or ``interrupt`` was recorded."""
-        return not any(isinstance(message, (Cancel, Interrupt)) for message in self.inputs)
+        """False once ``cancel``, ``interrupt`` or ``text`` was recorded."""
+        return not any(isinstance(message, (Cancel, Interrupt, Text)) for message in self.inputs)
 
     def record(self, message: RequestInput) -> None:
         self.inputs.append(message)

@@ -18,6 +18,7 @@ from lipstream_client import (
     Resume,
     ResumePolicy,
     Start,
+    Text,
 )
 from lipstream_client.resume import MAX_REPLAY_ITEMS, RequestLog, merged
 
@@ -79,8 +80,10 @@ def test_merging_keeps_order_and_splits_long_runs() -> None:
     assert list(merged(rates)) == rates  # a rate change is not merged (the server refuses it)
 
 
-@pytest.mark.parametrize("ending", [Cancel("a"), Interrupt("a", 0.3)])
-def test_a_cancelled_or_interrupted_request_is_not_resumable(ending: Cancel | Interrupt) -> None:
+@pytest.mark.parametrize("ending", [Cancel("a"), Interrupt("a", 0.3), Text("a", "hello")])
+def test_a_cancelled_interrupted_or_text_request_is_not_resumable(
+    ending: Cancel | Interrupt | Text,
+) -> None:
     log = RequestLog(Start("a", "viseme-lerp", "demo"))
     log.record(Phonemes("a", items(SPANS[:3])))
     assert log.resumable
