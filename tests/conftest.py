@@ -39,3 +39,11 @@ def all_models_dir(
     for name, model in trained_models.items():
         model.save(directory / name)
     return directory
+
+
+@pytest.fixture(scope="session")
+def lerp_dir(trained_models: dict[str, Model], tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Only the viseme-lerp model: fast to load, for servers testing limits."""
+    directory = tmp_path_factory.mktemp("server-models-lerp")
+    trained_models["viseme-lerp"].save(directory / "viseme-lerp")
+    return directory

@@ -10,11 +10,14 @@ import tempfile
 import time
 import urllib.error
 import urllib.request
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+import httpx
+from prometheus_client.multiprocess import MultiProcessCollector
 
 from tests.helpers import free_port, serve_command
 
@@ -104,3 +107,78 @@ def _descendants(pid: int) -> list[int]:
             for child in (task / "children").read_text().split():
                 found += [int(child), *_descendants(int(child))]
     return found
+
+
+def wait_for(condition: Callable[[], bool], timeout: float, what: str) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, f"not within {timeout} s: {what}"
+        time.sleep(0.05)
+
+
+def wait_for_value(read: Callable[[], float], expected: float, timeout: float, what: str) -> None:
+    deadline = time.monotonic() + timeout
+    while (last := read()) != expected:
+        assert time.monotonic() < deadline, f"{what}: {last:g}, not {expected:g}, after {timeout} s"
+        time.sleep(0.05)
+
+
+@contextmanager
+def lipstream_serve(
+    models: Path, workers: int, environ: dict[str, str], log: Path
+) -> Iterator[tuple[subprocess.Popen[bytes], str]]:
+    """``lipstream serve`` on a free loopback port, every worker started, its output in
+    ``log``; SIGTERM (then SIGKILL) at the end."""
+    port = free_port()
+    env = {**os.environ, "LIPSTREAM_LOG_LEVEL": "info", "LIPSTREAM_DRAIN_TIMEOUT_S": "5", **environ}
+    with log.open("ab") as output:
+        process = subprocess.Popen(
+            serve_command(models, port, "--workers", str(workers)),
+            env=env,
+            stdout=output,
+            stderr=subprocess.STDOUT,
+        )
+    base = f"http://127.0.0.1:{port}"
+    try:
+        # /readyz answers once one worker is ready; each logs its own startup.
+        wait_for(
+            lambda: process.poll() is not None or started(log) == workers,
+            30,
+            "every worker started",
+        )
+        if process.poll() is not None or not ready(base):
+            raise RuntimeError(f"lipstream serve did not start: {log.read_text()[-2000:]}")
+        yield process, base
+    finally:
+        stop_process(process)
+
+
+def started(log: Path) -> int:
+    """Workers that finished their startup (models loaded), from uvicorn's log."""
+    return log.read_text(errors="replace").count("Application startup complete.")
+
+
+def ready(base: str) -> bool:
+    try:
+        return httpx.get(f"{base}/readyz", timeout=1).status_code == 200
+    except httpx.TransportError:
+        return False
+
+
+def per_worker(directory: Path, kind: str, name: str, **labels: str) -> dict[int, float]:
+    """Sample ``name`` from each worker's own value file (``<kind>_<pid>.db``), by pid."""
+    values = {}
+    for path in directory.glob(f"{kind}_*.db"):
+        pid = int(path.stem.rsplit("_", 1)[1])
+        merged = MultiProcessCollector.merge([str(path)], accumulate=True)
+        values[pid] = sum(
+            sample.value
+            for metric in merged
+            for sample in metric.samples
+            if sample.name == name and sample.labels == labels
+        )
+    return values
+
+
+def sessions_by_worker(directory: Path) -> dict[int, float]:
+    return per_worker(directory, "gauge_livesum", "lipstream_sessions")

@@ -51,6 +51,7 @@ from .exceptions import (
     LipstreamClientError,
     LipstreamServerError,
     ProtocolViolation,
+    ResumeFailed,
     ServerBusy,
     ServerGoingAway,
     retry_delay_s,
@@ -74,10 +75,12 @@ from .messages import (
     PhonemeItem,
     Phonemes,
     Ready,
+    Resume,
     ServerMessage,
     Start,
     Text,
 )
+from .resume import ResumePolicy
 from .schema import load_schema
 
 if TYPE_CHECKING:
@@ -147,6 +150,9 @@ __all__ = [
     "ProtocolViolation",
     "Ready",
     "RequestOver",
+    "Resume",
+    "ResumeFailed",
+    "ResumePolicy",
     "ServerBusy",
     "ServerGoingAway",
     "ServerMessage",

@@ -9,9 +9,17 @@ per-request queue (so one slow consumer never stalls the other requests on
 the connection), and a fatal ``error`` ends it with a
 ``LipstreamServerError``. When the connection closes, every open request
 ends with the ``ConnectionClosed`` subclass that names the close code
-(``ServerBusy`` for 1013). Sending validates each message with the codec
-first, so a bad argument raises locally (``EncodeError``) and never reaches
-the wire.
+(``ServerBusy`` for 1013), unless the client was given a ``ResumePolicy``:
+then each request keeps a ``RequestLog`` of its input and progress, and a
+connection that breaks or that the server closes as going away, failed or
+busy (``RESUMABLE_CLOSE_CODES``) is opened again with backoff; each open
+request that was neither cancelled nor interrupted, nor sent ``text``, is
+started again with ``resume`` (the frames it holds) and its whole input, so
+that it receives the frames it lacks and no other (docs/protocol.md,
+*Resuming*). Input sent
+while the connection is down waits in the log. Sending validates each
+message with the codec first, so a bad argument raises locally
+(``EncodeError``) and never reaches the wire.
 
 Usage::
 
@@ -27,6 +35,7 @@ Usage::
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import itertools
 import time
 from collections.abc import AsyncIterator, Callable, Iterable, Sequence
@@ -40,14 +49,16 @@ from websockets.exceptions import InvalidHandshake, InvalidStatus
 from websockets.typing import Origin, Subprotocol
 
 from .codec import DEFAULT_ENCODING, decode, encode, encoding_for_subprotocol, subprotocol_for
-from .errors import CloseCode, ProtocolError
+from .errors import RETRYABLE_CLOSE_CODES, CloseCode, ProtocolError
 from .exceptions import (
     ConnectionClosed,
     HandshakeRejected,
     LipstreamClientError,
     LipstreamServerError,
     ProtocolViolation,
+    ResumeFailed,
     closed_error,
+    retry_delay_s,
 )
 from .frame_timeline import FrameTimeline
 from .items import PhonemeLike, is_loopback_url, phoneme_items
@@ -70,10 +81,17 @@ from .messages import (
     Start,
     Text,
 )
+from .resume import RequestLog, ResumePolicy
 
 DEFAULT_MAX_MESSAGE_BYTES = 16 << 20
 DEFAULT_OPEN_TIMEOUT_S = 10.0
 DEFAULT_CLOSE_TIMEOUT_S = 5.0
+ABNORMAL_CLOSURE = 1006
+RESUMABLE_CLOSE_CODES: frozenset[int | None] = frozenset(
+    {None, ABNORMAL_CLOSURE, CloseCode.INTERNAL_ERROR, *RETRYABLE_CLOSE_CODES}
+)
+"""Closes after which open requests are resumed: the connection broke (no close frame,
+1006), or the server went away, failed or asked for a retry."""
 _HANDSHAKE_BODY_CHARS = 200
 
 MessageTap: TypeAlias = Callable[[ServerMessage, float], None]
@@ -136,10 +154,11 @@ class Stream:
     request or the loss of the connection raises from all three.
     """
 
-    def __init__(self, client: AsyncClient, request: Start) -> None:
+    def __init__(self, client: AsyncClient, request: Start, log: RequestLog | None) -> None:
         loop = asyncio.get_running_loop()
         self._client = client
         self.request = request
+        self._log = log
         self._ready: asyncio.Future[Ready] = loop.create_future()
         self._done: asyncio.Future[Done] = loop.create_future()
         self._queue: asyncio.Queue[Frames | _Finished] = asyncio.Queue()
@@ -152,6 +171,11 @@ class Stream:
     @property
     def id(self) -> str:
         return self.request.id
+
+    @property
+    def resumes(self) -> int:
+        """How many times the request was resumed on a new connection."""
+        return self._log.resumes if self._log is not None else 0
 
     @property
     def is_over(self) -> bool:
@@ -197,7 +221,13 @@ class Stream:
             if error is not None:
                 raise error
             raise RequestOver(f"request {self.id!r} is over; start a new one")
-        await self._client.send(message)
+        if self._log is None:
+            await self._client.send(message)
+            return
+        encode(message, self._client.encoding)  # EncodeError before recording
+        assert not isinstance(message, Start)
+        self._log.record(message)
+        await self._client._send_logged(self)
 
     # Output.
 
@@ -256,12 +286,16 @@ class Stream:
     def _on_message(self, message: ServerMessage) -> bool:
         """Handle one message for this request; True when the request has ended."""
         if isinstance(message, Frames):
+            if self._log is not None:
+                self._log.on_frames(message)
             self._queue.put_nowait(message)
             return False
         if isinstance(message, AudioChunk):
             self.audio.append(message)
             return False
         if isinstance(message, Ready):
+            if self._log is not None:
+                self._log.on_ready(message)
             if not self._ready.done():
                 self._ready.set_result(message)
             return False
@@ -307,8 +341,10 @@ class AsyncClient:
     ``max_message_bytes`` bounds an incoming message. ``on_message``, if
     given, sees every valid server message with its arrival time
     (``time.perf_counter()`` seconds, taken before decoding) just before it
-    is dispatched; it runs on the event loop and must not block. Use the
-    client as an async context manager, or call ``connect()`` and ``close()``.
+    is dispatched; it runs on the event loop and must not block. With a
+    ``resume`` policy, requests survive a lost connection (module docstring).
+    Use the client as an async context manager, or call ``connect()`` and
+    ``close()``.
     """
 
     def __init__(
@@ -323,6 +359,7 @@ class AsyncClient:
         max_message_bytes: int = DEFAULT_MAX_MESSAGE_BYTES,
         proxy: str | Literal[True] | None = True,
         on_message: MessageTap | None = None,
+        resume: ResumePolicy | None = None,
     ) -> None:
         subprotocol_for(encoding)  # ValueError for an unknown encoding
         self.url = url
@@ -342,6 +379,11 @@ class AsyncClient:
         self._ids = itertools.count(1)
         self._connection_error: LipstreamServerError | None = None
         self._closed: ConnectionClosed | None = None
+        self._resume = resume
+        self._send_lock = asyncio.Lock()
+        self._resuming: asyncio.Task[None] | None = None
+        self._resume_attempt = 0
+        self._closing = False
         self.warnings: list[LipstreamClientError] = []
         """Non-fatal errors that concern no open request (e.g. ``unknown_request``)."""
 
@@ -361,6 +403,9 @@ class AsyncClient:
         """Open the WebSocket; HandshakeRejected if the server refuses the upgrade."""
         if self._connection is not None:
             raise LipstreamClientError("the client is already connected")
+        await self._open()
+
+    async def _open(self) -> None:
         headers = {"Authorization": f"Bearer {self._token}"} if self._token else None
         try:
             self._connection = await connect(
@@ -391,7 +436,15 @@ class AsyncClient:
         )
 
     async def close(self) -> None:
-        """Close with 1000 and wait for the reader; open requests end with ConnectionClosed."""
+        """Close with 1000 and wait for the reader; open requests end with ConnectionClosed
+        (also those waiting to be resumed)."""
+        self._closing = True
+        if self._resuming is not None:
+            self._resuming.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._resuming
+            self._resuming = None
+            self._give_up(closed_error(CloseCode.NORMAL, "closed by the client"))
         if self._connection is None:
             return
         await self._connection.close(CloseCode.NORMAL)
@@ -408,11 +461,15 @@ class AsyncClient:
         return frozenset(self._streams)
 
     async def wait_closed(self) -> ConnectionClosed:
-        """Wait until the connection closes (by either side) and say why."""
+        """Wait until the connection closes (by either side) for good, after any resumes,
+        and say why."""
         if self._reader is None:
             raise LipstreamClientError("the client is not connected")
-        await asyncio.shield(self._reader)
-        assert self._closed is not None
+        while self._closed is None:
+            if self._resuming is not None:
+                await asyncio.shield(self._resuming)
+            else:
+                await asyncio.shield(self._reader)
         return self._closed
 
     async def start(
@@ -454,14 +511,35 @@ class AsyncClient:
             raise ValueError(f"request id {request.id!r} is still open on this connection")
         self._check_open()
         encoded = encode(request, self.encoding)  # EncodeError before registering
-        stream = Stream(self, request)
+        log = RequestLog(request) if self._resume is not None else None
+        stream = Stream(self, request, log)
         self._streams[request.id] = stream
         try:
-            await self._send_encoded(encoded)
+            async with self._send_lock:
+                if self._connection is not None:  # else the resume starts it
+                    await self._send_encoded(encoded)
+        except ConnectionClosed:
+            if self._resuming is None or request.id not in self._streams:
+                self._streams.pop(request.id, None)
+                raise
         except BaseException:
             self._streams.pop(request.id, None)
             raise
         return stream
+
+    async def _send_logged(self, stream: Stream) -> None:
+        """Send the input ``stream`` recorded and has not sent; while the connection is
+        down, leave it for the resume."""
+        assert stream._log is not None
+        async with self._send_lock:
+            if self._connection is None:
+                return
+            try:
+                for message in stream._log.unsent():
+                    await self._send_encoded(encode(message, self.encoding))
+            except ConnectionClosed:
+                if self._resuming is None or stream.id not in self._streams:
+                    raise
 
     async def send(self, message: ClientMessage) -> None:
         """Validate and send any client message (``Stream`` does this for its request)."""
@@ -476,13 +554,15 @@ class AsyncClient:
     def _check_open(self) -> None:
         if self._closed is not None:
             raise self._closed
-        if self._connection is None:
+        if self._connection is None and self._resuming is None:
             raise LipstreamClientError("the client is not connected; use `async with` or connect()")
 
     async def _send_encoded(self, payload: bytes | str) -> None:
-        assert self._connection is not None
+        connection = self._connection
+        if connection is None:  # lost while a resume was sending
+            raise self._closed or closed_error(None, "the connection was lost")
         try:
-            await self._connection.send(payload)
+            await connection.send(payload)
         except WebSocketClosed:
             if self._reader is not None:
                 await asyncio.shield(self._reader)
@@ -492,6 +572,7 @@ class AsyncClient:
         try:
             async for data in connection:
                 received_at = time.perf_counter()
+                self._resume_attempt = 0
                 message = decode(
                     data, self.encoding, max_size=self._max_message_bytes, sender="server"
                 )
@@ -541,7 +622,67 @@ class AsyncClient:
     def _on_closed(self, connection: ClientConnection) -> None:
         code = connection.close_code
         reason = connection.close_reason or ""
-        self._closed = closed_error(code, reason, self._connection_error)
+        closed = closed_error(code, reason, self._connection_error)
+        self._connection_error = None
+        kept = self._resumable(closed)
+        for stream in list(self._streams.values()):
+            if stream not in kept:
+                del self._streams[stream.id]
+                stream._fail(closed)
+        if not kept:
+            self._closed = closed
+            return
+        self._connection = None
+        for stream in kept:
+            assert stream._log is not None
+            stream._log.rewind()
+        if self._resuming is None:
+            self._resuming = asyncio.create_task(
+                self._resume_requests(closed), name=f"lipstream-resume {self.url}"
+            )
+
+    def _resumable(self, closed: ConnectionClosed) -> list[Stream]:
+        """The open requests to resume after ``closed``: none without a policy, after
+        ``close()`` or after a close that a retry would not fix."""
+        if self._resume is None or self._closing or closed.code not in RESUMABLE_CLOSE_CODES:
+            return []
+        return [s for s in self._streams.values() if s._log is not None and s._log.resumable]
+
+    async def _resume_requests(self, lost: ConnectionClosed) -> None:
+        """Reconnect with backoff and replay every kept request (``RequestLog.replay``);
+        after ``attempts`` failures in a row, fail them with ``ResumeFailed``."""
+        assert self._resume is not None
+        policy = self._resume
+        last: LipstreamClientError = lost
+        while self._streams and self._resume_attempt < policy.attempts:
+            attempt = self._resume_attempt
+            self._resume_attempt += 1
+            await asyncio.sleep(
+                retry_delay_s(last, attempt, policy.backoff_s, policy.max_backoff_s)
+            )
+            try:
+                async with self._send_lock:
+                    await self._open()
+                    for stream in list(self._streams.values()):
+                        assert stream._log is not None
+                        for message in stream._log.replay():
+                            await self._send_encoded(encode(message, self.encoding))
+            except (LipstreamClientError, OSError, TimeoutError) as error:
+                last = (
+                    error
+                    if isinstance(error, LipstreamClientError)
+                    else LipstreamClientError(f"could not connect to {self.url}: {error!r}")
+                )
+                self._connection = None
+                continue
+            self._resuming = None
+            return
+        self._resuming = None
+        if self._streams:
+            self._give_up(ResumeFailed(lost, last, self._resume_attempt))
+
+    def _give_up(self, error: ConnectionClosed) -> None:
+        self._closed = error
         for stream in self._streams.values():
-            stream._fail(self._closed)
+            stream._fail(error)
         self._streams.clear()

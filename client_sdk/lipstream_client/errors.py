@@ -55,6 +55,7 @@ EMPTY_TEXT = "empty_text"
 TEXT_TOO_LONG = "text_too_long"
 UNSPEAKABLE_TEXT = "unspeakable_text"
 SPEECH_FAILED = "speech_failed"
+RESUME_MISMATCH = "resume_mismatch"
 
 # Connection-level errors: the server closes the connection after sending them.
 RATE_LIMITED = "rate_limited"
@@ -245,6 +246,12 @@ ERROR_CODES: dict[str, ErrorCodeInfo] = {
     ),
     REQUEST_TIMEOUT: ErrorCodeInfo(
         "no message for the request arrived within the request timeout", "server", "request"
+    ),
+    RESUME_MISMATCH: ErrorCodeInfo(
+        "a resuming start names a fidelity rung this server's model lacks, so the frames the "
+        "client holds cannot be continued",
+        "server",
+        "request",
     ),
     RATE_LIMITED: ErrorCodeInfo(
         "the connection exceeded its message rate",

@@ -9,7 +9,8 @@ carrying its stable ``code``; a closed connection becomes a
 asked it to wait first (``details.retry_after_ms`` of ``server_busy``, or an
 HTTP ``Retry-After``), which ``retry_delay_s`` honours. A refused HTTP upgrade
 is a ``HandshakeRejected``; a server message the codec rejects is a
-``ProtocolViolation``.
+``ProtocolViolation``; a client that could not resume its requests after a
+lost connection raises ``ResumeFailed``.
 """
 
 from __future__ import annotations
@@ -107,6 +108,19 @@ class ServerBusy(ConnectionClosed):
 
 class ServerGoingAway(ConnectionClosed):
     """Closed with 1001 (drained for shutdown) or 1012 (restarted): reconnect and retry."""
+
+
+class ResumeFailed(ConnectionClosed):
+    """The connection was lost (``lost``) and a client with a ``ResumePolicy`` could not
+    resume its requests: ``attempts`` connection attempts in a row failed, the last with
+    ``last``."""
+
+    def __init__(self, lost: ConnectionClosed, last: LipstreamClientError, attempts: int) -> None:
+        super().__init__(lost.code, lost.reason, lost.error)
+        self.lost = lost
+        self.last = last
+        self.attempts = attempts
+        self.args = (f"{lost}; {attempts} attempts to resume failed, the last: {last}",)
 
 
 class HandshakeRejected(LipstreamClientError):

@@ -104,6 +104,22 @@ class OutputProfile:
 
 
 @dataclass(frozen=True, slots=True)
+class Resume:
+    """A ``start`` that continues a request an earlier connection lost.
+
+    The client already holds the request's frames ``0 .. frames - 1`` and its
+    ``frames`` blocks ``0 .. seq - 1``; it re-sends the request's whole input
+    after this ``start``. The server sends only the frames from index ``frames``
+    on, numbering their blocks from ``seq``. ``fidelity`` is the rung the first
+    ``ready`` named, so that the frames are those of the same rung.
+    """
+
+    frames: int
+    seq: int
+    fidelity: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
 class Start:
     """Open request ``id``: synthesize ``character``'s face with ``engine`` at ``fps`` Hz.
 
@@ -113,7 +129,7 @@ class Start:
     covers t to sending the frame for t. ``options`` go to the engine.
     ``phoneme_source`` names the notation of the phoneme labels (e.g.
     ``arpabet``, ``espeak``, ``ipa``); None reads them with the server's
-    automatic detection.
+    automatic detection. ``resume`` continues a request a lost connection cut off.
     """
 
     type: ClassVar[str] = "start"
@@ -129,6 +145,7 @@ class Start:
     latency_budget_ms: float | None = None
     options: JsonMap = field(default_factory=_empty_map)
     phoneme_source: str | None = None
+    resume: Resume | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -50,6 +50,7 @@ from .messages import (
     Ready,
     Start,
 )
+from .resume import ResumePolicy
 
 T = TypeVar("T")
 _UNSET: Any = object()
@@ -168,6 +169,7 @@ class Client:
         max_message_bytes: int = DEFAULT_MAX_MESSAGE_BYTES,
         proxy: str | Literal[True] | None = True,
         on_message: MessageTap | None = None,
+        resume: ResumePolicy | None = None,
     ) -> None:
         self.timeout = timeout
         self._async = AsyncClient(
@@ -180,6 +182,7 @@ class Client:
             max_message_bytes=max_message_bytes,
             proxy=proxy,
             on_message=on_message,
+            resume=resume,
         )
         self._thread: _LoopThread | None = None
 

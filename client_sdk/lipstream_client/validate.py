@@ -89,6 +89,7 @@ from .messages import (
     PhonemeItem,
     Phonemes,
     Ready,
+    Resume,
     Sender,
     Start,
     Text,
@@ -171,7 +172,16 @@ def _start(payload: Mapping[str, Any], encoding: Encoding) -> Start:
     obj = _object(
         payload,
         ("id", "engine", "character"),
-        ("fps", "channels", "output", "emotion", "latency_budget_ms", "options", "phoneme_source"),
+        (
+            "fps",
+            "channels",
+            "output",
+            "emotion",
+            "latency_budget_ms",
+            "options",
+            "phoneme_source",
+            "resume",
+        ),
     )
     if present(obj, "channels") and present(obj, "output"):
         raise InvalidField(INVALID_MESSAGE, None, "give either 'channels' or 'output', not both")
@@ -192,6 +202,19 @@ def _start(payload: Mapping[str, Any], encoding: Encoding) -> Start:
         ),
         options=read_json_map(obj["options"], "options") if present(obj, "options") else {},
         phoneme_source=_optional_text(obj, "phoneme_source", "", MAX_PHONEME_SOURCE_LENGTH),
+        resume=_resume(obj["resume"]) if present(obj, "resume") else None,
+    )
+
+
+def _resume(value: object) -> Resume:
+    where = "resume"
+    obj = read_object(value, where, ("frames", "seq"), ("fidelity",))
+    return Resume(
+        frames=read_integer(obj["frames"], f"{where}.frames"),
+        seq=read_integer(obj["seq"], f"{where}.seq"),
+        fidelity=read_text(obj["fidelity"], f"{where}.fidelity", MAX_NAME_LENGTH)
+        if present(obj, "fidelity")
+        else None,
     )
 
 

@@ -34,6 +34,7 @@ from .messages import (
     PhonemeItem,
     Phonemes,
     Ready,
+    Resume,
     Start,
     Text,
 )
@@ -66,8 +67,13 @@ def _start(message: Start, encoding: Encoding) -> Payload:
             "latency_budget_ms": message.latency_budget_ms,
             "options": dict(message.options) or None,
             "phoneme_source": message.phoneme_source,
+            "resume": _resume(message.resume) if message.resume is not None else None,
         }
     )
+
+
+def _resume(resume: Resume) -> Payload:
+    return _compact({"frames": resume.frames, "seq": resume.seq, "fidelity": resume.fidelity})
 
 
 def _output(profile: OutputProfile) -> Payload:

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 from lipstream_client.messages import NAMINGS, VISEME_SETS
 
 from ._version import __version__
-from .config import Settings, demo_model_path, load_settings
+from .config import ServerSettings, Settings, demo_model_path, load_settings
 from .errors import LipstreamError
 from .exports import FORMATS, MOHO_FPS
 from .loadtest.command import add_loadtest_parser
@@ -155,6 +155,9 @@ def _serve(args: argparse.Namespace, settings: Settings) -> None:
         registry: ModelRegistry | None = ModelRegistry.load(
             models.resolve(), strict=server.strict_models
         )
+    if args.ray:
+        _serve_on_ray(args, settings, models.resolve(), server)
+        return
     if server.workers > 1:
         registry = None
     with multiprocess_directory(server.workers):
@@ -165,6 +168,22 @@ def _serve(args: argparse.Namespace, settings: Settings) -> None:
             server,
             registry,
         )
+
+
+def _serve_on_ray(
+    args: argparse.Namespace, settings: Settings, models: Path, server: ServerSettings
+) -> None:
+    try:
+        from .deploy.ray import serve_on_ray
+    except ImportError as error:
+        raise LipstreamError(
+            f'--ray needs Ray Serve: pip install "lipstream[ray]" ({error})',
+            where="--ray",
+            code="missing_dependency",
+        ) from None
+    host = args.host or settings.host
+    port = settings.port if args.port is None else args.port
+    serve_on_ray(models, host, port, server, args.replicas)
 
 
 def _stale_demo(models: Path) -> bool:
@@ -353,6 +372,17 @@ def _parser() -> argparse.ArgumentParser:
         "--workers",
         type=_positive_int,
         help="worker processes sharing the memory-mapped models (default: $LIPSTREAM_WORKERS or 1)",
+    )
+    serve.add_argument(
+        "--ray",
+        action="store_true",
+        help='serve on a local Ray Serve instance (pip install "lipstream[ray]")',
+    )
+    serve.add_argument(
+        "--replicas",
+        type=_positive_int,
+        default=1,
+        help="Ray Serve replicas with --ray, each loading the models once (default: 1)",
     )
     serve.add_argument(
         "--log-level",

@@ -17,6 +17,7 @@ from lipstream_client.float32 import pack_float32
 from lipstream_client.messages import (
     DONE_REASONS,
     MAX_FPS,
+    MAX_INTEGER,
     MAX_LATENCY_BUDGET_MS,
     MAX_RATE_WPM,
     MAX_RETURN_MS,
@@ -42,6 +43,7 @@ from lipstream_client.messages import (
     PhonemeItem,
     Phonemes,
     Ready,
+    Resume,
     ServerMessage,
     Start,
     Text,
@@ -117,6 +119,14 @@ def output_profiles(draw: st.DrawFn) -> OutputProfile:
     )
 
 
+resumes = st.builds(
+    Resume,
+    frames=st.integers(0, MAX_INTEGER),
+    seq=st.integers(0, MAX_INTEGER),
+    fidelity=st.none() | names,
+)
+
+
 @st.composite
 def starts(draw: st.DrawFn) -> Start:
     selection = draw(st.sampled_from(("none", "channels", "output")))
@@ -131,6 +141,7 @@ def starts(draw: st.DrawFn) -> Start:
         latency_budget_ms=draw(st.none() | st.floats(1e-3, MAX_LATENCY_BUDGET_MS)),
         options=draw(json_maps),
         phoneme_source=draw(st.none() | phoneme_sources),
+        resume=draw(st.none() | resumes),
     )
 
 

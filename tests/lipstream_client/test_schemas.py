@@ -52,6 +52,8 @@ FIELD_NAMES = (
     "transforms",
     "multiplier",
     "lookahead_ms",
+    "resume",
+    "fidelity",
     "v",
     "type",
 )

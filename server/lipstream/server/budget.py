@@ -27,6 +27,9 @@ from lipstream_client.errors import BUDGET_INFEASIBLE
 from ..engines.base import CallCost, Rung
 from ..errors import LipstreamError
 
+CUSTOM_FIDELITY = "custom"
+"""``ready.fidelity`` when the client's options, not a rung, decide the engine's work."""
+
 
 @dataclass(frozen=True)
 class RungEstimate:

@@ -77,13 +77,20 @@ from ..engines.work import WorkGuard
 from ..errors import LipstreamError
 from ..phonemes import SOURCES
 from ..timeline import EMOTIONS
-from .budget import BudgetInfeasible, RungEstimate, choose_rung, lookahead_ms
+from .budget import (
+    CUSTOM_FIDELITY,
+    BudgetInfeasible,
+    RungEstimate,
+    choose_rung,
+    lookahead_ms,
+)
 from .calibration import PHONEME_S
 from .catalog import Catalog
 from .outgoing import Outgoing, RequestClock
 from .overload import Refusal
 from .profiles import requested_profile, resolve_profile
 from .request import ActiveRequest, RequestError, RequestLimits, RequestSpec, protocol_code
+from .resume import ResumeCursor, pinned_rung
 from .text_input import (
     engine_audio,
     phoneme_items,
@@ -96,7 +103,6 @@ from .text_input import (
 logger = logging.getLogger("lipstream.server")
 
 DEFAULT_PHONEME_SOURCE = "auto"
-CUSTOM_FIDELITY = "custom"
 _LONGEST_WAIT_MS = 86_400_000.0  # the protocol's bound on ready.lookahead_ms: a day
 REMEMBERED_IDS = 256
 _MAX_TEXT = 4096
@@ -137,6 +143,7 @@ class Session:
         self.requests: dict[str, ActiveRequest] = {}
         self.costs: dict[str, CallCost] = {}
         self.guards: dict[str, WorkGuard] = {}
+        self.resumes: dict[str, ResumeCursor] = {}
         self.ended: OrderedDict[str, DoneReason] = OrderedDict()
         self.draining = False
         self.stopped_work = 0
@@ -158,6 +165,7 @@ class Session:
         self.requests.clear()
         self.costs.clear()
         self.guards.clear()
+        self.resumes.clear()
         self.output_values = 0
         return dropped
 
@@ -306,6 +314,9 @@ class Session:
                     clock=request.spec.clock,
                 )
             ]
+        cursor = self.resumes.get(request.id)
+        if cursor is not None:
+            outgoing = cursor.filter(outgoing)
         if isinstance(received, (End, Cancel, Interrupt)):
             self._forget(request.id)
             self._remember(request.id, _REASONS[type(received)])
@@ -384,6 +395,7 @@ class Session:
             self.output_values -= request.output_values
         self.costs.pop(identifier, None)
         self.guards.pop(identifier, None)
+        self.resumes.pop(identifier, None)
 
     def _remember(self, identifier: str, reason: DoneReason) -> None:
         self.ended[identifier] = reason
@@ -448,6 +460,8 @@ class Session:
         self.requests[start.id] = request
         self.costs[start.id] = cost
         self.guards[start.id] = guard
+        if start.resume is not None:
+            self.resumes[start.id] = ResumeCursor.of(start.resume)
         self.ended.pop(start.id, None)
         return [Outgoing(ready, request.spec.clock)]
 
@@ -462,7 +476,8 @@ class Session:
                 code=UNKNOWN_EMOTION,
             )
         emotion = start.emotion or catalog.default_emotion(model)
-        estimate = choose_rung(catalog.ladder(model), start.latency_budget_ms)
+        ladder = catalog.ladder(model)
+        estimate = pinned_rung(ladder, start.resume) or choose_rung(ladder, start.latency_budget_ms)
         profile = resolve_profile(
             model.channels,
             requested_profile(start, catalog.preset(start.character)),

@@ -1,0 +1,1 @@
+"""Deployments of the lipstream server beyond ``lipstream serve`` (``ray``: Ray Serve)."""

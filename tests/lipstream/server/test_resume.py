@@ -1,0 +1,148 @@
+"""Resumed requests (``start.resume``) on the sans-I/O session: only the frames the client lacks.
+
+Each engine's request runs once uninterrupted, in small messages; then a
+fresh session (another worker) gets the same ``start`` with ``resume`` and
+the whole input in one message. The resumed blocks must continue the
+uninterrupted run exactly: the rows from ``resume.frames`` on, bit for bit,
+blocks numbered from ``resume.seq``, nothing before. The rung is pinned by
+name, the unknown rung is refused, and an interrupt's return to rest, which
+supersedes frames, goes out whole.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from lipstream.server.catalog import Catalog
+from lipstream.server.request import RequestLimits
+from lipstream.server.session import Session, SessionLimits
+from lipstream_client import (
+    End,
+    ErrorMessage,
+    Frames,
+    Interrupt,
+    Message,
+    PhonemeItem,
+    Phonemes,
+    Ready,
+    Resume,
+    ServerMessage,
+    Start,
+)
+from lipstream_client.errors import RESUME_MISMATCH
+
+FPS = 30.0
+SPANS = [
+    ("sil", 0.0, 0.1),
+    ("HH", 0.1, 0.18),
+    ("AH", 0.18, 0.3),
+    ("L", 0.3, 0.38),
+    ("OW", 0.38, 0.6),
+    ("M", 0.6, 0.7),
+    ("AY", 0.7, 0.95),
+    ("F", 0.95, 1.05),
+    ("R", 1.05, 1.12),
+    ("EH", 1.12, 1.3),
+    ("N", 1.3, 1.4),
+    ("D", 1.4, 1.46),
+    ("sil", 1.46, 1.7),
+]
+ITEMS = tuple(PhonemeItem(label, start, end) for label, start, end in SPANS)
+
+
+def new_session(catalog: Catalog) -> Session:
+    return Session(catalog, SessionLimits(2, RequestLimits(100, 10_000, 100.0)))
+
+
+def play(session: Session, messages: list[Message]) -> list[ServerMessage]:
+    return [
+        item.stamp(0.0).message for message in messages for item in session.handle(message, 0.0)
+    ]
+
+
+def blocks(messages: list[ServerMessage]) -> list[Frames]:
+    return [message for message in messages if isinstance(message, Frames)]
+
+
+def rows(frames: list[Frames]) -> np.ndarray:
+    return np.concatenate([np.frombuffer(b.data, "<f4").reshape(-1, b.n_channels) for b in frames])
+
+
+def uninterrupted(catalog: Catalog, start: Start) -> list[ServerMessage]:
+    """The request with its phonemes two at a time."""
+    chunks = [Phonemes(start.id, ITEMS[i : i + 2]) for i in range(0, len(ITEMS), 2)]
+    return play(new_session(catalog), [start, *chunks, End(start.id)])
+
+
+@pytest.mark.parametrize("engine", ["viseme-lerp", "anime-graph", "dam", "cohen-massaro"])
+def test_a_resumed_request_sends_exactly_the_frames_the_client_lacks(
+    catalog: Catalog, engine: str
+) -> None:
+    start = Start("a", engine, "demo", fps=FPS)
+    first = uninterrupted(catalog, start)
+    first_blocks = blocks(first)
+    [ready] = [m for m in first if isinstance(m, Ready)]
+    expected = rows(first_blocks)
+    assert len(first_blocks) >= 3 and len(expected) == int(1.7 * FPS) + 1
+    # The client held the first two blocks when the connection broke.
+    held = first_blocks[1].end_frame
+    resume = Resume(frames=held, seq=2, fidelity=ready.fidelity)
+    answers = play(
+        new_session(catalog),
+        [replace(start, resume=resume), Phonemes("a", ITEMS), End("a")],
+    )
+    resumed = blocks(answers)
+    assert [m.type for m in answers if not isinstance(m, Frames)] == ["ready", "done"]
+    assert [b.seq for b in resumed] == list(range(2, 2 + len(resumed)))
+    assert resumed[0].first_frame == held
+    assert all(b.first_frame == a.end_frame for a, b in zip(resumed, resumed[1:], strict=False))
+    np.testing.assert_array_equal(rows(resumed), expected[held:])
+    assert answers[-1].stats.frames == len(expected)  # type: ignore[union-attr]
+
+
+def test_the_resumed_rung_is_the_named_one_not_the_budgets(catalog: Catalog) -> None:
+    # Without resume, no budget means the first rung (lerp); resume pins the causal one.
+    start = Start("a", "viseme-lerp", "demo", fps=FPS, latency_budget_ms=20.0)
+    original = uninterrupted(catalog, start)
+    [ready] = [m for m in original if isinstance(m, Ready)]
+    assert ready.fidelity == "causal"
+    unbudgeted = replace(start, latency_budget_ms=None)
+    resume = Resume(frames=5, seq=1, fidelity="causal")
+    answers = play(
+        new_session(catalog), [replace(unbudgeted, resume=resume), Phonemes("a", ITEMS), End("a")]
+    )
+    [resumed_ready] = [m for m in answers if isinstance(m, Ready)]
+    assert resumed_ready.fidelity == "causal"
+    np.testing.assert_array_equal(rows(blocks(answers)), rows(blocks(original))[5:])
+
+
+def test_a_rung_the_model_lacks_is_a_resume_mismatch(catalog: Catalog) -> None:
+    start = Start("a", "viseme-lerp", "demo", resume=Resume(3, 1, "greedy_tile10"))
+    answers = play(new_session(catalog), [start])
+    [error] = answers
+    assert isinstance(error, ErrorMessage)
+    assert (error.code, error.id, error.fatal) == (RESUME_MISMATCH, "a", True)
+    assert error.message.startswith("resume.fidelity: ")
+    assert "lerp, damped_lead, causal" in error.message
+
+
+def test_an_interrupts_return_to_rest_goes_out_whole(catalog: Catalog) -> None:
+    start = Start("a", "viseme-lerp", "demo", fps=FPS)
+    interrupt = Interrupt("a", at=0.5, return_ms=100.0)
+    first = play(new_session(catalog), [start, Phonemes("a", ITEMS), interrupt])
+    first_blocks = blocks(first)
+    return_block = first_blocks[-1]
+    assert return_block.first_frame == 15 < first_blocks[-2].end_frame
+    held = first_blocks[-2].end_frame
+    answers = play(
+        new_session(catalog),
+        [replace(start, resume=Resume(held, 1)), Phonemes("a", ITEMS), interrupt],
+    )
+    resumed = blocks(answers)
+    assert [(b.seq, b.first_frame, b.n_frames) for b in resumed] == [
+        (1, return_block.first_frame, return_block.n_frames)
+    ]
+    assert resumed[0].data == return_block.data
