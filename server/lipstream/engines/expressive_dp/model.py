@@ -225,8 +225,11 @@ class ExpressiveDpModel(Model):
         return dict(self.stored)
 
     def save(self, path: str | Path) -> None:
+        """The model directory, with ``contamination.json`` when nodes are contaminated."""
         super().save(path)
-        self.contamination = _moved(self.contamination, Path(path))
+        nodes = self.contamination.nodes()
+        if nodes:
+            Contamination(self.nodes.size, Path(path)).change(nodes, [])
 
     @classmethod
     def from_arrays(
@@ -278,12 +281,3 @@ def _index(value: Any) -> int | None:
     if isinstance(value, int) and value >= 0:
         return value
     return None
-
-
-def _moved(contamination: Contamination, directory: Path) -> Contamination:
-    """The contamination of a model just saved to ``directory``, carried over."""
-    moved = Contamination(contamination.size, directory)
-    nodes = contamination.nodes()
-    if nodes:
-        moved.change(nodes, [])
-    return moved
