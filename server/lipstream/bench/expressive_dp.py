@@ -106,10 +106,10 @@ def _lags(model: ExpressiveDpModel, heldout: Corpus) -> list[dict[str, Any]]:
         for utterance, best in zip(heldout.utterances, full):
             stats, seconds = _run(model, utterance.phones, emotion=utterance.emotion, lag=lag)
             gaps.append((stats["path_cost"] - best["path_cost"]) / best["path_cost"])
-            differing = sum(a != b for a, b in zip(stats["nodes"], best["nodes"]))
+            differing = sum(a != b for a, b in zip(stats["nodes"].split(), best["nodes"].split()))
             lines += differing > 0
             nodes += differing
-            total += len(best["nodes"])
+            total += len(best["nodes"].split())
             elapsed += seconds
             phonemes += len(utterance.phones)
         rows.append(

@@ -18,7 +18,7 @@ the start), with the shared critically damped filter (``damped``) at
 r(t + shift). The frame at t is final once the input covers t + shift.
 
 Stats: ``nodes`` (the committed node of every span, silences filled into gaps
-included), ``path_cost`` (their Eq. 4 cost) and ``candidates`` (nodes priced).
+included, as space-separated ids: engine stats on the wire are scalars), ``path_cost`` (their Eq. 4 cost) and ``candidates`` (nodes priced).
 
 Constraints name client phoneme indices (the spans as sent, not the silences
 filled into gaps); a constraint whose index the finished input never reached
@@ -75,7 +75,7 @@ class PathSynthesizer(RenderingSynthesizer):
         self.client_spans = 0
         self.constrained: dict[int, int] = {}
         self.path: list[int] = []
-        self.stats = {"frames": 0, "path_cost": 0.0, "candidates": 0, "nodes": []}
+        self.stats = {"frames": 0, "path_cost": 0.0, "candidates": 0, "nodes": ""}
 
     def feed(self, spans: Iterable[SpanLike], audio: Audio | None = None) -> None:
         if self.finished:
@@ -107,7 +107,7 @@ class PathSynthesizer(RenderingSynthesizer):
         )  # fmt: skip
         self.stats["candidates"] += priced
         self.stats["path_cost"] += cost
-        self.stats["nodes"] = list(self.path)
+        self.stats["nodes"] = " ".join(map(str, self.path))
 
     def finish(self) -> np.ndarray:
         unreached = sorted(index for index in self.constraints if index >= self.client_spans)

@@ -35,7 +35,7 @@ def _path(model: ExpressiveDpModel, spans: list[PhonemeSpan], **options: Any) ->
     synthesizer = model.start(fps=60, **options)
     synthesizer.feed(spans)
     synthesizer.finish()
-    return list(synthesizer.stats["nodes"])  # type: ignore[attr-defined]
+    return [int(node) for node in str(synthesizer.stats["nodes"]).split()]
 
 
 def _cost(model: ExpressiveDpModel, spans: list[PhonemeSpan], **options: Any) -> float:
