@@ -80,7 +80,7 @@ def direct_smoothing(leaving_a: np.ndarray, arriving_p: np.ndarray) -> float:
             value = leaving_a[m, k] + arriving_p[m, k]
             squares += value * value
         total += math.sqrt(squares)
-    return total * (interior + 1)
+    return float(total * (interior + 1))
 
 
 @njit(cache=True, fastmath=False)
@@ -102,12 +102,12 @@ def transition_cost(
     if p == a:
         return 0.0
     if p < 0:
-        return packed[0]
+        return float(packed[0])
     cost = packed[2] * gap(first_position[b], last_position[a])
     cost += gap(first_velocity[b], last_velocity[a])
     if viseme[a] != viseme[p]:
         cost += packed[3]
-    return cost + packed[1] * direct_smoothing(leaving[a], arriving[p])
+    return float(cost + packed[1] * direct_smoothing(leaving[a], arriving[p]))
 
 
 def unary_costs(

@@ -154,4 +154,4 @@ def _rest_pose(corpus: Any, basis: MotionBasis) -> np.ndarray:
     frames = np.concatenate(rows) if rows and sum(map(len, rows)) else None
     if frames is None or len(frames) == 0:
         return np.zeros(basis.n_components)
-    return basis.project(frames.mean(axis=0, keepdims=True))[0]
+    return np.asarray(basis.project(frames.mean(axis=0, keepdims=True))[0])

@@ -138,7 +138,7 @@ class Renderer:
         k = len(spans) - 1
         if spans[k].phoneme != SILENCE:
             return np.asarray(self.nodes.node_frames(int(path[k]))[-1])
-        return self._silence(spans, path, k, np.ones(1))[0]
+        return np.asarray(self._silence(spans, path, k, np.ones(1))[0])
 
     def grid(
         self, spans: Sequence[PhonemeSpan], path: Sequence[int], low: int, high: int

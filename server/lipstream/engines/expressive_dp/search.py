@@ -162,10 +162,10 @@ def _step(
     common = (space.nodes.pre, f.viseme, f.first_position, f.last_position, f.first_velocity,
               f.last_velocity, f.leaving, f.arriving, space.packed)  # fmt: skip
     if not fast:
-        return _exact_step(prev_nodes, prev_f, next_nodes, next_u, *common)  # type: ignore[no-any-return]
+        return _exact_step(prev_nodes, prev_f, next_nodes, next_u, *common)
     position = np.full(space.nodes.size, -1, dtype=np.int64)
     position[prev_nodes] = np.arange(len(prev_nodes))
-    return _fast_step(prev_nodes, prev_f, next_nodes, next_u, position, *common)  # type: ignore[no-any-return]
+    return _fast_step(prev_nodes, prev_f, next_nodes, next_u, position, *common)
 
 
 def _candidates(

@@ -18,7 +18,8 @@ the start), with the shared critically damped filter (``damped``) at
 r(t + shift). The frame at t is final once the input covers t + shift.
 
 Stats: ``nodes`` (the committed node of every span, silences filled into gaps
-included, as space-separated ids: engine stats on the wire are scalars), ``path_cost`` (their Eq. 4 cost) and ``candidates`` (nodes priced).
+included, as space-separated ids: engine stats on the wire are scalars),
+``path_cost`` (their Eq. 4 cost) and ``candidates`` (nodes priced).
 
 Constraints name client phoneme indices (the spans as sent, not the silences
 filled into gaps); a constraint whose index the finished input never reached
