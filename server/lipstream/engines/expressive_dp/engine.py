@@ -28,7 +28,7 @@ from .nodes import EMOTION_INDEX, NodeFeatures, build_nodes
 from .postprocess import Renderer
 from .search import LayerSpec, SearchSpace
 from .synthesizer import KappaCurves, extend_path
-from .weights import frame_error, search_weights, total_error, validation_split
+from .weights import DEFAULTS, frame_error, search_weights, total_error, validation_split
 
 
 class ExpressiveDpEngine(Engine):
@@ -61,7 +61,7 @@ class ExpressiveDpEngine(Engine):
         with threadpool_limits(limits=1):
             database_rows, validation_rows = validation_split(len(corpus.utterances))
             cv = None
-            alphas = np.array([1.0, 0.05, 1.0, 0.5, 4.0, 2.0])
+            alphas = DEFAULTS.copy()
             if validation_rows:
                 part = replace(corpus, utterances=[corpus.utterances[i] for i in database_rows])
                 held = [corpus.utterances[i] for i in validation_rows]
