@@ -48,11 +48,11 @@ def test_the_bounds_hold_for_every_pair() -> None:
                 assert cost <= space.bounds.into[b] and cost <= space.bounds.out_of[a]
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=25, deadline=None)
 @given(
     seed=st.integers(0, 2**32 - 1),
     n=st.integers(2, 5),
-    t=st.integers(1, 4),
+    t=st.integers(1, 3),
     constrain=st.booleans(),
     contaminate=st.booleans(),
 )
