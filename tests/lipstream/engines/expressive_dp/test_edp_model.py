@@ -14,7 +14,7 @@ from lipstream.corpus import Corpus
 from lipstream.engines import load_model
 from lipstream.engines.base import Model
 from lipstream.engines.expressive_dp import ExpressiveDpModel
-from lipstream.errors import InvalidRequestError
+from lipstream.errors import InvalidRequestError, ModelStoreError
 from lipstream.phonemes import PHONEME_INDEX, SILENCE
 from lipstream.timeline import EMOTIONS, PhonemeSpan
 
@@ -139,3 +139,24 @@ def test_contamination_is_persisted_beside_the_model_honoured_and_reversible(
     assert first.contamination.change([], marked) == []
     assert _path(second, spans) == before
     assert _digest(tmp_path / "m" / "arrays.npz") == arrays
+
+
+@pytest.mark.parametrize(
+    ("name", "damage"),
+    [
+        ("node_pre", lambda a: np.full_like(a, 10**6)),
+        ("node_suc", lambda a: np.roll(a, 1)),
+        ("alphas", lambda a: np.array([1.0, 1.0, 1.0, 1.5, 1.0, 1.0])),
+        ("map_points", lambda a: a[:-1]),
+    ],
+)
+def test_a_damaged_array_is_refused_at_load_naming_it(
+    model: ExpressiveDpModel, tmp_path: Path, name: str, damage: Any
+) -> None:
+    model.save(tmp_path / "m")
+    arrays = dict(np.load(tmp_path / "m" / "arrays.npz"))
+    arrays[name] = damage(arrays[name])
+    np.savez(tmp_path / "m" / "arrays.npz", **arrays)
+    with pytest.raises(ModelStoreError) as caught:
+        load_model(tmp_path / "m")
+    assert caught.value.code == "model_invalid" and name in str(caught.value)
