@@ -5,7 +5,8 @@ temporary name and renamed over, so a reader never sees half of it), never the
 model's arrays. A model re-reads the file whenever its modification time or
 size changes, checked when a search starts, so every worker process serving the
 model honours a change from the next search on. A model without a directory
-(trained in memory) keeps the set in memory. A file that is not a JSON object
+(trained in memory) keeps the set in memory. At least one node stays
+uncontaminated. A file that is not a JSON object
 ``{"nodes": [ids]}`` of node ids of this model is a ``model_invalid`` error
 naming the file.
 """
@@ -60,6 +61,11 @@ class Contamination:
             mask = self._mask.copy()
             mask[marked] = True
             mask[restored] = False
+            if mask.all():
+                raise InvalidRequestError(
+                    "marking every node contaminated would leave nothing to search",
+                    where="mark",
+                )
             self._write(mask)
             self._mask = mask
             return [int(node) for node in np.flatnonzero(mask)]

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from ...errors import InvalidRequestError
 from .costs import NodeBounds, direct_smoothing, gap, transition_cost, unary_costs
 from .nodes import NodeDatabase, NodeFeatures
 
@@ -175,7 +176,10 @@ def _candidates(
     unary = space.unary(layers[index], excluded)
     admitted = np.isfinite(unary)
     if not admitted.any():
-        raise ValueError(f"layer {index} admits no node")
+        raise InvalidRequestError(
+            f"phoneme {index} of the search admits no node: every node is contaminated",
+            where="contamination",
+        )
     if fast:
         score = unary.copy()
         if index > 0 or has_before:

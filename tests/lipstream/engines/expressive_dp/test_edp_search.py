@@ -117,3 +117,15 @@ def test_pruning_drops_nodes_and_keeps_the_optimum() -> None:
     fast = search(pruned_space, layers, excluded, fast=True)
     assert fast.cost == pytest.approx(exact.cost, rel=1e-9)
     assert fast.candidates < exact.candidates / 4
+
+
+def test_contaminating_every_node_is_refused() -> None:
+    from lipstream.engines.expressive_dp.contamination import Contamination
+    from lipstream.errors import InvalidRequestError
+
+    store = Contamination(3, None)
+    assert store.change([0, 1], []) == [0, 1]
+    with pytest.raises(InvalidRequestError) as caught:
+        store.change([2], [])
+    assert caught.value.where == "mark"
+    assert store.nodes() == [0, 1]
