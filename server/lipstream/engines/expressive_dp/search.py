@@ -28,7 +28,7 @@ paths of equal cost; the cost is the same.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
@@ -57,11 +57,18 @@ class SearchSpace:
     features: NodeFeatures
     bounds: NodeBounds
     packed: np.ndarray
+    observed: dict[tuple[int, int], np.ndarray] = field(default_factory=dict, compare=False)
+    """OC + EMP per (phoneme, emotion), filled on first use."""
 
     def unary(self, layer: LayerSpec, excluded: np.ndarray) -> np.ndarray:
         """U(o) for every node, infinite where the node is not admitted."""
-        viseme = self.features.viseme
-        cost = unary_costs(self.nodes, viseme, layer.phoneme, layer.emotion, self.packed)
+        key = (layer.phoneme, layer.emotion)
+        cost = self.observed.get(key)
+        if cost is None:  # a race only computes the same read-only array twice
+            viseme = self.features.viseme
+            cost = unary_costs(self.nodes, viseme, layer.phoneme, layer.emotion, self.packed)
+            cost.setflags(write=False)
+            self.observed[key] = cost
         if layer.constrained >= 0:
             only = np.full(len(cost), INF)
             only[layer.constrained] = cost[layer.constrained]
@@ -208,7 +215,8 @@ def search(
     members: list[np.ndarray] = []
     nodes, f = _candidates(space, layers, excluded, 0, before >= 0, fast)
     if before >= 0:
-        f = f + np.array([space.tc(before, int(b)) for b in nodes])
+        start = np.array([before], dtype=np.int64)
+        f, _ = _step(space, start, np.zeros(1), nodes, f, fast=False)
     priced = len(nodes)
     if fast:
         order = np.argsort(f, kind="stable")
