@@ -14,7 +14,8 @@ f0 = ω / 2π, so its -3 dB frequency is ``HALF_POWER_RATIO`` f0.
 
 ``run`` steps a sequence of (target, ω, dt) pieces and records the value
 after the pieces marked as frames; both causal engines build those pieces
-from what the input has made final.
+from what the input has made final. ``filter_raw`` runs the filter over a raw curve
+sampled at frame times, carrying its state from call to call.
 """
 
 from __future__ import annotations
@@ -104,3 +105,22 @@ class DampedState:
             out,
         )
         return out
+
+
+def filter_raw(
+    state: DampedState | None, raw: np.ndarray, omegas: np.ndarray, times: np.ndarray
+) -> tuple[DampedState, np.ndarray]:
+    """The filter following ``raw`` (m, components) at rates ``omegas`` (m,) over frame
+    ``times`` (m,); ``state`` is the filter at the frame before (None: ``times`` starts at
+    frame 0, where the filter rests on raw[0]). The state after and the values."""
+    pieces = []
+    if state is None:
+        state = DampedState.at_rest(raw[0], float(times[0]))
+        pieces.append(state.x[None].copy())
+        raw, omegas, times = raw[1:], omegas[1:], times[1:]
+    if len(times):
+        steps = np.diff(np.concatenate(([state.t], times)))
+        rates = np.repeat(omegas[:, None], raw.shape[1], axis=1)
+        pieces.append(state.run(raw, rates, steps, np.ones(len(times), dtype=np.bool_)))
+        state.t = float(times[-1])
+    return state, np.concatenate(pieces)

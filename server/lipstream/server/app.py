@@ -10,7 +10,8 @@ The lifespan also starts the load monitor that admission follows
 (``overload``), throttles repeated log lines (``log_throttle``) and logs
 the limits in force. Routes:
 ``/healthz``, ``/readyz``, ``/v1/engines``, ``/v1/characters``,
-``POST /v1/synthesize``, ``GET /metrics``, the WebSocket ``/v1/stream`` and
+``POST /v1/synthesize``, ``GET /metrics``, the WebSocket ``/v1/stream``, the
+``expressive-dp`` phoneme-map and contamination routes (``phoneme_maps``) and
 the OpenAPI docs (``/docs``, served with its assets so it works offline,
 and ``/openapi.json``), and the demo page ``/`` (``demo_page``).
 """
@@ -35,7 +36,7 @@ from ..engines import ENGINES
 from ..errors import LipstreamError
 from ..models import ModelRegistry
 from ..status import phase
-from . import demo_page, docs_page, openapi
+from . import demo_page, docs_page, openapi, phoneme_maps
 from .catalog import Catalog
 from .handshake import head_limits
 from .lifecycle import Lifecycle, install_drain_on_signals
@@ -192,6 +193,8 @@ def create_app(
     @app.websocket("/v1/stream")
     async def stream(websocket: WebSocket) -> None:
         await stream_endpoint(websocket)
+
+    phoneme_maps.install(app)
 
     return app
 

@@ -136,7 +136,7 @@ async def synthesize(request: Request, state: ServerState) -> Response:
     try:
         request_encoding = _request_encoding(request)
         response_encoding = _response_encoding(request, request_encoding)
-        _authorize(request, state)
+        authorize(request, state)
         _admit(state)
         body = await _read_body(request, state.settings.max_body_bytes)
         messages = _messages(_parse(body, request_encoding), request_encoding)
@@ -146,7 +146,7 @@ async def synthesize(request: Request, state: ServerState) -> Response:
         )
     except HttpError as error:
         state.metrics.errors.labels(error.code).inc()
-        return _error_response(error, "json" if response_encoding == "csv" else response_encoding)
+        return error_response(error, "json" if response_encoding == "csv" else response_encoding)
     state.metrics.synthesize.observe(time.perf_counter() - started)
     return response
 
@@ -197,7 +197,7 @@ def _admit(state: ServerState) -> None:
         raise HttpError(refusal.code, refusal.message, details=refusal.details)
 
 
-def _authorize(request: Request, state: ServerState) -> None:
+def authorize(request: Request, state: ServerState) -> None:
     token = bearer_token(request.headers.get("authorization"), request.scope["query_string"])
     if not token_accepted(token, state.settings.auth_tokens):
         raise HttpError(
@@ -324,7 +324,7 @@ def _response(result: Synthesis, encoding: ResponseFormat) -> Response:
     )
 
 
-def _error_response(error: HttpError, encoding: Encoding) -> Response:
+def error_response(error: HttpError, encoding: Encoding) -> Response:
     content: dict[str, Any] = {"code": error.code, "message": error.message}
     if error.details:
         content["details"] = error.details

@@ -102,6 +102,14 @@ DEMO_LOOKAHEAD_MS = {
         "greedy_tile1_unsmoothed": 240.833,
         "causal": 0.0,
     },
+    # expressive-dp: a fixed lag of L phonemes, plus two for smoothing and interpolation
+    "expressive-dp": {
+        "lag-4": 1200.0,
+        "lag-2": 800.0,
+        "lag-1": 600.0,
+        "lag-0": 400.0,
+        "causal": 0.0,
+    },
 }
 
 

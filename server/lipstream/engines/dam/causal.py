@@ -35,7 +35,7 @@ import numpy as np
 from ...phonemes import PHONEME_INDEX as CANONICAL_INDEX
 from ...timeline import PhonemeSpan
 from ..base import RenderingSynthesizer, SynthesisRequest, fill_gaps, frame_count
-from ..damped import DampedState
+from ..damped import DampedState, filter_raw
 from ..damped_fit import best_kappa
 from .dominance import dominance, powers
 from .selection import context_cost, smooth_cost
@@ -95,25 +95,6 @@ class CausalCurve:
                     powers(u, model.coefficients.shape[1] - 1) @ model.coefficients[mode]
                 )
         return values, begun
-
-
-def filter_raw(
-    state: DampedState | None, raw: np.ndarray, omegas: np.ndarray, times: np.ndarray
-) -> tuple[DampedState, np.ndarray]:
-    """The filter following ``raw`` (m, components) at rates ``omegas`` (m,) over frame
-    ``times`` (m,); ``state`` is the filter at the frame before (None: ``times`` starts at
-    frame 0, where the filter rests on raw[0]). The state after and the values."""
-    pieces = []
-    if state is None:
-        state = DampedState.at_rest(raw[0], float(times[0]))
-        pieces.append(state.x[None].copy())
-        raw, omegas, times = raw[1:], omegas[1:], times[1:]
-    if len(times):
-        steps = np.diff(np.concatenate(([state.t], times)))
-        rates = np.repeat(omegas[:, None], raw.shape[1], axis=1)
-        pieces.append(state.run(raw, rates, steps, np.ones(len(times), dtype=np.bool_)))
-        state.t = float(times[-1])
-    return state, np.concatenate(pieces)
 
 
 def inverse_durations(

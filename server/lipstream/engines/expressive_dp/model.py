@@ -1,0 +1,283 @@
+"""The trained ``expressive-dp`` model: node database, weights, maps; options and rungs.
+
+The model holds the motion basis, the node database (``nodes``), α1..α6 and PNT
+(``costs``), the phoneme maps (``isomap``), the rest pose, the duration model
+and the causal rungs' κ. Contaminated nodes live in ``contamination.json``
+beside the model (``contamination``), re-read when it changes.
+
+Options: ``lag`` (an integer in [0, ``MAX_LAG``] phonemes, or ``"full"``: the
+whole optimum, whose frames wait for the end of the input), ``constraints``
+(hard constraints: an object mapping a phoneme index of the request, as a
+string, to a node id, or a list of [index, node] pairs), ``causal`` and
+``lead_ms`` (the causal rungs). Emotion modifiers are the spans' own emotions
+(else the request's). Ladder: ``lag-<L>`` for the model's lag, then 2, 1 and
+0 below it (lookahead L + 2 phonemes), ``causal_lead`` and ``causal``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...audio import Audio
+from ...errors import InvalidRequestError
+from ...model_checks import ArrayReader, FieldReader
+from ...numerics.basis import MotionBasis, read_components
+from ...store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
+from ...timeline import PhonemeSpan
+from ..base import Lookahead, Model, Rung, SynthesisRequest, Synthesizer
+from ..durations import DurationModel
+from .contamination import Contamination
+from .costs import ALPHA_NAMES, NodeBounds, Weights
+from .isomap import PhonemeMaps
+from .nodes import NodeDatabase, NodeFeatures
+from .postprocess import Renderer
+from .search import SearchSpace
+from .synthesizer import CausalSynthesizer, LagSynthesizer
+
+MAX_LAG = 64
+LADDER_LAGS = (2, 1, 0)
+MAX_LEAD_MS = 1000.0
+CAUSAL_LEAD_MS = 120.0
+Resolved = tuple[str, float | int | None]
+
+
+class ExpressiveDpModel(Model):
+    """See the module docstring; arrays as ``engine.ExpressiveDpEngine.fit`` stores them."""
+
+    engine = "expressive-dp"
+    option_names = ("lag", "constraints", "causal", "lead_ms")
+
+    def __init__(
+        self,
+        manifest: ModelManifest,
+        arrays: Mapping[str, np.ndarray],
+        directory: Path | None = None,
+        nodes: NodeDatabase | None = None,
+    ) -> None:
+        super().__init__(manifest)
+        self.stored = {name: np.asarray(value) for name, value in arrays.items()}
+        hyper = manifest.hyperparameters
+        self.basis = MotionBasis(self.stored["basis_mean"], self.stored["basis_components"])
+        self.nodes = nodes or NodeDatabase(
+            phoneme=self.stored["node_phoneme"],
+            emotion=self.stored["node_emotion"],
+            previous=self.stored["node_previous"],
+            next=self.stored["node_next"],
+            pre=self.stored["node_pre"],
+            suc=self.stored["node_suc"],
+            offsets=self.stored["node_offsets"],
+            frames=self.stored["node_frames"],
+            fps=float(manifest.fps),
+        )
+        self.features = NodeFeatures.of(self.nodes)
+        self.weights = Weights(self.stored["alphas"], float(manifest.extra["pnt"]))
+        packed = self.weights.packed()
+        bounds = NodeBounds.of(self.nodes, self.features, packed)
+        self.space = SearchSpace(self.nodes, self.features, bounds, packed)
+        self.rest_pose = self.stored["rest_pose"]
+        self.lag = int(hyper["lag"])
+        self.renderer = Renderer(
+            self.nodes,
+            self.rest_pose,
+            float(manifest.fps),
+            int(hyper["smoothing_half"]),
+            float(hyper["smoothness"]),
+        )
+        self.maps = PhonemeMaps(self.nodes, self.stored["map_points"])
+        self.contamination = Contamination(self.nodes.size, directory)
+        self.durations = DurationModel(
+            self.stored["duration_count"],
+            self.stored["duration_log_mean"],
+            self.stored["duration_log_std"],
+        )
+        self.causal_kappa = float(self.stored["causal_kappa"][0])
+
+    # -- options, lookahead, ladder -------------------------------------------------------
+
+    def resolve(self, options: Mapping[str, Any]) -> Resolved:
+        """("lag", L or None for the full search) or ("causal", lead ms), defaults filled."""
+        causal = options.get("causal", False)
+        if not isinstance(causal, bool):
+            raise InvalidRequestError(
+                f"causal must be true or false, got {causal!r}", where="options.causal"
+            )
+        lead = options.get("lead_ms", 0.0)
+        if (
+            isinstance(lead, bool)
+            or not isinstance(lead, (int, float))
+            or not 0 <= lead <= MAX_LEAD_MS
+        ):
+            raise InvalidRequestError(
+                f"lead_ms must be a number of milliseconds in [0, {MAX_LEAD_MS:g}], got {lead!r}",
+                where="options.lead_ms",
+            )
+        if causal:
+            return ("causal", float(lead))
+        if "lead_ms" in options:
+            raise InvalidRequestError(
+                "lead_ms applies with causal: true only", where="options.lead_ms"
+            )
+        lag = options.get("lag", self.lag)
+        if lag == "full":
+            return ("lag", None)
+        if isinstance(lag, bool) or not isinstance(lag, int) or not 0 <= lag <= MAX_LAG:
+            raise InvalidRequestError(
+                f'lag must be an integer in [0, {MAX_LAG}] or "full", got {lag!r}',
+                where="options.lag",
+            )
+        return ("lag", lag)
+
+    def constraints(self, options: Mapping[str, Any]) -> dict[int, int]:
+        """The hard constraints of ``options``: phoneme index -> node id, each checked."""
+        given = options.get("constraints", {})
+        if isinstance(given, Mapping):
+            pairs: list[Any] = list(given.items())
+        elif isinstance(given, list):
+            pairs = given
+        else:
+            raise InvalidRequestError(
+                "constraints must be an object {phoneme index: node id} or a list of "
+                f"[index, node] pairs, got {type(given).__name__}",
+                where="options.constraints",
+            )
+        found: dict[int, int] = {}
+        excluded = self.contamination.mask()
+        for position, pair in enumerate(pairs):
+            where = f"options.constraints.{position}"
+            if not (isinstance(pair, (list, tuple)) and len(pair) == 2):
+                raise InvalidRequestError("must be an [index, node] pair", where=where)
+            index, node = _index(pair[0]), pair[1]
+            if index is None:
+                raise InvalidRequestError(
+                    f"phoneme index must be a non-negative integer, got {pair[0]!r}", where=where
+                )
+            where = f"options.constraints.{index}"
+            if isinstance(node, bool) or not isinstance(node, int):
+                raise InvalidRequestError(f"node id must be an integer, got {node!r}", where=where)
+            if not 0 <= node < self.nodes.size:
+                raise InvalidRequestError(
+                    f"node {node} does not exist: node ids run from 0 to {self.nodes.size - 1}",
+                    where=where,
+                )
+            if excluded[node]:
+                raise InvalidRequestError(f"node {node} is marked contaminated", where=where)
+            if index in found:
+                raise InvalidRequestError(
+                    f"phoneme index {index} is constrained twice", where=where
+                )
+            found[index] = node
+        return found
+
+    def shift_s(self, lead_ms: float) -> float:
+        return min(lead_ms / 1000.0, 2.0 * self.durations.pooled_median_s() / self.causal_kappa)
+
+    @property
+    def lookahead(self) -> Lookahead:
+        return Lookahead(phonemes=self.lag + 2)
+
+    def lookahead_for(self, options: Mapping[str, Any]) -> Lookahead | None:
+        kind, value = self.resolve(options)
+        if kind == "causal":
+            return Lookahead(seconds=self.shift_s(float(value or 0.0)))
+        return None if value is None else Lookahead(phonemes=int(value) + 2)
+
+    def fidelity_ladder(self) -> tuple[Rung, ...]:
+        rungs = [
+            Rung(f"lag-{lag}", Lookahead(phonemes=lag + 2), {"lag": lag})
+            for lag in sorted({self.lag, *(x for x in LADDER_LAGS if x < self.lag)}, reverse=True)
+        ]
+        for name, lead in (("causal_lead", CAUSAL_LEAD_MS), ("causal", 0.0)):
+            options: dict[str, Any] = {"causal": True, "lead_ms": lead}
+            rungs.append(Rung(name, Lookahead(seconds=self.shift_s(lead)), options))
+        return tuple(rungs)
+
+    def rung_for(self, options: Mapping[str, Any]) -> Rung | None:
+        """The rung of the resolved lag or lead; constraints do not change the work."""
+        resolved = self.resolve(options)
+        for rung in self.fidelity_ladder():
+            if self.resolve(rung.options) == resolved:
+                return rung
+        return None
+
+    def synthesizer(self, request: SynthesisRequest) -> Synthesizer:
+        kind, value = self.resolve(request.options)
+        constraints = self.constraints(request.options)
+        if kind == "causal":
+            return CausalSynthesizer(self, request, self.shift_s(float(value or 0.0)), constraints)
+        return LagSynthesizer(self, request, None if value is None else int(value), constraints)
+
+    def render(
+        self,
+        spans: Sequence[PhonemeSpan],
+        times: np.ndarray,
+        request: SynthesisRequest,
+        audio: Audio | None,
+    ) -> np.ndarray:
+        raise NotImplementedError("expressive-dp streams through its own synthesizers")
+
+    # -- store ----------------------------------------------------------------------------
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return dict(self.stored)
+
+    def save(self, path: str | Path) -> None:
+        """The model directory, with ``contamination.json`` when nodes are contaminated."""
+        super().save(path)
+        nodes = self.contamination.nodes()
+        if nodes:
+            Contamination(self.nodes.size, Path(path)).change(nodes, [])
+
+    @classmethod
+    def from_arrays(
+        cls, manifest: ModelManifest, arrays: Mapping[str, np.ndarray], path: Path
+    ) -> ExpressiveDpModel:
+        fields = FieldReader(str(path / MANIFEST_NAME))
+        hyper = fields.mapping(manifest.hyperparameters, "hyperparameters")
+        extra = fields.mapping(manifest.extra, "extra")
+        fields.integer(
+            fields.member(hyper, "lag", "hyperparameters.lag"), "hyperparameters.lag", 0, MAX_LAG
+        )
+        fields.integer(
+            fields.member(hyper, "smoothing_half", "hyperparameters.smoothing_half"),
+            "hyperparameters.smoothing_half", 1, 32,
+        )  # fmt: skip
+        fields.number(
+            fields.member(hyper, "smoothness", "hyperparameters.smoothness"),
+            "hyperparameters.smoothness", 0.0, 1e6,
+        )  # fmt: skip
+        fields.number(fields.member(extra, "pnt", "extra.pnt"), "extra.pnt", 0.0, 1e9, above=True)
+        reader = ArrayReader(arrays, str(path / ARRAYS_NAME))
+        n_channels = len(manifest.channels)
+        checked: dict[str, np.ndarray] = {
+            "basis_mean": reader.floats("basis_mean", (n_channels,)),
+            "basis_components": read_components(reader, "basis_components", n_channels),
+        }
+        k = len(checked["basis_components"])
+        nodes = NodeDatabase.from_arrays(reader, k, float(manifest.fps))
+        checked.update(nodes.arrays())
+        alphas = reader.floats("alphas", (len(ALPHA_NAMES),))
+        if (alphas < 0).any() or not 0 < alphas[3] < 1:
+            raise reader.error("alphas", "must not be negative, and alpha4 must lie in (0, 1)")
+        checked["alphas"] = alphas
+        checked["rest_pose"] = reader.floats("rest_pose", (k,))
+        checked["map_points"] = reader.floats("map_points", (len(nodes.frames), 2))
+        checked.update(DurationModel.from_arrays(reader).arrays())
+        checked["causal_kappa"] = reader.floats("causal_kappa", (1,))
+        if not checked["causal_kappa"][0] > 0:
+            raise reader.error("causal_kappa", "must be positive")
+        return cls(manifest, checked, path, nodes)
+
+
+def _index(value: Any) -> int | None:
+    """A phoneme index given as an integer or a decimal string (JSON object keys)."""
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, str) and value.isdigit():
+        return int(value)
+    if isinstance(value, int) and value >= 0:
+        return value
+    return None

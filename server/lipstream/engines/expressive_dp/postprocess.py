@@ -1,0 +1,205 @@
+"""Post-processing (§VII-B): time warping, boundary smoothing (Eq. 16), silence, resampling.
+
+Method. Frames are made on a grid at the model's recording rate R (120 Hz for
+the demo character, the paper's rate) and sampled at the requested times by
+linear interpolation, so every output rate reads the same motion. Span k owns
+the grid points g with start_k ≤ g/R < end_k (the point at the very end of the
+input belongs to the last span, at relative time 1).
+
+* Time warping: a non-silence span shows its node resampled linearly over the
+  span's relative time (``nodes.warp_node``), whatever the node's own length.
+* Smoothing (Eq. 16): at a join of two non-silence spans whose nodes are not
+  captured neighbours (pre(o_{k+1}) ≠ o_k), the last s points of span k and the
+  first s of span k + 1 (s = ``half``; fewer when a span is short: a span gives
+  at most half its points to the join before it, and the rest to the join
+  after, so joins never overlap) are refitted as g minimising
+  Σ W_j (g − f)² + Σ W_k (g − f)² + λ Σ (Δ²g)², W the visibility weight of each
+  side's node phoneme (Table IV: 2 for /p b m f v w/, 0.5 for /k g ch ng r/, 1
+  otherwise), λ = ``smoothness``. It is one banded solve per join for every
+  basis component at once (``numerics.banded.solve_spd_banded``).
+* Silence: a silence span's points are interpolated linearly from the last
+  frame of the node before it to the first frame of the node after it (the one
+  side that exists at the ends of the input; the rest pose when neither does).
+
+A span's points depend on the nodes of spans k − 1, k and k + 1 only.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from functools import lru_cache
+
+import numpy as np
+
+from ...numerics.banded import solve_spd_banded
+from ...phonemes import SILENCE
+from ...timeline import PhonemeSpan
+from .nodes import NodeDatabase, warp_node
+
+VISIBILITY = {"P": 2.0, "B": 2.0, "M": 2.0, "F": 2.0, "V": 2.0, "W": 2.0} | {
+    "K": 0.5, "G": 0.5, "CH": 0.5, "NG": 0.5, "R": 0.5,
+}  # fmt: skip
+CURVATURE = np.array([1.0, -2.0, 1.0])
+_EPS = 1e-9
+
+
+def owned(span: PhonemeSpan, rate: float) -> tuple[int, int]:
+    """The grid points [low, high) span ``span`` owns."""
+    return math.ceil(span.start * rate - _EPS), math.ceil(span.end * rate - _EPS)
+
+
+def visibility(phoneme: str) -> float:
+    return VISIBILITY.get(phoneme, 1.0)
+
+
+class Renderer:
+    """Grid values and output frames of a node path over contiguous spans."""
+
+    def __init__(
+        self, nodes: NodeDatabase, rest: np.ndarray, rate: float, half: int, smoothness: float
+    ) -> None:
+        self.nodes = nodes
+        self.rest = rest
+        self.rate = rate
+        self.half = half
+        self.smoothness = smoothness
+
+    def _base(self, spans: Sequence[PhonemeSpan], path: Sequence[int], k: int) -> np.ndarray:
+        """Span k's points before smoothing."""
+        span = spans[k]
+        low, high = owned(span, self.rate)
+        times = np.arange(low, high) / self.rate
+        relative = (times - span.start) / (span.end - span.start)
+        if span.phoneme != SILENCE:
+            return warp_node(self.nodes.node_frames(int(path[k])), relative)
+        return self._silence(spans, path, k, relative)
+
+    def _silence(
+        self, spans: Sequence[PhonemeSpan], path: Sequence[int], k: int, relative: np.ndarray
+    ) -> np.ndarray:
+        left = self.nodes.node_frames(int(path[k - 1]))[-1] if k > 0 else None
+        right = self.nodes.node_frames(int(path[k + 1]))[0] if k + 1 < len(spans) else None
+        if left is None:
+            left = self.rest if right is None else right
+        if right is None:
+            right = left
+        return np.asarray(left + np.clip(relative, 0.0, 1.0)[:, None] * (right - left))
+
+    def _smoothed(self, spans: Sequence[PhonemeSpan], path: Sequence[int], k: int) -> bool:
+        """Whether the join of spans k and k + 1 is smoothed."""
+        if spans[k].phoneme == SILENCE or spans[k + 1].phoneme == SILENCE:
+            return False
+        return int(self.nodes.pre[int(path[k + 1])]) != int(path[k])
+
+    def span_values(self, spans: Sequence[PhonemeSpan], path: Sequence[int], k: int) -> np.ndarray:
+        """Span k's points, smoothed at its joins (needs the nodes of k − 1 .. k + 1)."""
+        values = self._base(spans, path, k)
+        count = len(values)
+        head = min(self.half, count // 2)
+        tail = min(self.half, count - head)
+        if k > 0 and head and self._smoothed(spans, path, k - 1):
+            before = self._base(spans, path, k - 1)
+            before_head = min(self.half, len(before) // 2)
+            before_tail = min(self.half, len(before) - before_head)
+            if before_tail:
+                solved = self._join(spans, path, k - 1, before[-before_tail:], values[:head])
+                values[:head] = solved[before_tail:]
+        if k + 1 < len(spans) and tail and self._smoothed(spans, path, k):
+            after = self._base(spans, path, k + 1)
+            after_head = min(self.half, len(after) // 2)
+            if after_head:
+                solved = self._join(spans, path, k, values[-tail:], after[:after_head])
+                values[-tail:] = solved[:tail]
+        return values
+
+    def _join(
+        self,
+        spans: Sequence[PhonemeSpan],
+        path: Sequence[int],
+        k: int,
+        left: np.ndarray,
+        right: np.ndarray,
+    ) -> np.ndarray:
+        """Eq. 16 over the points ``left`` (end of span k) and ``right`` (start of k + 1)."""
+        fitted = np.concatenate([left, right])
+        weights = np.concatenate(
+            [
+                np.full(len(left), visibility(spans[k].phoneme)),
+                np.full(len(right), visibility(spans[k + 1].phoneme)),
+            ]
+        )
+        if len(fitted) < 3:
+            return fitted
+        return smooth_join(fitted, weights, self.smoothness)
+
+    def terminal(self, spans: Sequence[PhonemeSpan], path: Sequence[int]) -> np.ndarray:
+        """The point at the end of the last span (relative time 1)."""
+        k = len(spans) - 1
+        if spans[k].phoneme != SILENCE:
+            return np.asarray(self.nodes.node_frames(int(path[k]))[-1])
+        return np.asarray(self._silence(spans, path, k, np.ones(1))[0])
+
+    def grid(
+        self, spans: Sequence[PhonemeSpan], path: Sequence[int], low: int, high: int
+    ) -> np.ndarray:
+        """Grid points low..high (inclusive), (high − low + 1, K)."""
+        out = np.empty((high - low + 1, self.nodes.frames.shape[1]))
+        filled = np.zeros(high - low + 1, dtype=bool)
+        first = max(0, _span_at(spans, low / self.rate) - 1)
+        for k in range(first, len(spans)):
+            start, stop = owned(spans[k], self.rate)
+            if start > high:
+                break
+            if stop <= low or stop <= start:
+                continue
+            values = self.span_values(spans, path, k)
+            a, b = max(start, low), min(stop, high + 1)
+            out[a - low : b - low] = values[a - start : b - start]
+            filled[a - low : b - low] = True
+        if not filled.all():
+            out[~filled] = self.terminal(spans, path)
+        return out
+
+    def frames(
+        self, spans: Sequence[PhonemeSpan], path: Sequence[int], times: np.ndarray
+    ) -> np.ndarray:
+        """Coefficient frames at ``times`` (ascending), linear between grid points."""
+        position = times * self.rate
+        low = np.floor(position + _EPS).astype(np.int64)
+        fraction = np.where(position - low > _EPS, position - low, 0.0)
+        needs_next = fraction > 0
+        top = int(low[-1] + (1 if needs_next[-1] else 0))
+        top = max(top, int((low + needs_next).max()))
+        grid = self.grid(spans, path, int(low[0]), top)
+        base = grid[low - low[0]]
+        following = grid[np.minimum(low + 1, top) - low[0]]
+        return np.asarray(base + fraction[:, None] * (following - base))
+
+
+def smooth_join(fitted: np.ndarray, weights: np.ndarray, smoothness: float) -> np.ndarray:
+    """argmin_g Σ_t weights_t (g_t − f_t)² + smoothness Σ_t (g_{t−1} − 2g_t + g_{t+1})² for
+    every column of ``fitted`` (n, K): the normal equations (diag(W) + λ D²ᵀD²) g = W f are
+    pentadiagonal, one banded Cholesky solve with K right-hand sides."""
+    bands = _normal_bands(tuple(weights.tolist()), smoothness)
+    return solve_spd_banded(bands, weights[:, None] * fitted)
+
+
+@lru_cache(maxsize=256)
+def _normal_bands(weights: tuple[float, ...], smoothness: float) -> np.ndarray:
+    """The lower bands of diag(W) + λ D²ᵀD² (a join has few distinct weight patterns)."""
+    n = len(weights)
+    curvature = np.zeros((n - 2, n))
+    for row in range(n - 2):
+        curvature[row, row : row + 3] = CURVATURE
+    normal = np.diag(weights) + smoothness * curvature.T @ curvature
+    bands = np.zeros((3, n))
+    for offset in range(3):
+        bands[offset, : n - offset] = np.diagonal(normal, -offset)
+    bands.setflags(write=False)
+    return bands
+
+
+def _span_at(spans: Sequence[PhonemeSpan], t: float) -> int:
+    ends = [span.end for span in spans]
+    return min(int(np.searchsorted(ends, t, side="right")), len(spans) - 1)

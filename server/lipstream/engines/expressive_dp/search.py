@@ -1,0 +1,258 @@
+"""The motion-node search: exact Viterbi DP (Alg. 1) and a fast search with the same optimum.
+
+Method. Each layer i (an input phoneme) admits the nodes that are not
+contaminated, or only its constrained node (B of Eq. 10), with unary cost
+U_i(o) = OC + EMP. Alg. 1 computes φ_i(b) = U_i(b) + min_a [φ_{i−1}(a) + TC(a, b)]
+over every pair, Θ(N²·T) (``exact_path``). ``fast_path`` reaches the same
+minimum with three exact reductions:
+
+1. Dominance pruning, before any transition is priced: with b* the admitted
+   node of least U_i(b*) + into[b*] + out_of[b*] (``costs.NodeBounds``; only
+   the sides the layer has), any path through a node b with
+   U_i(b) > U_i(b*) + into[b*] + out_of[b*] costs more than the same path through
+   b*, so b is never on an optimal path and is dropped. Nodes of other phonemes
+   or emotions go this way as soon as their OC/EMP exceed the bounds.
+2. Rule-1 and Rule-4 transitions priced without a scan: a node without a
+   captured predecessor costs α1·PNT from every a, so its best a is the cheapest
+   φ; a node whose predecessor is admitted starts from φ(pre) + 0.
+3. A sorted scan with a cut-off: the previous layer's nodes in ascending φ;
+   since TC ≥ 0, the scan stops at the first a with φ(a) ≥ the best so far, and
+   a pair's DSC (the dear term) is priced only when φ(a) + PVC (+ PNT) still
+   beats it. The step is compiled (numba).
+
+``before`` is a node fixed ahead of the first layer (the fixed-lag search's last
+committed node); its TC into the first layer counts. Ties may pick different
+paths of equal cost; the cost is the same.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+
+from ...errors import InvalidRequestError
+from .costs import NodeBounds, direct_smoothing, gap, transition_cost, unary_costs
+from .nodes import NodeDatabase, NodeFeatures
+
+INF = np.inf
+
+
+@dataclass(frozen=True)
+class LayerSpec:
+    """One input phoneme: its phoneme and emotion index, and its constrained node (-1)."""
+
+    phoneme: int
+    emotion: int
+    constrained: int = -1
+
+
+@dataclass(frozen=True)
+class SearchSpace:
+    """A database with its features, bounds and packed weights (``costs.Weights.packed``)."""
+
+    nodes: NodeDatabase
+    features: NodeFeatures
+    bounds: NodeBounds
+    packed: np.ndarray
+    observed: dict[tuple[int, int], np.ndarray] = field(default_factory=dict, compare=False)
+    """OC + EMP per (phoneme, emotion), filled on first use."""
+
+    def unary(self, layer: LayerSpec, excluded: np.ndarray) -> np.ndarray:
+        """U(o) for every node, infinite where the node is not admitted."""
+        key = (layer.phoneme, layer.emotion)
+        cost = self.observed.get(key)
+        if cost is None:  # a race only computes the same read-only array twice
+            viseme = self.features.viseme
+            cost = unary_costs(self.nodes, viseme, layer.phoneme, layer.emotion, self.packed)
+            cost.setflags(write=False)
+            self.observed[key] = cost
+        if layer.constrained >= 0:
+            only = np.full(len(cost), INF)
+            only[layer.constrained] = cost[layer.constrained]
+            return only
+        return np.where(excluded, INF, cost)
+
+    def tc(self, a: int, b: int) -> float:
+        f = self.features
+        return float(
+            transition_cost(
+                a, b, self.nodes.pre, f.viseme, f.first_position, f.last_position,
+                f.first_velocity, f.last_velocity, f.leaving, f.arriving, self.packed,
+            )
+        )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class SearchResult:
+    path: np.ndarray
+    cost: float
+    candidates: int
+    """Nodes priced over every layer (after pruning, for the fast search)."""
+
+
+@njit(cache=True)
+def _exact_step(
+    prev_nodes: np.ndarray, prev_f: np.ndarray, next_nodes: np.ndarray, next_u: np.ndarray,
+    pre: np.ndarray, viseme: np.ndarray, fp: np.ndarray, lp: np.ndarray, fv: np.ndarray,
+    lv: np.ndarray, leaving: np.ndarray, arriving: np.ndarray, packed: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    f = np.empty(len(next_nodes))
+    back = np.empty(len(next_nodes), dtype=np.int64)
+    for j in range(len(next_nodes)):
+        b = next_nodes[j]
+        best = np.inf
+        arg = 0
+        for i in range(len(prev_nodes)):
+            cost = prev_f[i] + transition_cost(
+                prev_nodes[i], b, pre, viseme, fp, lp, fv, lv, leaving, arriving, packed
+            )
+            if cost < best:
+                best = cost
+                arg = i
+        f[j] = best + next_u[j]
+        back[j] = arg
+    return f, back
+
+
+@njit(cache=True)
+def _fast_step(
+    prev_nodes: np.ndarray, prev_f: np.ndarray, next_nodes: np.ndarray, next_u: np.ndarray,
+    position: np.ndarray, pre: np.ndarray, viseme: np.ndarray, fp: np.ndarray, lp: np.ndarray,
+    fv: np.ndarray, lv: np.ndarray, leaving: np.ndarray, arriving: np.ndarray, packed: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """As ``_exact_step``, with ``prev_f`` ascending and ``position[node]`` its index there."""
+    f = np.empty(len(next_nodes))
+    back = np.empty(len(next_nodes), dtype=np.int64)
+    for j in range(len(next_nodes)):
+        b = next_nodes[j]
+        p = pre[b]
+        if p < 0:
+            f[j] = prev_f[0] + packed[0] + next_u[j]
+            back[j] = 0
+            continue
+        best = np.inf
+        arg = 0
+        if position[p] >= 0:
+            best = prev_f[position[p]]
+            arg = position[p]
+        for i in range(len(prev_nodes)):
+            if prev_f[i] >= best:
+                break
+            a = prev_nodes[i]
+            if a == p:
+                continue
+            cost = prev_f[i] + packed[2] * gap(fp[b], lp[a]) + gap(fv[b], lv[a])
+            if viseme[a] != viseme[p]:
+                cost += packed[3]
+            if cost >= best:
+                continue
+            cost += packed[1] * direct_smoothing(leaving[a], arriving[p])
+            if cost < best:
+                best = cost
+                arg = i
+        f[j] = best + next_u[j]
+        back[j] = arg
+    return f, back
+
+
+def _step(
+    space: SearchSpace,
+    prev_nodes: np.ndarray,
+    prev_f: np.ndarray,
+    next_nodes: np.ndarray,
+    next_u: np.ndarray,
+    fast: bool,
+) -> tuple[np.ndarray, np.ndarray]:
+    f = space.features
+    common = (space.nodes.pre, f.viseme, f.first_position, f.last_position, f.first_velocity,
+              f.last_velocity, f.leaving, f.arriving, space.packed)  # fmt: skip
+    if not fast:
+        return _exact_step(prev_nodes, prev_f, next_nodes, next_u, *common)
+    position = np.full(space.nodes.size, -1, dtype=np.int64)
+    position[prev_nodes] = np.arange(len(prev_nodes))
+    return _fast_step(prev_nodes, prev_f, next_nodes, next_u, position, *common)
+
+
+def _candidates(
+    space: SearchSpace, layers: Sequence[LayerSpec], excluded: np.ndarray, index: int,
+    has_before: bool, fast: bool,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    unary = space.unary(layers[index], excluded)
+    admitted = np.isfinite(unary)
+    if not admitted.any():
+        raise InvalidRequestError(
+            f"phoneme {index} of the search admits no node: every node is contaminated",
+            where="contamination",
+        )
+    if fast:
+        score = unary.copy()
+        if index > 0 or has_before:
+            score += space.bounds.into
+        if index + 1 < len(layers):
+            score += space.bounds.out_of
+        admitted &= unary <= score[admitted].min()
+    nodes = np.flatnonzero(admitted)
+    return nodes, unary[nodes]
+
+
+def search(
+    space: SearchSpace,
+    layers: Sequence[LayerSpec],
+    excluded: np.ndarray,
+    *,
+    fast: bool = True,
+    before: int = -1,
+    guard: object | None = None,
+) -> SearchResult:
+    """The cheapest path over ``layers`` (node ids) and its cost; ``excluded`` (N,) marks
+    contaminated nodes; ``fast`` selects the pruned search, else Alg. 1 over every pair."""
+    if not layers:
+        return SearchResult(np.zeros(0, dtype=np.int64), 0.0, 0)
+    backs: list[np.ndarray] = []
+    members: list[np.ndarray] = []
+    nodes, f = _candidates(space, layers, excluded, 0, before >= 0, fast)
+    if before >= 0:
+        start = np.array([before], dtype=np.int64)
+        f, _ = _step(space, start, np.zeros(1), nodes, f, fast=False)
+    priced = len(nodes)
+    if fast:
+        order = np.argsort(f, kind="stable")
+        nodes, f = nodes[order], f[order]
+    members.append(nodes)
+    for index in range(1, len(layers)):
+        if guard is not None:
+            guard.check()  # type: ignore[attr-defined]
+        next_nodes, next_u = _candidates(space, layers, excluded, index, True, fast)
+        priced += len(next_nodes)
+        f, back = _step(space, nodes, f, next_nodes, next_u, fast)
+        if fast:
+            order = np.argsort(f, kind="stable")
+            next_nodes, f, back = next_nodes[order], f[order], back[order]
+        backs.append(back)
+        members.append(next_nodes)
+        nodes = next_nodes
+    position = int(np.argmin(f))
+    cost = float(f[position])
+    path = np.empty(len(layers), dtype=np.int64)
+    for index in range(len(layers) - 1, -1, -1):
+        path[index] = members[index][position]
+        if index > 0:
+            position = int(backs[index - 1][position])
+    return SearchResult(path, cost, priced)
+
+
+def path_cost(
+    space: SearchSpace, layers: Sequence[LayerSpec], path: Sequence[int], before: int = -1
+) -> float:
+    """Eq. 4 of ``path`` (infinite when it breaks a constraint)."""
+    excluded = np.zeros(space.nodes.size, dtype=bool)
+    total = 0.0
+    for index, (layer, node) in enumerate(zip(layers, path)):
+        total += float(space.unary(layer, excluded)[node])
+        previous = path[index - 1] if index > 0 else before
+        if previous >= 0:
+            total += space.tc(int(previous), int(node))
+    return total

@@ -1,0 +1,264 @@
+"""Streaming the search: fixed-lag commitment, the full search, and the causal rungs.
+
+Method. Span j's node is committed once the input holds spans j .. j + lag
+(``lag``): the fast search over those spans, starting from the node committed
+at j − 1 (its TC into span j counts), taken at j and never revised, so the
+committed path is one path and its cost (Eq. 4) is well defined. With
+``lag: "full"`` nothing is committed before the input ends, then the whole
+optimum is searched at once. A frame in span k reads the nodes of spans
+k − 1 .. k + 2 (smoothing and silence reach one span each side; the output
+interpolates between grid points, the next of which may lie in span k + 1),
+so it is final once lag + 2 spans follow its span: the rung's lookahead.
+
+The causal rungs commit at lag 0, as each span arrives, and follow the raw curve
+r(τ), the committed node of the latest span begun by τ time-warped over that
+span (a silence holds the last frame of the node before it, the rest pose at
+the start), with the shared critically damped filter (``damped``) at
+ω = κ / the median duration of that span's phoneme; the lead rung follows
+r(t + shift). The frame at t is final once the input covers t + shift.
+
+Stats: ``nodes`` (the committed node of every span, silences filled into gaps
+included, as space-separated ids: engine stats on the wire are scalars),
+``path_cost`` (their Eq. 4 cost) and ``candidates`` (nodes priced).
+
+Constraints name client phoneme indices (the spans as sent, not the silences
+filled into gaps); a constraint whose index the finished input never reached
+is an ``invalid_request`` error at ``options.constraints.<index>``.
+"""
+
+from __future__ import annotations
+
+from bisect import bisect_left
+from collections.abc import Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ...audio import Audio
+from ...errors import InvalidRequestError
+from ...phonemes import PHONEME_INDEX, SILENCE
+from ...timeline import PhonemeSpan, SpanLike, coerce_spans
+from ..base import (
+    Lookahead,
+    RenderingSynthesizer,
+    SynthesisRequest,
+    fill_gaps,
+    final_until,
+    frame_count,
+)
+from ..damped import DampedState, filter_raw
+from ..work import WorkGuard
+from .nodes import EMOTION_INDEX, warp_node
+from .search import LayerSpec, SearchSpace, search
+
+if TYPE_CHECKING:
+    from .model import ExpressiveDpModel
+
+_STARTED = 1e-9
+
+
+class PathSynthesizer(RenderingSynthesizer):
+    """Committed nodes of one request, and the spans they belong to."""
+
+    model: ExpressiveDpModel
+
+    def __init__(
+        self,
+        model: ExpressiveDpModel,
+        request: SynthesisRequest,
+        lag: int | None,
+        constraints: Mapping[int, int],
+    ) -> None:
+        super().__init__(model, request)
+        self.lag = lag
+        self.constraints = dict(constraints)
+        self.excluded = model.contamination.mask()
+        self.client_spans = 0
+        self.constrained: dict[int, int] = {}
+        self.path: list[int] = []
+        self.stats = {"frames": 0, "path_cost": 0.0, "candidates": 0, "nodes": ""}
+
+    def feed(self, spans: Iterable[SpanLike], audio: Audio | None = None) -> None:
+        if self.finished:
+            raise InvalidRequestError("input fed after finish()", code="request_finished")
+        new = coerce_spans(spans, after=self.covered_until, first_index=self.client_spans)
+        for span in new:
+            filled = fill_gaps([span], self.covered_until)
+            self.spans.extend(filled)
+            node = self.constraints.get(self.client_spans)
+            if node is not None:
+                self.constrained[len(self.spans) - 1] = node
+            self.client_spans += 1
+        if audio is not None:
+            self.audio = audio if self.audio is None else self.audio.concat(audio)
+
+    def layer(self, index: int) -> LayerSpec:
+        span = self.spans[index]
+        emotion = self.request.emotion_of(span) or "neutral"
+        return LayerSpec(
+            PHONEME_INDEX[span.phoneme], EMOTION_INDEX[emotion], self.constrained.get(index, -1)
+        )
+
+    def commit(self) -> None:
+        """Commit every node the input (and the lag) now decides."""
+        layers = [self.layer(k) for k in range(len(self.path), len(self.spans))]
+        priced, cost = extend_path(
+            self.model.space, layers, self.excluded, self.lag, self.path, self.finished,
+            self.request.guard,
+        )  # fmt: skip
+        self.stats["candidates"] += priced
+        self.stats["path_cost"] += cost
+        self.stats["nodes"] = " ".join(map(str, self.path))
+
+    def finish(self) -> np.ndarray:
+        unreached = sorted(index for index in self.constraints if index >= self.client_spans)
+        if unreached:
+            raise InvalidRequestError(
+                f"constraint on phoneme index {unreached[0]}, but the request has only "
+                f"{self.client_spans} phonemes",
+                where=f"options.constraints.{unreached[0]}",
+            )
+        return super().finish()
+
+
+class LagSynthesizer(PathSynthesizer):
+    """The fixed-lag rungs and the full search."""
+
+    def final_until(self) -> float:
+        if not self.spans or self.lag is None:
+            return 0.0
+        return final_until(self.spans, Lookahead(phonemes=self.lag + 2))
+
+    def _emit(self, stop: int) -> np.ndarray:
+        if stop <= self.emitted:
+            return np.zeros((0, len(self.model.channels)), dtype=np.float32)
+        self.request.guard.check()
+        self.commit()
+        times = np.arange(self.emitted, stop, dtype=np.float64) / self.request.fps
+        values = self.model.renderer.frames(self.spans, self.path, times)
+        self.emitted = stop
+        self.stats["frames"] = stop
+        return np.asarray(self.model.basis.reconstruct(values), dtype=np.float32)
+
+
+class CausalSynthesizer(PathSynthesizer):
+    """The causal and lead rungs: nodes committed on arrival, a damped filter after."""
+
+    def __init__(
+        self,
+        model: ExpressiveDpModel,
+        request: SynthesisRequest,
+        shift_s: float,
+        constraints: Mapping[int, int],
+    ) -> None:
+        super().__init__(model, request, 0, constraints)
+        self.shift_s = shift_s
+        self.state: DampedState | None = None
+
+    def final_until(self) -> float:
+        return self.covered_until - self.shift_s if self.spans else 0.0
+
+    def frames(self) -> np.ndarray:
+        reach = self.final_until()
+        if not self.spans or reach < 0.0:
+            return self._emit(self.emitted)
+        return self._emit(frame_count(reach, self.request.fps))
+
+    def _emit(self, stop: int) -> np.ndarray:
+        if stop <= self.emitted:
+            return np.zeros((0, len(self.model.channels)), dtype=np.float32)
+        self.request.guard.check()
+        self.commit()
+        times = np.arange(self.emitted, stop, dtype=np.float64) / self.request.fps
+        raw, begun = raw_curve(self.model, self.spans, self.path, times + self.shift_s)
+        medians = self.model.durations.expected_all_s()
+        phonemes = [PHONEME_INDEX[self.spans[k].phoneme] for k in begun.tolist()]
+        omegas = self.model.causal_kappa / medians[phonemes]
+        self.state, values = filter_raw(self.state, raw, omegas, times)
+        self.emitted = stop
+        self.stats["frames"] = stop
+        return np.asarray(self.model.basis.reconstruct(values), dtype=np.float32)
+
+
+def extend_path(
+    space: SearchSpace,
+    layers: Sequence[LayerSpec],
+    excluded: np.ndarray,
+    lag: int | None,
+    path: list[int],
+    finished: bool,
+    guard: WorkGuard | None = None,
+) -> tuple[int, float]:
+    """Append to ``path`` the nodes of ``layers`` (the spans after it) that ``lag`` decides
+    now; the nodes priced and the Eq. 4 cost the new nodes add."""
+    priced, added = 0, 0.0
+    offset = 0
+    while offset < len(layers):
+        if lag is None:
+            if not finished:
+                break
+            last = len(layers) - 1
+        else:
+            last = offset + lag
+            if last >= len(layers) and not finished:
+                break
+            last = min(last, len(layers) - 1)
+        window = layers[offset : last + 1]
+        before = path[-1] if path else -1
+        found = search(space, window, excluded, before=before, guard=guard)
+        priced += found.candidates
+        taken = found.path if lag is None else found.path[:1]
+        for node in taken.tolist():
+            previous = path[-1] if path else -1
+            added += float(space.unary(layers[offset], excluded)[node])
+            added += space.tc(previous, node) if previous >= 0 else 0.0
+            path.append(node)
+            offset += 1
+    return priced, added
+
+
+def raw_curve(
+    model: ExpressiveDpModel, spans: list[PhonemeSpan], path: list[int], at: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """r at times ``at`` (ascending) and the latest span begun at each."""
+    starts = [span.start for span in spans]
+    begun = np.array(
+        [max(bisect_left(starts, float(t) - _STARTED) - 1, 0) for t in at], dtype=np.int64
+    )
+    values = np.empty((len(at), model.nodes.frames.shape[1]))
+    for k in np.unique(begun).tolist():
+        rows = begun == k
+        span = spans[k]
+        if span.phoneme == SILENCE:
+            values[rows] = model.nodes.node_frames(path[k - 1])[-1] if k > 0 else model.rest_pose
+            continue
+        relative = (at[rows] - span.start) / (span.end - span.start)
+        values[rows] = warp_node(model.nodes.node_frames(path[k]), relative)
+    return values, begun
+
+
+class KappaCurves:
+    """The causal rung's raw curve of training utterances, each computed once, filtered at any
+    κ (for choosing κ with ``damped_fit.best_kappa``)."""
+
+    def __init__(self, model: ExpressiveDpModel) -> None:
+        self.model = model
+        self.curves: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+    def frames(self, kappa: float, utterance: Any) -> np.ndarray:
+        key = id(utterance)
+        if key not in self.curves:
+            request = SynthesisRequest(fps=float(utterance.fps), emotion=utterance.emotion)
+            synthesizer = CausalSynthesizer(self.model, request, 0.0, {})
+            synthesizer.feed(utterance.phones)
+            synthesizer.finished = True
+            synthesizer.commit()
+            spans = synthesizer.spans
+            times = np.arange(frame_count(spans[-1].end, request.fps)) / request.fps
+            raw, begun = raw_curve(self.model, spans, synthesizer.path, times)
+            medians = self.model.durations.expected_all_s()
+            phonemes = [PHONEME_INDEX[spans[k].phoneme] for k in begun.tolist()]
+            self.curves[key] = (raw, 1.0 / medians[phonemes], times)
+        raw, inverse, times = self.curves[key]
+        _, values = filter_raw(None, raw, kappa * inverse, times)
+        return self.model.basis.reconstruct(values)

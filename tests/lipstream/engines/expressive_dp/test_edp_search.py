@@ -1,0 +1,131 @@
+"""The search: Table I as written, bounds that hold, exact DP against enumeration, and the fast
+search's optimum equal to exact DP's with emotions, constraints and contamination."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from lipstream.engines.expressive_dp.search import LayerSpec, path_cost, search
+
+from .edp_synthetic import PHONEMES, brute_force, loop_tc, loop_unary, random_space
+
+
+def _problem(seed: int, n: int, t: int, constrain: bool, contaminate: bool):  # type: ignore[no-untyped-def]
+    rng = np.random.default_rng(seed)
+    space = random_space(rng, n)
+    excluded = np.zeros(n, dtype=bool)
+    if contaminate:
+        excluded[rng.choice(n, size=max(1, n // 3), replace=False)] = True
+    free = np.flatnonzero(~excluded)
+    layers = []
+    for _ in range(t):
+        constrained = int(rng.choice(free)) if constrain and rng.random() < 0.3 else -1
+        layers.append(LayerSpec(int(rng.choice(PHONEMES)), int(rng.integers(0, 4)), constrained))
+    return space, layers, excluded
+
+
+def test_the_compiled_transition_cost_is_table_one() -> None:
+    space, _, _ = _problem(3, 12, 1, False, False)
+    rules_seen = set()
+    for a in range(12):
+        for b in range(12):
+            expected = loop_tc(space, a, b)
+            assert space.tc(a, b) == pytest.approx(expected, rel=1e-9, abs=1e-12)
+            pre = int(space.nodes.pre[b])
+            rules_seen.add("1" if pre == a else "4" if pre < 0 else "2/3")
+    assert rules_seen == {"1", "2/3", "4"}
+
+
+def test_the_bounds_hold_for_every_pair() -> None:
+    for seed in range(5):
+        space, _, _ = _problem(seed, 14, 1, False, False)
+        for a in range(14):
+            for b in range(14):
+                cost = loop_tc(space, a, b)
+                assert cost <= space.bounds.into[b] and cost <= space.bounds.out_of[a]
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(2, 5),
+    t=st.integers(1, 3),
+    constrain=st.booleans(),
+    contaminate=st.booleans(),
+)
+def test_exact_dp_finds_the_cheapest_of_all_paths(
+    seed: int, n: int, t: int, constrain: bool, contaminate: bool
+) -> None:
+    space, layers, excluded = _problem(seed, n, t, constrain, contaminate)
+    expected, _ = brute_force(space, layers, excluded)
+    found = search(space, layers, excluded, fast=False)
+    assert found.cost == pytest.approx(expected, rel=1e-9)
+    assert path_cost(space, layers, found.path) == pytest.approx(expected, rel=1e-9)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(2, 40),
+    t=st.integers(1, 9),
+    constrain=st.booleans(),
+    contaminate=st.booleans(),
+)
+def test_the_fast_search_has_exact_dps_optimum(
+    seed: int, n: int, t: int, constrain: bool, contaminate: bool
+) -> None:
+    space, layers, excluded = _problem(seed, n, t, constrain, contaminate)
+    exact = search(space, layers, excluded, fast=False)
+    fast = search(space, layers, excluded, fast=True)
+    assert fast.cost == pytest.approx(exact.cost, rel=1e-9, abs=1e-9)
+    assert path_cost(space, layers, fast.path) == pytest.approx(exact.cost, rel=1e-9, abs=1e-9)
+    for layer, node in zip(layers, fast.path):
+        assert node == layer.constrained if layer.constrained >= 0 else not excluded[node]
+    assert np.isfinite(
+        [loop_unary(space, layer, node) for layer, node in zip(layers, fast.path)]
+    ).all()
+
+
+def test_a_node_fixed_before_the_first_layer_prices_its_join() -> None:
+    space, layers, excluded = _problem(11, 10, 3, False, False)
+    before = 4
+    found = search(space, layers, excluded, before=before)
+    best = min(
+        (path_cost(space, layers, path, before), path)
+        for path in np.ndindex(*(10,) * 3)
+        if all(loop_unary(space, layer, node) < np.inf for layer, node in zip(layers, path))
+    )
+    assert found.cost == pytest.approx(best[0], rel=1e-9)
+
+
+def test_pruning_drops_nodes_and_keeps_the_optimum() -> None:
+    rng = np.random.default_rng(5)
+    space = random_space(rng, 60)
+    strict = np.array(space.packed)
+    strict[5] = strict[6] = 1e4 * strict[3]  # wrong phonemes and emotions cost far more
+    from lipstream.engines.expressive_dp.costs import NodeBounds
+    from lipstream.engines.expressive_dp.search import SearchSpace
+
+    bounds = NodeBounds.of(space.nodes, space.features, strict)
+    pruned_space = SearchSpace(space.nodes, space.features, bounds, strict)
+    layers = [LayerSpec(int(rng.choice(PHONEMES[:4])), int(rng.integers(0, 4))) for _ in range(8)]
+    excluded = np.zeros(60, dtype=bool)
+    exact = search(pruned_space, layers, excluded, fast=False)
+    fast = search(pruned_space, layers, excluded, fast=True)
+    assert fast.cost == pytest.approx(exact.cost, rel=1e-9)
+    assert fast.candidates < exact.candidates / 4
+
+
+def test_contaminating_every_node_is_refused() -> None:
+    from lipstream.engines.expressive_dp.contamination import Contamination
+    from lipstream.errors import InvalidRequestError
+
+    store = Contamination(3, None)
+    assert store.change([0, 1], []) == [0, 1]
+    with pytest.raises(InvalidRequestError) as caught:
+        store.change([2], [])
+    assert caught.value.where == "mark"
+    assert store.nodes() == [0, 1]
