@@ -8,7 +8,6 @@ from pathlib import Path
 
 from lipstream.config import ServerSettings
 from lipstream.loadtest.storm import _quantile, storm
-from tests.lipstream.server.conftest import lerp_dir
 from tests.lipstream.server.harness import serving
 
 __all__ = ["lerp_dir"]  # the server tests' fixture: only the viseme-lerp model

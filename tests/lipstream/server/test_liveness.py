@@ -12,7 +12,6 @@ import httpx
 from lipstream.config import ServerSettings
 from lipstream.server.liveness import LivenessServer
 from tests.helpers import free_port
-from tests.lipstream.server.conftest import lerp_dir
 from tests.lipstream.server.harness import serving
 
 __all__ = ["lerp_dir"]
