@@ -230,7 +230,8 @@ class Model(ABC):
     """A trained, read-only model. Subclasses define ``render`` and the array round trip."""
 
     engine: ClassVar[str]
-    uses_audio: ClassVar[bool] = False
+    uses_audio: bool = False
+    """Whether a request's audio reaches the synthesizer (a model may decide at load)."""
     option_names: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, manifest: ModelManifest) -> None:
@@ -269,6 +270,11 @@ class Model(ABC):
         cls: type[ModelT], manifest: ModelManifest, arrays: Mapping[str, np.ndarray], path: Path
     ) -> ModelT:
         """Rebuild a model from its manifest and (memory-mapped) arrays."""
+
+    @property
+    def accepts_audio_only(self) -> bool:
+        """Whether audio alone (no phonemes) can drive the model; engines that can say so."""
+        return False
 
     @property
     def lookahead(self) -> Lookahead:
