@@ -77,6 +77,7 @@ from .work import WorkGuard
 MIN_FPS = 1.0  # lowest request frame rate, Hz (the highest, MAX_FPS, is the store's)
 DEFAULT_EMOTION = "neutral"
 DEFAULT_EMOTION_KEY = "default_emotion"
+AUDIO_ONLY_UNSUPPORTED = "audio_only_unsupported"  # the protocol's error code
 _EPS = 1e-9
 
 ModelT = TypeVar("ModelT", bound="Model")
@@ -345,8 +346,17 @@ class Model(ABC):
         emotion: str | None = None,
         **engine_options: Any,
     ) -> SynthesisResult:
-        """Offline synthesis of a whole utterance."""
+        """Offline synthesis of a whole utterance; with no spans, of ``audio`` alone (engines
+        that can, see ``accepts_audio_only``; the others raise ``audio_only_unsupported``)."""
         request = SynthesisRequest(fps=fps, emotion=emotion, options=engine_options)
+        spans = list(spans)
+        if not spans and audio is not None and not self.accepts_audio_only:
+            raise InvalidRequestError(
+                f"model {self.name!r} of engine {self.engine} cannot be driven by audio alone; "
+                "pass phoneme spans with the audio",
+                where="spans",
+                code=AUDIO_ONLY_UNSUPPORTED,
+            )
         synthesizer = self.start(request)
         synthesizer.feed(spans, audio)
         frames = synthesizer.finish()

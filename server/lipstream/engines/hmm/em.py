@@ -6,14 +6,15 @@ the E-step (``trellis.forward_backward`` per sequence: γ, expected transition
 counts, log-likelihood) and the M-step, recording the objective in a
 ``ConvergenceMonitor`` until its relative gain falls below ``tol``.
 
-Objective: log P(X | θ) + log P(θ). Both estimators share an
-inverse-Wishart prior on each covariance, −(ν/2) log|K| − ½ tr(Ψ K⁻¹) with
-Ψ = ν c diag(var) (c the covariance floor, a share of each dimension's variance
-over all frames, ν = ``PRIOR_FRAMES`` pseudo-frames), so no state collapses onto
-a point and a state seen for few frames keeps a broad density. The entropic
+Objective: log P(X | θ) + log P(θ). Both estimators share a normalized
+inverse-Wishart prior on each covariance, IW(K; Ψ, df) with df = d +
+``PRIOR_FRAMES`` and Ψ = (df + d + 1) c diag(var), whose mode is c·var (c the
+covariance floor, a share of each dimension's variance over all frames), so no
+state collapses onto a point, a state seen for few frames keeps a broad
+density, and models with different numbers of states compare fairly. The entropic
 estimator adds Brand's prior −Z·H(θ): the transition rows and the start
 distribution by ``entropic.entropic_map``, the covariances
-K = (S + Ψ) / (n + Z + ν). Baum-Welch is Z = 0: normalized counts. Every M-step
+K = (S + Ψ) / (n + Z + df + d + 1). Baum-Welch is Z = 0: normalized counts. Every M-step
 maximizes the expected complete-data log-posterior exactly, so the objective
 never decreases.
 
@@ -33,6 +34,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.special import multigammaln
 from sklearn.cluster import KMeans
 
 from ...numerics.trellis import forward_backward
@@ -78,8 +80,8 @@ def _log(values: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class Settings:
     """``estimator`` (entropic or baum-welch), prior scale ``z``, ``covariance_floor`` c
-    (a share of each dimension's variance),
-    ``min_occupancy`` (frames; None: d + 1) for a state to survive, iteration limit and tolerance."""
+    (a share of each dimension's variance), ``min_occupancy`` (frames; None: d + 1) for a
+    state to survive, iteration limit and tolerance."""
 
     n_states: int
     estimator: str = ENTROPIC
@@ -199,7 +201,15 @@ def log_prior(parameters: HmmParameters, settings: Settings, prior_scatter: np.n
     log_dets = gaussians.log_determinants()
     inverses = np.einsum("nki,nkj->nij", gaussians.whitening, gaussians.whitening)
     traces = np.einsum("nii,i->n", inverses, prior_scatter)
-    value = float(-0.5 * PRIOR_FRAMES * log_dets.sum() - 0.5 * traces.sum())
+    dim = parameters.means.shape[1]
+    df = dim + PRIOR_FRAMES
+    normalizer = (
+        0.5 * df * float(np.log(prior_scatter).sum())
+        - 0.5 * df * dim * math.log(2.0)
+        - float(multigammaln(0.5 * df, dim))
+    )
+    per_state = normalizer - 0.5 * (df + dim + 1.0) * log_dets - 0.5 * traces
+    value = float(per_state.sum())
     if settings.estimator == ENTROPIC:
         z, dim = settings.z, parameters.means.shape[1]
         value += z * _neg_entropy(parameters.start) + z * _neg_entropy(parameters.transition)
@@ -229,7 +239,7 @@ def m_step(
             means[state] = stats.sums[state] / weight
         scatter = stats.outer[state] - weight * np.outer(means[state], means[state])
         scatter = 0.5 * (scatter + scatter.T)
-        covariances[state] = (scatter + floor) / (weight + z + PRIOR_FRAMES)
+        covariances[state] = (scatter + floor) / (weight + z + _prior_power(len(floor)))
     return HmmParameters(start, transition, means, covariances)
 
 
@@ -299,7 +309,14 @@ def objective_of(
 def prior_scatter_of(sequences: Sequence[np.ndarray], settings: Settings) -> np.ndarray:
     """diag Ψ = ν c var_d over all frames (d,)."""
     variance = np.concatenate(sequences).var(axis=0)
-    return np.asarray(PRIOR_FRAMES * settings.covariance_floor * np.maximum(variance, 1e-12))
+    power = _prior_power(len(variance))
+    return np.asarray(power * settings.covariance_floor * np.maximum(variance, 1e-12))
+
+
+def _prior_power(dim: int) -> float:
+    """df + d + 1 of the inverse-Wishart prior (df = d + ``PRIOR_FRAMES``): the power of
+    |K|^(−1/2) in its density, and the pseudo-frames the MAP covariance adds."""
+    return 2.0 * dim + PRIOR_FRAMES + 1.0
 
 
 def fit(

@@ -48,13 +48,19 @@ from ...features import frames_covered, speech_features
 from ...numerics.trellis import FixedLagViterbi
 from ...phonemes import PHONEME_INDEX
 from ...timeline import EMOTIONS, PhonemeSpan, SpanLike, coerce_spans
-from ..base import DEFAULT_EMOTION, SynthesisRequest, Synthesizer, fill_gaps, frame_count
+from ..base import (
+    AUDIO_ONLY_UNSUPPORTED,
+    DEFAULT_EMOTION,
+    SynthesisRequest,
+    Synthesizer,
+    fill_gaps,
+    frame_count,
+)
 from . import trajectory
 
 if TYPE_CHECKING:
     from .model import HmmModel
 
-AUDIO_ONLY_UNSUPPORTED = "audio_only_unsupported"
 PINNED = 2
 _EPS = 1e-9
 
