@@ -77,7 +77,7 @@ class HmmEngine(Engine):
         max_training_frames: int = 8000,
         tol: float = 1e-4,
         phoneme_smoothing: float = 0.5,
-        audio_weight: float = 0.3,
+        audio_weight: float = 0.1,
         seed: int = 0,
         lag_ms: float = 500.0,
         window_ms: float = 250.0,

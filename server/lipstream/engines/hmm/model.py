@@ -9,8 +9,9 @@ corpus had audio, its Gaussian over speech features (``vocal_means`` (N, F),
 ``vocal_covariances`` (N, F, F); F = 0 without audio). The manifest's extra holds
 ``hmm_fps``, ``has_audio`` and the feature analysis (``mfcc``).
 
-Options: ``lag_ms`` (the Viterbi lag limit; null: unlimited) and ``window_ms``
-(the trajectory block; 0: a frame at a time; null: one solve at the end). The
+Options: ``lag_ms`` (the Viterbi lag limit; null: unlimited), ``window_ms``
+(the trajectory block; 0: a frame at a time; null: one solve at the end) and
+``drive`` (``auto``, ``phonemes``, ``audio``, ``both``; see ``synthesizer``). The
 ladder (``RUNGS``) runs from a half-second lag with quarter-second blocks down
 to the causal rung (lag 0, a frame at a time), which also hears audio a few
 frames late rather than wait for a feature window (``synthesizer``).
@@ -33,10 +34,10 @@ from ...numerics.basis import MotionBasis, read_components
 from ...phonemes import PHONEMES
 from ...store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
 from ...timeline import EMOTIONS, PhonemeSpan
-from ..base import Lookahead, Model, Rung, SynthesisRequest, Synthesizer
+from ..base import AUDIO_ONLY_UNSUPPORTED, Lookahead, Model, Rung, SynthesisRequest, Synthesizer
 from . import trajectory
 from .gaussian import Gaussians
-from .synthesizer import HmmSynthesizer, Plan
+from .synthesizer import AUDIO, AUTO, BOTH, DRIVES, HmmSynthesizer, Plan
 
 MAX_OPTION_MS = 5000.0
 RUNGS: tuple[tuple[str, float, float], ...] = (  # name, lag_ms, window_ms
@@ -54,7 +55,7 @@ class HmmModel(Model):
     """See the module docstring."""
 
     engine = "hmm"
-    option_names = ("lag_ms", "window_ms")
+    option_names = ("lag_ms", "window_ms", "drive")
 
     def __init__(self, manifest: ModelManifest, arrays: Mapping[str, np.ndarray]) -> None:
         super().__init__(manifest)
@@ -130,10 +131,21 @@ class HmmModel(Model):
         else:
             block = max(1, round(window_ms / 1000.0 * self.synthesis_fps))
             future = block // 2
+        drive = options.get("drive", AUTO)
+        if drive not in DRIVES:
+            raise InvalidRequestError(
+                f"drive must be one of {', '.join(DRIVES)}, got {drive!r}", where="options.drive"
+            )
+        if drive in (AUDIO, BOTH) and self.vocal is None:
+            raise InvalidRequestError(
+                f"model {self.name!r} was trained without audio: it takes drive = phonemes only",
+                where="options.drive",
+                code=AUDIO_ONLY_UNSUPPORTED if drive == AUDIO else "invalid_request",
+            )
         delay = 0
         if lag_ms is not None and lag_ms <= NO_WAIT_BELOW_MS and window_ms == 0.0:
             delay = math.ceil((self.mfcc.window_s / 2.0 + 1e-3) * self.hmm_fps)
-        return Plan(lag, block, future, delay)
+        return Plan(lag, block, future, delay, str(drive))
 
     def lookahead_for(self, options: Mapping[str, Any]) -> Lookahead | None:
         plan = self.plan(options)

@@ -17,6 +17,12 @@ and emotion log-probabilities plus its vocal Gaussian's log-density times
 dimensions would otherwise outvote the phoneme and the emotion), whichever the
 request carries.
 
+Driving (option ``drive``): ``phonemes``, ``audio``, ``both``, or ``auto``
+(default), which decides at the request's first input: spans → phonemes
+(audio fed later is ignored), audio → audio alone (spans fed later are an
+error), both in one feed → both. A frame is decoded once, from the input then
+final, so a streamed request that means both must say so up front.
+
 Decoding: ``numerics.trellis.FixedLagViterbi`` with the rung's lag L (HMM
 frames; None: commits only where survivors merge, and at the end).
 
@@ -62,6 +68,8 @@ if TYPE_CHECKING:
     from .model import HmmModel
 
 PINNED = 2
+AUTO, PHONEMES, AUDIO, BOTH = "auto", "phonemes", "audio", "both"
+DRIVES = (AUTO, PHONEMES, AUDIO, BOTH)
 _EPS = 1e-9
 
 
@@ -74,6 +82,7 @@ class Plan:
     block: int | None
     future: int
     delay: int
+    drive: str = AUTO
 
     def wait_s(self, hmm_fps: float, synthesis_fps: float) -> float | None:
         """Seconds of input past t that the frame at t waits for (None: the end)."""
@@ -151,6 +160,7 @@ class HmmSynthesizer(Synthesizer):
         self.moods: list[int] = []
         self.audio = AudioFeatures(model)
         self.heard = False
+        self.mode = None if plan.drive == AUTO else plan.drive
         self.decoder = FixedLagViterbi(model.log_start, model.log_transition, plan.lag)
         self.observed = 0
         self.states = np.zeros(0, dtype=np.int64)
@@ -166,21 +176,34 @@ class HmmSynthesizer(Synthesizer):
             raise InvalidRequestError("input fed after finish()", code="request_finished")
         covered = self.spans[-1].end if self.spans else 0.0
         new = coerce_spans(spans, after=covered, first_index=len(self.spans))
+        hearing = audio is not None and self.model.vocal is not None
+        if self.mode is None and (new or hearing):
+            self.mode = BOTH if new and hearing else (PHONEMES if new else AUDIO)
+        if new and self.mode == AUDIO:
+            raise InvalidRequestError(
+                "this request is driven by audio alone (its first input was audio); to drive "
+                "it by phonemes and audio, start it with options.drive = both",
+                where="phonemes",
+            )
         for span in fill_gaps(new, covered):
             self.spans.append(span)
             self.starts.append(span.start)
             self.labels.append(PHONEME_INDEX[span.phoneme])
             self.moods.append(EMOTIONS.index(self.request.emotion_of(span) or DEFAULT_EMOTION))
         if audio is not None:
-            self.audio.add(audio)
             self.heard = True
+            if hearing and self.mode != PHONEMES:
+                self.audio.add(audio)
 
     def _listening(self) -> bool:
-        return self.heard and self.model.vocal is not None
+        return self.mode in (AUDIO, BOTH)
+
+    def _reading(self) -> bool:
+        return self.mode in (PHONEMES, BOTH)
 
     def _duration(self) -> float:
-        if self.spans:
-            return self.spans[-1].end
+        if self._reading():
+            return self.spans[-1].end if self.spans else 0.0
         return self.audio.duration if self._listening() else 0.0
 
     def _observable(self) -> int:
@@ -189,8 +212,8 @@ class HmmSynthesizer(Synthesizer):
         if self.finished:
             return frame_count(self._duration(), hmm_fps) if self._duration() > 0 else 0
         limits = []
-        if self.spans:
-            limits.append(frame_count(self.spans[-1].end, hmm_fps))
+        if self._reading():
+            limits.append(frame_count(self.spans[-1].end, hmm_fps) if self.spans else 0)
         if self._listening():
             limits.append(self.audio.final_frames(False) + self.plan.delay)
         return min(limits) if limits else 0
@@ -199,8 +222,8 @@ class HmmSynthesizer(Synthesizer):
         """The time up to which the input is final."""
         hmm_fps = self.model.hmm_fps
         times = []
-        if self.spans:
-            times.append(self.spans[-1].end)
+        if self._reading():
+            times.append(self.spans[-1].end if self.spans else -math.inf)
         if self._listening():
             times.append((self.audio.final_frames(False) + self.plan.delay - 1) / hmm_fps)
         return min(times) if times else -math.inf
@@ -211,7 +234,7 @@ class HmmSynthesizer(Synthesizer):
         model = self.model
         log_e = np.zeros((stop - first, len(model.log_start)))
         times = np.arange(first, stop) / model.hmm_fps
-        if self.spans:
+        if self._reading():
             index = np.searchsorted(np.asarray(self.starts), times - _EPS, side="left") - 1
             index = np.clip(index, 0, len(self.labels) - 1)
             log_e += model.phoneme_log_probs[:, np.asarray(self.labels)[index]].T
@@ -319,6 +342,10 @@ class HmmSynthesizer(Synthesizer):
         return self._emit()
 
     def finish(self) -> np.ndarray:
+        if self.mode == BOTH and not (self.spans and self.audio.length):
+            raise InvalidRequestError(
+                "a request with options.drive = both needs phonemes and audio", where="input"
+            )
         if not self.spans and self.heard and self.model.vocal is None:
             raise InvalidRequestError(
                 f"model {self.model.name!r} of engine hmm was trained without audio, so it "
