@@ -152,7 +152,7 @@ class HmmModel(Model):
         wait = plan.wait_s(self.hmm_fps, self.synthesis_fps)
         if wait is None:
             return None
-        audio = 0.0 if plan.delay else self.mfcc.window_s / 2.0
+        audio = 0.0 if plan.delay or self.vocal is None else self.mfcc.window_s / 2.0
         return Lookahead(seconds=wait, audio_seconds=audio)
 
     @property
