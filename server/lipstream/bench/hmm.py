@@ -151,11 +151,13 @@ def run_hmm_bench(corpus: Corpus) -> dict[str, Any]:
             mean,
         )
         voiced = [u for u in heldout.utterances if u.audio is not None]
+        first_audio = voiced[0].audio
+        assert first_audio is not None
         speeds = {"offline": _real_time_factor(model, voiced, {"lag_ms": None, "window_ms": None})}
         latency = {}
         for rung in model.fidelity_ladder():
             speeds[rung.name] = _real_time_factor(model, voiced, dict(rung.options))
-            latency[rung.name] = _first_frame(model, voiced[0].audio, dict(rung.options))
+            latency[rung.name] = _first_frame(model, first_audio, dict(rung.options))
         results["real_time_factor"] = speeds
         results["first_frame"] = latency
     return results

@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 
+_BATCH_VALUES = 1 << 20
+
 
 class Gaussians:
     """``means`` (N, d) and symmetric positive definite ``covariances`` (N, d, d)."""
@@ -31,6 +33,9 @@ class Gaussians:
     def log_density(self, frames: np.ndarray) -> np.ndarray:
         """log N(x_t; μ_i, K_i) for frames (T, d): (T, N)."""
         x = np.asarray(frames, dtype=np.float64)
+        if len(x) * self.whitening.size <= _BATCH_VALUES:  # few frames: every state at once
+            z = np.einsum("td,nkd->tnk", x, self.whitening) - self.offsets
+            return np.asarray(-0.5 * np.einsum("tnk,tnk->tn", z, z) + self.constants)
         out = np.empty((len(x), len(self.means)))
         for state, (whitening, offset) in enumerate(zip(self.whitening, self.offsets)):
             z = x @ whitening.T - offset

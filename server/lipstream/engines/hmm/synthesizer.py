@@ -30,7 +30,8 @@ Trajectory: blocks of B synthesis frames; block b is solved over frames
 [bB − 2, (b+1)B + F) once their states are committed (F frames of future
 context), its first two frames pinned to the committed ones
 (``trajectory.solve``), and keeps [bB, (b+1)B). B = 1, F = 0 is a frame at a
-time (with the pose and velocity marginals, which keep that recursion stable);
+time (``trajectory.recurse``, with the pose and velocity marginals, which keep that
+recursion stable);
 B None solves the whole utterance once at the end.
 
 Finality: the output frame at t is final once the input covers
@@ -245,10 +246,10 @@ class HmmSynthesizer(Synthesizer):
         if self._listening() and model.vocal is not None:
             frames = np.arange(first, stop) - self.plan.delay
             available = frame_count(self.audio.duration, model.mfcc.rate)
-            heard = (frames < available) & (frames >= -self.plan.delay)
+            heard = (frames < available) & (frames >= 0)  # the first d frames hear nothing yet
             if heard.any():
                 rows = self.audio.rows(int(frames[heard].max()) + 1)
-                vocal = model.vocal.log_density(rows[np.maximum(frames[heard], 0)])
+                vocal = model.vocal.log_density(rows[frames[heard]])
                 log_e[heard] += model.audio_weight * vocal
         return log_e
 
@@ -301,13 +302,23 @@ class HmmSynthesizer(Synthesizer):
             if end > ready:
                 return
             self.request.guard.check()
+            if block == 1:
+                self._recurse(start, ready if total is None else total)
+                continue
             first = max(0, start - PINNED)
             frames = np.arange(first, end)
             states = self.states[np.minimum(hmm_frame(frames, self.ratio), len(self.states) - 1)]
             pins = self.curve[first:start] if start > 0 else None
-            terms = self.model.stepwise_dynamics if block == 1 else self.model.dynamics
-            solved = trajectory.solve(terms, states, pins)
+            solved = trajectory.solve(self.model.dynamics, states, pins)
             self.curve = np.concatenate([self.curve, solved[start - first : stop - first]])
+
+    def _recurse(self, start: int, stop: int) -> None:
+        """Frames start .. stop − 1 a frame at a time (``trajectory.recurse``)."""
+        states = self.states[np.minimum(hmm_frame(np.arange(start, stop), self.ratio),
+                                        len(self.states) - 1)]  # fmt: skip
+        previous = self.curve[start - 1] if start > 0 else None
+        fresh = trajectory.recurse(self.model.stepwise_dynamics, states, previous)
+        self.curve = np.concatenate([self.curve, fresh])
 
     # -- output -----------------------------------------------------------------------------
 

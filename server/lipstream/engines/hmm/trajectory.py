@@ -35,6 +35,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+from numba import njit
 
 from ...numerics.banded import solve_spd_banded
 
@@ -52,6 +53,8 @@ class Dynamics:
     g_current: np.ndarray  # (N, D, D)
     r_previous: np.ndarray  # (N, D)
     r_current: np.ndarray  # (N, D)
+    pose_mean: np.ndarray  # μ (N, D)
+    current_inverse: np.ndarray  # G_cur⁻¹ (N, D, D)
 
     @property
     def dim(self) -> int:
@@ -88,6 +91,49 @@ def dynamics(
         g_current=a + c + ct + e,
         r_previous=-pm_velocity,
         r_current=pm_pose + pm_velocity,
+        pose_mean=mu,
+        current_inverse=np.linalg.inv(a + c + ct + e),
+    )
+
+
+@njit(cache=True)
+def _recurse(
+    states: np.ndarray,
+    previous: np.ndarray,
+    started: bool,
+    inverse: np.ndarray,
+    cross: np.ndarray,
+    rhs: np.ndarray,
+    mean: np.ndarray,
+) -> np.ndarray:
+    out = np.empty((states.shape[0], mean.shape[1]))
+    last = previous.copy()
+    for t in range(states.shape[0]):
+        state = states[t]
+        if not started and t == 0:
+            out[0] = mean[state]
+        else:
+            out[t] = inverse[state] @ (rhs[state] - cross[state] @ last)
+        last = out[t]
+    return out
+
+
+def recurse(terms: Dynamics, states: np.ndarray, previous: np.ndarray | None) -> np.ndarray:
+    """A frame at a time: each frame minimizes its own term of Eq. 5 given the frame before
+    (``previous``, the last committed frame; None: the first frame takes its state's pose
+    mean), y_t = G_cur⁻¹ (r_cur − G_cross y_{t−1}) — the limit of pinning the frame before."""
+    started = previous is not None
+    last = np.zeros(terms.dim) if previous is None else np.asarray(previous, dtype=np.float64)
+    return np.asarray(
+        _recurse(
+            np.asarray(states, dtype=np.int64),
+            last,
+            started,
+            terms.current_inverse,
+            terms.g_cross,
+            terms.r_current,
+            terms.pose_mean,
+        )  # fmt: skip
     )
 
 

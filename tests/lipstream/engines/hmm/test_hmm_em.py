@@ -43,7 +43,9 @@ def test_entropic_training_is_sparser_and_more_certain_than_baum_welch(
     perplexity_c = em.perplexity(conventional.parameters, conventional.statistics.occupancy)
     assert perplexity_e < perplexity_c
     assert held_e.entropy / held_e.frames < held_c.entropy / held_c.frames
-    assert (entropic.parameters.transition > 0).sum() < (conventional.parameters.transition > 0).sum()
+    assert (entropic.parameters.transition > 0).sum() < (
+        conventional.parameters.transition > 0
+    ).sum()
 
 
 def test_the_log_posterior_never_decreases(

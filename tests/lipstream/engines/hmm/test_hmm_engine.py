@@ -46,9 +46,13 @@ def test_every_mode_beats_the_mean_pose_on_held_out_lines(
     errors: dict[str, list[float]] = {"phonemes": [], "audio": [], "both": [], "mean": []}
     for u in heldout.utterances:
         fps, emotion = u.fps, u.emotion
-        errors["phonemes"].append(_rms(model.synthesize(u.phones, fps, emotion=emotion).frames, u.frames))
+        errors["phonemes"].append(
+            _rms(model.synthesize(u.phones, fps, emotion=emotion).frames, u.frames)
+        )
         errors["audio"].append(_rms(model.synthesize([], fps, u.audio, emotion).frames, u.frames))
-        errors["both"].append(_rms(model.synthesize(u.phones, fps, u.audio, emotion).frames, u.frames))
+        errors["both"].append(
+            _rms(model.synthesize(u.phones, fps, u.audio, emotion).frames, u.frames)
+        )
         errors["mean"].append(_rms(np.broadcast_to(mean, u.frames.shape), u.frames))
     baseline = np.mean(errors["mean"])
     for mode in ("phonemes", "audio", "both"):
@@ -119,7 +123,9 @@ def test_audio_alone_needs_a_model_trained_with_audio(
 
 
 @pytest.fixture(scope="module")
-def served(trained_models: dict[str, Model], tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
+def served(
+    trained_models: dict[str, Model], tmp_path_factory: pytest.TempPathFactory
+) -> Iterator[LiveServer]:
     chosen = {name: trained_models[name] for name in ("hmm", "viseme-lerp")}
     with live_server(save_models(chosen, tmp_path_factory.mktemp("hmm-models"))) as server:
         yield server

@@ -68,9 +68,7 @@ def test_solving_at_a_higher_rate_keeps_the_trajectorys_shape() -> None:
     coarse = trajectory.solve(trajectory.dynamics(means, covariances), states)
     for factor in (2, 3):
         fine_states = np.repeat(states, factor)
-        fine = trajectory.solve(
-            trajectory.dynamics(means, covariances, 1.0 / factor), fine_states
-        )
+        fine = trajectory.solve(trajectory.dynamics(means, covariances, 1.0 / factor), fine_states)
         sampled = fine[::factor]
         # Same shape: strongly correlated per dimension and close in value.
         for d in range(DIM):
