@@ -32,7 +32,6 @@ continuous across the join; those frames carry no state term.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
 from numba import njit
@@ -137,15 +136,6 @@ def recurse(terms: Dynamics, states: np.ndarray, previous: np.ndarray | None) ->
     )
 
 
-@lru_cache(maxsize=16)
-def _band_layout(dim: int) -> tuple[np.ndarray, ...]:
-    """Lower-band rows and column offsets of a diagonal block (a ≥ b) and a sub-diagonal
-    block (all a, b) at frame column t·D + b."""
-    a, b = np.meshgrid(np.arange(dim), np.arange(dim), indexing="ij")
-    lower = a >= b
-    return (a[lower], b[lower], (a - b)[lower], a.ravel(), b.ravel(), (dim + a - b).ravel())
-
-
 def solve(terms: Dynamics, states: np.ndarray, pins: np.ndarray | None = None) -> np.ndarray:
     """The trajectory (T, D) for the state of each frame; ``pins`` (P, D) fix its first P
     frames (their states are ignored)."""
@@ -170,10 +160,21 @@ def solve(terms: Dynamics, states: np.ndarray, pins: np.ndarray | None = None) -
         below[first - 1 :] += terms.g_cross[joint]
         rhs[first:] += terms.r_current[joint]
         rhs[first - 1 : frames - 1] += terms.r_previous[joint]
-    a_d, b_d, row_d, a_o, b_o, row_o = _band_layout(dim)
-    bands = np.zeros((2 * dim, frames * dim))
-    columns = (np.arange(frames) * dim)[:, None]
-    bands[row_d[None, :], columns + b_d[None, :]] = diagonal[:, a_d, b_d]
-    if frames > 1:
-        bands[row_o[None, :], columns[:-1] + b_o[None, :]] = below[:, a_o, b_o]
-    return solve_spd_banded(bands, rhs.reshape(-1)).reshape(frames, dim)
+    return solve_spd_banded(_bands(diagonal, below), rhs.reshape(-1)).reshape(frames, dim)
+
+
+def _bands(diagonal: np.ndarray, below: np.ndarray) -> np.ndarray:
+    """LAPACK lower band storage of the block-tridiagonal matrix, time-major: row m of the
+    bands holds A[i + m, i], i = t·D + b, which lies in block (t, t) for m ≤ D − 1 − b and
+    in block (t + 1, t) otherwise. Filled one block diagonal at a time."""
+    frames, dim, _ = diagonal.shape
+    bands = np.zeros((2 * dim, frames, dim))
+    for offset in range(dim):  # within a diagonal block: A[t·D + b + offset, t·D + b]
+        bands[offset, :, : dim - offset] = np.diagonal(diagonal, -offset, axis1=1, axis2=2)
+    for row in range(1, 2 * dim):  # into the block below: A[(t+1)·D + a, t·D + b]
+        shift = row - dim  # a − b
+        if frames > 1:
+            first = max(0, -shift)
+            last = min(dim, dim - shift)
+            bands[row, :-1, first:last] = np.diagonal(below, -shift, axis1=1, axis2=2)
+    return bands.reshape(2 * dim, frames * dim)
