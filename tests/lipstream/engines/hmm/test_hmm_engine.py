@@ -91,6 +91,21 @@ def test_a_streamed_request_is_driven_by_what_its_first_input_was(
     np.testing.assert_array_equal(streamed, model.synthesize(line.phones, FPS, line.audio).frames)
 
 
+def test_trajectory_windows_join_without_a_jump_in_pose_or_velocity(
+    model: HmmModel, heldout: Corpus
+) -> None:
+    """Blocks of 250 ms at the synthesis rate (one output frame per trajectory frame): the
+    acceleration at each join is no larger than the motion's own elsewhere."""
+    rate = model.synthesis_fps
+    block = round(0.25 * rate)
+    for line in heldout.utterances:
+        frames = model.synthesize(line.phones, rate, lag_ms=None, window_ms=250).frames
+        acceleration = np.abs(np.diff(frames.astype(np.float64), 2, axis=0)).max(axis=1)
+        joins = np.arange(block, len(frames) - 1, block) - 1  # second difference centred on a join
+        elsewhere = np.delete(acceleration, joins)
+        assert acceleration[joins].max() <= 0.5 * elsewhere.max()
+
+
 def test_the_model_stores_its_training_figures(model: HmmModel) -> None:
     metrics = model.manifest.metrics
     assert 1 <= metrics["states"] <= metrics["states_initial"] == 40
