@@ -50,6 +50,7 @@ CPU_BUDGET_EXCEEDED = "cpu_budget_exceeded"
 SEARCH_TOO_LARGE = "search_too_large"
 SEARCH_TIMEOUT = "search_timeout"
 OUTPUT_TOO_LARGE = "output_too_large"
+AUDIO_ONLY_UNSUPPORTED = "audio_only_unsupported"
 REQUEST_TIMEOUT = "request_timeout"
 EMPTY_TEXT = "empty_text"
 TEXT_TOO_LONG = "text_too_long"
@@ -235,6 +236,11 @@ ERROR_CODES: dict[str, ErrorCodeInfo] = {
     ),
     SEARCH_TIMEOUT: ErrorCodeInfo(
         "the search ran past the request's own search budget (anime-graph's pq_budget_s)",
+        "server",
+        "request",
+    ),
+    AUDIO_ONLY_UNSUPPORTED: ErrorCodeInfo(
+        "the request sent audio and no phonemes, but its model cannot be driven by audio alone",
         "server",
         "request",
     ),

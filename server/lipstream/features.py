@@ -1,4 +1,5 @@
-"""Audio features shared by training and serving: MFCC curves.
+"""Audio features shared by training and serving: MFCC curves, and MFCC plus log energy
+with deltas (``speech_features``).
 
 Sketch: feature frame i is centred at ``i / rate`` seconds. Its window
 (25 ms) is cut straight out of the pre-emphasised samples (the first-order
@@ -152,10 +153,46 @@ def mfcc(
     ``stop`` defaults to the frames up to the signal's duration. Returns float32
     (n_frames, n_coefficients); frame i is centred at i / rate seconds.
     """
+    return _analyse(samples, sample_rate, first, stop, config, with_energy=False)
+
+
+def speech_features(
+    samples: np.ndarray,
+    sample_rate: int,
+    first: int = 0,
+    stop: int | None = None,
+    config: MfccConfig = DEFAULT_MFCC,
+) -> np.ndarray:
+    """MFCC plus log energy, with their deltas: float32 (n_frames, 2 (n_coefficients + 1)).
+
+    The log energy is that of the pre-emphasised, windowed frame (as a density, like the
+    band energies). Deltas are backward differences (frame i minus frame i − 1; zero at
+    frame 0), so a frame is final as soon as its own window is, as for ``mfcc``.
+    """
     if stop is None:
         stop = frame_count(len(samples) / sample_rate, config)
     if stop <= first:
-        return np.zeros((0, config.n_coefficients), dtype=np.float32)
+        return np.zeros((0, 2 * (config.n_coefficients + 1)), dtype=np.float32)
+    start = max(0, first - 1)
+    static = _analyse(samples, sample_rate, start, stop, config, with_energy=True)
+    deltas = np.diff(static, axis=0, prepend=static[:1])
+    both = np.concatenate([static, deltas], axis=1)[first - start :]
+    return np.ascontiguousarray(both, dtype=np.float32)
+
+
+def _analyse(
+    samples: np.ndarray,
+    sample_rate: int,
+    first: int,
+    stop: int | None,
+    config: MfccConfig,
+    with_energy: bool,
+) -> np.ndarray:
+    width = config.n_coefficients + (1 if with_energy else 0)
+    if stop is None:
+        stop = frame_count(len(samples) / sample_rate, config)
+    if stop <= first:
+        return np.zeros((0, width), dtype=np.float32)
     analysis = _analysis(int(sample_rate), config)
     length = analysis.length
     starts = _window_starts(first, stop, sample_rate, config)
@@ -170,9 +207,16 @@ def mfcc(
     emphasised = (segment[1:] - coefficient * segment[:-1]) * gain
     windows = sliding_window_view(emphasised, length)[starts - low + pad - 1]
     windows *= analysis.window
+    energy = None
+    if with_energy:
+        density = 1.0 / (float(np.sum(analysis.window.astype(np.float64) ** 2)) * analysis.n_fft)
+        power_sum = np.einsum("ij,ij->i", windows, windows, dtype=np.float64)
+        energy = np.log(np.maximum(power_sum * density * analysis.n_fft, _LOG_FLOOR))
     spectrum = rfft(windows, n=analysis.n_fft, axis=1, overwrite_x=True)
     spectrum = spectrum[:, analysis.low_bin : analysis.high_bin]
     power = spectrum.real.astype(np.float64) ** 2 + spectrum.imag.astype(np.float64) ** 2
     energies = power @ analysis.pooling
     cepstrum = np.log(np.maximum(energies, _LOG_FLOOR)) @ analysis.cepstral
+    if energy is not None:
+        cepstrum = np.concatenate([cepstrum, energy[:, None]], axis=1)
     return np.ascontiguousarray(cepstrum, dtype=np.float32)

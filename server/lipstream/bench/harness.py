@@ -50,6 +50,7 @@ ENGINE_BENCHES: dict[str, tuple[str, str]] = {
         "lipstream.bench.anime_graph:format_anime_graph_bench",
     ),
     "dam": ("lipstream.bench.dam:run_dam_bench", "lipstream.bench.dam:format_dam_bench"),
+    "hmm": ("lipstream.bench.hmm:run_hmm_bench", "lipstream.bench.hmm:format_hmm_bench"),
     "expressive-dp": (
         "lipstream.bench.expressive_dp:run_expressive_dp_bench",
         "lipstream.bench.expressive_dp:format_expressive_dp_bench",

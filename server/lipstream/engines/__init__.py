@@ -14,6 +14,7 @@ ENGINES: dict[str, str] = {
     "anime-graph": "lipstream.engines.anime_graph:AnimeGraphEngine",
     "dam": "lipstream.engines.dam:DamEngine",
     "cohen-massaro": "lipstream.engines.dam:CohenMassaroEngine",
+    "hmm": "lipstream.engines.hmm:HmmEngine",
     "expressive-dp": "lipstream.engines.expressive_dp:ExpressiveDpEngine",
 }
 

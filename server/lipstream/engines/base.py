@@ -77,6 +77,7 @@ from .work import WorkGuard
 MIN_FPS = 1.0  # lowest request frame rate, Hz (the highest, MAX_FPS, is the store's)
 DEFAULT_EMOTION = "neutral"
 DEFAULT_EMOTION_KEY = "default_emotion"
+AUDIO_ONLY_UNSUPPORTED = "audio_only_unsupported"  # the protocol's error code
 _EPS = 1e-9
 
 ModelT = TypeVar("ModelT", bound="Model")
@@ -230,7 +231,8 @@ class Model(ABC):
     """A trained, read-only model. Subclasses define ``render`` and the array round trip."""
 
     engine: ClassVar[str]
-    uses_audio: ClassVar[bool] = False
+    uses_audio: bool = False
+    """Whether a request's audio reaches the synthesizer (a model may decide at load)."""
     option_names: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, manifest: ModelManifest) -> None:
@@ -269,6 +271,11 @@ class Model(ABC):
         cls: type[ModelT], manifest: ModelManifest, arrays: Mapping[str, np.ndarray], path: Path
     ) -> ModelT:
         """Rebuild a model from its manifest and (memory-mapped) arrays."""
+
+    @property
+    def accepts_audio_only(self) -> bool:
+        """Whether audio alone (no phonemes) can drive the model; engines that can say so."""
+        return False
 
     @property
     def lookahead(self) -> Lookahead:
@@ -339,8 +346,17 @@ class Model(ABC):
         emotion: str | None = None,
         **engine_options: Any,
     ) -> SynthesisResult:
-        """Offline synthesis of a whole utterance."""
+        """Offline synthesis of a whole utterance; with no spans, of ``audio`` alone (engines
+        that can, see ``accepts_audio_only``; the others raise ``audio_only_unsupported``)."""
         request = SynthesisRequest(fps=fps, emotion=emotion, options=engine_options)
+        spans = list(spans)
+        if not spans and audio is not None and not self.accepts_audio_only:
+            raise InvalidRequestError(
+                f"model {self.name!r} of engine {self.engine} cannot be driven by audio alone; "
+                "pass phoneme spans with the audio",
+                where="spans",
+                code=AUDIO_ONLY_UNSUPPORTED,
+            )
         synthesizer = self.start(request)
         synthesizer.feed(spans, audio)
         frames = synthesizer.finish()

@@ -16,6 +16,11 @@ the end of its input times its channels, is checked against ``max_values``
 (and the connection's share, which the ``Session`` passes in) before the
 engine sees the phonemes that would make it larger.
 
+Audio alone: a request may send only ``audio`` chunks, then ``end``, when its
+model can be driven by audio alone (``Model.accepts_audio_only``: ``hmm`` with a
+vocal model); its input then covers the audio received. Any other request
+that sent audio and no phonemes ends at ``end`` with ``audio_only_unsupported``.
+
 Endings: ``end`` flushes the engine and sends ``done``; ``cancel`` sends
 ``done`` at once; ``interrupt`` at time ``at`` flushes the engine, sends the
 frames before ``ceil(at × fps)`` not yet sent, then a block starting at that
@@ -38,6 +43,7 @@ import numpy as np
 
 from lipstream_client import AudioChunk, Done, DoneStats, Frames, PhonemeItem
 from lipstream_client.errors import (
+    AUDIO_ONLY_UNSUPPORTED,
     ERROR_CODES,
     INVALID_AUDIO,
     INVALID_REQUEST,
@@ -168,6 +174,8 @@ class RequestSpec:
     profile: ResolvedProfile
     rest: np.ndarray
     clock: RequestClock
+    audio_only: bool = False
+    """The model can be driven by audio alone (``Model.accepts_audio_only``)."""
 
 
 class ActiveRequest:
@@ -324,8 +332,24 @@ class ActiveRequest:
 
     def _covered_until(self) -> float:
         if self.spec.uses_audio and self.audio_rate is not None:
-            return min(self.phonemes_end, self.audio_s)
+            return min(self.phonemes_end, self.audio_s) if self.n_phonemes else self.audio_s
         return self.phonemes_end
+
+    def _input_end(self) -> float:
+        """Where the input ends: its phonemes', or an audio-only request's audio."""
+        if not self.n_phonemes and self.spec.audio_only and self.audio_rate is not None:
+            return self.audio_s
+        return self.phonemes_end
+
+    def _check_drivable(self) -> None:
+        """AUDIO_ONLY_UNSUPPORTED for audio without phonemes to a model that needs phonemes."""
+        if not self.n_phonemes and self.audio_rate is not None and not self.spec.audio_only:
+            raise RequestError(
+                f"the request sent audio and no phonemes, but engine {self.spec.engine}'s "
+                "model cannot be driven by audio alone; send phonemes with the audio",
+                code=AUDIO_ONLY_UNSUPPORTED,
+                where="phonemes",
+            )
 
     def _feed(self, spans: list[PhonemeSpan], audio: Audio | None, fallback: str) -> None:
         try:
@@ -346,6 +370,7 @@ class ActiveRequest:
     # ---- endings --------------------------------------------------------------------------
 
     def end(self, now: float) -> list[Outgoing]:
+        self._check_drivable()
         blocks = self._emit(self._finish(), now)
         return blocks + [self._done("end", self.next_frame)]
 
@@ -354,7 +379,7 @@ class ActiveRequest:
 
     def interrupt(self, at: float, return_ms: float | None, now: float) -> list[Outgoing]:
         fps = self.spec.fps
-        cut = min(at, self.phonemes_end)
+        cut = min(at, self._input_end())
         first_return = max(frames_before(cut, fps), self.tail.oldest)
         base = self.next_frame
         final = self._finish()

@@ -500,6 +500,7 @@ class Session:
             profile,
             rest,
             clock,
+            audio_only=model.accepts_audio_only,
         )
         fidelity, lookahead = self._fidelity(model, estimate, options)
         ready = Ready(

@@ -10,8 +10,6 @@ from lipstream.config import ServerSettings
 from lipstream.loadtest.storm import _quantile, storm
 from tests.lipstream.server.harness import serving
 
-__all__ = ["lerp_dir"]  # the server tests' fixture: only the viseme-lerp model
-
 
 def test_silent_and_partial_connections_are_reported_closed_by_the_server(
     lerp_dir: Path,

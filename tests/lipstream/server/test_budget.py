@@ -94,6 +94,11 @@ DEMO_LOOKAHEAD_MS = {
         "lerp": 200.0,
         "causal": 0.0,
     },
+    "hmm": {  # Viterbi lag + trajectory block and future context, + half a feature window
+        "full": 500.0 + 1000.0 * 44 / 120 + 12.5,
+        "short": 200.0 + 1000.0 * 17 / 120 + 12.5,
+        "causal": 0.0,
+    },
     "anime-graph": {
         "greedy_tile10": 2140.833,
         "greedy_tile4": 940.833,

@@ -14,8 +14,6 @@ from lipstream.server.liveness import LivenessServer
 from tests.helpers import free_port
 from tests.lipstream.server.harness import serving
 
-__all__ = ["lerp_dir"]
-
 ANSWER_BOUND_S = 5.0  # whether it answers at all, not how fast
 
 

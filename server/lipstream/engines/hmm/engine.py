@@ -1,0 +1,222 @@
+"""The ``hmm`` engine: voice puppetry (Brand 1999), trained by ``fit``.
+
+the motion basis (PCA keeping ``variance`` of every channel's variance) ->
+observations [pose, velocity] at ``hmm_fps`` (curves resampled, velocity the
+backward difference per HMM frame) -> the facial HMM trained from a large
+fully connected model (``em``: entropic with extinction, or Baum-Welch as the
+comparison) on the inner training split -> γ on every training line ->
+remapping (``remap``): phoneme and emotion categoricals, and speech-feature
+Gaussians when every line has audio -> metrics: perplexity, held-out entropy rate (bits per
+frame of the facial state posterior on the inner held-out lines), states
+surviving.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from ...corpus import Corpus, Utterance
+from ...features import speech_features
+from ...numerics.basis import MotionBasis, fit_basis
+from ...numerics.trellis import forward_backward
+from ...phonemes import PHONEME_INDEX, PHONEMES
+from ...timeline import EMOTIONS
+from ..base import Engine, frame_count
+from . import em, remap
+from .model import HmmModel, mfcc_fields
+
+VOCAL_FLOOR = 1e-3
+
+
+def hmm_times(utterance: Utterance, hmm_fps: float) -> np.ndarray:
+    """Times (s) of the HMM frames of an utterance: j / hmm_fps up to its last frame."""
+    return np.arange(frame_count(utterance.duration, hmm_fps)) / hmm_fps
+
+
+def observations(utterance: Utterance, basis: MotionBasis, hmm_fps: float) -> np.ndarray:
+    """[pose, velocity] (T, 2D) at the HMM rate; frame 0's velocity is frame 1's."""
+    times = hmm_times(utterance, hmm_fps)
+    pose = basis.project(utterance.frames)
+    sampled = np.stack(
+        [np.interp(times, utterance.times(), pose[:, d]) for d in range(pose.shape[1])], axis=1
+    )
+    velocity = np.diff(sampled, axis=0, prepend=sampled[:1])
+    if len(sampled) > 1:
+        velocity[0] = velocity[1]
+    return np.concatenate([sampled, velocity], axis=1)
+
+
+def phoneme_labels(utterance: Utterance, hmm_fps: float) -> np.ndarray:
+    """Phoneme index of each HMM frame: the span with start < t ≤ end (frame 0: the first)."""
+    times = hmm_times(utterance, hmm_fps)
+    starts = np.array([span.start for span in utterance.phones])
+    index = np.clip(np.searchsorted(starts, times - 1e-9, side="left") - 1, 0, None)
+    return np.array([PHONEME_INDEX[utterance.phones[k].phoneme] for k in index], dtype=np.int64)
+
+
+class HmmEngine(Engine):
+    """Voice puppetry; hyperparameters as in docs/engines/hmm.md."""
+
+    name = "hmm"
+    model_class = HmmModel
+
+    def __init__(
+        self,
+        n_states: int = 40,
+        hmm_fps: float = 40.0,
+        variance: float = 0.95,
+        estimator: str = em.ENTROPIC,
+        prior_scale: float = 1.0,
+        covariance_floor: float = 0.05,
+        n_iter: int = 15,
+        max_training_frames: int = 8000,
+        tol: float = 1e-4,
+        phoneme_smoothing: float = 0.5,
+        audio_weight: float = 0.1,
+        seed: int = 0,
+        lag_ms: float = 500.0,
+        window_ms: float = 250.0,
+    ) -> None:
+        self.n_states = n_states
+        self.hmm_fps = hmm_fps
+        self.variance = variance
+        self.estimator = estimator
+        self.prior_scale = prior_scale
+        self.covariance_floor = covariance_floor
+        self.n_iter = n_iter
+        self.max_training_frames = max_training_frames
+        self.tol = tol
+        self.phoneme_smoothing = phoneme_smoothing
+        self.audio_weight = audio_weight
+        self.seed = seed
+        self.lag_ms = lag_ms
+        self.window_ms = window_ms
+
+    def settings(self) -> em.Settings:
+        if self.estimator not in em.ESTIMATORS:
+            raise ValueError(f"estimator must be one of {em.ESTIMATORS}, got {self.estimator!r}")
+        return em.Settings(
+            n_states=self.n_states,
+            estimator=self.estimator,
+            z=self.prior_scale,
+            covariance_floor=self.covariance_floor,
+            n_iter=self.n_iter,
+            tol=self.tol,
+            seed=self.seed,
+        )
+
+    def fit(self, corpus: Any, *, progress: bool = False) -> HmmModel:
+        began = time.perf_counter()
+        recorded = np.concatenate([utterance.frames for utterance in corpus.utterances])
+        basis, _ = fit_basis(recorded, self.variance)
+        inner, heldout = corpus.split() if len(corpus.utterances) >= 10 else (corpus, None)
+        with threadpool_limits(limits=1):
+            sequences = _evenly(
+                [observations(u, basis, self.hmm_fps) for u in inner.utterances],
+                self.max_training_frames,
+            )
+            fitted = em.fit(sequences, self.settings())
+            parameters = fitted.parameters
+            everything = [observations(u, basis, self.hmm_fps) for u in corpus.utterances]
+            gammas = _gammas(parameters, everything)
+            metrics = self._metrics(fitted, heldout, basis)
+            arrays = self._remap(corpus, gammas)
+        metrics["training_s"] = round(time.perf_counter() - began, 3)
+        manifest = self.new_manifest(
+            corpus,
+            metrics=metrics,
+            extra={
+                "hmm_fps": float(self.hmm_fps),
+                "has_audio": arrays["vocal_means"].shape[1] > 0,
+                "mfcc": mfcc_fields(),
+            },
+        )
+        arrays.update(
+            basis_mean=basis.mean,
+            basis_components=basis.components,
+            start=parameters.start,
+            transition=parameters.transition,
+            means=parameters.means,
+            covariances=parameters.covariances,
+        )
+        return HmmModel(manifest, arrays)
+
+    def _metrics(
+        self, fitted: em.FitResult, heldout: Corpus | None, basis: MotionBasis
+    ) -> dict[str, Any]:
+        parameters = fitted.parameters
+        metrics: dict[str, Any] = {
+            "estimator": self.estimator,
+            "states_initial": self.n_states,
+            "states": parameters.n_states,
+            "transitions": int((parameters.transition > 0.0).sum()),
+            "perplexity": round(em.perplexity(parameters, fitted.statistics.occupancy), 6),
+            "log_posterior": [round(value, 3) for value in fitted.history],
+            "train_entropy_rate_bits": round(
+                fitted.statistics.entropy / fitted.statistics.frames / math.log(2.0), 6
+            ),
+            "heldout_entropy_rate_bits": None,
+        }
+        if heldout is not None and heldout.utterances:
+            held = [observations(u, basis, self.hmm_fps) for u in heldout.utterances]
+            stats = em.e_step(parameters, held)
+            metrics["heldout_entropy_rate_bits"] = round(
+                stats.entropy / stats.frames / math.log(2.0), 6
+            )
+            metrics["heldout_log_likelihood_per_frame"] = round(
+                stats.log_likelihood / stats.frames, 6
+            )
+        return metrics
+
+    def _remap(self, corpus: Corpus, gammas: list[np.ndarray]) -> dict[str, np.ndarray]:
+        utterances = corpus.utterances
+        labels = [phoneme_labels(u, self.hmm_fps) for u in utterances]
+        emotions = [
+            np.full(len(gamma), EMOTIONS.index(u.emotion), dtype=np.int64)
+            for u, gamma in zip(utterances, gammas, strict=True)
+        ]
+        arrays = {
+            "phoneme_log_probs": remap.phoneme_log_probabilities(
+                gammas, labels, len(PHONEMES), self.phoneme_smoothing
+            ),
+            "emotion_log_probs": remap.phoneme_log_probabilities(
+                gammas, emotions, len(EMOTIONS), self.phoneme_smoothing
+            ),
+        }
+        n = gammas[0].shape[1]
+        if all(u.audio is not None for u in utterances):
+            config = HmmModel.feature_config(self.hmm_fps)
+            features = []
+            for utterance, gamma in zip(utterances, gammas, strict=True):
+                audio = utterance.audio
+                assert audio is not None
+                rows = speech_features(audio.samples, audio.sample_rate, 0, len(gamma), config)
+                features.append(rows)
+            means, covariances = remap.vocal_gaussians(gammas, features, VOCAL_FLOOR)
+        else:
+            means, covariances = np.zeros((n, 0)), np.zeros((n, 0, 0))
+        arrays["vocal_means"] = means
+        arrays["vocal_covariances"] = covariances
+        return arrays
+
+
+def _evenly(sequences: list[np.ndarray], max_frames: int) -> list[np.ndarray]:
+    """Every k-th sequence, k the smallest step that keeps the total within ``max_frames``
+    (at least one sequence)."""
+    total = sum(len(sequence) for sequence in sequences)
+    step = max(1, math.ceil(total / max(1, max_frames)))
+    return sequences[::step]
+
+
+def _gammas(parameters: em.HmmParameters, sequences: list[np.ndarray]) -> list[np.ndarray]:
+    gaussians = parameters.gaussians()
+    log_start = parameters.log_start()
+    return [
+        forward_backward(log_start, parameters.transition, gaussians.log_density(s)).gamma
+        for s in sequences
+    ]

@@ -1,0 +1,277 @@
+"""The trained voice-puppetry model: the facial HMM remapped to vocal outputs.
+
+Arrays: the motion basis (``basis_mean``, ``basis_components``, D components);
+the state machine (``start`` (N,), ``transition`` (N, N)); each state's
+Gaussian over [pose, velocity] (``means`` (N, 2D), ``covariances`` (N, 2D, 2D));
+its phoneme and emotion categoricals (``phoneme_log_probs`` (N, phonemes),
+``emotion_log_probs`` (N, emotions)); and, when the
+corpus had audio, its Gaussian over speech features (``vocal_means`` (N, F),
+``vocal_covariances`` (N, F, F); F = 0 without audio). The manifest's extra holds
+``hmm_fps``, ``has_audio`` and the feature analysis (``mfcc``).
+
+Options: ``lag_ms`` (the Viterbi lag limit; null: unlimited), ``window_ms``
+(the trajectory block; 0: a frame at a time; null: one solve at the end) and
+``drive`` (``auto``, ``phonemes``, ``audio``, ``both``; see ``synthesizer``). The
+ladder (``RUNGS``) runs from a half-second lag with quarter-second blocks down
+to the causal rung (lag 0, a frame at a time), which also hears audio a few
+frames late rather than wait for a feature window (``synthesizer``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...audio import Audio
+from ...errors import InvalidRequestError
+from ...features import DEFAULT_MFCC, MfccConfig
+from ...model_checks import ArrayReader, FieldReader
+from ...numerics.basis import MotionBasis, read_components
+from ...phonemes import PHONEMES
+from ...store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
+from ...timeline import EMOTIONS, PhonemeSpan
+from ..base import AUDIO_ONLY_UNSUPPORTED, Lookahead, Model, Rung, SynthesisRequest, Synthesizer
+from . import trajectory
+from .gaussian import Gaussians
+from .synthesizer import AUDIO, AUTO, BOTH, DRIVES, HmmSynthesizer, Plan
+
+MAX_OPTION_MS = 5000.0
+RUNGS: tuple[tuple[str, float, float], ...] = (  # name, lag_ms, window_ms
+    ("full", 500.0, 250.0),
+    ("short", 200.0, 100.0),
+    ("causal_lead", 100.0, 0.0),
+    ("causal", 0.0, 0.0),
+)
+NO_WAIT_BELOW_MS = 100.0
+"""Rungs with a lag up to this hear audio late instead of waiting for a feature window."""
+MFCC_FIELDS = ("window_s", "n_mels", "n_coefficients", "f_min", "f_max", "pre_emphasis")
+
+
+class HmmModel(Model):
+    """See the module docstring."""
+
+    engine = "hmm"
+    option_names = ("lag_ms", "window_ms", "drive")
+
+    def __init__(self, manifest: ModelManifest, arrays: Mapping[str, np.ndarray]) -> None:
+        super().__init__(manifest)
+        self.stored = {name: np.asarray(value) for name, value in arrays.items()}
+        extra = manifest.extra
+        self.hmm_fps = float(extra["hmm_fps"])
+        self.synthesis_fps = float(manifest.fps)
+        self.mfcc = MfccConfig(rate=self.hmm_fps, **dict(extra["mfcc"]))
+        self.basis = MotionBasis(self.stored["basis_mean"], self.stored["basis_components"])
+        start = self.stored["start"]
+        transition = self.stored["transition"]
+        with np.errstate(divide="ignore"):
+            self.log_start = np.log(start)
+            self.log_transition = np.log(transition)
+        self.facial = Gaussians(self.stored["means"], self.stored["covariances"])
+        self.phoneme_log_probs = np.ascontiguousarray(self.stored["phoneme_log_probs"])
+        self.emotion_log_probs = np.ascontiguousarray(self.stored["emotion_log_probs"])
+        self.vocal: Gaussians | None = None
+        if bool(extra["has_audio"]):
+            self.vocal = Gaussians(self.stored["vocal_means"], self.stored["vocal_covariances"])
+        self.uses_audio = self.vocal is not None
+        ratio = self.hmm_fps / self.synthesis_fps
+        self.dynamics = trajectory.dynamics(self.stored["means"], self.stored["covariances"], ratio)
+        self.stepwise_dynamics = trajectory.dynamics(
+            self.stored["means"], self.stored["covariances"], ratio, coupled=False
+        )
+        self.audio_weight = float(manifest.hyperparameters["audio_weight"])
+        self.default_lag_ms = float(manifest.hyperparameters["lag_ms"])
+        self.default_window_ms = float(manifest.hyperparameters["window_ms"])
+
+    @property
+    def accepts_audio_only(self) -> bool:
+        return self.vocal is not None
+
+    @staticmethod
+    def feature_config(hmm_fps: float) -> MfccConfig:
+        """The speech-feature analysis at one feature frame per HMM frame."""
+        return MfccConfig(rate=hmm_fps, **mfcc_fields())
+
+    # -- options, ladder --------------------------------------------------------------------
+
+    def resolve(self, options: Mapping[str, Any]) -> tuple[float | None, float | None]:
+        """(lag_ms, window_ms) of ``options`` with the defaults filled in."""
+        values: list[float | None] = []
+        for name, default in (
+            ("lag_ms", self.default_lag_ms),
+            ("window_ms", self.default_window_ms),
+        ):
+            value = options.get(name, default)
+            if value is None:
+                values.append(None)
+                continue
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float))
+                or not 0.0 <= value <= MAX_OPTION_MS
+            ):
+                raise InvalidRequestError(
+                    f"{name} must be null or a number of milliseconds in [0, {MAX_OPTION_MS:g}], "
+                    f"got {value!r}",
+                    where=f"options.{name}",
+                )
+            values.append(float(value))
+        return values[0], values[1]
+
+    def plan(self, options: Mapping[str, Any]) -> Plan:
+        lag_ms, window_ms = self.resolve(options)
+        lag = None if lag_ms is None else round(lag_ms / 1000.0 * self.hmm_fps)
+        if window_ms is None:
+            block, future = None, 0
+        elif window_ms == 0.0:
+            block, future = 1, 0
+        else:
+            block = max(1, round(window_ms / 1000.0 * self.synthesis_fps))
+            future = block // 2
+        drive = options.get("drive", AUTO)
+        if drive not in DRIVES:
+            raise InvalidRequestError(
+                f"drive must be one of {', '.join(DRIVES)}, got {drive!r}", where="options.drive"
+            )
+        if drive in (AUDIO, BOTH) and self.vocal is None:
+            raise InvalidRequestError(
+                f"model {self.name!r} was trained without audio: it takes drive = phonemes only",
+                where="options.drive",
+                code=AUDIO_ONLY_UNSUPPORTED if drive == AUDIO else "invalid_request",
+            )
+        delay = 0
+        if lag_ms is not None and lag_ms <= NO_WAIT_BELOW_MS and window_ms == 0.0:
+            delay = math.ceil((self.mfcc.window_s / 2.0 + 1e-3) * self.hmm_fps)
+        return Plan(lag, block, future, delay, str(drive))
+
+    def lookahead_for(self, options: Mapping[str, Any]) -> Lookahead | None:
+        plan = self.plan(options)
+        wait = plan.wait_s(self.hmm_fps, self.synthesis_fps)
+        if wait is None:
+            return None
+        audio = 0.0 if plan.delay or self.vocal is None else self.mfcc.window_s / 2.0
+        return Lookahead(seconds=wait, audio_seconds=audio)
+
+    @property
+    def lookahead(self) -> Lookahead:
+        lookahead = self.lookahead_for({})
+        return lookahead if lookahead is not None else Lookahead(seconds=math.inf)
+
+    def fidelity_ladder(self) -> tuple[Rung, ...]:
+        rungs = []
+        for name, lag_ms, window_ms in RUNGS:
+            options = {"lag_ms": lag_ms, "window_ms": window_ms}
+            lookahead = self.lookahead_for(options)
+            assert lookahead is not None
+            rungs.append(Rung(name, lookahead, options))
+        return tuple(rungs)
+
+    def rung_for(self, options: Mapping[str, Any]) -> Rung | None:
+        resolved = self.resolve(options)
+        for rung in self.fidelity_ladder():
+            if self.resolve(rung.options) == resolved:
+                return rung
+        return None
+
+    def synthesizer(self, request: SynthesisRequest) -> Synthesizer:
+        return HmmSynthesizer(self, request, self.plan(request.options))
+
+    def render(
+        self,
+        spans: Sequence[PhonemeSpan],
+        times: np.ndarray,
+        request: SynthesisRequest,
+        audio: Audio | None,
+    ) -> np.ndarray:
+        raise NotImplementedError("the hmm engine streams through HmmSynthesizer")
+
+    # -- store ------------------------------------------------------------------------------
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return dict(self.stored)
+
+    @classmethod
+    def from_arrays(
+        cls, manifest: ModelManifest, arrays: Mapping[str, np.ndarray], path: Path
+    ) -> HmmModel:
+        fields = FieldReader(str(path / MANIFEST_NAME))
+        hyper = fields.mapping(manifest.hyperparameters, "hyperparameters")
+        extra = fields.mapping(manifest.extra, "extra")
+        fields.number(fields.member(hyper, "audio_weight", "hyperparameters.audio_weight"),
+                      "hyperparameters.audio_weight", 0.0, 100.0)  # fmt: skip
+        for name in ("lag_ms", "window_ms"):
+            fields.number(fields.member(hyper, name, f"hyperparameters.{name}"),
+                          f"hyperparameters.{name}", 0.0, MAX_OPTION_MS)  # fmt: skip
+        fields.number(fields.member(extra, "hmm_fps", "extra.hmm_fps"), "extra.hmm_fps",
+                      1.0, 1000.0)  # fmt: skip
+        has_audio = fields.flag(fields.member(extra, "has_audio", "extra.has_audio"),
+                                "extra.has_audio")  # fmt: skip
+        mfcc = fields.mapping(fields.member(extra, "mfcc", "extra.mfcc"), "extra.mfcc")
+        for name in MFCC_FIELDS:
+            value = fields.member(mfcc, name, f"extra.mfcc.{name}")
+            if name in ("n_mels", "n_coefficients"):
+                fields.integer(value, f"extra.mfcc.{name}", 1, 128)
+            else:
+                fields.number(value, f"extra.mfcc.{name}", 0.0, 100000.0)
+        reader = ArrayReader(arrays, str(path / ARRAYS_NAME))
+        checked = check_arrays(reader, len(manifest.channels), has_audio)
+        return cls(manifest, checked)
+
+
+def mfcc_fields(config: MfccConfig = DEFAULT_MFCC) -> dict[str, Any]:
+    """The feature analysis as stored in ``extra.mfcc`` (the rate is ``hmm_fps``)."""
+    return {name: getattr(config, name) for name in MFCC_FIELDS}
+
+
+def _check_spd(reader: ArrayReader, name: str, matrices: np.ndarray) -> None:
+    if not np.allclose(matrices, np.swapaxes(matrices, 1, 2), rtol=1e-6, atol=1e-9):
+        raise reader.error(name, "holds a matrix that is not symmetric")
+    try:
+        np.linalg.cholesky(matrices)
+    except np.linalg.LinAlgError:
+        raise reader.error(name, "holds a matrix that is not positive definite") from None
+
+
+def check_arrays(reader: ArrayReader, n_channels: int, has_audio: bool) -> dict[str, np.ndarray]:
+    """Every array read with kind, shape and range checked."""
+    mean = reader.floats("basis_mean", (n_channels,))
+    components = read_components(reader, "basis_components", n_channels)
+    dim = 2 * len(components)
+    start = reader.floats("start", (None,))
+    n = len(start)
+    if n == 0:
+        raise reader.error("start", "is empty: a model needs at least one state")
+    transition = reader.floats("transition", (n, n))
+    for name, values in (("start", start), ("transition", transition)):
+        if (values < 0.0).any() or np.abs(values.sum(axis=-1) - 1.0).max() > 1e-6:
+            raise reader.error(name, "must hold probabilities summing to 1")
+    means = reader.floats("means", (n, dim))
+    covariances = reader.floats("covariances", (n, dim, dim))
+    _check_spd(reader, "covariances", covariances)
+    categoricals = {}
+    for name, width in (("phoneme_log_probs", len(PHONEMES)), ("emotion_log_probs", len(EMOTIONS))):
+        values = reader.floats(name, (n, width))
+        if (values > 1e-9).any() or np.abs(np.exp(values).sum(axis=1) - 1.0).max() > 1e-6:
+            raise reader.error(name, "must hold log-probabilities summing to 1")
+        categoricals[name] = values
+    vocal_means = reader.floats("vocal_means", (n, None))
+    width = vocal_means.shape[1]
+    if has_audio != (width > 0):
+        raise reader.error("vocal_means", "must have columns exactly when extra.has_audio")
+    vocal_covariances = reader.floats("vocal_covariances", (n, width, width))
+    if has_audio:
+        _check_spd(reader, "vocal_covariances", vocal_covariances)
+    return {
+        "basis_mean": mean,
+        "basis_components": components,
+        "start": start,
+        "transition": transition,
+        "means": means,
+        "covariances": covariances,
+        **categoricals,
+        "vocal_means": vocal_means,
+        "vocal_covariances": vocal_covariances,
+    }

@@ -1,0 +1,368 @@
+"""Streaming synthesis: observations → fixed-lag Viterbi → windowed trajectory → frames.
+
+Three clocks. HMM frame j is at j / R (R = the model's ``hmm_fps``);
+synthesis frame k at k / R_s (R_s = the training fps), whose state is that of
+HMM frame ⌊k R / R_s⌋; output frame i at i / fps is synthesis frame
+⌊i R_s / fps⌋ (sample and hold, so every fps samples one trajectory).
+
+Observations of HMM frame j: the phoneme and emotion of the span with
+start < j / R ≤ end (frame 0: the first span), known once the spans cover j / R
+(audio alone: the request's emotion); and/or the
+speech features of feature frame j (feature rate R), known once the audio
+covers its window. On the rungs that may not wait for audio (``delay``) frame
+j hears feature frame j − d instead, d frames being enough for its window to
+have ended by j / R. Emission log-likelihood: the state's phoneme log-probability
+and emotion log-probabilities plus its vocal Gaussian's log-density times
+``audio_weight`` (a stream weight, as in multi-stream speech HMMs: 28 feature
+dimensions would otherwise outvote the phoneme and the emotion), whichever the
+request carries.
+
+Driving (option ``drive``): ``phonemes``, ``audio``, ``both``, or ``auto``
+(default), which decides at the request's first input: spans → phonemes
+(audio fed later is ignored), audio → audio alone (spans fed later are an
+error), both in one feed → both. A frame is decoded once, from the input then
+final, so a streamed request that means both must say so up front.
+
+Decoding: ``numerics.trellis.FixedLagViterbi`` with the rung's lag L (HMM
+frames; None: commits only where survivors merge, and at the end).
+
+Trajectory: blocks of B synthesis frames; block b is solved over frames
+[bB − 2, (b+1)B + F) once their states are committed (F frames of future
+context), its first two frames pinned to the committed ones
+(``trajectory.solve``), and keeps [bB, (b+1)B). B = 1, F = 0 is a frame at a
+time (``trajectory.recurse``, with the pose and velocity marginals, which keep that
+recursion stable);
+B None solves the whole utterance once at the end.
+
+Finality: the output frame at t is final once the input covers
+t + L / R + (B − 1 + F) / R_s, which guarantees its block is solvable. Every
+decision depends only on the input up to then, so streaming in any chunking
+gives the offline frames.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ...audio import Audio
+from ...errors import InvalidRequestError
+from ...features import frames_covered, speech_features
+from ...numerics.trellis import FixedLagViterbi
+from ...phonemes import PHONEME_INDEX
+from ...timeline import EMOTIONS, PhonemeSpan, SpanLike, coerce_spans
+from ..base import (
+    AUDIO_ONLY_UNSUPPORTED,
+    DEFAULT_EMOTION,
+    SynthesisRequest,
+    Synthesizer,
+    fill_gaps,
+    frame_count,
+)
+from . import trajectory
+
+if TYPE_CHECKING:
+    from .model import HmmModel
+
+PINNED = 2
+AUTO, PHONEMES, AUDIO, BOTH = "auto", "phonemes", "audio", "both"
+DRIVES = (AUTO, PHONEMES, AUDIO, BOTH)
+_EPS = 1e-9
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A rung's schedule: Viterbi lag (HMM frames, None: unlimited), block and future
+    context (synthesis frames; block None: one solve at the end), feature delay (frames)."""
+
+    lag: int | None
+    block: int | None
+    future: int
+    delay: int
+    drive: str = AUTO
+
+    def wait_s(self, hmm_fps: float, synthesis_fps: float) -> float | None:
+        """Seconds of input past t that the frame at t waits for (None: the end)."""
+        if self.lag is None or self.block is None:
+            return None
+        return self.lag / hmm_fps + (self.block - 1 + self.future) / synthesis_fps
+
+
+def hmm_frame(k: np.ndarray | int, ratio: float) -> np.ndarray:
+    """The HMM frame of synthesis frame(s) ``k`` (ratio = R / R_s)."""
+    return np.floor(np.asarray(k, dtype=np.float64) * ratio + _EPS).astype(np.int64)
+
+
+class AudioFeatures:
+    """A request's audio and its speech features at the HMM rate, computed as they become
+    final."""
+
+    def __init__(self, model: HmmModel) -> None:
+        self.config = model.mfcc
+        self.sample_rate: int | None = None
+        self.samples = np.zeros(0, dtype=np.float32)
+        self.length = 0
+        self.features = np.zeros((0, model.vocal.dim if model.vocal else 0))
+
+    def add(self, audio: Audio) -> None:
+        rate = int(audio.sample_rate)
+        if self.sample_rate is not None and rate != self.sample_rate:
+            raise InvalidRequestError(
+                f"audio at {rate} Hz follows audio at {self.sample_rate} Hz", where="audio"
+            )
+        self.sample_rate = rate
+        chunk = np.asarray(audio.samples, dtype=np.float32).ravel()
+        needed = self.length + len(chunk)
+        if needed > len(self.samples):
+            grown = np.zeros(max(needed, 2 * len(self.samples)), dtype=np.float32)
+            grown[: self.length] = self.samples[: self.length]
+            self.samples = grown
+        self.samples[self.length : needed] = chunk
+        self.length = needed
+
+    @property
+    def duration(self) -> float:
+        return self.length / self.sample_rate if self.sample_rate else 0.0
+
+    def final_frames(self, finished: bool) -> int:
+        """Feature frames final now (all of them once the input is finished)."""
+        if self.sample_rate is None:
+            return 0
+        if finished:
+            return frame_count(self.duration, self.config.rate)
+        return frames_covered(self.length, self.sample_rate, self.config)
+
+    def rows(self, stop: int) -> np.ndarray:
+        """Feature frames 0 .. stop − 1 (computed once each)."""
+        have = len(self.features)
+        if stop > have and self.sample_rate is not None:
+            fresh = speech_features(
+                self.samples[: self.length], self.sample_rate, have, stop, self.config
+            )
+            self.features = np.concatenate([self.features, fresh])
+        return self.features[:stop]
+
+
+class HmmSynthesizer(Synthesizer):
+    """One request: its observations, the decoder, and the trajectory solved so far."""
+
+    def __init__(self, model: HmmModel, request: SynthesisRequest, plan: Plan) -> None:
+        self.model = model
+        self.request = request
+        self.plan = plan
+        self.ratio = model.hmm_fps / model.synthesis_fps
+        self.spans: list[PhonemeSpan] = []
+        self.starts: list[float] = []
+        self.labels: list[int] = []
+        self.moods: list[int] = []
+        self.audio = AudioFeatures(model)
+        self.heard = False
+        self.mode = None if plan.drive == AUTO else plan.drive
+        self.decoder = FixedLagViterbi(model.log_start, model.log_transition, plan.lag)
+        self.observed = 0
+        self.states = np.zeros(0, dtype=np.int64)
+        self.curve = np.zeros((0, model.dynamics.dim))
+        self.emitted = 0
+        self.finished = False
+        self.stats = {"frames": 0, "states": 0}
+
+    # -- input ------------------------------------------------------------------------------
+
+    def feed(self, spans: Iterable[SpanLike], audio: Audio | None = None) -> None:
+        if self.finished:
+            raise InvalidRequestError("input fed after finish()", code="request_finished")
+        covered = self.spans[-1].end if self.spans else 0.0
+        new = coerce_spans(spans, after=covered, first_index=len(self.spans))
+        hearing = audio is not None and self.model.vocal is not None
+        if self.mode is None and (new or hearing):
+            self.mode = BOTH if new and hearing else (PHONEMES if new else AUDIO)
+        if new and self.mode == AUDIO:
+            raise InvalidRequestError(
+                "this request is driven by audio alone (its first input was audio); to drive "
+                "it by phonemes and audio, start it with options.drive = both",
+                where="phonemes",
+            )
+        for span in fill_gaps(new, covered):
+            self.spans.append(span)
+            self.starts.append(span.start)
+            self.labels.append(PHONEME_INDEX[span.phoneme])
+            self.moods.append(EMOTIONS.index(self.request.emotion_of(span) or DEFAULT_EMOTION))
+        if audio is not None:
+            self.heard = True
+            if hearing and self.mode != PHONEMES:
+                self.audio.add(audio)
+
+    def _listening(self) -> bool:
+        return self.mode in (AUDIO, BOTH)
+
+    def _reading(self) -> bool:
+        return self.mode in (PHONEMES, BOTH)
+
+    def _duration(self) -> float:
+        if self._reading():
+            return self.spans[-1].end if self.spans else 0.0
+        return self.audio.duration if self._listening() else 0.0
+
+    def _observable(self) -> int:
+        """HMM frames whose observations are final."""
+        hmm_fps = self.model.hmm_fps
+        if self.finished:
+            return frame_count(self._duration(), hmm_fps) if self._duration() > 0 else 0
+        limits = []
+        if self._reading():
+            limits.append(frame_count(self.spans[-1].end, hmm_fps) if self.spans else 0)
+        if self._listening():
+            limits.append(self.audio.final_frames(False) + self.plan.delay)
+        return min(limits) if limits else 0
+
+    def _covered_s(self) -> float:
+        """The time up to which the input is final."""
+        hmm_fps = self.model.hmm_fps
+        times = []
+        if self._reading():
+            times.append(self.spans[-1].end if self.spans else -math.inf)
+        if self._listening():
+            times.append((self.audio.final_frames(False) + self.plan.delay - 1) / hmm_fps)
+        return min(times) if times else -math.inf
+
+    # -- observations and decoding ----------------------------------------------------------
+
+    def _emissions(self, first: int, stop: int) -> np.ndarray:
+        model = self.model
+        log_e = np.zeros((stop - first, len(model.log_start)))
+        times = np.arange(first, stop) / model.hmm_fps
+        if self._reading():
+            index = np.searchsorted(np.asarray(self.starts), times - _EPS, side="left") - 1
+            index = np.clip(index, 0, len(self.labels) - 1)
+            log_e += model.phoneme_log_probs[:, np.asarray(self.labels)[index]].T
+            log_e += model.emotion_log_probs[:, np.asarray(self.moods)[index]].T
+        else:
+            mood = EMOTIONS.index(self.request.emotion or DEFAULT_EMOTION)
+            log_e += model.emotion_log_probs[:, mood]
+        if self._listening() and model.vocal is not None:
+            frames = np.arange(first, stop) - self.plan.delay
+            available = frame_count(self.audio.duration, model.mfcc.rate)
+            heard = (frames < available) & (frames >= 0)  # the first d frames hear nothing yet
+            if heard.any():
+                rows = self.audio.rows(int(frames[heard].max()) + 1)
+                vocal = model.vocal.log_density(rows[frames[heard]])
+                log_e[heard] += model.audio_weight * vocal
+        return log_e
+
+    def _decode(self) -> None:
+        target = self._observable()
+        if target > self.observed:
+            self.request.guard.check()
+            fresh = self.decoder.push(self._emissions(self.observed, target))
+            self.observed = target
+            self._commit(fresh)
+        if self.finished:
+            self._commit(self.decoder.finish())
+
+    def _commit(self, states: np.ndarray) -> None:
+        if len(states):
+            self.states = np.concatenate([self.states, states])
+            self.stats["states"] = len(self.states)
+
+    # -- trajectory -------------------------------------------------------------------------
+
+    def _synthesis_total(self) -> int | None:
+        if not self.finished:
+            return None
+        duration = self._duration()
+        return frame_count(duration, self.model.synthesis_fps) if duration > 0 else 0
+
+    def _ready_synthesis_frames(self) -> int:
+        """Synthesis frames whose state is committed."""
+        if not len(self.states):
+            return 0
+        return math.ceil((len(self.states) - _EPS) / self.ratio)
+
+    def _solve(self) -> None:
+        total = self._synthesis_total()
+        ready = self._ready_synthesis_frames() if total is None else total
+        block = self.plan.block
+        while True:
+            start = len(self.curve)
+            if total is not None and start >= total:
+                return
+            if block is None:
+                if total is None:
+                    return
+                stop = end = total
+            else:
+                stop = start + block
+                end = stop + self.plan.future
+                if total is not None:
+                    stop, end = min(stop, total), min(end, total)
+            if end > ready:
+                return
+            self.request.guard.check()
+            if block == 1:
+                self._recurse(start, ready if total is None else total)
+                continue
+            first = max(0, start - PINNED)
+            frames = np.arange(first, end)
+            states = self.states[np.minimum(hmm_frame(frames, self.ratio), len(self.states) - 1)]
+            pins = self.curve[first:start] if start > 0 else None
+            solved = trajectory.solve(self.model.dynamics, states, pins)
+            self.curve = np.concatenate([self.curve, solved[start - first : stop - first]])
+
+    def _recurse(self, start: int, stop: int) -> None:
+        """Frames start .. stop − 1 a frame at a time (``trajectory.recurse``)."""
+        states = self.states[np.minimum(hmm_frame(np.arange(start, stop), self.ratio),
+                                        len(self.states) - 1)]  # fmt: skip
+        previous = self.curve[start - 1] if start > 0 else None
+        fresh = trajectory.recurse(self.model.stepwise_dynamics, states, previous)
+        self.curve = np.concatenate([self.curve, fresh])
+
+    # -- output -----------------------------------------------------------------------------
+
+    def _final_output_frames(self) -> int:
+        fps = self.request.fps
+        if self.finished:
+            duration = self._duration()
+            return frame_count(duration, fps) if duration > 0 else 0
+        wait = self.plan.wait_s(self.model.hmm_fps, self.model.synthesis_fps)
+        covered = self._covered_s()
+        if wait is None or covered < wait:
+            return 0
+        return frame_count(covered - wait, fps)
+
+    def _emit(self) -> np.ndarray:
+        stop = self._final_output_frames()
+        width = len(self.model.channels)
+        if stop <= self.emitted:
+            return np.zeros((0, width), dtype=np.float32)
+        self._decode()
+        self._solve()
+        fps = self.request.fps
+        index = np.arange(self.emitted, stop)
+        k = np.floor(index * (self.model.synthesis_fps / fps) + _EPS).astype(np.int64)
+        k = k[k < len(self.curve)]
+        frames = self.model.basis.reconstruct(self.curve[k]).astype(np.float32)
+        self.emitted += len(k)
+        self.stats["frames"] = self.emitted
+        return frames
+
+    def frames(self) -> np.ndarray:
+        return self._emit()
+
+    def finish(self) -> np.ndarray:
+        if self.mode == BOTH and not (self.spans and self.audio.length):
+            raise InvalidRequestError(
+                "a request with options.drive = both needs phonemes and audio", where="input"
+            )
+        if not self.spans and self.heard and self.model.vocal is None:
+            raise InvalidRequestError(
+                f"model {self.model.name!r} of engine hmm was trained without audio, so it "
+                "cannot be driven by audio alone; send phonemes (with or without audio)",
+                where="audio",
+                code=AUDIO_ONLY_UNSUPPORTED,
+            )
+        self.finished = True
+        return self._emit()

@@ -1,0 +1,180 @@
+"""The most likely trajectory through a state sequence (Brand 1999, Eq. 5–6).
+
+Each state i has a Gaussian over z = [y, ẏ] (pose and velocity in the motion
+basis, velocity per HMM frame) with mean m_i and full covariance K_i. With y at
+frames t = 0..T−1 and ẏ_t = y_t − y_{t−1}, Eq. 5 minimizes
+
+    Σ_{t≥1} (M u_t − m_s(t))ᵀ P_s(t) (M u_t − m_s(t)) + (y_0 − μ_s(0))ᵀ Π_s(0) (y_0 − μ_s(0))
+
+with u_t = [y_{t−1}; y_t], M = [[0, I], [−I, I]], P = K⁻¹ and Π the precision of
+the pose marginal (frame 0 has no velocity). Each term adds Mᵀ P M (blocks
+G_prev = E, G_cross = −(C + E) below the diagonal, G_cur = A + C + Cᵀ + E for
+P = [[A, C], [Cᵀ, E]]) to a block-tridiagonal SPD system (Eq. 6), ordered time-major
+so one banded Cholesky (``numerics.banded.solve_spd_banded``) solves every
+dimension at once in O(T·D³). ``numerics.banded.windowed_least_squares`` takes one
+precision per window and so cannot carry the pose-velocity cross-covariance C
+that Brand's states keep; the blocks are assembled here and solved there.
+
+Frame rate: solving at rate R_s for states learned at rate R scales the velocity
+statistics by ρ = R / R_s (velocity per frame shrinks with shorter frames): the
+mean velocity by ρ, the covariance by S K S with S = diag(I, ρI).
+
+A frame at a time (the causal rungs) the solve is the recursion
+y_t = G_cur⁻¹ (r_cur − G_cross y_{t−1}), whose gain G_cur⁻¹ (C + E) can exceed 1
+when C is large: the frames would diverge. Those rungs drop C (``coupled``
+False), which leaves the gain (A + E)⁻¹ E with eigenvalues in [0, 1).
+
+Windows: ``pins`` fix the first frames of a window to frames already committed
+by a strong prior (``PIN_PRECISION`` on their pose), so pose and velocity stay
+continuous across the join; those frames carry no state term.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ...numerics.banded import solve_spd_banded
+
+PIN_PRECISION = 1e8
+
+
+@dataclass(frozen=True)
+class Dynamics:
+    """Per-state terms of Eq. 5 at one synthesis rate (D = pose dimensions)."""
+
+    pose_precision: np.ndarray  # Π (N, D, D)
+    pose_rhs: np.ndarray  # Π μ (N, D)
+    g_previous: np.ndarray  # (N, D, D)
+    g_cross: np.ndarray  # block (t, t−1), (N, D, D)
+    g_current: np.ndarray  # (N, D, D)
+    r_previous: np.ndarray  # (N, D)
+    r_current: np.ndarray  # (N, D)
+    pose_mean: np.ndarray  # μ (N, D)
+    current_inverse: np.ndarray  # G_cur⁻¹ (N, D, D)
+
+    @property
+    def dim(self) -> int:
+        return int(self.pose_rhs.shape[1])
+
+
+def dynamics(
+    means: np.ndarray, covariances: np.ndarray, ratio: float = 1.0, coupled: bool = True
+) -> Dynamics:
+    """The terms for states with [pose, velocity] ``means`` (N, 2D) and ``covariances``
+    (N, 2D, 2D) learned at rate R, solved at R_s = R / ``ratio``. ``coupled`` False drops
+    the pose-velocity cross-covariance (see ``marginal_dynamics``)."""
+    dim = means.shape[1] // 2
+    if not coupled:
+        covariances = covariances.copy()
+        covariances[:, :dim, dim:] = 0.0
+        covariances[:, dim:, :dim] = 0.0
+    scale = np.concatenate([np.ones(dim), np.full(dim, ratio)])
+    m = means * scale
+    k = covariances * scale[:, None] * scale[None, :]
+    precision = np.linalg.inv(k)
+    precision = 0.5 * (precision + np.swapaxes(precision, 1, 2))
+    a, c, e = precision[:, :dim, :dim], precision[:, :dim, dim:], precision[:, dim:, dim:]
+    mu, velocity = m[:, :dim], m[:, dim:]
+    pose_precision = np.linalg.inv(k[:, :dim, :dim])
+    ct = np.swapaxes(c, 1, 2)
+    pm_pose = np.einsum("nij,nj->ni", a, mu) + np.einsum("nij,nj->ni", c, velocity)
+    pm_velocity = np.einsum("nij,nj->ni", ct, mu) + np.einsum("nij,nj->ni", e, velocity)
+    return Dynamics(
+        pose_precision=pose_precision,
+        pose_rhs=np.einsum("nij,nj->ni", pose_precision, mu),
+        g_previous=e,
+        g_cross=-(c + e),
+        g_current=a + c + ct + e,
+        r_previous=-pm_velocity,
+        r_current=pm_pose + pm_velocity,
+        pose_mean=mu,
+        current_inverse=np.linalg.inv(a + c + ct + e),
+    )
+
+
+@njit(cache=True)
+def _recurse(
+    states: np.ndarray,
+    previous: np.ndarray,
+    started: bool,
+    inverse: np.ndarray,
+    cross: np.ndarray,
+    rhs: np.ndarray,
+    mean: np.ndarray,
+) -> np.ndarray:
+    out = np.empty((states.shape[0], mean.shape[1]))
+    last = previous.copy()
+    for t in range(states.shape[0]):
+        state = states[t]
+        if not started and t == 0:
+            out[0] = mean[state]
+        else:
+            out[t] = inverse[state] @ (rhs[state] - cross[state] @ last)
+        last = out[t]
+    return out
+
+
+def recurse(terms: Dynamics, states: np.ndarray, previous: np.ndarray | None) -> np.ndarray:
+    """A frame at a time: each frame minimizes its own term of Eq. 5 given the frame before
+    (``previous``, the last committed frame; None: the first frame takes its state's pose
+    mean), y_t = G_cur⁻¹ (r_cur − G_cross y_{t−1}) — the limit of pinning the frame before."""
+    started = previous is not None
+    last = np.zeros(terms.dim) if previous is None else np.asarray(previous, dtype=np.float64)
+    return np.asarray(
+        _recurse(
+            np.asarray(states, dtype=np.int64),
+            last,
+            started,
+            terms.current_inverse,
+            terms.g_cross,
+            terms.r_current,
+            terms.pose_mean,
+        )  # fmt: skip
+    )
+
+
+def solve(terms: Dynamics, states: np.ndarray, pins: np.ndarray | None = None) -> np.ndarray:
+    """The trajectory (T, D) for the state of each frame; ``pins`` (P, D) fix its first P
+    frames (their states are ignored)."""
+    states = np.asarray(states, dtype=np.int64)
+    frames, dim = len(states), terms.dim
+    n_pins = 0 if pins is None else len(pins)
+    diagonal = np.zeros((frames, dim, dim))
+    below = np.zeros((max(frames - 1, 0), dim, dim))
+    rhs = np.zeros((frames, dim))
+    if n_pins:
+        assert pins is not None
+        diagonal[:n_pins] += PIN_PRECISION * np.eye(dim)
+        rhs[:n_pins] += PIN_PRECISION * pins
+    else:
+        diagonal[0] += terms.pose_precision[states[0]]
+        rhs[0] += terms.pose_rhs[states[0]]
+    first = max(1, n_pins)
+    if first < frames:
+        joint = states[first:]
+        diagonal[first:] += terms.g_current[joint]
+        diagonal[first - 1 : frames - 1] += terms.g_previous[joint]
+        below[first - 1 :] += terms.g_cross[joint]
+        rhs[first:] += terms.r_current[joint]
+        rhs[first - 1 : frames - 1] += terms.r_previous[joint]
+    return solve_spd_banded(_bands(diagonal, below), rhs.reshape(-1)).reshape(frames, dim)
+
+
+def _bands(diagonal: np.ndarray, below: np.ndarray) -> np.ndarray:
+    """LAPACK lower band storage of the block-tridiagonal matrix, time-major: row m of the
+    bands holds A[i + m, i], i = t·D + b, which lies in block (t, t) for m ≤ D − 1 − b and
+    in block (t + 1, t) otherwise. Filled one block diagonal at a time."""
+    frames, dim, _ = diagonal.shape
+    bands = np.zeros((2 * dim, frames, dim))
+    for offset in range(dim):  # within a diagonal block: A[t·D + b + offset, t·D + b]
+        bands[offset, :, : dim - offset] = np.diagonal(diagonal, -offset, axis1=1, axis2=2)
+    for row in range(1, 2 * dim):  # into the block below: A[(t+1)·D + a, t·D + b]
+        shift = row - dim  # a − b
+        if frames > 1:
+            first = max(0, -shift)
+            last = min(dim, dim - shift)
+            bands[row, :-1, first:last] = np.diagonal(below, -shift, axis1=1, axis2=2)
+    return bands.reshape(2 * dim, frames * dim)
