@@ -10,7 +10,8 @@ depend on the trained model; their shape is still compared) and the numbers
 inside a ``budget_infeasible`` message (they follow the server's calibration).
 Every other JSON example on the page must be one of the transcript's messages,
 unless a comment before it (``<!-- not in the transcript: REASON -->``) says why
-it cannot be (the ``server_busy`` of an overloaded server).
+it cannot be (the ``server_busy`` of an overloaded server, speech from the machine's
+espeak-ng, a resumed ``start``).
 
 Regenerate the transcript from a running server (the demo character)::
 
@@ -52,6 +53,8 @@ VARIABLE = {
     ("error", "details.min_budget_ms"),
 }
 NUMBERS = re.compile(r"\d+(?:\.\d+)?")
+# server_busy (an overloaded server), text and its audio (espeak-ng's own samples), resume.
+MAX_EXCUSED = 4
 
 
 @dataclass(frozen=True)
@@ -149,7 +152,7 @@ def test_every_json_example_is_a_message_of_the_transcript() -> None:
     messages += [answer for step in STEPS for answer in step.answers]
     found = JSON_EXAMPLE.findall(DOC)
     examples = [json.loads(text) for excused, text in found if not excused]
-    assert len(examples) >= 10 and len(found) - len(examples) <= 1
+    assert len(examples) >= 10 and len(found) - len(examples) <= MAX_EXCUSED
     assert [example for example in examples if example not in messages] == []
 
 
