@@ -23,6 +23,18 @@ minimum with three exact reductions:
 ``before`` is a node fixed ahead of the first layer (the fixed-lag search's last
 committed node); its TC into the first layer counts. Ties may pick different
 paths of equal cost; the cost is the same.
+
+Silence splits the search, as /pau/ splits the paper's sentences. A silence
+layer's OC is 0 for every node, so dominance pruning keeps thousands of its
+nodes and their pairs were most of the fast search's work; yet the node chosen
+there is never shown: post-processing draws a silence as a straight line from
+the last frame of the node before it to the first frame of the node after it.
+So a silence layer gets no node (``NO_NODE`` in the path) and no cost, and the
+layers between silences are independent segments: no TC across a silence (the
+node after one starts a segment as the first layer of a search does; ``before``
+reaches only a segment that starts the layers). The optimum is the sum of the
+segments' optima, in exact DP and in the fast search alike; the out-of bound of
+pruning is dropped at a segment's last layer, as at the last layer of a search.
 """
 
 from __future__ import annotations
@@ -35,9 +47,11 @@ from numba import njit
 
 from ...errors import InvalidRequestError
 from .costs import NodeBounds, direct_smoothing, gap, transition_cost, unary_costs
-from .nodes import NodeDatabase, NodeFeatures
+from .nodes import SILENCE_INDEX, NodeDatabase, NodeFeatures
 
 INF = np.inf
+NO_NODE = -1
+"""The path's entry at a silence layer."""
 
 
 @dataclass(frozen=True)
@@ -47,6 +61,10 @@ class LayerSpec:
     phoneme: int
     emotion: int
     constrained: int = -1
+
+    @property
+    def silent(self) -> bool:
+        return self.phoneme == SILENCE_INDEX
 
 
 @dataclass(frozen=True)
@@ -178,13 +196,13 @@ def _step(
 
 def _candidates(
     space: SearchSpace, layers: Sequence[LayerSpec], excluded: np.ndarray, index: int,
-    has_before: bool, fast: bool,
+    has_before: bool, fast: bool, offset: int,
 ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     unary = space.unary(layers[index], excluded)
     admitted = np.isfinite(unary)
     if not admitted.any():
         raise InvalidRequestError(
-            f"phoneme {index} of the search admits no node: every node is contaminated",
+            f"phoneme {offset + index} of the search admits no node: every node is contaminated",
             where="contamination",
         )
     if fast:
@@ -207,13 +225,46 @@ def search(
     before: int = -1,
     guard: object | None = None,
 ) -> SearchResult:
-    """The cheapest path over ``layers`` (node ids) and its cost; ``excluded`` (N,) marks
-    contaminated nodes; ``fast`` selects the pruned search, else Alg. 1 over every pair."""
-    if not layers:
-        return SearchResult(np.zeros(0, dtype=np.int64), 0.0, 0)
+    """The cheapest path over ``layers`` (node ids, ``NO_NODE`` at silences) and its cost;
+    ``excluded`` (N,) marks contaminated nodes; ``fast`` selects the pruned search, else
+    Alg. 1 over every pair. Each run of layers between silences is searched on its own."""
+    path = np.full(len(layers), NO_NODE, dtype=np.int64)
+    cost, priced = 0.0, 0
+    for start, stop in segments(layers):
+        found = _segment(
+            space, layers[start:stop], excluded, fast, before if start == 0 else -1, guard, start
+        )
+        path[start:stop] = found.path
+        cost += found.cost
+        priced += found.candidates
+    return SearchResult(path, cost, priced)
+
+
+def segments(layers: Sequence[LayerSpec]) -> list[tuple[int, int]]:
+    """The [start, stop) runs of non-silent layers."""
+    runs: list[tuple[int, int]] = []
+    start = 0
+    for index, layer in enumerate([*layers, None]):
+        if layer is None or layer.silent:
+            if index > start:
+                runs.append((start, index))
+            start = index + 1
+    return runs
+
+
+def _segment(
+    space: SearchSpace,
+    layers: Sequence[LayerSpec],
+    excluded: np.ndarray,
+    fast: bool,
+    before: int,
+    guard: object | None,
+    offset: int,
+) -> SearchResult:
+    """Viterbi over ``layers`` (none silent; the first is layer ``offset`` of the search)."""
     backs: list[np.ndarray] = []
     members: list[np.ndarray] = []
-    nodes, f = _candidates(space, layers, excluded, 0, before >= 0, fast)
+    nodes, f = _candidates(space, layers, excluded, 0, before >= 0, fast, offset)
     if before >= 0:
         start = np.array([before], dtype=np.int64)
         f, _ = _step(space, start, np.zeros(1), nodes, f, fast=False)
@@ -225,7 +276,7 @@ def search(
     for index in range(1, len(layers)):
         if guard is not None:
             guard.check()  # type: ignore[attr-defined]
-        next_nodes, next_u = _candidates(space, layers, excluded, index, True, fast)
+        next_nodes, next_u = _candidates(space, layers, excluded, index, True, fast, offset)
         priced += len(next_nodes)
         f, back = _step(space, nodes, f, next_nodes, next_u, fast)
         if fast:
@@ -247,12 +298,17 @@ def search(
 def path_cost(
     space: SearchSpace, layers: Sequence[LayerSpec], path: Sequence[int], before: int = -1
 ) -> float:
-    """Eq. 4 of ``path`` (infinite when it breaks a constraint)."""
+    """Eq. 4 of ``path`` (infinite when it breaks a constraint); silences cost nothing and
+    no TC crosses them."""
     excluded = np.zeros(space.nodes.size, dtype=bool)
     total = 0.0
-    for index, (layer, node) in enumerate(zip(layers, path)):
+    previous = before
+    for layer, node in zip(layers, path):
+        if layer.silent:
+            previous = NO_NODE
+            continue
         total += float(space.unary(layer, excluded)[node])
-        previous = path[index - 1] if index > 0 else before
         if previous >= 0:
             total += space.tc(int(previous), int(node))
+        previous = node
     return total
