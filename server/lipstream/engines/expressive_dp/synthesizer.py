@@ -17,13 +17,20 @@ the start), with the shared critically damped filter (``damped``) at
 ω = κ / the median duration of that span's phoneme; the lead rung follows
 r(t + shift). The frame at t is final once the input covers t + shift.
 
+A silence ends a search segment (``search``): it gets no node (``NO_NODE``),
+and every node before it is committed as soon as it arrives, whatever the lag.
+Adjacent silences (a gap filled beside a sent silence) are merged into one span
+as they arrive, so a pause's line waits for one node after it.
+
 Stats: ``nodes`` (the committed node of every span, silences filled into gaps
-included, as space-separated ids: engine stats on the wire are scalars),
-``path_cost`` (their Eq. 4 cost) and ``candidates`` (nodes priced).
+included, -1 at a silence, as space-separated ids: engine stats on the wire are
+scalars), ``path_cost`` (their Eq. 4 cost) and ``candidates`` (nodes priced).
 
 Constraints name client phoneme indices (the spans as sent, not the silences
-filled into gaps); a constraint whose index the finished input never reached
-is an ``invalid_request`` error at ``options.constraints.<index>``.
+filled into gaps; ``SpanSynthesizer`` hands each span's index to ``_accepted``).
+A constraint whose index the finished input never reached is an
+``invalid_request`` error at ``options.constraints.<index>``, at ``finish``; a
+constraint on a silence is one too, when the silence is fed.
 """
 
 from __future__ import annotations
@@ -200,10 +207,10 @@ def extend_path(
             continue
         end = next((k for k in range(offset, len(layers)) if layers[k].silent), len(layers))
         closed = finished or end < len(layers)
-        if lag is None or end <= offset + lag + 1:
-            if not closed:
-                break
+        if closed and (lag is None or end <= offset + lag + 1):
             last, whole = end - 1, True
+        elif lag is None or offset + lag >= end:
+            break
         else:
             last, whole = offset + lag, False
         window = layers[offset : last + 1]
