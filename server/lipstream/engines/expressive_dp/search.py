@@ -77,9 +77,14 @@ class SearchSpace:
     packed: np.ndarray
     observed: dict[tuple[int, int], np.ndarray] = field(default_factory=dict, compare=False)
     """OC + EMP per (phoneme, emotion), filled on first use."""
+    survivors: dict[tuple[int, int, bool, bool], tuple[np.ndarray, int]] = field(
+        default_factory=dict, compare=False
+    )
+    """The nodes dominance pruning keeps with nothing contaminated, and the node b* that set
+    the threshold, per (phoneme, emotion, has a layer before, has a layer after)."""
 
-    def unary(self, layer: LayerSpec, excluded: np.ndarray) -> np.ndarray:
-        """U(o) for every node, infinite where the node is not admitted."""
+    def observation(self, layer: LayerSpec) -> np.ndarray:
+        """OC + EMP of every node for ``layer`` (read-only)."""
         key = (layer.phoneme, layer.emotion)
         cost = self.observed.get(key)
         if cost is None:  # a race only computes the same read-only array twice
@@ -87,6 +92,11 @@ class SearchSpace:
             cost = unary_costs(self.nodes, viseme, layer.phoneme, layer.emotion, self.packed)
             cost.setflags(write=False)
             self.observed[key] = cost
+        return cost
+
+    def unary(self, layer: LayerSpec, excluded: np.ndarray) -> np.ndarray:
+        """U(o) for every node, infinite where the node is not admitted."""
+        cost = self.observation(layer)
         if layer.constrained >= 0:
             only = np.full(len(cost), INF)
             only[layer.constrained] = cost[layer.constrained]
@@ -198,7 +208,14 @@ def _candidates(
     space: SearchSpace, layers: Sequence[LayerSpec], excluded: np.ndarray, index: int,
     has_before: bool, fast: bool, offset: int,
 ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-    unary = space.unary(layers[index], excluded)
+    layer = layers[index]
+    sides = (index > 0 or has_before, index + 1 < len(layers))
+    if fast and layer.constrained < 0:
+        kept = _survivors(space, layer, *sides)
+        if not excluded[kept[1]]:  # the threshold stands: drop only contaminated survivors
+            nodes = kept[0][~excluded[kept[0]]]
+            return nodes, space.observation(layer)[nodes]
+    unary = space.unary(layer, excluded)
     admitted = np.isfinite(unary)
     if not admitted.any():
         raise InvalidRequestError(
@@ -206,14 +223,35 @@ def _candidates(
             where="contamination",
         )
     if fast:
-        score = unary.copy()
-        if index > 0 or has_before:
-            score += space.bounds.into
-        if index + 1 < len(layers):
-            score += space.bounds.out_of
-        admitted &= unary <= score[admitted].min()
+        admitted &= unary <= _pruning_scores(space, unary, *sides)[admitted].min()
     nodes = np.flatnonzero(admitted)
     return nodes, unary[nodes]
+
+
+def _pruning_scores(space: SearchSpace, unary: np.ndarray, into: bool, out: bool) -> np.ndarray:
+    """U + the bounds of the sides the layer has: b* is the node of least score."""
+    score = unary.copy()
+    if into:
+        score += space.bounds.into
+    if out:
+        score += space.bounds.out_of
+    return score
+
+
+def _survivors(
+    space: SearchSpace, layer: LayerSpec, into: bool, out: bool
+) -> tuple[np.ndarray, int]:
+    key = (layer.phoneme, layer.emotion, into, out)
+    kept = space.survivors.get(key)
+    if kept is None:  # a race only computes the same read-only arrays twice
+        unary = space.observation(layer)
+        score = _pruning_scores(space, unary, into, out)
+        best = int(np.argmin(score))
+        nodes = np.flatnonzero(unary <= score[best])
+        nodes.setflags(write=False)
+        kept = (nodes, best)
+        space.survivors[key] = kept
+    return kept
 
 
 def search(
