@@ -20,6 +20,11 @@ minimum with three exact reductions:
    a pair's DSC (the dear term) is priced only when φ(a) + PVC (+ PNT) still
    beats it. The step is compiled (numba).
 
+The nodes dominance pruning (1.) keeps depend only on the layer's phoneme, emotion and sides,
+so they are cached (``SearchSpace.survivors``) with b*; contaminated nodes are
+dropped from the cached set, which stays exact unless b* itself is contaminated
+(then the layer is pruned afresh).
+
 ``before`` is a node fixed ahead of the first layer (the fixed-lag search's last
 committed node); its TC into the first layer counts. Ties may pick different
 paths of equal cost; the cost is the same.

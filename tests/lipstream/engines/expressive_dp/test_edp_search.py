@@ -154,3 +154,19 @@ def test_contaminating_every_node_is_refused() -> None:
         store.change([2], [])
     assert caught.value.where == "mark"
     assert store.nodes() == [0, 1]
+
+
+def test_the_cached_pruning_stays_exact_when_contamination_takes_its_threshold_node() -> None:
+    space, layers, _ = _problem(8, 40, 6, False, False)
+    layers = [LayerSpec(PHONEMES[k % 4], 0) for k in range(6)]
+    clean = np.zeros(40, dtype=bool)
+    search(space, layers, clean)  # fills the cache
+    assert space.survivors
+    for _nodes, threshold in list(space.survivors.values())[:3]:
+        excluded = clean.copy()
+        excluded[threshold] = True
+        excluded[(threshold + 7) % 40] = True
+        fast = search(space, layers, excluded)
+        exact = search(space, layers, excluded, fast=False)
+        assert fast.cost == pytest.approx(exact.cost, rel=1e-9)
+        assert not excluded[fast.path].any()
