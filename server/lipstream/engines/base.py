@@ -461,10 +461,12 @@ class Engine(ABC):
 
 class SpanSynthesizer(Synthesizer):
     """A synthesizer that keeps its request's spans, gaps filled with silence, and its audio
-    as they are fed; ``_accepted(span)`` sees each new span."""
+    as they are fed; ``_accepted(span, sent)`` sees each new span, with its index among the
+    spans the client sent (``None`` for a silence filled into a gap). ``sent`` counts them."""
 
     def __init__(self) -> None:
         self.spans: list[PhonemeSpan] = []
+        self.sent = 0
         self.audio: Audio | None = None
         self.emitted = 0
         self.finished = False
@@ -477,15 +479,17 @@ class SpanSynthesizer(Synthesizer):
     def feed(self, spans: Iterable[SpanLike], audio: Audio | None = None) -> None:
         if self.finished:
             raise InvalidRequestError("input fed after finish()", code="request_finished")
-        new = coerce_spans(spans, after=self.covered_until, first_index=len(self.spans))
-        for span in fill_gaps(new, self.covered_until):
-            self.spans.append(span)
-            self._accepted(span)
+        new = coerce_spans(spans, after=self.covered_until, first_index=self.sent)
+        for span in new:
+            for piece in fill_gaps([span], self.covered_until):
+                self.spans.append(piece)
+                self._accepted(piece, self.sent if piece is span else None)
+            self.sent += 1
         if audio is not None:
             self.audio = audio if self.audio is None else self.audio.concat(audio)
 
-    def _accepted(self, span: PhonemeSpan) -> None:
-        """Called with each span as it joins ``spans``."""
+    def _accepted(self, span: PhonemeSpan, sent: int | None) -> None:
+        """Called with each span as it joins ``spans``; ``sent`` is its client index."""
 
 
 class RenderingSynthesizer(SpanSynthesizer):

@@ -49,7 +49,7 @@ class DampedTimelineSynthesizer(SpanSynthesizer):
         self._rows: list[int] = []
         self.state: DampedState | None = None
 
-    def _accepted(self, span: PhonemeSpan) -> None:
+    def _accepted(self, span: PhonemeSpan, sent: int | None) -> None:
         self._shifted.append(span.start - self.targets.lead_s)
         self._rows.append(PHONEME_INDEX[span.phoneme])
 

@@ -10,7 +10,9 @@ import pytest
 
 from lipstream.engines import engine_names, get_engine_class
 from lipstream.engines.anime_graph import AnimeGraphEngine
-from lipstream.engines.base import Engine, Model
+from lipstream.engines.base import Engine, Model, SpanSynthesizer
+from lipstream.errors import InvalidRequestError
+from lipstream.timeline import PhonemeSpan
 from tests.lipstream.engines.anime_graph.anime_synthetic import make_corpus
 
 
@@ -78,3 +80,36 @@ def test_fit_leaves_the_engine_unchanged(name: str) -> None:
     model = engine.fit(make_corpus(seed=3, n_utterances=6))
     assert vars(engine) == before
     assert model.manifest.hyperparameters == before
+
+
+class _Recording(SpanSynthesizer):
+    def __init__(self) -> None:
+        super().__init__()
+        self.seen: list[tuple[str, float, int | None]] = []
+
+    def _accepted(self, span: PhonemeSpan, sent: int | None) -> None:
+        self.seen.append((span.phoneme, span.start, sent))
+
+    def frames(self) -> Any:
+        return None
+
+    def finish(self) -> Any:
+        return None
+
+
+def test_accepted_spans_carry_their_client_index_and_filled_silences_none() -> None:
+    synthesizer = _Recording()
+    synthesizer.feed([("AA", 0.0, 0.1), ("B", 0.3, 0.4)])
+    synthesizer.feed([("sil", 0.4, 0.5), ("M", 0.7, 0.8)])
+    assert synthesizer.seen == [
+        ("AA", 0.0, 0),
+        ("sil", 0.1, None),
+        ("B", 0.3, 1),
+        ("sil", 0.4, 2),
+        ("sil", 0.5, None),
+        ("M", 0.7, 3),
+    ]
+    assert synthesizer.sent == 4 and len(synthesizer.spans) == 6
+    with pytest.raises(InvalidRequestError) as caught:  # errors name the index as sent
+        synthesizer.feed([("AA", 0.9, 1.0), ("AA", 0.95, 0.99)])
+    assert caught.value.where == "spans[5]"

@@ -17,11 +17,14 @@ input belongs to the last span, at relative time 1).
   side's node phoneme (Table IV: 2 for /p b m f v w/, 0.5 for /k g ch ng r/, 1
   otherwise), λ = ``smoothness``. It is one banded solve per join for every
   basis component at once (``numerics.banded.solve_spd_banded``).
-* Silence: a silence span's points are interpolated linearly from the last
-  frame of the node before it to the first frame of the node after it (the one
-  side that exists at the ends of the input; the rest pose when neither does).
+* Silence: a silence has no node (the search splits there, ``search``); its
+  points are interpolated linearly from the last frame of the node before it
+  (the last of one search segment) to the first frame of the node after it (the
+  first of the next), the one side that exists at the ends of the input, the
+  rest pose when neither does. Adjacent silences are drawn as one line.
 
-A span's points depend on the nodes of spans k − 1, k and k + 1 only.
+A span's points depend on the nodes of spans k − 1, k and k + 1 only (of the
+spans around a run of silences, which the synthesizer merges into one span).
 """
 
 from __future__ import annotations
@@ -70,21 +73,29 @@ class Renderer:
         span = spans[k]
         low, high = owned(span, self.rate)
         times = np.arange(low, high) / self.rate
-        relative = (times - span.start) / (span.end - span.start)
         if span.phoneme != SILENCE:
+            relative = (times - span.start) / (span.end - span.start)
             return warp_node(self.nodes.node_frames(int(path[k])), relative)
-        return self._silence(spans, path, k, relative)
+        return self._silence(spans, path, k, times)
 
     def _silence(
-        self, spans: Sequence[PhonemeSpan], path: Sequence[int], k: int, relative: np.ndarray
+        self, spans: Sequence[PhonemeSpan], path: Sequence[int], k: int, times: np.ndarray
     ) -> np.ndarray:
-        left = self.nodes.node_frames(int(path[k - 1]))[-1] if k > 0 else None
-        right = self.nodes.node_frames(int(path[k + 1]))[0] if k + 1 < len(spans) else None
+        """The line over the run of silences holding span k, at ``times``."""
+        first, last = k, k
+        while first > 0 and spans[first - 1].phoneme == SILENCE:
+            first -= 1
+        while last + 1 < len(spans) and spans[last + 1].phoneme == SILENCE:
+            last += 1
+        left = self.nodes.node_frames(int(path[first - 1]))[-1] if first > 0 else None
+        right = self.nodes.node_frames(int(path[last + 1]))[0] if last + 1 < len(spans) else None
         if left is None:
             left = self.rest if right is None else right
         if right is None:
             right = left
-        return np.asarray(left + np.clip(relative, 0.0, 1.0)[:, None] * (right - left))
+        start, end = spans[first].start, spans[last].end
+        relative = np.clip((times - start) / (end - start), 0.0, 1.0)
+        return np.asarray(left + relative[:, None] * (right - left))
 
     def _smoothed(self, spans: Sequence[PhonemeSpan], path: Sequence[int], k: int) -> bool:
         """Whether the join of spans k and k + 1 is smoothed."""
@@ -138,7 +149,7 @@ class Renderer:
         k = len(spans) - 1
         if spans[k].phoneme != SILENCE:
             return np.asarray(self.nodes.node_frames(int(path[k]))[-1])
-        return np.asarray(self._silence(spans, path, k, np.ones(1))[0])
+        return np.asarray(self._silence(spans, path, k, np.array([spans[k].end]))[0])
 
     def grid(
         self, spans: Sequence[PhonemeSpan], path: Sequence[int], low: int, high: int

@@ -20,9 +20,26 @@ minimum with three exact reductions:
    a pair's DSC (the dear term) is priced only when φ(a) + PVC (+ PNT) still
    beats it. The step is compiled (numba).
 
+The nodes dominance pruning (1.) keeps depend only on the layer's phoneme, emotion and sides,
+so they are cached (``SearchSpace.survivors``) with b*; contaminated nodes are
+dropped from the cached set, which stays exact unless b* itself is contaminated
+(then the layer is pruned afresh).
+
 ``before`` is a node fixed ahead of the first layer (the fixed-lag search's last
 committed node); its TC into the first layer counts. Ties may pick different
 paths of equal cost; the cost is the same.
+
+Silence splits the search, as /pau/ splits the paper's sentences. A silence
+layer's OC is 0 for every node, so dominance pruning keeps thousands of its
+nodes and their pairs were most of the fast search's work; yet the node chosen
+there is never shown: post-processing draws a silence as a straight line from
+the last frame of the node before it to the first frame of the node after it.
+So a silence layer gets no node (``NO_NODE`` in the path) and no cost, and the
+layers between silences are independent segments: no TC across a silence (the
+node after one starts a segment as the first layer of a search does; ``before``
+reaches only a segment that starts the layers). The optimum is the sum of the
+segments' optima, in exact DP and in the fast search alike; the out-of bound of
+pruning is dropped at a segment's last layer, as at the last layer of a search.
 """
 
 from __future__ import annotations
@@ -35,9 +52,11 @@ from numba import njit
 
 from ...errors import InvalidRequestError
 from .costs import NodeBounds, direct_smoothing, gap, transition_cost, unary_costs
-from .nodes import NodeDatabase, NodeFeatures
+from .nodes import SILENCE_INDEX, NodeDatabase, NodeFeatures
 
 INF = np.inf
+NO_NODE = -1
+"""The path's entry at a silence layer."""
 
 
 @dataclass(frozen=True)
@@ -47,6 +66,10 @@ class LayerSpec:
     phoneme: int
     emotion: int
     constrained: int = -1
+
+    @property
+    def silent(self) -> bool:
+        return self.phoneme == SILENCE_INDEX
 
 
 @dataclass(frozen=True)
@@ -59,9 +82,14 @@ class SearchSpace:
     packed: np.ndarray
     observed: dict[tuple[int, int], np.ndarray] = field(default_factory=dict, compare=False)
     """OC + EMP per (phoneme, emotion), filled on first use."""
+    survivors: dict[tuple[int, int, bool, bool], tuple[np.ndarray, int]] = field(
+        default_factory=dict, compare=False
+    )
+    """The nodes dominance pruning keeps with nothing contaminated, and the node b* that set
+    the threshold, per (phoneme, emotion, has a layer before, has a layer after)."""
 
-    def unary(self, layer: LayerSpec, excluded: np.ndarray) -> np.ndarray:
-        """U(o) for every node, infinite where the node is not admitted."""
+    def observation(self, layer: LayerSpec) -> np.ndarray:
+        """OC + EMP of every node for ``layer`` (read-only)."""
         key = (layer.phoneme, layer.emotion)
         cost = self.observed.get(key)
         if cost is None:  # a race only computes the same read-only array twice
@@ -69,6 +97,11 @@ class SearchSpace:
             cost = unary_costs(self.nodes, viseme, layer.phoneme, layer.emotion, self.packed)
             cost.setflags(write=False)
             self.observed[key] = cost
+        return cost
+
+    def unary(self, layer: LayerSpec, excluded: np.ndarray) -> np.ndarray:
+        """U(o) for every node, infinite where the node is not admitted."""
+        cost = self.observation(layer)
         if layer.constrained >= 0:
             only = np.full(len(cost), INF)
             only[layer.constrained] = cost[layer.constrained]
@@ -178,24 +211,52 @@ def _step(
 
 def _candidates(
     space: SearchSpace, layers: Sequence[LayerSpec], excluded: np.ndarray, index: int,
-    has_before: bool, fast: bool,
+    has_before: bool, fast: bool, offset: int,
 ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-    unary = space.unary(layers[index], excluded)
+    layer = layers[index]
+    sides = (index > 0 or has_before, index + 1 < len(layers))
+    if fast and layer.constrained < 0:
+        kept = _survivors(space, layer, *sides)
+        if not excluded[kept[1]]:  # the threshold stands: drop only contaminated survivors
+            nodes = kept[0][~excluded[kept[0]]]
+            return nodes, space.observation(layer)[nodes]
+    unary = space.unary(layer, excluded)
     admitted = np.isfinite(unary)
     if not admitted.any():
         raise InvalidRequestError(
-            f"phoneme {index} of the search admits no node: every node is contaminated",
+            f"phoneme {offset + index} of the search admits no node: every node is contaminated",
             where="contamination",
         )
     if fast:
-        score = unary.copy()
-        if index > 0 or has_before:
-            score += space.bounds.into
-        if index + 1 < len(layers):
-            score += space.bounds.out_of
-        admitted &= unary <= score[admitted].min()
+        admitted &= unary <= _pruning_scores(space, unary, *sides)[admitted].min()
     nodes = np.flatnonzero(admitted)
     return nodes, unary[nodes]
+
+
+def _pruning_scores(space: SearchSpace, unary: np.ndarray, into: bool, out: bool) -> np.ndarray:
+    """U + the bounds of the sides the layer has: b* is the node of least score."""
+    score = unary.copy()
+    if into:
+        score += space.bounds.into
+    if out:
+        score += space.bounds.out_of
+    return score
+
+
+def _survivors(
+    space: SearchSpace, layer: LayerSpec, into: bool, out: bool
+) -> tuple[np.ndarray, int]:
+    key = (layer.phoneme, layer.emotion, into, out)
+    kept = space.survivors.get(key)
+    if kept is None:  # a race only computes the same read-only arrays twice
+        unary = space.observation(layer)
+        score = _pruning_scores(space, unary, into, out)
+        best = int(np.argmin(score))
+        nodes = np.flatnonzero(unary <= score[best])
+        nodes.setflags(write=False)
+        kept = (nodes, best)
+        space.survivors[key] = kept
+    return kept
 
 
 def search(
@@ -207,13 +268,46 @@ def search(
     before: int = -1,
     guard: object | None = None,
 ) -> SearchResult:
-    """The cheapest path over ``layers`` (node ids) and its cost; ``excluded`` (N,) marks
-    contaminated nodes; ``fast`` selects the pruned search, else Alg. 1 over every pair."""
-    if not layers:
-        return SearchResult(np.zeros(0, dtype=np.int64), 0.0, 0)
+    """The cheapest path over ``layers`` (node ids, ``NO_NODE`` at silences) and its cost;
+    ``excluded`` (N,) marks contaminated nodes; ``fast`` selects the pruned search, else
+    Alg. 1 over every pair. Each run of layers between silences is searched on its own."""
+    path = np.full(len(layers), NO_NODE, dtype=np.int64)
+    cost, priced = 0.0, 0
+    for start, stop in segments(layers):
+        found = _segment(
+            space, layers[start:stop], excluded, fast, before if start == 0 else -1, guard, start
+        )
+        path[start:stop] = found.path
+        cost += found.cost
+        priced += found.candidates
+    return SearchResult(path, cost, priced)
+
+
+def segments(layers: Sequence[LayerSpec]) -> list[tuple[int, int]]:
+    """The [start, stop) runs of non-silent layers."""
+    runs: list[tuple[int, int]] = []
+    start = 0
+    for index, layer in enumerate([*layers, None]):
+        if layer is None or layer.silent:
+            if index > start:
+                runs.append((start, index))
+            start = index + 1
+    return runs
+
+
+def _segment(
+    space: SearchSpace,
+    layers: Sequence[LayerSpec],
+    excluded: np.ndarray,
+    fast: bool,
+    before: int,
+    guard: object | None,
+    offset: int,
+) -> SearchResult:
+    """Viterbi over ``layers`` (none silent; the first is layer ``offset`` of the search)."""
     backs: list[np.ndarray] = []
     members: list[np.ndarray] = []
-    nodes, f = _candidates(space, layers, excluded, 0, before >= 0, fast)
+    nodes, f = _candidates(space, layers, excluded, 0, before >= 0, fast, offset)
     if before >= 0:
         start = np.array([before], dtype=np.int64)
         f, _ = _step(space, start, np.zeros(1), nodes, f, fast=False)
@@ -225,7 +319,7 @@ def search(
     for index in range(1, len(layers)):
         if guard is not None:
             guard.check()  # type: ignore[attr-defined]
-        next_nodes, next_u = _candidates(space, layers, excluded, index, True, fast)
+        next_nodes, next_u = _candidates(space, layers, excluded, index, True, fast, offset)
         priced += len(next_nodes)
         f, back = _step(space, nodes, f, next_nodes, next_u, fast)
         if fast:
@@ -247,12 +341,17 @@ def search(
 def path_cost(
     space: SearchSpace, layers: Sequence[LayerSpec], path: Sequence[int], before: int = -1
 ) -> float:
-    """Eq. 4 of ``path`` (infinite when it breaks a constraint)."""
+    """Eq. 4 of ``path`` (infinite when it breaks a constraint); silences cost nothing and
+    no TC crosses them."""
     excluded = np.zeros(space.nodes.size, dtype=bool)
     total = 0.0
-    for index, (layer, node) in enumerate(zip(layers, path)):
+    previous = before
+    for layer, node in zip(layers, path):
+        if layer.silent:
+            previous = NO_NODE
+            continue
         total += float(space.unary(layer, excluded)[node])
-        previous = path[index - 1] if index > 0 else before
         if previous >= 0:
             total += space.tc(int(previous), int(node))
+        previous = node
     return total

@@ -17,39 +17,44 @@ the start), with the shared critically damped filter (``damped``) at
 ω = κ / the median duration of that span's phoneme; the lead rung follows
 r(t + shift). The frame at t is final once the input covers t + shift.
 
+A silence ends a search segment (``search``): it gets no node (``NO_NODE``),
+and every node before it is committed as soon as it arrives, whatever the lag.
+Adjacent silences (a gap filled beside a sent silence) are merged into one span
+as they arrive, so a pause's line waits for one node after it.
+
 Stats: ``nodes`` (the committed node of every span, silences filled into gaps
-included, as space-separated ids: engine stats on the wire are scalars),
-``path_cost`` (their Eq. 4 cost) and ``candidates`` (nodes priced).
+included, -1 at a silence, as space-separated ids: engine stats on the wire are
+scalars), ``path_cost`` (their Eq. 4 cost) and ``candidates`` (nodes priced).
 
 Constraints name client phoneme indices (the spans as sent, not the silences
-filled into gaps); a constraint whose index the finished input never reached
-is an ``invalid_request`` error at ``options.constraints.<index>``.
+filled into gaps; ``SpanSynthesizer`` hands each span's index to ``_accepted``).
+A constraint whose index the finished input never reached is an
+``invalid_request`` error at ``options.constraints.<index>``, at ``finish``; a
+constraint on a silence is one too, when the silence is fed.
 """
 
 from __future__ import annotations
 
 from bisect import bisect_left
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ...audio import Audio
 from ...errors import InvalidRequestError
 from ...phonemes import PHONEME_INDEX, SILENCE
-from ...timeline import PhonemeSpan, SpanLike, coerce_spans
+from ...timeline import PhonemeSpan
 from ..base import (
     Lookahead,
     RenderingSynthesizer,
     SynthesisRequest,
-    fill_gaps,
     final_until,
     frame_count,
 )
 from ..damped import DampedState, filter_raw
 from ..work import WorkGuard
 from .nodes import EMOTION_INDEX, warp_node
-from .search import LayerSpec, SearchSpace, search
+from .search import NO_NODE, LayerSpec, SearchSpace, search
 
 if TYPE_CHECKING:
     from .model import ExpressiveDpModel
@@ -73,24 +78,25 @@ class PathSynthesizer(RenderingSynthesizer):
         self.lag = lag
         self.constraints = dict(constraints)
         self.excluded = model.contamination.mask()
-        self.client_spans = 0
         self.constrained: dict[int, int] = {}
         self.path: list[int] = []
         self.stats = {"frames": 0, "path_cost": 0.0, "candidates": 0, "nodes": ""}
 
-    def feed(self, spans: Iterable[SpanLike], audio: Audio | None = None) -> None:
-        if self.finished:
-            raise InvalidRequestError("input fed after finish()", code="request_finished")
-        new = coerce_spans(spans, after=self.covered_until, first_index=self.client_spans)
-        for span in new:
-            filled = fill_gaps([span], self.covered_until)
-            self.spans.extend(filled)
-            node = self.constraints.get(self.client_spans)
-            if node is not None:
-                self.constrained[len(self.spans) - 1] = node
-            self.client_spans += 1
-        if audio is not None:
-            self.audio = audio if self.audio is None else self.audio.concat(audio)
+    def _accepted(self, span: PhonemeSpan, sent: int | None) -> None:
+        if span.phoneme == SILENCE:
+            if sent is not None and sent in self.constraints:
+                raise InvalidRequestError(
+                    f"constraint on phoneme index {sent}, a silence: a silence gets no node "
+                    "(it splits the search)",
+                    where=f"options.constraints.{sent}",
+                )
+            if len(self.spans) > 1 and self.spans[-2].phoneme == SILENCE:
+                # one silence per pause, so its line waits for one node after it
+                before = self.spans[-2]
+                self.spans[-2:] = [PhonemeSpan(SILENCE, before.start, span.end, before.emotion)]
+            return
+        if sent is not None and sent in self.constraints:
+            self.constrained[len(self.spans) - 1] = self.constraints[sent]
 
     def layer(self, index: int) -> LayerSpec:
         span = self.spans[index]
@@ -111,11 +117,11 @@ class PathSynthesizer(RenderingSynthesizer):
         self.stats["nodes"] = " ".join(map(str, self.path))
 
     def finish(self) -> np.ndarray:
-        unreached = sorted(index for index in self.constraints if index >= self.client_spans)
+        unreached = sorted(index for index in self.constraints if index >= self.sent)
         if unreached:
             raise InvalidRequestError(
                 f"constraint on phoneme index {unreached[0]}, but the request has only "
-                f"{self.client_spans} phonemes",
+                f"{self.sent} phonemes",
                 where=f"options.constraints.{unreached[0]}",
             )
         return super().finish()
@@ -190,26 +196,29 @@ def extend_path(
     guard: WorkGuard | None = None,
 ) -> tuple[int, float]:
     """Append to ``path`` the nodes of ``layers`` (the spans after it) that ``lag`` decides
-    now; the nodes priced and the Eq. 4 cost the new nodes add."""
+    now (``NO_NODE`` at a silence); the nodes priced and the Eq. 4 cost the new nodes add.
+    A silence closes its segment: every node before it is decided at once."""
     priced, added = 0, 0.0
     offset = 0
     while offset < len(layers):
-        if lag is None:
-            if not finished:
-                break
-            last = len(layers) - 1
+        if layers[offset].silent:
+            path.append(NO_NODE)
+            offset += 1
+            continue
+        end = next((k for k in range(offset, len(layers)) if layers[k].silent), len(layers))
+        closed = finished or end < len(layers)
+        if closed and (lag is None or end <= offset + lag + 1):
+            last, whole = end - 1, True
+        elif lag is None or offset + lag >= end:
+            break
         else:
-            last = offset + lag
-            if last >= len(layers) and not finished:
-                break
-            last = min(last, len(layers) - 1)
+            last, whole = offset + lag, False
         window = layers[offset : last + 1]
-        before = path[-1] if path else -1
+        before = path[-1] if path else NO_NODE
         found = search(space, window, excluded, before=before, guard=guard)
         priced += found.candidates
-        taken = found.path if lag is None else found.path[:1]
-        for node in taken.tolist():
-            previous = path[-1] if path else -1
+        for node in (found.path if whole else found.path[:1]).tolist():
+            previous = path[-1] if path else NO_NODE
             added += float(space.unary(layers[offset], excluded)[node])
             added += space.tc(previous, node) if previous >= 0 else 0.0
             path.append(node)
@@ -230,7 +239,8 @@ def raw_curve(
         rows = begun == k
         span = spans[k]
         if span.phoneme == SILENCE:
-            values[rows] = model.nodes.node_frames(path[k - 1])[-1] if k > 0 else model.rest_pose
+            held = k > 0 and path[k - 1] >= 0
+            values[rows] = model.nodes.node_frames(path[k - 1])[-1] if held else model.rest_pose
             continue
         relative = (at[rows] - span.start) / (span.end - span.start)
         values[rows] = warp_node(model.nodes.node_frames(path[k]), relative)

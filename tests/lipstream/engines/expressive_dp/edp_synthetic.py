@@ -102,14 +102,20 @@ def loop_unary(space: SearchSpace, layer: LayerSpec, node: int) -> float:
 def brute_force(
     space: SearchSpace, layers: list[LayerSpec], excluded: np.ndarray
 ) -> tuple[float, tuple[int, ...]]:
-    """The cheapest path by enumerating every path (tiny problems only)."""
+    """The cheapest path by enumerating every path (tiny problems only); a silence layer has
+    no node (-1) and cuts the chain of TCs."""
+    silent = PHONEME_INDEX["sil"]
     allowed = [n for n in range(space.nodes.size) if not excluded[n]]
+    choices = [[-1] if layer.phoneme == silent else range(space.nodes.size) for layer in layers]
     best: tuple[float, tuple[int, ...]] = (math.inf, ())
-    for path in itertools.product(range(space.nodes.size), repeat=len(layers)):
-        if any(layer.constrained < 0 and node not in allowed for layer, node in zip(layers, path)):
+    for path in itertools.product(*choices):
+        if any(
+            layer.constrained < 0 and node >= 0 and node not in allowed
+            for layer, node in zip(layers, path)
+        ):
             continue
-        cost = sum(loop_unary(space, layer, node) for layer, node in zip(layers, path))
-        cost += sum(loop_tc(space, a, b) for a, b in itertools.pairwise(path))
+        cost = sum(loop_unary(space, layer, node) for layer, node in zip(layers, path) if node >= 0)
+        cost += sum(loop_tc(space, a, b) for a, b in itertools.pairwise(path) if a >= 0 and b >= 0)
         if cost < best[0]:
             best = (cost, path)
     return best

@@ -14,6 +14,8 @@ from lipstream.corpus import Corpus
 from lipstream.engines import load_model
 from lipstream.engines.base import Model
 from lipstream.engines.expressive_dp import ExpressiveDpModel
+from lipstream.engines.expressive_dp.search import NO_NODE
+from lipstream.engines.expressive_dp.synthesizer import PathSynthesizer
 from lipstream.errors import InvalidRequestError, ModelStoreError
 from lipstream.phonemes import PHONEME_INDEX, SILENCE
 from lipstream.timeline import EMOTIONS, PhonemeSpan
@@ -76,9 +78,8 @@ def test_emotion_modifiers_move_the_nodes_toward_the_emotion(
     model: ExpressiveDpModel, spans: list[PhonemeSpan]
 ) -> None:
     def share(path: list[int], emotion: str, rows: range) -> float:
-        return float(
-            np.mean(model.nodes.emotion[[path[i] for i in rows]] == EMOTIONS.index(emotion))
-        )
+        nodes = [path[i] for i in rows if path[i] != NO_NODE]
+        return float(np.mean(model.nodes.emotion[nodes] == EMOTIONS.index(emotion)))
 
     everything = range(len(spans))
     neutral = _path(model, spans, emotion="neutral")
@@ -114,6 +115,37 @@ def test_bad_constraints_are_coded_errors_naming_them(
     assert f"only {len(spans)} phonemes" in caught.value.message
 
 
+def test_a_constraint_on_a_silence_is_a_coded_error_naming_it(
+    model: ExpressiveDpModel, spans: list[PhonemeSpan]
+) -> None:
+    pause = next(i for i, span in enumerate(spans) if span.phoneme == SILENCE)
+    synthesizer = model.start(fps=60, constraints={str(pause): 0})
+    with pytest.raises(InvalidRequestError) as caught:
+        synthesizer.feed(spans)
+    assert caught.value.where == f"options.constraints.{pause}"
+    assert "silence" in caught.value.message
+
+
+def test_a_silence_has_no_node_and_commits_every_node_before_it(
+    model: ExpressiveDpModel, spans: list[PhonemeSpan]
+) -> None:
+    pause = next(i for i, span in enumerate(spans) if i > 2 and span.phoneme == SILENCE)
+    full = _path(model, spans, lag="full")
+    assert [full[i] == NO_NODE for i in range(len(spans))] == [
+        span.phoneme == SILENCE for span in spans
+    ]
+    # at a lag longer than the input, the nodes before the pause are committed once it
+    # arrives, before finish, and they are the full search's
+    synthesizer = model.start(fps=60, lag=64)
+    synthesizer.feed(spans[: pause + 1])
+    assert isinstance(synthesizer, PathSynthesizer)
+    synthesizer.commit()
+    assert synthesizer.path == full[: pause + 1]
+    synthesizer.feed(spans[pause + 1 : pause + 3])
+    synthesizer.commit()
+    assert len(synthesizer.path) == pause + 1  # the next segment waits for its lag
+
+
 def _digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
@@ -126,7 +158,7 @@ def test_contamination_is_persisted_beside_the_model_honoured_and_reversible(
     first = load_model(tmp_path / "m")
     assert isinstance(first, ExpressiveDpModel)
     before = _path(first, spans)
-    marked = sorted(set(before))
+    marked = sorted(set(before) - {NO_NODE})
     assert first.contamination.change(marked, []) == marked
     assert (tmp_path / "m" / "contamination.json").is_file()
     # another process's copy of the model (here: another load) sees the change

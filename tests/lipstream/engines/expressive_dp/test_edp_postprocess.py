@@ -55,7 +55,7 @@ SPANS = [
 
 def test_captured_neighbours_are_warped_and_not_smoothed() -> None:
     renderer = Renderer(_database(), np.zeros(1), 10.0, 3, 1.0)
-    grid = renderer.grid(SPANS, [0, 0, 1, 1], 0, 40)[:, 0]
+    grid = renderer.grid(SPANS, [-1, 0, 1, -1], 0, 40)[:, 0]
     # AA over 1.0..2.0: node 0 warped from 5 frames (0..4) onto 10 points: 4 * u
     np.testing.assert_allclose(grid[10:20], 4.0 * np.arange(10) / 10, atol=1e-12)
     np.testing.assert_allclose(grid[20:30], 10.0)
@@ -66,7 +66,7 @@ def test_captured_neighbours_are_warped_and_not_smoothed() -> None:
 
 def test_a_join_without_capture_is_smoothed_and_a_silence_is_a_line() -> None:
     renderer = Renderer(_database(), np.zeros(1), 10.0, 3, 1.0)
-    path = [0, 0, 2, 1]
+    path = [-1, 0, 2, -1]
     grid = renderer.grid(SPANS, path, 0, 40)[:, 0]
     raw = np.concatenate([4.0 * np.arange(10) / 10, np.full(10, 20.0)])
     changed = np.flatnonzero(np.abs(grid[10:30] - raw) > 1e-9) + 10
@@ -75,14 +75,26 @@ def test_a_join_without_capture_is_smoothed_and_a_silence_is_a_line() -> None:
     np.testing.assert_allclose(grid[17:23], smooth_join(raw[7:13, None], weights, 1.0)[:, 0])
     np.testing.assert_allclose(grid[30:40], 20.0)  # a final silence holds the last frame
     inner = [PhonemeSpan("AA", 0.0, 1.0), PhonemeSpan("sil", 1.0, 2.0), PhonemeSpan("B", 2.0, 3.0)]
-    line = renderer.grid(inner, [0, 1, 2], 0, 30)[:, 0]
-    # from node 0's last frame (4) to node 2's first (20); the silence's own node is unused
+    line = renderer.grid(inner, [0, -1, 2], 0, 30)[:, 0]
+    # from node 0's last frame (4), ending one segment, to node 2's first (20), starting the next
+    np.testing.assert_allclose(line[10:20], 4.0 + 16.0 * np.arange(10) / 10)
+
+
+def test_adjacent_silences_are_one_line_between_the_segments() -> None:
+    renderer = Renderer(_database(), np.zeros(1), 10.0, 3, 1.0)
+    spans = [
+        PhonemeSpan("AA", 0.0, 1.0),
+        PhonemeSpan("sil", 1.0, 1.5),
+        PhonemeSpan("sil", 1.5, 2.0),
+        PhonemeSpan("B", 2.0, 3.0),
+    ]
+    line = renderer.grid(spans, [0, -1, -1, 2], 0, 30)[:, 0]
     np.testing.assert_allclose(line[10:20], 4.0 + 16.0 * np.arange(10) / 10)
 
 
 def test_frames_between_grid_points_are_linear() -> None:
     renderer = Renderer(_database(), np.zeros(1), 10.0, 3, 1.0)
     times = np.array([1.25, 1.5, 4.0])
-    frames = renderer.frames(SPANS, [0, 0, 1, 1], times)[:, 0]
-    grid = renderer.grid(SPANS, [0, 0, 1, 1], 0, 40)[:, 0]
+    frames = renderer.frames(SPANS, [-1, 0, 1, -1], times)[:, 0]
+    grid = renderer.grid(SPANS, [-1, 0, 1, -1], 0, 40)[:, 0]
     np.testing.assert_allclose(frames, [(grid[12] + grid[13]) / 2, grid[15], grid[40]])

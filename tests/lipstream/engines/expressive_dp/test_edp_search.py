@@ -8,9 +8,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lipstream.engines.expressive_dp.search import LayerSpec, path_cost, search
+from lipstream.engines.expressive_dp.search import NO_NODE, LayerSpec, path_cost, search
+from lipstream.phonemes import PHONEME_INDEX
 
 from .edp_synthetic import PHONEMES, brute_force, loop_tc, loop_unary, random_space
+
+SILENCE = PHONEME_INDEX["sil"]
 
 
 def _problem(seed: int, n: int, t: int, constrain: bool, contaminate: bool):  # type: ignore[no-untyped-def]
@@ -22,8 +25,11 @@ def _problem(seed: int, n: int, t: int, constrain: bool, contaminate: bool):  # 
     free = np.flatnonzero(~excluded)
     layers = []
     for _ in range(t):
-        constrained = int(rng.choice(free)) if constrain and rng.random() < 0.3 else -1
-        layers.append(LayerSpec(int(rng.choice(PHONEMES)), int(rng.integers(0, 4)), constrained))
+        phoneme = SILENCE if rng.random() < 0.25 else int(rng.choice(PHONEMES))
+        chosen = constrain and phoneme != SILENCE and rng.random() < 0.3
+        layers.append(
+            LayerSpec(phoneme, int(rng.integers(0, 4)), int(rng.choice(free)) if chosen else -1)
+        )
     return space, layers, excluded
 
 
@@ -83,10 +89,29 @@ def test_the_fast_search_has_exact_dps_optimum(
     assert fast.cost == pytest.approx(exact.cost, rel=1e-9, abs=1e-9)
     assert path_cost(space, layers, fast.path) == pytest.approx(exact.cost, rel=1e-9, abs=1e-9)
     for layer, node in zip(layers, fast.path):
-        assert node == layer.constrained if layer.constrained >= 0 else not excluded[node]
-    assert np.isfinite(
-        [loop_unary(space, layer, node) for layer, node in zip(layers, fast.path)]
-    ).all()
+        if layer.phoneme == SILENCE:
+            assert node == NO_NODE
+        else:
+            assert node == layer.constrained if layer.constrained >= 0 else not excluded[node]
+            assert np.isfinite(loop_unary(space, layer, node))
+
+
+def test_a_silence_splits_the_search_into_independent_segments() -> None:
+    space, layers, excluded = _problem(21, 30, 8, False, False)
+    layers = [
+        LayerSpec(x.phoneme if x.phoneme != SILENCE else PHONEMES[0], x.emotion) for x in layers
+    ]
+    pause = LayerSpec(SILENCE, 0)
+    joined = [*layers[:4], pause, pause, *layers[4:]]
+    for fast in (True, False):
+        head = search(space, layers[:4], excluded, fast=fast, before=7)
+        tail = search(space, layers[4:], excluded, fast=fast)
+        found = search(space, joined, excluded, fast=fast, before=7)
+        assert found.cost == pytest.approx(head.cost + tail.cost, rel=1e-12)
+        assert found.path.tolist() == [*head.path.tolist(), NO_NODE, NO_NODE, *tail.path.tolist()]
+        # without the pause the TC across it counts and the optimum is no cheaper
+        assert search(space, layers, excluded, fast=fast, before=7).cost >= found.cost - 1e-9
+    assert search(space, [pause, pause], excluded).path.tolist() == [NO_NODE, NO_NODE]
 
 
 def test_a_node_fixed_before_the_first_layer_prices_its_join() -> None:
@@ -129,3 +154,19 @@ def test_contaminating_every_node_is_refused() -> None:
         store.change([2], [])
     assert caught.value.where == "mark"
     assert store.nodes() == [0, 1]
+
+
+def test_the_cached_pruning_stays_exact_when_contamination_takes_its_threshold_node() -> None:
+    space, layers, _ = _problem(8, 40, 6, False, False)
+    layers = [LayerSpec(PHONEMES[k % 4], 0) for k in range(6)]
+    clean = np.zeros(40, dtype=bool)
+    search(space, layers, clean)  # fills the cache
+    assert space.survivors
+    for _nodes, threshold in list(space.survivors.values())[:3]:
+        excluded = clean.copy()
+        excluded[threshold] = True
+        excluded[(threshold + 7) % 40] = True
+        fast = search(space, layers, excluded)
+        exact = search(space, layers, excluded, fast=False)
+        assert fast.cost == pytest.approx(exact.cost, rel=1e-9)
+        assert not excluded[fast.path].any()
