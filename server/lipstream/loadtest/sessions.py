@@ -20,6 +20,14 @@ The optional probe measures the first-frame latency of a whole utterance
 sent at once (``probe_phonemes`` phonemes in one ``phonemes`` message, as
 a TTS that has synthesized a sentence sends it) on one extra connection,
 one request after another, for as long as the load runs.
+
+A session the server refuses for load (``server_busy``, 1013) waits the
+``retry_after_ms`` it was given and tries again, as a client following the
+protocol does, up to ``BUSY_RETRIES`` times while its clip still fits before the
+deadline; ``RequestRecord.busy_retries`` counts them. Without this, a capacity
+step that opens its sessions within a second meets load-based admission,
+which admits a burst of new sessions at the cost of the dearest rung the server
+holds, before it measures any load.
 """
 
 from __future__ import annotations
@@ -40,10 +48,13 @@ from lipstream_client.exceptions import (
     HandshakeRejected,
     LipstreamClientError,
     LipstreamServerError,
+    ServerBusy,
+    retry_delay_s,
 )
 from lipstream_client.messages import Encoding
 
 REQUEST_SLACK_S = 15.0
+BUSY_RETRIES = 8
 PROBE_PAUSE_S = 0.1
 _MS = 1000.0
 T = TypeVar("T")
@@ -84,6 +95,7 @@ class RequestRecord:
     frames: int = 0
     server_max_lag_ms: float | None = None
     send_slip_ms: list[float] = field(default_factory=list)
+    busy_retries: int = 0
 
 
 @dataclass
@@ -178,11 +190,30 @@ class _Session:
 
     async def _request(self) -> RequestRecord:
         record = RequestRecord()
+        for attempt in range(BUSY_RETRIES + 1):
+            busy = await self._attempt(record)
+            delay = retry_delay_s(busy, attempt) if busy is not None else 0.0
+            if busy is None or attempt == BUSY_RETRIES or not self._fits(delay):
+                return record
+            record.error = None
+            record.busy_retries += 1
+            await self._drop_connection()
+            await asyncio.sleep(delay)
+        return record
+
+    def _fits(self, delay_s: float) -> bool:
+        return time.perf_counter() + delay_s + self.plan.clip_s <= self.plan.deadline
+
+    async def _attempt(self, record: RequestRecord) -> ServerBusy | None:
+        """One try of the request into ``record``; the refusal, when the server was busy."""
         try:
             client = await self._connected()
             await asyncio.wait_for(self._stream(client, record), self.plan.clip_s + REQUEST_SLACK_S)
         except LipstreamServerError as error:
             record.error = error.code
+        except ServerBusy as busy:
+            record.error = busy.error.code if busy.error else f"closed_{busy.code}"
+            return busy
         except ConnectionClosed as error:
             record.error = error.error.code if error.error else f"closed_{error.code}"
         except HandshakeRejected as error:
@@ -193,7 +224,7 @@ class _Session:
         except (OSError, LipstreamClientError) as error:
             record.error = type(error).__name__
             await self._drop_connection()
-        return record
+        return None
 
     async def _drop_connection(self) -> None:
         if self.client is not None:

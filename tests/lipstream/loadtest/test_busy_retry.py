@@ -1,0 +1,30 @@
+"""A load-test session that the server refuses for load retries when it was told to."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from lipstream.config import ServerSettings
+from lipstream.loadtest.load import LoadTestConfig, loadtest
+from tests.lipstream.server.harness import serving
+
+
+def test_a_refused_session_waits_retry_after_and_completes(lerp_dir: Path) -> None:
+    # One session at a time: of two 2 s clips started within the same second, one is
+    # refused with server_busy while the other runs, and gets in on a later try.
+    with serving(lerp_dir, ServerSettings(max_sessions=1)) as served:
+        config = LoadTestConfig(
+            url=served.ws,
+            streams=2,
+            requests=2,
+            clips_s=(2.0,),
+            fps=30.0,
+            engine="viseme-lerp",
+            character="demo",
+            pause_s=0.0,
+            max_duration_s=40.0,
+        )
+        clip = loadtest(config)["clips"][0]
+    assert clip["requests"] == 2 and clip["successful_requests"] == 2
+    assert clip["errors"] == {}
+    assert clip["busy_retries"] >= 1
