@@ -392,6 +392,31 @@ class Model(ABC):
         return cls.from_arrays(manifest, load_arrays(directory), directory)
 
 
+MAX_LEAD_MS = 1000.0
+
+
+def causal_lead_ms(options: Mapping[str, Any]) -> float | None:
+    """The lead (ms) of options asking for a causal rung (``causal: true``, ``lead_ms`` in
+    [0, ``MAX_LEAD_MS``], 0 by default), None without ``causal``; ``lead_ms`` without it is
+    refused, as is any other type (``InvalidRequestError`` naming the option)."""
+    causal = options.get("causal", False)
+    if not isinstance(causal, bool):
+        raise InvalidRequestError(
+            f"causal must be true or false, got {causal!r}", where="options.causal"
+        )
+    lead = options.get("lead_ms", 0.0)
+    if isinstance(lead, bool) or not isinstance(lead, (int, float)) or not 0 <= lead <= MAX_LEAD_MS:
+        raise InvalidRequestError(
+            f"lead_ms must be a number of milliseconds in [0, {MAX_LEAD_MS:g}], got {lead!r}",
+            where="options.lead_ms",
+        )
+    if causal:
+        return float(lead)
+    if "lead_ms" in options:
+        raise InvalidRequestError("lead_ms applies with causal: true only", where="options.lead_ms")
+    return None
+
+
 def check_options(engine: str, known: Sequence[str], options: Mapping[str, Any]) -> None:
     """InvalidRequestError (``invalid_request``, at ``options.<name>``) naming every option in
     ``options`` that ``engine`` does not know, and listing the ones it does."""

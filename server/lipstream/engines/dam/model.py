@@ -42,6 +42,7 @@ from ..base import (
     Rung,
     SynthesisRequest,
     Synthesizer,
+    causal_lead_ms,
     final_until,
 )
 from ..durations import DurationModel
@@ -60,7 +61,6 @@ NUMBER_FIELDS = (  # name, low, high, low excluded
     ("w_context", 0.0, 1e9, False),
     ("w_smooth", 0.0, 1e9, False),
 )
-MAX_LEAD_MS = 1000.0
 CAUSAL_LEAD_MS = 120.0
 NEUTRAL = EMOTION_INDEX["neutral"]
 SILENCE_INDEX = PHONEME_INDEX[SILENCE]
@@ -123,27 +123,9 @@ class DamModel(Model):
         """(search_ahead, tail_ahead) of ``options``, defaults filled in; with ``causal: true``
         the lead (ms) instead, which ignores the other two (a server merges a rung's options
         over the client's)."""
-        causal = options.get("causal", False)
-        if not isinstance(causal, bool):
-            raise InvalidRequestError(
-                f"causal must be true or false, got {causal!r}", where="options.causal"
-            )
-        lead = options.get("lead_ms", 0.0)
-        if (
-            isinstance(lead, bool)
-            or not isinstance(lead, (int, float))
-            or not 0 <= lead <= MAX_LEAD_MS
-        ):
-            raise InvalidRequestError(
-                f"lead_ms must be a number of milliseconds in [0, {MAX_LEAD_MS:g}], got {lead!r}",
-                where="options.lead_ms",
-            )
-        if causal:
-            return float(lead)
-        if "lead_ms" in options:
-            raise InvalidRequestError(
-                "lead_ms applies with causal: true only", where="options.lead_ms"
-            )
+        lead = causal_lead_ms(options)
+        if lead is not None:
+            return lead
         values = []
         for name, default in (("search_ahead", self.search_ahead), ("tail_ahead", self.tail)):
             value = options.get(name, default)

@@ -28,7 +28,7 @@ from ...model_checks import ArrayReader, FieldReader
 from ...numerics.basis import MotionBasis, read_components
 from ...store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
 from ...timeline import PhonemeSpan
-from ..base import Lookahead, Model, Rung, SynthesisRequest, Synthesizer
+from ..base import Lookahead, Model, Rung, SynthesisRequest, Synthesizer, causal_lead_ms
 from ..durations import DurationModel
 from .contamination import Contamination
 from .costs import ALPHA_NAMES, NodeBounds, Weights
@@ -40,7 +40,6 @@ from .synthesizer import CausalSynthesizer, LagSynthesizer
 
 MAX_LAG = 64
 LADDER_LAGS = (2, 1, 0)
-MAX_LEAD_MS = 1000.0
 CAUSAL_LEAD_MS = 120.0
 Resolved = tuple[str, float | int | None]
 
@@ -100,27 +99,9 @@ class ExpressiveDpModel(Model):
 
     def resolve(self, options: Mapping[str, Any]) -> Resolved:
         """("lag", L or None for the full search) or ("causal", lead ms), defaults filled."""
-        causal = options.get("causal", False)
-        if not isinstance(causal, bool):
-            raise InvalidRequestError(
-                f"causal must be true or false, got {causal!r}", where="options.causal"
-            )
-        lead = options.get("lead_ms", 0.0)
-        if (
-            isinstance(lead, bool)
-            or not isinstance(lead, (int, float))
-            or not 0 <= lead <= MAX_LEAD_MS
-        ):
-            raise InvalidRequestError(
-                f"lead_ms must be a number of milliseconds in [0, {MAX_LEAD_MS:g}], got {lead!r}",
-                where="options.lead_ms",
-            )
-        if causal:
-            return ("causal", float(lead))
-        if "lead_ms" in options:
-            raise InvalidRequestError(
-                "lead_ms applies with causal: true only", where="options.lead_ms"
-            )
+        lead = causal_lead_ms(options)
+        if lead is not None:
+            return ("causal", lead)
         lag = options.get("lag", self.lag)
         if lag == "full":
             return ("lag", None)
