@@ -16,6 +16,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -274,3 +275,19 @@ def test_several_workers_without_a_directory_get_a_private_one(
         process.wait(timeout=15)
     assert [value(samples, "lipstream_sessions") for samples in scrapes] == [len(clients)] * 4
     assert not directory.exists()
+
+
+def test_a_killed_worker_not_yet_reaped_counts_as_gone() -> None:
+    from lipstream.server.metrics import _running
+
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        assert _running(child.pid)
+        os.kill(child.pid, signal.SIGKILL)
+        deadline = time.monotonic() + EVENTUALLY_S
+        while _running(child.pid):  # a zombie until reaped below: signal 0 still reaches it
+            assert time.monotonic() < deadline, "the killed child still counts as running"
+            time.sleep(0.05)
+    finally:
+        child.wait(timeout=EVENTUALLY_S)
+    assert not _running(child.pid)
