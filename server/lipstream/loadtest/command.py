@@ -295,7 +295,16 @@ def _storm(args: argparse.Namespace, settings: Settings) -> None:
     url = args.url or default_url(settings)
     engine, character = args.engine or "viseme-lerp", args.character or "demo"
     report = asyncio.run(
-        storm(url, args.kind, args.connections, args.duration, engine, character, args.healthz_url)
+        storm(
+            url,
+            args.kind,
+            args.connections,
+            args.duration,
+            engine,
+            character,
+            args.healthz_url,
+            args.latency_budget_ms,
+        )
     )
     print(json.dumps(asdict(report), indent=2))
 
@@ -311,6 +320,7 @@ def _add_storm_parser(runs: Any) -> None:
         "meanwhile, and report how the connections ended and the server's frame lag.",
     )
     _target_options(storm, required_target=False)
+    _budget_option(storm)
     storm.add_argument("--kind", choices=KINDS, default="sessions", help="connection kind")
     storm.add_argument(
         "-n", "--connections", type=int, default=1100, help="connections opened at once"

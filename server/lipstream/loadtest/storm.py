@@ -6,7 +6,7 @@ head and stop, or ``sessions``: WebSockets that each start a request and stream 
 every ``PHONEME_S`` (real time) for ``duration_s``, then end it. Meanwhile a probe asks
 ``GET /healthz`` every ``PROBE_EVERY_S`` with a ``PROBE_TIMEOUT_S`` timeout. The report
 counts how the connections ended (admitted and finished, refused with ``server_busy`` by
-``details.reason``, upgrade refused with HTTP 503, closed by the server before their head,
+``details.reason``, other errors by code, upgrade refused with HTTP 503, closed by the server before their head,
 other failures), the probe's answers and slowest answer (the probe runs in a process of its
 own, so the storm's load on its own process does not delay it), and, for sessions, the server's
 own frame lag over the storm: the difference of its ``lipstream_frame_lag_seconds``
@@ -29,7 +29,13 @@ from multiprocessing.connection import Connection
 from multiprocessing.synchronize import Event as EventType
 from urllib.parse import urlsplit
 
-from lipstream_client import AsyncClient, HandshakeRejected, LipstreamClientError, ServerBusy
+from lipstream_client import (
+    AsyncClient,
+    HandshakeRejected,
+    LipstreamClientError,
+    LipstreamServerError,
+    ServerBusy,
+)
 
 PHONEME_S = 0.08
 PHONEMES = ("HH", "AH0", "L", "OW1", "W", "ER1", "L", "D", "sil")
@@ -63,9 +69,12 @@ async def storm(
     engine: str = "viseme-lerp",
     character: str = "demo",
     healthz_url: str | None = None,
+    latency_budget_ms: float | None = None,
 ) -> StormReport:
     """Open ``connections`` of ``kind`` against the WebSocket ``url`` at once (see above);
-    the probe asks ``healthz_url`` (default: ``/healthz`` of the serving port)."""
+    the probe asks ``healthz_url`` (default: ``/healthz`` of the serving port). Sessions ask
+    for ``latency_budget_ms``: with a budget at the latency floor (20 ms), the rung has no
+    lookahead and every ms of frame lag is the server's."""
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {', '.join(KINDS)}, not {kind!r}")
     base = _http_base(url)
@@ -81,7 +90,10 @@ async def storm(
     if answers.poll(PROBE_START_S):
         answers.recv()  # probing from now on
     if kind == "sessions":
-        jobs = [_session(url, engine, character, duration_s) for _ in range(connections)]
+        jobs = [
+            _session(url, engine, character, duration_s, latency_budget_ms)
+            for _ in range(connections)
+        ]
     else:
         jobs = [_raw(url, kind == "partial", duration_s) for _ in range(connections)]
     outcomes = await asyncio.gather(*jobs)
@@ -97,10 +109,12 @@ async def storm(
     return report
 
 
-async def _session(url: str, engine: str, character: str, duration_s: float) -> str:
+async def _session(
+    url: str, engine: str, character: str, duration_s: float, latency_budget_ms: float | None
+) -> str:
     try:
         async with AsyncClient(url, open_timeout=30.0) as client:
-            stream = await client.start(engine, character)
+            stream = await client.start(engine, character, latency_budget_ms=latency_budget_ms)
             await stream.ready()
             began = time.monotonic()
             for index in range(round(duration_s / PHONEME_S)):
@@ -115,6 +129,8 @@ async def _session(url: str, engine: str, character: str, duration_s: float) -> 
         return f"server_busy:{reason}"
     except HandshakeRejected as rejected:
         return f"http_{rejected.status}"
+    except LipstreamServerError as error:
+        return f"error:{error.code}"
     except LipstreamClientError as error:
         return f"failed:{type(error).__name__}"
     except (OSError, TimeoutError) as error:

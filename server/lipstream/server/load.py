@@ -94,15 +94,16 @@ class LoadMonitor:
             self._timer = None
 
     def sample(self) -> LoadSample:
-        """The load over the window; on the loop's own thread, up to this moment: the next
-        tick, if already overdue, is a lag the loop has now (a batch of callbacks that runs
-        for seconds holds the ticks back, and would otherwise leave the sample stale), and
-        the busy fraction runs to now."""
+        """The load over the window; on the loop's own thread the next tick, if already
+        overdue, is a lag the loop has now (a batch of callbacks that runs for seconds holds
+        the ticks back, and would otherwise leave the sample stale). The busy fraction runs
+        to the last tick: admission asks for a sample per handshake, and reading the thread's
+        CPU clock is a system call, which in a storm of handshakes was a quarter of the
+        loop's time (``py-spy``, docs/server.md's *Storm*)."""
         ticks = list(self.ticks)
         overdue_s = 0.0
         if self._loop is not None and threading.get_ident() == self._thread:
             overdue_s = max(0.0, self._loop.time() - self._due)
-            ticks.append(_Tick(time.monotonic(), time.thread_time(), overdue_s))
         if len(ticks) < 2:
             return LoadSample(lag_ms=1000.0 * overdue_s, rss_mb=self.rss_mb)
         first, last = ticks[0], ticks[-1]

@@ -30,6 +30,14 @@ def test_sessions_past_the_cap_are_counted_by_reason(lerp_dir: Path) -> None:
     assert report.lag_p50_s <= report.lag_p99_s
 
 
+def test_sessions_ask_for_the_latency_budget_given(lerp_dir: Path) -> None:
+    """A budget below every rung's need reaches the server: it refuses each session with
+    ``budget_infeasible``, which the storm counts as a failure of that kind."""
+    with serving(lerp_dir, ServerSettings()) as served:
+        report = asyncio.run(storm(served.ws, "sessions", 2, 0.5, latency_budget_ms=0.01))
+    assert report.outcomes == {"error:budget_infeasible": 2}
+
+
 def test_quantiles_are_the_bucket_bounds_they_fall_under() -> None:
     cumulative = {0.01: 50.0, 0.1: 98.0, 1.0: 100.0, float("inf"): 100.0}
     assert _quantile(cumulative, 0.5) == 0.01
