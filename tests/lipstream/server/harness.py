@@ -40,7 +40,7 @@ from lipstream_client import (
 )
 from tests.helpers import free_port
 
-STARTUP_TIMEOUT_S = 20.0
+STARTUP_TIMEOUT_S = 60.0  # a server loading every engine took 37 s on a loaded 2-core machine
 RECEIVE_TIMEOUT_S = 10.0
 T = TypeVar("T")
 
