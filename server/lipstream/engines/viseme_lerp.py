@@ -37,7 +37,15 @@ from ..phonemes import PHONEMES, SILENCE
 from ..store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
 from ..timeline import PhonemeSpan
 from ..visemes import get_scheme
-from .base import Engine, Lookahead, Model, Rung, SynthesisRequest, Synthesizer
+from .base import (
+    Engine,
+    Lookahead,
+    Model,
+    Rung,
+    SynthesisRequest,
+    Synthesizer,
+    resolved_rung,
+)
 from .damped_fit import KAPPAS, best_kappa, validation_utterances
 from .damped_synthesis import DampedTargets, DampedTimelineSynthesizer
 from .durations import DurationModel
@@ -95,15 +103,7 @@ class VisemeLerpModel(Model):
         return (Rung("lerp", self.lookahead, {"mode": "lerp"}), *damped)
 
     def rung_for(self, options: Mapping[str, Any]) -> Rung | None:
-        mode, lead_ms = _parse_options(options)
-        return next(
-            (
-                rung
-                for rung in self.fidelity_ladder()
-                if _parse_options(rung.options) == (mode, lead_ms)
-            ),
-            None,
-        )
+        return resolved_rung(self.fidelity_ladder(), options, _parse_options)
 
     def kappa_for(self, lead_ms: float) -> float:
         """The fitted κ of the nearest fitted lead."""

@@ -34,7 +34,7 @@ import numpy as np
 
 from ...phonemes import PHONEME_INDEX as CANONICAL_INDEX
 from ...timeline import PhonemeSpan
-from ..base import RenderingSynthesizer, SynthesisRequest, fill_gaps, frame_count
+from ..base import ShiftedSynthesizer, SynthesisRequest, fill_gaps, frame_count
 from ..damped import DampedState, filter_raw
 from ..damped_fit import best_kappa
 from .dominance import dominance, powers
@@ -105,7 +105,7 @@ def inverse_durations(
     return np.asarray(1.0 / model.durations.expected_all_s()[phonemes])
 
 
-class CausalSynthesizer(RenderingSynthesizer):
+class CausalSynthesizer(ShiftedSynthesizer):
     """One request of a causal or lead rung: the frame at t is final once the input covers
     t + shift; the filter's state is carried from call to call."""
 
@@ -116,15 +116,6 @@ class CausalSynthesizer(RenderingSynthesizer):
         self.shift_s = shift_s
         self.curve = CausalCurve(model, request)
         self.state: DampedState | None = None
-
-    def final_until(self) -> float:
-        return self.covered_until - self.shift_s if self.spans else 0.0
-
-    def frames(self) -> np.ndarray:
-        reach = self.final_until()
-        if not self.spans or reach < 0.0:
-            return self._emit(self.emitted)
-        return self._emit(frame_count(reach, self.request.fps))
 
     def _emit(self, stop: int) -> np.ndarray:
         if stop <= self.emitted:

@@ -43,7 +43,10 @@ from ..base import (
     SynthesisRequest,
     Synthesizer,
     causal_lead_ms,
+    causal_rungs,
+    causal_shift_s,
     final_until,
+    resolved_rung,
 )
 from ..durations import DurationModel
 from .causal import CausalSynthesizer
@@ -61,7 +64,6 @@ NUMBER_FIELDS = (  # name, low, high, low excluded
     ("w_context", 0.0, 1e9, False),
     ("w_smooth", 0.0, 1e9, False),
 )
-CAUSAL_LEAD_MS = 120.0
 NEUTRAL = EMOTION_INDEX["neutral"]
 SILENCE_INDEX = PHONEME_INDEX[SILENCE]
 
@@ -145,7 +147,7 @@ class DamModel(Model):
     def shift_s(self, lead_ms: float) -> float:
         """How far ahead (s) a causal rung with ``lead_ms`` follows its raw curve: the filter's
         lag at the pooled median duration, at most the lead."""
-        return min(lead_ms / 1000.0, 2.0 * self.durations.pooled_median_s() / self.causal_kappa)
+        return causal_shift_s(lead_ms, self.durations.pooled_median_s(), self.causal_kappa)
 
     @property
     def lookahead(self) -> Lookahead:
@@ -162,23 +164,16 @@ class DamModel(Model):
         """Mode searches looking ``search_ahead`` phonemes ahead, then fewer, then none; the
         tails stay whole on these rungs (cutting them costs far more than 1 % of a channel's
         range, see docs/engines/dam.md). Below them the causal rungs (``causal``): one
-        following its curve ``CAUSAL_LEAD_MS`` ahead, then the causal floor."""
+        following its curve ``base.CAUSAL_LEAD_MS`` ahead, then the causal floor."""
         rungs = []
         for search in range(self.search_ahead, -1, -1):
             name = "full" if search == self.search_ahead else f"search-{search}"
             options = {"search_ahead": search, "tail_ahead": self.tail}
             rungs.append(Rung(name, Lookahead(phonemes=search + self.tail), options))
-        for name, lead in (("causal_lead", CAUSAL_LEAD_MS), ("causal", 0.0)):
-            causal: dict[str, Any] = {"causal": True, "lead_ms": lead}
-            rungs.append(Rung(name, Lookahead(seconds=self.shift_s(lead)), causal))
-        return tuple(rungs)
+        return (*rungs, *causal_rungs(self.shift_s))
 
     def rung_for(self, options: Mapping[str, Any]) -> Rung | None:
-        resolved = self.resolve(options)
-        for rung in self.fidelity_ladder():
-            if self.resolve(rung.options) == resolved:
-                return rung
-        return None
+        return resolved_rung(self.fidelity_ladder(), options, self.resolve)
 
     def synthesizer(self, request: SynthesisRequest) -> Synthesizer:
         resolved = self.resolve(request.options)

@@ -47,6 +47,7 @@ from ...timeline import PhonemeSpan
 from ..base import (
     Lookahead,
     RenderingSynthesizer,
+    ShiftedSynthesizer,
     SynthesisRequest,
     final_until,
     frame_count,
@@ -147,7 +148,7 @@ class LagSynthesizer(PathSynthesizer):
         return np.asarray(self.model.basis.reconstruct(values), dtype=np.float32)
 
 
-class CausalSynthesizer(PathSynthesizer):
+class CausalSynthesizer(PathSynthesizer, ShiftedSynthesizer):
     """The causal and lead rungs: nodes committed on arrival, a damped filter after."""
 
     def __init__(
@@ -160,15 +161,6 @@ class CausalSynthesizer(PathSynthesizer):
         super().__init__(model, request, 0, constraints)
         self.shift_s = shift_s
         self.state: DampedState | None = None
-
-    def final_until(self) -> float:
-        return self.covered_until - self.shift_s if self.spans else 0.0
-
-    def frames(self) -> np.ndarray:
-        reach = self.final_until()
-        if not self.spans or reach < 0.0:
-            return self._emit(self.emitted)
-        return self._emit(frame_count(reach, self.request.fps))
 
     def _emit(self, stop: int) -> np.ndarray:
         if stop <= self.emitted:
