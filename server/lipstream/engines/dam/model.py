@@ -32,7 +32,7 @@ from ...audio import Audio
 from ...errors import InvalidRequestError
 from ...model_checks import ArrayReader, FieldReader
 from ...numerics.basis import MotionBasis, read_components
-from ...phonemes import PHONEMES, SILENCE
+from ...phonemes import PHONEMES
 from ...store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
 from ...timeline import EMOTIONS, PhonemeSpan
 from ..base import (
@@ -53,7 +53,7 @@ from .causal import CausalSynthesizer
 from .dominance import reach
 from .em import SIGMA_MIN
 from .kernels import choose_modes, dam_sum, search_tables
-from .modes import EMOTION_INDEX, PHONEME_INDEX
+from .modes import PHONEME_INDEX, SILENCE_INDEX, emotion_index
 from .selection import Costs, Layer, cheapest_path, context_cost, end_derivatives, smooth_cost
 
 OPTION_LIMIT = 16
@@ -64,8 +64,6 @@ NUMBER_FIELDS = (  # name, low, high, low excluded
     ("w_context", 0.0, 1e9, False),
     ("w_smooth", 0.0, 1e9, False),
 )
-NEUTRAL = EMOTION_INDEX["neutral"]
-SILENCE_INDEX = PHONEME_INDEX[SILENCE]
 
 
 class DamModel(Model):
@@ -190,9 +188,8 @@ class DamModel(Model):
         span = spans[index]
         phoneme = int(self.stand_in[PHONEME_INDEX[span.phoneme]])
         candidates = np.arange(self.offsets[phoneme], self.offsets[phoneme + 1])
-        emotion = request.emotion_of(span)
-        emotion_index = NEUTRAL if emotion is None else EMOTION_INDEX[emotion]
-        said = candidates[self.count_emotion[candidates, emotion_index] > 0]
+        emotion = emotion_index(request, span)
+        said = candidates[self.count_emotion[candidates, emotion] > 0]
         if len(said):
             candidates = said
         previous = PHONEME_INDEX[spans[index - 1].phoneme] if index > 0 else SILENCE_INDEX
@@ -202,7 +199,7 @@ class DamModel(Model):
             following = PHONEME_INDEX[spans[index + 1].phoneme]
         else:
             following = SILENCE_INDEX
-        return Layer(candidates, span.end - span.start, previous, following, emotion_index)
+        return Layer(candidates, span.end - span.start, previous, following, emotion)
 
     def select_mode(
         self,
@@ -239,10 +236,7 @@ class DamModel(Model):
         phonemes = [PHONEME_INDEX[span.phoneme] for span in window]
         before = PHONEME_INDEX[spans[low - 1].phoneme] if low > 0 else SILENCE_INDEX
         after = PHONEME_INDEX[spans[high + 1].phoneme] if high + 1 < len(spans) else SILENCE_INDEX
-        emotions = [request.emotion_of(span) for span in window]
-        emotion = np.array(
-            [NEUTRAL if name is None else EMOTION_INDEX[name] for name in emotions], dtype=np.int64
-        )
+        emotion = np.array([emotion_index(request, span) for span in window], dtype=np.int64)
         phoneme = np.array(phonemes, dtype=np.int64)
         tables, costs = self.tables, self.costs
         return np.asarray(
