@@ -22,6 +22,12 @@ pooled median duration, to make up the filter's lag as viseme-lerp's damped
 rung does; the causal rung is shift 0. The frame at t is final once the input
 covers t + shift, and the state carried frame to frame does not depend on how
 the input was cut, so streaming gives the offline frames.
+
+Cost: a server at lead 0 calls the synthesizer once per phoneme message, so
+each step is one compiled call (``kernels``): ``commit_mode`` per arriving
+span, ``causal_sum`` for the frames' raw curve (the latest span begun found by
+binary search over the committed spans, kept in ``Growable`` arrays), and
+``damped.filter_raw``.
 """
 
 from __future__ import annotations
@@ -62,9 +68,9 @@ class CausalCurve:
 
     def commit(self, spans: Sequence[PhonemeSpan]) -> None:
         """Commit the mode of every span not yet committed, in order."""
-        model, tables, costs = self.model, self.model.tables, self.model.costs
+        model = self.model
         rates = model.durations.expected_all_s()
-        n_emotions = tables.set_start.shape[1]
+        n_emotions = model.tables.set_start.shape[1]
         for index in range(self.modes.count, len(spans)):
             span = spans[index]
             phoneme = PHONEME_INDEX[span.phoneme]
@@ -77,17 +83,7 @@ class CausalCurve:
                 span.end - span.start,
                 int(self.modes.data[before]) if index else -1,
                 float(self.ends.data[before] - self.starts.data[before]) if index else 1.0,
-                tables.set_start,
-                tables.set_stop,
-                tables.modes,
-                tables.log_previous,
-                tables.log_following,
-                tables.log_emotion,
-                costs.ends,
-                costs.starts,
-                costs.reference_duration,
-                costs.w_context,
-                costs.w_smooth,
+                *model.search_arguments,
             )
             self.modes.append(mode)
             self.starts.append(span.start)

@@ -19,6 +19,11 @@ few integer arrays per span, and two kernels do the rest:
   ahead whose dominance reaches it, each term D·A with A on the clamped local
   time, in the order ``model.render`` adds them.
 
+The causal rungs (``causal``) use two more: ``commit_mode``, a span's mode as
+it arrives (E_c with its next phoneme unknown plus E_s of the join to the
+mode committed before it), and ``causal_sum``, Eq. 2 at each time over the
+latest span begun and the ``tail`` before it; both sums share ``_dam_frame``.
+
 Sums of squares and polynomial products run in plain loops, so E_s and the
 frames may differ from numpy's (pairwise, BLAS) summation in the last bits;
 the tests hold the modes equal and the frames within 1e-12 of the

@@ -116,6 +116,21 @@ class DamModel(Model):
             self.count_emotion,
             self.costs.alpha,
         )
+        tables, costs = self.tables, self.costs
+        self.search_arguments = (
+            tables.set_start,
+            tables.set_stop,
+            tables.modes,
+            tables.log_previous,
+            tables.log_following,
+            tables.log_emotion,
+            costs.ends,
+            costs.starts,
+            costs.reference_duration,
+            costs.w_context,
+            costs.w_smooth,
+        )
+        """The tables and weights every compiled search takes, last, in the kernels' order."""
 
     # -- options, lookahead, ladder -------------------------------------------------------
 
@@ -238,10 +253,9 @@ class DamModel(Model):
         after = PHONEME_INDEX[spans[high + 1].phoneme] if high + 1 < len(spans) else SILENCE_INDEX
         emotion = np.array([emotion_index(request, span) for span in window], dtype=np.int64)
         phoneme = np.array(phonemes, dtype=np.int64)
-        tables, costs = self.tables, self.costs
         return np.asarray(
             choose_modes(
-                phoneme * tables.set_start.shape[1] + emotion,
+                phoneme * self.tables.set_start.shape[1] + emotion,
                 np.array([before, *phonemes[:-1]], dtype=np.int64),
                 np.array([*phonemes[1:], after], dtype=np.int64),
                 emotion,
@@ -250,17 +264,7 @@ class DamModel(Model):
                 last - low,
                 self.search_behind,
                 ahead,
-                tables.set_start,
-                tables.set_stop,
-                tables.modes,
-                tables.log_previous,
-                tables.log_following,
-                tables.log_emotion,
-                costs.ends,
-                costs.starts,
-                costs.reference_duration,
-                costs.w_context,
-                costs.w_smooth,
+                *self.search_arguments,
             )
         )
 
