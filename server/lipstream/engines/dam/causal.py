@@ -40,7 +40,7 @@ import numpy as np
 from ...timeline import PhonemeSpan
 from ..base import ShiftedSynthesizer, SynthesisRequest, fill_gaps, frame_count
 from ..damped import DampedState, filter_raw
-from ..damped_fit import best_kappa
+from ..damped_fit import RawCurve, best_following_kappa
 from ..growable import Growable
 from .kernels import causal_sum, commit_mode
 from .modes import PHONEME_INDEX, SILENCE_INDEX, emotion_index
@@ -138,21 +138,15 @@ class CausalSynthesizer(ShiftedSynthesizer):
 
 def fit_causal_kappa(model: DamModel, utterances: Sequence[Any]) -> float:
     """The κ of ``KAPPAS`` whose causal rung has the least squared error on ``utterances``
-    (``damped_fit``); each utterance's raw curve is computed once, the filter per κ."""
-    curves: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+    (``damped_fit``)."""
 
-    def synthesize(kappa: float, utterance: Any) -> np.ndarray:
-        key = id(utterance)
-        if key not in curves:
-            request = SynthesisRequest(fps=float(utterance.fps), emotion=utterance.emotion)
-            spans = fill_gaps(utterance.phones)
-            times = np.arange(frame_count(spans[-1].end, request.fps)) / request.fps
-            curve = CausalCurve(model, request)
-            curve.commit(spans)
-            raw, inverse = curve.raw(times)
-            curves[key] = (raw, inverse, times)
-        raw, inverse, times = curves[key]
-        _, values = filter_raw(None, raw, kappa * inverse, times)
-        return model.basis.reconstruct(values)
+    def raw_curve(utterance: Any) -> RawCurve:
+        request = SynthesisRequest(fps=float(utterance.fps), emotion=utterance.emotion)
+        spans = fill_gaps(utterance.phones)
+        times = np.arange(frame_count(spans[-1].end, request.fps)) / request.fps
+        curve = CausalCurve(model, request)
+        curve.commit(spans)
+        raw, rates = curve.raw(times)
+        return raw, rates, times
 
-    return best_kappa(synthesize, utterances)
+    return best_following_kappa(raw_curve, model.basis, utterances)
