@@ -408,6 +408,18 @@ CAUSAL_LEAD_MS = 120.0
 ahead of time."""
 
 
+def lead_ms_option(options: Mapping[str, Any]) -> float:
+    """The ``lead_ms`` option (0 when absent): a number of milliseconds in [0,
+    ``MAX_LEAD_MS``], else ``InvalidRequestError`` at ``options.lead_ms``."""
+    lead = options.get("lead_ms", 0.0)
+    if isinstance(lead, bool) or not isinstance(lead, (int, float)) or not 0 <= lead <= MAX_LEAD_MS:
+        raise InvalidRequestError(
+            f"lead_ms must be a number of milliseconds in [0, {MAX_LEAD_MS:g}], got {lead!r}",
+            where="options.lead_ms",
+        )
+    return float(lead)
+
+
 def causal_lead_ms(options: Mapping[str, Any]) -> float | None:
     """The lead (ms) of options asking for a causal rung (``causal: true``, ``lead_ms`` in
     [0, ``MAX_LEAD_MS``], 0 by default), None without ``causal``; ``lead_ms`` without it is
@@ -417,14 +429,9 @@ def causal_lead_ms(options: Mapping[str, Any]) -> float | None:
         raise InvalidRequestError(
             f"causal must be true or false, got {causal!r}", where="options.causal"
         )
-    lead = options.get("lead_ms", 0.0)
-    if isinstance(lead, bool) or not isinstance(lead, (int, float)) or not 0 <= lead <= MAX_LEAD_MS:
-        raise InvalidRequestError(
-            f"lead_ms must be a number of milliseconds in [0, {MAX_LEAD_MS:g}], got {lead!r}",
-            where="options.lead_ms",
-        )
+    lead = lead_ms_option(options)
     if causal:
-        return float(lead)
+        return lead
     if "lead_ms" in options:
         raise InvalidRequestError("lead_ms applies with causal: true only", where="options.lead_ms")
     return None
