@@ -49,7 +49,7 @@ from __future__ import annotations
 import inspect
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, ClassVar, Self, TypeVar
@@ -297,10 +297,8 @@ class Model(ABC):
     def rung_for(self, options: Mapping[str, Any]) -> Rung | None:
         """The rung of ``fidelity_ladder`` that these engine ``options`` select exactly, None
         when they leave the ladder; engines whose options have defaults override it to
-        compare the options they resolve to."""
-        return next(
-            (rung for rung in self.fidelity_ladder() if dict(rung.options) == dict(options)), None
-        )
+        compare the options they resolve to (``resolved_rung``)."""
+        return resolved_rung(self.fidelity_ladder(), options, dict)
 
     def call_cost(self, options: Mapping[str, Any], measured: Mapping[str, CallCost]) -> CallCost:
         """The estimated cost of one streaming call of a request with these ``options``.
@@ -392,7 +390,34 @@ class Model(ABC):
         return cls.from_arrays(manifest, load_arrays(directory), directory)
 
 
+def resolved_rung(
+    ladder: Iterable[Rung],
+    options: Mapping[str, Any],
+    resolve: Callable[[Mapping[str, Any]], object],
+) -> Rung | None:
+    """The first rung of ``ladder`` whose options ``resolve`` to what ``options`` resolve to
+    (an engine's option parser, defaults filled in), None when none does; ``options`` are
+    resolved first, so bad ones raise the parser's error."""
+    resolved = resolve(options)
+    return next((rung for rung in ladder if resolve(rung.options) == resolved), None)
+
+
 MAX_LEAD_MS = 1000.0
+CAUSAL_LEAD_MS = 120.0
+"""The lead of the ``causal_lead`` rung of the engines whose causal rungs follow a raw curve
+ahead of time."""
+
+
+def lead_ms_option(options: Mapping[str, Any]) -> float:
+    """The ``lead_ms`` option (0 when absent): a number of milliseconds in [0,
+    ``MAX_LEAD_MS``], else ``InvalidRequestError`` at ``options.lead_ms``."""
+    lead = options.get("lead_ms", 0.0)
+    if isinstance(lead, bool) or not isinstance(lead, (int, float)) or not 0 <= lead <= MAX_LEAD_MS:
+        raise InvalidRequestError(
+            f"lead_ms must be a number of milliseconds in [0, {MAX_LEAD_MS:g}], got {lead!r}",
+            where="options.lead_ms",
+        )
+    return float(lead)
 
 
 def causal_lead_ms(options: Mapping[str, Any]) -> float | None:
@@ -404,17 +429,38 @@ def causal_lead_ms(options: Mapping[str, Any]) -> float | None:
         raise InvalidRequestError(
             f"causal must be true or false, got {causal!r}", where="options.causal"
         )
-    lead = options.get("lead_ms", 0.0)
-    if isinstance(lead, bool) or not isinstance(lead, (int, float)) or not 0 <= lead <= MAX_LEAD_MS:
-        raise InvalidRequestError(
-            f"lead_ms must be a number of milliseconds in [0, {MAX_LEAD_MS:g}], got {lead!r}",
-            where="options.lead_ms",
-        )
+    lead = lead_ms_option(options)
     if causal:
-        return float(lead)
+        return lead
     if "lead_ms" in options:
         raise InvalidRequestError("lead_ms applies with causal: true only", where="options.lead_ms")
     return None
+
+
+def causal_shift_s(lead_ms: float, pooled_median_s: float, kappa: float) -> float:
+    """How far ahead (s) a causal rung with ``lead_ms`` follows its raw curve through a
+    critically damped filter at ω = ``kappa`` / duration: the filter's lag 2 / ω at the
+    pooled median phoneme duration, at most the lead."""
+    return min(lead_ms / 1000.0, 2.0 * pooled_median_s / kappa)
+
+
+def causal_rungs(
+    shift_s: Callable[[float], float],
+    leads_ms: Iterable[float] = (CAUSAL_LEAD_MS, 0.0),
+    pinned: Mapping[str, Any] | None = None,
+) -> tuple[Rung, ...]:
+    """The causal rungs at the foot of a ladder, one per lead of ``leads_ms`` (a lead of 0 is
+    ``causal``, the floor; any other ``causal_lead``), each waiting ``shift_s(lead)`` seconds;
+    their options are ``pinned`` (options the engine's causal search also fixes) followed by
+    ``causal: true`` and ``lead_ms``."""
+    return tuple(
+        Rung(
+            "causal" if lead == 0 else "causal_lead",
+            Lookahead(seconds=shift_s(lead)),
+            {**(pinned or {}), "causal": True, "lead_ms": lead},
+        )
+        for lead in leads_ms
+    )
 
 
 def check_options(engine: str, known: Sequence[str], options: Mapping[str, Any]) -> None:
@@ -554,3 +600,26 @@ class RenderingSynthesizer(SpanSynthesizer):
         self.finished = True
         total = frame_count(self.covered_until, self.request.fps) if self.spans else 0
         return self._emit(total)
+
+
+def shifted_frame_stop(synthesizer: SpanSynthesizer, shift_s: float, fps: float) -> int:
+    """The frames final when the frame at t waits for the input to cover t + ``shift_s``: those
+    with i / fps <= the input's end - ``shift_s``; the frames already emitted while no span
+    has come or that is before 0."""
+    reach = synthesizer.covered_until - shift_s
+    if not synthesizer.spans or reach < 0.0:
+        return synthesizer.emitted
+    return frame_count(reach, fps)
+
+
+class ShiftedSynthesizer(RenderingSynthesizer):
+    """A causal or lead rung's synthesizer: the frame at t is final once the input covers
+    t + ``shift_s`` (which subclasses set); their ``_emit`` carries the filter's state."""
+
+    shift_s: float
+
+    def final_until(self) -> float:
+        return self.covered_until - self.shift_s if self.spans else 0.0
+
+    def frames(self) -> np.ndarray:
+        return self._emit(shifted_frame_stop(self, self.shift_s, self.request.fps))

@@ -36,14 +36,32 @@ def omega_for_cutoff(cutoff_hz: np.ndarray | float) -> np.ndarray:
 
 
 @njit(cache=True)
+def _pull(x: float, v: float, target: float, w: float, dt: float) -> tuple[float, float]:
+    """x and v after ``dt`` s toward ``target`` at rate ``w``."""
+    error = x - target
+    pull = v + w * error
+    decay = math.exp(-w * dt)
+    return target + (error + pull * dt) * decay, (v - w * pull * dt) * decay
+
+
+@njit(cache=True)
 def _step(x: np.ndarray, v: np.ndarray, target: np.ndarray, omega: np.ndarray, dt: float) -> None:
     for column in range(len(x)):
-        w = omega[column]
-        error = x[column] - target[column]
-        pull = v[column] + w * error
-        decay = math.exp(-w * dt)
-        x[column] = target[column] + (error + pull * dt) * decay
-        v[column] = (v[column] - w * pull * dt) * decay
+        x[column], v[column] = _pull(x[column], v[column], target[column], omega[column], dt)
+
+
+@njit(cache=True)
+def _follow(
+    x: np.ndarray, v: np.ndarray, t: float, raw: np.ndarray, omegas: np.ndarray,
+    times: np.ndarray, out: np.ndarray,
+) -> None:  # fmt: skip
+    """Step from time ``t`` to each of ``times`` toward that frame's ``raw`` row at its rate
+    ``omegas`` (every column), recording the value in ``out``."""
+    for row in range(len(times)):
+        dt = times[row] - (t if row == 0 else times[row - 1])
+        for column in range(len(x)):
+            x[column], v[column] = _pull(x[column], v[column], raw[row, column], omegas[row], dt)
+        out[row] = x
 
 
 @njit(cache=True)
@@ -113,14 +131,20 @@ def filter_raw(
     """The filter following ``raw`` (m, components) at rates ``omegas`` (m,) over frame
     ``times`` (m,); ``state`` is the filter at the frame before (None: ``times`` starts at
     frame 0, where the filter rests on raw[0]). The state after and the values."""
-    pieces = []
+    values = np.empty((len(times), raw.shape[1]))
+    first = 0
     if state is None:
         state = DampedState.at_rest(raw[0], float(times[0]))
-        pieces.append(state.x[None].copy())
-        raw, omegas, times = raw[1:], omegas[1:], times[1:]
-    if len(times):
-        steps = np.diff(np.concatenate(([state.t], times)))
-        rates = np.repeat(omegas[:, None], raw.shape[1], axis=1)
-        pieces.append(state.run(raw, rates, steps, np.ones(len(times), dtype=np.bool_)))
+        values[0], first = state.x, 1
+    if len(times) > first:
+        _follow(
+            state.x,
+            state.v,
+            state.t,
+            np.ascontiguousarray(raw[first:], dtype=np.float64),
+            np.ascontiguousarray(omegas[first:], dtype=np.float64),
+            np.ascontiguousarray(times[first:], dtype=np.float64),
+            values[first:],
+        )
         state.t = float(times[-1])
-    return state, np.concatenate(pieces)
+    return state, values

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..phonemes import PHONEME_INDEX
 from ..timeline import PhonemeSpan
-from .base import SpanSynthesizer, SynthesisRequest, frame_count
+from .base import SpanSynthesizer, SynthesisRequest, frame_count, shifted_frame_stop
 from .damped import DampedState
 
 
@@ -54,10 +54,7 @@ class DampedTimelineSynthesizer(SpanSynthesizer):
         self._rows.append(PHONEME_INDEX[span.phoneme])
 
     def frames(self) -> np.ndarray:
-        reach = self.covered_until - self.targets.lead_s
-        if not self.spans or reach < 0.0:
-            return self._emit(self.emitted)
-        return self._emit(frame_count(reach, self.fps))
+        return self._emit(shifted_frame_stop(self, self.targets.lead_s, self.fps))
 
     def finish(self) -> np.ndarray:
         self.finished = True

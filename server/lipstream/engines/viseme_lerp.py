@@ -37,14 +37,23 @@ from ..phonemes import PHONEMES, SILENCE
 from ..store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
 from ..timeline import PhonemeSpan
 from ..visemes import get_scheme
-from .base import Engine, Lookahead, Model, Rung, SynthesisRequest, Synthesizer
+from .base import (
+    MAX_LEAD_MS,
+    Engine,
+    Lookahead,
+    Model,
+    Rung,
+    SynthesisRequest,
+    Synthesizer,
+    lead_ms_option,
+    resolved_rung,
+)
 from .damped_fit import KAPPAS, best_kappa, validation_utterances
 from .damped_synthesis import DampedTargets, DampedTimelineSynthesizer
 from .durations import DurationModel
 
 MODES = ("lerp", "damped")
 LEADS_MS = (120.0, 0.0)
-MAX_LEAD_MS = 1000.0
 
 
 class VisemeLerpModel(Model):
@@ -95,15 +104,7 @@ class VisemeLerpModel(Model):
         return (Rung("lerp", self.lookahead, {"mode": "lerp"}), *damped)
 
     def rung_for(self, options: Mapping[str, Any]) -> Rung | None:
-        mode, lead_ms = _parse_options(options)
-        return next(
-            (
-                rung
-                for rung in self.fidelity_ladder()
-                if _parse_options(rung.options) == (mode, lead_ms)
-            ),
-            None,
-        )
+        return resolved_rung(self.fidelity_ladder(), options, _parse_options)
 
     def kappa_for(self, lead_ms: float) -> float:
         """The fitted κ of the nearest fitted lead."""
@@ -236,15 +237,10 @@ def _parse_options(options: Mapping[str, Any]) -> tuple[str, float]:
         raise InvalidRequestError(
             f"mode must be one of {', '.join(MODES)}, got {mode!r}", where="options.mode"
         )
-    lead = options.get("lead_ms", 0.0)
-    if isinstance(lead, bool) or not isinstance(lead, (int, float)) or not 0 <= lead <= MAX_LEAD_MS:
-        raise InvalidRequestError(
-            f"lead_ms must be a number of milliseconds in [0, {MAX_LEAD_MS:g}], got {lead!r}",
-            where="options.lead_ms",
-        )
+    lead = lead_ms_option(options)
     if mode == "lerp" and "lead_ms" in options:
         raise InvalidRequestError("lead_ms applies to mode damped only", where="options.lead_ms")
-    return str(mode), float(lead) if mode == "damped" else 0.0
+    return str(mode), lead if mode == "damped" else 0.0
 
 
 def _first_key(spans: Sequence[PhonemeSpan], t: float) -> int:

@@ -1,8 +1,9 @@
-"""The dam bench: rungs and truncation errors as the models record them."""
+"""The dam bench: rungs and truncation errors as the models record them, and the causal rungs'
+call figures."""
 
 from __future__ import annotations
 
-from lipstream.bench.dam import format_dam_bench, run_dam_bench, sentence
+from lipstream.bench.dam import CALL_SESSIONS, format_dam_bench, run_dam_bench, sentence
 from lipstream.corpus import Corpus
 from lipstream.engines.dam import DamEngine
 
@@ -25,9 +26,18 @@ def test_dam_bench_reports_every_rung_with_its_truncation_error(
     assert max(figures["cut_tail_errors"].values()) > DamEngine().truncation_bound
     speed = figures["synthesis"]
     assert (speed["phonemes"], speed["fps"], speed["repeats"]) == (40, 60.0, 200)
+    causal = [rung for rung in model.fidelity_ladder() if rung.options.get("causal")]
+    calls = figures["causal_calls"]
+    assert [(c["rung"], c["lead_ms"]) for c in calls] == [
+        (rung.name, rung.options["lead_ms"]) for rung in causal
+    ]
+    for call in calls:  # every span of every timed session is one call
+        assert call["calls"] == CALL_SESSIONS * len(sentence())
+        assert 0.0 <= call["cpu_ms_median"] <= call["cpu_ms_p90"]
     text = format_dam_bench(results)
     assert "rung full" in text and "rung causal      lookahead 0 phonemes" in text
     assert "synthesis of a 40-phoneme sentence at 60 fps" in text
+    assert "rung causal fed a phoneme at a time at 60 fps" in text
 
 
 def test_the_speed_sentence_is_40_contiguous_phonemes() -> None:

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from lipstream.engines.damped import HALF_POWER_RATIO, DampedState, omega_for_cutoff
+from lipstream.engines.damped import HALF_POWER_RATIO, DampedState, filter_raw, omega_for_cutoff
 
 
 def _expected(x0: float, v0: float, target: float, omega: float, t: float) -> float:
@@ -52,3 +52,26 @@ def test_the_cutoff_is_where_half_the_power_passes() -> None:
     gain = 1.0 / (1.0 + (frequency / omega) ** 2)
     assert math.isclose(gain**2, 0.5, rel_tol=1e-12)
     assert math.isclose(HALF_POWER_RATIO, 0.6435942529055826, rel_tol=1e-12)
+
+
+def test_filter_raw_steps_each_frame_toward_its_raw_value_and_carries_its_state() -> None:
+    generator = np.random.default_rng(3)
+    raw = generator.normal(size=(30, 3))
+    omegas = generator.uniform(5.0, 60.0, size=30)
+    times = np.arange(30) / 60.0
+    # by hand: at rest on raw[0] at frame 0, then one closed-form step per frame
+    x, v = raw[0].copy(), np.zeros(3)
+    expected = [x.copy()]
+    for row in range(1, 30):
+        dt = times[row] - times[row - 1]
+        for column in range(3):
+            error = x[column] - raw[row, column]
+            pull = v[column] + omegas[row] * error
+            decay = math.exp(-omegas[row] * dt)
+            x[column] = raw[row, column] + (error + pull * dt) * decay
+            v[column] = (v[column] - omegas[row] * pull * dt) * decay
+        expected.append(x.copy())
+    state, first = filter_raw(None, raw[:11], omegas[:11], times[:11])
+    state, second = filter_raw(state, raw[11:], omegas[11:], times[11:])
+    np.testing.assert_allclose(np.concatenate([first, second]), expected, rtol=0, atol=1e-12)
+    assert state.t == times[-1]

@@ -23,7 +23,7 @@ from ...features import MfccConfig
 from ...numerics.basis import MotionBasis
 from ...store import ModelManifest, require_arrays
 from ...timeline import PhonemeSpan
-from ..base import Lookahead, Model, Rung, SynthesisRequest
+from ..base import Lookahead, Model, Rung, SynthesisRequest, causal_rungs, resolved_rung
 from ..damped import omega_for_cutoff
 from .animes import AnimeTable, Curves
 from .checks import check_stored_model
@@ -41,7 +41,6 @@ REQUIRED_ARRAYS = [
     "feature_offsets", "anime_summary", "cutoffs",
 ]  # fmt: skip
 LADDER_TILES = (10, 4, 2, 1)
-CAUSAL_LEADS_MS = (120.0, 0.0)
 MIN_CAUSAL_CUTOFF_HZ = 2.0
 CAUSAL_CUTOFF_FACTOR = 2.0
 """The causal filter's -3 dB point over the learned cutoff: a second-order filter already
@@ -127,7 +126,7 @@ class AnimeGraphModel(Model):
         """Greedy with tiles of at most ``max_tile`` (none when uncapped: a tile may wait for
         the end of the input), or PQ, whose window of h phonemes decides its first
         fragments; the filter's reach only when ``smooth``."""
-        parsed = parse_options(options, self.default_graph, self.has_clusters, self.max_tile)
+        parsed = self.parse(options)
         if parsed.causal:
             return Lookahead(seconds=self.causal_shift_s(parsed.lead_ms))
         if parsed.search == "pq":
@@ -183,15 +182,8 @@ class AnimeGraphModel(Model):
                     {"search": "greedy", "max_tile": 1, "smooth": False},
                 )
             )
-        rungs.extend(
-            Rung(
-                "causal" if lead == 0 else "causal_lead",
-                Lookahead(seconds=self.causal_shift_s(lead)),
-                {"search": "greedy", "max_tile": 1, "causal": True, "lead_ms": lead},
-            )
-            for lead in CAUSAL_LEADS_MS
-        )
-        return tuple(rungs)
+        pinned = {"search": "greedy", "max_tile": 1}
+        return (*rungs, *causal_rungs(self.causal_shift_s, pinned=pinned))
 
     def rung_for(self, options: Mapping[str, Any]) -> Rung | None:
         """The rung whose options resolve to the same search as ``options`` (defaults filled
@@ -200,16 +192,11 @@ class AnimeGraphModel(Model):
         h and no calibration bounds it, so ``call_cost`` leaves it unbounded (such calls
         always leave the server's event loop), and the request's guard and ``pq_budget_s``
         stop it."""
-        parsed = parse_options(options, self.default_graph, self.has_clusters, self.max_tile)
-        return next(
-            (
-                rung
-                for rung in self.fidelity_ladder()
-                if parse_options(rung.options, self.default_graph, self.has_clusters, self.max_tile)
-                == parsed
-            ),
-            None,
-        )
+        return resolved_rung(self.fidelity_ladder(), options, self.parse)
+
+    def parse(self, options: Mapping[str, Any]) -> SearchOptions:
+        """The search ``options`` ask for, this model's defaults filled in."""
+        return parse_options(options, self.default_graph, self.has_clusters, self.max_tile)
 
     def view_for(self, emotion: str | None, options: SearchOptions) -> GraphView:
         """The view searched for a span spoken with ``emotion`` (its own, else the
@@ -256,10 +243,7 @@ class AnimeGraphModel(Model):
         return cast(AnimeGraphSynthesizer, super().start(request, **settings))
 
     def synthesizer(self, request: SynthesisRequest) -> AnimeGraphSynthesizer:
-        options = parse_options(
-            request.options, self.default_graph, self.has_clusters, self.max_tile
-        )
-        return AnimeGraphSynthesizer(self, request, options)
+        return AnimeGraphSynthesizer(self, request, self.parse(request.options))
 
     def render(
         self,

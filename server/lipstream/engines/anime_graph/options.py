@@ -28,13 +28,12 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from ...errors import InvalidRequestError
-from ..base import check_options
+from ..base import check_options, lead_ms_option
 
 GRAPHS = ("unclustered", "clustered")
 SEARCHES = ("greedy", "pq")
 MAX_PQ_WINDOW = 6
 MAX_PQ_STEPS = 256
-MAX_LEAD_MS = 1000.0
 SEARCH_TOO_LARGE = "search_too_large"
 
 
@@ -131,18 +130,10 @@ def parse_options(
 
 
 def _lead(options: Mapping[str, Any], causal: bool) -> float:
-    value = options.get("lead_ms", 0.0)
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        value = None
-    if value is None or not 0 <= value <= MAX_LEAD_MS:
-        raise InvalidRequestError(
-            f"lead_ms must be a number of milliseconds in [0, {MAX_LEAD_MS:g}], "
-            f"got {options.get('lead_ms')!r}",
-            where="options.lead_ms",
-        )
+    value = lead_ms_option(options)
     if not causal and "lead_ms" in options:
         raise InvalidRequestError("lead_ms applies to causal: true only", where="options.lead_ms")
-    return float(value)
+    return value
 
 
 def _check_causal(parsed: SearchOptions) -> None:

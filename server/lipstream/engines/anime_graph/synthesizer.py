@@ -55,12 +55,12 @@ from ...phonemes import PHONEME_INDEX, SILENCE
 from ...timeline import PhonemeSpan, SpanLike, coerce_spans
 from ..base import SynthesisRequest, Synthesizer, fill_gaps, frame_count
 from ..damped import DampedState
+from ..growable import Growable
 from ..work import WorkGuard
 from .animes import summarize
 from .blending import Join, PairIndex, plan_join
 from .costs import Ranking
 from .graph import SearchGraph
-from .growable import Growable
 from .options import SearchOptions
 from .pq import SearchTimeout, pq_window
 from .request_audio import RequestAudio

@@ -21,9 +21,9 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from ..growable import Growable
 from .animes import AnimeTable, sample_into
 from .blending import Join, JoinKind
-from .growable import Growable
 from .warp import Warp
 
 _NO_CORRECTION, _PAIR, _EXTEND, _FORWARD = 0, 1, 2, 3

@@ -22,23 +22,28 @@ pooled median duration, to make up the filter's lag as viseme-lerp's damped
 rung does; the causal rung is shift 0. The frame at t is final once the input
 covers t + shift, and the state carried frame to frame does not depend on how
 the input was cut, so streaming gives the offline frames.
+
+Cost: a server at lead 0 calls the synthesizer once per phoneme message, so
+each step is one compiled call (``kernels``): ``commit_mode`` per arriving
+span, ``causal_sum`` for the frames' raw curve (the latest span begun found by
+binary search over the committed spans, kept in ``Growable`` arrays), and
+``damped.filter_raw``.
 """
 
 from __future__ import annotations
 
-from bisect import bisect_left
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ...phonemes import PHONEME_INDEX as CANONICAL_INDEX
 from ...timeline import PhonemeSpan
-from ..base import RenderingSynthesizer, SynthesisRequest, fill_gaps, frame_count
+from ..base import ShiftedSynthesizer, SynthesisRequest, fill_gaps, frame_count
 from ..damped import DampedState, filter_raw
-from ..damped_fit import best_kappa
-from .dominance import dominance, powers
-from .selection import context_cost, smooth_cost
+from ..damped_fit import RawCurve, best_following_kappa
+from ..growable import Growable
+from .kernels import causal_sum, commit_mode
+from .modes import PHONEME_INDEX, SILENCE_INDEX, emotion_index
 
 if TYPE_CHECKING:
     from .model import DamModel
@@ -49,63 +54,63 @@ with that span's input."""
 
 
 class CausalCurve:
-    """The committed modes of one request and its raw curve r."""
+    """The committed modes of one request and its raw curve r, by the compiled kernels
+    (``kernels.commit_mode``, ``kernels.causal_sum``)."""
 
     def __init__(self, model: DamModel, request: SynthesisRequest) -> None:
         self.model = model
         self.request = request
-        self.positions: list[int] = []
-        self.modes: list[int] = []
-        self.starts: list[float] = []
+        self.modes = Growable(np.int64)
+        self.starts = Growable(np.float64)
+        self.ends = Growable(np.float64)
+        self.rates = Growable(np.float64)
+        """1 / the median duration (s) of each committed span's phoneme: ω over κ."""
 
     def commit(self, spans: Sequence[PhonemeSpan]) -> None:
         """Commit the mode of every span not yet committed, in order."""
-        costs = self.model.costs
-        for index in range(len(self.modes), len(spans)):
-            layer = self.model.layer(spans, index, index, self.request)
-            cost = costs.w_context * context_cost(costs, layer)
-            if index > 0:
-                before = self.model.layer(spans, index - 1, index - 1, self.request)
-                joins = smooth_cost(costs, before, layer)
-                cost = cost + costs.w_smooth * joins[self.positions[-1]]
-            position = int(np.argmin(cost))
-            self.positions.append(position)
-            self.modes.append(int(layer.candidates[position]))
-            self.starts.append(spans[index].start)
-
-    def raw(self, spans: Sequence[PhonemeSpan], at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """r at times ``at`` (ascending, components) and the index of the latest span begun at
-        each; every span of ``spans`` is committed."""
         model = self.model
-        low = max(0, bisect_left(self.starts, float(at[0]) - _STARTED) - 1)
-        high = bisect_left(self.starts, float(at[-1]) - _STARTED)
-        starts = np.asarray(self.starts[low:high])
-        begun = low + np.maximum(np.searchsorted(starts, at - _STARTED, side="left") - 1, 0)
-        first = max(0, int(begun[0]) - model.tail)
-        values = np.zeros((len(at), model.coefficients.shape[2]))
-        for k in range(first, int(begun[-1]) + 1):
-            span, mode = spans[k], self.modes[k]
-            local = (at - span.start) / (span.end - span.start)
-            near = (begun >= k) & (begun - model.tail <= k)
-            near &= (local >= -model.reach[mode]) & (local <= 1.0 + model.reach[mode])
-            if near.any():
-                u = local[near]
-                weight = dominance(u, model.sigma[mode], model.eps)
-                values[near] += weight[:, None] * (
-                    powers(u, model.coefficients.shape[1] - 1) @ model.coefficients[mode]
-                )
-        return values, begun
+        rates = model.durations.expected_all_s()
+        n_emotions = model.tables.set_start.shape[1]
+        for index in range(self.modes.count, len(spans)):
+            span = spans[index]
+            phoneme = PHONEME_INDEX[span.phoneme]
+            emotion = emotion_index(self.request, span)
+            before = index - 1
+            mode = commit_mode(
+                phoneme * n_emotions + emotion,
+                PHONEME_INDEX[spans[before].phoneme] if index else SILENCE_INDEX,
+                emotion,
+                span.end - span.start,
+                int(self.modes.data[before]) if index else -1,
+                float(self.ends.data[before] - self.starts.data[before]) if index else 1.0,
+                *model.search_arguments,
+            )
+            self.modes.append(mode)
+            self.starts.append(span.start)
+            self.ends.append(span.end)
+            self.rates.append(1.0 / rates[phoneme])
+
+    def raw(self, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """r at times ``at`` (components) and 1 / the median duration of the latest span begun
+        at each (the filter's ω over κ); the spans reaching ``at`` are committed."""
+        model = self.model
+        values, rates = causal_sum(
+            at,
+            self.starts.view(),
+            self.ends.view(),
+            self.modes.view(),
+            self.rates.view(),
+            model.tail,
+            model.sigma,
+            model.reach,
+            model.eps,
+            model.coefficients,
+            _STARTED,
+        )
+        return np.asarray(values), np.asarray(rates)
 
 
-def inverse_durations(
-    model: DamModel, spans: Sequence[PhonemeSpan], indices: np.ndarray
-) -> np.ndarray:
-    """1 / the median duration (s) of the phoneme of each of the spans ``indices``."""
-    phonemes = [CANONICAL_INDEX[spans[k].phoneme] for k in indices.tolist()]
-    return np.asarray(1.0 / model.durations.expected_all_s()[phonemes])
-
-
-class CausalSynthesizer(RenderingSynthesizer):
+class CausalSynthesizer(ShiftedSynthesizer):
     """One request of a causal or lead rung: the frame at t is final once the input covers
     t + shift; the filter's state is carried from call to call."""
 
@@ -117,15 +122,6 @@ class CausalSynthesizer(RenderingSynthesizer):
         self.curve = CausalCurve(model, request)
         self.state: DampedState | None = None
 
-    def final_until(self) -> float:
-        return self.covered_until - self.shift_s if self.spans else 0.0
-
-    def frames(self) -> np.ndarray:
-        reach = self.final_until()
-        if not self.spans or reach < 0.0:
-            return self._emit(self.emitted)
-        return self._emit(frame_count(reach, self.request.fps))
-
     def _emit(self, stop: int) -> np.ndarray:
         if stop <= self.emitted:
             return np.zeros((0, len(self.model.channels)), dtype=np.float32)
@@ -133,9 +129,8 @@ class CausalSynthesizer(RenderingSynthesizer):
         fps = self.request.fps
         times = np.arange(self.emitted, stop, dtype=np.float64) / fps
         self.curve.commit(self.spans)
-        raw, begun = self.curve.raw(self.spans, times + self.shift_s)
-        omegas = self.model.causal_kappa * inverse_durations(self.model, self.spans, begun)
-        self.state, values = filter_raw(self.state, raw, omegas, times)
+        raw, inverse = self.curve.raw(times + self.shift_s)
+        self.state, values = filter_raw(self.state, raw, self.model.causal_kappa * inverse, times)
         self.emitted = stop
         self.stats["frames"] = stop
         return np.asarray(self.model.basis.reconstruct(values), dtype=np.float32)
@@ -143,21 +138,15 @@ class CausalSynthesizer(RenderingSynthesizer):
 
 def fit_causal_kappa(model: DamModel, utterances: Sequence[Any]) -> float:
     """The κ of ``KAPPAS`` whose causal rung has the least squared error on ``utterances``
-    (``damped_fit``); each utterance's raw curve is computed once, the filter per κ."""
-    curves: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+    (``damped_fit``)."""
 
-    def synthesize(kappa: float, utterance: Any) -> np.ndarray:
-        key = id(utterance)
-        if key not in curves:
-            request = SynthesisRequest(fps=float(utterance.fps), emotion=utterance.emotion)
-            spans = fill_gaps(utterance.phones)
-            times = np.arange(frame_count(spans[-1].end, request.fps)) / request.fps
-            curve = CausalCurve(model, request)
-            curve.commit(spans)
-            raw, begun = curve.raw(spans, times)
-            curves[key] = (raw, inverse_durations(model, spans, begun), times)
-        raw, inverse, times = curves[key]
-        _, values = filter_raw(None, raw, kappa * inverse, times)
-        return model.basis.reconstruct(values)
+    def raw_curve(utterance: Any) -> RawCurve:
+        request = SynthesisRequest(fps=float(utterance.fps), emotion=utterance.emotion)
+        spans = fill_gaps(utterance.phones)
+        times = np.arange(frame_count(spans[-1].end, request.fps)) / request.fps
+        curve = CausalCurve(model, request)
+        curve.commit(spans)
+        raw, rates = curve.raw(times)
+        return raw, rates, times
 
-    return best_kappa(synthesize, utterances)
+    return best_following_kappa(raw_curve, model.basis, utterances)

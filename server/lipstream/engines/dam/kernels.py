@@ -19,6 +19,11 @@ few integer arrays per span, and two kernels do the rest:
   ahead whose dominance reaches it, each term D·A with A on the clamped local
   time, in the order ``model.render`` adds them.
 
+The causal rungs (``causal``) use two more: ``commit_mode``, a span's mode as
+it arrives (E_c with its next phoneme unknown plus E_s of the join to the
+mode committed before it), and ``causal_sum``, Eq. 2 at each time over the
+latest span begun and the ``tail`` before it; both sums share ``_dam_frame``.
+
 Sums of squares and polynomial products run in plain loops, so E_s and the
 frames may differ from numpy's (pairwise, BLAS) summation in the last bits;
 the tests hold the modes equal and the frames within 1e-12 of the
@@ -246,6 +251,46 @@ def choose_modes(
 
 
 @njit(cache=True)
+def _dam_frame(
+    time: float,
+    low: int,
+    high: int,
+    span_start: np.ndarray,
+    span_end: np.ndarray,
+    span_mode: np.ndarray,
+    sigma: np.ndarray,
+    reach: np.ndarray,
+    eps: float,
+    coefficients: np.ndarray,
+    animeme: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """Add to ``out`` (components) Eq. 2 at ``time`` over spans ``low`` .. ``high``: D·A of each
+    span's mode wherever its local time lies within the mode's reach (``animeme`` is
+    scratch)."""
+    n_terms, n_components = coefficients.shape[1], coefficients.shape[2]
+    for k in range(low, high + 1):
+        mode = span_mode[k]
+        local = (time - span_start[k]) / (span_end[k] - span_start[k])
+        if local < -reach[mode] or local > 1.0 + reach[mode]:
+            continue
+        gap = local if local < 0.0 else (local - 1.0 if local > 1.0 else 0.0)
+        weight = 1.0  # exp(-0 / w), exactly
+        if gap != 0.0:
+            weight = np.exp(-(gap * gap) / (2.0 * sigma[mode] * sigma[mode] + eps))
+        clamped = min(max(local, 0.0), 1.0)
+        # A = sum_m clamped^m a_m, in increasing m as ``powers(u) @ coefficients`` adds
+        animeme[:] = coefficients[mode, 0]
+        power = 1.0
+        for m in range(1, n_terms):
+            power *= clamped
+            for c in range(n_components):
+                animeme[c] += power * coefficients[mode, m, c]
+        for c in range(n_components):
+            out[c] += weight * animeme[c]
+
+
+@njit(cache=True)
 def dam_sum(
     times: np.ndarray,
     owner: np.ndarray,
@@ -262,28 +307,82 @@ def dam_sum(
     """Eq. 2 at ``times`` (components): frame i sums, over spans k (indices into the per-span
     arrays) from owner[i] - tail to owner[i] + ahead, D·A of span k's mode wherever its local
     time lies within the mode's reach."""
-    n_terms, n_components = coefficients.shape[1], coefficients.shape[2]
     n_spans = len(span_mode)
-    frames = np.zeros((len(times), n_components))
-    animeme = np.empty(n_components)
+    frames = np.zeros((len(times), coefficients.shape[2]))
+    animeme = np.empty(coefficients.shape[2])
     for i in range(len(times)):
-        for k in range(max(0, owner[i] - tail), min(n_spans - 1, owner[i] + ahead) + 1):
-            mode = span_mode[k]
-            local = (times[i] - span_start[k]) / (span_end[k] - span_start[k])
-            if local < -reach[mode] or local > 1.0 + reach[mode]:
-                continue
-            gap = local if local < 0.0 else (local - 1.0 if local > 1.0 else 0.0)
-            weight = 1.0  # exp(-0 / w), exactly
-            if gap != 0.0:
-                weight = np.exp(-(gap * gap) / (2.0 * sigma[mode] * sigma[mode] + eps))
-            clamped = min(max(local, 0.0), 1.0)
-            # A = sum_m clamped^m a_m, in increasing m as ``powers(u) @ coefficients`` adds
-            animeme[:] = coefficients[mode, 0]
-            power = 1.0
-            for m in range(1, n_terms):
-                power *= clamped
-                for c in range(n_components):
-                    animeme[c] += power * coefficients[mode, m, c]
-            for c in range(n_components):
-                frames[i, c] += weight * animeme[c]
+        low, high = max(0, owner[i] - tail), min(n_spans - 1, owner[i] + ahead)
+        _dam_frame(times[i], low, high, span_start, span_end, span_mode, sigma, reach, eps,
+                   coefficients, animeme, frames[i])  # fmt: skip
     return frames
+
+
+@njit(cache=True)
+def commit_mode(
+    span_set: int,
+    previous: int,
+    emotion: int,
+    duration: float,
+    before_mode: int,
+    before_duration: float,
+    set_start: np.ndarray,
+    set_stop: np.ndarray,
+    modes: np.ndarray,
+    log_previous: np.ndarray,
+    log_following: np.ndarray,
+    log_emotion: np.ndarray,
+    ends: np.ndarray,
+    starts: np.ndarray,
+    reference_duration: float,
+    w_context: float,
+    w_smooth: float,
+) -> int:
+    """The causal rungs' mode of a span as it arrives (``span_set``, ``previous``, ``emotion``
+    as in ``choose_modes``): the least w_c·E_c, its next phoneme unknown, plus w_s·E_s of its
+    join to ``before_mode``, the mode committed at the span before (of ``before_duration``
+    s; no join when negative); the first minimum on ties."""
+    start, stop = set_start.ravel()[span_set], set_stop.ravel()[span_set]
+    cost = np.empty(stop - start)
+    _node(start, stop, previous, -1, emotion, log_previous, log_following, log_emotion, cost)
+    for a in range(stop - start):
+        cost[a] = w_context * cost[a]
+    if before_mode >= 0:
+        join = np.empty((1, stop - start))
+        left = np.full(1, before_mode, dtype=np.int64)
+        _joins(left, modes[start:stop], before_duration, duration, ends, starts,
+               reference_duration, join)  # fmt: skip
+        for a in range(stop - start):
+            cost[a] = cost[a] + w_smooth * join[0, a]
+    position = 0
+    for a in range(1, stop - start):
+        if cost[a] < cost[position]:
+            position = a
+    return int(modes[start + position])
+
+
+@njit(cache=True)
+def causal_sum(
+    times: np.ndarray,
+    span_start: np.ndarray,
+    span_end: np.ndarray,
+    span_mode: np.ndarray,
+    span_rate: np.ndarray,
+    tail: int,
+    sigma: np.ndarray,
+    reach: np.ndarray,
+    eps: float,
+    coefficients: np.ndarray,
+    started: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The causal rungs' raw curve: Eq. 2 at each of ``times`` over the latest span begun by
+    then (the last whose start lies more than ``started`` before it; span 0 at the first
+    times) and the ``tail`` spans before it, and that span's ``span_rate``."""
+    frames = np.zeros((len(times), coefficients.shape[2]))
+    rates = np.empty(len(times))
+    animeme = np.empty(coefficients.shape[2])
+    for i in range(len(times)):
+        begun = max(np.searchsorted(span_start, times[i] - started) - 1, 0)
+        _dam_frame(times[i], max(0, begun - tail), begun, span_start, span_end, span_mode,
+                   sigma, reach, eps, coefficients, animeme, frames[i])  # fmt: skip
+        rates[i] = span_rate[begun]
+    return frames, rates

@@ -32,7 +32,7 @@ from ...audio import Audio
 from ...errors import InvalidRequestError
 from ...model_checks import ArrayReader, FieldReader
 from ...numerics.basis import MotionBasis, read_components
-from ...phonemes import PHONEMES, SILENCE
+from ...phonemes import PHONEMES
 from ...store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
 from ...timeline import EMOTIONS, PhonemeSpan
 from ..base import (
@@ -43,14 +43,17 @@ from ..base import (
     SynthesisRequest,
     Synthesizer,
     causal_lead_ms,
+    causal_rungs,
+    causal_shift_s,
     final_until,
+    resolved_rung,
 )
 from ..durations import DurationModel
 from .causal import CausalSynthesizer
 from .dominance import reach
 from .em import SIGMA_MIN
 from .kernels import choose_modes, dam_sum, search_tables
-from .modes import EMOTION_INDEX, PHONEME_INDEX
+from .modes import PHONEME_INDEX, SILENCE_INDEX, emotion_index
 from .selection import Costs, Layer, cheapest_path, context_cost, end_derivatives, smooth_cost
 
 OPTION_LIMIT = 16
@@ -61,9 +64,6 @@ NUMBER_FIELDS = (  # name, low, high, low excluded
     ("w_context", 0.0, 1e9, False),
     ("w_smooth", 0.0, 1e9, False),
 )
-CAUSAL_LEAD_MS = 120.0
-NEUTRAL = EMOTION_INDEX["neutral"]
-SILENCE_INDEX = PHONEME_INDEX[SILENCE]
 
 
 class DamModel(Model):
@@ -116,6 +116,21 @@ class DamModel(Model):
             self.count_emotion,
             self.costs.alpha,
         )
+        tables, costs = self.tables, self.costs
+        self.search_arguments = (
+            tables.set_start,
+            tables.set_stop,
+            tables.modes,
+            tables.log_previous,
+            tables.log_following,
+            tables.log_emotion,
+            costs.ends,
+            costs.starts,
+            costs.reference_duration,
+            costs.w_context,
+            costs.w_smooth,
+        )
+        """The tables and weights every compiled search takes, last, in the kernels' order."""
 
     # -- options, lookahead, ladder -------------------------------------------------------
 
@@ -145,7 +160,7 @@ class DamModel(Model):
     def shift_s(self, lead_ms: float) -> float:
         """How far ahead (s) a causal rung with ``lead_ms`` follows its raw curve: the filter's
         lag at the pooled median duration, at most the lead."""
-        return min(lead_ms / 1000.0, 2.0 * self.durations.pooled_median_s() / self.causal_kappa)
+        return causal_shift_s(lead_ms, self.durations.pooled_median_s(), self.causal_kappa)
 
     @property
     def lookahead(self) -> Lookahead:
@@ -162,23 +177,16 @@ class DamModel(Model):
         """Mode searches looking ``search_ahead`` phonemes ahead, then fewer, then none; the
         tails stay whole on these rungs (cutting them costs far more than 1 % of a channel's
         range, see docs/engines/dam.md). Below them the causal rungs (``causal``): one
-        following its curve ``CAUSAL_LEAD_MS`` ahead, then the causal floor."""
+        following its curve ``base.CAUSAL_LEAD_MS`` ahead, then the causal floor."""
         rungs = []
         for search in range(self.search_ahead, -1, -1):
             name = "full" if search == self.search_ahead else f"search-{search}"
             options = {"search_ahead": search, "tail_ahead": self.tail}
             rungs.append(Rung(name, Lookahead(phonemes=search + self.tail), options))
-        for name, lead in (("causal_lead", CAUSAL_LEAD_MS), ("causal", 0.0)):
-            causal: dict[str, Any] = {"causal": True, "lead_ms": lead}
-            rungs.append(Rung(name, Lookahead(seconds=self.shift_s(lead)), causal))
-        return tuple(rungs)
+        return (*rungs, *causal_rungs(self.shift_s))
 
     def rung_for(self, options: Mapping[str, Any]) -> Rung | None:
-        resolved = self.resolve(options)
-        for rung in self.fidelity_ladder():
-            if self.resolve(rung.options) == resolved:
-                return rung
-        return None
+        return resolved_rung(self.fidelity_ladder(), options, self.resolve)
 
     def synthesizer(self, request: SynthesisRequest) -> Synthesizer:
         resolved = self.resolve(request.options)
@@ -195,9 +203,8 @@ class DamModel(Model):
         span = spans[index]
         phoneme = int(self.stand_in[PHONEME_INDEX[span.phoneme]])
         candidates = np.arange(self.offsets[phoneme], self.offsets[phoneme + 1])
-        emotion = request.emotion_of(span)
-        emotion_index = NEUTRAL if emotion is None else EMOTION_INDEX[emotion]
-        said = candidates[self.count_emotion[candidates, emotion_index] > 0]
+        emotion = emotion_index(request, span)
+        said = candidates[self.count_emotion[candidates, emotion] > 0]
         if len(said):
             candidates = said
         previous = PHONEME_INDEX[spans[index - 1].phoneme] if index > 0 else SILENCE_INDEX
@@ -207,7 +214,7 @@ class DamModel(Model):
             following = PHONEME_INDEX[spans[index + 1].phoneme]
         else:
             following = SILENCE_INDEX
-        return Layer(candidates, span.end - span.start, previous, following, emotion_index)
+        return Layer(candidates, span.end - span.start, previous, following, emotion)
 
     def select_mode(
         self,
@@ -244,15 +251,11 @@ class DamModel(Model):
         phonemes = [PHONEME_INDEX[span.phoneme] for span in window]
         before = PHONEME_INDEX[spans[low - 1].phoneme] if low > 0 else SILENCE_INDEX
         after = PHONEME_INDEX[spans[high + 1].phoneme] if high + 1 < len(spans) else SILENCE_INDEX
-        emotions = [request.emotion_of(span) for span in window]
-        emotion = np.array(
-            [NEUTRAL if name is None else EMOTION_INDEX[name] for name in emotions], dtype=np.int64
-        )
+        emotion = np.array([emotion_index(request, span) for span in window], dtype=np.int64)
         phoneme = np.array(phonemes, dtype=np.int64)
-        tables, costs = self.tables, self.costs
         return np.asarray(
             choose_modes(
-                phoneme * tables.set_start.shape[1] + emotion,
+                phoneme * self.tables.set_start.shape[1] + emotion,
                 np.array([before, *phonemes[:-1]], dtype=np.int64),
                 np.array([*phonemes[1:], after], dtype=np.int64),
                 emotion,
@@ -261,17 +264,7 @@ class DamModel(Model):
                 last - low,
                 self.search_behind,
                 ahead,
-                tables.set_start,
-                tables.set_stop,
-                tables.modes,
-                tables.log_previous,
-                tables.log_following,
-                tables.log_emotion,
-                costs.ends,
-                costs.starts,
-                costs.reference_duration,
-                costs.w_context,
-                costs.w_smooth,
+                *self.search_arguments,
             )
         )
 

@@ -29,11 +29,20 @@ from sklearn.exceptions import ConvergenceWarning
 
 from ...errors import CorpusError
 from ...phonemes import PHONEMES, SILENCE
-from ...timeline import EMOTIONS
+from ...timeline import EMOTIONS, PhonemeSpan
 from ...visemes import get_scheme
+from ..base import SynthesisRequest
 
 PHONEME_INDEX = {phoneme: index for index, phoneme in enumerate(PHONEMES)}
 EMOTION_INDEX = {emotion: index for index, emotion in enumerate(EMOTIONS)}
+SILENCE_INDEX = PHONEME_INDEX[SILENCE]
+NEUTRAL = EMOTION_INDEX["neutral"]
+
+
+def emotion_index(request: SynthesisRequest, span: PhonemeSpan) -> int:
+    """The index of the emotion ``span`` is spoken with (neutral when none is named)."""
+    emotion = request.emotion_of(span)
+    return NEUTRAL if emotion is None else EMOTION_INDEX[emotion]
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,7 @@ from threadpoolctl import threadpool_limits
 from ...numerics.basis import MotionBasis, fit_basis
 from ...phonemes import PHONEME_INDEX, SILENCE
 from ..base import Engine, fill_gaps, frame_count
-from ..damped_fit import best_kappa, validation_utterances
+from ..damped_fit import best_following_kappa, validation_utterances
 from ..durations import DurationModel
 from .costs import ALPHA_NAMES, NodeBounds, Weights, unit_penalty
 from .isomap import fit_maps
@@ -27,7 +27,7 @@ from .model import ExpressiveDpModel
 from .nodes import EMOTION_INDEX, NodeFeatures, build_nodes
 from .postprocess import Renderer
 from .search import LayerSpec, SearchSpace
-from .synthesizer import KappaCurves, extend_path
+from .synthesizer import extend_path, training_raw_curve
 from .weights import DEFAULTS, frame_error, search_weights, total_error, validation_split
 
 
@@ -104,7 +104,9 @@ class ExpressiveDpEngine(Engine):
         }
         model = ExpressiveDpModel(manifest, arrays, None, nodes)
         utterances = validation_utterances(corpus)
-        kappa = best_kappa(KappaCurves(model).frames, utterances)
+        kappa = best_following_kappa(
+            lambda utterance: training_raw_curve(model, utterance), model.basis, utterances
+        )
         model.causal_kappa = kappa
         model.stored["causal_kappa"] = np.array([kappa])
         manifest.metrics["causal_kappa"] = kappa

@@ -28,7 +28,17 @@ from ...model_checks import ArrayReader, FieldReader
 from ...numerics.basis import MotionBasis, read_components
 from ...store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
 from ...timeline import PhonemeSpan
-from ..base import Lookahead, Model, Rung, SynthesisRequest, Synthesizer, causal_lead_ms
+from ..base import (
+    Lookahead,
+    Model,
+    Rung,
+    SynthesisRequest,
+    Synthesizer,
+    causal_lead_ms,
+    causal_rungs,
+    causal_shift_s,
+    resolved_rung,
+)
 from ..durations import DurationModel
 from .contamination import Contamination
 from .costs import ALPHA_NAMES, NodeBounds, Weights
@@ -40,7 +50,6 @@ from .synthesizer import CausalSynthesizer, LagSynthesizer
 
 MAX_LAG = 64
 LADDER_LAGS = (2, 1, 0)
-CAUSAL_LEAD_MS = 120.0
 Resolved = tuple[str, float | int | None]
 
 
@@ -154,7 +163,7 @@ class ExpressiveDpModel(Model):
         return found
 
     def shift_s(self, lead_ms: float) -> float:
-        return min(lead_ms / 1000.0, 2.0 * self.durations.pooled_median_s() / self.causal_kappa)
+        return causal_shift_s(lead_ms, self.durations.pooled_median_s(), self.causal_kappa)
 
     @property
     def lookahead(self) -> Lookahead:
@@ -171,18 +180,11 @@ class ExpressiveDpModel(Model):
             Rung(f"lag-{lag}", Lookahead(phonemes=lag + 2), {"lag": lag})
             for lag in sorted({self.lag, *(x for x in LADDER_LAGS if x < self.lag)}, reverse=True)
         ]
-        for name, lead in (("causal_lead", CAUSAL_LEAD_MS), ("causal", 0.0)):
-            options: dict[str, Any] = {"causal": True, "lead_ms": lead}
-            rungs.append(Rung(name, Lookahead(seconds=self.shift_s(lead)), options))
-        return tuple(rungs)
+        return (*rungs, *causal_rungs(self.shift_s))
 
     def rung_for(self, options: Mapping[str, Any]) -> Rung | None:
         """The rung of the resolved lag or lead; constraints do not change the work."""
-        resolved = self.resolve(options)
-        for rung in self.fidelity_ladder():
-            if self.resolve(rung.options) == resolved:
-                return rung
-        return None
+        return resolved_rung(self.fidelity_ladder(), options, self.resolve)
 
     def synthesizer(self, request: SynthesisRequest) -> Synthesizer:
         kind, value = self.resolve(request.options)

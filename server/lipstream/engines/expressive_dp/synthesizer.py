@@ -47,11 +47,13 @@ from ...timeline import PhonemeSpan
 from ..base import (
     Lookahead,
     RenderingSynthesizer,
+    ShiftedSynthesizer,
     SynthesisRequest,
     final_until,
     frame_count,
 )
 from ..damped import DampedState, filter_raw
+from ..damped_fit import RawCurve
 from ..work import WorkGuard
 from .nodes import EMOTION_INDEX, warp_node
 from .search import NO_NODE, LayerSpec, SearchSpace, search
@@ -147,7 +149,7 @@ class LagSynthesizer(PathSynthesizer):
         return np.asarray(self.model.basis.reconstruct(values), dtype=np.float32)
 
 
-class CausalSynthesizer(PathSynthesizer):
+class CausalSynthesizer(PathSynthesizer, ShiftedSynthesizer):
     """The causal and lead rungs: nodes committed on arrival, a damped filter after."""
 
     def __init__(
@@ -160,15 +162,6 @@ class CausalSynthesizer(PathSynthesizer):
         super().__init__(model, request, 0, constraints)
         self.shift_s = shift_s
         self.state: DampedState | None = None
-
-    def final_until(self) -> float:
-        return self.covered_until - self.shift_s if self.spans else 0.0
-
-    def frames(self) -> np.ndarray:
-        reach = self.final_until()
-        if not self.spans or reach < 0.0:
-            return self._emit(self.emitted)
-        return self._emit(frame_count(reach, self.request.fps))
 
     def _emit(self, stop: int) -> np.ndarray:
         if stop <= self.emitted:
@@ -247,28 +240,17 @@ def raw_curve(
     return values, begun
 
 
-class KappaCurves:
-    """The causal rung's raw curve of training utterances, each computed once, filtered at any
-    κ (for choosing κ with ``damped_fit.best_kappa``)."""
-
-    def __init__(self, model: ExpressiveDpModel) -> None:
-        self.model = model
-        self.curves: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-
-    def frames(self, kappa: float, utterance: Any) -> np.ndarray:
-        key = id(utterance)
-        if key not in self.curves:
-            request = SynthesisRequest(fps=float(utterance.fps), emotion=utterance.emotion)
-            synthesizer = CausalSynthesizer(self.model, request, 0.0, {})
-            synthesizer.feed(utterance.phones)
-            synthesizer.finished = True
-            synthesizer.commit()
-            spans = synthesizer.spans
-            times = np.arange(frame_count(spans[-1].end, request.fps)) / request.fps
-            raw, begun = raw_curve(self.model, spans, synthesizer.path, times)
-            medians = self.model.durations.expected_all_s()
-            phonemes = [PHONEME_INDEX[spans[k].phoneme] for k in begun.tolist()]
-            self.curves[key] = (raw, 1.0 / medians[phonemes], times)
-        raw, inverse, times = self.curves[key]
-        _, values = filter_raw(None, raw, kappa * inverse, times)
-        return self.model.basis.reconstruct(values)
+def training_raw_curve(model: ExpressiveDpModel, utterance: Any) -> RawCurve:
+    """The causal rung's raw curve of a training utterance, for choosing κ
+    (``damped_fit.best_following_kappa``)."""
+    request = SynthesisRequest(fps=float(utterance.fps), emotion=utterance.emotion)
+    synthesizer = CausalSynthesizer(model, request, 0.0, {})
+    synthesizer.feed(utterance.phones)
+    synthesizer.finished = True
+    synthesizer.commit()
+    spans = synthesizer.spans
+    times = np.arange(frame_count(spans[-1].end, request.fps)) / request.fps
+    raw, begun = raw_curve(model, spans, synthesizer.path, times)
+    medians = model.durations.expected_all_s()
+    phonemes = [PHONEME_INDEX[spans[k].phoneme] for k in begun.tolist()]
+    return raw, 1.0 / medians[phonemes], times

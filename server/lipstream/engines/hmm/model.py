@@ -34,7 +34,15 @@ from ...numerics.basis import MotionBasis, read_components
 from ...phonemes import PHONEMES
 from ...store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
 from ...timeline import EMOTIONS, PhonemeSpan
-from ..base import AUDIO_ONLY_UNSUPPORTED, Lookahead, Model, Rung, SynthesisRequest, Synthesizer
+from ..base import (
+    AUDIO_ONLY_UNSUPPORTED,
+    Lookahead,
+    Model,
+    Rung,
+    SynthesisRequest,
+    Synthesizer,
+    resolved_rung,
+)
 from . import trajectory
 from .gaussian import Gaussians
 from .synthesizer import AUDIO, AUTO, BOTH, DRIVES, HmmSynthesizer, Plan
@@ -170,11 +178,7 @@ class HmmModel(Model):
         return tuple(rungs)
 
     def rung_for(self, options: Mapping[str, Any]) -> Rung | None:
-        resolved = self.resolve(options)
-        for rung in self.fidelity_ladder():
-            if self.resolve(rung.options) == resolved:
-                return rung
-        return None
+        return resolved_rung(self.fidelity_ladder(), options, self.resolve)
 
     def synthesizer(self, request: SynthesisRequest) -> Synthesizer:
         return HmmSynthesizer(self, request, self.plan(request.options))

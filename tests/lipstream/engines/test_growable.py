@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lipstream.engines.anime_graph.growable import Growable
+from lipstream.engines.growable import Growable
 
 
 def test_rows_keep_their_numbers_after_the_oldest_are_dropped() -> None:
