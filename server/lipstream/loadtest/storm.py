@@ -1,18 +1,19 @@
 """A connection storm against a running server: do admission and the health probe hold?
 
-Sketch: ``storm`` opens ``connections`` connections at once, all of one ``kind``:
-``silent`` TCP sockets that never send a byte, ``partial`` ones that send half a request
-head and stop, or ``sessions``: WebSockets that each start a request and stream one phoneme
-every ``PHONEME_S`` (real time) for ``duration_s``, then end it. Meanwhile a probe asks
-``GET /healthz`` every ``PROBE_EVERY_S`` with a ``PROBE_TIMEOUT_S`` timeout. The report
-counts how the connections ended (admitted and finished, refused with ``server_busy`` by
-``details.reason``, other errors by code, upgrade refused with HTTP 503, closed by the server
-before their head, other failures), the probe's answers and slowest answer (the probe runs
-in a process of its own, so the storm's load on its own process does not delay it), and, for
-sessions, the server's own frame lag over the storm: the difference of its
+Sketch: ``storm`` opens ``connections`` connections at once, all of one ``kind``: ``silent``
+TCP sockets that never send a byte, ``partial`` ones that send half a request head and stop,
+or ``sessions``: WebSockets that each start a request and stream one phoneme every
+``PHONEME_S`` (real time) for ``duration_s``, then end it. Meanwhile a probe asks ``GET
+/healthz`` every ``PROBE_EVERY_S`` with a ``PROBE_TIMEOUT_S`` timeout. The report counts how
+the connections ended (admitted and finished, refused with ``server_busy`` by
+``details.reason``, other errors by code, upgrade refused with HTTP 503, closed by the
+server before their head, other failures), the probe's answers and slowest answer (the probe
+runs in a process of its own, so the storm's load on its own process does not delay it),
+and, for sessions, the server's own frame lag over the storm: the difference of its
 ``lipstream_frame_lag_seconds`` histogram before and after, read from ``/metrics``, as the
-bucket bounds the 50th and 99th percentiles fall under. One process drives every connection: beyond a few hundred
-streaming sessions, run several stormers at once so the generator is not the bottleneck.
+bucket bounds the 50th and 99th percentiles fall under. One process drives every connection:
+beyond a few hundred streaming sessions, run several stormers at once so the generator is
+not the bottleneck.
 
     lipstream loadtest storm --url ws://127.0.0.1:8000/v1/stream --kind sessions -n 1100
 """
