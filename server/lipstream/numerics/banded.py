@@ -103,7 +103,7 @@ def solve_spd_block_tridiagonal(
     return solution
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath={"reassoc", "contract"})  # vectorised sums; NaN checks still hold
 def _block_cholesky_solve(
     diagonal: FloatArray, below: FloatArray, rhs: FloatArray, out: FloatArray
 ) -> int:

@@ -37,7 +37,7 @@ class Gaussians:
     def log_density(self, frames: np.ndarray) -> np.ndarray:
         """log N(x_t; μ_i, K_i) for frames (T, d): (T, N)."""
         x = np.asarray(frames, dtype=np.float64)
-        if len(x) * self.whitening.size <= _BATCH_VALUES:  # few frames: every state at once
+        if len(x) * self.stacked.shape[1] <= _BATCH_VALUES:  # few frames: every state at once
             z = x @ self.stacked
             z -= self.stacked_offsets
             z = z.reshape(-1, self.dim)

@@ -177,9 +177,11 @@ def _assemble(
         rhs[0] += pose_rhs[states[0]]
     for t in range(max(1, n_pins), frames):
         state = states[t]
-        diagonal[t] += g_current[state]
-        diagonal[t - 1] += g_previous[state]
-        below[t - 1] += g_cross[state]
-        rhs[t] += r_current[state]
-        rhs[t - 1] += r_previous[state]
+        for i in range(dim):
+            for j in range(dim):
+                diagonal[t, i, j] += g_current[state, i, j]
+                diagonal[t - 1, i, j] += g_previous[state, i, j]
+                below[t - 1, i, j] += g_cross[state, i, j]
+            rhs[t, i] += r_current[state, i]
+            rhs[t - 1, i] += r_previous[state, i]
     return diagonal, below, rhs
