@@ -9,7 +9,9 @@ from scipy.stats import multivariate_normal
 from lipstream.engines.hmm.gaussian import Gaussians
 
 
-@pytest.mark.parametrize("frames", [1, 7, 60000])  # the last exceeds the all-states batch (2^20 values)
+@pytest.mark.parametrize(
+    "frames", [1, 7, 60000]
+)  # the last exceeds the all-states batch (2^20 values)
 def test_log_density_matches_scipy(frames: int) -> None:
     rng = np.random.default_rng(frames)
     states, dim = 5, 4
