@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
+from numpy.lib.stride_tricks import as_strided
 from scipy.fft import dct, next_fast_len, rfft
 
 _LOG_FLOOR = 1e-10
@@ -206,7 +206,9 @@ def _analyse(
     emphasised = np.multiply(segment[:-1], -coefficient)  # in place: no large temporaries
     emphasised += segment[1:]
     emphasised *= np.float32(sample_rate / REFERENCE_RATE)
-    windows = sliding_window_view(emphasised, length)[starts - low + pad - 1]
+    stride = emphasised.strides[0]  # a view of every window start, as sliding_window_view
+    every = as_strided(emphasised, (len(emphasised) - length + 1, length), (stride, stride))
+    windows = every[starts - low + pad - 1]
     padded = np.zeros((len(starts), analysis.n_fft), dtype=np.float32)  # rfft's zero padding
     windowed = np.multiply(windows, analysis.window, out=padded[:, :length])
     energy = None

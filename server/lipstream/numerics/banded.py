@@ -87,20 +87,24 @@ def solve_spd_block_tridiagonal(
             f"block-tridiagonal system of diagonal {diagonal.shape}, below {below.shape} and "
             f"right-hand side {rhs.shape} does not fit (T, D, D), (T − 1, D, D), (T, D)"
         )
-    if not (np.isfinite(diagonal).all() and np.isfinite(below).all() and np.isfinite(rhs).all()):
+    arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (diagonal, below, rhs)]
+    if not all(_all_finite(a.reshape(-1)) for a in arrays):
         raise ValueError("block-tridiagonal system has a non-finite entry")
     solution = np.empty(rhs.shape)
-    failed = _block_cholesky_solve(
-        np.ascontiguousarray(diagonal, dtype=np.float64),
-        np.ascontiguousarray(below, dtype=np.float64),
-        np.ascontiguousarray(rhs, dtype=np.float64),
-        solution,
-    )
+    failed = _block_cholesky_solve(*arrays, solution)
     if failed >= 0:
         raise np.linalg.LinAlgError(
             f"block-tridiagonal system is not positive definite (at frame {failed})"
         )
     return solution
+
+
+@njit(cache=True)
+def _all_finite(values: FloatArray) -> bool:
+    for value in values:
+        if not np.isfinite(value):
+            return False
+    return True
 
 
 @njit(cache=True, fastmath={"reassoc", "contract"})  # vectorised sums; NaN checks still hold
