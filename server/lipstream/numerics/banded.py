@@ -87,11 +87,13 @@ def solve_spd_block_tridiagonal(
             f"block-tridiagonal system of diagonal {diagonal.shape}, below {below.shape} and "
             f"right-hand side {rhs.shape} does not fit (T, D, D), (T − 1, D, D), (T, D)"
         )
-    arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in (diagonal, below, rhs)]
-    if not all(_all_finite(a.reshape(-1)) for a in arrays):
+    blocks, coupling, right = (
+        np.ascontiguousarray(a, dtype=np.float64) for a in (diagonal, below, rhs)
+    )
+    if not all(_all_finite(a.reshape(-1)) for a in (blocks, coupling, right)):
         raise ValueError("block-tridiagonal system has a non-finite entry")
     solution = np.empty(rhs.shape)
-    failed = _block_cholesky_solve(*arrays, solution)
+    failed = _block_cholesky_solve(blocks, coupling, right, solution)
     if failed >= 0:
         raise np.linalg.LinAlgError(
             f"block-tridiagonal system is not positive definite (at frame {failed})"
