@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
+from numpy.lib.stride_tricks import as_strided
 from scipy.fft import dct, next_fast_len, rfft
 
 _LOG_FLOOR = 1e-10
@@ -203,16 +203,20 @@ def _analyse(
     copied = np.asarray(samples[low : min(end, len(samples))], dtype=np.float32)
     segment[pad : pad + len(copied)] = copied
     coefficient = np.float32(config.pre_emphasis ** (REFERENCE_RATE / sample_rate))
-    gain = np.float32(sample_rate / REFERENCE_RATE)
-    emphasised = (segment[1:] - coefficient * segment[:-1]) * gain
-    windows = sliding_window_view(emphasised, length)[starts - low + pad - 1]
-    windows *= analysis.window
+    emphasised = np.multiply(segment[:-1], -coefficient)  # in place: no large temporaries
+    emphasised += segment[1:]
+    emphasised *= np.float32(sample_rate / REFERENCE_RATE)
+    stride = emphasised.strides[0]  # a view of every window start, as sliding_window_view
+    every = as_strided(emphasised, (len(emphasised) - length + 1, length), (stride, stride))
+    windows = every[starts - low + pad - 1]
+    padded = np.zeros((len(starts), analysis.n_fft), dtype=np.float32)  # rfft's zero padding
+    windowed = np.multiply(windows, analysis.window, out=padded[:, :length])
     energy = None
     if with_energy:
         density = 1.0 / (float(np.sum(analysis.window.astype(np.float64) ** 2)) * analysis.n_fft)
-        power_sum = np.einsum("ij,ij->i", windows, windows, dtype=np.float64)
+        power_sum = np.einsum("ij,ij->i", windowed, windowed, dtype=np.float64)
         energy = np.log(np.maximum(power_sum * density * analysis.n_fft, _LOG_FLOOR))
-    spectrum = rfft(windows, n=analysis.n_fft, axis=1, overwrite_x=True)
+    spectrum = rfft(padded, axis=1, overwrite_x=True)
     spectrum = spectrum[:, analysis.low_bin : analysis.high_bin]
     power = spectrum.real.astype(np.float64) ** 2 + spectrum.imag.astype(np.float64) ** 2
     energies = power @ analysis.pooling

@@ -20,6 +20,15 @@ band of width 2h, solved together as one dimension-major system.
 
 A window term at frame t is used only where the stencil lies inside the
 sequence; near the ends a velocity or curvature target simply has no term.
+
+Block-tridiagonal systems (first-order windows with full precisions, as Brand's
+Eq. 6) have a sharper solver than LAPACK's band storage, whose 2D − 1
+sub-diagonals carry a quarter zeros and cost about 2D³ multiply-adds per frame
+to factor: ``solve_spd_block_tridiagonal`` factors A = L Lᵀ a frame at a time
+(block Cholesky, the Riccati recursion of a Kalman smoother): with
+C_t = B_{t−1} L_{t−1}⁻ᵀ for the block B_{t−1} = A[t, t−1],
+L_t L_tᵀ = A[t, t] − C_t C_tᵀ, then one forward and one backward substitution;
+about 7/6 D³ multiply-adds per frame, in one compiled loop.
 """
 
 from __future__ import annotations
@@ -29,6 +38,7 @@ from functools import lru_cache
 
 import numpy as np
 import scipy.linalg
+from numba import njit
 from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
@@ -56,6 +66,110 @@ def solve_spd_banded(lower_bands: FloatArray, rhs: FloatArray) -> FloatArray:
             f"from any window ({error})"
         ) from error
     return np.asarray(solution, dtype=np.float64)
+
+
+def solve_spd_block_tridiagonal(
+    diagonal: FloatArray, below: FloatArray, rhs: FloatArray
+) -> FloatArray:
+    """Solve A x = rhs for a symmetric positive definite block-tridiagonal A.
+
+    ``diagonal`` (T, D, D) holds the blocks A[t, t] (only their lower triangles are read),
+    ``below`` (T − 1, D, D) the blocks A[t + 1, t], ``rhs`` (T, D); returns x (T, D).
+    Raises ``numpy.linalg.LinAlgError`` when A is not positive definite.
+    """
+    frames = diagonal.shape[0] if diagonal.ndim == 3 else -1
+    if (
+        frames < 1
+        or diagonal.shape[1] != diagonal.shape[2]
+        or below.shape != (frames - 1, *diagonal.shape[1:])
+        or rhs.shape != diagonal.shape[:2]
+    ):
+        raise ValueError(
+            f"block-tridiagonal system of diagonal {diagonal.shape}, below {below.shape} and "
+            f"right-hand side {rhs.shape} does not fit (T, D, D), (T − 1, D, D), (T, D)"
+        )
+    blocks, coupling, right = (
+        np.ascontiguousarray(a, dtype=np.float64) for a in (diagonal, below, rhs)
+    )
+    if not all(_all_finite(a.reshape(-1)) for a in (blocks, coupling, right)):
+        raise ValueError("block-tridiagonal system has a non-finite entry")
+    solution = np.empty(rhs.shape)
+    failed = _block_cholesky_solve(blocks, coupling, right, solution)
+    if failed >= 0:
+        raise np.linalg.LinAlgError(
+            f"block-tridiagonal system is not positive definite (at frame {failed})"
+        )
+    return solution
+
+
+@njit(cache=True)
+def _all_finite(values: FloatArray) -> bool:
+    for value in values:
+        if not np.isfinite(value):
+            return False
+    return True
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})  # vectorised sums; NaN checks still hold
+def _block_cholesky_solve(
+    diagonal: FloatArray, below: FloatArray, rhs: FloatArray, out: FloatArray
+) -> int:
+    """The factorization and substitutions of ``solve_spd_block_tridiagonal`` into ``out``;
+    returns −1, or the first frame whose Schur complement is not positive definite."""
+    frames, dims = rhs.shape
+    factor = np.zeros((frames, dims, dims))  # L_t, lower triangular
+    coupling = np.zeros((frames, dims, dims))  # C_t = B_{t-1} L_{t-1}^-T (C_0 unused)
+    forward = np.empty((frames, dims))
+    schur = np.empty((dims, dims))
+    for t in range(frames):
+        schur[:, :] = diagonal[t]
+        if t > 0:
+            previous, block, c = factor[t - 1], below[t - 1], coupling[t]
+            for i in range(dims):  # C_t L_{t-1}^T = B_{t-1}, row by row
+                for j in range(dims):
+                    value = block[i, j]
+                    for k in range(j):
+                        value -= c[i, k] * previous[j, k]
+                    c[i, j] = value / previous[j, j]
+            for i in range(dims):
+                for j in range(i + 1):
+                    value = 0.0
+                    for k in range(dims):
+                        value += c[i, k] * c[j, k]
+                    schur[i, j] -= value
+        lower = factor[t]
+        for j in range(dims):
+            value = schur[j, j]
+            for k in range(j):
+                value -= lower[j, k] * lower[j, k]
+            if not value > 0.0:
+                return t
+            pivot = np.sqrt(value)
+            lower[j, j] = pivot
+            for i in range(j + 1, dims):
+                value = schur[i, j]
+                for k in range(j):
+                    value -= lower[i, k] * lower[j, k]
+                lower[i, j] = value / pivot
+        for i in range(dims):  # L_t y_t = r_t − C_t y_{t-1}
+            value = rhs[t, i]
+            if t > 0:
+                for k in range(dims):
+                    value -= coupling[t, i, k] * forward[t - 1, k]
+            for k in range(i):
+                value -= lower[i, k] * forward[t, k]
+            forward[t, i] = value / lower[i, i]
+    for t in range(frames - 1, -1, -1):  # L_tᵀ x_t = y_t − C_{t+1}ᵀ x_{t+1}
+        lower = factor[t]
+        for i in range(dims - 1, -1, -1):
+            value = forward[t, i]
+            if t < frames - 1:
+                for k in range(dims):
+                    value -= coupling[t + 1, k, i] * out[t + 1, k]
+            for k in range(i + 1, dims):
+                value -= lower[k, i] * out[t, k]
+            out[t, i] = value / lower[i, i]
+    return -1
 
 
 def windowed_least_squares(

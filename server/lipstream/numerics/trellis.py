@@ -36,6 +36,7 @@ import numpy as np
 from numba import njit
 
 NEG_INF = -np.inf
+_NO_LAG = int(np.iinfo(np.int64).max)
 _SMALL = 1e-250
 
 
@@ -213,12 +214,15 @@ def _advance(
     size = ring.shape[0]
     count = 0
     scratch = np.empty(size, dtype=np.int64)
+    fresh = np.empty(states)
+    cursor = np.empty(states, dtype=np.int64)
+    seen = np.full(states, -1, dtype=np.int64)
+    stamp = 0
     for offset in range(log_emission.shape[0]):
         t = first_frame + offset
         if t == 0:
             delta[:] = log_start + log_emission[0]
         else:
-            fresh = np.empty(states)
             for j in range(states):
                 best = 0
                 score = delta[0] + log_transition[0, j]
@@ -229,11 +233,15 @@ def _advance(
                 fresh[j] = score + log_emission[offset, j]
                 ring[t % size, j] = best
             delta[:] = fresh
-        # Merged survivors: the latest frame where every live path passes one state.
-        live = np.flatnonzero(delta > NEG_INF)
-        cursor = live.copy()
+        # Merged survivors: the latest frame where every live path passes one state. The
+        # distinct states the survivors pass at frame u are traced back one frame at a time.
+        live = 0
+        for j in range(states):
+            if delta[j] > NEG_INF:
+                cursor[live] = j
+                live += 1
         for u in range(t, oldest - 1, -1):
-            if np.all(cursor == cursor[0]):
+            if live == 1:
                 _trace(ring, u, cursor[0], oldest, scratch)
                 for k in range(u - oldest + 1):
                     committed[count + k] = scratch[k]
@@ -241,8 +249,15 @@ def _advance(
                 oldest = u + 1
                 break
             if u > oldest:
-                for k in range(cursor.shape[0]):
-                    cursor[k] = ring[u % size, cursor[k]]
+                stamp += 1
+                distinct = 0
+                for k in range(live):
+                    ancestor = ring[u % size, cursor[k]]
+                    if seen[ancestor] != stamp:
+                        seen[ancestor] = stamp
+                        cursor[distinct] = ancestor
+                        distinct += 1
+                live = distinct
         if t - oldest >= lag and oldest <= t:
             _trace(ring, t, int(np.argmax(delta)), oldest, scratch)
             chosen = scratch[0]
@@ -289,7 +304,7 @@ class FixedLagViterbi:
             return np.zeros(0, dtype=np.int64)
         self._room(len(rows))
         committed = np.empty(len(rows) + len(self.ring) + 1, dtype=np.int64)
-        lag = np.iinfo(np.int64).max if self.lag is None else self.lag
+        lag = _NO_LAG if self.lag is None else self.lag
         count, self.oldest = _advance(
             self.log_start, self.log_transition, self.delta, self.ring, rows,
             self.frames, self.oldest, lag, committed,

@@ -5,7 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lipstream.numerics.banded import solve_spd_banded, windowed_least_squares
+from lipstream.numerics.banded import (
+    solve_spd_banded,
+    solve_spd_block_tridiagonal,
+    windowed_least_squares,
+)
 
 
 def window_matrix(stencil: np.ndarray, frames: int) -> np.ndarray:
@@ -89,6 +93,46 @@ def test_solve_spd_banded_matches_dense() -> None:
     bands = np.array([np.pad(np.diag(dense, -k), (0, k)) for k in range(width + 1)])
     rhs = rng.normal(size=(size, 2))
     np.testing.assert_allclose(solve_spd_banded(bands, rhs), np.linalg.solve(dense, rhs))
+
+
+def block_tridiagonal_system(
+    rng: np.random.Generator, frames: int, dims: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A dense SPD block-tridiagonal matrix (a sum of random Gram terms over frame pairs, plus a
+    small ridge) and its diagonal and below-diagonal blocks."""
+    size = frames * dims
+    dense = 0.05 * np.eye(size)
+    for t in range(frames - 1):
+        rows = rng.normal(size=(dims, 2 * dims))
+        dense[t * dims : (t + 2) * dims, t * dims : (t + 2) * dims] += rows.T @ rows
+    diagonal = np.array([dense[t * dims : (t + 1) * dims, t * dims : (t + 1) * dims]
+                         for t in range(frames)])  # fmt: skip
+    below = np.zeros((frames - 1, dims, dims))
+    for t in range(frames - 1):
+        below[t] = dense[(t + 1) * dims : (t + 2) * dims, t * dims : (t + 1) * dims]
+    return dense, diagonal, below
+
+
+@pytest.mark.parametrize(("frames", "dims"), [(1, 3), (2, 1), (7, 2), (12, 5)])
+def test_solve_spd_block_tridiagonal_matches_dense(frames: int, dims: int) -> None:
+    rng = np.random.default_rng(frames * 10 + dims)
+    dense, diagonal, below = block_tridiagonal_system(rng, frames, dims)
+    rhs = rng.normal(size=(frames, dims))
+    upper_ignored = diagonal.copy()
+    upper_ignored[:, np.triu_indices(dims, 1)[0], np.triu_indices(dims, 1)[1]] = 99.0
+    expected = np.linalg.solve(dense, rhs.reshape(-1)).reshape(frames, dims)
+    np.testing.assert_allclose(solve_spd_block_tridiagonal(upper_ignored, below, rhs), expected)
+
+
+def test_solve_spd_block_tridiagonal_refuses_an_indefinite_matrix() -> None:
+    diagonal = np.stack([np.eye(2), np.eye(2), np.diag([1.0, -1.0])])
+    below = np.zeros((2, 2, 2))
+    with pytest.raises(np.linalg.LinAlgError, match="not positive definite.*frame 2"):
+        solve_spd_block_tridiagonal(diagonal, below, np.ones((3, 2)))
+    with pytest.raises(ValueError, match="does not fit"):
+        solve_spd_block_tridiagonal(diagonal, below[:1], np.ones((3, 2)))
+    with pytest.raises(ValueError, match="non-finite"):
+        solve_spd_block_tridiagonal(diagonal, below, np.full((3, 2), np.inf))
 
 
 def test_malformed_input_is_a_value_error() -> None:

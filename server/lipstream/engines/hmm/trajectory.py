@@ -9,9 +9,10 @@ frames t = 0..T−1 and ẏ_t = y_t − y_{t−1}, Eq. 5 minimizes
 with u_t = [y_{t−1}; y_t], M = [[0, I], [−I, I]], P = K⁻¹ and Π the precision of
 the pose marginal (frame 0 has no velocity). Each term adds Mᵀ P M (blocks
 G_prev = E, G_cross = −(C + E) below the diagonal, G_cur = A + C + Cᵀ + E for
-P = [[A, C], [Cᵀ, E]]) to a block-tridiagonal SPD system (Eq. 6), ordered time-major
-so one banded Cholesky (``numerics.banded.solve_spd_banded``) solves every
-dimension at once in O(T·D³). ``numerics.banded.windowed_least_squares`` takes one
+P = [[A, C], [Cᵀ, E]]) to a block-tridiagonal SPD system (Eq. 6): the full
+precisions couple the dimensions, so one block Cholesky
+(``numerics.banded.solve_spd_block_tridiagonal``) solves every dimension at once
+in O(T·D³). ``numerics.banded.windowed_least_squares`` takes one
 precision per window and so cannot carry the pose-velocity cross-covariance C
 that Brand's states keep; the blocks are assembled here and solved there.
 
@@ -36,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ...numerics.banded import solve_spd_banded
+from ...numerics.banded import solve_spd_block_tridiagonal
 
 PIN_PRECISION = 1e8
 
@@ -139,42 +140,48 @@ def recurse(terms: Dynamics, states: np.ndarray, previous: np.ndarray | None) ->
 def solve(terms: Dynamics, states: np.ndarray, pins: np.ndarray | None = None) -> np.ndarray:
     """The trajectory (T, D) for the state of each frame; ``pins`` (P, D) fix its first P
     frames (their states are ignored)."""
-    states = np.asarray(states, dtype=np.int64)
-    frames, dim = len(states), terms.dim
-    n_pins = 0 if pins is None else len(pins)
+    dim = terms.dim
+    held = np.zeros((0, dim)) if pins is None else np.asarray(pins, dtype=np.float64)
+    diagonal, below, rhs = _assemble(
+        np.asarray(states, dtype=np.int64), held, terms.pose_precision, terms.pose_rhs,
+        terms.g_current, terms.g_previous, terms.g_cross, terms.r_current, terms.r_previous,
+    )  # fmt: skip
+    return solve_spd_block_tridiagonal(diagonal, below, rhs)
+
+
+@njit(cache=True)
+def _assemble(
+    states: np.ndarray,
+    pins: np.ndarray,
+    pose_precision: np.ndarray,
+    pose_rhs: np.ndarray,
+    g_current: np.ndarray,
+    g_previous: np.ndarray,
+    g_cross: np.ndarray,
+    r_current: np.ndarray,
+    r_previous: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The blocks of Eq. 6 (module docstring): frame t ≥ 1 adds its state's terms to the
+    blocks (t, t), (t − 1, t − 1) and (t, t − 1); pinned frames (or frame 0's pose marginal)
+    instead hold their pose."""
+    frames, dim, n_pins = states.shape[0], pose_rhs.shape[1], pins.shape[0]
     diagonal = np.zeros((frames, dim, dim))
     below = np.zeros((max(frames - 1, 0), dim, dim))
     rhs = np.zeros((frames, dim))
-    if n_pins:
-        assert pins is not None
-        diagonal[:n_pins] += PIN_PRECISION * np.eye(dim)
-        rhs[:n_pins] += PIN_PRECISION * pins
-    else:
-        diagonal[0] += terms.pose_precision[states[0]]
-        rhs[0] += terms.pose_rhs[states[0]]
-    first = max(1, n_pins)
-    if first < frames:
-        joint = states[first:]
-        diagonal[first:] += terms.g_current[joint]
-        diagonal[first - 1 : frames - 1] += terms.g_previous[joint]
-        below[first - 1 :] += terms.g_cross[joint]
-        rhs[first:] += terms.r_current[joint]
-        rhs[first - 1 : frames - 1] += terms.r_previous[joint]
-    return solve_spd_banded(_bands(diagonal, below), rhs.reshape(-1)).reshape(frames, dim)
-
-
-def _bands(diagonal: np.ndarray, below: np.ndarray) -> np.ndarray:
-    """LAPACK lower band storage of the block-tridiagonal matrix, time-major: row m of the
-    bands holds A[i + m, i], i = t·D + b, which lies in block (t, t) for m ≤ D − 1 − b and
-    in block (t + 1, t) otherwise. Filled one block diagonal at a time."""
-    frames, dim, _ = diagonal.shape
-    bands = np.zeros((2 * dim, frames, dim))
-    for offset in range(dim):  # within a diagonal block: A[t·D + b + offset, t·D + b]
-        bands[offset, :, : dim - offset] = np.diagonal(diagonal, -offset, axis1=1, axis2=2)
-    for row in range(1, 2 * dim):  # into the block below: A[(t+1)·D + a, t·D + b]
-        shift = row - dim  # a − b
-        if frames > 1:
-            first = max(0, -shift)
-            last = min(dim, dim - shift)
-            bands[row, :-1, first:last] = np.diagonal(below, -shift, axis1=1, axis2=2)
-    return bands.reshape(2 * dim, frames * dim)
+    for t in range(min(n_pins, frames)):
+        for i in range(dim):
+            diagonal[t, i, i] = PIN_PRECISION
+            rhs[t, i] = PIN_PRECISION * pins[t, i]
+    if n_pins == 0 and frames > 0:
+        diagonal[0] += pose_precision[states[0]]
+        rhs[0] += pose_rhs[states[0]]
+    for t in range(max(1, n_pins), frames):
+        state = states[t]
+        for i in range(dim):
+            for j in range(dim):
+                diagonal[t, i, j] += g_current[state, i, j]
+                diagonal[t - 1, i, j] += g_previous[state, i, j]
+                below[t - 1, i, j] += g_cross[state, i, j]
+            rhs[t, i] += r_current[state, i]
+            rhs[t - 1, i] += r_previous[state, i]
+    return diagonal, below, rhs

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from lipstream.audio import Audio
+from lipstream.bench.hmm_first_frame import first_frame, pcm16_of
 from lipstream.corpus import Corpus
 from lipstream.engines.base import Model, frame_count
 from lipstream.engines.hmm import HmmEngine, HmmModel
@@ -178,3 +179,22 @@ def test_three_modes_stream_through_the_server(
     with pytest.raises(LipstreamServerError) as raised:
         asyncio.run(_stream(served.ws, "viseme-lerp", [], pcm16, audio.sample_rate))
     assert raised.value.code == "audio_only_unsupported"
+
+
+def test_an_audio_only_request_gets_frames_before_its_end_on_the_causal_rung(
+    served: LiveServer, model: HmmModel, heldout: Corpus
+) -> None:
+    line = heldout.utterances[0]
+    assert line.audio is not None
+    pcm16 = pcm16_of(line.audio.samples)
+    causal = {"lag_ms": 0.0, "window_ms": 0.0}
+    got = asyncio.run(
+        first_frame(served.ws, model.name, pcm16, line.audio.sample_rate, causal, fps=FPS)
+    )
+    assert got.before_end and got.block.first_frame == 0
+    assert got.audio_sent_ms < 1000.0 * line.audio.duration
+    audio = Audio.from_pcm16(pcm16, line.audio.sample_rate)
+    offline = model.synthesize([], FPS, audio, "neutral", drive="audio", **causal).frames
+    rows = np.frombuffer(got.block.data, "<f4").reshape(got.block.n_frames, -1)
+    assert 0 < len(rows) <= frame_count(got.audio_sent_ms / 1000.0, FPS)
+    np.testing.assert_allclose(rows, offline[: len(rows)], atol=1e-5)
