@@ -46,12 +46,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from numba import njit
 
 from ...errors import InvalidRequestError
-from .costs import NodeBounds, direct_smoothing, gap, transition_cost, unary_costs
+from .costs import NodeBounds, transition_cost, unary_costs
+from .fast_step import JoinRecords, fast_step
 from .nodes import SILENCE_INDEX, NodeDatabase, NodeFeatures
 
 INF = np.inf
@@ -87,6 +89,11 @@ class SearchSpace:
     )
     """The nodes dominance pruning keeps with nothing contaminated, and the node b* that set
     the threshold, per (phoneme, emotion, has a layer before, has a layer after)."""
+
+    @cached_property
+    def records(self) -> JoinRecords:
+        """Each node's join features in one row per side, for the fast step (at first use)."""
+        return JoinRecords.of(self.nodes, self.features)
 
     def observation(self, layer: LayerSpec) -> np.ndarray:
         """OC + EMP of every node for ``layer`` (read-only)."""
@@ -150,47 +157,6 @@ def _exact_step(
     return f, back
 
 
-@njit(cache=True)
-def _fast_step(
-    prev_nodes: np.ndarray, prev_f: np.ndarray, next_nodes: np.ndarray, next_u: np.ndarray,
-    position: np.ndarray, pre: np.ndarray, viseme: np.ndarray, fp: np.ndarray, lp: np.ndarray,
-    fv: np.ndarray, lv: np.ndarray, leaving: np.ndarray, arriving: np.ndarray, packed: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-    """As ``_exact_step``, with ``prev_f`` ascending and ``position[node]`` its index there."""
-    f = np.empty(len(next_nodes))
-    back = np.empty(len(next_nodes), dtype=np.int64)
-    for j in range(len(next_nodes)):
-        b = next_nodes[j]
-        p = pre[b]
-        if p < 0:
-            f[j] = prev_f[0] + packed[0] + next_u[j]
-            back[j] = 0
-            continue
-        best = np.inf
-        arg = 0
-        if position[p] >= 0:
-            best = prev_f[position[p]]
-            arg = position[p]
-        for i in range(len(prev_nodes)):
-            if prev_f[i] >= best:
-                break
-            a = prev_nodes[i]
-            if a == p:
-                continue
-            cost = prev_f[i] + packed[2] * gap(fp[b], lp[a]) + gap(fv[b], lv[a])
-            if viseme[a] != viseme[p]:
-                cost += packed[3]
-            if cost >= best:
-                continue
-            cost += packed[1] * direct_smoothing(leaving[a], arriving[p])
-            if cost < best:
-                best = cost
-                arg = i
-        f[j] = best + next_u[j]
-        back[j] = arg
-    return f, back
-
-
 def _step(
     space: SearchSpace,
     prev_nodes: np.ndarray,
@@ -204,9 +170,11 @@ def _step(
               f.last_velocity, f.leaving, f.arriving, space.packed)  # fmt: skip
     if not fast:
         return _exact_step(prev_nodes, prev_f, next_nodes, next_u, *common)
-    position = np.full(space.nodes.size, -1, dtype=np.int64)
-    position[prev_nodes] = np.arange(len(prev_nodes))
-    return _fast_step(prev_nodes, prev_f, next_nodes, next_u, position, *common)
+    records = space.records
+    return fast_step(
+        prev_nodes, prev_f, next_nodes, next_u, space.nodes.pre, f.viseme, records.leaving,
+        records.arriving, f.first_position.shape[1], space.packed,
+    )  # fmt: skip
 
 
 def _candidates(
