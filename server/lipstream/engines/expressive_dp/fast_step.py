@@ -57,6 +57,10 @@ class JoinRecords:
     arriving: np.ndarray
     order: np.ndarray
 
+    @property
+    def dims(self) -> int:
+        return len(self.order)
+
     @classmethod
     def of(cls, nodes: NodeDatabase, features: NodeFeatures) -> JoinRecords:
         spread = features.first_velocity.var(axis=0) + features.last_velocity.var(axis=0)
@@ -177,12 +181,12 @@ def _scan(
 def fast_step(
     prev_nodes: np.ndarray, prev_f: np.ndarray, next_nodes: np.ndarray, next_u: np.ndarray,
     pre: np.ndarray, viseme: np.ndarray, leaving: np.ndarray, arriving: np.ndarray,
-    dims: int, packed: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-    """φ of ``next_nodes`` and the position of each one's best predecessor in ``prev_nodes``
-    (``prev_f`` ascending); ``leaving`` and ``arriving`` are ``JoinRecords``' rows, ``dims``
-    the motion basis's size."""
-    position = np.full(len(pre), -1, dtype=np.int64)
+    dims: int, packed: np.ndarray, position: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """``next_nodes`` in ascending φ, their φ, and the position of each one's best
+    predecessor in ``prev_nodes`` (``prev_f`` ascending); ``leaving`` and ``arriving`` are
+    ``JoinRecords``' rows, ``dims`` the motion basis's size; ``position`` (N) is scratch,
+    all -1, and left so."""
     for i in range(len(prev_nodes)):
         position[prev_nodes[i]] = i
     members, starts = _groups(prev_nodes, viseme)
@@ -215,4 +219,7 @@ def fast_step(
                 )  # fmt: skip
         f[j] = best + next_u[j]
         back[j] = arg
-    return f, back
+    for i in range(len(prev_nodes)):
+        position[prev_nodes[i]] = -1
+    order = np.argsort(f, kind="mergesort")
+    return next_nodes[order], f[order], back[order]

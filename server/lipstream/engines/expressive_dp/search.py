@@ -84,11 +84,12 @@ class SearchSpace:
     packed: np.ndarray
     observed: dict[tuple[int, int], np.ndarray] = field(default_factory=dict, compare=False)
     """OC + EMP per (phoneme, emotion), filled on first use."""
-    survivors: dict[tuple[int, int, bool, bool], tuple[np.ndarray, int]] = field(
+    survivors: dict[tuple[int, int, bool, bool], tuple[np.ndarray, int, np.ndarray]] = field(
         default_factory=dict, compare=False
     )
-    """The nodes dominance pruning keeps with nothing contaminated, and the node b* that set
-    the threshold, per (phoneme, emotion, has a layer before, has a layer after)."""
+    """The nodes dominance pruning keeps with nothing contaminated, the node b* that set
+    the threshold, and the kept nodes' OC + EMP, per (phoneme, emotion, has a layer before,
+    has a layer after)."""
 
     @cached_property
     def records(self) -> JoinRecords:
@@ -134,7 +135,7 @@ class SearchResult:
 
 
 @njit(cache=True)
-def _exact_step(
+def _exact_kernel(
     prev_nodes: np.ndarray, prev_f: np.ndarray, next_nodes: np.ndarray, next_u: np.ndarray,
     pre: np.ndarray, viseme: np.ndarray, fp: np.ndarray, lp: np.ndarray, fv: np.ndarray,
     lv: np.ndarray, leaving: np.ndarray, arriving: np.ndarray, packed: np.ndarray,
@@ -157,23 +158,32 @@ def _exact_step(
     return f, back
 
 
-def _step(
+def _exact_step(
     space: SearchSpace,
     prev_nodes: np.ndarray,
     prev_f: np.ndarray,
     next_nodes: np.ndarray,
     next_u: np.ndarray,
-    fast: bool,
 ) -> tuple[np.ndarray, np.ndarray]:
     f = space.features
-    common = (space.nodes.pre, f.viseme, f.first_position, f.last_position, f.first_velocity,
-              f.last_velocity, f.leaving, f.arriving, space.packed)  # fmt: skip
-    if not fast:
-        return _exact_step(prev_nodes, prev_f, next_nodes, next_u, *common)
+    return _exact_kernel(
+        prev_nodes, prev_f, next_nodes, next_u, space.nodes.pre, f.viseme, f.first_position,
+        f.last_position, f.first_velocity, f.last_velocity, f.leaving, f.arriving, space.packed,
+    )  # fmt: skip
+
+
+def _fast_step(
+    space: SearchSpace,
+    prev_nodes: np.ndarray,
+    prev_f: np.ndarray,
+    next_nodes: np.ndarray,
+    next_u: np.ndarray,
+    position: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     records = space.records
     return fast_step(
-        prev_nodes, prev_f, next_nodes, next_u, space.nodes.pre, f.viseme, records.leaving,
-        records.arriving, f.first_position.shape[1], space.packed,
+        prev_nodes, prev_f, next_nodes, next_u, space.nodes.pre, space.features.viseme,
+        records.leaving, records.arriving, records.dims, space.packed, position,
     )  # fmt: skip
 
 
@@ -184,10 +194,11 @@ def _candidates(
     layer = layers[index]
     sides = (index > 0 or has_before, index + 1 < len(layers))
     if fast and layer.constrained < 0:
-        kept = _survivors(space, layer, *sides)
-        if not excluded[kept[1]]:  # the threshold stands: drop only contaminated survivors
-            nodes = kept[0][~excluded[kept[0]]]
-            return nodes, space.observation(layer)[nodes]
+        kept, threshold, kept_unary = _survivors(space, layer, *sides)
+        if not excluded.any():
+            return kept, kept_unary
+        if not excluded[threshold]:  # the threshold stands: drop only contaminated survivors
+            return _read_only(kept[~excluded[kept]], space.observation(layer))
     unary = space.unary(layer, excluded)
     admitted = np.isfinite(unary)
     if not admitted.any():
@@ -197,8 +208,7 @@ def _candidates(
         )
     if fast:
         admitted &= unary <= _pruning_scores(space, unary, *sides)[admitted].min()
-    nodes = np.flatnonzero(admitted)
-    return nodes, unary[nodes]
+    return _read_only(np.flatnonzero(admitted), unary)
 
 
 def _pruning_scores(space: SearchSpace, unary: np.ndarray, into: bool, out: bool) -> np.ndarray:
@@ -213,18 +223,26 @@ def _pruning_scores(space: SearchSpace, unary: np.ndarray, into: bool, out: bool
 
 def _survivors(
     space: SearchSpace, layer: LayerSpec, into: bool, out: bool
-) -> tuple[np.ndarray, int]:
+) -> tuple[np.ndarray, int, np.ndarray]:
     key = (layer.phoneme, layer.emotion, into, out)
     kept = space.survivors.get(key)
     if kept is None:  # a race only computes the same read-only arrays twice
         unary = space.observation(layer)
         score = _pruning_scores(space, unary, into, out)
         best = int(np.argmin(score))
-        nodes = np.flatnonzero(unary <= score[best])
-        nodes.setflags(write=False)
-        kept = (nodes, best)
+        nodes, kept_unary = _read_only(np.flatnonzero(unary <= score[best]), unary)
+        kept = (nodes, best, kept_unary)
         space.survivors[key] = kept
     return kept
+
+
+def _read_only(nodes: np.ndarray, unary: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A layer's nodes and their U (of ``unary``, every node's), frozen: cached layers are
+    shared, and the kernels are compiled for one kind of array."""
+    kept_unary = unary[nodes]
+    nodes.setflags(write=False)
+    kept_unary.setflags(write=False)
+    return nodes, kept_unary
 
 
 def search(
@@ -278,21 +296,22 @@ def _segment(
     nodes, f = _candidates(space, layers, excluded, 0, before >= 0, fast, offset)
     if before >= 0:
         start = np.array([before], dtype=np.int64)
-        f, _ = _step(space, start, np.zeros(1), nodes, f, fast=False)
+        f, _ = _exact_step(space, start, np.zeros(1), nodes, f)
     priced = len(nodes)
     if fast:
         order = np.argsort(f, kind="stable")
         nodes, f = nodes[order], f[order]
+        scratch = np.full(space.nodes.size, -1, dtype=np.int64)
     members.append(nodes)
     for index in range(1, len(layers)):
         if guard is not None:
             guard.check()  # type: ignore[attr-defined]
         next_nodes, next_u = _candidates(space, layers, excluded, index, True, fast, offset)
         priced += len(next_nodes)
-        f, back = _step(space, nodes, f, next_nodes, next_u, fast)
         if fast:
-            order = np.argsort(f, kind="stable")
-            next_nodes, f, back = next_nodes[order], f[order], back[order]
+            next_nodes, f, back = _fast_step(space, nodes, f, next_nodes, next_u, scratch)
+        else:
+            f, back = _exact_step(space, nodes, f, next_nodes, next_u)
         backs.append(back)
         members.append(next_nodes)
         nodes = next_nodes
