@@ -162,7 +162,7 @@ def test_the_cached_pruning_stays_exact_when_contamination_takes_its_threshold_n
     clean = np.zeros(40, dtype=bool)
     search(space, layers, clean)  # fills the cache
     assert space.survivors
-    for _nodes, threshold in list(space.survivors.values())[:3]:
+    for _nodes, threshold, _unary in list(space.survivors.values())[:3]:
         excluded = clean.copy()
         excluded[threshold] = True
         excluded[(threshold + 7) % 40] = True
