@@ -15,10 +15,13 @@ minimum with three exact reductions:
 2. Rule-1 and Rule-4 transitions priced without a scan: a node without a
    captured predecessor costs α1·PNT from every a, so its best a is the cheapest
    φ; a node whose predecessor is admitted starts from φ(pre) + 0.
-3. A sorted scan with a cut-off: the previous layer's nodes in ascending φ;
-   since TC ≥ 0, the scan stops at the first a with φ(a) ≥ the best so far, and
-   a pair's DSC (the dear term) is priced only when φ(a) + PVC (+ PNT) still
-   beats it. The step is compiled (numba).
+3. A sorted scan with cut-offs (``fast_step``, compiled): the previous layer's
+   nodes grouped by viseme, each group in ascending φ; the scan of a group stops at
+   the first a with φ(a) (+ PNT, when the group's viseme is not pre(b)'s) ≥ the
+   best so far, since the rest of TC ≥ 0; a pair is dropped as soon as a partial
+   sum of its velocity gap reaches the best, and its position gap and DSC are
+   priced only when it still beats it. Each node's join features are one
+   contiguous row per side (``fast_step.JoinRecords``, made at first use).
 
 The nodes dominance pruning (1.) keeps depend only on the layer's phoneme, emotion and sides,
 so they are cached (``SearchSpace.survivors``) with b*; contaminated nodes are
