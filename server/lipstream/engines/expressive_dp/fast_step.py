@@ -18,18 +18,19 @@ viseme v:
 3. a pair that survives is priced whole: the position gap and the penalty, then DSC, each
    compared with best before the next; it replaces the best only when strictly cheaper.
 
-The pairs priced, and so the optimum, are those of a scan of every pair: only the order
-among equal costs may differ, and the velocity gap's rounding (its coordinates are summed
-in another order than ``costs.gap``'s, a difference of about 1e-16 relative). Rule 1
+A pair is skipped only when its cost as computed is no less than the best, so the optimum
+is that of a scan pricing every pair: only the order among equal costs may differ, and the
+velocity gap's rounding (its coordinates are summed in another order than ``costs.gap``'s,
+a difference of about 1e-16 relative). Rule 1
 (pre(b) in the previous layer: φ(pre) + 0 starts the best) and Rule 4 (no predecessor:
 α1·PNT from the cheapest a) are taken without a scan.
 
-Memory, not arithmetic, set the time: a pair read rows of six arrays spread over the
-database. ``JoinRecords`` lays out, once per model at first use, each node's leaving side
-(last velocity reordered, last position, DSC's leaving half) and arriving side (first
-velocity reordered, first position, the arriving half of its predecessor) as one
-contiguous row each, so a pair reads two rows front to back and a scan touches only
-their first cache line.
+Memory reads, more than arithmetic, set a priced pair's time: it read rows of six arrays
+spread over the database. ``JoinRecords`` lays out, once per model at first use, each
+node's leaving side (last velocity reordered, last position, DSC's leaving half) and
+arriving side (first velocity reordered, first position, the arriving half of its
+predecessor) as one contiguous row each, so a pair reads two rows front to back and a
+scan touches only their first cache line.
 """
 
 from __future__ import annotations
