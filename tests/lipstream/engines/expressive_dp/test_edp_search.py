@@ -139,7 +139,10 @@ def test_the_fast_step_finds_every_nodes_best_predecessor(seed: int, dims: int) 
     nodes = np.arange(n)
     expected = [min(f + space.tc(int(a), int(b)) for a, f in zip(prev, prev_f)) for b in nodes]
     scratch = np.full(n, -1)
-    order, found, back = _fast_step(space, prev, prev_f, nodes, np.zeros(n), scratch)
+    unary = np.zeros(n)
+    for frozen in (nodes, unary):  # as the search hands layers over (one compiled kernel)
+        frozen.setflags(write=False)
+    order, found, back = _fast_step(space, prev, prev_f, nodes, unary, scratch)
     assert sorted(order.tolist()) == nodes.tolist() and (scratch == -1).all()
     assert list(found) == sorted(found)
     for node, cost, a in zip(order, found, back):
