@@ -61,23 +61,24 @@ class Weights:
 
 
 @njit(cache=True, fastmath=False)
-def gap(x: np.ndarray, y: np.ndarray) -> float:
+def gap(x: np.ndarray, i: int, y: np.ndarray, j: int) -> float:
+    """‖x[i] − y[j]‖ (rows read in place: a slice would cost a reference count per call)."""
     total = 0.0
-    for k in range(len(x)):
-        difference = x[k] - y[k]
+    for k in range(x.shape[1]):
+        difference = x[i, k] - y[j, k]
         total += difference * difference
     return math.sqrt(total)
 
 
 @njit(cache=True, fastmath=False)
-def direct_smoothing(leaving_a: np.ndarray, arriving_p: np.ndarray) -> float:
+def direct_smoothing(leaving: np.ndarray, a: int, arriving: np.ndarray, p: int) -> float:
     """Eq. 6 from the halves of Δ²g (``nodes.blend_halves``): (M − 1) Σ_m ‖L_a,m + R_p,m‖."""
-    interior, dims = leaving_a.shape
+    _, interior, dims = leaving.shape
     total = 0.0
     for m in range(interior):
         squares = 0.0
         for k in range(dims):
-            value = leaving_a[m, k] + arriving_p[m, k]
+            value = leaving[a, m, k] + arriving[p, m, k]
             squares += value * value
         total += math.sqrt(squares)
     return float(total * (interior + 1))
@@ -103,11 +104,11 @@ def transition_cost(
         return 0.0
     if p < 0:
         return float(packed[0])
-    cost = packed[2] * gap(first_position[b], last_position[a])
-    cost += gap(first_velocity[b], last_velocity[a])
+    cost = packed[2] * gap(first_position, b, last_position, a)
+    cost += gap(first_velocity, b, last_velocity, a)
     if viseme[a] != viseme[p]:
         cost += packed[3]
-    return float(cost + packed[1] * direct_smoothing(leaving[a], arriving[p]))
+    return float(cost + packed[1] * direct_smoothing(leaving, a, arriving, p))
 
 
 def unary_costs(

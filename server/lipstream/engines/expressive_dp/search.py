@@ -15,10 +15,13 @@ minimum with three exact reductions:
 2. Rule-1 and Rule-4 transitions priced without a scan: a node without a
    captured predecessor costs α1·PNT from every a, so its best a is the cheapest
    φ; a node whose predecessor is admitted starts from φ(pre) + 0.
-3. A sorted scan with a cut-off: the previous layer's nodes in ascending φ;
-   since TC ≥ 0, the scan stops at the first a with φ(a) ≥ the best so far, and
-   a pair's DSC (the dear term) is priced only when φ(a) + PVC (+ PNT) still
-   beats it. The step is compiled (numba).
+3. A sorted scan with cut-offs (``fast_step``, compiled): the previous layer's
+   nodes grouped by viseme, each group in ascending φ; the scan of a group stops at
+   the first a with φ(a) (+ PNT, when the group's viseme is not pre(b)'s) ≥ the
+   best so far, since the rest of TC ≥ 0; a pair is dropped as soon as a partial
+   sum of its velocity gap reaches the best, and its position gap and DSC are
+   priced only when it still beats it. Each node's join features are one
+   contiguous row per side (``fast_step.JoinRecords``, made at first use).
 
 The nodes dominance pruning (1.) keeps depend only on the layer's phoneme, emotion and sides,
 so they are cached (``SearchSpace.survivors``) with b*; contaminated nodes are
@@ -46,12 +49,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from numba import njit
 
 from ...errors import InvalidRequestError
-from .costs import NodeBounds, direct_smoothing, gap, transition_cost, unary_costs
+from .costs import NodeBounds, transition_cost, unary_costs
+from .fast_step import JoinRecords, fast_step
 from .nodes import SILENCE_INDEX, NodeDatabase, NodeFeatures
 
 INF = np.inf
@@ -82,11 +87,17 @@ class SearchSpace:
     packed: np.ndarray
     observed: dict[tuple[int, int], np.ndarray] = field(default_factory=dict, compare=False)
     """OC + EMP per (phoneme, emotion), filled on first use."""
-    survivors: dict[tuple[int, int, bool, bool], tuple[np.ndarray, int]] = field(
+    survivors: dict[tuple[int, int, bool, bool], tuple[np.ndarray, int, np.ndarray]] = field(
         default_factory=dict, compare=False
     )
-    """The nodes dominance pruning keeps with nothing contaminated, and the node b* that set
-    the threshold, per (phoneme, emotion, has a layer before, has a layer after)."""
+    """The nodes dominance pruning keeps with nothing contaminated, the node b* that set
+    the threshold, and the kept nodes' OC + EMP, per (phoneme, emotion, has a layer before,
+    has a layer after)."""
+
+    @cached_property
+    def records(self) -> JoinRecords:
+        """Each node's join features in one row per side, for the fast step (at first use)."""
+        return JoinRecords.of(self.nodes, self.features)
 
     def observation(self, layer: LayerSpec) -> np.ndarray:
         """OC + EMP of every node for ``layer`` (read-only)."""
@@ -127,7 +138,7 @@ class SearchResult:
 
 
 @njit(cache=True)
-def _exact_step(
+def _exact_kernel(
     prev_nodes: np.ndarray, prev_f: np.ndarray, next_nodes: np.ndarray, next_u: np.ndarray,
     pre: np.ndarray, viseme: np.ndarray, fp: np.ndarray, lp: np.ndarray, fv: np.ndarray,
     lv: np.ndarray, leaving: np.ndarray, arriving: np.ndarray, packed: np.ndarray,
@@ -150,63 +161,33 @@ def _exact_step(
     return f, back
 
 
-@njit(cache=True)
-def _fast_step(
-    prev_nodes: np.ndarray, prev_f: np.ndarray, next_nodes: np.ndarray, next_u: np.ndarray,
-    position: np.ndarray, pre: np.ndarray, viseme: np.ndarray, fp: np.ndarray, lp: np.ndarray,
-    fv: np.ndarray, lv: np.ndarray, leaving: np.ndarray, arriving: np.ndarray, packed: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-    """As ``_exact_step``, with ``prev_f`` ascending and ``position[node]`` its index there."""
-    f = np.empty(len(next_nodes))
-    back = np.empty(len(next_nodes), dtype=np.int64)
-    for j in range(len(next_nodes)):
-        b = next_nodes[j]
-        p = pre[b]
-        if p < 0:
-            f[j] = prev_f[0] + packed[0] + next_u[j]
-            back[j] = 0
-            continue
-        best = np.inf
-        arg = 0
-        if position[p] >= 0:
-            best = prev_f[position[p]]
-            arg = position[p]
-        for i in range(len(prev_nodes)):
-            if prev_f[i] >= best:
-                break
-            a = prev_nodes[i]
-            if a == p:
-                continue
-            cost = prev_f[i] + packed[2] * gap(fp[b], lp[a]) + gap(fv[b], lv[a])
-            if viseme[a] != viseme[p]:
-                cost += packed[3]
-            if cost >= best:
-                continue
-            cost += packed[1] * direct_smoothing(leaving[a], arriving[p])
-            if cost < best:
-                best = cost
-                arg = i
-        f[j] = best + next_u[j]
-        back[j] = arg
-    return f, back
-
-
-def _step(
+def _exact_step(
     space: SearchSpace,
     prev_nodes: np.ndarray,
     prev_f: np.ndarray,
     next_nodes: np.ndarray,
     next_u: np.ndarray,
-    fast: bool,
 ) -> tuple[np.ndarray, np.ndarray]:
     f = space.features
-    common = (space.nodes.pre, f.viseme, f.first_position, f.last_position, f.first_velocity,
-              f.last_velocity, f.leaving, f.arriving, space.packed)  # fmt: skip
-    if not fast:
-        return _exact_step(prev_nodes, prev_f, next_nodes, next_u, *common)
-    position = np.full(space.nodes.size, -1, dtype=np.int64)
-    position[prev_nodes] = np.arange(len(prev_nodes))
-    return _fast_step(prev_nodes, prev_f, next_nodes, next_u, position, *common)
+    return _exact_kernel(
+        prev_nodes, prev_f, next_nodes, next_u, space.nodes.pre, f.viseme, f.first_position,
+        f.last_position, f.first_velocity, f.last_velocity, f.leaving, f.arriving, space.packed,
+    )  # fmt: skip
+
+
+def _fast_step(
+    space: SearchSpace,
+    prev_nodes: np.ndarray,
+    prev_f: np.ndarray,
+    next_nodes: np.ndarray,
+    next_u: np.ndarray,
+    position: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    records = space.records
+    return fast_step(
+        prev_nodes, prev_f, next_nodes, next_u, space.nodes.pre, space.features.viseme,
+        records.leaving, records.arriving, records.dims, space.packed, position,
+    )  # fmt: skip
 
 
 def _candidates(
@@ -216,10 +197,11 @@ def _candidates(
     layer = layers[index]
     sides = (index > 0 or has_before, index + 1 < len(layers))
     if fast and layer.constrained < 0:
-        kept = _survivors(space, layer, *sides)
-        if not excluded[kept[1]]:  # the threshold stands: drop only contaminated survivors
-            nodes = kept[0][~excluded[kept[0]]]
-            return nodes, space.observation(layer)[nodes]
+        kept, threshold, kept_unary = _survivors(space, layer, *sides)
+        if not excluded.any():
+            return kept, kept_unary
+        if not excluded[threshold]:  # the threshold stands: drop only contaminated survivors
+            return _read_only(kept[~excluded[kept]], space.observation(layer))
     unary = space.unary(layer, excluded)
     admitted = np.isfinite(unary)
     if not admitted.any():
@@ -229,8 +211,7 @@ def _candidates(
         )
     if fast:
         admitted &= unary <= _pruning_scores(space, unary, *sides)[admitted].min()
-    nodes = np.flatnonzero(admitted)
-    return nodes, unary[nodes]
+    return _read_only(np.flatnonzero(admitted), unary)
 
 
 def _pruning_scores(space: SearchSpace, unary: np.ndarray, into: bool, out: bool) -> np.ndarray:
@@ -245,18 +226,26 @@ def _pruning_scores(space: SearchSpace, unary: np.ndarray, into: bool, out: bool
 
 def _survivors(
     space: SearchSpace, layer: LayerSpec, into: bool, out: bool
-) -> tuple[np.ndarray, int]:
+) -> tuple[np.ndarray, int, np.ndarray]:
     key = (layer.phoneme, layer.emotion, into, out)
     kept = space.survivors.get(key)
     if kept is None:  # a race only computes the same read-only arrays twice
         unary = space.observation(layer)
         score = _pruning_scores(space, unary, into, out)
         best = int(np.argmin(score))
-        nodes = np.flatnonzero(unary <= score[best])
-        nodes.setflags(write=False)
-        kept = (nodes, best)
+        nodes, kept_unary = _read_only(np.flatnonzero(unary <= score[best]), unary)
+        kept = (nodes, best, kept_unary)
         space.survivors[key] = kept
     return kept
+
+
+def _read_only(nodes: np.ndarray, unary: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A layer's nodes and their U (of ``unary``, every node's), frozen: cached layers are
+    shared, and the kernels are compiled for one kind of array."""
+    kept_unary = unary[nodes]
+    nodes.setflags(write=False)
+    kept_unary.setflags(write=False)
+    return nodes, kept_unary
 
 
 def search(
@@ -310,21 +299,22 @@ def _segment(
     nodes, f = _candidates(space, layers, excluded, 0, before >= 0, fast, offset)
     if before >= 0:
         start = np.array([before], dtype=np.int64)
-        f, _ = _step(space, start, np.zeros(1), nodes, f, fast=False)
+        f, _ = _exact_step(space, start, np.zeros(1), nodes, f)
     priced = len(nodes)
     if fast:
         order = np.argsort(f, kind="stable")
         nodes, f = nodes[order], f[order]
+        scratch = np.full(space.nodes.size, -1, dtype=np.int64)
     members.append(nodes)
     for index in range(1, len(layers)):
         if guard is not None:
             guard.check()  # type: ignore[attr-defined]
         next_nodes, next_u = _candidates(space, layers, excluded, index, True, fast, offset)
         priced += len(next_nodes)
-        f, back = _step(space, nodes, f, next_nodes, next_u, fast)
         if fast:
-            order = np.argsort(f, kind="stable")
-            next_nodes, f, back = next_nodes[order], f[order], back[order]
+            next_nodes, f, back = _fast_step(space, nodes, f, next_nodes, next_u, scratch)
+        else:
+            f, back = _exact_step(space, nodes, f, next_nodes, next_u)
         backs.append(back)
         members.append(next_nodes)
         nodes = next_nodes

@@ -46,8 +46,19 @@ def random_database(rng: np.random.Generator, n: int, dims: int = 3) -> NodeData
     )
 
 
-def random_space(rng: np.random.Generator, n: int) -> SearchSpace:
-    nodes = random_database(rng, n)
+def random_space(
+    rng: np.random.Generator, n: int, dims: int = 3, coarse: bool = False, tight: bool = False
+) -> SearchSpace:
+    """A random database and weights; ``coarse`` rounds the frames to integers, so that many
+    gaps, and so many path costs, tie exactly; ``tight`` draws every frame near one of three
+    poses, so that many joins cost nearly the same and every coordinate counts."""
+    nodes = random_database(rng, n, dims)
+    if coarse:
+        nodes.frames[:] = np.round(nodes.frames)
+    if tight:
+        poses = rng.normal(size=(3, dims))
+        picked = poses[rng.integers(0, 3, len(nodes.frames))]
+        nodes.frames[:] = picked + 0.002 * rng.normal(size=nodes.frames.shape)
     features = NodeFeatures.of(nodes)
     alphas = np.exp(rng.uniform(np.log(0.05), np.log(5.0), 6))
     alphas[3] = rng.uniform(0.05, 0.95)
@@ -75,10 +86,13 @@ def loop_tc(space: SearchSpace, a: int, b: int) -> float:
     pgap = float(np.linalg.norm(fb[0] - fa[-1]))
     vgap = float(np.linalg.norm((fb[1] - fb[0]) * nodes.fps - (fa[-1] - fa[-2]) * nodes.fps))
     sa, sp = shape(nodes, a), shape(nodes, p)
+    dims = sa.shape[1]
     m = SHAPE_POINTS
     blend = [(1 - i / (m - 1)) * sa[i] + i / (m - 1) * sp[i] for i in range(m)]
     dsc = sum(
-        math.sqrt(sum((blend[i - 1][k] - 2 * blend[i][k] + blend[i + 1][k]) ** 2 for k in range(3)))
+        math.sqrt(
+            sum((blend[i - 1][k] - 2 * blend[i][k] + blend[i + 1][k]) ** 2 for k in range(dims))
+        )
         for i in range(1, m - 1)
     ) * (m - 1)
     same = VISEME_OF_PHONEME[nodes.phoneme[a]] == VISEME_OF_PHONEME[nodes.phoneme[p]]

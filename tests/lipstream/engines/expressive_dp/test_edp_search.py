@@ -8,7 +8,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lipstream.engines.expressive_dp.search import NO_NODE, LayerSpec, path_cost, search
+from lipstream.engines.expressive_dp.search import (
+    NO_NODE,
+    LayerSpec,
+    _fast_step,
+    path_cost,
+    search,
+)
 from lipstream.phonemes import PHONEME_INDEX
 
 from .edp_synthetic import PHONEMES, brute_force, loop_tc, loop_unary, random_space
@@ -96,6 +102,62 @@ def test_the_fast_search_has_exact_dps_optimum(
             assert np.isfinite(loop_unary(space, layer, node))
 
 
+@settings(max_examples=20, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(2, 40),
+    t=st.integers(1, 8),
+    dims=st.sampled_from([1, 5, 10, 14]),
+    coarse=st.booleans(),
+)
+def test_the_fast_search_has_exact_dps_optimum_in_more_dimensions_and_with_ties(
+    seed: int, n: int, t: int, dims: int, coarse: bool
+) -> None:
+    """The fast step sums velocity gaps a few coordinates at a time (2, 4, 8, then all) and
+    cuts off on the partial sums; integer frames make many costs tie exactly."""
+    rng = np.random.default_rng(seed)
+    space = random_space(rng, n, dims, coarse)
+    layers = [LayerSpec(int(rng.choice(PHONEMES)), int(rng.integers(0, 4))) for _ in range(t)]
+    excluded = np.zeros(n, dtype=bool)
+    exact = search(space, layers, excluded, fast=False)
+    fast = search(space, layers, excluded, fast=True)
+    assert fast.cost == pytest.approx(exact.cost, rel=1e-9, abs=1e-9)
+    assert path_cost(space, layers, fast.path) == pytest.approx(exact.cost, rel=1e-9, abs=1e-9)
+
+
+@settings(max_examples=12, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), dims=st.sampled_from([2, 5, 10, 14]))
+def test_the_fast_step_finds_every_nodes_best_predecessor(seed: int, dims: int) -> None:
+    """One layer against the next: every node's φ, not only the optimal path's, equals exact
+    DP's (Table I as compiled for Alg. 1), on frames near three poses where the cut-offs
+    decide most pairs."""
+    rng = np.random.default_rng(seed)
+    n = 90
+    space = random_space(rng, n, dims, tight=True)
+    prev = rng.choice(n, 50, replace=False)
+    prev_f = np.sort(rng.uniform(0.0, 2.0 * space.packed[3], 50))
+    nodes = np.arange(n)
+    expected = [min(f + space.tc(int(a), int(b)) for a, f in zip(prev, prev_f)) for b in nodes]
+    scratch = np.full(n, -1)
+    unary = np.zeros(n)
+    for frozen in (nodes, unary):  # as the search hands layers over (one compiled kernel)
+        frozen.setflags(write=False)
+    order, found, back = _fast_step(space, prev, prev_f, nodes, unary, scratch)
+    assert sorted(order.tolist()) == nodes.tolist() and (scratch == -1).all()
+    assert list(found) == sorted(found)
+    for node, cost, a in zip(order, found, back):
+        assert cost == pytest.approx(expected[node], rel=1e-9, abs=1e-12)
+        assert cost == pytest.approx(prev_f[a] + space.tc(int(prev[a]), int(node)), rel=1e-9)
+
+
+def test_the_tc_by_hand_holds_in_ten_dimensions() -> None:
+    rng = np.random.default_rng(4)
+    space = random_space(rng, 9, dims=10)
+    for a in range(9):
+        for b in range(9):
+            assert space.tc(a, b) == pytest.approx(loop_tc(space, a, b), rel=1e-9, abs=1e-12)
+
+
 def test_a_silence_splits_the_search_into_independent_segments() -> None:
     space, layers, excluded = _problem(21, 30, 8, False, False)
     layers = [
@@ -162,7 +224,7 @@ def test_the_cached_pruning_stays_exact_when_contamination_takes_its_threshold_n
     clean = np.zeros(40, dtype=bool)
     search(space, layers, clean)  # fills the cache
     assert space.survivors
-    for _nodes, threshold in list(space.survivors.values())[:3]:
+    for _nodes, threshold, _unary in list(space.survivors.values())[:3]:
         excluded = clean.copy()
         excluded[threshold] = True
         excluded[(threshold + 7) % 40] = True

@@ -1,0 +1,226 @@
+"""The fast search's step: min over the previous layer of φ(a) + TC(a, b) for each node b, exact.
+
+Method. On the demo database nearly all of a join's cost is two terms: PNT when the
+visemes of a and pre(b) differ (Table I) and the velocity gap ‖v_first(b) − v_last(a)‖;
+the position gap (weighted by a small α3) and DSC add little. So the previous layer is
+grouped by viseme, each group in ascending φ, and for a node b whose predecessor p has
+viseme v:
+
+1. the group of viseme v is scanned first, up to the first a with φ(a) ≥ best (TC ≥ 0);
+   every other group adds PNT to every pair, so it is scanned up to the first a with
+   φ(a) + PNT ≥ best (the costs add PNT after the gaps, and rounding is monotone, so a
+   pair past that point cannot cost less than best as computed);
+2. each pair's velocity gap is summed a few coordinates at a time, coordinates in
+   descending variance over the database, and the pair is dropped as soon as
+   φ(a) + penalty + the partial gap reaches best: a partial sum of squares never exceeds
+   the whole. The comparison keeps a slack of 1e-12 · (|best| + 1), far above the
+   rounding of the sums, so a dropped pair is one whose computed cost is at least best;
+3. a pair that survives is priced whole: the position gap and the penalty, then DSC, each
+   compared with best before the next; it replaces the best only when strictly cheaper.
+
+A pair is skipped only when its cost as computed is no less than the best, so the optimum
+is that of a scan pricing every pair: only the order among equal costs may differ, and the
+velocity gap's rounding (its coordinates are summed in another order than ``costs.gap``'s,
+a difference of about 1e-16 relative). Rule 1
+(pre(b) in the previous layer: φ(pre) + 0 starts the best) and Rule 4 (no predecessor:
+α1·PNT from the cheapest a) are taken without a scan.
+
+Memory reads, more than arithmetic, set a priced pair's time: it read rows of six arrays
+spread over the database. ``JoinRecords`` lays out, once per model at first use, each
+node's leaving side (last velocity reordered, last position, DSC's leaving half) and
+arriving side (first velocity reordered, first position, the arriving half of its
+predecessor) as one contiguous row each, so a pair reads two rows front to back and a
+scan touches only their first cache line.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from .nodes import NodeDatabase, NodeFeatures
+
+SLACK = 1e-12
+"""Relative slack of the partial-gap test (far above the rounding of a 1e-16 sum)."""
+
+
+@dataclass(frozen=True)
+class JoinRecords:
+    """Per node, (N, 2K + (M − 2)K) each: ``leaving`` = [last velocity in ``order``, last
+    position, DSC's leaving half]; ``arriving`` = [first velocity in ``order``, first
+    position, the arriving half of its predecessor (zeros without one)]. ``order``: the
+    velocity coordinates in descending variance."""
+
+    leaving: np.ndarray
+    arriving: np.ndarray
+    order: np.ndarray
+
+    @property
+    def dims(self) -> int:
+        return len(self.order)
+
+    @classmethod
+    def of(cls, nodes: NodeDatabase, features: NodeFeatures) -> JoinRecords:
+        spread = features.first_velocity.var(axis=0) + features.last_velocity.var(axis=0)
+        order = np.argsort(-spread, kind="stable")
+        n = nodes.size
+        predecessor = np.where(nodes.pre[:, None, None] >= 0, features.arriving[nodes.pre], 0.0)
+        leaving = np.hstack(
+            [
+                features.last_velocity[:, order],
+                features.last_position,
+                features.leaving.reshape(n, -1),
+            ]
+        )
+        arriving = np.hstack(
+            [features.first_velocity[:, order], features.first_position, predecessor.reshape(n, -1)]
+        )
+        return cls(np.ascontiguousarray(leaving), np.ascontiguousarray(arriving), order)
+
+
+@njit(cache=True)
+def _groups(prev_nodes: np.ndarray, viseme: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``members``: positions in the layer grouped by viseme, ascending φ within a group;
+    ``starts`` (visemes + 1): each viseme's slice of ``members`` (empty when absent)."""
+    classes = 0
+    for a in prev_nodes:
+        classes = max(classes, viseme[a] + 1)
+    starts = np.zeros(classes + 1, dtype=np.int64)
+    for a in prev_nodes:
+        starts[viseme[a] + 1] += 1
+    for v in range(classes):
+        starts[v + 1] += starts[v]
+    filled = starts[:-1].copy()
+    members = np.empty(len(prev_nodes), dtype=np.int64)
+    for i in range(len(prev_nodes)):
+        v = viseme[prev_nodes[i]]
+        members[filled[v]] = i
+        filled[v] += 1
+    return members, starts
+
+
+@njit(cache=True, inline="always")
+def _squares(
+    leaving: np.ndarray, a: int, arriving: np.ndarray, b: int, start: int, stop: int
+) -> float:
+    total = 0.0
+    for k in range(start, stop):
+        difference = arriving[b, k] - leaving[a, k]
+        total += difference * difference
+    return total
+
+
+@njit(cache=True, inline="always")
+def _velocity_squares(
+    leaving: np.ndarray, a: int, arriving: np.ndarray, b: int, dims: int, limit: float
+) -> float:
+    """Σ of the squared velocity differences, or a partial sum ≥ ``limit`` once one is
+    (tested after 2, 4 and 8 coordinates)."""
+    total = 0.0
+    start = 0
+    for stop in range(2, 9, 2):
+        if stop == 6 or stop >= dims:
+            continue
+        total += _squares(leaving, a, arriving, b, start, stop)
+        if total >= limit:
+            return total
+        start = stop
+    return total + _squares(leaving, a, arriving, b, start, dims)
+
+
+@njit(cache=True, inline="always")
+def _dsc(leaving: np.ndarray, a: int, arriving: np.ndarray, b: int, dims: int) -> float:
+    """Eq. 6 as ``costs.direct_smoothing``, from the records' halves (same sums, same order)."""
+    interior = (leaving.shape[1] - 2 * dims) // dims
+    total = 0.0
+    for m in range(interior):
+        base = 2 * dims + m * dims
+        squares = 0.0
+        for k in range(dims):
+            value = leaving[a, base + k] + arriving[b, base + k]
+            squares += value * value
+        total += math.sqrt(squares)
+    return float(total * (interior + 1))
+
+
+@njit(cache=True, inline="always")
+def _scan(
+    members: np.ndarray, start: int, stop: int, penalty: float, best: float, arg: int,
+    b: int, p: int, prev_nodes: np.ndarray, prev_f: np.ndarray, viseme: np.ndarray,
+    leaving: np.ndarray, arriving: np.ndarray, dims: int, packed: np.ndarray,
+) -> tuple[float, int]:  # fmt: skip
+    """One viseme group (``members[start:stop]``, ascending φ), every pair adding ``penalty``."""
+    for k in range(start, stop):
+        i = members[k]
+        floor = prev_f[i] + penalty
+        if floor >= best:
+            break
+        a = prev_nodes[i]
+        if a == p:
+            continue
+        budget = best - floor + SLACK * (abs(best) + 1.0)
+        velocity = _velocity_squares(leaving, a, arriving, b, dims, budget * budget)
+        if velocity >= budget * budget:
+            continue
+        position = _squares(leaving, a, arriving, b, dims, 2 * dims)
+        cost = prev_f[i] + packed[2] * math.sqrt(position) + math.sqrt(velocity)
+        if viseme[a] != viseme[p]:
+            cost += packed[3]
+        if cost >= best:
+            continue
+        cost += packed[1] * _dsc(leaving, a, arriving, b, dims)
+        if cost < best:
+            best = cost
+            arg = i
+    return best, arg
+
+
+@njit(cache=True)
+def fast_step(
+    prev_nodes: np.ndarray, prev_f: np.ndarray, next_nodes: np.ndarray, next_u: np.ndarray,
+    pre: np.ndarray, viseme: np.ndarray, leaving: np.ndarray, arriving: np.ndarray,
+    dims: int, packed: np.ndarray, position: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """``next_nodes`` in ascending φ, their φ, and the position of each one's best
+    predecessor in ``prev_nodes`` (``prev_f`` ascending); ``leaving`` and ``arriving`` are
+    ``JoinRecords``' rows, ``dims`` the motion basis's size; ``position`` (N) is scratch,
+    all -1, and left so."""
+    for i in range(len(prev_nodes)):
+        position[prev_nodes[i]] = i
+    members, starts = _groups(prev_nodes, viseme)
+    classes = len(starts) - 1
+    f = np.empty(len(next_nodes))
+    back = np.empty(len(next_nodes), dtype=np.int64)
+    for j in range(len(next_nodes)):
+        b = next_nodes[j]
+        p = pre[b]
+        if p < 0:
+            f[j] = prev_f[0] + packed[0] + next_u[j]
+            back[j] = 0
+            continue
+        best = np.inf
+        arg = 0
+        if position[p] >= 0:
+            best = prev_f[position[p]]
+            arg = position[p]
+        own = viseme[p]
+        if own < classes:
+            best, arg = _scan(
+                members, starts[own], starts[own + 1], 0.0, best, arg, b, p, prev_nodes,
+                prev_f, viseme, leaving, arriving, dims, packed,
+            )  # fmt: skip
+        for v in range(classes):
+            if v != own and starts[v + 1] > starts[v]:
+                best, arg = _scan(
+                    members, starts[v], starts[v + 1], packed[3], best, arg, b, p,
+                    prev_nodes, prev_f, viseme, leaving, arriving, dims, packed,
+                )  # fmt: skip
+        f[j] = best + next_u[j]
+        back[j] = arg
+    for i in range(len(prev_nodes)):
+        position[prev_nodes[i]] = -1
+    order = np.argsort(f, kind="mergesort")
+    return next_nodes[order], f[order], back[order]
