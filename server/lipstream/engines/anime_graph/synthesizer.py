@@ -503,19 +503,19 @@ class AnimeGraphSynthesizer(Synthesizer):
         targets = self.track.evaluate(
             np.minimum(times + self.lead_s, self.covered_until), left_continuous=True
         )
-        pieces = []
+        values = np.empty_like(targets)
+        first = 0
         if self.damped is None:
             self.damped = DampedState.at_rest(targets[0], 0.0)
-            pieces.append(self.damped.x[None].copy())
-            times, targets = times[1:], targets[1:]
-        if len(times):
-            steps = np.diff(np.concatenate(([self.damped.t], times)))
-            omegas = np.broadcast_to(self.model.causal_omegas, targets.shape)
-            pieces.append(self.damped.run(targets, omegas, steps, np.ones(len(times), bool)))
-            self.damped.t = float(times[-1])
+            values[0] = self.damped.x
+            first = 1
+        if len(times) > first:
+            self.damped.follow(
+                targets[first:], self.model.causal_omegas, times[first:], values[first:]
+            )
         self.emitted = stop
         self.stats["frames"] = stop
-        return self.model.to_channels(np.concatenate(pieces))
+        return self.model.to_channels(values)
 
 
 def _samples_needed(frame: int, fps_model: float, fps: float) -> int:
