@@ -27,24 +27,7 @@ from pathlib import Path
 from ..engines.base import Model, make_request
 from ..models import ModelRegistry
 
-LABELS = (
-    "HH",
-    "AH0",
-    "L",
-    "OW1",
-    "W",
-    "ER1",
-    "L",
-    "D",
-    "sil",
-    "M",
-    "AA1",
-    "P",
-    "B",
-    "IY1",
-    "S",
-    "T",
-)
+LABELS = tuple("HH AH0 L OW1 W ER1 L D sil M AA1 P B IY1 S T".split())
 PHONEME_S = 0.08
 FPS = 60.0
 
