@@ -16,7 +16,7 @@ from __future__ import annotations
 import re
 import unicodedata
 from collections.abc import Callable, Iterable, Mapping
-from functools import lru_cache
+from functools import cache, lru_cache
 from types import MappingProxyType
 
 from .errors import LipstreamError, UnknownPhonemeError
@@ -285,6 +285,15 @@ def normalize_phoneme(label: str, source: str = "auto", where: str | None = None
     if canonical is None:
         raise UnknownPhonemeError(f"unknown phoneme {label!r} for source {source!r}", where=where)
     return canonical
+
+
+@cache
+def kept_labels(source: str = "auto") -> frozenset[str]:
+    """The canonical labels that ``source`` reads as themselves: for these, and only these,
+    ``normalize_phoneme(label, source) == label`` (any other label normalizes to a
+    canonical one, so differs from it). A set lookup for callers that re-check labels."""
+    name = _reader_name(source, None)
+    return frozenset(label for label in PHONEMES if _lookup(label, name) == label)
 
 
 def normalize_phonemes(

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from typing import Any, TypeGuard, Union
 
 from .errors import InvalidRequestError, LipstreamError
-from .phonemes import normalize_phoneme
+from .phonemes import kept_labels, normalize_phoneme
 
 SpanLike = Union["PhonemeSpan", Sequence[Any], Mapping[str, Any]]
 EMOTIONS = ("neutral", "happy", "angry", "sad")
@@ -41,6 +41,8 @@ class PhonemeSpan:
 
 
 def _fields(span: SpanLike, where: str) -> tuple[Any, Any, Any, Any]:
+    if type(span) is tuple and len(span) in (3, 4):  # the common case, before the ABC checks
+        return span[0], span[1], span[2], span[3] if len(span) == 4 else None
     if isinstance(span, PhonemeSpan):
         return span.phoneme, span.start, span.end, span.emotion
     if isinstance(span, Mapping):
@@ -101,7 +103,7 @@ def _valid_as_is(span: SpanLike, source: str) -> TypeGuard[PhonemeSpan]:
     if span.emotion is not None and span.emotion not in EMOTIONS:
         return False
     try:
-        return normalize_phoneme(span.phoneme, source=source) == span.phoneme
+        return type(span.phoneme) is str and span.phoneme in kept_labels(source)
     except LipstreamError:
         return False
 

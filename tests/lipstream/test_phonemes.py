@@ -20,9 +20,11 @@ from lipstream.phonemes import (
     PHONEME_INDEX,
     PHONEMES,
     SILENCE,
+    SOURCE_ALIASES,
     SOURCES,
     detect_source,
     is_silence,
+    kept_labels,
     normalize_phoneme,
     normalize_phonemes,
 )
@@ -391,3 +393,21 @@ def test_any_text_gives_a_canonical_label_or_unknown_phoneme_error(label: str, s
 @pytest.mark.parametrize("source", ["auto", "arpabet", "mfa", "timit"])
 def test_canonical_labels_are_fixed_points(source: str) -> None:
     assert [normalize_phoneme(p, source) for p in PHONEMES] == list(PHONEMES)
+
+
+@pytest.mark.parametrize("source", SOURCES + tuple(SOURCE_ALIASES))
+def test_kept_labels_are_exactly_the_labels_that_normalize_to_themselves(source: str) -> None:
+    def kept(label: str) -> bool:
+        try:
+            return normalize_phoneme(label, source) == label
+        except UnknownPhonemeError:
+            return False
+
+    candidates = list(PHONEMES) + ["AH0", "aa", "ax", "SIL", " AA", "@", "p", "zz", ""]
+    expected = {label for label in candidates if kept(label)}
+    assert {label for label in candidates if label in kept_labels(source)} == expected
+
+
+def test_auto_keeps_every_canonical_label_and_sampa_not_arpabet_vowels() -> None:
+    assert kept_labels("auto") == frozenset(PHONEMES)
+    assert "AA" not in kept_labels("sampa") and SILENCE in kept_labels("sampa")

@@ -82,6 +82,23 @@ def _run(
             row += 1
 
 
+@njit(cache=True)
+def _follow_rates(
+    x: np.ndarray,
+    v: np.ndarray,
+    t: float,
+    targets: np.ndarray,
+    omega: np.ndarray,
+    times: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    previous = t
+    for row in range(len(times)):
+        _step(x, v, targets[row], omega, times[row] - previous)
+        previous = times[row]
+        out[row] = x
+
+
 @dataclass
 class DampedState:
     """The filter's value ``x`` and velocity ``v`` (each (n,)) at time ``t`` (s)."""
@@ -123,6 +140,16 @@ class DampedState:
             out,
         )
         return out
+
+    def follow(
+        self, targets: np.ndarray, omega: np.ndarray, times: np.ndarray, out: np.ndarray
+    ) -> None:
+        """Step from ``t`` to each of ``times`` (m,) (ascending, after ``t``) toward that
+        time's row of ``targets`` (m, n) at rates ``omega`` (n,), writing the value there
+        into ``out`` (m, n); ``t`` becomes the last time. All float64 and contiguous: the
+        per-frame loop of a causal rung, one compiled call."""
+        _follow_rates(self.x, self.v, self.t, targets, omega, times, out)
+        self.t = float(times[-1])
 
 
 def filter_raw(

@@ -8,20 +8,23 @@ t_i (``damped``), from rest at the target of t = 0. So the frame at t needs
 the input up to t + lead and no further: it is emitted as soon as the input
 covers it, and since the state is carried frame to frame through the same
 pieces whatever the chunking, streaming gives the offline frames. Past the
-end of the input the last phoneme's target holds.
+end of the input the last phoneme's target holds. One compiled pass
+(``_advance``) merges the frame times with the steps between them, so a call
+costs a kernel dispatch rather than numpy set operations on a few numbers.
 """
 
 from __future__ import annotations
 
-from bisect import bisect_right
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from ..phonemes import PHONEME_INDEX
 from ..timeline import PhonemeSpan
 from .base import SpanSynthesizer, SynthesisRequest, frame_count, shifted_frame_stop
-from .damped import DampedState
+from .damped import DampedState, _step
+from .growable import Growable
 
 
 @dataclass(frozen=True)
@@ -45,8 +48,9 @@ class DampedTimelineSynthesizer(SpanSynthesizer):
         self.request = request
         self.channels = channels
         self.fps = float(request.fps)
-        self._shifted: list[float] = []
-        self._rows: list[int] = []
+        self._shifted = Growable(np.float64)
+        self._rows = Growable(np.int64)
+        self._omega_rows = np.repeat(targets.omegas[:, None], len(channels), axis=1)
         self.state: DampedState | None = None
 
     def _accepted(self, span: PhonemeSpan, sent: int | None) -> None:
@@ -60,43 +64,77 @@ class DampedTimelineSynthesizer(SpanSynthesizer):
         self.finished = True
         return self._emit(frame_count(self.covered_until, self.fps) if self.spans else 0)
 
-    def _span_at(self, shifted_time: float) -> int:
-        """Index of the span whose target holds at (shifted) ``shifted_time``."""
-        return max(0, bisect_right(self._shifted, shifted_time) - 1)
-
     def _emit(self, stop: int) -> np.ndarray:
+        return self.advance_to(stop).astype(np.float32)
+
+    def advance_to(self, stop: int) -> np.ndarray:
+        """The frames from the last emitted to ``stop`` (exclusive) in float64; each must be
+        covered by the input (``frames`` and ``finish`` emit them as float32)."""
         if stop <= self.emitted:
-            return np.zeros((0, len(self.channels)), dtype=np.float32)
+            return np.zeros((0, len(self.channels)))
         self.request.guard.check()
-        times = np.arange(self.emitted, stop, dtype=np.float64) / self.fps
-        pieces: list[np.ndarray] = []
+        values = np.empty((stop - self.emitted, len(self.channels)))
+        first = self.emitted
+        shifted = self._shifted.view()
         if self.state is None:
-            self.state = DampedState.at_rest(
-                self.targets.poses[self._rows[self._span_at(0.0)]], 0.0
+            owner = max(0, int(np.searchsorted(shifted, 0.0, side="right")) - 1)
+            self.state = DampedState.at_rest(self.targets.poses[self._rows.view()[owner]], 0.0)
+            values[0] = self.state.x
+            first += 1
+        if stop > first:
+            state = self.state
+            state.t = _advance(
+                state.x,
+                state.v,
+                state.t,
+                shifted,
+                self._rows.view(),
+                first,
+                stop,
+                self.fps,
+                self.targets.poses,
+                self._omega_rows,
+                values[first - self.emitted :],
             )
-            pieces.append(self.state.x[None].copy())
-            times = times[1:]
-        if len(times):
-            pieces.append(self._advance(times))
         self.emitted = stop
         self.stats["frames"] = stop
-        return np.concatenate(pieces).astype(np.float32)
-
-    def _advance(self, times: np.ndarray) -> np.ndarray:
-        """Step the filter from its time to each of ``times`` (ascending, after it)."""
-        state = self.state
-        assert state is not None
-        first = self._span_at(state.t)
-        shifted = np.asarray(self._shifted[first:])
-        rows = np.asarray(self._rows[first:], dtype=np.int64)
-        steps = shifted[(shifted > state.t) & (shifted < times[-1])]
-        points = np.union1d(times, steps)
-        starts = np.concatenate(([state.t], points[:-1]))
-        owners = np.maximum(np.searchsorted(shifted, starts, side="right") - 1, 0)
-        phonemes = rows[owners]
-        omegas = np.repeat(self.targets.omegas[phonemes][:, None], len(self.channels), axis=1)
-        values = state.run(
-            self.targets.poses[phonemes], omegas, points - starts, np.isin(points, times)
-        )
-        state.t = float(points[-1])
         return values
+
+
+@njit(cache=True)
+def _advance(
+    x: np.ndarray,
+    v: np.ndarray,
+    t: float,
+    shifted: np.ndarray,
+    rows: np.ndarray,
+    first: int,
+    stop: int,
+    fps: float,
+    poses: np.ndarray,
+    omega_rows: np.ndarray,
+    out: np.ndarray,
+) -> float:
+    """Step the filter from ``t`` through frames ``first`` .. ``stop`` - 1 (at k / fps, each
+    after ``t``), recording each in ``out``, and through every step of the targets between
+    (``shifted`` ascending; the span of ``rows[j]`` holds from ``shifted[j]``, the first span
+    also before it): one merged pass, a step at a frame's time taken with the frame. The
+    time of the last frame."""
+    count = len(shifted)
+    following = int(np.searchsorted(shifted, t, side="right"))
+    now = t
+    for row in range(stop - first):
+        frame_t = (first + row) / fps
+        while following < count and shifted[following] < frame_t:
+            owner = rows[max(following - 1, 0)]
+            _step(x, v, poses[owner], omega_rows[owner], shifted[following] - now)
+            now = shifted[following]
+            while following < count and shifted[following] <= now:
+                following += 1
+        owner = rows[max(following - 1, 0)]
+        _step(x, v, poses[owner], omega_rows[owner], frame_t - now)
+        now = frame_t
+        while following < count and shifted[following] <= now:
+            following += 1
+        out[row] = x
+    return now

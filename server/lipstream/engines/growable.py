@@ -38,8 +38,10 @@ class Growable:
             self.data = grown
 
     def append(self, row: float | np.ndarray) -> None:
-        self._reserve(self.held + 1)
-        self.data[self.held] = row
+        held = self.count - self.first
+        if held >= len(self.data):
+            self._reserve(held + 1)
+        self.data[held] = row
         self.count += 1
 
     def extend(self, rows: np.ndarray | list[float] | list[int]) -> None:
@@ -49,7 +51,7 @@ class Growable:
         self.count += len(rows)
 
     def view(self) -> np.ndarray:
-        return self.data[: self.held]
+        return self.data[: self.count - self.first]
 
     def drop_before(self, index: int) -> None:
         """Forget the rows before row ``index``."""

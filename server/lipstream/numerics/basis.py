@@ -39,7 +39,9 @@ class MotionBasis:
 
     def reconstruct(self, coefficients: np.ndarray) -> np.ndarray:
         """Coefficients (n, n_components) back to channel frames (n, n_channels), float64."""
-        return np.asarray(np.asarray(coefficients, dtype=np.float64) @ self.components + self.mean)
+        frames: np.ndarray = np.asarray(coefficients, dtype=np.float64) @ self.components
+        frames += self.mean
+        return frames
 
 
 def fit_basis(

@@ -75,3 +75,20 @@ def test_filter_raw_steps_each_frame_toward_its_raw_value_and_carries_its_state(
     state, second = filter_raw(state, raw[11:], omegas[11:], times[11:])
     np.testing.assert_allclose(np.concatenate([first, second]), expected, rtol=0, atol=1e-12)
     assert state.t == times[-1]
+
+
+def test_follow_equals_running_the_pieces_between_the_times() -> None:
+    rng = np.random.default_rng(4)
+    for _ in range(5):
+        x0, v0 = rng.normal(size=4), rng.normal(size=4)
+        times = 0.3 + np.cumsum(rng.uniform(0.001, 0.05, size=12))
+        targets, omega = rng.normal(size=(12, 4)), rng.uniform(1.0, 60.0, size=4)
+        followed = DampedState(x0.copy(), v0.copy(), 0.3)
+        values = np.empty((12, 4))
+        followed.follow(targets, omega, times, values)
+        ran = DampedState(x0.copy(), v0.copy(), 0.3)
+        steps = np.diff(np.concatenate(([0.3], times)))
+        expected = ran.run(targets, np.tile(omega, (12, 1)), steps, np.ones(12, dtype=bool))
+        assert np.array_equal(values, expected)
+        assert np.array_equal(followed.x, ran.x) and np.array_equal(followed.v, ran.v)
+        assert followed.t == times[-1]

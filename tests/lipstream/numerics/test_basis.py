@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from sklearn.decomposition import PCA
 
-from lipstream.numerics.basis import channel_shares, fit_basis
+from lipstream.numerics.basis import MotionBasis, channel_shares, fit_basis
 
 
 def _frames(seed: int = 0) -> np.ndarray:
@@ -50,3 +50,13 @@ def test_a_channel_that_never_moves_needs_no_component() -> None:
     frames = np.column_stack([_frames()[:, :2], np.full(4000, 0.25)])
     basis, _ = fit_basis(frames, 0.99)
     assert basis.n_components == 2
+
+
+def test_reconstruct_is_the_product_plus_the_mean_and_leaves_its_input() -> None:
+    rng = np.random.default_rng(2)
+    basis = MotionBasis(rng.normal(size=5), np.linalg.qr(rng.normal(size=(5, 3)))[0].T)
+    coefficients = rng.normal(size=(7, 3))
+    kept = coefficients.copy()
+    frames = basis.reconstruct(coefficients)
+    assert np.array_equal(frames, coefficients @ basis.components + basis.mean)
+    assert np.array_equal(coefficients, kept)

@@ -281,7 +281,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         )
         if not (ready == stop and closed) and len(tiles[-1]) != cap:
             tiles.pop()
-        return [[int(node) for node in tile] for tile in tiles] or None
+        return [tile.tolist() for tile in tiles] or None
 
     def _audio_ready_stop(self, start: int, stop: int) -> int:
         """The largest p in [start, stop] such that the audio covers spans start..p-1."""
@@ -341,7 +341,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         animes: list[int] = []
         for searcher, run in groupby(positions, key=lambda position: self.searchers[position]):
             nodes = np.asarray([self.nodes[position] for position in run], dtype=np.int64)
-            animes.extend(int(anime) for anime in searcher.graph.motion_of(nodes))
+            animes.extend(np.asarray(searcher.graph.motion_of(nodes), dtype=np.int64).tolist())
         return animes
 
     # ---- post-processing -----------------------------------------------------------------
@@ -350,6 +350,8 @@ class AnimeGraphSynthesizer(Synthesizer):
         """Time warps of the fragments ``animes`` shown at query ``positions``; the DTW
         problems among them are solved as one batch."""
         problems = [self._alignment(position, anime) for position, anime in zip(positions, animes)]
+        if self.audio is None:  # every warp is linear (``_alignment``): nothing to batch
+            return [problem for problem in problems if isinstance(problem, Warp)]
         batch = iter(dtw_warps([p for p in problems if isinstance(p, Alignment)]))
         return [next(batch) if isinstance(p, Alignment) else p for p in problems]
 
@@ -503,19 +505,19 @@ class AnimeGraphSynthesizer(Synthesizer):
         targets = self.track.evaluate(
             np.minimum(times + self.lead_s, self.covered_until), left_continuous=True
         )
-        pieces = []
+        values = np.empty_like(targets)
+        first = 0
         if self.damped is None:
             self.damped = DampedState.at_rest(targets[0], 0.0)
-            pieces.append(self.damped.x[None].copy())
-            times, targets = times[1:], targets[1:]
-        if len(times):
-            steps = np.diff(np.concatenate(([self.damped.t], times)))
-            omegas = np.broadcast_to(self.model.causal_omegas, targets.shape)
-            pieces.append(self.damped.run(targets, omegas, steps, np.ones(len(times), bool)))
-            self.damped.t = float(times[-1])
+            values[0] = self.damped.x
+            first = 1
+        if len(times) > first:
+            self.damped.follow(
+                targets[first:], self.model.causal_omegas, times[first:], values[first:]
+            )
         self.emitted = stop
         self.stats["frames"] = stop
-        return self.model.to_channels(np.concatenate(pieces))
+        return self.model.to_channels(values)
 
 
 def _samples_needed(frame: int, fps_model: float, fps: float) -> int:

@@ -238,3 +238,19 @@ def test_merged_nodes_keep_every_label_audio_feature_and_edge() -> None:
                 got = graph.audio_costs(np.array([cluster]), label, query, summaries)[0]
                 assert got == pytest.approx(expected)
                 assert graph.members(cluster, label).tolist() == members.tolist()
+
+
+def test_to_channels_is_the_reconstruction_clipped_to_the_recorded_range(
+    model: AnimeGraphModel,
+) -> None:
+    rng = np.random.default_rng(5)
+    coefficients = 3.0 * rng.normal(size=(40, model.n_components))  # far outside, often
+    expected = np.clip(
+        coefficients @ model.basis.components + model.basis.mean,
+        model.channel_low,
+        model.channel_high,
+    ).astype(np.float32)
+    frames = model.to_channels(coefficients)
+    assert frames.dtype == np.float32 and np.array_equal(frames, expected)
+    assert np.any(frames == model.channel_low.astype(np.float32))
+    assert np.any(frames == model.channel_high.astype(np.float32))

@@ -1,0 +1,93 @@
+"""CPU per streaming call at the latency floor: what a session costs the server's engine.
+
+Method: at lead 0 a session sends one ``phonemes`` message per phoneme and the
+server calls its synthesizer's ``feed([span])`` then ``frames()`` once per
+message, at the engine's ``causal`` rung. For each engine, ``passes`` fresh
+requests (60 fps) are fed ``calls`` phonemes of 80 ms each, one per call, as
+client-sent tuples of stressed ARPAbet labels, after one unmeasured warm-up
+request (compiled kernels, caches); each call's CPU time is read on the
+measuring thread's clock (``time.thread_time``), so other processes on a shared
+machine lengthen it only through cache and frequency effects. Reported: the
+median and 90th percentile per call, in µs.
+
+    python -m lipstream.bench.floor_calls --models DIR [--character demo]
+        [--engine NAME ...] [--calls 200] [--passes 3] [--json out.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from ..engines.base import Model, make_request
+from ..models import ModelRegistry
+
+LABELS = tuple("HH AH0 L OW1 W ER1 L D sil M AA1 P B IY1 S T".split())
+PHONEME_S = 0.08
+FPS = 60.0
+
+
+@dataclass(frozen=True)
+class FloorCost:
+    """One engine's CPU per feed+frames call at its causal rung, µs."""
+
+    engine: str
+    calls: int
+    median_us: float
+    p90_us: float
+
+
+def call_costs(model: Model, calls: int) -> list[float]:
+    """CPU seconds of each of ``calls`` feed+frames calls of one causal request."""
+    rung = next(rung for rung in model.fidelity_ladder() if rung.name == "causal")
+    synthesizer = model.start(make_request(FPS, **rung.options))
+    costs, t = [], 0.0
+    for index in range(calls):
+        span = (LABELS[index % len(LABELS)], t, t + PHONEME_S)
+        started = time.thread_time()
+        synthesizer.feed([span])
+        synthesizer.frames()
+        costs.append(time.thread_time() - started)
+        t += PHONEME_S
+    return costs
+
+
+def measure(model: Model, calls: int = 200, passes: int = 3) -> FloorCost:
+    """The engine's ``FloorCost`` over ``passes`` requests, after one warm-up request."""
+    call_costs(model, min(calls, 50))
+    costs = sorted(cost for _ in range(passes) for cost in call_costs(model, calls))
+    return FloorCost(
+        model.engine,
+        len(costs),
+        round(1e6 * statistics.median(costs), 1),
+        round(1e6 * costs[int(0.9 * (len(costs) - 1))], 1),
+    )
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--models", type=Path, required=True, help="model directory")
+    parser.add_argument("--character", default="demo", help="character name")
+    parser.add_argument("--engine", action="append", help="engine (repeatable; default all)")
+    parser.add_argument("--calls", type=int, default=200, help="calls per request")
+    parser.add_argument("--passes", type=int, default=3, help="requests per engine")
+    parser.add_argument("--json", type=Path, help="write the rows here")
+    args = parser.parse_args(argv)
+    registry = ModelRegistry.load(args.models)
+    names = args.engine or registry.characters().get(args.character, [])
+    rows = []
+    for name in names:
+        row = measure(registry.find(name, args.character), args.calls, args.passes)
+        rows.append(row)
+        print(f"{row.engine:15s} median {row.median_us:8.1f} µs   p90 {row.p90_us:8.1f} µs")
+    if args.json is not None:
+        args.json.write_text(json.dumps([asdict(row) for row in rows], indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()
