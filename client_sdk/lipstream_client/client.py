@@ -13,10 +13,10 @@ ends with the ``ConnectionClosed`` subclass that names the close code
 then each request keeps a ``RequestLog`` of its input and progress, and a
 connection that breaks or that the server closes as going away, failed or
 busy (``RESUMABLE_CLOSE_CODES``) is opened again with backoff; each open
-request that was neither cancelled nor interrupted, nor sent ``text``, is
-started again with ``resume`` (the frames it holds) and its whole input, so
-that it receives the frames it lacks and no other (docs/protocol.md,
-*Resuming*). Input sent
+request that was neither cancelled nor interrupted is started again with
+``resume`` (the frames and speech chunks it holds) and its whole input, so
+that it receives the frames and speech it lacks and no other
+(docs/protocol.md, *Resuming*). Input sent
 while the connection is down waits in the log. Sending validates each
 message with the codec first, so a bad argument raises locally
 (``EncodeError``) and never reaches the wire.
@@ -291,6 +291,8 @@ class Stream:
             self._queue.put_nowait(message)
             return False
         if isinstance(message, AudioChunk):
+            if self._log is not None:
+                self._log.on_audio()
             self.audio.append(message)
             return False
         if isinstance(message, Ready):

@@ -111,12 +111,15 @@ class Resume:
     ``frames`` blocks ``0 .. seq - 1``; it re-sends the request's whole input
     after this ``start``. The server sends only the frames from index ``frames``
     on, numbering their blocks from ``seq``. ``fidelity`` is the rung the first
-    ``ready`` named, so that the frames are those of the same rung.
+    ``ready`` named, so that the frames are those of the same rung. ``audio`` is
+    the number of ``audio`` messages the client holds (the speech the server sent
+    for the request's ``text``): the server sends its speech from the next one on.
     """
 
     frames: int
     seq: int
     fidelity: str | None = None
+    audio: int = 0
 
 
 @dataclass(frozen=True, slots=True)

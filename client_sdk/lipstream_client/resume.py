@@ -1,19 +1,21 @@
 """What a client keeps of each request so that it can resume it on a new connection (sans I/O).
 
 Method: a ``RequestLog`` records the request's ``start``, every input message
-the caller gave it (``phonemes``, ``audio``, ``end``) in order, the rung its
-``ready`` named, and the frames received so far (one past the highest frame
-index, and the next block ``seq``). While the connection lives, ``unsent``
+the caller gave it (``phonemes``, ``audio``, ``text``, ``end``) in order, the
+rung its ``ready`` named, the frames received so far (one past the highest
+frame index, and the next block ``seq``) and how many ``audio`` messages of
+the server's speech arrived. While the connection lives, ``unsent``
 hands out each input once, as it is recorded. When the connection is lost,
 ``rewind`` marks everything unsent again and ``replay`` gives what the new
-connection needs: the ``start`` with ``resume`` (the frames and blocks held,
-the rung), then the whole input. Consecutive ``phonemes`` (and ``audio``)
+connection needs: the ``start`` with ``resume`` (the frames, blocks and speech
+chunks held, the rung), then the whole input: a ``text`` is sent again, and
+the server, whose espeak-ng speaks it the same way, sends only the speech
+chunks and frames the client lacks. Consecutive ``phonemes`` (and ``audio``)
 messages are merged into a few large ones, since a server answers the same
 frames however its input is chunked and a burst of many small messages could
 meet its message-rate limit. A request that was cancelled or interrupted is
 not resumable: its remaining frames depend on when the server read those
-messages; nor is one that sent ``text``, whose speech the server sent back
-as ``audio`` that a replay would send again. ``ResumePolicy`` says how hard
+messages. ``ResumePolicy`` says how hard
 the client tries to reconnect.
 """
 
@@ -76,12 +78,13 @@ class RequestLog:
         self.frames = 0
         self.seq = 0
         self.fidelity: str | None = None
+        self.audio = 0
         self.resumes = 0
 
     @property
     def resumable(self) -> bool:
-        """False once ``cancel``, ``interrupt`` or ``text`` was recorded."""
-        return not any(isinstance(message, (Cancel, Interrupt, Text)) for message in self.inputs)
+        """False once ``cancel`` or ``interrupt`` was recorded."""
+        return not any(isinstance(message, (Cancel, Interrupt)) for message in self.inputs)
 
     def record(self, message: RequestInput) -> None:
         self.inputs.append(message)
@@ -100,6 +103,10 @@ class RequestLog:
         self.frames = max(self.frames, block.end_frame)
         self.seq = block.seq + 1
 
+    def on_audio(self) -> None:
+        """One more chunk of the server's speech arrived."""
+        self.audio += 1
+
     def rewind(self) -> None:
         """The connection was lost: nothing recorded has reached a server that still runs."""
         self.sent = 0
@@ -108,7 +115,7 @@ class RequestLog:
         """The ``start`` that resumes the request, then its whole input, merged; counts
         everything sent."""
         self.resumes += 1
-        resume = Resume(frames=self.frames, seq=self.seq, fidelity=self.fidelity)
+        resume = Resume(self.frames, self.seq, self.fidelity, self.audio)
         start = replace(self.start, resume=resume)
         return [start, *merged(self.unsent())]
 

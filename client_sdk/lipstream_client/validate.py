@@ -208,13 +208,14 @@ def _start(payload: Mapping[str, Any], encoding: Encoding) -> Start:
 
 def _resume(value: object) -> Resume:
     where = "resume"
-    obj = read_object(value, where, ("frames", "seq"), ("fidelity",))
+    obj = read_object(value, where, ("frames", "seq"), ("fidelity", "audio"))
     return Resume(
         frames=read_integer(obj["frames"], f"{where}.frames"),
         seq=read_integer(obj["seq"], f"{where}.seq"),
         fidelity=read_text(obj["fidelity"], f"{where}.fidelity", MAX_NAME_LENGTH)
         if present(obj, "fidelity")
         else None,
+        audio=read_integer(obj["audio"], f"{where}.audio") if present(obj, "audio") else 0,
     )
 
 

@@ -73,7 +73,8 @@ def _start(message: Start, encoding: Encoding) -> Payload:
 
 
 def _resume(resume: Resume) -> Payload:
-    return _compact({"frames": resume.frames, "seq": resume.seq, "fidelity": resume.fidelity})
+    fields = {"frames": resume.frames, "seq": resume.seq, "fidelity": resume.fidelity}
+    return _compact({**fields, "audio": resume.audio or None})  # 0, the default: left out
 
 
 def _output(profile: OutputProfile) -> Payload:

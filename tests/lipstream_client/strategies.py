@@ -124,6 +124,7 @@ resumes = st.builds(
     frames=st.integers(0, MAX_INTEGER),
     seq=st.integers(0, MAX_INTEGER),
     fidelity=st.none() | names,
+    audio=st.integers(0, MAX_INTEGER),
 )
 
 

@@ -80,9 +80,25 @@ def test_merging_keeps_order_and_splits_long_runs() -> None:
     assert list(merged(rates)) == rates  # a rate change is not merged (the server refuses it)
 
 
-@pytest.mark.parametrize("ending", [Cancel("a"), Interrupt("a", 0.3), Text("a", "hello")])
-def test_a_cancelled_interrupted_or_text_request_is_not_resumable(
-    ending: Cancel | Interrupt | Text,
+def test_a_text_request_replays_its_text_and_names_the_speech_chunks_it_holds() -> None:
+    log = RequestLog(Start("a", "viseme-lerp", "demo", fps=FPS))
+    said = [Text("a", "hello", "en-us", 150), Text("a", "there")]
+    log.record(said[0])
+    assert log.unsent() == [said[0]]
+    for _ in range(3):
+        log.on_audio()
+    log.on_frames(frames_block(0, 0, 5))
+    log.rewind()
+    log.record(said[1])
+    log.record(End("a"))
+    start, *replayed = log.replay()
+    assert start.resume == Resume(frames=5, seq=1, fidelity=None, audio=3)  # type: ignore[union-attr]
+    assert replayed == [*said, End("a")] and log.resumable
+
+
+@pytest.mark.parametrize("ending", [Cancel("a"), Interrupt("a", 0.3)])
+def test_a_cancelled_or_interrupted_request_is_not_resumable(
+    ending: Cancel | Interrupt,
 ) -> None:
     log = RequestLog(Start("a", "viseme-lerp", "demo"))
     log.record(Phonemes("a", items(SPANS[:3])))

@@ -54,6 +54,7 @@ FIELD_NAMES = (
     "lookahead_ms",
     "resume",
     "fidelity",
+    "audio",
     "v",
     "type",
 )

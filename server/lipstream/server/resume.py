@@ -3,16 +3,20 @@
 Method: synthesis is deterministic and independent of how the input is
 chunked, so a request started again with the same parameters and the same
 input, on any worker or replica serving the same models, produces the same
-frames. A resuming client sends ``start`` with ``resume`` (the frames and
-``frames`` blocks it already holds, and the fidelity rung the first ``ready``
-named), then the request's whole input again. The server runs the request
+frames; and espeak-ng speaks a ``text`` the same way every time (the same
+voice, rate and text give the same samples and phoneme spans), so a request
+that sent ``text`` speaks the same ``audio`` chunks. A resuming client sends
+``start`` with ``resume`` (the frames, ``frames`` blocks and ``audio``
+chunks it already holds, and the fidelity rung the first ``ready`` named),
+then the request's whole input again. The server runs the request
 from the beginning, on that rung rather than the one its own calibration
 would choose for the budget (``pinned_rung``), and passes its output through
 a ``ResumeCursor``: rows before ``resume.frames`` are dropped, blocks that
 keep rows are numbered on from ``resume.seq`` (an interrupt's return to
-rest supersedes frames and goes out whole), and every other message
-(``ready``, ``done``, errors) goes out unchanged. The client thus receives
-every frame once, in order, as an uninterrupted connection would have sent
+rest supersedes frames and goes out whole), the first ``resume.audio``
+``audio`` messages are dropped, and every other message (``ready``,
+``done``, errors) goes out unchanged. The client thus receives every frame
+and speech chunk once, in order, as an uninterrupted connection would have sent
 them. Re-synthesizing the beginning costs the engine's time for input that
 is already bounded by the request limits.
 """
@@ -22,7 +26,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
-from lipstream_client import Frames, Resume
+from lipstream_client import AudioChunk, Frames, Resume
 from lipstream_client.errors import RESUME_MISMATCH
 from lipstream_client.float32 import FLOAT32_BYTES
 
@@ -57,22 +61,28 @@ def pinned_rung(ladder: Sequence[RungEstimate], resume: Resume | None) -> RungEs
 @dataclass
 class ResumeCursor:
     """The frames a resumed request has still to send: from ``frames`` on, blocks from
-    ``seq``. A block that starts before the end of the one before it (an interrupt's return
-    to rest, which supersedes frames) goes out whole."""
+    ``seq``, and its speech from ``audio`` message on. A block that starts before the end
+    of the one before it (an interrupt's return to rest, which supersedes frames) goes out
+    whole."""
 
     frames: int
     seq: int
+    audio: int = 0
     produced: int = 0
 
     @classmethod
     def of(cls, resume: Resume) -> ResumeCursor:
-        return cls(resume.frames, resume.seq)
+        return cls(resume.frames, resume.seq, resume.audio)
 
     def filter(self, outgoing: list[Outgoing]) -> list[Outgoing]:
-        """``outgoing`` without the rows the client holds, blocks renumbered."""
+        """``outgoing`` without the rows and speech chunks the client holds, blocks
+        renumbered."""
         kept: list[Outgoing] = []
         for item in outgoing:
             message = item.message
+            if isinstance(message, AudioChunk) and self.audio > 0:
+                self.audio -= 1
+                continue
             if not isinstance(message, Frames):
                 kept.append(item)
                 continue

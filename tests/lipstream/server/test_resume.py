@@ -6,11 +6,14 @@ the whole input in one message. The resumed blocks must continue the
 uninterrupted run exactly: the rows from ``resume.frames`` on, bit for bit,
 blocks numbered from ``resume.seq``, nothing before. The rung is pinned by
 name, the unknown rung is refused, and an interrupt's return to rest, which
-supersedes frames, goes out whole.
+supersedes frames, goes out whole. A request that sent ``text`` is cut in the
+middle of its second text's speech: the resumed run sends the rest of that
+transcript, speech chunks and blocks alike, and nothing the client held.
 """
 
 from __future__ import annotations
 
+import shutil
 from dataclasses import replace
 
 import numpy as np
@@ -20,6 +23,7 @@ from lipstream.server.catalog import Catalog
 from lipstream.server.request import RequestLimits
 from lipstream.server.session import Session, SessionLimits
 from lipstream_client import (
+    AudioChunk,
     End,
     ErrorMessage,
     Frames,
@@ -31,6 +35,7 @@ from lipstream_client import (
     Resume,
     ServerMessage,
     Start,
+    Text,
 )
 from lipstream_client.errors import RESUME_MISMATCH
 
@@ -146,3 +151,26 @@ def test_an_interrupts_return_to_rest_goes_out_whole(catalog: Catalog) -> None:
         (1, return_block.first_frame, return_block.n_frames)
     ]
     assert resumed[0].data == return_block.data
+
+
+@pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng missing")
+def test_a_resumed_text_request_sends_the_speech_and_frames_the_client_lacks(
+    catalog: Catalog,
+) -> None:
+    start = Start("a", "viseme-lerp", "demo", fps=FPS)
+    texts = [Text("a", "Hello there."), Text("a", "How are you today, my friend?")]
+    first = play(new_session(catalog), [start, *texts, End("a")])
+    speech = [i for i, m in enumerate(first) if isinstance(m, AudioChunk)]
+    second_text = next(
+        i for i in speech if i > speech[0] and not isinstance(first[i - 1], AudioChunk)
+    )
+    cut = second_text + 1  # the client held the first text's output and one chunk of the second's
+    held = first[:cut]
+    [ready] = [m for m in held if isinstance(m, Ready)]
+    held_blocks = blocks(held)
+    held_audio = sum(isinstance(m, AudioChunk) for m in held)
+    assert len(held_blocks) >= 1 and held_audio >= 2 and len(speech) > held_audio + 1
+    resume = Resume(held_blocks[-1].end_frame, held_blocks[-1].seq + 1, ready.fidelity, held_audio)
+    answers = play(new_session(catalog), [replace(start, resume=resume), *texts, End("a")])
+    assert answers[0] == ready
+    assert answers[1:] == first[cut:]

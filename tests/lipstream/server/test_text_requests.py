@@ -1,10 +1,12 @@
 """``text`` requests end to end: the real client against a real uvicorn server on loopback.
 The server speaks with espeak-ng, streams the speech as ``audio`` messages with their start
 times and the frames of what was said; bad text and a failing espeak-ng end that request
-only."""
+only. A text request whose connection the server closes mid-utterance (as a drain that timed
+out does) is resumed by the SDK with no speech chunk or frame lost or repeated."""
 
 from __future__ import annotations
 
+import asyncio
 import shutil
 from collections.abc import Iterator
 from pathlib import Path
@@ -15,7 +17,15 @@ import pytest
 from lipstream.engines.base import Model, frame_count
 from lipstream.speech import worker
 from lipstream.speech.text_frontend import MAX_TEXT_CHARS, speak_text
-from lipstream_client import Client, LipstreamServerError, StreamResult
+from lipstream_client import (
+    AsyncClient,
+    AudioChunk,
+    Client,
+    Frames,
+    LipstreamServerError,
+    ResumePolicy,
+    StreamResult,
+)
 from tests.lipstream.server.harness import Served, serving
 
 pytestmark = pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng missing")
@@ -105,3 +115,44 @@ def test_a_crashing_espeak_is_speech_failed_and_the_server_serves_on(
         monkeypatch.undo()
         assert say(client, "Fine.").done.reason == "end"
         assert say(bystander, "Me too.").done.reason == "end"
+
+
+async def abort_every_connection(served: Served) -> None:
+    """On the server's loop: close this test's connection (and any still closing)."""
+    for connection in list(served.app.state.lifecycle.connections):
+        connection.abort()
+
+
+async def speak_two_texts(served: Served, cut: bool) -> tuple[list[Frames], list[AudioChunk], int]:
+    """Blocks, speech chunks and resumes of a request that says two texts; with ``cut``, the
+    server closes the connection (1001, as at a drain's timeout) after the first block."""
+    async with AsyncClient(served.ws, resume=ResumePolicy(attempts=5, backoff_s=0.05)) as client:
+        stream = await client.start("viseme-lerp", "demo", fps=FPS)
+        await stream.send_text(SENTENCE)
+        first = await asyncio.wait_for(stream.next_block(), 30)
+        assert first is not None
+        if cut:
+            await asyncio.wrap_future(served.call_soon(abort_every_connection(served)))
+            await asyncio.sleep(0.2)  # the second text is sent while the connection is down
+        await stream.send_text("Fine, thank you.")
+        await stream.end()
+        result = await asyncio.wait_for(stream.collect(), 30)
+        return [first, *result.frames], list(result.audio), stream.resumes
+
+
+def test_a_text_request_cut_off_mid_utterance_resumes_with_nothing_lost_or_repeated(
+    served: Served,
+) -> None:
+    calm_blocks, calm_audio, calm_resumes = asyncio.run(speak_two_texts(served, cut=False))
+    blocks, audio, resumes = asyncio.run(speak_two_texts(served, cut=True))
+    assert (calm_resumes, resumes) == (0, 1)
+    assert [b.seq for b in blocks] == list(range(len(blocks)))
+    assert [b.first_frame for b in blocks] == [0] + [b.end_frame for b in blocks[:-1]]
+    assert blocks[-1].end_frame == calm_blocks[-1].end_frame
+    rows = [np.frombuffer(b.data, "<f4") for b in blocks]
+    assert np.array_equal(
+        np.concatenate(rows), np.concatenate([np.frombuffer(b.data, "<f4") for b in calm_blocks])
+    )
+    assert [(c.start, c.pcm16) for c in audio] == [(c.start, c.pcm16) for c in calm_audio]
+    spoken = speak_text(SENTENCE).pcm16 + speak_text("Fine, thank you.").pcm16
+    assert b"".join(c.pcm16 for c in audio) == spoken
