@@ -56,6 +56,8 @@ TIMEOUT_S = 120.0  # bounds on a busy machine, not speeds
 PROBES = 600
 PROBE_PAUSE_S = 0.1
 
+pytestmark = pytest.mark.alone
+
 
 @pytest.fixture(scope="module")
 def proxy(lerp_dir: Path) -> Iterator[str]:

@@ -178,7 +178,7 @@ def test_metrics_of_two_workers_are_summed_exactly(
         runner.run(close_all(held))
         wait_for_value(lambda: open_sessions(base), 0, 30, "open sessions")
         process.terminate()
-        process.wait(timeout=15)
+        process.wait(timeout=60)  # a bound for a busy machine, not a speed
 
     requests = len(results)
     assert requests == REQUESTS_PER_CONNECTION * len(clients)
@@ -272,7 +272,7 @@ def test_several_workers_without_a_directory_get_a_private_one(
         scrapes = [scrape(base) for _ in range(4)]
         runner.run(close_all(clients))
         process.terminate()
-        process.wait(timeout=15)
+        process.wait(timeout=60)  # a bound for a busy machine, not a speed
     assert [value(samples, "lipstream_sessions") for samples in scrapes] == [len(clients)] * 4
     assert not directory.exists()
 
