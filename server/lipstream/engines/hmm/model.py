@@ -56,6 +56,8 @@ RUNGS: tuple[tuple[str, float, float], ...] = (  # name, lag_ms, window_ms
 )
 NO_WAIT_BELOW_MS = 100.0
 """Rungs with a lag up to this hear audio late instead of waiting for a feature window."""
+CACHED_RATES = 8
+"""Trajectory terms kept for this many (rate, coupled) pairs; a request fps is any number."""
 MFCC_FIELDS = ("window_s", "n_mels", "n_coefficients", "f_min", "f_max", "pre_emphasis")
 
 
@@ -85,14 +87,32 @@ class HmmModel(Model):
         if bool(extra["has_audio"]):
             self.vocal = Gaussians(self.stored["vocal_means"], self.stored["vocal_covariances"])
         self.uses_audio = self.vocal is not None
-        ratio = self.hmm_fps / self.synthesis_fps
-        self.dynamics = trajectory.dynamics(self.stored["means"], self.stored["covariances"], ratio)
-        self.stepwise_dynamics = trajectory.dynamics(
-            self.stored["means"], self.stored["covariances"], ratio, coupled=False
-        )
+        self._dynamics: dict[tuple[float, bool], trajectory.Dynamics] = {}
+        self.dynamics = self.dynamics_at(self.synthesis_fps)
+        self.stepwise_dynamics = self.dynamics_at(self.synthesis_fps, coupled=False)
         self.audio_weight = float(manifest.hyperparameters["audio_weight"])
         self.default_lag_ms = float(manifest.hyperparameters["lag_ms"])
         self.default_window_ms = float(manifest.hyperparameters["window_ms"])
+
+    def solve_fps(self, fps: float) -> float:
+        """The rate the trajectory of a request at ``fps`` is solved at (``synthesizer``):
+        the smallest whole multiple of ``fps`` that is at least ``hmm_fps`` (every HMM frame
+        keeps a trajectory frame, so no state is skipped), at most the synthesis rate."""
+        multiple = fps * max(1, math.ceil(self.hmm_fps / fps - 1e-9))
+        return min(float(multiple), self.synthesis_fps)
+
+    def dynamics_at(self, rate: float, coupled: bool = True) -> trajectory.Dynamics:
+        """Eq. 5's terms for a trajectory solved at ``rate`` (kept for ``CACHED_RATES``
+        rates)."""
+        key = (float(rate), coupled)
+        found = self._dynamics.get(key)
+        if found is None:
+            means, covariances = self.stored["means"], self.stored["covariances"]
+            found = trajectory.dynamics(means, covariances, self.hmm_fps / rate, coupled)
+            if len(self._dynamics) >= CACHED_RATES:
+                self._dynamics.clear()
+            self._dynamics[key] = found
+        return found
 
     @property
     def accepts_audio_only(self) -> bool:
@@ -129,16 +149,24 @@ class HmmModel(Model):
             values.append(float(value))
         return values[0], values[1]
 
-    def plan(self, options: Mapping[str, Any]) -> Plan:
+    def plan(self, options: Mapping[str, Any], fps: float | None = None) -> Plan:
+        """The schedule of a request at ``fps`` (None: at the synthesis rate, the one the
+        lookahead is stated for). Blocks are solved at ``solve_fps(fps)``, ``window_ms`` long
+        with half a block of future context, trimmed so that the frame's wait is never longer
+        than at the synthesis rate: the rung's lookahead holds at every fps. A frame at a time
+        (``window_ms`` 0) stays at the synthesis rate: each step of that recursion pulls
+        towards the state's pose by a gain set by the velocity precision, so its pull per
+        second, unlike Eq. 5's whole-window optimum, changes with the rate."""
         lag_ms, window_ms = self.resolve(options)
         lag = None if lag_ms is None else round(lag_ms / 1000.0 * self.hmm_fps)
+        frame_at_a_time = window_ms == 0.0  # its recursion's pull per second depends on the rate
+        rate = self.synthesis_fps if fps is None or frame_at_a_time else self.solve_fps(fps)
         if window_ms is None:
             block, future = None, 0
         elif window_ms == 0.0:
             block, future = 1, 0
         else:
-            block = max(1, round(window_ms / 1000.0 * self.synthesis_fps))
-            future = block // 2
+            block, future = _blocks(window_ms / 1000.0, rate, self.synthesis_fps)
         drive = options.get("drive", AUTO)
         if drive not in DRIVES:
             raise InvalidRequestError(
@@ -153,11 +181,13 @@ class HmmModel(Model):
         delay = 0
         if lag_ms is not None and lag_ms <= NO_WAIT_BELOW_MS and window_ms == 0.0:
             delay = math.ceil((self.mfcc.window_s / 2.0 + 1e-3) * self.hmm_fps)
-        return Plan(lag, block, future, delay, str(drive))
+        return Plan(lag, block, future, delay, rate, str(drive))
 
     def lookahead_for(self, options: Mapping[str, Any]) -> Lookahead | None:
+        """The lookahead at the synthesis rate, which bounds the wait at every fps
+        (``plan``)."""
         plan = self.plan(options)
-        wait = plan.wait_s(self.hmm_fps, self.synthesis_fps)
+        wait = plan.wait_s(self.hmm_fps)
         if wait is None:
             return None
         audio = 0.0 if plan.delay or self.vocal is None else self.mfcc.window_s / 2.0
@@ -181,7 +211,7 @@ class HmmModel(Model):
         return resolved_rung(self.fidelity_ladder(), options, self.resolve)
 
     def synthesizer(self, request: SynthesisRequest) -> Synthesizer:
-        return HmmSynthesizer(self, request, self.plan(request.options))
+        return HmmSynthesizer(self, request, self.plan(request.options, request.fps))
 
     def render(
         self,
@@ -223,6 +253,17 @@ class HmmModel(Model):
         reader = ArrayReader(arrays, str(path / ARRAYS_NAME))
         checked = check_arrays(reader, len(manifest.channels), has_audio)
         return cls(manifest, checked)
+
+
+def _blocks(window_s: float, rate: float, synthesis_fps: float) -> tuple[int, int]:
+    """(block, future) in frames at ``rate`` for blocks ``window_s`` long with half a block of
+    future context, cut so that (block − 1 + future) / rate, the wait they add, is at most
+    what it is at ``synthesis_fps``."""
+    widest = max(1, round(window_s * synthesis_fps))
+    budget = (widest - 1 + widest // 2) / synthesis_fps
+    frames = math.floor(budget * rate + 1e-9)  # block − 1 + future may not exceed this
+    block = max(1, min(round(window_s * rate), frames + 1))
+    return block, max(0, min(block // 2, frames - (block - 1)))
 
 
 def mfcc_fields(config: MfccConfig = DEFAULT_MFCC) -> dict[str, Any]:

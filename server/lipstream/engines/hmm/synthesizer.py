@@ -1,9 +1,17 @@
 """Streaming synthesis: observations → fixed-lag Viterbi → windowed trajectory → frames.
 
 Three clocks. HMM frame j is at j / R (R = the model's ``hmm_fps``);
-synthesis frame k at k / R_s (R_s = the training fps), whose state is that of
-HMM frame ⌊k R / R_s⌋; output frame i at i / fps is synthesis frame
-⌊i R_s / fps⌋ (sample and hold, so every fps samples one trajectory).
+trajectory frame k at k / f, whose state is that of HMM frame ⌊k R / f⌋; output
+frame i at i / fps is trajectory frame ⌊i f / fps⌋ (sample and hold). The solve
+rate f (``HmmModel.solve_fps``) is the synthesis rate R_s (the training fps)
+when fps ≥ R_s, as the recorded motion has no finer detail; below it, the
+smallest whole multiple of fps that is at least R, so that every output frame
+is a trajectory frame and no HMM frame lacks one (at 60 fps with R_s = 120:
+f = 60, and the half of the R_s frames that would never be sent is not solved).
+A frame at a time (B = 1, below) f stays R_s (``HmmModel.plan``).
+The velocity statistics are rescaled to f (``trajectory``), so every rate solves
+the same motion; trajectory frames at R_s and at f differ by the
+discretisation only.
 
 Observations of HMM frame j: the phoneme and emotion of the span with
 start < j / R ≤ end (frame 0: the first span), known once the spans cover j / R
@@ -26,7 +34,7 @@ final, so a streamed request that means both must say so up front.
 Decoding: ``numerics.trellis.FixedLagViterbi`` with the rung's lag L (HMM
 frames; None: commits only where survivors merge, and at the end).
 
-Trajectory: blocks of B synthesis frames; block b is solved over frames
+Trajectory: blocks of B trajectory frames; block b is solved over frames
 [bB − 2, (b+1)B + F) once their states are committed (F frames of future
 context), its first two frames pinned to the committed ones
 (``trajectory.solve``), and keeps [bB, (b+1)B). B = 1, F = 0 is a frame at a
@@ -35,7 +43,8 @@ recursion stable);
 B None solves the whole utterance once at the end.
 
 Finality: the output frame at t is final once the input covers
-t + L / R + (B − 1 + F) / R_s, which guarantees its block is solvable. Every
+t + L / R + (B − 1 + F) / f, which guarantees its block is solvable; B and F are
+chosen at f so that this wait is at most the one at R_s, the rung's lookahead. Every
 decision depends only on the input up to then, so streaming in any chunking
 gives the offline frames.
 """
@@ -77,23 +86,25 @@ _EPS = 1e-9
 @dataclass(frozen=True)
 class Plan:
     """A rung's schedule: Viterbi lag (HMM frames, None: unlimited), block and future
-    context (synthesis frames; block None: one solve at the end), feature delay (frames)."""
+    context (trajectory frames at ``rate``; block None: one solve at the end), feature delay
+    (frames), and the rate the trajectory is solved at (Hz)."""
 
     lag: int | None
     block: int | None
     future: int
     delay: int
+    rate: float
     drive: str = AUTO
 
-    def wait_s(self, hmm_fps: float, synthesis_fps: float) -> float | None:
+    def wait_s(self, hmm_fps: float) -> float | None:
         """Seconds of input past t that the frame at t waits for (None: the end)."""
         if self.lag is None or self.block is None:
             return None
-        return self.lag / hmm_fps + (self.block - 1 + self.future) / synthesis_fps
+        return self.lag / hmm_fps + (self.block - 1 + self.future) / self.rate
 
 
 def hmm_frame(k: np.ndarray | int, ratio: float) -> np.ndarray:
-    """The HMM frame of synthesis frame(s) ``k`` (ratio = R / R_s)."""
+    """The HMM frame of trajectory frame(s) ``k`` (ratio = R / f)."""
     return np.floor(np.asarray(k, dtype=np.float64) * ratio + _EPS).astype(np.int64)
 
 
@@ -154,7 +165,10 @@ class HmmSynthesizer(Synthesizer):
         self.model = model
         self.request = request
         self.plan = plan
-        self.ratio = model.hmm_fps / model.synthesis_fps
+        self.rate = plan.rate
+        self.ratio = model.hmm_fps / plan.rate
+        self.dynamics = model.dynamics_at(plan.rate)
+        self.stepwise_dynamics = model.dynamics_at(plan.rate, coupled=False)
         self.spans: list[PhonemeSpan] = []
         self.starts: list[float] = []
         self.labels: list[int] = []
@@ -165,7 +179,7 @@ class HmmSynthesizer(Synthesizer):
         self.decoder = FixedLagViterbi(model.log_start, model.log_transition, plan.lag)
         self.observed = 0
         self.states = np.zeros(0, dtype=np.int64)
-        self.curve = np.zeros((0, model.dynamics.dim))
+        self.curve = np.zeros((0, self.dynamics.dim))
         self.emitted = 0
         self.finished = False
         self.stats = {"frames": 0, "states": 0}
@@ -274,10 +288,10 @@ class HmmSynthesizer(Synthesizer):
         if not self.finished:
             return None
         duration = self._duration()
-        return frame_count(duration, self.model.synthesis_fps) if duration > 0 else 0
+        return frame_count(duration, self.rate) if duration > 0 else 0
 
     def _ready_synthesis_frames(self) -> int:
-        """Synthesis frames whose state is committed."""
+        """Trajectory frames whose state is committed."""
         if not len(self.states):
             return 0
         return math.ceil((len(self.states) - _EPS) / self.ratio)
@@ -309,7 +323,7 @@ class HmmSynthesizer(Synthesizer):
             frames = np.arange(first, end)
             states = self.states[np.minimum(hmm_frame(frames, self.ratio), len(self.states) - 1)]
             pins = self.curve[first:start] if start > 0 else None
-            solved = trajectory.solve(self.model.dynamics, states, pins)
+            solved = trajectory.solve(self.dynamics, states, pins)
             self.curve = np.concatenate([self.curve, solved[start - first : stop - first]])
 
     def _recurse(self, start: int, stop: int) -> None:
@@ -317,7 +331,7 @@ class HmmSynthesizer(Synthesizer):
         states = self.states[np.minimum(hmm_frame(np.arange(start, stop), self.ratio),
                                         len(self.states) - 1)]  # fmt: skip
         previous = self.curve[start - 1] if start > 0 else None
-        fresh = trajectory.recurse(self.model.stepwise_dynamics, states, previous)
+        fresh = trajectory.recurse(self.stepwise_dynamics, states, previous)
         self.curve = np.concatenate([self.curve, fresh])
 
     # -- output -----------------------------------------------------------------------------
@@ -327,7 +341,7 @@ class HmmSynthesizer(Synthesizer):
         if self.finished:
             duration = self._duration()
             return frame_count(duration, fps) if duration > 0 else 0
-        wait = self.plan.wait_s(self.model.hmm_fps, self.model.synthesis_fps)
+        wait = self.plan.wait_s(self.model.hmm_fps)
         covered = self._covered_s()
         if wait is None or covered < wait:
             return 0
@@ -342,7 +356,7 @@ class HmmSynthesizer(Synthesizer):
         self._solve()
         fps = self.request.fps
         index = np.arange(self.emitted, stop)
-        k = np.floor(index * (self.model.synthesis_fps / fps) + _EPS).astype(np.int64)
+        k = np.floor(index * (self.rate / fps) + _EPS).astype(np.int64)
         k = k[k < len(self.curve)]
         frames = self.model.basis.reconstruct(self.curve[k]).astype(np.float32)
         self.emitted += len(k)

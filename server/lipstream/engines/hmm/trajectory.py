@@ -16,9 +16,14 @@ in O(T·D³). ``numerics.banded.windowed_least_squares`` takes one
 precision per window and so cannot carry the pose-velocity cross-covariance C
 that Brand's states keep; the blocks are assembled here and solved there.
 
-Frame rate: solving at rate R_s for states learned at rate R scales the velocity
-statistics by ρ = R / R_s (velocity per frame shrinks with shorter frames): the
-mean velocity by ρ, the covariance by S K S with S = diag(I, ρI).
+Frame rate: the states' velocity is the difference per HMM frame (rate R). Solved
+at rate f, a frame's difference y_t − y_{t−1} spans 1 / f instead of 1 / R, so for
+the same motion (locally linear over a frame) it is ρ = R / f times the learned
+velocity: z_f = S z with S = diag(I, ρI). The statistics of z_f are then the mean
+S m (pose mean unchanged, velocity mean × ρ) and the covariance S K S: the
+pose block unchanged, the pose-velocity cross-covariance × ρ, the velocity block
+× ρ². ρ < 1 above the HMM rate (the synthesis rate R_s, 120 Hz with R = 40 Hz:
+ρ = 1/3), ρ = 2/3 at 60 fps; the pose marginal, and so Π, never changes.
 
 A frame at a time (the causal rungs) the solve is the recursion
 y_t = G_cur⁻¹ (r_cur − G_cross y_{t−1}), whose gain G_cur⁻¹ (C + E) can exceed 1

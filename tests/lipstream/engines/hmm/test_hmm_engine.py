@@ -14,6 +14,7 @@ from lipstream.bench.hmm_first_frame import first_frame, pcm16_of
 from lipstream.corpus import Corpus
 from lipstream.engines.base import Model, frame_count
 from lipstream.engines.hmm import HmmEngine, HmmModel
+from lipstream.engines.hmm.model import RUNGS
 from lipstream.errors import InvalidRequestError
 from lipstream_client import AsyncClient, LipstreamServerError, StreamResult
 from tests.live_server import LiveServer, live_server, save_models
@@ -105,6 +106,49 @@ def test_trajectory_windows_join_without_a_jump_in_pose_or_velocity(
         joins = np.arange(block, len(frames) - 1, block) - 1  # second difference centred on a join
         elsewhere = np.delete(acceleration, joins)
         assert acceleration[joins].max() <= 0.5 * elsewhere.max()
+
+
+def test_the_trajectory_is_solved_at_the_output_rate_below_the_synthesis_rate(
+    model: HmmModel,
+) -> None:
+    """The smallest whole multiple of fps at or above hmm_fps (40 Hz), at most R_s (120)."""
+    assert (model.hmm_fps, model.synthesis_fps) == (40.0, 120.0)
+    expected = {240.0: 120.0, 120.0: 120.0, 100.0: 100.0, 60.0: 60.0, 50.0: 50.0,
+                30.0: 60.0, 25.0: 50.0, 24.0: 48.0, 10.0: 40.0, 7.0: 42.0}  # fmt: skip
+    assert {fps: model.solve_fps(fps) for fps in expected} == expected
+    for name, lag_ms, window_ms in RUNGS:
+        options = {"lag_ms": lag_ms, "window_ms": window_ms}
+        at_synthesis_rate = model.plan(options)
+        if window_ms:  # blocks of window_ms at R_s with half a block of future, as before
+            block = round(window_ms / 1000.0 * 120.0)
+            assert (at_synthesis_rate.block, at_synthesis_rate.future) == (block, block // 2)
+        lookahead = model.lookahead_for(options)
+        assert lookahead is not None
+        for fps in (*expected, 33.0, 90.0, 119.0):
+            plan = model.plan(options, fps)
+            assert plan == at_synthesis_rate if fps >= 120.0 else plan.lag == at_synthesis_rate.lag
+            assert plan.rate == (120.0 if window_ms == 0.0 else model.solve_fps(fps)), name
+            wait = plan.wait_s(model.hmm_fps)
+            assert wait is not None and wait <= lookahead.seconds + 1e-12, (name, fps)
+
+
+def test_below_the_synthesis_rate_the_frames_stay_close_to_the_synthesis_rate_ones(
+    model: HmmModel, heldout: Corpus
+) -> None:
+    """At R_s / 2 the trajectory is solved at 60 Hz: the same quadratic (Eq. 5) on a grid
+    half as fine, so it differs from the 120 Hz solution at the 60 Hz frames only where the
+    motion changes within a frame. Bound: the RMS difference is under a fifth of the
+    motion's own RMS and under a tenth of the synthesis error against the recording."""
+    for line in heldout.utterances[:6]:
+        for spans, audio in ((line.phones, None), ([], line.audio)):
+            fine = model.synthesize(spans, 120.0, audio, line.emotion, lag_ms=None, window_ms=None)
+            coarse = model.synthesize(spans, 60.0, audio, line.emotion, lag_ms=None, window_ms=None)
+            sampled = fine.frames[::2][: len(coarse.frames)]
+            assert len(coarse.frames) == frame_count(line.duration, 60.0) == len(sampled)
+            change = _rms(coarse.frames, sampled)
+            motion = _rms(sampled, sampled.mean(axis=0))
+            error = _rms(sampled, line.frames[::2])
+            assert 0.0 < change < 0.2 * motion and change < 0.1 * error, (change, motion, error)
 
 
 def test_the_model_stores_its_training_figures(model: HmmModel) -> None:

@@ -90,3 +90,25 @@ def test_uncoupled_terms_drop_only_the_pose_velocity_covariance() -> None:
         _dense(means, blocky, states),
         atol=1e-8,
     )
+
+
+def test_velocity_statistics_scale_by_the_rate_ratio_as_worked_by_hand() -> None:
+    """One pose dimension, learned at R = 40 Hz, solved at f = 60 Hz: ρ = R / f = 2/3, so
+    the velocity mean 0.6 becomes 0.4, the cross-covariance 0.3 becomes 0.2 and the velocity
+    variance 0.5 becomes 0.5 · 4/9; the pose statistics stay."""
+    means = np.array([[1.0, 0.6]])
+    covariances = np.array([[[2.0, 0.3], [0.3, 0.5]]])
+    terms = trajectory.dynamics(means, covariances, ratio=40.0 / 60.0)
+    a, c, e = 2.0, 0.2, 0.5 * 4.0 / 9.0  # the covariance at 60 Hz
+    det = a * e - c * c
+    p_pose, p_cross, p_velocity = e / det, -c / det, a / det  # its 2 × 2 inverse
+    mu, v = 1.0, 0.4
+    np.testing.assert_allclose(terms.pose_precision[0], [[1.0 / a]])
+    np.testing.assert_allclose(terms.pose_rhs[0], [mu / a])
+    np.testing.assert_allclose(terms.g_previous[0], [[p_velocity]])
+    np.testing.assert_allclose(terms.g_cross[0], [[-(p_cross + p_velocity)]])
+    np.testing.assert_allclose(terms.g_current[0], [[p_pose + 2 * p_cross + p_velocity]])
+    pm_pose = p_pose * mu + p_cross * v
+    pm_velocity = p_cross * mu + p_velocity * v
+    np.testing.assert_allclose(terms.r_previous[0], [-pm_velocity])
+    np.testing.assert_allclose(terms.r_current[0], [pm_pose + pm_velocity])
