@@ -25,6 +25,7 @@ changes once it is decided.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
 
@@ -88,21 +89,23 @@ class PairIndex:
 def plan_join(
     left: int,
     right: int,
-    labels: tuple[int, int],
     poses: Poses,
-    pairs: PairIndex,
+    pairs_of: Callable[[], tuple[tuple[int, int], PairIndex]],
     limit: int | None,
     blend: bool,
     forward: bool = False,
 ) -> Join:
-    """The join from fragment anime ``left`` to ``right`` shown for query ``labels``
-    (``forward``: blended inside ``right``'s span only)."""
+    """The join from fragment anime ``left`` to ``right`` (``forward``: blended inside
+    ``right``'s span only); ``pairs_of`` gives the query labels of the join and the
+    recorded pairs to blend it with, asked for only when a pair is sought (a causal
+    request, blending forward, never seeks one)."""
     if int(poses.successor[left]) == right:
         return Join(JoinKind.SEAMLESS)
     if not blend:
         return Join(JoinKind.CUT)
     if forward:
         return Join(JoinKind.FORWARD)
+    labels, pairs = pairs_of()
     candidates = pairs.pairs(labels[0], labels[1], limit)
     if not len(candidates):
         return Join(JoinKind.EXTEND)

@@ -383,13 +383,11 @@ class AnimeGraphSynthesizer(Synthesizer):
         join: Join | None = None
         if position > 0:
             left = self.track.placements[position - 1].anime
-            labels, pairs = self._join_pairs(position)
             join = plan_join(
                 left,
                 anime,
-                labels,
                 self.model.poses,
-                pairs,
+                lambda: self._join_pairs(position),
                 self.model.max_candidates,
                 self.options.blend,
                 forward=self.options.causal,
