@@ -37,6 +37,7 @@ from __future__ import annotations
 
 from bisect import bisect_left
 from collections.abc import Mapping, Sequence
+from operator import attrgetter
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -62,6 +63,7 @@ if TYPE_CHECKING:
     from .model import ExpressiveDpModel
 
 _STARTED = 1e-9
+_start = attrgetter("start")
 
 
 class PathSynthesizer(RenderingSynthesizer):
@@ -109,14 +111,18 @@ class PathSynthesizer(RenderingSynthesizer):
 
     def commit(self) -> None:
         """Commit every node the input (and the lag) now decides."""
-        layers = [self.layer(k) for k in range(len(self.path), len(self.spans))]
+        decided = len(self.path)
+        layers = [self.layer(k) for k in range(decided, len(self.spans))]
         priced, cost = extend_path(
             self.model.space, layers, self.excluded, self.lag, self.path, self.finished,
             self.request.guard,
         )  # fmt: skip
         self.stats["candidates"] += priced
         self.stats["path_cost"] += cost
-        self.stats["nodes"] = " ".join(map(str, self.path))
+        # appended, not rebuilt: rebuilding the whole path each call grew with the request
+        added = " ".join(map(str, self.path[decided:]))
+        if added:
+            self.stats["nodes"] = f"{self.stats['nodes']} {added}".lstrip()
 
     def finish(self) -> np.ndarray:
         unreached = sorted(index for index in self.constraints if index >= self.sent)
@@ -223,9 +229,9 @@ def raw_curve(
     model: ExpressiveDpModel, spans: list[PhonemeSpan], path: list[int], at: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """r at times ``at`` (ascending) and the latest span begun at each."""
-    starts = [span.start for span in spans]
     begun = np.array(
-        [max(bisect_left(starts, float(t) - _STARTED) - 1, 0) for t in at], dtype=np.int64
+        [max(bisect_left(spans, float(t) - _STARTED, key=_start) - 1, 0) for t in at],
+        dtype=np.int64,
     )
     values = np.empty((len(at), model.nodes.frames.shape[1]))
     for k in np.unique(begun).tolist():
