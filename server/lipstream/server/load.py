@@ -98,8 +98,9 @@ class LoadMonitor:
         overdue, is a lag the loop has now (a batch of callbacks that runs for seconds holds
         the ticks back, and would otherwise leave the sample stale). The busy fraction runs
         to the last tick: admission asks for a sample per handshake, and reading the thread's
-        CPU clock is a system call, which in a storm of handshakes was a quarter of the
-        loop's time (``py-spy``, docs/server.md's *Storm*)."""
+        CPU clock is a system call, where ``py-spy`` found a quarter of the loop's time in a
+        storm of handshakes on a loaded machine (a system call is also where a preempted
+        process is caught, so that share is an upper bound; docs/server.md)."""
         ticks = list(self.ticks)
         overdue_s = 0.0
         if self._loop is not None and threading.get_ident() == self._thread:
