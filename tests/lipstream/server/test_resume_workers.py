@@ -73,14 +73,19 @@ async def stream_utterance(url: str, kill: Path | None) -> tuple[list[Frames], i
         return received + list(result.frames), stream.resumes
 
 
-async def stream_until_everything_dies(url: str, victims: list[int]) -> ResumeFailed:
-    """The error of a request whose server (supervisor and workers) is killed mid-utterance."""
+async def stream_until_everything_dies(url: str, supervisor: int) -> ResumeFailed:
+    """The error of a request whose server (supervisor and workers) is killed mid-utterance.
+
+    The supervisor is stopped before its workers are listed: it may still be
+    starting the replacement of the worker killed earlier, and a worker it
+    starts after the listing would survive and serve the resumed request."""
     policy = ResumePolicy(attempts=GIVE_UP_AFTER, backoff_s=0.01, max_backoff_s=0.05)
     async with AsyncClient(url, resume=policy) as client:
         stream = await client.start("viseme-lerp", "demo", fps=FPS)
         await stream.send_phonemes(SPANS[:HALF])
         await asyncio.wait_for(stream.next_block(), EVENTUALLY_S)
-        for pid in victims:  # the supervisor first, so that it starts no new worker
+        os.kill(supervisor, signal.SIGSTOP)
+        for pid in [supervisor, *descendants(supervisor)]:
             with contextlib.suppress(ProcessLookupError):  # a helper that exited by itself
                 os.kill(pid, signal.SIGKILL)
         with pytest.raises(ResumeFailed) as failed:
@@ -103,8 +108,7 @@ def test_killing_the_worker_mid_utterance_loses_no_frame(
         calm, calm_resumes = asyncio.run(stream_utterance(url, None))
         killed, resumes = asyncio.run(stream_utterance(url, directory))
         # With no worker left, the client gives up after its attempts.
-        everything = [process.pid, *descendants(process.pid)]
-        gave_up = asyncio.run(stream_until_everything_dies(url, everything))
+        gave_up = asyncio.run(stream_until_everything_dies(url, process.pid))
     assert gave_up.attempts == GIVE_UP_AFTER and gave_up.code in (None, 1006)
     assert isinstance(gave_up.last, LipstreamClientError)
     assert (calm_resumes, resumes) == (0, 1)
