@@ -134,7 +134,10 @@ class SentTail:
             grown[: len(self.rows)] = self.rows
             self.rows = grown
         kept = rows[-self.capacity :]
-        self.rows[np.arange(stop - len(kept), stop) % self.capacity] = kept
+        at = (stop - len(kept)) % self.capacity
+        first = min(len(kept), self.capacity - at)
+        self.rows[at : at + first] = kept[:first]
+        self.rows[: len(kept) - first] = kept[first:]
         self.stop = stop
 
     def row(self, index: int) -> np.ndarray:
@@ -285,26 +288,29 @@ class ActiveRequest:
         values than its limit, or the connection (whose other requests hold ``others``) to
         more than ``session_max_values``."""
         values = self.output_values_until(end_s)
-        made = (
-            f"input up to {end_s:g} s makes {values // self.spec.profile.n_channels} frames of "
-            f"{self.spec.profile.n_channels} channels, {values} values"
-        )
         limit = self.limits.max_values
         if limit is not None and values > limit:
             raise RequestError(
-                f"{made}, beyond the server's limit of {limit} values per request",
+                f"{self._made(end_s, values)}, beyond the server's limit of {limit} values per request",
                 code=OUTPUT_TOO_LARGE,
                 where="items",
                 details={"max_request_values": limit, "values": values},
             )
         if session_max_values is not None and others + values > session_max_values:
             raise RequestError(
-                f"{made}; with the {others} values of the connection's other requests that "
+                f"{self._made(end_s, values)}; with the {others} values of the connection's other requests that "
                 f"exceeds the server's limit of {session_max_values} values per connection",
                 code=OUTPUT_TOO_LARGE,
                 where="items",
                 details={"max_session_values": session_max_values, "values": others + values},
             )
+
+    def _made(self, end_s: float, values: int) -> str:
+        width = self.spec.profile.n_channels
+        return (
+            f"input up to {end_s:g} s makes {values // width} frames of {width} channels, "
+            f"{values} values"
+        )
 
     def add_audio(self, chunk: AudioChunk, now: float) -> list[Outgoing]:
         if self.audio_rate is not None and chunk.sample_rate != self.audio_rate:
