@@ -143,7 +143,7 @@ def lipstream_serve(
         # /readyz answers once one worker is ready; each logs its own startup.
         wait_for(
             lambda: process.poll() is not None or started(log) == workers,
-            30,
+            READY_TIMEOUT_S,
             "every worker started",
         )
         if process.poll() is not None or not ready(base):

@@ -291,15 +291,17 @@ class ActiveRequest:
         limit = self.limits.max_values
         if limit is not None and values > limit:
             raise RequestError(
-                f"{self._made(end_s, values)}, beyond the server's limit of {limit} values per request",
+                f"{self._made(end_s, values)}, beyond the server's limit of {limit} values "
+                "per request",
                 code=OUTPUT_TOO_LARGE,
                 where="items",
                 details={"max_request_values": limit, "values": values},
             )
         if session_max_values is not None and others + values > session_max_values:
             raise RequestError(
-                f"{self._made(end_s, values)}; with the {others} values of the connection's other requests that "
-                f"exceeds the server's limit of {session_max_values} values per connection",
+                f"{self._made(end_s, values)}; with the {others} values of the connection's "
+                f"other requests that exceeds the server's limit of {session_max_values} values "
+                "per connection",
                 code=OUTPUT_TOO_LARGE,
                 where="items",
                 details={"max_session_values": session_max_values, "values": others + values},

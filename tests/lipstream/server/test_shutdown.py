@@ -23,6 +23,7 @@ from lipstream.server.catalog import Catalog
 from lipstream_client import Done, End, ErrorMessage, PhonemeItem, Phonemes, Ready, Start
 from tests.helpers import free_port, serve_command
 from tests.lipstream.server.harness import client, frame_rows, serving
+from tests.live_server import READY_TIMEOUT_S
 
 SPANS = [("HH", 0.0, 0.1), ("AY1", 0.1, 0.4), ("M", 0.4, 0.5), ("sil", 0.5, 0.7)]
 ITEMS = tuple(PhonemeItem(*span) for span in SPANS)
@@ -98,7 +99,7 @@ def lipstream_serve(models: Path, *flags: str) -> Iterator[tuple[subprocess.Pope
     )
     base = f"http://127.0.0.1:{port}"
     try:
-        wait_for(lambda: readyz(base) == 200, timeout=30)
+        wait_for(lambda: readyz(base) == 200, timeout=READY_TIMEOUT_S)
         yield process, base
     finally:
         if process.poll() is None:
