@@ -76,10 +76,13 @@ class Matcher(Protocol):
         previous: int | None,
         ranking: Ranking,
         ranked_from: int | None = None,
+        final_only: bool = False,
     ) -> list[np.ndarray]:
         """GreedyMatching of ``query[start:stop]``: the tiles' node ids, in order. The first
         tile may continue ``previous``; its join is ranked from ``ranked_from`` when given
-        (a node shown before in another view), else from ``previous``."""
+        (a node shown before in another view), else from ``previous``. ``final_only``
+        leaves out a last tile that reaches ``stop`` below ``cap`` (unchosen: the input
+        after ``stop`` may still extend it)."""
 
 
 @dataclass
@@ -127,17 +130,19 @@ class SuffixMatcher:
         previous: int | None,
         ranking: Ranking,
         ranked_from: int | None = None,
+        final_only: bool = False,
     ) -> list[np.ndarray]:
         labels = np.asarray(query[start:stop], dtype=np.int64)
         joined = previous if ranked_from is None else ranked_from
-        nodes, ends = greedy_tiles(
+        nodes, ends, pending = greedy_tiles(
             labels,
             cap or 0,
             -1 if previous is None else previous,
             -1 if joined is None else joined,
+            final_only,
             *self.kernel_arguments(ranking, ranking.summaries_of(start, stop - start)),
         )
-        if len(nodes) < stop - start:
+        if len(nodes) < stop - start and not pending:
             missing(query, start + len(nodes))
         bounds = [0, *ends.tolist()]
         return [nodes[low:high] for low, high in zip(bounds, bounds[1:])]
@@ -277,8 +282,11 @@ class LayeredMatcher:
         previous: int | None,
         ranking: Ranking,
         ranked_from: int | None = None,
+        final_only: bool = False,
     ) -> list[np.ndarray]:
-        return tiles_by_matches(self, query, start, stop, cap, previous, ranking, ranked_from)
+        return tiles_by_matches(
+            self, query, start, stop, cap, previous, ranking, ranked_from, final_only
+        )
 
 
 def tiles_by_matches(
@@ -290,8 +298,9 @@ def tiles_by_matches(
     previous: int | None,
     ranking: Ranking,
     ranked_from: int | None = None,
+    final_only: bool = False,
 ) -> list[np.ndarray]:
-    """Algorithm 2's loop, one ``match`` and ``choose`` per tile."""
+    """Algorithm 2's loop, one ``match`` and ``choose`` per tile (``Matcher.tiles``)."""
     tiles: list[np.ndarray] = []
     position = start
     joined = previous if ranked_from is None else ranked_from
@@ -299,6 +308,8 @@ def tiles_by_matches(
         match = matcher.match(query, position, stop, cap, previous)
         if match.length == 0:
             missing(query, position)
+        if final_only and position + match.length == stop and not (cap and match.length == cap):
+            break
         nodes = matcher.choose(match, query, joined, ranking)
         tiles.append(nodes)
         previous = joined = int(nodes[-1])

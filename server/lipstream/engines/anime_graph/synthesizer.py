@@ -278,13 +278,12 @@ class AnimeGraphSynthesizer(Synthesizer):
             return None
         ranking = self.ranking(searcher.graph, start, ready)
         cap = self.options.max_tile
+        final_only = not (ready == stop and closed)
         tiles = self._timed(
             lambda: searcher.matcher.tiles(
-                self.query, start, ready, cap, continuing, ranking, ranked
+                self.query, start, ready, cap, continuing, ranking, ranked, final_only
             )
         )
-        if not (ready == stop and closed) and len(tiles[-1]) != cap:
-            tiles.pop()
         return [tile.tolist() for tile in tiles] or None
 
     def _audio_ready_stop(self, start: int, stop: int) -> int:
@@ -365,7 +364,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         query = self._labels.view()
         self.search_guard.check()
         started = time.perf_counter()
-        chosen, _ = greedy_tiles(query[placed:], 1, previous, previous, *arguments)
+        chosen, _, _ = greedy_tiles(query[placed:], 1, previous, previous, False, *arguments)
         spent = time.perf_counter() - started  # what ``_timed`` adds, without its wrapping
         self.search_guard.spent_s += spent
         self.stats["search_ms"] += 1000.0 * spent
