@@ -60,7 +60,7 @@ from ..work import WorkGuard
 from .animes import summarize
 from .blending import Join, JoinKind, PairIndex, plan_join
 from .costs import Ranking
-from .emission import causal_frames
+from .emission import causal_frames, channel_frames
 from .graph import SearchGraph
 from .options import SearchOptions
 from .pq import SearchTimeout, pq_window
@@ -333,6 +333,8 @@ class AnimeGraphSynthesizer(Synthesizer):
                 self.stats["tiles"] += 1
         if self.options.search == "pq":
             self.stats["tiles"] = self.stats["jumps"] + 1 if self.nodes else 0
+        if placed == len(self.nodes):
+            return
         positions = range(placed, len(self.nodes))
         animes = self._animes(positions)
         for position, anime, warp in zip(positions, animes, self._warps(positions, animes)):
@@ -515,18 +517,23 @@ class AnimeGraphSynthesizer(Synthesizer):
         if stop <= self.emitted:
             return np.zeros((0, len(self.model.channels)), dtype=np.float32)
         self.guard.check()
-        values = _interpolate(
+        model = self.model
+        frames = _interpolated_frames(
             self.emitted,
             stop,
-            self.model.fps / self.fps,
+            model.fps / self.fps,
             self.smoothed.view(),
             self.smoothed.first,
             self.smoothed.count,
+            model.basis.components,
+            model.basis.mean,
+            model.channel_low,
+            model.channel_high,
         )
         self.emitted = stop
         self.stats["frames"] = stop
         self._forget_consumed()
-        return self.model.to_channels(values)
+        return frames
 
     def _forget_consumed(self) -> None:
         """Drop the samples no later frame reads: raw ones already smoothed, smoothed ones
@@ -609,6 +616,25 @@ def _interpolate(
                 fraction * curve[high - offset, column]
             )
     return values
+
+
+@njit(cache=True)
+def _interpolated_frames(
+    first: int,
+    stop: int,
+    ratio: float,
+    curve: np.ndarray,
+    offset: int,
+    count: int,
+    components: np.ndarray,
+    mean: np.ndarray,
+    low: np.ndarray,
+    high: np.ndarray,
+) -> np.ndarray:
+    """``_interpolate``'s values as channel frames (``emission.channel_frames``), in one
+    call."""
+    values = _interpolate(first, stop, ratio, curve, offset, count)
+    return channel_frames(values, components, mean, low, high)
 
 
 @njit(cache=True)
