@@ -83,7 +83,7 @@ def _run(
 
 
 @njit(cache=True)
-def _follow_rates(
+def follow_rates(
     x: np.ndarray,
     v: np.ndarray,
     t: float,
@@ -148,7 +148,7 @@ class DampedState:
         time's row of ``targets`` (m, n) at rates ``omega`` (n,), writing the value there
         into ``out`` (m, n); ``t`` becomes the last time. All float64 and contiguous: the
         per-frame loop of a causal rung, one compiled call."""
-        _follow_rates(self.x, self.v, self.t, targets, omega, times, out)
+        follow_rates(self.x, self.v, self.t, targets, omega, times, out)
         self.t = float(times[-1])
 
 

@@ -25,11 +25,13 @@ changes once it is decided.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
 
 import numpy as np
+from numba import njit
 
 from .costs import Poses
 from .graph import csr_offsets
@@ -109,9 +111,62 @@ def plan_join(
     candidates = pairs.pairs(labels[0], labels[1], limit)
     if not len(candidates):
         return Join(JoinKind.EXTEND)
-    meeting = poses.last[candidates]
-    cost = np.linalg.norm(meeting - poses.last[left], axis=1) + np.linalg.norm(
-        meeting - poses.first[right], axis=1
-    )
-    chosen = int(candidates[int(np.argmin(cost))])
+    if poses.last.dtype == poses.first.dtype == np.float64 and poses.last.shape[1] <= _BLOCK:
+        chosen = int(_cheapest_meeting(candidates, poses.last, poses.first, left, right))
+    else:
+        meeting = poses.last[candidates]
+        cost = np.linalg.norm(meeting - poses.last[left], axis=1) + np.linalg.norm(
+            meeting - poses.first[right], axis=1
+        )
+        chosen = int(candidates[int(np.argmin(cost))])
     return Join(JoinKind.PAIR, chosen, int(poses.successor[chosen]))
+
+
+_BLOCK = 128
+"""Rows up to this long numpy sums in one block (longer ones it splits in halves)."""
+
+
+@njit(cache=True)
+def _cheapest_meeting(
+    candidates: np.ndarray, last: np.ndarray, first: np.ndarray, left: int, right: int
+) -> int:
+    """The candidate m minimizing |last[m] - last[left]| + |last[m] - first[right]|, the
+    first of equals: the numpy expression's value bit for bit (``_distance`` sums as
+    ``np.linalg.norm`` does), without its temporaries, since a join is planned on the
+    streamed call that decides a tile."""
+    squares = np.empty(last.shape[1])
+    best, best_cost = -1, np.inf
+    for candidate in candidates:
+        cost = _distance(last[candidate], last[left], squares) + _distance(
+            last[candidate], first[right], squares
+        )
+        if best < 0 or cost < best_cost or (np.isnan(cost) and not np.isnan(best_cost)):
+            best, best_cost = candidate, cost
+    return best
+
+
+@njit(cache=True)
+def _distance(a: np.ndarray, b: np.ndarray, squares: np.ndarray) -> float:
+    """Euclidean distance with numpy's row sum of at most ``_BLOCK`` squares: 0 + their
+    sum in order when under 8, else eight running sums combined as a tree, then the rest
+    in order."""
+    for column in range(len(a)):
+        squares[column] = (a[column] - b[column]) * (a[column] - b[column])
+    count = len(squares)
+    if count < 8:
+        total = 0.0
+        for column in range(count):
+            total += squares[column]
+        return math.sqrt(0.0 + total)
+    sums = squares[:8].copy()
+    column = 8
+    while column < count - count % 8:
+        for lane in range(8):
+            sums[lane] += squares[column + lane]
+        column += 8
+    total = ((sums[0] + sums[1]) + (sums[2] + sums[3])) + (
+        (sums[4] + sums[5]) + (sums[6] + sums[7])
+    )
+    for rest in range(column, count):
+        total += squares[rest]
+    return math.sqrt(0.0 + total)

@@ -27,7 +27,7 @@ exactly, while with a cap the jumps can exceed the minimum.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, TypeAlias
 
 import numpy as np
 
@@ -36,6 +36,11 @@ from .graph import AnimeGraph, SearchGraph, csr_offsets
 from .index import SuffixIndex
 from .layered import cheapest, reach
 from .suffix_search import greedy_tiles
+
+GreedyArguments: TypeAlias = tuple[
+    int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+    bool, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+]  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -71,10 +76,13 @@ class Matcher(Protocol):
         previous: int | None,
         ranking: Ranking,
         ranked_from: int | None = None,
+        final_only: bool = False,
     ) -> list[np.ndarray]:
         """GreedyMatching of ``query[start:stop]``: the tiles' node ids, in order. The first
         tile may continue ``previous``; its join is ranked from ``ranked_from`` when given
-        (a node shown before in another view), else from ``previous``."""
+        (a node shown before in another view), else from ``previous``. ``final_only``
+        leaves out a last tile that reaches ``stop`` below ``cap`` (unchosen: the input
+        after ``stop`` may still extend it)."""
 
 
 @dataclass
@@ -122,15 +130,28 @@ class SuffixMatcher:
         previous: int | None,
         ranking: Ranking,
         ranked_from: int | None = None,
+        final_only: bool = False,
     ) -> list[np.ndarray]:
         labels = np.asarray(query[start:stop], dtype=np.int64)
-        index, poses = self.index, ranking.poses
         joined = previous if ranked_from is None else ranked_from
-        nodes, ends = greedy_tiles(
+        nodes, ends, pending = greedy_tiles(
             labels,
             cap or 0,
             -1 if previous is None else previous,
             -1 if joined is None else joined,
+            final_only,
+            *self.kernel_arguments(ranking, ranking.summaries_of(start, stop - start)),
+        )
+        if len(nodes) < stop - start and not pending:
+            missing(query, start + len(nodes))
+        bounds = [0, *ends.tolist()]
+        return [nodes[low:high] for low, high in zip(bounds, bounds[1:])]
+
+    def kernel_arguments(self, ranking: Ranking, summaries: np.ndarray) -> GreedyArguments:
+        """``greedy_tiles``'s arguments after the query, cap and previous nodes, for a query
+        whose audio ``summaries`` are given (``Ranking.summaries_of``)."""
+        index, poses = self.index, ranking.poses
+        return (
             self.limit or 0,
             index.transitions,
             index.low,
@@ -140,19 +161,16 @@ class SuffixMatcher:
             self.graph.labels,
             self.graph.successor,
             ranking.uses_audio,
-            ranking.summaries_of(start, stop - start),
+            summaries,
             ranking.anime_summaries,
             poses.last,
             poses.first,
             poses.successor,
         )
-        if len(nodes) < stop - start:
-            _missing(query, start + len(nodes))
-        bounds = [0, *ends.tolist()]
-        return [nodes[low:high] for low, high in zip(bounds, bounds[1:])]
 
 
-def _missing(query: Labels, position: int) -> None:
+def missing(query: Labels, position: int) -> None:
+    """Raise the error for a query phoneme no tile can spell."""
     raise ValueError(f"phoneme {query[position]} at query position {position} is not in the graph")
 
 
@@ -264,8 +282,11 @@ class LayeredMatcher:
         previous: int | None,
         ranking: Ranking,
         ranked_from: int | None = None,
+        final_only: bool = False,
     ) -> list[np.ndarray]:
-        return tiles_by_matches(self, query, start, stop, cap, previous, ranking, ranked_from)
+        return tiles_by_matches(
+            self, query, start, stop, cap, previous, ranking, ranked_from, final_only
+        )
 
 
 def tiles_by_matches(
@@ -277,15 +298,18 @@ def tiles_by_matches(
     previous: int | None,
     ranking: Ranking,
     ranked_from: int | None = None,
+    final_only: bool = False,
 ) -> list[np.ndarray]:
-    """Algorithm 2's loop, one ``match`` and ``choose`` per tile."""
+    """Algorithm 2's loop, one ``match`` and ``choose`` per tile (``Matcher.tiles``)."""
     tiles: list[np.ndarray] = []
     position = start
     joined = previous if ranked_from is None else ranked_from
     while position < stop:
         match = matcher.match(query, position, stop, cap, previous)
         if match.length == 0:
-            _missing(query, position)
+            missing(query, position)
+        if final_only and position + match.length == stop and not (cap and match.length == cap):
+            break
         nodes = matcher.choose(match, query, joined, ranking)
         tiles.append(nodes)
         previous = joined = int(nodes[-1])

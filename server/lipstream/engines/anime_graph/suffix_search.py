@@ -68,6 +68,7 @@ def greedy_tiles(
     cap: int,
     previous: int,
     joined: int,
+    final_only: bool,
     limit: int,
     transitions: np.ndarray,
     low: np.ndarray,
@@ -82,21 +83,28 @@ def greedy_tiles(
     last: np.ndarray,
     first: np.ndarray,
     pose_successor: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Tile ``query`` (l,) labels: (anime per position (l,), tile end positions (T,)).
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Tile ``query`` (l,) labels: (anime per position (l,), tile end positions (T,), and
+        whether a last tile was left out as pending).
 
-    ``cap`` <= 0 leaves tiles uncapped; ``previous`` (-1: none) is the anime before the
-    query, which the first tile may continue, and ``joined`` the one its join is ranked
-    from (they differ only when the query enters a view that lacks the anime shown
-    last); ``query_summaries`` (l, D) are used when ``use_audio``; ``successor`` is the
-    graph's, ``last``/``first``/``pose_successor`` the ``costs.Poses``. Stops early, with
-    the last end short of l, at a phoneme the corpus never says."""
+        ``cap`` <= 0 leaves tiles uncapped; ``previous`` (-1: none) is the anime before the
+        query, which the first tile may continue, and ``joined`` the one its join is ranked
+        from (they differ only when the query enters a view that lacks the anime shown
+        last); ``query_summaries`` (l, D) are used when ``use_audio``; ``successor`` is the
+        graph's, ``last``/``first``/``pose_successor`` the ``costs.Poses``. Stops early, with
+        the last end short of l, at a phoneme the corpus never says. ``final_only`` leaves out a
+    last tile that reaches the end of ``query`` below ``cap`` (more input may extend it):
+    it is found without ranking its occurrences, which is most of a call."""
     nodes = np.empty(len(query), dtype=np.int64)
     tile_ends = np.empty(len(query), dtype=np.int64)
     position = n_tiles = 0
+    pending = False
     while position < len(query):
         length = _continued(previous, query, position, len(query), cap, labels, successor)
         chosen = successor[previous] if length else -1
+        if length and final_only and _grows(position, length, len(query), cap):
+            pending = True
+            break
         if length == 0:
             state = 0
             while position + length < len(query) and (cap <= 0 or length < cap):
@@ -108,6 +116,9 @@ def greedy_tiles(
                     break
                 state, length = following, length + 1
             if length == 0:
+                break
+            if final_only and _grows(position, length, len(query), cap):
+                pending = True
                 break
             starts = _occurrences(state, length, limit, low, high, ends, text_anime)
             chosen = starts[
@@ -129,4 +140,11 @@ def greedy_tiles(
         tile_ends[n_tiles] = position
         n_tiles += 1
         previous = joined = chosen + length - 1
-    return nodes[:position], tile_ends[:n_tiles]
+    return nodes[:position], tile_ends[:n_tiles], pending
+
+
+@njit(cache=True)
+def _grows(position: int, length: int, known: int, cap: int) -> bool:
+    """Whether a tile of ``length`` at ``position`` may still grow: it reaches the end of
+    the ``known`` query, below the cap."""
+    return position + length == known and (cap <= 0 or length < cap)

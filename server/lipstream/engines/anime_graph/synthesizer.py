@@ -58,13 +58,15 @@ from ..damped import DampedState
 from ..growable import Growable
 from ..work import WorkGuard
 from .animes import summarize
-from .blending import Join, PairIndex, plan_join
+from .blending import Join, JoinKind, PairIndex, plan_join
 from .costs import Ranking
+from .emission import causal_frames, channel_frames
 from .graph import SearchGraph
 from .options import SearchOptions
 from .pq import SearchTimeout, pq_window
 from .request_audio import RequestAudio
-from .search import Matcher, count_jumps
+from .search import GreedyArguments, Matcher, SuffixMatcher, count_jumps, missing
+from .suffix_search import greedy_tiles
 from .track import MotionTrack, Placement
 from .views import WHOLE, GraphView
 from .warp import Alignment, Warp, dtw_warps, linear_warp
@@ -73,6 +75,7 @@ if TYPE_CHECKING:
     from .model import AnimeGraphModel
 
 _SNAP = 1e-9
+_SEAMLESS, _CUT, _FORWARD = Join(JoinKind.SEAMLESS), Join(JoinKind.CUT), Join(JoinKind.FORWARD)
 _Result = TypeVar("_Result")
 
 
@@ -120,6 +123,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         self.damped: DampedState | None = None
         self.lead_s = model.causal_shift_s(options.lead_ms)
         self.guard = request.guard
+        self._greedy_arguments: dict[str, GreedyArguments] = {}
         self.search_guard = WorkGuard(options.pq_budget_s, time.perf_counter, _search_timeout)
         self.stats: dict[str, Any] = {
             "frames": 0,
@@ -187,7 +191,7 @@ class AnimeGraphSynthesizer(Synthesizer):
 
     def frames(self) -> np.ndarray:
         if self.options.causal:
-            self._decide()
+            self._decide_causal()
             return self._emit_causal()
         self._advance()
         return self._emit()
@@ -274,13 +278,12 @@ class AnimeGraphSynthesizer(Synthesizer):
             return None
         ranking = self.ranking(searcher.graph, start, ready)
         cap = self.options.max_tile
+        final_only = not (ready == stop and closed)
         tiles = self._timed(
             lambda: searcher.matcher.tiles(
-                self.query, start, ready, cap, continuing, ranking, ranked
+                self.query, start, ready, cap, continuing, ranking, ranked, final_only
             )
         )
-        if not (ready == stop and closed) and len(tiles[-1]) != cap:
-            tiles.pop()
         return [tile.tolist() for tile in tiles] or None
 
     def _audio_ready_stop(self, start: int, stop: int) -> int:
@@ -330,11 +333,61 @@ class AnimeGraphSynthesizer(Synthesizer):
                 self.stats["tiles"] += 1
         if self.options.search == "pq":
             self.stats["tiles"] = self.stats["jumps"] + 1 if self.nodes else 0
+        if placed == len(self.nodes):
+            return
         positions = range(placed, len(self.nodes))
         animes = self._animes(positions)
         for position, anime, warp in zip(positions, animes, self._warps(positions, animes)):
             self.guard.check()
             self._place(position, anime, warp)
+
+    def _decide_causal(self) -> None:
+        """``_decide`` for a causal request, where every tile is one final phoneme: while
+        the new positions and the one before them share a view searched by suffix
+        automaton, one ``greedy_tiles`` call picks their nodes and each is placed with its
+        linear warp and forward join, without the general path's per-tile set-up."""
+        placed, total = len(self.nodes), self._labels.count
+        if placed == total:
+            return
+        searcher = self.searchers[placed]
+        matcher = searcher.matcher
+        if (self.run_starts and self.run_starts[-1] >= placed) or not isinstance(
+            matcher, SuffixMatcher
+        ):
+            self._decide()
+            return
+        self.guard.check()
+        previous = self.nodes[-1] if placed else -1
+        arguments = self._greedy_arguments.get(searcher.view.name)
+        if arguments is None:
+            ranking = self.ranking(searcher.graph, placed, total)
+            arguments = matcher.kernel_arguments(ranking, ranking.summaries_of(placed, 0))
+            self._greedy_arguments[searcher.view.name] = arguments
+        query = self._labels.view()
+        self.search_guard.check()
+        started = time.perf_counter()
+        chosen, _, _ = greedy_tiles(query[placed:], 1, previous, previous, False, *arguments)
+        spent = time.perf_counter() - started  # what ``_timed`` adds, without its wrapping
+        self.search_guard.spent_s += spent
+        self.stats["search_ms"] += 1000.0 * spent
+        if len(chosen) < total - placed:
+            missing(query, placed + len(chosen))
+        successor, animes = matcher.graph.successor, self.model.animes
+        pose_successor, blend = self.model.poses.successor, self.options.blend
+        for anime in chosen.tolist():
+            self.guard.check()
+            position = len(self.nodes)
+            span = self.spans[position]
+            warp = linear_warp(span.start, span.end, animes.start[anime], animes.end[anime])
+            join = None
+            if position:
+                self.stats["jumps"] += int(successor[previous]) != anime
+                join = _SEAMLESS if int(pose_successor[previous]) == anime else _FORWARD
+                join = join if blend or join is _SEAMLESS else _CUT
+            self.nodes.append(anime)
+            self.stats["tiles"] += 1
+            self.track.append(Placement(span.start, span.end, anime, warp), join)
+            previous = anime
 
     def _animes(self, positions: range) -> list[int]:
         """The anime each decided node at ``positions`` shows, one batch per run."""
@@ -464,18 +517,23 @@ class AnimeGraphSynthesizer(Synthesizer):
         if stop <= self.emitted:
             return np.zeros((0, len(self.model.channels)), dtype=np.float32)
         self.guard.check()
-        values = _interpolate(
+        model = self.model
+        frames = _interpolated_frames(
             self.emitted,
             stop,
-            self.model.fps / self.fps,
+            model.fps / self.fps,
             self.smoothed.view(),
             self.smoothed.first,
             self.smoothed.count,
+            model.basis.components,
+            model.basis.mean,
+            model.channel_low,
+            model.channel_high,
         )
         self.emitted = stop
         self.stats["frames"] = stop
         self._forget_consumed()
-        return self.model.to_channels(values)
+        return frames
 
     def _forget_consumed(self) -> None:
         """Drop the samples no later frame reads: raw ones already smoothed, smoothed ones
@@ -499,23 +557,33 @@ class AnimeGraphSynthesizer(Synthesizer):
         if stop <= self.emitted:
             return np.zeros((0, len(self.model.channels)), dtype=np.float32)
         self.guard.check()
-        times = np.arange(self.emitted, stop, dtype=np.float64) / self.fps
-        targets = self.track.evaluate(
-            np.minimum(times + self.lead_s, self.covered_until), left_continuous=True
-        )
-        values = np.empty_like(targets)
-        first = 0
+        at_rest = self.damped is None
         if self.damped is None:
-            self.damped = DampedState.at_rest(targets[0], 0.0)
-            values[0] = self.damped.x
-            first = 1
-        if len(times) > first:
-            self.damped.follow(
-                targets[first:], self.model.causal_omegas, times[first:], values[first:]
-            )
+            components = self.model.n_components
+            self.damped = DampedState(np.empty(components), np.zeros(components), 0.0)
+        state = self.damped
+        model = self.model
+        frames = causal_frames(
+            self.emitted,
+            stop,
+            self.fps,
+            self.lead_s,
+            self.covered_until,
+            state.x,
+            state.v,
+            state.t,
+            at_rest,
+            model.causal_omegas,
+            model.basis.components,
+            model.basis.mean,
+            model.channel_low,
+            model.channel_high,
+            *self.track.arrays(),
+        )
+        state.t = (stop - 1) / self.fps
         self.emitted = stop
         self.stats["frames"] = stop
-        return self.model.to_channels(values)
+        return frames
 
 
 def _samples_needed(frame: int, fps_model: float, fps: float) -> int:
@@ -548,6 +616,25 @@ def _interpolate(
                 fraction * curve[high - offset, column]
             )
     return values
+
+
+@njit(cache=True)
+def _interpolated_frames(
+    first: int,
+    stop: int,
+    ratio: float,
+    curve: np.ndarray,
+    offset: int,
+    count: int,
+    components: np.ndarray,
+    mean: np.ndarray,
+    low: np.ndarray,
+    high: np.ndarray,
+) -> np.ndarray:
+    """``_interpolate``'s values as channel frames (``emission.channel_frames``), in one
+    call."""
+    values = _interpolate(first, stop, ratio, curve, offset, count)
+    return channel_frames(values, components, mean, low, high)
 
 
 @njit(cache=True)

@@ -10,13 +10,14 @@ except with forward joins (causal rungs), which correct only the span after
 them; those rungs also evaluate left-continuously (a span's end belongs to
 it), so a decided span is evaluated up to its end.
 Placements and joins are also kept as flat, growing arrays, so one compiled
-call (``_evaluate``) samples any stretch of the track: it runs on every
+call (``evaluate_track``) samples any stretch of the track: it runs on every
 streamed message, where per-fragment numpy calls cost more than the samples.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TypeAlias
 
 import numpy as np
 from numba import njit
@@ -31,6 +32,10 @@ _KIND_CODES = {JoinKind.PAIR: _PAIR, JoinKind.EXTEND: _EXTEND, JoinKind.FORWARD:
 FORWARD_BLEND_SHARE = 0.5
 """A forward join blends the previous recording out over this share of the next span, so a
 short span (a closure) still reaches its own fragment's pose."""
+TrackArrays: TypeAlias = tuple[
+    np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+    np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float,
+]  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -83,9 +88,13 @@ class MotionTrack:
     def evaluate(self, times: np.ndarray, left_continuous: bool = False) -> np.ndarray:
         """Track values (n, n_pc) at ascending ``times``; a time belongs to the last
         placement starting at or before it (``left_continuous``: strictly before it)."""
+        return evaluate_track(np.asarray(times, dtype=np.float64), *self.arrays(), left_continuous)
+
+    def arrays(self) -> TrackArrays:
+        """The track as the flat arrays that ``evaluate_track`` (and kernels calling it) read,
+        in its argument order after ``times``."""
         animes, motion = self.animes, self.animes.motion
-        return _evaluate(
-            np.asarray(times, dtype=np.float64),
+        return (
             self._starts.view(),
             self._ends.view(),
             self._animes.view(),
@@ -101,12 +110,11 @@ class MotionTrack:
             motion.values,
             motion.offsets,
             float(motion.rate),
-            left_continuous,
         )
 
 
 @njit(cache=True)
-def _evaluate(
+def evaluate_track(
     times: np.ndarray,
     starts: np.ndarray,
     ends: np.ndarray,

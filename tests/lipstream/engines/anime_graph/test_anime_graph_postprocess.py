@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from lipstream.engines.anime_graph import AnimeGraphEngine, AnimeGraphModel
-from lipstream.engines.anime_graph.blending import JoinKind
+from lipstream.engines.anime_graph.blending import JoinKind, PairIndex, plan_join
 from lipstream.engines.anime_graph.clustering import cluster_animes
+from lipstream.engines.anime_graph.costs import Poses
 from lipstream.engines.anime_graph.graph import ClusterGraph
 from lipstream.engines.anime_graph.smoothing import (
     energy_below,
@@ -254,3 +255,57 @@ def test_to_channels_is_the_reconstruction_clipped_to_the_recorded_range(
     assert frames.dtype == np.float32 and np.array_equal(frames, expected)
     assert np.any(frames == model.channel_low.astype(np.float32))
     assert np.any(frames == model.channel_high.astype(np.float32))
+
+
+@pytest.mark.parametrize("dimensions", [3, 8, 13, 21])
+def test_a_pair_join_takes_the_first_cheapest_meeting_as_numpy_ranks_it(dimensions: int) -> None:
+    rng = np.random.default_rng(dimensions)
+    first, last = rng.normal(size=(2, 60, dimensions))
+    last[3] = last[7] = (last[59] + first[40]) / 2.0  # tied cheapest for the join 59 -> 40
+    successor = np.append(np.arange(1, 60), -1)
+    pairs = PairIndex.build(np.zeros(60, dtype=np.int64), successor, 1)
+    poses = Poses(first, last, successor)
+    for left, right in [(59, 40), (10, 20), (58, 5)]:
+        candidates = pairs.pairs(0, 0)
+        meeting = last[candidates]
+        cost = np.linalg.norm(meeting - last[left], axis=1) + np.linalg.norm(
+            meeting - first[right], axis=1
+        )
+        expected = int(candidates[int(np.argmin(cost))])
+        join = plan_join(left, right, poses, lambda: ((0, 0), pairs), None, True)
+        assert (join.kind, join.left_example, join.right_example) == (
+            JoinKind.PAIR,
+            expected,
+            expected + 1,
+        )
+    assert plan_join(59, 40, poses, lambda: ((0, 0), pairs), None, True).left_example == 3
+
+
+def test_causal_frames_are_the_track_followed_by_the_damped_filter(
+    model: AnimeGraphModel,
+) -> None:
+    spans = make_spans(np.random.default_rng(2), 12)
+    synthesizer = model.start(fps=FPS, causal=True, lead_ms=40.0)
+    streamed = []
+    for span in spans:
+        synthesizer.feed([span])
+        streamed.append(synthesizer.frames())
+    frames = np.concatenate([*streamed, synthesizer.finish()])
+    times = np.arange(len(frames)) / FPS
+    lead = model.causal_shift_s(40.0)
+    targets = synthesizer.track.evaluate(
+        np.minimum(times + lead, spans[-1].end), left_continuous=True
+    )
+    # the filter stepped frame by frame in closed form, from rest on the first target
+    x, v = targets[0].copy(), np.zeros(model.n_components)
+    values = [x.copy()]
+    for row in range(1, len(times)):
+        omega, dt = model.causal_omegas, times[row] - times[row - 1]
+        error = x - targets[row]
+        pull = v + omega * error
+        decay = np.exp(-omega * dt)
+        x, v = targets[row] + (error + pull * dt) * decay, (v - omega * pull * dt) * decay
+        values.append(x.copy())
+    expected = model.to_channels(np.array(values))
+    assert frames.shape == expected.shape
+    assert np.abs(frames.astype(np.float64) - expected).max() < 1e-5

@@ -372,6 +372,13 @@ def test_compiled_tiles_equal_the_match_and_choose_loop(
         matcher, query, 0, len(query), cap or None, previous, ranking, ranked_from
     )
     assert [t.tolist() for t in compiled] == [t.tolist() for t in reference]
+    # final_only: the same tiles less a last one that reaches the end below the cap
+    final = [t.tolist() for t in reference]
+    if final and len(final[-1]) != (cap or None):
+        final.pop()
+    args = (query, 0, len(query), cap or None, previous, ranking, ranked_from, True)
+    assert [t.tolist() for t in matcher.tiles(*args)] == final
+    assert [t.tolist() for t in tiles_by_matches(matcher, *args)] == final
 
 
 def test_a_phoneme_missing_from_the_corpus_is_reported_by_position() -> None:
