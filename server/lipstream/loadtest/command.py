@@ -40,7 +40,10 @@ def _target_options(parser: argparse.ArgumentParser, *, required_target: bool) -
         parser.add_argument(
             "--engine",
             required=True,
-            help="engine of every session; capacity also takes 'all' (each of the character's)",
+            help=(
+                "engine of every session; capacity also takes a comma-separated list, or 'all' "
+                "(each of the character's)"
+            ),
         )
         parser.add_argument("--character", required=True, help="character of every session")
     else:
@@ -143,9 +146,10 @@ def _capacity(args: argparse.Namespace, settings: Settings) -> None:
 
 
 def _capacity_engines(url: str, engine: str, character: str, token: str | None) -> list[str]:
-    """``engine``, or with ``all`` every engine the server has a model of ``character`` for."""
+    """The engines of ``engine``, a comma-separated list, or with ``all`` every engine the
+    server has a model of ``character`` for."""
     if engine != "all":
-        return [engine]
+        return [name.strip() for name in engine.split(",") if name.strip()]
     from lipstream_client.rest import RestClient
 
     from ..errors import InvalidRequestError
