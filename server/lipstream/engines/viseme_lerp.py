@@ -23,7 +23,6 @@ value of ``KAPPAS`` with the least squared error on training utterances
 
 from __future__ import annotations
 
-from bisect import bisect_right
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -42,6 +41,7 @@ from .base import (
     Engine,
     Lookahead,
     Model,
+    RenderingSynthesizer,
     Rung,
     SynthesisRequest,
     Synthesizer,
@@ -51,6 +51,7 @@ from .base import (
 from .damped_fit import KAPPAS, best_kappa, validation_utterances
 from .damped_synthesis import DampedTargets, DampedTimelineSynthesizer
 from .durations import DurationModel
+from .lerp_keys import KeyedSpans, lerp_frames
 
 MODES = ("lerp", "damped")
 LEADS_MS = (120.0, 0.0)
@@ -127,7 +128,7 @@ class VisemeLerpModel(Model):
     def synthesizer(self, request: SynthesisRequest) -> Synthesizer:
         mode, lead_ms = _parse_options(request.options)
         if mode == "lerp":
-            return super().synthesizer(request)
+            return LerpSynthesizer(self, request)
         return DampedTimelineSynthesizer(self.damped_targets(lead_ms), request, self.channels)
 
     def render(
@@ -137,18 +138,19 @@ class VisemeLerpModel(Model):
         request: SynthesisRequest,
         audio: Audio | None,
     ) -> np.ndarray:
-        window = spans[_first_key(spans, times[0]) : _last_key(spans, times[-1]) + 1]
-        centres = np.array([span.centre for span in window])
-        keys = self.poses[[self._pose_row[span.phoneme] for span in window]]
-        if len(window) == 1:
-            return np.repeat(keys, len(times), axis=0).astype(np.float32)
-        # np.interp per channel, for all channels at once: the segment left of each time
-        # (held flat beyond the first and last centres), and the weight of its right key.
-        left = np.clip(np.searchsorted(centres, times, side="right") - 1, 0, len(window) - 2)
-        width = centres[left + 1] - centres[left]
-        weight = np.minimum(np.maximum((times - centres[left]) / width, 0.0), 1.0)[:, None]
-        frames = keys[left] * (1.0 - weight) + keys[left + 1] * weight
-        return np.asarray(frames, dtype=np.float32)
+        """One compiled call (``lerp_keys.lerp_frames``); a streaming request's spans are
+        ``KeyedSpans``, which keep their keys and window from call to call."""
+        keyed = spans if isinstance(spans, KeyedSpans) else KeyedSpans(spans)
+        centres, phonemes = keyed.keys()
+        frames, keyed.first_key = lerp_frames(
+            centres,
+            phonemes,
+            self._pose_rows,
+            self.poses,
+            np.asarray(times, dtype=np.float64),
+            keyed.first_key,
+        )
+        return frames
 
     def arrays(self) -> dict[str, np.ndarray]:
         return {
@@ -178,6 +180,14 @@ class VisemeLerpModel(Model):
         if not np.all(kappas > 0):
             raise reader.error("kappa", "must be positive")
         return cls(manifest, poses, DurationModel.from_arrays(reader), leads, kappas)
+
+
+class LerpSynthesizer(RenderingSynthesizer):
+    """The ``lerp`` rung's streaming: ``render`` by the lookahead, its spans ``KeyedSpans``."""
+
+    def __init__(self, model: VisemeLerpModel, request: SynthesisRequest) -> None:
+        super().__init__(model, request)
+        self.spans = KeyedSpans()
 
 
 class VisemeLerpEngine(Engine):
@@ -241,16 +251,6 @@ def _parse_options(options: Mapping[str, Any]) -> tuple[str, float]:
     if mode == "lerp" and "lead_ms" in options:
         raise InvalidRequestError("lead_ms applies to mode damped only", where="options.lead_ms")
     return str(mode), lead if mode == "damped" else 0.0
-
-
-def _first_key(spans: Sequence[PhonemeSpan], t: float) -> int:
-    """Index of the last span whose centre is at or before ``t`` (0 if none)."""
-    return max(0, bisect_right(spans, t, key=lambda span: span.centre) - 1)
-
-
-def _last_key(spans: Sequence[PhonemeSpan], t: float) -> int:
-    """Index of the first span whose centre is after ``t`` (the last span if none)."""
-    return min(len(spans) - 1, bisect_right(spans, t, key=lambda span: span.centre))
 
 
 def _mean_poses(sums: np.ndarray, counts: np.ndarray, rest_row: int) -> np.ndarray:
