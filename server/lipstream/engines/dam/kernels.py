@@ -318,6 +318,97 @@ def dam_sum(
 
 
 @njit(cache=True)
+def channels(values: np.ndarray, components: np.ndarray, mean: np.ndarray) -> np.ndarray:
+    """``MotionBasis.reconstruct`` of ``values`` (frames, components) as float32 frames: each
+    channel the sum over components, added in component order, plus the mean."""
+    n_channels = components.shape[1]
+    out = np.empty((values.shape[0], n_channels), dtype=np.float32)
+    total = np.empty(n_channels)
+    for i in range(values.shape[0]):
+        total[:] = 0.0
+        for component in range(components.shape[0]):
+            weight = values[i, component]
+            for channel in range(n_channels):
+                total[channel] += weight * components[component, channel]
+        for channel in range(n_channels):
+            out[i, channel] = np.float32(total[channel] + mean[channel])
+    return out
+
+
+@njit(cache=True)
+def render_run(
+    times: np.ndarray,
+    owner: int,
+    span_start: np.ndarray,
+    span_end: np.ndarray,
+    span_set: np.ndarray,
+    span_phoneme: np.ndarray,
+    span_emotion: np.ndarray,
+    span_mode: np.ndarray,
+    silence: int,
+    search_behind: int,
+    search: int,
+    tail: int,
+    ahead: int,
+    sigma: np.ndarray,
+    reach: np.ndarray,
+    eps: float,
+    coefficients: np.ndarray,
+    components: np.ndarray,
+    mean: np.ndarray,
+    set_start: np.ndarray,
+    set_stop: np.ndarray,
+    modes: np.ndarray,
+    log_previous: np.ndarray,
+    log_following: np.ndarray,
+    log_emotion: np.ndarray,
+    ends: np.ndarray,
+    starts: np.ndarray,
+    reference_duration: float,
+    w_context: float,
+    w_smooth: float,
+) -> tuple[np.ndarray, int]:
+    """A search rung's float32 frames at ascending ``times``, over every span so far (the
+    per-span arrays): each frame's owner (the first span ending after it, the last span
+    after the end) found by stepping from ``owner``, the modes of the spans the frames reach
+    that ``span_mode`` does not hold yet (-1) chosen by ``choose_modes`` and stored there,
+    then ``dam_sum`` and ``channels``. Returns the frames and the owner of the last time."""
+    n = len(span_start)
+    if len(times) == 0:
+        return np.zeros((0, components.shape[1]), dtype=np.float32), owner
+    owners = np.empty(len(times), dtype=np.int64)
+    owner = min(max(owner, 0), n - 1)
+    for i in range(len(times)):
+        while owner > 0 and span_end[owner - 1] > times[i]:
+            owner -= 1
+        while owner < n - 1 and span_end[owner] <= times[i]:
+            owner += 1
+        owners[i] = owner
+    first = max(0, owners[0] - tail)
+    last = min(n - 1, owners[-1] + ahead)
+    missing = first
+    while missing <= last and span_mode[missing] >= 0:
+        missing += 1
+    if missing <= last:
+        low = max(0, missing - search_behind)
+        high = min(n - 1, last + search)
+        previous = np.empty(high - low + 1, dtype=np.int64)
+        following = np.empty(high - low + 1, dtype=np.int64)
+        for k in range(low, high + 1):
+            previous[k - low] = span_phoneme[k - 1] if k > 0 else silence
+            following[k - low] = span_phoneme[k + 1] if k + 1 < n else silence
+        span_mode[missing : last + 1] = choose_modes(
+            span_set[low : high + 1], previous, following, span_emotion[low : high + 1],
+            span_end[low : high + 1] - span_start[low : high + 1], missing - low, last - low,
+            search_behind, search, set_start, set_stop, modes, log_previous, log_following,
+            log_emotion, ends, starts, reference_duration, w_context, w_smooth,
+        )  # fmt: skip
+    values = dam_sum(times, owners, span_start, span_end, span_mode, tail, ahead, sigma, reach,
+                     eps, coefficients)  # fmt: skip
+    return channels(values, components, mean), owner
+
+
+@njit(cache=True)
 def commit_mode(
     span_set: int,
     previous: int,

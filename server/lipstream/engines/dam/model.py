@@ -21,7 +21,6 @@ another (``modes.stand_ins``).
 
 from __future__ import annotations
 
-from bisect import bisect_right
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -52,9 +51,10 @@ from ..durations import DurationModel
 from .causal import CausalSynthesizer
 from .dominance import reach
 from .em import SIGMA_MIN
-from .kernels import choose_modes, dam_sum, search_tables
+from .kernels import choose_modes, render_run, search_tables
 from .modes import PHONEME_INDEX, SILENCE_INDEX, emotion_index
 from .selection import Costs, Layer, cheapest_path, context_cost, end_derivatives, smooth_cost
+from .spans import DamSpans
 
 OPTION_LIMIT = 16
 NUMBER_FIELDS = (  # name, low, high, low excluded
@@ -275,33 +275,40 @@ class DamModel(Model):
         request: SynthesisRequest,
         audio: Audio | None,
     ) -> np.ndarray:
-        resolved = self.resolve(request.options)
-        assert not isinstance(resolved, float), "causal rungs stream with CausalSynthesizer"
-        search, ahead = resolved
+        """One compiled call (``kernels.render_run``); a streaming request's spans are its
+        ``DamSpans``, which keep their arrays and chosen modes between calls."""
+        if isinstance(spans, DamSpans) and spans.request is request:
+            tracked = spans
+        else:
+            resolved = self.resolve(request.options)
+            assert not isinstance(resolved, float), "causal rungs stream with CausalSynthesizer"
+            tracked = DamSpans(request, resolved, spans)
+        search, ahead = tracked.resolved
         request.guard.check()
-        owner_low = min(bisect_right(spans, times[0], key=_end), len(spans) - 1)
-        owner_high = min(bisect_right(spans, times[-1], key=_end), len(spans) - 1)
-        first = max(0, owner_low - self.tail)
-        last = min(len(spans) - 1, owner_high + ahead)
-        window = spans[first : last + 1]
-        starts = np.array([span.start for span in window])
-        ends = np.array([span.end for span in window])
-        owner = np.minimum(np.searchsorted(ends, times, side="right"), len(ends) - 1)
-        modes = self.choose_modes(spans, first, last, search, request)
-        frames = dam_sum(
+        starts, ends, sets, phonemes, emotions, modes = tracked.arrays()
+        frames, tracked.owner = render_run(
             np.asarray(times, dtype=np.float64),
-            owner,
+            tracked.owner,
             starts,
             ends,
+            sets,
+            phonemes,
+            emotions,
             modes,
+            SILENCE_INDEX,
+            self.search_behind,
+            search,
             self.tail,
             ahead,
             self.sigma,
             self.reach,
             self.eps,
             self.coefficients,
+            self.basis.components,
+            self.basis.mean,
+            *self.search_arguments,
         )
-        return self.basis.reconstruct(frames).astype(np.float32)
+        return frames
 
     # -- store ----------------------------------------------------------------------------
 
@@ -376,10 +383,6 @@ def check_arrays(reader: ArrayReader, degree: int, n_channels: int) -> dict[str,
     return result
 
 
-def _end(span: PhonemeSpan) -> float:
-    return span.end
-
-
 class ModeMemo:
     """Layers, E_c and E_s of one synthesis call, shared by its overlapping search windows.
 
@@ -419,13 +422,18 @@ class ModeMemo:
 
 
 class DamSynthesizer(RenderingSynthesizer):
-    """The generic rendering synthesizer, waiting for the lookahead of the request's options."""
+    """The generic rendering synthesizer, waiting for the lookahead of the request's options
+    (resolved once); its spans are ``DamSpans``."""
+
+    def __init__(self, model: DamModel, request: SynthesisRequest) -> None:
+        super().__init__(model, request)
+        resolved = model.resolve(request.options)
+        assert not isinstance(resolved, float), "causal rungs stream with CausalSynthesizer"
+        self.spans = DamSpans(request, resolved)
+        self._lookahead = Lookahead(phonemes=resolved[0] + resolved[1])
 
     def final_until(self) -> float:
-        lookahead = self.model.lookahead_for(self.request.options)
-        if not self.spans or lookahead is None:
-            return 0.0
-        return final_until(self.spans, lookahead)
+        return final_until(self.spans, self._lookahead)
 
 
 class CohenMassaroModel(DamModel):
