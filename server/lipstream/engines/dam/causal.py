@@ -39,10 +39,10 @@ import numpy as np
 
 from ...timeline import PhonemeSpan
 from ..base import ShiftedSynthesizer, SynthesisRequest, fill_gaps, frame_count
-from ..damped import DampedState, filter_raw
+from ..damped import DampedState
 from ..damped_fit import RawCurve, best_following_kappa
 from ..growable import Growable
-from .kernels import causal_sum, commit_mode
+from .kernels import causal_run, causal_sum, commit_modes
 from .modes import PHONEME_INDEX, SILENCE_INDEX, emotion_index
 
 if TYPE_CHECKING:
@@ -55,40 +55,52 @@ with that span's input."""
 
 class CausalCurve:
     """The committed modes of one request and its raw curve r, by the compiled kernels
-    (``kernels.commit_mode``, ``kernels.causal_sum``)."""
+    (``kernels.commit_modes``, ``kernels.causal_sum``); ``committed`` spans have their mode."""
 
     def __init__(self, model: DamModel, request: SynthesisRequest) -> None:
         self.model = model
         self.request = request
-        self.modes = Growable(np.int64)
         self.starts = Growable(np.float64)
         self.ends = Growable(np.float64)
+        self.phonemes = Growable(np.int64)
+        self.emotions = Growable(np.int64)
+        self.modes = Growable(np.int64)
         self.rates = Growable(np.float64)
-        """1 / the median duration (s) of each committed span's phoneme: ω over κ."""
+        """1 / the median duration (s) of each span's phoneme: ω over κ."""
+        self.committed = 0
+
+    def add(self, spans: Sequence[PhonemeSpan]) -> None:
+        """Take the arrays of the spans not yet added (their modes not yet committed)."""
+        rates = self.model.span_rates
+        for span in spans[self.starts.count :]:
+            phoneme = PHONEME_INDEX[span.phoneme]
+            self.starts.append(span.start)
+            self.ends.append(span.end)
+            self.phonemes.append(phoneme)
+            self.emotions.append(emotion_index(self.request, span))
+            self.modes.append(-1)
+            self.rates.append(rates[phoneme])
 
     def commit(self, spans: Sequence[PhonemeSpan]) -> None:
         """Commit the mode of every span not yet committed, in order."""
-        model = self.model
-        rates = model.durations.expected_all_s()
-        n_emotions = model.tables.set_start.shape[1]
-        for index in range(self.modes.count, len(spans)):
-            span = spans[index]
-            phoneme = PHONEME_INDEX[span.phoneme]
-            emotion = emotion_index(self.request, span)
-            before = index - 1
-            mode = commit_mode(
-                phoneme * n_emotions + emotion,
-                PHONEME_INDEX[spans[before].phoneme] if index else SILENCE_INDEX,
-                emotion,
-                span.end - span.start,
-                int(self.modes.data[before]) if index else -1,
-                float(self.ends.data[before] - self.starts.data[before]) if index else 1.0,
-                *model.search_arguments,
-            )
-            self.modes.append(mode)
-            self.starts.append(span.start)
-            self.ends.append(span.end)
-            self.rates.append(1.0 / rates[phoneme])
+        self.add(spans)
+        starts, ends, phonemes, emotions, modes, _ = self.arrays()
+        commit_modes(self.committed, starts, ends, phonemes, emotions, modes, SILENCE_INDEX,
+                     *self.model.search_arguments)  # fmt: skip
+        self.committed = self.modes.count
+
+    def arrays(
+        self,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Start, end, phoneme, emotion, mode and rate of every span added, (n,) each."""
+        return (
+            self.starts.view(),
+            self.ends.view(),
+            self.phonemes.view(),
+            self.emotions.view(),
+            self.modes.view(),
+            self.rates.view(),
+        )
 
     def raw(self, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """r at times ``at`` (components) and 1 / the median duration of the latest span begun
@@ -126,14 +138,23 @@ class CausalSynthesizer(ShiftedSynthesizer):
         if stop <= self.emitted:
             return np.zeros((0, len(self.model.channels)), dtype=np.float32)
         self.request.guard.check()
-        fps = self.request.fps
-        times = np.arange(self.emitted, stop, dtype=np.float64) / fps
-        self.curve.commit(self.spans)
-        raw, inverse = self.curve.raw(times + self.shift_s)
-        self.state, values = filter_raw(self.state, raw, self.model.causal_kappa * inverse, times)
+        model, curve, state = self.model, self.curve, self.state
+        curve.add(self.spans)
+        fresh = state is None
+        if state is None:
+            state = self.state = DampedState.at_rest(np.zeros(model.basis.n_components))
+        starts, ends, phonemes, emotions, modes, rates = curve.arrays()
+        frames, state.t = causal_run(
+            self.emitted, stop, self.request.fps, self.shift_s, _STARTED, model.causal_kappa,
+            state.x, state.v, state.t, fresh, curve.committed, starts, ends, phonemes,
+            emotions, modes, rates, SILENCE_INDEX, model.tail, model.sigma, model.reach,
+            model.eps, model.coefficients, model.basis.components, model.basis.mean,
+            *model.search_arguments,
+        )  # fmt: skip
+        curve.committed = curve.modes.count
         self.emitted = stop
         self.stats["frames"] = stop
-        return np.asarray(self.model.basis.reconstruct(values), dtype=np.float32)
+        return frames
 
 
 def fit_causal_kappa(model: DamModel, utterances: Sequence[Any]) -> float:

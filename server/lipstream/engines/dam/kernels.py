@@ -39,6 +39,7 @@ from numba import njit
 
 from ...phonemes import PHONEMES
 from ...timeline import EMOTIONS
+from ..damped import _follow
 
 
 @dataclass(frozen=True)
@@ -477,3 +478,106 @@ def causal_sum(
                    sigma, reach, eps, coefficients, animeme, frames[i])  # fmt: skip
         rates[i] = span_rate[begun]
     return frames, rates
+
+
+@njit(cache=True)
+def commit_modes(
+    first: int,
+    span_start: np.ndarray,
+    span_end: np.ndarray,
+    span_phoneme: np.ndarray,
+    span_emotion: np.ndarray,
+    span_mode: np.ndarray,
+    silence: int,
+    set_start: np.ndarray,
+    set_stop: np.ndarray,
+    modes: np.ndarray,
+    log_previous: np.ndarray,
+    log_following: np.ndarray,
+    log_emotion: np.ndarray,
+    ends: np.ndarray,
+    starts: np.ndarray,
+    reference_duration: float,
+    w_context: float,
+    w_smooth: float,
+) -> None:
+    """``commit_mode`` of spans ``first`` .. the last, in order, into ``span_mode`` (each
+    joined to the mode committed before it; the first span after silence)."""
+    n_emotions = set_start.shape[1]
+    for k in range(first, len(span_mode)):
+        previous, before_mode, before_duration = silence, -1, 1.0
+        if k > 0:
+            previous, before_mode = span_phoneme[k - 1], span_mode[k - 1]
+            before_duration = span_end[k - 1] - span_start[k - 1]
+        span_mode[k] = commit_mode(
+            span_phoneme[k] * n_emotions + span_emotion[k], previous, span_emotion[k],
+            span_end[k] - span_start[k], before_mode, before_duration, set_start, set_stop,
+            modes, log_previous, log_following, log_emotion, ends, starts, reference_duration,
+            w_context, w_smooth,
+        )  # fmt: skip
+
+
+@njit(cache=True)
+def causal_run(
+    first_frame: int,
+    stop_frame: int,
+    fps: float,
+    shift: float,
+    started: float,
+    kappa: float,
+    x: np.ndarray,
+    v: np.ndarray,
+    t: float,
+    fresh: bool,
+    committed: int,
+    span_start: np.ndarray,
+    span_end: np.ndarray,
+    span_phoneme: np.ndarray,
+    span_emotion: np.ndarray,
+    span_mode: np.ndarray,
+    span_rate: np.ndarray,
+    silence: int,
+    tail: int,
+    sigma: np.ndarray,
+    reach: np.ndarray,
+    eps: float,
+    coefficients: np.ndarray,
+    components: np.ndarray,
+    mean: np.ndarray,
+    set_start: np.ndarray,
+    set_stop: np.ndarray,
+    modes: np.ndarray,
+    log_previous: np.ndarray,
+    log_following: np.ndarray,
+    log_emotion: np.ndarray,
+    ends: np.ndarray,
+    starts: np.ndarray,
+    reference_duration: float,
+    w_context: float,
+    w_smooth: float,
+) -> tuple[np.ndarray, float]:
+    """A causal rung's float32 frames ``first_frame`` .. ``stop_frame`` - 1 at ``fps``: the
+    modes of the spans from ``committed`` on committed (``commit_modes``), the raw curve at
+    each frame's time + ``shift`` (``causal_sum``), the filter (value ``x``, velocity
+    ``v``, at time ``t``; ``fresh``: none yet, it starts at rest on the first raw value)
+    stepped toward it at ω = ``kappa`` times the rates (``damped._follow``), and the basis
+    (``channels``). ``x`` and ``v`` are updated in place; returns the frames and the
+    filter's time."""
+    commit_modes(committed, span_start, span_end, span_phoneme, span_emotion, span_mode,
+                 silence, set_start, set_stop, modes, log_previous, log_following, log_emotion,
+                 ends, starts, reference_duration, w_context, w_smooth)  # fmt: skip
+    times = np.arange(first_frame, stop_frame) / fps
+    raw, rates = causal_sum(times + shift, span_start, span_end, span_mode, span_rate, tail,
+                            sigma, reach, eps, coefficients, started)  # fmt: skip
+    values = np.empty((len(times), coefficients.shape[2]))
+    first = 0
+    if fresh:
+        x[:] = raw[0]
+        v[:] = 0.0
+        t = times[0]
+        values[0] = x
+        first = 1
+    if len(times) > first:
+        omegas = kappa * rates
+        _follow(x, v, t, raw[first:], omegas[first:], times[first:], values[first:])
+    return channels(values, components, mean), times[-1]

@@ -97,6 +97,8 @@ class DamModel(Model):
             self.stored["duration_log_std"],
         )
         self.causal_kappa = float(self.stored["causal_kappa"][0])
+        self.span_rates = 1.0 / self.durations.expected_all_s()
+        """1 / the median duration (s) of each phoneme: a causal rung's ω over κ."""
         self.costs = Costs(
             previous=self.stored["count_previous"],
             following=self.stored["count_following"],
