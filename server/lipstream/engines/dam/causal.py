@@ -24,10 +24,12 @@ covers t + shift, and the state carried frame to frame does not depend on how
 the input was cut, so streaming gives the offline frames.
 
 Cost: a server at lead 0 calls the synthesizer once per phoneme message, so
-each step is one compiled call (``kernels``): ``commit_mode`` per arriving
-span, ``causal_sum`` for the frames' raw curve (the latest span begun found by
-binary search over the committed spans, kept in ``Growable`` arrays), and
-``damped.filter_raw``.
+each call is one compiled call (``kernels.causal_run``): the modes of the
+spans that arrived (``commit_modes``), the frames' raw curve (``causal_sum``,
+the latest span begun found by binary search over the spans' starts), the
+filter, and the motion basis. The spans' starts, ends, phonemes, emotions,
+modes and rates are kept in ``Growable`` arrays, so a call converts only the
+spans it brought.
 """
 
 from __future__ import annotations

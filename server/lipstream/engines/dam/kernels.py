@@ -19,15 +19,26 @@ few integer arrays per span, and two kernels do the rest:
   ahead whose dominance reaches it, each term D·A with A on the clamped local
   time, in the order ``model.render`` adds them.
 
-The causal rungs (``causal``) use two more: ``commit_mode``, a span's mode as
-it arrives (E_c with its next phoneme unknown plus E_s of the join to the
-mode committed before it), and ``causal_sum``, Eq. 2 at each time over the
-latest span begun and the ``tail`` before it; both sums share ``_dam_frame``.
+A streamed call of a search rung is one call of ``render_run``: each frame's
+owner span found by stepping on from the last call's, ``choose_modes`` for
+the spans whose mode no earlier call chose (a span's mode depends only on the
+spans of its window), ``dam_sum``, and ``channels`` (the motion basis back to
+float32 channels), so the modes are chosen once per span however the input
+is cut.
+
+The causal rungs (``causal``) use ``commit_mode``, a span's mode as it arrives
+(E_c with its next phoneme unknown plus E_s of the join to the mode committed
+before it; ``commit_modes`` runs it over the spans not yet committed), and
+``causal_sum``, Eq. 2 at each time over the latest span begun and the ``tail``
+before it; both sums share ``_dam_frame``. A streamed call is one call of
+``causal_run``: the new modes, the raw curve, the damped filter
+(``damped._follow``) and ``channels``.
 
 Sums of squares and polynomial products run in plain loops, so E_s and the
 frames may differ from numpy's (pairwise, BLAS) summation in the last bits;
 the tests hold the modes equal and the frames within 1e-12 of the
-straightforward implementation.
+straightforward implementation. ``channels`` adds each channel's components
+in order, as a plain loop too.
 """
 
 from __future__ import annotations

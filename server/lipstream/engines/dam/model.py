@@ -9,7 +9,9 @@ components and mapped back to channels. Everything a frame reads lies
 within ``tail_ahead + search_ahead`` spans after its own, which is the
 lookahead. The frames are a pure function of the spans, so streaming is the
 generic ``RenderingSynthesizer`` waiting for the lookahead of the request's
-options. Below these search rungs, ``causal: true`` selects the causal rungs
+options; its spans are a ``DamSpans``, which keeps their arrays and chosen
+modes from call to call, so each call is one compiled ``kernels.render_run``.
+Below these search rungs, ``causal: true`` selects the causal rungs
 (``causal``: modes committed as spans arrive, Eq. 2 over the spans begun, a
 critically damped filter), which wait for ``lead_ms`` at most.
 
