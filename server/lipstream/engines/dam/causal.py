@@ -145,11 +145,11 @@ class CausalSynthesizer(ShiftedSynthesizer):
         fresh = state is None
         if state is None:
             state = self.state = DampedState.at_rest(np.zeros(model.basis.n_components))
-        starts, ends, phonemes, emotions, modes, rates = curve.arrays()
         frames, state.t = causal_run(
             self.emitted, stop, self.request.fps, self.shift_s, _STARTED, model.causal_kappa,
-            state.x, state.v, state.t, fresh, curve.committed, starts, ends, phonemes,
-            emotions, modes, rates, SILENCE_INDEX, model.tail, model.sigma, model.reach,
+            state.x, state.v, state.t, fresh, curve.committed, curve.starts.count,
+            curve.starts.data, curve.ends.data, curve.phonemes.data, curve.emotions.data,
+            curve.modes.data, curve.rates.data, SILENCE_INDEX, model.tail, model.sigma, model.reach,
             model.eps, model.coefficients, model.basis.components, model.basis.mean,
             *model.search_arguments,
         )  # fmt: skip

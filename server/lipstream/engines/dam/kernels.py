@@ -351,9 +351,9 @@ def channels(values: np.ndarray, components: np.ndarray, mean: np.ndarray) -> np
 def render_run(
     times: np.ndarray,
     owner: int,
+    n_spans: int,
     span_start: np.ndarray,
     span_end: np.ndarray,
-    span_set: np.ndarray,
     span_phoneme: np.ndarray,
     span_emotion: np.ndarray,
     span_mode: np.ndarray,
@@ -380,12 +380,14 @@ def render_run(
     w_context: float,
     w_smooth: float,
 ) -> tuple[np.ndarray, int]:
-    """A search rung's float32 frames at ascending ``times``, over every span so far (the
-    per-span arrays): each frame's owner (the first span ending after it, the last span
-    after the end) found by stepping from ``owner``, the modes of the spans the frames reach
-    that ``span_mode`` does not hold yet (-1) chosen by ``choose_modes`` and stored there,
-    then ``dam_sum`` and ``channels``. Returns the frames and the owner of the last time."""
-    n = len(span_start)
+    """A search rung's float32 frames at ascending ``times``, over the first ``n_spans``
+    spans (rows of the per-span arrays, which may hold more): each frame's owner (the first
+    span ending after it, the last span after the end) found by stepping from ``owner``,
+    the modes of the spans the frames reach that ``span_mode`` does not hold yet (-1)
+    chosen by ``choose_modes`` and stored there, then ``dam_sum`` and ``channels``.
+    Returns the frames and the owner of the last time."""
+    n = n_spans
+    span_start, span_end, span_mode = span_start[:n], span_end[:n], span_mode[:n]
     if len(times) == 0:
         return np.zeros((0, components.shape[1]), dtype=np.float32), owner
     owners = np.empty(len(times), dtype=np.int64)
@@ -409,8 +411,9 @@ def render_run(
         for k in range(low, high + 1):
             previous[k - low] = span_phoneme[k - 1] if k > 0 else silence
             following[k - low] = span_phoneme[k + 1] if k + 1 < n else silence
+        sets = span_phoneme[low : high + 1] * set_start.shape[1] + span_emotion[low : high + 1]
         span_mode[missing : last + 1] = choose_modes(
-            span_set[low : high + 1], previous, following, span_emotion[low : high + 1],
+            sets, previous, following, span_emotion[low : high + 1],
             span_end[low : high + 1] - span_start[low : high + 1], missing - low, last - low,
             search_behind, search, set_start, set_stop, modes, log_previous, log_following,
             log_emotion, ends, starts, reference_duration, w_context, w_smooth,
@@ -541,6 +544,7 @@ def causal_run(
     t: float,
     fresh: bool,
     committed: int,
+    n_spans: int,
     span_start: np.ndarray,
     span_end: np.ndarray,
     span_phoneme: np.ndarray,
@@ -567,13 +571,17 @@ def causal_run(
     w_context: float,
     w_smooth: float,
 ) -> tuple[np.ndarray, float]:
-    """A causal rung's float32 frames ``first_frame`` .. ``stop_frame`` - 1 at ``fps``: the
+    """A causal rung's float32 frames ``first_frame`` .. ``stop_frame`` - 1 at ``fps``, over
+    the first ``n_spans`` spans (rows of the per-span arrays, which may hold more): the
     modes of the spans from ``committed`` on committed (``commit_modes``), the raw curve at
     each frame's time + ``shift`` (``causal_sum``), the filter (value ``x``, velocity
     ``v``, at time ``t``; ``fresh``: none yet, it starts at rest on the first raw value)
     stepped toward it at ω = ``kappa`` times the rates (``damped._follow``), and the basis
     (``channels``). ``x`` and ``v`` are updated in place; returns the frames and the
     filter's time."""
+    n = n_spans
+    span_start, span_end, span_mode = span_start[:n], span_end[:n], span_mode[:n]
+    span_phoneme, span_emotion, span_rate = span_phoneme[:n], span_emotion[:n], span_rate[:n]
     commit_modes(committed, span_start, span_end, span_phoneme, span_emotion, span_mode,
                  silence, set_start, set_stop, modes, log_previous, log_following, log_emotion,
                  ends, starts, reference_duration, w_context, w_smooth)  # fmt: skip

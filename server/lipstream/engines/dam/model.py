@@ -289,13 +289,13 @@ class DamModel(Model):
             tracked = DamSpans(request, resolved, spans)
         search, ahead = tracked.resolved
         request.guard.check()
-        starts, ends, sets, phonemes, emotions, modes = tracked.arrays()
+        count, starts, ends, phonemes, emotions, modes = tracked.arrays()
         frames, tracked.owner = render_run(
             np.asarray(times, dtype=np.float64),
             tracked.owner,
+            count,
             starts,
             ends,
-            sets,
             phonemes,
             emotions,
             modes,

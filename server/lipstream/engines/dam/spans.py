@@ -2,12 +2,13 @@
 
 Sketch: ``DamSpans`` is the request's span list (the synthesizer appends to it as
 spans arrive) that also keeps, in growing arrays (``engines.growable``), each
-span's start, end, phoneme, emotion (the request's when the span names none),
-candidate set, and its mode once chosen (-1 before). ``arrays()`` brings them
-up to date with the spans appended since the last call, so a streaming call
-converts only its new spans, and the modes chosen by one call are reused by
-the next: a span's mode depends only on the spans of its search window (and,
-at the end of the input, on there being none after them), which never change.
+span's start, end, phoneme, emotion (the request's when the span names none)
+and its mode once chosen (-1 before). ``arrays()`` brings them up to date with
+the spans appended since the last call, so a streaming call converts only its
+new spans, and hands the kernel their buffers and count (no views to make);
+the modes chosen by one call are reused by the next: a span's mode depends
+only on the spans of its search window (and, at the end of the input, on
+there being none after them), which never change.
 ``owner`` is the owner span of the latest frame rendered, where the next call's
 search for its frames' owners starts.
 """
@@ -19,7 +20,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ...phonemes import PHONEME_INDEX
-from ...timeline import EMOTIONS, PhonemeSpan
+from ...timeline import PhonemeSpan
 from ..base import SynthesisRequest
 from ..growable import Growable
 from .modes import emotion_index
@@ -43,14 +44,11 @@ class DamSpans(list[PhonemeSpan]):
         self.ends = Growable(np.float64)
         self.phonemes = Growable(np.int64)
         self.emotions = Growable(np.int64)
-        self.sets = Growable(np.int64)
-        """phoneme * len(EMOTIONS) + emotion: the row of ``kernels.SearchTables``."""
         self.modes = Growable(np.int64)
 
-    def arrays(
-        self,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Start, end, phoneme, emotion, set and mode of every span, (n,) each."""
+    def arrays(self) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The count of spans n, and the buffers whose first n rows hold their start, end,
+        phoneme, emotion and mode."""
         for span in self[self.starts.count :]:
             phoneme = PHONEME_INDEX[span.phoneme]
             emotion = emotion_index(self.request, span)
@@ -58,13 +56,12 @@ class DamSpans(list[PhonemeSpan]):
             self.ends.append(span.end)
             self.phonemes.append(phoneme)
             self.emotions.append(emotion)
-            self.sets.append(phoneme * len(EMOTIONS) + emotion)
             self.modes.append(-1)
         return (
-            self.starts.view(),
-            self.ends.view(),
-            self.sets.view(),
-            self.phonemes.view(),
-            self.emotions.view(),
-            self.modes.view(),
+            self.starts.count,
+            self.starts.data,
+            self.ends.data,
+            self.phonemes.data,
+            self.emotions.data,
+            self.modes.data,
         )
