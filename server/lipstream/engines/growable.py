@@ -37,7 +37,7 @@ class Growable:
             grown[: self.held] = self.data[: self.held]
             self.data = grown
 
-    def append(self, row: float | np.ndarray) -> None:
+    def append(self, row: float | np.ndarray | tuple[float, ...]) -> None:
         held = self.count - self.first
         if held >= len(self.data):
             self._reserve(held + 1)

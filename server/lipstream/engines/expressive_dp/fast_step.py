@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numba import njit
@@ -61,6 +62,11 @@ class JoinRecords:
     @property
     def dims(self) -> int:
         return len(self.order)
+
+    @cached_property
+    def natural(self) -> np.ndarray:
+        """The column of each velocity coordinate, natural order (``order`` inverted)."""
+        return np.argsort(self.order)
 
     @classmethod
     def of(cls, nodes: NodeDatabase, features: NodeFeatures) -> JoinRecords:
@@ -224,3 +230,126 @@ def fast_step(
         position[prev_nodes[i]] = -1
     order = np.argsort(f, kind="mergesort")
     return next_nodes[order], f[order], back[order]
+
+
+ENTRY_VELOCITY = 4
+"""Leading velocity coordinates (descending variance) an entry table holds per candidate."""
+
+
+def entry_table(
+    nodes: np.ndarray, unary: np.ndarray, pre: np.ndarray, viseme: np.ndarray,
+    records: JoinRecords,
+) -> np.ndarray:  # fmt: skip
+    """Per candidate of a layer (``nodes``, their U in ``unary``), what ``best_entry`` reads
+    for every one of them, contiguous, in ascending U (then position): [U, its position in
+    ``nodes``, pre(b), viseme of pre(b) (−1 without one), the first ``ENTRY_VELOCITY``
+    coordinates of its first velocity in ``records``' order]."""
+    order = np.argsort(unary, kind="stable")
+    chosen = nodes[order]
+    before = pre[chosen]
+    kept = min(ENTRY_VELOCITY, records.dims)
+    table = np.empty((len(nodes), 4 + kept))
+    table[:, 0] = unary[order]
+    table[:, 1] = order
+    table[:, 2] = before
+    table[:, 3] = np.where(before >= 0, viseme[np.maximum(before, 0)], -1)
+    table[:, 4:] = records.arriving[chosen, :kept]
+    table.setflags(write=False)
+    return table
+
+
+@njit(cache=True, inline="always")
+def _entry_floor(
+    table: np.ndarray, row: int, a: int, own: int, leaving: np.ndarray, packed: np.ndarray
+) -> float:
+    """A floor under (0 + TC(a, b)) + U(b) for the table's ``row`` (b), own = viseme(a):
+    U, U + α1·PNT (Rule 4), or U (+ PNT when the visemes differ) + the gap of the table's
+    velocity coordinates; exact up to rounding (``SLACK`` covers it)."""
+    floor = table[row, 0]
+    p = int(table[row, 2])
+    if p < 0:
+        return float(floor + packed[0])
+    if p == a:
+        return float(floor)
+    if int(table[row, 3]) != own:
+        floor += packed[3]
+    squares = 0.0
+    for k in range(table.shape[1] - 4):
+        difference = table[row, 4 + k] - leaving[a, k]
+        squares += difference * difference
+    return float(floor + math.sqrt(squares))
+
+
+@njit(cache=True, inline="always")
+def _exact_tc(
+    a: int, b: int, p: int, viseme: np.ndarray, leaving: np.ndarray, arriving: np.ndarray,
+    natural: np.ndarray, dims: int, packed: np.ndarray,
+) -> float:  # fmt: skip
+    """``costs.transition_cost(a, b)`` for p = pre(b) ≥ 0, p ≠ a, from ``JoinRecords``' rows:
+    every sum in ``transition_cost``'s order (velocity coordinates read at ``natural``, the
+    records' column of each coordinate), so the same value to the last bit."""
+    position = 0.0
+    for k in range(dims):
+        difference = arriving[b, dims + k] - leaving[a, dims + k]
+        position += difference * difference
+    velocity = 0.0
+    for k in range(dims):
+        difference = arriving[b, natural[k]] - leaving[a, natural[k]]
+        velocity += difference * difference
+    cost = packed[2] * math.sqrt(position)
+    cost += math.sqrt(velocity)
+    if viseme[a] != viseme[p]:
+        cost += packed[3]
+    return float(cost + packed[1] * _dsc(leaving, a, arriving, b, dims))
+
+
+@njit(cache=True)
+def best_entry(
+    a: int, nodes: np.ndarray, table: np.ndarray, viseme: np.ndarray, leaving: np.ndarray,
+    arriving: np.ndarray, natural: np.ndarray, packed: np.ndarray,
+) -> tuple[int, float, float]:  # fmt: skip
+    """The position j in ``nodes`` (``table`` = their ``entry_table``) of the least
+    (0 + TC(a, b)) + U(b), b = nodes[j], the lowest j among equal costs, that cost and its
+    TC: the exact step from the one node ``a`` (``search._exact_kernel``) and its argmin.
+
+    The table runs in ascending U. A first pass prices first the pair of least floor
+    (``_entry_floor``) among those of U below the least floor so far (the pair of Rule 1,
+    b = suc(a), has floor U(b) and its cost); the second stops at the first U above the
+    best (TC ≥ 0), drops a pair whose floor exceeds the best (with ``SLACK``, as in
+    ``_scan``) and prices the rest exactly (``_exact_tc``)."""
+    own = viseme[a]
+    seed = 0
+    lowest = np.inf
+    for row in range(len(table)):
+        if table[row, 0] >= lowest:
+            break
+        floor = _entry_floor(table, row, a, own, leaving, packed)
+        if floor < lowest:
+            lowest = floor
+            seed = row
+    best = np.inf
+    best_tc = 0.0
+    arg = -1
+    for step in range(len(table) + 1):
+        row = seed if step == 0 else step - 1
+        if step > 0 and row == seed:
+            continue
+        u = table[row, 0]
+        if u > best:
+            break
+        j = int(table[row, 1])
+        p = int(table[row, 2])
+        if p == a:
+            tc = 0.0
+        elif p < 0:
+            tc = packed[0]
+        else:
+            if _entry_floor(table, row, a, own, leaving, packed) > best + SLACK * (abs(best) + 1.0):
+                continue
+            tc = _exact_tc(a, nodes[j], p, viseme, leaving, arriving, natural, len(natural), packed)
+        cost = (0.0 + tc) + u
+        if cost < best or (cost == best and j < arg):
+            best = cost
+            best_tc = tc
+            arg = j
+    return arg, best, best_tc

@@ -104,6 +104,11 @@ class ExpressiveDpModel(Model):
         )
         self.causal_kappa = float(self.stored["causal_kappa"][0])
 
+    @property
+    def causal_omegas(self) -> np.ndarray:
+        """The causal rungs' filter rate ω of every phoneme: κ / its median duration."""
+        return self.causal_kappa / self.durations.expected_all_s()
+
     # -- options, lookahead, ladder -------------------------------------------------------
 
     def resolve(self, options: Mapping[str, Any]) -> Resolved:

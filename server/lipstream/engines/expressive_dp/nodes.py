@@ -101,15 +101,16 @@ class NodeDatabase:
             raise reader.error("node_pre", "is not the inverse of node_suc")
         if np.count_nonzero(suc >= 0) != np.count_nonzero(linked):
             raise reader.error("node_suc", "is not the inverse of node_pre")
+        # plain ndarray views of the mapped pages (no copy): a memmap's indexing is slower
         return cls(
-            phoneme=phoneme,
-            emotion=reader.integers("node_emotion", (n,), 0, len(EMOTIONS)),
-            previous=reader.integers("node_previous", (n,), 0, n_phonemes),
-            next=reader.integers("node_next", (n,), 0, n_phonemes),
-            pre=pre,
-            suc=suc,
-            offsets=offsets,
-            frames=frames,
+            phoneme=np.asarray(phoneme),
+            emotion=np.asarray(reader.integers("node_emotion", (n,), 0, len(EMOTIONS))),
+            previous=np.asarray(reader.integers("node_previous", (n,), 0, n_phonemes)),
+            next=np.asarray(reader.integers("node_next", (n,), 0, n_phonemes)),
+            pre=np.asarray(pre),
+            suc=np.asarray(suc),
+            offsets=np.asarray(offsets),
+            frames=np.asarray(frames),
             fps=fps,
         )
 

@@ -30,8 +30,10 @@ spans around a run of silences, which the synthesizer merges into one span).
 from __future__ import annotations
 
 import math
+from bisect import bisect_right
 from collections.abc import Sequence
 from functools import lru_cache
+from operator import attrgetter
 
 import numpy as np
 
@@ -45,6 +47,7 @@ VISIBILITY = {"P": 2.0, "B": 2.0, "M": 2.0, "F": 2.0, "V": 2.0, "W": 2.0} | {
 }  # fmt: skip
 CURVATURE = np.array([1.0, -2.0, 1.0])
 _EPS = 1e-9
+_end = attrgetter("end")
 
 
 def owned(span: PhonemeSpan, rate: float) -> tuple[int, int]:
@@ -152,19 +155,33 @@ class Renderer:
         return np.asarray(self._silence(spans, path, k, np.array([spans[k].end]))[0])
 
     def grid(
-        self, spans: Sequence[PhonemeSpan], path: Sequence[int], low: int, high: int
+        self,
+        spans: Sequence[PhonemeSpan],
+        path: Sequence[int],
+        low: int,
+        high: int,
+        kept: dict[int, np.ndarray] | None = None,
     ) -> np.ndarray:
-        """Grid points low..high (inclusive), (high − low + 1, K)."""
+        """Grid points low..high (inclusive), (high − low + 1, K). ``kept`` (a stream's) holds
+        the points of spans already made, by index, and takes those made now: a span's points
+        are final once made (its frames waited for the nodes they read)."""
         out = np.empty((high - low + 1, self.nodes.frames.shape[1]))
         filled = np.zeros(high - low + 1, dtype=bool)
         first = max(0, _span_at(spans, low / self.rate) - 1)
+        if kept:  # a stream's times ascend: no later call reads spans before this one's
+            for k in [k for k in kept if k < first]:
+                del kept[k]
         for k in range(first, len(spans)):
             start, stop = owned(spans[k], self.rate)
             if start > high:
                 break
             if stop <= low or stop <= start:
                 continue
-            values = self.span_values(spans, path, k)
+            values = kept.get(k) if kept is not None else None
+            if values is None:
+                values = self.span_values(spans, path, k)
+                if kept is not None:
+                    kept[k] = values
             a, b = max(start, low), min(stop, high + 1)
             out[a - low : b - low] = values[a - start : b - start]
             filled[a - low : b - low] = True
@@ -173,16 +190,21 @@ class Renderer:
         return out
 
     def frames(
-        self, spans: Sequence[PhonemeSpan], path: Sequence[int], times: np.ndarray
+        self,
+        spans: Sequence[PhonemeSpan],
+        path: Sequence[int],
+        times: np.ndarray,
+        kept: dict[int, np.ndarray] | None = None,
     ) -> np.ndarray:
-        """Coefficient frames at ``times`` (ascending), linear between grid points."""
+        """Coefficient frames at ``times`` (ascending), linear between grid points (``kept``:
+        see ``grid``)."""
         position = times * self.rate
         low = np.floor(position + _EPS).astype(np.int64)
         fraction = np.where(position - low > _EPS, position - low, 0.0)
         needs_next = fraction > 0
         top = int(low[-1] + (1 if needs_next[-1] else 0))
         top = max(top, int((low + needs_next).max()))
-        grid = self.grid(spans, path, int(low[0]), top)
+        grid = self.grid(spans, path, int(low[0]), top, kept)
         base = grid[low - low[0]]
         following = grid[np.minimum(low + 1, top) - low[0]]
         return np.asarray(base + fraction[:, None] * (following - base))
@@ -212,5 +234,5 @@ def _normal_bands(weights: tuple[float, ...], smoothness: float) -> np.ndarray:
 
 
 def _span_at(spans: Sequence[PhonemeSpan], t: float) -> int:
-    ends = [span.end for span in spans]
-    return min(int(np.searchsorted(ends, t, side="right")), len(spans) - 1)
+    """The first span ending after ``t`` (the last span if none), by bisection."""
+    return min(bisect_right(spans, t, key=_end), len(spans) - 1)

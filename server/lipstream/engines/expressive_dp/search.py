@@ -23,6 +23,12 @@ minimum with three exact reductions:
    priced only when it still beats it. Each node's join features are one
    contiguous row per side (``fast_step.JoinRecords``, made at first use).
 
+4. One layer after a fixed node (``one_layer``: each call of the causal rungs) needs only
+   the argmin of TC(before, b) + U(b): ``fast_step.best_entry`` scans the layer's
+   candidates in ascending U (``entry_table``, cached with the layer) and prices exactly,
+   with the exact step's sums, only the pairs whose floor (U, PNT, a partial velocity
+   gap) does not exceed the best: the exact step's node and ties, bit for bit.
+
 The nodes dominance pruning (1.) keeps depend only on the layer's phoneme, emotion and sides,
 so they are cached (``SearchSpace.survivors``) with b*; contaminated nodes are
 dropped from the cached set, which stays exact unless b* itself is contaminated
@@ -56,7 +62,7 @@ from numba import njit
 
 from ...errors import InvalidRequestError
 from .costs import NodeBounds, transition_cost, unary_costs
-from .fast_step import JoinRecords, fast_step
+from .fast_step import JoinRecords, best_entry, entry_table, fast_step
 from .nodes import SILENCE_INDEX, NodeDatabase, NodeFeatures
 
 INF = np.inf
@@ -93,6 +99,17 @@ class SearchSpace:
     """The nodes dominance pruning keeps with nothing contaminated, the node b* that set
     the threshold, and the kept nodes' OC + EMP, per (phoneme, emotion, has a layer before,
     has a layer after)."""
+    entries: dict[tuple[int, int, bool, bool], np.ndarray] = field(
+        default_factory=dict, compare=False
+    )
+    """``fast_step.entry_table`` of the survivors of a layer with a node before it."""
+
+    @cached_property
+    def no_exclusion(self) -> np.ndarray:
+        """An exclusion mask with nothing excluded, known so without reading it."""
+        mask = np.zeros(self.nodes.size, dtype=bool)
+        mask.setflags(write=False)
+        return mask
 
     @cached_property
     def records(self) -> JoinRecords:
@@ -118,6 +135,12 @@ class SearchSpace:
             only[layer.constrained] = cost[layer.constrained]
             return only
         return np.where(excluded, INF, cost)
+
+    def unary_at(self, layer: LayerSpec, excluded: np.ndarray, node: int) -> float:
+        """``unary(layer, excluded)[node]``, without the other nodes'."""
+        if node != layer.constrained and (layer.constrained >= 0 or excluded[node]):
+            return INF
+        return float(self.observation(layer)[node])
 
     def tc(self, a: int, b: int) -> float:
         f = self.features
@@ -190,6 +213,19 @@ def _fast_step(
     )  # fmt: skip
 
 
+def _best_entry(
+    space: SearchSpace, before: int, nodes: np.ndarray, unary: np.ndarray,
+    table: np.ndarray | None = None,
+) -> tuple[int, float, float]:  # fmt: skip
+    records = space.records
+    if table is None:
+        table = entry_table(nodes, unary, space.nodes.pre, space.features.viseme, records)
+    return best_entry(
+        before, nodes, table, space.features.viseme, records.leaving, records.arriving,
+        records.natural, space.packed,
+    )  # fmt: skip
+
+
 def _candidates(
     space: SearchSpace, layers: Sequence[LayerSpec], excluded: np.ndarray, index: int,
     has_before: bool, fast: bool, offset: int,
@@ -198,7 +234,7 @@ def _candidates(
     sides = (index > 0 or has_before, index + 1 < len(layers))
     if fast and layer.constrained < 0:
         kept, threshold, kept_unary = _survivors(space, layer, *sides)
-        if not excluded.any():
+        if excluded is space.no_exclusion or not excluded.any():
             return kept, kept_unary
         if not excluded[threshold]:  # the threshold stands: drop only contaminated survivors
             return _read_only(kept[~excluded[kept]], space.observation(layer))
@@ -272,6 +308,26 @@ def search(
     return SearchResult(path, cost, priced)
 
 
+def one_layer(
+    space: SearchSpace, layer: LayerSpec, excluded: np.ndarray, before: int = -1
+) -> tuple[int, int, float]:
+    """``search`` over the one non-silent ``layer`` (fast): its node, the nodes priced, and
+    TC(``before``, node) (0 without ``before``), without the segment bookkeeping."""
+    nodes, unary = _candidates(space, (layer,), excluded, 0, before >= 0, True, 0)
+    if before < 0:
+        return int(nodes[int(np.argmin(unary))]), len(nodes), 0.0
+    key = (layer.phoneme, layer.emotion, True, False)
+    survivors = space.survivors.get(key)
+    shared = survivors is not None and nodes is survivors[0]  # not narrowed by contamination
+    table = space.entries.get(key) if shared else None
+    if table is None:
+        table = entry_table(nodes, unary, space.nodes.pre, space.features.viseme, space.records)
+        if shared:
+            space.entries[key] = table
+    position, _, tc = _best_entry(space, before, nodes, unary, table)
+    return int(nodes[position]), len(nodes), tc
+
+
 def segments(layers: Sequence[LayerSpec]) -> list[tuple[int, int]]:
     """The [start, stop) runs of non-silent layers."""
     runs: list[tuple[int, int]] = []
@@ -297,6 +353,9 @@ def _segment(
     backs: list[np.ndarray] = []
     members: list[np.ndarray] = []
     nodes, f = _candidates(space, layers, excluded, 0, before >= 0, fast, offset)
+    if fast and before >= 0 and len(layers) == 1:
+        position, cost, _ = _best_entry(space, before, nodes, f)
+        return SearchResult(nodes[position : position + 1], cost, len(nodes))
     if before >= 0:
         start = np.array([before], dtype=np.int64)
         f, _ = _exact_step(space, start, np.zeros(1), nodes, f)

@@ -15,7 +15,10 @@ r(τ), the committed node of the latest span begun by τ time-warped over that
 span (a silence holds the last frame of the node before it, the rest pose at
 the start), with the shared critically damped filter (``damped``) at
 ω = κ / the median duration of that span's phoneme; the lead rung follows
-r(t + shift). The frame at t is final once the input covers t + shift.
+r(t + shift). The frame at t is final once the input covers t + shift. Each span's
+row and node are kept as it is committed and one compiled call reads the curve and steps
+the filter for a call's frames (``causal_curve``), so no per-call work grows with the
+request; a lag-0 commit is a one-layer search (``search.one_layer``).
 
 A silence ends a search segment (``search``): it gets no node (``NO_NODE``),
 and every node before it is committed as soon as it arrives, whatever the lag.
@@ -35,9 +38,7 @@ constraint on a silence is one too, when the silence is fed.
 
 from __future__ import annotations
 
-from bisect import bisect_left
 from collections.abc import Mapping, Sequence
-from operator import attrgetter
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -53,17 +54,16 @@ from ..base import (
     final_until,
     frame_count,
 )
-from ..damped import DampedState, filter_raw
+from ..damped import DampedState
 from ..damped_fit import RawCurve
+from ..growable import Growable
 from ..work import WorkGuard
-from .nodes import EMOTION_INDEX, warp_node
-from .search import NO_NODE, LayerSpec, SearchSpace, search
+from .causal_curve import follow_raw, raw_rows
+from .nodes import EMOTION_INDEX
+from .search import NO_NODE, LayerSpec, SearchSpace, one_layer, search
 
 if TYPE_CHECKING:
     from .model import ExpressiveDpModel
-
-_STARTED = 1e-9
-_start = attrgetter("start")
 
 
 class PathSynthesizer(RenderingSynthesizer):
@@ -81,7 +81,8 @@ class PathSynthesizer(RenderingSynthesizer):
         super().__init__(model, request)
         self.lag = lag
         self.constraints = dict(constraints)
-        self.excluded = model.contamination.mask()
+        excluded = model.contamination.mask()
+        self.excluded = excluded if excluded.any() else model.space.no_exclusion
         self.constrained: dict[int, int] = {}
         self.path: list[int] = []
         self.stats = {"frames": 0, "path_cost": 0.0, "candidates": 0, "nodes": ""}
@@ -136,7 +137,18 @@ class PathSynthesizer(RenderingSynthesizer):
 
 
 class LagSynthesizer(PathSynthesizer):
-    """The fixed-lag rungs and the full search."""
+    """The fixed-lag rungs and the full search; the points of the spans a call made are kept
+    for the next (``Renderer.grid``)."""
+
+    def __init__(
+        self,
+        model: ExpressiveDpModel,
+        request: SynthesisRequest,
+        lag: int | None,
+        constraints: Mapping[int, int],
+    ) -> None:
+        super().__init__(model, request, lag, constraints)
+        self.kept: dict[int, np.ndarray] = {}
 
     def final_until(self) -> float:
         if not self.spans or self.lag is None:
@@ -149,14 +161,16 @@ class LagSynthesizer(PathSynthesizer):
         self.request.guard.check()
         self.commit()
         times = np.arange(self.emitted, stop, dtype=np.float64) / self.request.fps
-        values = self.model.renderer.frames(self.spans, self.path, times)
+        values = self.model.renderer.frames(self.spans, self.path, times, self.kept)
         self.emitted = stop
         self.stats["frames"] = stop
         return np.asarray(self.model.basis.reconstruct(values), dtype=np.float32)
 
 
 class CausalSynthesizer(PathSynthesizer, ShiftedSynthesizer):
-    """The causal and lead rungs: nodes committed on arrival, a damped filter after."""
+    """The causal and lead rungs: nodes committed on arrival, a damped filter after. Each
+    span's row (``causal_curve``) and node are kept as it is committed, so a call's work
+    is that of its new spans and frames."""
 
     def __init__(
         self,
@@ -168,18 +182,27 @@ class CausalSynthesizer(PathSynthesizer, ShiftedSynthesizer):
         super().__init__(model, request, 0, constraints)
         self.shift_s = shift_s
         self.state: DampedState | None = None
+        self.omegas = model.causal_omegas
+        self.rows = Growable(np.float64, (3,))
+        self.nodes = Growable(np.int64)
 
     def _emit(self, stop: int) -> np.ndarray:
         if stop <= self.emitted:
             return np.zeros((0, len(self.model.channels)), dtype=np.float32)
         self.request.guard.check()
         self.commit()
-        times = np.arange(self.emitted, stop, dtype=np.float64) / self.request.fps
-        raw, begun = raw_curve(self.model, self.spans, self.path, times + self.shift_s)
-        medians = self.model.durations.expected_all_s()
-        phonemes = [PHONEME_INDEX[self.spans[k].phoneme] for k in begun.tolist()]
-        omegas = self.model.causal_kappa / medians[phonemes]
-        self.state, values = filter_raw(self.state, raw, omegas, times)
+        _keep_rows(self.omegas, self.spans, self.path, self.rows, self.nodes)
+        at_rest = self.state is None
+        if self.state is None:
+            self.state = DampedState.at_rest(self.model.rest_pose)
+        values = np.empty((stop - self.emitted, len(self.state.x)))
+        nodes = self.model.nodes
+        follow_raw(
+            self.emitted, stop, self.request.fps, self.shift_s, self.rows.view(),
+            self.nodes.view(), nodes.frames, nodes.offsets, self.model.rest_pose, self.state.x,
+            self.state.v, self.state.t, at_rest, values,
+        )  # fmt: skip
+        self.state.t = (stop - 1) / self.request.fps
         self.emitted = stop
         self.stats["frames"] = stop
         return np.asarray(self.model.basis.reconstruct(values), dtype=np.float32)
@@ -212,38 +235,52 @@ def extend_path(
             break
         else:
             last, whole = offset + lag, False
-        window = layers[offset : last + 1]
         before = path[-1] if path else NO_NODE
-        found = search(space, window, excluded, before=before, guard=guard)
+        if last == offset:  # one layer (every call of the causal rungs): no DP to run
+            node, candidates, tc = one_layer(space, layers[offset], excluded, before)
+            priced += candidates
+            added += space.unary_at(layers[offset], excluded, node)
+            added += tc if before >= 0 else 0.0
+            path.append(node)
+            offset += 1
+            continue
+        found = search(space, layers[offset : last + 1], excluded, before=before, guard=guard)
         priced += found.candidates
         for node in (found.path if whole else found.path[:1]).tolist():
             previous = path[-1] if path else NO_NODE
-            added += float(space.unary(layers[offset], excluded)[node])
+            added += space.unary_at(layers[offset], excluded, node)
             added += space.tc(previous, node) if previous >= 0 else 0.0
             path.append(node)
             offset += 1
     return priced, added
 
 
+def _keep_rows(
+    omegas: np.ndarray, spans: list[PhonemeSpan], path: list[int], rows: Growable,
+    nodes: Growable,
+) -> None:  # fmt: skip
+    """Append the rows (start, end, ω of its phoneme in ``omegas``) and nodes of the
+    committed spans not yet kept. A silence merged into a kept one changes only its end,
+    which a silence's row never reads."""
+    for k in range(nodes.count, len(path)):
+        span = spans[k]
+        rows.append((span.start, span.end, float(omegas[PHONEME_INDEX[span.phoneme]])))
+        nodes.append(path[k])
+
+
 def raw_curve(
     model: ExpressiveDpModel, spans: list[PhonemeSpan], path: list[int], at: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """r at times ``at`` (ascending) and the latest span begun at each."""
-    begun = np.array(
-        [max(bisect_left(spans, float(t) - _STARTED, key=_start) - 1, 0) for t in at],
-        dtype=np.int64,
-    )
-    values = np.empty((len(at), model.nodes.frames.shape[1]))
-    for k in np.unique(begun).tolist():
-        rows = begun == k
-        span = spans[k]
-        if span.phoneme == SILENCE:
-            held = k > 0 and path[k - 1] >= 0
-            values[rows] = model.nodes.node_frames(path[k - 1])[-1] if held else model.rest_pose
-            continue
-        relative = (at[rows] - span.start) / (span.end - span.start)
-        values[rows] = warp_node(model.nodes.node_frames(path[k]), relative)
-    return values, begun
+    rows, nodes = Growable(np.float64, (3,)), Growable(np.int64)
+    _keep_rows(model.causal_omegas, spans, path, rows, nodes)
+    raw = np.empty((len(at), model.nodes.frames.shape[1]))
+    begun = np.empty(len(at), dtype=np.int64)
+    raw_rows(
+        np.ascontiguousarray(at, dtype=np.float64), rows.view(), nodes.view(),
+        model.nodes.frames, model.nodes.offsets, model.rest_pose, raw, begun,
+    )  # fmt: skip
+    return raw, begun
 
 
 def training_raw_curve(model: ExpressiveDpModel, utterance: Any) -> RawCurve:

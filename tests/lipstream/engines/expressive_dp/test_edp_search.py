@@ -3,6 +3,8 @@ search's optimum equal to exact DP's with emotions, constraints and contaminatio
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -12,6 +14,7 @@ from lipstream.engines.expressive_dp.search import (
     NO_NODE,
     LayerSpec,
     _fast_step,
+    one_layer,
     path_cost,
     search,
 )
@@ -232,3 +235,36 @@ def test_the_cached_pruning_stays_exact_when_contamination_takes_its_threshold_n
         exact = search(space, layers, excluded, fast=False)
         assert fast.cost == pytest.approx(exact.cost, rel=1e-9)
         assert not excluded[fast.path].any()
+
+
+@settings(max_examples=10, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    dims=st.sampled_from([1, 3, 5, 14]),
+    coarse=st.booleans(),
+    contaminate=st.booleans(),
+)
+def test_one_layer_after_a_fixed_node_is_the_exact_steps_argmin(
+    seed: int, dims: int, coarse: bool, contaminate: bool
+) -> None:
+    """The causal rungs' search of one layer (``one_layer``: pruned scan, exact pricing) picks
+    the node exact DP over every admitted node picks, with its TC to the last bit; integer
+    frames make many costs tie, where the lowest node id wins as in the exact step."""
+    rng = np.random.default_rng(seed)
+    n = 40
+    space = random_space(rng, n, dims, coarse)
+    excluded = np.zeros(n, dtype=bool)
+    if contaminate:
+        excluded[rng.choice(n, size=n // 4, replace=False)] = True
+    for _ in range(8):
+        layer = LayerSpec(int(rng.choice(PHONEMES[:4])), int(rng.integers(0, 4)))
+        before = int(rng.integers(0, n))
+        node, priced, tc = one_layer(space, layer, excluded, before)
+        costs = [
+            loop_tc(space, before, b) + loop_unary(space, layer, b) if not excluded[b] else math.inf
+            for b in range(n)
+        ]
+        assert costs[node] == pytest.approx(min(costs), rel=1e-9, abs=1e-12)
+        assert tc == space.tc(before, node)
+        assert node == int(search(space, [layer], excluded, fast=False, before=before).path[0])
+        assert 1 <= priced <= n - int(excluded.sum())
