@@ -353,3 +353,25 @@ def best_entry(
             best_tc = tc
             arg = j
     return arg, best, best_tc
+
+
+@njit(cache=True)
+def entry_costs(
+    a: int, nodes: np.ndarray, unary: np.ndarray, pre: np.ndarray, viseme: np.ndarray,
+    leaving: np.ndarray, arriving: np.ndarray, natural: np.ndarray, packed: np.ndarray,
+) -> np.ndarray:  # fmt: skip
+    """(0 + TC(a, b)) + U(b) for every b of ``nodes`` (their U in ``unary``): the exact step
+    from the one node ``a`` (``search._exact_kernel``) to the last bit, each pair read from
+    two ``JoinRecords`` rows instead of six arrays."""
+    f = np.empty(len(nodes))
+    for j in range(len(nodes)):
+        b = nodes[j]
+        p = pre[b]
+        if p == a:
+            tc = 0.0
+        elif p < 0:
+            tc = packed[0]
+        else:
+            tc = _exact_tc(a, b, p, viseme, leaving, arriving, natural, len(natural), packed)
+        f[j] = (0.0 + tc) + unary[j]
+    return f

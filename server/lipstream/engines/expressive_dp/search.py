@@ -62,7 +62,7 @@ from numba import njit
 
 from ...errors import InvalidRequestError
 from .costs import NodeBounds, transition_cost, unary_costs
-from .fast_step import JoinRecords, best_entry, entry_table, fast_step
+from .fast_step import JoinRecords, best_entry, entry_costs, entry_table, fast_step
 from .nodes import SILENCE_INDEX, NodeDatabase, NodeFeatures
 
 INF = np.inf
@@ -356,7 +356,13 @@ def _segment(
     if fast and before >= 0 and len(layers) == 1:
         position, cost, _ = _best_entry(space, before, nodes, f)
         return SearchResult(nodes[position : position + 1], cost, len(nodes))
-    if before >= 0:
+    if before >= 0 and fast:
+        records = space.records
+        f = entry_costs(
+            before, nodes, f, space.nodes.pre, space.features.viseme, records.leaving,
+            records.arriving, records.natural, space.packed,
+        )  # fmt: skip
+    elif before >= 0:
         start = np.array([before], dtype=np.int64)
         f, _ = _exact_step(space, start, np.zeros(1), nodes, f)
     priced = len(nodes)
