@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 from bisect import bisect_right
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 from functools import lru_cache
 from operator import attrgetter
 
@@ -57,6 +58,21 @@ def owned(span: PhonemeSpan, rate: float) -> tuple[int, int]:
 
 def visibility(phoneme: str) -> float:
     return VISIBILITY.get(phoneme, 1.0)
+
+
+@dataclass
+class RenderCache:
+    """A stream's made span points (``points``), unsmoothed points (``bases``) and solved
+    joins (``joins``, of spans k and k + 1), by span index."""
+
+    points: dict[int, np.ndarray] = field(default_factory=dict)
+    bases: dict[int, np.ndarray] = field(default_factory=dict)
+    joins: dict[int, np.ndarray] = field(default_factory=dict)
+
+    def forget_before(self, first: int) -> None:
+        for kept in (self.points, self.bases, self.joins):
+            for k in [k for k in kept if k < first]:
+                del kept[k]
 
 
 class Renderer:
@@ -106,24 +122,57 @@ class Renderer:
             return False
         return int(self.nodes.pre[int(path[k + 1])]) != int(path[k])
 
-    def span_values(self, spans: Sequence[PhonemeSpan], path: Sequence[int], k: int) -> np.ndarray:
-        """Span k's points, smoothed at its joins (needs the nodes of k − 1 .. k + 1)."""
-        values = self._base(spans, path, k)
+    def _kept_base(
+        self, spans: Sequence[PhonemeSpan], path: Sequence[int], k: int, kept: RenderCache | None
+    ) -> np.ndarray:
+        """``_base``, read from or left in ``kept`` (not to be written)."""
+        if kept is None:
+            return self._base(spans, path, k)
+        base = kept.bases.get(k)
+        if base is None:
+            base = kept.bases[k] = self._base(spans, path, k)
+        return base
+
+    def _kept_join(
+        self, spans: Sequence[PhonemeSpan], path: Sequence[int], k: int, left: np.ndarray,
+        right: np.ndarray, kept: RenderCache | None,
+    ) -> np.ndarray:  # fmt: skip
+        """``_join`` of spans k and k + 1, read from or left in ``kept``: both spans' points
+        read it, with the same ``left`` and ``right``."""
+        if kept is None:
+            return self._join(spans, path, k, left, right)
+        solved = kept.joins.get(k)
+        if solved is None:
+            solved = kept.joins[k] = self._join(spans, path, k, left, right)
+        return solved
+
+    def span_values(
+        self,
+        spans: Sequence[PhonemeSpan],
+        path: Sequence[int],
+        k: int,
+        kept: RenderCache | None = None,
+    ) -> np.ndarray:
+        """Span k's points, smoothed at its joins (needs the nodes of k − 1 .. k + 1); ``kept``
+        (a stream's) holds the unsmoothed points and joins already made."""
+        values = self._kept_base(spans, path, k, kept).copy()
         count = len(values)
         head = min(self.half, count // 2)
         tail = min(self.half, count - head)
         if k > 0 and head and self._smoothed(spans, path, k - 1):
-            before = self._base(spans, path, k - 1)
+            before = self._kept_base(spans, path, k - 1, kept)
             before_head = min(self.half, len(before) // 2)
             before_tail = min(self.half, len(before) - before_head)
             if before_tail:
-                solved = self._join(spans, path, k - 1, before[-before_tail:], values[:head])
+                solved = self._kept_join(
+                    spans, path, k - 1, before[-before_tail:], values[:head], kept
+                )
                 values[:head] = solved[before_tail:]
         if k + 1 < len(spans) and tail and self._smoothed(spans, path, k):
-            after = self._base(spans, path, k + 1)
+            after = self._kept_base(spans, path, k + 1, kept)
             after_head = min(self.half, len(after) // 2)
             if after_head:
-                solved = self._join(spans, path, k, values[-tail:], after[:after_head])
+                solved = self._kept_join(spans, path, k, values[-tail:], after[:after_head], kept)
                 values[-tail:] = solved[:tail]
         return values
 
@@ -160,28 +209,27 @@ class Renderer:
         path: Sequence[int],
         low: int,
         high: int,
-        kept: dict[int, np.ndarray] | None = None,
+        kept: RenderCache | None = None,
     ) -> np.ndarray:
         """Grid points low..high (inclusive), (high − low + 1, K). ``kept`` (a stream's) holds
-        the points of spans already made, by index, and takes those made now: a span's points
-        are final once made (its frames waited for the nodes they read)."""
+        what spans already made, by index, and takes what is made now: a span's points are
+        final once made (its frames waited for the nodes they read)."""
         out = np.empty((high - low + 1, self.nodes.frames.shape[1]))
         filled = np.zeros(high - low + 1, dtype=bool)
         first = max(0, _span_at(spans, low / self.rate) - 1)
-        if kept:  # a stream's times ascend: no later call reads spans before this one's
-            for k in [k for k in kept if k < first]:
-                del kept[k]
+        if kept is not None:  # a stream's times ascend: no later call reads spans before these
+            kept.forget_before(first - 1)
         for k in range(first, len(spans)):
             start, stop = owned(spans[k], self.rate)
             if start > high:
                 break
             if stop <= low or stop <= start:
                 continue
-            values = kept.get(k) if kept is not None else None
+            values = kept.points.get(k) if kept is not None else None
             if values is None:
-                values = self.span_values(spans, path, k)
+                values = self.span_values(spans, path, k, kept)
                 if kept is not None:
-                    kept[k] = values
+                    kept.points[k] = values
             a, b = max(start, low), min(stop, high + 1)
             out[a - low : b - low] = values[a - start : b - start]
             filled[a - low : b - low] = True
@@ -194,7 +242,7 @@ class Renderer:
         spans: Sequence[PhonemeSpan],
         path: Sequence[int],
         times: np.ndarray,
-        kept: dict[int, np.ndarray] | None = None,
+        kept: RenderCache | None = None,
     ) -> np.ndarray:
         """Coefficient frames at ``times`` (ascending), linear between grid points (``kept``:
         see ``grid``)."""

@@ -60,6 +60,7 @@ from ..growable import Growable
 from ..work import WorkGuard
 from .causal_curve import follow_raw, raw_rows
 from .nodes import EMOTION_INDEX
+from .postprocess import RenderCache
 from .search import NO_NODE, LayerSpec, SearchSpace, one_layer, search
 
 if TYPE_CHECKING:
@@ -148,7 +149,7 @@ class LagSynthesizer(PathSynthesizer):
         constraints: Mapping[int, int],
     ) -> None:
         super().__init__(model, request, lag, constraints)
-        self.kept: dict[int, np.ndarray] = {}
+        self.kept = RenderCache()
 
     def final_until(self) -> float:
         if not self.spans or self.lag is None:
