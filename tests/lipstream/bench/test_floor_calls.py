@@ -18,8 +18,8 @@ def test_each_call_is_timed_and_the_median_lies_within_the_calls(
     costs = call_costs(model, 12)
     assert len(costs) == 12 and all(cost >= 0.0 for cost in costs)
     row = measure(model, calls=10, passes=2)
-    assert row.engine == "viseme-lerp" and row.calls == 20
-    assert 0.0 <= row.median_us <= row.p90_us
+    assert (row.engine, row.rung, row.calls) == ("viseme-lerp", "causal", 20)
+    assert 0.0 <= row.median_us <= row.p90_us and row.mean_us > 0.0
 
 
 def test_the_command_writes_a_row_for_each_engine_of_the_character(
@@ -35,3 +35,17 @@ def test_the_command_writes_a_row_for_each_engine_of_the_character(
     rows = json.loads(out.read_text())
     assert [(row["engine"], row["calls"]) for row in rows] == [("viseme-lerp", 10)]
     assert "viseme-lerp" in capsys.readouterr().out
+
+
+def test_every_rung_gets_a_row_with_all_rungs(
+    lerp_dir: Path,
+    trained_models: dict[str, Model],
+    tmp_path: Path,
+) -> None:
+    out = tmp_path / "rungs.json"
+    model = trained_models["viseme-lerp"]
+    main(["--models", str(lerp_dir), "--character", model.name, "--calls", "4", "--passes", "1",
+          "--all-rungs", "--json", str(out)])  # fmt: skip
+    rows = json.loads(out.read_text())
+    assert [row["rung"] for row in rows] == [rung.name for rung in model.fidelity_ladder()]
+    assert all(row["calls"] == 4 for row in rows)
