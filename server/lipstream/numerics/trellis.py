@@ -282,6 +282,7 @@ class FixedLagViterbi:
         self.log_start = np.ascontiguousarray(log_start, dtype=np.float64)
         self.log_transition = np.ascontiguousarray(log_transition, dtype=np.float64)
         self.lag = lag
+        self.lag_limit = _NO_LAG if lag is None else lag
         self.frames = 0
         self.oldest = 0
         self.delta = np.full(len(self.log_start), NEG_INF)
@@ -289,8 +290,10 @@ class FixedLagViterbi:
 
     def _room(self, extra: int) -> None:
         """Unbounded lag: grow the ring so the uncommitted frames never wrap."""
+        if self.lag is not None:
+            return
         needed = self.frames + extra - self.oldest + 2
-        if self.lag is None and needed > len(self.ring):
+        if needed > len(self.ring):
             size = max(needed, 2 * len(self.ring))
             grown = np.zeros((size, self.ring.shape[1]), np.int64)
             for u in range(self.oldest, self.frames):
@@ -300,17 +303,26 @@ class FixedLagViterbi:
     def push(self, log_emission: np.ndarray) -> np.ndarray:
         """Decode the next frames (m, N); the states committed by them, in frame order."""
         rows = np.ascontiguousarray(log_emission, dtype=np.float64)
-        if len(rows) == 0:
-            return np.zeros(0, dtype=np.int64)
-        self._room(len(rows))
-        committed = np.empty(len(rows) + len(self.ring) + 1, dtype=np.int64)
-        lag = _NO_LAG if self.lag is None else self.lag
+        committed = np.empty(self.most_committed(len(rows)), dtype=np.int64)
+        return committed[: self.push_into(rows, committed)].copy()
+
+    def most_committed(self, frames: int) -> int:
+        """The most states that pushing ``frames`` more frames can commit."""
+        return frames + self.frames - self.oldest + 1
+
+    def push_into(self, log_emission: np.ndarray, out: np.ndarray) -> int:
+        """``push`` for C-contiguous float64 rows (m, N), writing the committed states into
+        ``out`` (room for ``most_committed(m)``); returns how many."""
+        frames = len(log_emission)
+        if frames == 0:
+            return 0
+        self._room(frames)
         count, self.oldest = _advance(
-            self.log_start, self.log_transition, self.delta, self.ring, rows,
-            self.frames, self.oldest, lag, committed,
+            self.log_start, self.log_transition, self.delta, self.ring, log_emission,
+            self.frames, self.oldest, self.lag_limit, out,
         )  # fmt: skip
-        self.frames += len(rows)
-        return committed[:count].copy()
+        self.frames += frames
+        return int(count)
 
     def finish(self) -> np.ndarray:
         """Commit every remaining frame along the best survivor."""

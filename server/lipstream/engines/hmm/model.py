@@ -83,6 +83,8 @@ class HmmModel(Model):
         self.facial = Gaussians(self.stored["means"], self.stored["covariances"])
         self.phoneme_log_probs = np.ascontiguousarray(self.stored["phoneme_log_probs"])
         self.emotion_log_probs = np.ascontiguousarray(self.stored["emotion_log_probs"])
+        self.phoneme_rows = np.ascontiguousarray(self.phoneme_log_probs.T)  # (phonemes, N)
+        self.emotion_rows = np.ascontiguousarray(self.emotion_log_probs.T)  # (emotions, N)
         self.vocal: Gaussians | None = None
         if bool(extra["has_audio"]):
             self.vocal = Gaussians(self.stored["vocal_means"], self.stored["vocal_covariances"])

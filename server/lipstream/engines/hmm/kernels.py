@@ -1,0 +1,146 @@
+"""Compiled per-call steps of ``synthesizer`` (numba): emissions, state lookups, recursion.
+
+Sketch: a streamed call decodes a few HMM frames and solves a few trajectory
+frames; done as numpy expressions, each step costs more in array set-up than
+in arithmetic, and rebuilding arrays from the request's growing lists costs
+O(length so far) per call. The synthesizer therefore keeps its spans, states
+and trajectory in growing buffers (``engines.growable``) and these kernels
+read and write them in place:
+
+- ``emissions``: the phoneme and emotion log-probabilities of HMM frames
+  ``first .. stop − 1``, each frame finding its span by bisection over the span
+  starts (the span with start < j / R ≤ end), as ``np.searchsorted`` did;
+- ``frame_states``: the state of trajectory frames ``first .. stop − 1``
+  (HMM frame ⌊k R / f⌋, the last committed one past the end);
+- ``recurse``: the frame-at-a-time solve y_t = G_cur⁻¹ (r_cur − G_cross y_{t−1})
+  written into the trajectory buffer;
+- ``output_frames``: output frames ``first .. stop − 1`` (trajectory frame
+  ⌊i f / fps⌋ back in channel space), up to the first not yet solved.
+
+Every value is computed by the same floating-point operations as the numpy
+expressions they replace (the same sums in the same order, the same BLAS
+matrix-vector products), so the frames are the same to the bit.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+EPS = 1e-9
+"""Tolerance of the frame-time comparisons (``synthesizer``)."""
+
+
+@njit(cache=True)
+def _span_of(starts: np.ndarray, count: int, time: float) -> int:
+    """The span with start < time ≤ end among the first ``count`` (clipped to 0 .. count − 1):
+    one less than the number of starts below time − EPS."""
+    key = time - EPS
+    low, high = 0, count
+    while low < high:
+        middle = (low + high) >> 1
+        if starts[middle] < key:
+            low = middle + 1
+        else:
+            high = middle
+    return min(max(low - 1, 0), count - 1)
+
+
+@njit(cache=True)
+def emissions(
+    starts: np.ndarray,
+    labels: np.ndarray,
+    moods: np.ndarray,
+    count: int,
+    first: int,
+    hmm_fps: float,
+    phoneme_rows: np.ndarray,
+    emotion_rows: np.ndarray,
+    mood: int,
+    out: np.ndarray,
+) -> None:
+    """out[j − first] = the log-probabilities of HMM frame j's phoneme plus its emotion
+    (``phoneme_rows`` (phonemes, N), ``emotion_rows`` (emotions, N)); with no spans
+    (``count`` 0) the emotion ``mood`` alone."""
+    states = out.shape[1]
+    for offset in range(out.shape[0]):
+        row = out[offset]
+        if count == 0:
+            emotion = emotion_rows[mood]
+            for state in range(states):
+                row[state] = 0.0 + emotion[state]
+            continue
+        span = _span_of(starts, count, (first + offset) / hmm_fps)
+        phoneme, emotion = phoneme_rows[labels[span]], emotion_rows[moods[span]]
+        for state in range(states):
+            row[state] = (0.0 + phoneme[state]) + emotion[state]
+
+
+@njit(cache=True)
+def _hmm_frame(frame: int, ratio: float, committed: int) -> int:
+    return min(int(math.floor(float(frame) * ratio + EPS)), committed - 1)
+
+
+@njit(cache=True)
+def frame_states(
+    states: np.ndarray, committed: int, ratio: float, first: int, stop: int
+) -> np.ndarray:
+    """The state of each trajectory frame first .. stop − 1 (``ratio`` = R / f) among the
+    ``committed`` states."""
+    out = np.empty(stop - first, dtype=np.int64)
+    for frame in range(first, stop):
+        out[frame - first] = states[_hmm_frame(frame, ratio, committed)]
+    return out
+
+
+@njit(cache=True)
+def recurse(
+    states: np.ndarray,
+    committed: int,
+    ratio: float,
+    curve: np.ndarray,
+    start: int,
+    stop: int,
+    inverse: np.ndarray,
+    cross: np.ndarray,
+    rhs: np.ndarray,
+    mean: np.ndarray,
+) -> None:
+    """curve[start .. stop − 1] a frame at a time from curve[start − 1] (frame 0: its
+    state's pose mean), as ``trajectory.recurse``."""
+    for t in range(start, stop):
+        state = states[_hmm_frame(t, ratio, committed)]
+        if t == 0:
+            curve[0] = mean[state]
+        else:
+            curve[t] = inverse[state] @ (rhs[state] - cross[state] @ curve[t - 1])
+
+
+@njit(cache=True)
+def output_frames(
+    curve: np.ndarray,
+    solved: int,
+    first: int,
+    stop: int,
+    step: float,
+    components: np.ndarray,
+    mean: np.ndarray,
+) -> np.ndarray:
+    """Output frames first .. stop − 1 as float32 channel frames (``MotionBasis.reconstruct``
+    of trajectory row ⌊i · step + EPS⌋, ``step`` = f / fps), ending before the first whose row
+    is past the ``solved`` ones."""
+    count = 0
+    for frame in range(first, stop):
+        if int(math.floor(float(frame) * step + EPS)) >= solved:
+            break
+        count += 1
+    if count == 0:
+        return np.zeros((0, components.shape[1]), dtype=np.float32)
+    rows = np.empty((count, curve.shape[1]))
+    for offset in range(count):
+        rows[offset] = curve[int(math.floor(float(first + offset) * step + EPS))]
+    frames: np.ndarray = np.dot(rows, components)  # the BLAS product of ``reconstruct``, to the bit
+    frames += mean
+    return frames.astype(np.float32)
