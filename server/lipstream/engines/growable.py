@@ -53,7 +53,8 @@ class Growable:
     def reserve(self, extra: int) -> np.ndarray:
         """The buffer, with room for ``extra`` rows after the held ones, for a kernel to write
         them in place; ``grow`` then counts the rows it wrote."""
-        self._reserve(self.held + extra)
+        if self.count - self.first + extra > len(self.data):
+            self._reserve(self.count - self.first + extra)
         return self.data
 
     def grow(self, rows: int) -> None:

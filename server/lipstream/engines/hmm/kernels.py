@@ -7,11 +7,14 @@ O(length so far) per call. The synthesizer therefore keeps its spans, states
 and trajectory in growing buffers (``engines.growable``) and these kernels
 read and write them in place:
 
-- ``emissions``: the phoneme and emotion log-probabilities of HMM frames
-  ``first .. stop − 1``, each frame finding its span by bisection over the span
-  starts (the span with start < j / R ≤ end), as ``np.searchsorted`` did;
-- ``frame_states``: the state of trajectory frames ``first .. stop − 1``
-  (HMM frame ⌊k R / f⌋, the last committed one past the end);
+- ``decode``: the emission log-likelihoods of HMM frames ``first .. stop − 1``
+  (``emissions``: the phoneme and emotion log-probabilities, each frame finding
+  its span by bisection over the span starts, the span with start < j / R ≤ end,
+  plus the weighted vocal log-densities computed by the caller), decoded by the
+  request's ``FixedLagViterbi`` in the same compiled call;
+- ``solve_block``: a block of the trajectory (``trajectory.solve``) written into
+  the trajectory buffer, the states of its frames (``frame_states``: HMM frame
+  ⌊k R / f⌋, the last committed one past the end) looked up in the same call;
 - ``recurse``: the frame-at-a-time solve y_t = G_cur⁻¹ (r_cur − G_cross y_{t−1})
   written into the trajectory buffer;
 - ``output_frames``: output frames ``first .. stop − 1`` (trajectory frame
@@ -19,7 +22,7 @@ read and write them in place:
 
 Every value is computed by the same floating-point operations as the numpy
 expressions they replace (the same sums in the same order, the same BLAS
-matrix-vector products), so the frames are the same to the bit.
+products, the same compiled block solve), so the frames are the same to the bit.
 """
 
 from __future__ import annotations
@@ -29,19 +32,23 @@ import math
 import numpy as np
 from numba import njit
 
+from ...numerics.banded import SOLVED, solve_block_tridiagonal_into
+from ...numerics.trellis import advance
+from .trajectory import assemble
+
 EPS = 1e-9
 """Tolerance of the frame-time comparisons (``synthesizer``)."""
 
 
 @njit(cache=True)
-def _span_of(starts: np.ndarray, count: int, time: float) -> int:
+def _span_of(spans: np.ndarray, count: int, time: float) -> int:
     """The span with start < time ≤ end among the first ``count`` (clipped to 0 .. count − 1):
     one less than the number of starts below time − EPS."""
     key = time - EPS
     low, high = 0, count
     while low < high:
         middle = (low + high) >> 1
-        if starts[middle] < key:
+        if spans[middle, 0] < key:
             low = middle + 1
         else:
             high = middle
@@ -50,32 +57,69 @@ def _span_of(starts: np.ndarray, count: int, time: float) -> int:
 
 @njit(cache=True)
 def emissions(
-    starts: np.ndarray,
-    labels: np.ndarray,
-    moods: np.ndarray,
+    spans: np.ndarray,
     count: int,
     first: int,
     hmm_fps: float,
-    phoneme_rows: np.ndarray,
-    emotion_rows: np.ndarray,
+    categories: np.ndarray,
     mood: int,
+    audio_terms: np.ndarray,
+    heard_from: int,
     out: np.ndarray,
 ) -> None:
-    """out[j − first] = the log-probabilities of HMM frame j's phoneme plus its emotion
-    (``phoneme_rows`` (phonemes, N), ``emotion_rows`` (emotions, N)); with no spans
-    (``count`` 0) the emotion ``mood`` alone."""
+    """out[j − first] = the log-probability of HMM frame j's phoneme plus its emotion's (rows
+    of ``categories``: phonemes, then emotions; ``spans`` rows: start, phoneme row, emotion
+    row), or with no spans (``count`` 0) of the emotion row ``mood`` alone; plus
+    audio_terms[j − heard_from] for the frames it covers."""
     states = out.shape[1]
     for offset in range(out.shape[0]):
         row = out[offset]
         if count == 0:
-            emotion = emotion_rows[mood]
+            emotion = categories[mood]
             for state in range(states):
                 row[state] = 0.0 + emotion[state]
-            continue
-        span = _span_of(starts, count, (first + offset) / hmm_fps)
-        phoneme, emotion = phoneme_rows[labels[span]], emotion_rows[moods[span]]
-        for state in range(states):
-            row[state] = (0.0 + phoneme[state]) + emotion[state]
+        else:
+            span = _span_of(spans, count, (first + offset) / hmm_fps)
+            phoneme, emotion = categories[int(spans[span, 1])], categories[int(spans[span, 2])]
+            for state in range(states):
+                row[state] = (0.0 + phoneme[state]) + emotion[state]
+        heard = first + offset - heard_from
+        if 0 <= heard < audio_terms.shape[0]:
+            for state in range(states):
+                row[state] += audio_terms[heard, state]
+
+
+@njit(cache=True)
+def decode(
+    spans: np.ndarray,
+    count: int,
+    first: int,
+    stop: int,
+    hmm_fps: float,
+    categories: np.ndarray,
+    mood: int,
+    audio_terms: np.ndarray,
+    heard_from: int,
+    log_start: np.ndarray,
+    log_transition: np.ndarray,
+    into_offsets: np.ndarray,
+    into_states: np.ndarray,
+    delta: np.ndarray,
+    ring: np.ndarray,
+    position: np.ndarray,
+    lag: int,
+    committed: np.ndarray,
+    at: int,
+) -> int:
+    """``emissions`` of HMM frames first .. stop − 1 pushed through a
+    ``numerics.trellis.FixedLagViterbi`` (its arrays, after its ``reserve``); the states
+    committed go to committed[at:], and their count is returned."""
+    log_emission = np.empty((stop - first, log_start.shape[0]))
+    emissions(spans, count, first, hmm_fps, categories, mood, audio_terms, heard_from, log_emission)
+    return advance(
+        log_start, log_transition, into_offsets, into_states, delta, ring, position, lag,
+        log_emission, committed, at,
+    )  # fmt: skip
 
 
 @njit(cache=True)
@@ -93,6 +137,38 @@ def frame_states(
     for frame in range(first, stop):
         out[frame - first] = states[_hmm_frame(frame, ratio, committed)]
     return out
+
+
+@njit(cache=True)
+def solve_block(
+    states: np.ndarray,
+    committed: int,
+    ratio: float,
+    curve: np.ndarray,
+    first: int,
+    start: int,
+    stop: int,
+    end: int,
+    pose_precision: np.ndarray,
+    pose_rhs: np.ndarray,
+    g_current: np.ndarray,
+    g_previous: np.ndarray,
+    g_cross: np.ndarray,
+    r_current: np.ndarray,
+    r_previous: np.ndarray,
+) -> int:
+    """curve[start .. stop − 1] from Eq. 6 over frames first .. end − 1 with frames
+    first .. start − 1 pinned to the curve, as ``trajectory.solve``; returns the solve's
+    code (``numerics.banded.solve_block_tridiagonal_into``)."""
+    diagonal, below, rhs = assemble(
+        frame_states(states, committed, ratio, first, end), curve[first:start],
+        pose_precision, pose_rhs, g_current, g_previous, g_cross, r_current, r_previous,
+    )  # fmt: skip
+    solution = np.empty(rhs.shape)
+    code = solve_block_tridiagonal_into(diagonal, below, rhs, solution)
+    if code == SOLVED:
+        curve[start:stop] = solution[start - first : stop - first]
+    return code
 
 
 @njit(cache=True)

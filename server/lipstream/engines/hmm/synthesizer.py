@@ -61,9 +61,10 @@ import numpy as np
 from ...audio import Audio
 from ...errors import InvalidRequestError
 from ...features import frames_covered, speech_features
+from ...numerics.banded import check_block_tridiagonal
 from ...numerics.trellis import FixedLagViterbi
 from ...phonemes import PHONEME_INDEX
-from ...timeline import EMOTIONS, PhonemeSpan, SpanLike, coerce_spans
+from ...timeline import PhonemeSpan, SpanLike, coerce_spans
 from ..base import (
     AUDIO_ONLY_UNSUPPORTED,
     DEFAULT_EMOTION,
@@ -73,7 +74,7 @@ from ..base import (
     frame_count,
 )
 from ..growable import Growable
-from . import kernels, trajectory
+from . import kernels
 
 if TYPE_CHECKING:
     from .model import HmmModel
@@ -82,7 +83,6 @@ PINNED = 2
 AUTO, PHONEMES, AUDIO, BOTH = "auto", "phonemes", "audio", "both"
 DRIVES = (AUTO, PHONEMES, AUDIO, BOTH)
 _EPS = kernels.EPS
-EMOTION_INDEX = {emotion: index for index, emotion in enumerate(EMOTIONS)}
 
 
 @dataclass(frozen=True)
@@ -176,20 +176,20 @@ class HmmSynthesizer(Synthesizer):
         self.stepwise_dynamics = model.dynamics_at(plan.rate, coupled=False)
         self.spans: list[PhonemeSpan] = []
         self.end = 0.0
-        self.starts = Growable(np.float64)
-        self.labels = Growable(np.int64)
-        self.moods = Growable(np.int64)
+        self.span_rows = Growable(np.float64, (3,))  # start, phoneme row, emotion row
         self.audio = AudioFeatures(model)
         self.heard = False
         self._drive(None if plan.drive == AUTO else plan.drive)
-        self.decoder = FixedLagViterbi(model.log_start, model.log_transition, plan.lag)
+        self.decoder = FixedLagViterbi(
+            model.log_start, model.log_transition, plan.lag, model.predecessors
+        )
         self.observed = 0
-        self.log_emission = np.zeros((0, len(model.log_start)))
+        self.unheard = np.zeros((0, len(model.log_start)))
         self.states = Growable(np.int64)
         self.curve = Growable(np.float64, (self.dynamics.dim,))
         self.emitted = 0
         self.wait_s = plan.wait_s(model.hmm_fps)
-        self.mood = EMOTION_INDEX[request.emotion or DEFAULT_EMOTION]
+        self.mood = model.emotion_row(request.emotion or DEFAULT_EMOTION)
         self.finished = False
         self.stats = {"frames": 0, "states": 0}
 
@@ -215,13 +215,12 @@ class HmmSynthesizer(Synthesizer):
                 where="phonemes",
             )
         if new:
-            emotion = self.request.emotion
+            emotion, rows, model = self.request.emotion, self.span_rows, self.model
             for span in fill_gaps(new, covered):
                 self.spans.append(span)
-                self.starts.append(span.start)
-                self.labels.append(PHONEME_INDEX[span.phoneme])
                 mood = span.emotion or emotion
-                self.moods.append(EMOTION_INDEX[mood] if mood else self.mood)
+                mood_row = model.emotion_row(mood) if mood else self.mood
+                rows.append((span.start, PHONEME_INDEX[span.phoneme], mood_row))
             self.end = self.spans[-1].end
         if audio is not None:
             self.heard = True
@@ -259,37 +258,38 @@ class HmmSynthesizer(Synthesizer):
 
     # -- observations and decoding ----------------------------------------------------------
 
-    def _emissions(self, first: int, stop: int) -> np.ndarray:
-        """Emission log-likelihoods of HMM frames first .. stop − 1 (a view of a buffer that
-        the next call overwrites)."""
+    def _audio_terms(self, first: int, stop: int) -> tuple[np.ndarray, int]:
+        """The weighted vocal log-densities of the HMM frames first .. stop − 1 that hear a
+        feature frame, and the first of them (``kernels.emissions``)."""
         model = self.model
-        if stop - first > len(self.log_emission):
-            size = max(stop - first, 2 * len(self.log_emission))
-            self.log_emission = np.zeros((size, len(model.log_start)))
-        log_e = self.log_emission[: stop - first]
-        kernels.emissions(
-            self.starts.data, self.labels.data, self.moods.data,
-            self.starts.count if self.reading else 0, first, model.hmm_fps,
-            model.phoneme_rows, model.emotion_rows, self.mood, log_e,
-        )  # fmt: skip
-        if self.listening and model.vocal is not None:
-            frames = np.arange(first, stop) - self.plan.delay
-            available = frame_count(self.audio.duration, model.mfcc.rate)
-            heard = (frames < available) & (frames >= 0)  # the first d frames hear nothing yet
-            if heard.any():
-                rows = self.audio.rows(int(frames[heard].max()) + 1)
-                vocal = model.vocal.log_density(rows[frames[heard]])
-                log_e[heard] += model.audio_weight * vocal
-        return log_e
+        if not self.listening or model.vocal is None:
+            return self.unheard, 0
+        frames = np.arange(first, stop) - self.plan.delay
+        available = frame_count(self.audio.duration, model.mfcc.rate)
+        heard = (frames < available) & (frames >= 0)  # the first d frames hear nothing yet
+        if not heard.any():
+            return self.unheard, 0
+        rows = self.audio.rows(int(frames[heard].max()) + 1)
+        vocal = model.vocal.log_density(rows[frames[heard]])
+        return model.audio_weight * vocal, first + int(np.argmax(heard))
 
     def _decode(self) -> None:
         target = self._observable()
         states = self.states
-        if target > self.observed:
+        first = self.observed
+        if target > first:
             self.request.guard.check()
-            decoder = self.decoder
-            out = states.reserve(decoder.most_committed(target - self.observed))
-            fresh = decoder.push_into(self._emissions(self.observed, target), out[states.count :])
+            decoder, model = self.decoder, self.model
+            decoder.reserve(target - first)
+            out = states.reserve(decoder.most_committed(target - first))
+            terms, heard_from = self._audio_terms(first, target)
+            fresh = kernels.decode(
+                self.span_rows.data, self.span_rows.count if self.reading else 0, first,
+                target, model.hmm_fps, model.categories, self.mood, terms, heard_from,
+                decoder.log_start, decoder.log_transition, decoder.into_offsets,
+                decoder.into_states, decoder.delta, decoder.ring, decoder.position,
+                decoder.lag_limit, out, states.count,
+            )  # fmt: skip
             self.observed = target
             states.grow(fresh)
         if self.finished:
@@ -335,13 +335,27 @@ class HmmSynthesizer(Synthesizer):
             if end > ready:
                 return
             self.request.guard.check()
-            first = max(0, start - PINNED)
-            states = kernels.frame_states(
-                self.states.data, self.states.count, self.ratio, first, end
+            terms, curve = self.dynamics, self.curve
+            check_block_tridiagonal(
+                kernels.solve_block(
+                    self.states.data,
+                    self.states.count,
+                    self.ratio,
+                    curve.reserve(stop - start),
+                    max(0, start - PINNED),
+                    start,
+                    stop,
+                    end,
+                    terms.pose_precision,
+                    terms.pose_rhs,
+                    terms.g_current,
+                    terms.g_previous,
+                    terms.g_cross,
+                    terms.r_current,
+                    terms.r_previous,
+                )  # fmt: skip
             )
-            pins = self.curve.data[first:start] if start > 0 else None
-            solved = trajectory.solve(self.dynamics, states, pins)
-            self.curve.extend(solved[start - first : stop - first])
+            curve.grow(stop - start)
 
     def _recurse(self, start: int, stop: int) -> None:
         """Frames start .. stop − 1 a frame at a time (``trajectory.recurse``)."""
