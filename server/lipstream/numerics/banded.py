@@ -147,8 +147,10 @@ def _block_cholesky_solve(
         schur[:, :] = diagonal[t]
         if t > 0:
             previous, block, c = factor[t - 1], below[t - 1], coupling[t]
-            for i in range(dims):  # C_t L_{t-1}^T = B_{t-1}, row by row
-                for j in range(dims):
+            # C_t L_{t-1}^T = B_{t-1}, column by column: the rows are independent, so their
+            # divisions overlap rather than wait on each other along a row.
+            for j in range(dims):
+                for i in range(dims):
                     value = block[i, j]
                     for k in range(j):
                         value -= c[i, k] * previous[j, k]
