@@ -9,7 +9,7 @@ as a density (by the window's energy and length), so band energies do not
 depend on the sample rate. A mel filterbank fixed in Hz (50 Hz to 4 kHz, so any sample rate of
 8 kHz or more gives comparable features) pools the spectrum, and the DCT-II
 of the log energies gives the cepstrum; the first ``n_coefficients`` are kept.
-All frames are analysed at once (windows cut by stride tricks, one rfft);
+All frames are analysed at once (windows cut and weighted in one compiled pass, one rfft);
 the window, mel pooling and DCT matrices are cached per sample rate.
 
 Every frame depends only on the samples under its own window, so the frames
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from numpy.lib.stride_tricks import as_strided
+from numba import njit
 from scipy.fft import dct, next_fast_len, rfft
 
 _LOG_FLOOR = 1e-10
@@ -196,31 +196,64 @@ def _analyse(
     analysis = _analysis(int(sample_rate), config)
     length = analysis.length
     starts = _window_starts(first, stop, sample_rate, config)
-    low = max(0, int(starts[0]) - 1)
-    end = int(starts[-1]) + length
-    pad = length + 1
-    segment = np.zeros(end - low + pad, dtype=np.float32)
-    copied = np.asarray(samples[low : min(end, len(samples))], dtype=np.float32)
-    segment[pad : pad + len(copied)] = copied
     coefficient = np.float32(config.pre_emphasis ** (REFERENCE_RATE / sample_rate))
-    emphasised = np.multiply(segment[:-1], -coefficient)  # in place: no large temporaries
-    emphasised += segment[1:]
-    emphasised *= np.float32(sample_rate / REFERENCE_RATE)
-    stride = emphasised.strides[0]  # a view of every window start, as sliding_window_view
-    every = as_strided(emphasised, (len(emphasised) - length + 1, length), (stride, stride))
-    windows = every[starts - low + pad - 1]
-    padded = np.zeros((len(starts), analysis.n_fft), dtype=np.float32)  # rfft's zero padding
-    windowed = np.multiply(windows, analysis.window, out=padded[:, :length])
+    padded = _windows(  # rfft's zero padding past each window
+        np.asarray(samples),
+        np.asarray(starts, dtype=np.int64),
+        -coefficient,
+        np.float32(sample_rate / REFERENCE_RATE),
+        analysis.window,
+        analysis.n_fft,
+    )
+    windowed = padded[:, :length]
     energy = None
     if with_energy:
         density = 1.0 / (float(np.sum(analysis.window.astype(np.float64) ** 2)) * analysis.n_fft)
         power_sum = np.einsum("ij,ij->i", windowed, windowed, dtype=np.float64)
         energy = np.log(np.maximum(power_sum * density * analysis.n_fft, _LOG_FLOOR))
     spectrum = rfft(padded, axis=1, overwrite_x=True)
-    spectrum = spectrum[:, analysis.low_bin : analysis.high_bin]
-    power = spectrum.real.astype(np.float64) ** 2 + spectrum.imag.astype(np.float64) ** 2
+    power = _power(spectrum, analysis.low_bin, analysis.high_bin)
     energies = power @ analysis.pooling
     cepstrum = np.log(np.maximum(energies, _LOG_FLOOR)) @ analysis.cepstral
     if energy is not None:
         cepstrum = np.concatenate([cepstrum, energy[:, None]], axis=1)
     return np.ascontiguousarray(cepstrum, dtype=np.float32)
+
+
+@njit(cache=True)
+def _windows(
+    samples: np.ndarray,
+    starts: np.ndarray,
+    minus_coefficient: np.float32,
+    scale: np.float32,
+    window: np.ndarray,
+    n_fft: int,
+) -> np.ndarray:
+    """Each window of the pre-emphasised signal times the Hamming window, zero-padded to
+    ``n_fft``, in float32 (n_windows, n_fft): sample i of the emphasised signal is
+    (x[i − 1] · (−c) + x[i]) · scale, zero outside the signal; the same float32 operations
+    as the array expressions it replaces, done only where a window needs them."""
+    length = window.shape[0]
+    count = samples.shape[0]
+    zero = np.float32(0.0)
+    padded = np.zeros((starts.shape[0], n_fft), dtype=np.float32)
+    for row in range(starts.shape[0]):
+        for k in range(length):
+            at = starts[row] + k
+            before = np.float32(samples[at - 1]) if 0 <= at - 1 < count else zero
+            current = np.float32(samples[at]) if 0 <= at < count else zero
+            emphasised = (before * minus_coefficient + current) * scale
+            padded[row, k] = emphasised * window[k]
+    return padded
+
+
+@njit(cache=True)
+def _power(spectrum: np.ndarray, low: int, high: int) -> np.ndarray:
+    """|X|² in float64 of bins low .. high − 1 of each row of a complex64 spectrum."""
+    power = np.empty((spectrum.shape[0], high - low))
+    for row in range(spectrum.shape[0]):
+        for bin in range(low, high):
+            real = np.float64(spectrum[row, bin].real)
+            imaginary = np.float64(spectrum[row, bin].imag)
+            power[row, bin - low] = real * real + imaginary * imaginary
+    return power

@@ -7,6 +7,8 @@ import pytest
 
 from lipstream.features import (
     DEFAULT_MFCC,
+    _power,
+    _windows,
     frame_count,
     frames_covered,
     mel_filterbank,
@@ -80,3 +82,21 @@ def test_a_tone_lights_the_mel_band_around_its_pitch() -> None:
     assert peaks[0] > DEFAULT_MFCC.f_min and peaks[-1] < DEFAULT_MFCC.f_max
     spectrum = np.abs(np.fft.rfft(_tone(1000.0, 0.032, 16000)[:512])) ** 2
     assert abs(peaks[int(np.argmax(filters @ spectrum))] - 1000.0) < 120.0
+
+
+def test_compiled_windows_and_powers_equal_the_array_expressions() -> None:
+    rng = np.random.default_rng(3)
+    samples = rng.normal(scale=0.3, size=3000).astype(np.float32)
+    starts = np.array([-40, -3, 0, 500, 2950, 2990])  # windows past both ends read zeros
+    window = np.hamming(80).astype(np.float32)
+    minus_c, scale = np.float32(-0.95), np.float32(1.378)
+    padded = _windows(samples, starts, minus_c, scale, window, 96)
+    signal = np.concatenate([np.zeros(100, np.float32), samples, np.zeros(200, np.float32)])
+    emphasised = (signal[:-1] * minus_c + signal[1:]) * scale  # sample i at index i + 99
+    for row, start in enumerate(starts):
+        expected = emphasised[start + 99 : start + 179] * window
+        np.testing.assert_array_equal(padded[row, :80], expected)
+    assert not padded[:, 80:].any()
+    spectrum = np.fft.rfft(padded, axis=1).astype(np.complex64)
+    expected_power = np.abs(spectrum[:, 2:30].astype(np.complex128)) ** 2
+    np.testing.assert_allclose(_power(spectrum, 2, 30), expected_power, rtol=1e-12)

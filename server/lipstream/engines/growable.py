@@ -50,6 +50,17 @@ class Growable:
         self.data[held : held + len(rows)] = rows
         self.count += len(rows)
 
+    def reserve(self, extra: int) -> np.ndarray:
+        """The buffer, with room for ``extra`` rows after the held ones, for a kernel to write
+        them in place; ``grow`` then counts the rows it wrote."""
+        if self.count - self.first + extra > len(self.data):
+            self._reserve(self.count - self.first + extra)
+        return self.data
+
+    def grow(self, rows: int) -> None:
+        """Count ``rows`` more rows, written into the buffer that ``reserve`` returned."""
+        self.count += rows
+
     def view(self) -> np.ndarray:
         return self.data[: self.count - self.first]
 

@@ -91,15 +91,37 @@ def solve_spd_block_tridiagonal(
     blocks, coupling, right = (
         np.ascontiguousarray(a, dtype=np.float64) for a in (diagonal, below, rhs)
     )
-    if not all(_all_finite(a.reshape(-1)) for a in (blocks, coupling, right)):
-        raise ValueError("block-tridiagonal system has a non-finite entry")
     solution = np.empty(rhs.shape)
-    failed = _block_cholesky_solve(blocks, coupling, right, solution)
-    if failed >= 0:
-        raise np.linalg.LinAlgError(
-            f"block-tridiagonal system is not positive definite (at frame {failed})"
-        )
+    check_block_tridiagonal(solve_block_tridiagonal_into(blocks, coupling, right, solution))
     return solution
+
+
+SOLVED = -1
+NOT_FINITE = -2
+
+
+@njit(cache=True)
+def solve_block_tridiagonal_into(
+    diagonal: FloatArray, below: FloatArray, rhs: FloatArray, out: FloatArray
+) -> int:
+    """``solve_spd_block_tridiagonal`` for compiled callers, on C-contiguous arrays of the
+    shapes it checks: writes x into ``out`` and returns ``SOLVED``, ``NOT_FINITE``, or the
+    first frame whose Schur complement is not positive definite (``check_block_tridiagonal``
+    raises the matching error)."""
+    for values in (diagonal.reshape(-1), below.reshape(-1), rhs.reshape(-1)):
+        if not _all_finite(values):
+            return NOT_FINITE
+    return _block_cholesky_solve(diagonal, below, rhs, out)
+
+
+def check_block_tridiagonal(code: int) -> None:
+    """Raise the error that a ``solve_block_tridiagonal_into`` result ``code`` stands for."""
+    if code == NOT_FINITE:
+        raise ValueError("block-tridiagonal system has a non-finite entry")
+    if code >= 0:
+        raise np.linalg.LinAlgError(
+            f"block-tridiagonal system is not positive definite (at frame {code})"
+        )
 
 
 @njit(cache=True)
@@ -125,8 +147,10 @@ def _block_cholesky_solve(
         schur[:, :] = diagonal[t]
         if t > 0:
             previous, block, c = factor[t - 1], below[t - 1], coupling[t]
-            for i in range(dims):  # C_t L_{t-1}^T = B_{t-1}, row by row
-                for j in range(dims):
+            # C_t L_{t-1}^T = B_{t-1}, column by column: the rows are independent, so their
+            # divisions overlap rather than wait on each other along a row.
+            for j in range(dims):
+                for i in range(dims):
                     value = block[i, j]
                     for k in range(j):
                         value -= c[i, k] * previous[j, k]

@@ -21,7 +21,10 @@ there is committed, which is exactly the full Viterbi path there. When the
 oldest uncommitted frame falls ``lag`` frames behind, it is committed from the
 best survivor and every survivor not passing through it is dropped, so later
 decisions stay consistent with it. Lag 0 is greedy decoding. The decisions
-depend only on the frames seen, never on how the stream was cut.
+depend only on the frames seen, never on how the stream was cut. Its max runs
+over each state's possible predecessors only (``predecessors``; entropic
+training leaves most transitions at zero), in increasing order, so ties and
+the result are the dense max's.
 
 hmmlearn's compiled ``_hmmc`` has forward-backward and Viterbi but no fixed-lag
 decoder or posterior entropy, and would be a new dependency; numba is already
@@ -200,6 +203,8 @@ def _trace(ring: np.ndarray, frame: int, state: int, until: int, out: np.ndarray
 def _advance(
     log_start: np.ndarray,
     log_transition: np.ndarray,
+    into_offsets: np.ndarray,
+    into_states: np.ndarray,
     delta: np.ndarray,
     ring: np.ndarray,
     log_emission: np.ndarray,
@@ -223,10 +228,11 @@ def _advance(
         if t == 0:
             delta[:] = log_start + log_emission[0]
         else:
-            for j in range(states):
+            for j in range(states):  # the dense max over i, skipping log A[i, j] = −inf
                 best = 0
-                score = delta[0] + log_transition[0, j]
-                for i in range(1, states):
+                score = NEG_INF
+                for k in range(into_offsets[j], into_offsets[j + 1]):
+                    i = into_states[k]
                     candidate = delta[i] + log_transition[i, j]
                     if candidate > score:
                         score, best = candidate, i
@@ -273,50 +279,127 @@ def _advance(
     return count, oldest
 
 
+@njit(cache=True)
+def advance(
+    log_start: np.ndarray,
+    log_transition: np.ndarray,
+    into_offsets: np.ndarray,
+    into_states: np.ndarray,
+    delta: np.ndarray,
+    ring: np.ndarray,
+    position: np.ndarray,
+    lag: int,
+    log_emission: np.ndarray,
+    committed: np.ndarray,
+    at: int,
+) -> int:
+    """``FixedLagViterbi.push_into`` on the decoder's arrays (after its ``reserve``), for
+    compiled callers: decodes the rows of ``log_emission`` as the frames after position[0]
+    (``position`` = [frames decoded, oldest uncommitted], updated), writes the states they
+    commit into committed[at:] and returns how many."""
+    count, oldest = _advance(
+        log_start, log_transition, into_offsets, into_states, delta, ring, log_emission,
+        position[0], position[1], lag, committed[at:],
+    )  # fmt: skip
+    position[0] += log_emission.shape[0]
+    position[1] = oldest
+    return count
+
+
+def predecessors(log_transition: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The states i with log A[i, j] > −inf of each state j, in increasing order:
+    into_states[into_offsets[j] : into_offsets[j + 1]]."""
+    possible = log_transition.T > NEG_INF
+    offsets = np.zeros(len(possible) + 1, dtype=np.int64)
+    np.cumsum(possible.sum(axis=1), out=offsets[1:])
+    return offsets, np.nonzero(possible)[1].astype(np.int64)
+
+
 class FixedLagViterbi:
     """Streaming Viterbi decoding: ``push`` emission rows, get the states committed so far;
     ``finish`` commits the rest along the best survivor. ``lag`` None never forces a
     commit (states commit only where survivors merge, and at the end)."""
 
-    def __init__(self, log_start: np.ndarray, log_transition: np.ndarray, lag: int | None) -> None:
+    def __init__(
+        self,
+        log_start: np.ndarray,
+        log_transition: np.ndarray,
+        lag: int | None,
+        into: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> None:
+        """``into``: ``predecessors(log_transition)``, if the caller keeps it."""
         self.log_start = np.ascontiguousarray(log_start, dtype=np.float64)
         self.log_transition = np.ascontiguousarray(log_transition, dtype=np.float64)
         self.lag = lag
-        self.frames = 0
-        self.oldest = 0
+        self.lag_limit = _NO_LAG if lag is None else lag
+        self.position = np.zeros(2, dtype=np.int64)  # frames decoded, oldest uncommitted
+        self.into_offsets, self.into_states = into or predecessors(self.log_transition)
         self.delta = np.full(len(self.log_start), NEG_INF)
         self.ring = np.zeros((2 if lag is None else lag + 2, len(self.log_start)), np.int64)
 
-    def _room(self, extra: int) -> None:
-        """Unbounded lag: grow the ring so the uncommitted frames never wrap."""
-        needed = self.frames + extra - self.oldest + 2
-        if self.lag is None and needed > len(self.ring):
+    @property
+    def frames(self) -> int:
+        """Frames decoded so far."""
+        return int(self.position[0])
+
+    @property
+    def oldest(self) -> int:
+        """The oldest frame not yet committed."""
+        return int(self.position[1])
+
+    def reserve(self, extra: int) -> None:
+        """Make room for ``extra`` more frames before ``advance`` decodes them on this
+        decoder's arrays (``push_into`` does it): with no lag limit, grow the ring so the
+        uncommitted frames never wrap."""
+        if self.lag is not None:
+            return
+        frames, oldest = self.frames, self.oldest
+        needed = frames + extra - oldest + 2
+        if needed > len(self.ring):
             size = max(needed, 2 * len(self.ring))
             grown = np.zeros((size, self.ring.shape[1]), np.int64)
-            for u in range(self.oldest, self.frames):
+            for u in range(oldest, frames):
                 grown[u % size] = self.ring[u % len(self.ring)]
             self.ring = grown
 
     def push(self, log_emission: np.ndarray) -> np.ndarray:
         """Decode the next frames (m, N); the states committed by them, in frame order."""
         rows = np.ascontiguousarray(log_emission, dtype=np.float64)
-        if len(rows) == 0:
-            return np.zeros(0, dtype=np.int64)
-        self._room(len(rows))
-        committed = np.empty(len(rows) + len(self.ring) + 1, dtype=np.int64)
-        lag = _NO_LAG if self.lag is None else self.lag
-        count, self.oldest = _advance(
-            self.log_start, self.log_transition, self.delta, self.ring, rows,
-            self.frames, self.oldest, lag, committed,
-        )  # fmt: skip
-        self.frames += len(rows)
-        return committed[:count].copy()
+        committed = np.empty(self.most_committed(len(rows)), dtype=np.int64)
+        return committed[: self.push_into(rows, committed)].copy()
+
+    def most_committed(self, frames: int) -> int:
+        """The most states that pushing ``frames`` more frames can commit."""
+        return frames + int(self.position[0] - self.position[1]) + 1
+
+    def push_into(self, log_emission: np.ndarray, out: np.ndarray) -> int:
+        """``push`` for C-contiguous float64 rows (m, N), writing the committed states into
+        ``out`` (room for ``most_committed(m)``); returns how many."""
+        if len(log_emission) == 0:
+            return 0
+        self.reserve(len(log_emission))
+        return int(
+            advance(
+                self.log_start,
+                self.log_transition,
+                self.into_offsets,
+                self.into_states,
+                self.delta,
+                self.ring,
+                self.position,
+                self.lag_limit,
+                log_emission,
+                out,
+                0,
+            )  # fmt: skip
+        )
 
     def finish(self) -> np.ndarray:
         """Commit every remaining frame along the best survivor."""
-        if self.oldest >= self.frames:
+        frames, oldest = self.frames, self.oldest
+        if oldest >= frames:
             return np.zeros(0, dtype=np.int64)
-        out = np.empty(self.frames - self.oldest, dtype=np.int64)
-        _trace(self.ring, self.frames - 1, int(np.argmax(self.delta)), self.oldest, out)
-        self.oldest = self.frames
+        out = np.empty(frames - oldest, dtype=np.int64)
+        _trace(self.ring, frames - 1, int(np.argmax(self.delta)), oldest, out)
+        self.position[1] = frames
         return out

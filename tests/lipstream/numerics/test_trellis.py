@@ -140,3 +140,20 @@ def test_a_lag_limit_commits_frames_that_lag_behind_and_merges_commit_early() ->
     committed = decoder.push(sharp)
     assert len(committed) >= 19  # all but (at most) the newest frame, with no lag limit
     np.testing.assert_array_equal(committed, (np.arange(20) % 3)[: len(committed)])
+
+
+def test_fixed_lag_viterbi_on_a_sparse_chain_is_the_dense_viterbi() -> None:
+    rng = np.random.default_rng(7)
+    states = 6
+    transition = rng.dirichlet(np.ones(states), size=states)
+    transition[rng.random((states, states)) < 0.6] = 0.0  # most transitions impossible
+    transition[np.arange(states), np.arange(states)] += 0.1  # every row keeps one
+    transition[:, 3] = 0.0  # a state nothing leads into
+    transition /= transition.sum(axis=1, keepdims=True)
+    emission = rng.normal(scale=2.0, size=(50, states))
+    with np.errstate(divide="ignore"):
+        log_start, log_transition = np.log(np.full(states, 1 / states)), np.log(transition)
+    full, _ = viterbi(log_start, log_transition, emission)
+    for cuts in ([], [1, 9, 30], list(range(1, 50, 3))):
+        decoded = _decode(FixedLagViterbi(log_start, log_transition, None), emission, cuts)
+        np.testing.assert_array_equal(decoded, full)

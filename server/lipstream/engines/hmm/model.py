@@ -31,6 +31,7 @@ from ...errors import InvalidRequestError
 from ...features import DEFAULT_MFCC, MfccConfig
 from ...model_checks import ArrayReader, FieldReader
 from ...numerics.basis import MotionBasis, read_components
+from ...numerics.trellis import predecessors
 from ...phonemes import PHONEMES
 from ...store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
 from ...timeline import EMOTIONS, PhonemeSpan
@@ -58,6 +59,7 @@ NO_WAIT_BELOW_MS = 100.0
 """Rungs with a lag up to this hear audio late instead of waiting for a feature window."""
 CACHED_RATES = 8
 """Trajectory terms kept for this many (rate, coupled) pairs; a request fps is any number."""
+EMOTION_INDEX = {emotion: index for index, emotion in enumerate(EMOTIONS)}
 MFCC_FIELDS = ("window_s", "n_mels", "n_coefficients", "f_min", "f_max", "pre_emphasis")
 
 
@@ -80,9 +82,13 @@ class HmmModel(Model):
         with np.errstate(divide="ignore"):
             self.log_start = np.log(start)
             self.log_transition = np.log(transition)
+        self.predecessors = predecessors(self.log_transition)
         self.facial = Gaussians(self.stored["means"], self.stored["covariances"])
         self.phoneme_log_probs = np.ascontiguousarray(self.stored["phoneme_log_probs"])
         self.emotion_log_probs = np.ascontiguousarray(self.stored["emotion_log_probs"])
+        self.categories = np.ascontiguousarray(  # (phonemes + emotions, N)
+            np.concatenate([self.phoneme_log_probs, self.emotion_log_probs], axis=1).T
+        )
         self.vocal: Gaussians | None = None
         if bool(extra["has_audio"]):
             self.vocal = Gaussians(self.stored["vocal_means"], self.stored["vocal_covariances"])
@@ -93,6 +99,10 @@ class HmmModel(Model):
         self.audio_weight = float(manifest.hyperparameters["audio_weight"])
         self.default_lag_ms = float(manifest.hyperparameters["lag_ms"])
         self.default_window_ms = float(manifest.hyperparameters["window_ms"])
+
+    def emotion_row(self, emotion: str) -> int:
+        """The row of ``emotion``'s log-probabilities in ``categories``."""
+        return int(self.phoneme_log_probs.shape[1]) + EMOTION_INDEX[emotion]
 
     def solve_fps(self, fps: float) -> float:
         """The rate the trajectory of a request at ``fps`` is solved at (``synthesizer``):

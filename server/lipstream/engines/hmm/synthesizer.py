@@ -61,9 +61,10 @@ import numpy as np
 from ...audio import Audio
 from ...errors import InvalidRequestError
 from ...features import frames_covered, speech_features
+from ...numerics.banded import check_block_tridiagonal
 from ...numerics.trellis import FixedLagViterbi
 from ...phonemes import PHONEME_INDEX
-from ...timeline import EMOTIONS, PhonemeSpan, SpanLike, coerce_spans
+from ...timeline import PhonemeSpan, SpanLike, coerce_spans
 from ..base import (
     AUDIO_ONLY_UNSUPPORTED,
     DEFAULT_EMOTION,
@@ -72,7 +73,8 @@ from ..base import (
     fill_gaps,
     frame_count,
 )
-from . import trajectory
+from ..growable import Growable
+from . import kernels
 
 if TYPE_CHECKING:
     from .model import HmmModel
@@ -80,7 +82,7 @@ if TYPE_CHECKING:
 PINNED = 2
 AUTO, PHONEMES, AUDIO, BOTH = "auto", "phonemes", "audio", "both"
 DRIVES = (AUTO, PHONEMES, AUDIO, BOTH)
-_EPS = 1e-9
+_EPS = kernels.EPS
 
 
 @dataclass(frozen=True)
@@ -159,7 +161,9 @@ class AudioFeatures:
 
 
 class HmmSynthesizer(Synthesizer):
-    """One request: its observations, the decoder, and the trajectory solved so far."""
+    """One request: its observations, the decoder, and the trajectory solved so far, each
+    in a buffer that grows at its end (the compiled steps in ``kernels`` read and write
+    them in place, so a streamed call costs the same however long the request is)."""
 
     def __init__(self, model: HmmModel, request: SynthesisRequest, plan: Plan) -> None:
         self.model = model
@@ -167,120 +171,130 @@ class HmmSynthesizer(Synthesizer):
         self.plan = plan
         self.rate = plan.rate
         self.ratio = model.hmm_fps / plan.rate
+        self.step = plan.rate / request.fps
         self.dynamics = model.dynamics_at(plan.rate)
         self.stepwise_dynamics = model.dynamics_at(plan.rate, coupled=False)
         self.spans: list[PhonemeSpan] = []
-        self.starts: list[float] = []
-        self.labels: list[int] = []
-        self.moods: list[int] = []
+        self.end = 0.0
+        self.span_rows = Growable(np.float64, (3,))  # start, phoneme row, emotion row
         self.audio = AudioFeatures(model)
         self.heard = False
-        self.mode = None if plan.drive == AUTO else plan.drive
-        self.decoder = FixedLagViterbi(model.log_start, model.log_transition, plan.lag)
+        self._drive(None if plan.drive == AUTO else plan.drive)
+        self.decoder = FixedLagViterbi(
+            model.log_start, model.log_transition, plan.lag, model.predecessors
+        )
         self.observed = 0
-        self.states = np.zeros(0, dtype=np.int64)
-        self.curve = np.zeros((0, self.dynamics.dim))
+        self.unheard = np.zeros((0, len(model.log_start)))
+        self.states = Growable(np.int64)
+        self.curve = Growable(np.float64, (self.dynamics.dim,))
         self.emitted = 0
+        self.wait_s = plan.wait_s(model.hmm_fps)
+        self.mood = model.emotion_row(request.emotion or DEFAULT_EMOTION)
         self.finished = False
         self.stats = {"frames": 0, "states": 0}
 
     # -- input ------------------------------------------------------------------------------
 
+    def _drive(self, mode: str | None) -> None:
+        self.mode = mode
+        self.reading = mode in (PHONEMES, BOTH)
+        self.listening = mode in (AUDIO, BOTH)
+
     def feed(self, spans: Iterable[SpanLike], audio: Audio | None = None) -> None:
         if self.finished:
             raise InvalidRequestError("input fed after finish()", code="request_finished")
-        covered = self.spans[-1].end if self.spans else 0.0
+        covered = self.end
         new = coerce_spans(spans, after=covered, first_index=len(self.spans))
         hearing = audio is not None and self.model.vocal is not None
         if self.mode is None and (new or hearing):
-            self.mode = BOTH if new and hearing else (PHONEMES if new else AUDIO)
+            self._drive(BOTH if new and hearing else (PHONEMES if new else AUDIO))
         if new and self.mode == AUDIO:
             raise InvalidRequestError(
                 "this request is driven by audio alone (its first input was audio); to drive "
                 "it by phonemes and audio, start it with options.drive = both",
                 where="phonemes",
             )
-        for span in fill_gaps(new, covered):
-            self.spans.append(span)
-            self.starts.append(span.start)
-            self.labels.append(PHONEME_INDEX[span.phoneme])
-            self.moods.append(EMOTIONS.index(self.request.emotion_of(span) or DEFAULT_EMOTION))
+        if new:
+            emotion, rows, model = self.request.emotion, self.span_rows, self.model
+            for span in fill_gaps(new, covered):
+                self.spans.append(span)
+                mood = span.emotion or emotion
+                mood_row = model.emotion_row(mood) if mood else self.mood
+                rows.append((span.start, PHONEME_INDEX[span.phoneme], mood_row))
+            self.end = self.spans[-1].end
         if audio is not None:
             self.heard = True
             if hearing and self.mode != PHONEMES:
                 self.audio.add(audio)
 
-    def _listening(self) -> bool:
-        return self.mode in (AUDIO, BOTH)
-
-    def _reading(self) -> bool:
-        return self.mode in (PHONEMES, BOTH)
-
     def _duration(self) -> float:
-        if self._reading():
-            return self.spans[-1].end if self.spans else 0.0
-        return self.audio.duration if self._listening() else 0.0
+        if self.reading:
+            return self.end
+        return self.audio.duration if self.listening else 0.0
 
     def _observable(self) -> int:
         """HMM frames whose observations are final."""
         hmm_fps = self.model.hmm_fps
         if self.finished:
-            return frame_count(self._duration(), hmm_fps) if self._duration() > 0 else 0
-        limits = []
-        if self._reading():
-            limits.append(frame_count(self.spans[-1].end, hmm_fps) if self.spans else 0)
-        if self._listening():
-            limits.append(self.audio.final_frames(False) + self.plan.delay)
-        return min(limits) if limits else 0
+            duration = self._duration()
+            return frame_count(duration, hmm_fps) if duration > 0 else 0
+        limit = None
+        if self.reading:
+            limit = frame_count(self.end, hmm_fps) if self.spans else 0
+        if self.listening:
+            heard = self.audio.final_frames(False) + self.plan.delay
+            limit = heard if limit is None else min(limit, heard)
+        return 0 if limit is None else limit
 
     def _covered_s(self) -> float:
         """The time up to which the input is final."""
-        hmm_fps = self.model.hmm_fps
-        times = []
-        if self._reading():
-            times.append(self.spans[-1].end if self.spans else -math.inf)
-        if self._listening():
-            times.append((self.audio.final_frames(False) + self.plan.delay - 1) / hmm_fps)
-        return min(times) if times else -math.inf
+        covered = math.inf if self.reading or self.listening else -math.inf
+        if self.reading:
+            covered = self.end if self.spans else -math.inf
+        if self.listening:
+            heard = (self.audio.final_frames(False) + self.plan.delay - 1) / self.model.hmm_fps
+            covered = min(covered, heard)
+        return covered
 
     # -- observations and decoding ----------------------------------------------------------
 
-    def _emissions(self, first: int, stop: int) -> np.ndarray:
+    def _audio_terms(self, first: int, stop: int) -> tuple[np.ndarray, int]:
+        """The weighted vocal log-densities of the HMM frames first .. stop − 1 that hear a
+        feature frame, and the first of them (``kernels.emissions``)."""
         model = self.model
-        log_e = np.zeros((stop - first, len(model.log_start)))
-        times = np.arange(first, stop) / model.hmm_fps
-        if self._reading():
-            index = np.searchsorted(np.asarray(self.starts), times - _EPS, side="left") - 1
-            index = np.clip(index, 0, len(self.labels) - 1)
-            log_e += model.phoneme_log_probs[:, np.asarray(self.labels)[index]].T
-            log_e += model.emotion_log_probs[:, np.asarray(self.moods)[index]].T
-        else:
-            mood = EMOTIONS.index(self.request.emotion or DEFAULT_EMOTION)
-            log_e += model.emotion_log_probs[:, mood]
-        if self._listening() and model.vocal is not None:
-            frames = np.arange(first, stop) - self.plan.delay
-            available = frame_count(self.audio.duration, model.mfcc.rate)
-            heard = (frames < available) & (frames >= 0)  # the first d frames hear nothing yet
-            if heard.any():
-                rows = self.audio.rows(int(frames[heard].max()) + 1)
-                vocal = model.vocal.log_density(rows[frames[heard]])
-                log_e[heard] += model.audio_weight * vocal
-        return log_e
+        if not self.listening or model.vocal is None:
+            return self.unheard, 0
+        frames = np.arange(first, stop) - self.plan.delay
+        available = frame_count(self.audio.duration, model.mfcc.rate)
+        heard = (frames < available) & (frames >= 0)  # the first d frames hear nothing yet
+        if not heard.any():
+            return self.unheard, 0
+        rows = self.audio.rows(int(frames[heard].max()) + 1)
+        vocal = model.vocal.log_density(rows[frames[heard]])
+        return model.audio_weight * vocal, first + int(np.argmax(heard))
 
     def _decode(self) -> None:
         target = self._observable()
-        if target > self.observed:
+        states = self.states
+        first = self.observed
+        if target > first:
             self.request.guard.check()
-            fresh = self.decoder.push(self._emissions(self.observed, target))
+            decoder, model = self.decoder, self.model
+            decoder.reserve(target - first)
+            out = states.reserve(decoder.most_committed(target - first))
+            terms, heard_from = self._audio_terms(first, target)
+            fresh = kernels.decode(
+                self.span_rows.data, self.span_rows.count if self.reading else 0, first,
+                target, model.hmm_fps, model.categories, self.mood, terms, heard_from,
+                decoder.log_start, decoder.log_transition, decoder.into_offsets,
+                decoder.into_states, decoder.delta, decoder.ring, decoder.position,
+                decoder.lag_limit, out, states.count,
+            )  # fmt: skip
             self.observed = target
-            self._commit(fresh)
+            states.grow(fresh)
         if self.finished:
-            self._commit(self.decoder.finish())
-
-    def _commit(self, states: np.ndarray) -> None:
-        if len(states):
-            self.states = np.concatenate([self.states, states])
-            self.stats["states"] = len(self.states)
+            states.extend(self.decoder.finish())
+        self.stats["states"] = states.count
 
     # -- trajectory -------------------------------------------------------------------------
 
@@ -292,16 +306,21 @@ class HmmSynthesizer(Synthesizer):
 
     def _ready_synthesis_frames(self) -> int:
         """Trajectory frames whose state is committed."""
-        if not len(self.states):
+        if not self.states.count:
             return 0
-        return math.ceil((len(self.states) - _EPS) / self.ratio)
+        return math.ceil((self.states.count - _EPS) / self.ratio)
 
     def _solve(self) -> None:
         total = self._synthesis_total()
         ready = self._ready_synthesis_frames() if total is None else total
         block = self.plan.block
+        if block == 1:  # a frame at a time: every ready frame at once
+            if ready > self.curve.count:
+                self.request.guard.check()
+                self._recurse(self.curve.count, ready)
+            return
         while True:
-            start = len(self.curve)
+            start = self.curve.count
             if total is not None and start >= total:
                 return
             if block is None:
@@ -316,23 +335,36 @@ class HmmSynthesizer(Synthesizer):
             if end > ready:
                 return
             self.request.guard.check()
-            if block == 1:
-                self._recurse(start, ready if total is None else total)
-                continue
-            first = max(0, start - PINNED)
-            frames = np.arange(first, end)
-            states = self.states[np.minimum(hmm_frame(frames, self.ratio), len(self.states) - 1)]
-            pins = self.curve[first:start] if start > 0 else None
-            solved = trajectory.solve(self.dynamics, states, pins)
-            self.curve = np.concatenate([self.curve, solved[start - first : stop - first]])
+            terms, curve = self.dynamics, self.curve
+            check_block_tridiagonal(
+                kernels.solve_block(
+                    self.states.data,
+                    self.states.count,
+                    self.ratio,
+                    curve.reserve(stop - start),
+                    max(0, start - PINNED),
+                    start,
+                    stop,
+                    end,
+                    terms.pose_precision,
+                    terms.pose_rhs,
+                    terms.g_current,
+                    terms.g_previous,
+                    terms.g_cross,
+                    terms.r_current,
+                    terms.r_previous,
+                )  # fmt: skip
+            )
+            curve.grow(stop - start)
 
     def _recurse(self, start: int, stop: int) -> None:
         """Frames start .. stop − 1 a frame at a time (``trajectory.recurse``)."""
-        states = self.states[np.minimum(hmm_frame(np.arange(start, stop), self.ratio),
-                                        len(self.states) - 1)]  # fmt: skip
-        previous = self.curve[start - 1] if start > 0 else None
-        fresh = trajectory.recurse(self.stepwise_dynamics, states, previous)
-        self.curve = np.concatenate([self.curve, fresh])
+        terms = self.stepwise_dynamics
+        kernels.recurse(
+            self.states.data, self.states.count, self.ratio, self.curve.reserve(stop - start),
+            start, stop, terms.current_inverse, terms.g_cross, terms.r_current, terms.pose_mean,
+        )  # fmt: skip
+        self.curve.grow(stop - start)
 
     # -- output -----------------------------------------------------------------------------
 
@@ -341,25 +373,23 @@ class HmmSynthesizer(Synthesizer):
         if self.finished:
             duration = self._duration()
             return frame_count(duration, fps) if duration > 0 else 0
-        wait = self.plan.wait_s(self.model.hmm_fps)
-        covered = self._covered_s()
-        if wait is None or covered < wait:
+        wait = self.wait_s
+        if wait is None:
             return 0
-        return frame_count(covered - wait, fps)
+        covered = self._covered_s()
+        return 0 if covered < wait else frame_count(covered - wait, fps)
 
     def _emit(self) -> np.ndarray:
         stop = self._final_output_frames()
-        width = len(self.model.channels)
         if stop <= self.emitted:
-            return np.zeros((0, width), dtype=np.float32)
+            return np.zeros((0, len(self.model.channels)), dtype=np.float32)
         self._decode()
         self._solve()
-        fps = self.request.fps
-        index = np.arange(self.emitted, stop)
-        k = np.floor(index * (self.rate / fps) + _EPS).astype(np.int64)
-        k = k[k < len(self.curve)]
-        frames = self.model.basis.reconstruct(self.curve[k]).astype(np.float32)
-        self.emitted += len(k)
+        curve, basis = self.curve, self.model.basis
+        frames = kernels.output_frames(
+            curve.data, curve.count, self.emitted, stop, self.step, basis.components, basis.mean
+        )
+        self.emitted += len(frames)
         self.stats["frames"] = self.emitted
         return frames
 

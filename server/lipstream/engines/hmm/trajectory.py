@@ -147,7 +147,7 @@ def solve(terms: Dynamics, states: np.ndarray, pins: np.ndarray | None = None) -
     frames (their states are ignored)."""
     dim = terms.dim
     held = np.zeros((0, dim)) if pins is None else np.asarray(pins, dtype=np.float64)
-    diagonal, below, rhs = _assemble(
+    diagonal, below, rhs = assemble(
         np.asarray(states, dtype=np.int64), held, terms.pose_precision, terms.pose_rhs,
         terms.g_current, terms.g_previous, terms.g_cross, terms.r_current, terms.r_previous,
     )  # fmt: skip
@@ -155,7 +155,7 @@ def solve(terms: Dynamics, states: np.ndarray, pins: np.ndarray | None = None) -
 
 
 @njit(cache=True)
-def _assemble(
+def assemble(
     states: np.ndarray,
     pins: np.ndarray,
     pose_precision: np.ndarray,
@@ -168,7 +168,7 @@ def _assemble(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The blocks of Eq. 6 (module docstring): frame t ≥ 1 adds its state's terms to the
     blocks (t, t), (t − 1, t − 1) and (t, t − 1); pinned frames (or frame 0's pose marginal)
-    instead hold their pose."""
+    instead hold their pose. Compiled; ``kernels.solve_block`` calls it too."""
     frames, dim, n_pins = states.shape[0], pose_rhs.shape[1], pins.shape[0]
     diagonal = np.zeros((frames, dim, dim))
     below = np.zeros((max(frames - 1, 0), dim, dim))
