@@ -372,22 +372,23 @@ class AnimeGraphSynthesizer(Synthesizer):
         self.stats["search_ms"] += 1000.0 * spent
         if len(chosen) < total - placed:
             missing(query, placed + len(chosen))
-        successor, animes = matcher.graph.successor, self.model.animes
+        successor, track = matcher.graph.successor, self.track
         pose_successor, blend = self.model.poses.successor, self.options.blend
+        jumps = 0
         for anime in chosen.tolist():
             self.guard.check()
             position = len(self.nodes)
             span = self.spans[position]
-            warp = linear_warp(span.start, span.end, animes.start[anime], animes.end[anime])
             join = None
             if position:
-                self.stats["jumps"] += int(successor[previous]) != anime
+                jumps += int(successor[previous]) != anime
                 join = _SEAMLESS if int(pose_successor[previous]) == anime else _FORWARD
                 join = join if blend or join is _SEAMLESS else _CUT
             self.nodes.append(anime)
-            self.stats["tiles"] += 1
-            self.track.append(Placement(span.start, span.end, anime, warp), join)
+            track.append_linear(span.start, span.end, anime, join)
             previous = anime
+        self.stats["jumps"] += jumps
+        self.stats["tiles"] += len(chosen)
 
     def _animes(self, positions: range) -> list[int]:
         """The anime each decided node at ``positions`` shows, one batch per run."""
@@ -435,7 +436,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         span = self.spans[position]
         join: Join | None = None
         if position > 0:
-            left = self.track.placements[position - 1].anime
+            left = self.track.anime_at(position - 1)
             join = plan_join(
                 left,
                 anime,

@@ -22,13 +22,13 @@ from typing import TypeAlias
 import numpy as np
 from numba import njit
 
-from ..growable import Growable
 from .animes import AnimeTable, sample_into
 from .blending import Join, JoinKind
 from .warp import Warp
 
 _NO_CORRECTION, _PAIR, _EXTEND, _FORWARD = 0, 1, 2, 3
 _KIND_CODES = {JoinKind.PAIR: _PAIR, JoinKind.EXTEND: _EXTEND, JoinKind.FORWARD: _FORWARD}
+_MIN_PLACEMENTS = 16
 FORWARD_BLEND_SHARE = 0.5
 """A forward join blends the previous recording out over this share of the next span, so a
 short span (a closure) still reaches its own fragment's pose."""
@@ -53,37 +53,95 @@ class MotionTrack:
 
     def __init__(self, animes: AnimeTable) -> None:
         self.animes = animes
-        self.placements: list[Placement] = []
         self.joins: list[Join] = []
-        self._starts = Growable(np.float64)
-        self._ends = Growable(np.float64)
-        self._animes = Growable(np.int64)
-        self._knot_offsets = Growable(np.int64)
-        self._knot_offsets.append(0)
-        self._knot_targets = Growable(np.float64)
-        self._knot_sources = Growable(np.float64)
-        self._join_kinds = Growable(np.int64)
-        self._join_examples = (Growable(np.int64), Growable(np.int64))
+        self._count = 0
+        self._knots = 0
+        self._starts = np.zeros(_MIN_PLACEMENTS)
+        self._ends = np.zeros(_MIN_PLACEMENTS)
+        self._animes = np.zeros(_MIN_PLACEMENTS, dtype=np.int64)
+        self._knot_offsets = np.zeros(_MIN_PLACEMENTS + 1, dtype=np.int64)
+        self._knot_targets = np.zeros(2 * _MIN_PLACEMENTS)
+        self._knot_sources = np.zeros(2 * _MIN_PLACEMENTS)
+        self._join_kinds = np.zeros(_MIN_PLACEMENTS, dtype=np.int64)
+        self._left_examples = np.zeros(_MIN_PLACEMENTS, dtype=np.int64)
+        self._right_examples = np.zeros(_MIN_PLACEMENTS, dtype=np.int64)
 
     def __len__(self) -> int:
-        return len(self.placements)
+        return self._count
+
+    @property
+    def placements(self) -> list[Placement]:
+        """Every placement so far, rebuilt from the track's arrays."""
+        offsets = self._knot_offsets
+        return [
+            Placement(
+                float(self._starts[index]),
+                float(self._ends[index]),
+                int(self._animes[index]),
+                Warp(
+                    self._knot_targets[offsets[index] : offsets[index + 1]].copy(),
+                    self._knot_sources[offsets[index] : offsets[index + 1]].copy(),
+                ),
+            )
+            for index in range(self._count)
+        ]
+
+    def anime_at(self, index: int) -> int:
+        """The anime placement ``index`` shows."""
+        return int(self._animes[index])
 
     def append(self, placement: Placement, join: Join | None) -> None:
         """Add the next placement; ``join`` from the previous one (None for the first)."""
-        if self.placements:
+        warp = placement.warp
+        self._add(placement.start, placement.end, placement.anime, join, len(warp.target))
+        low = self._knots
+        self._knot_targets[low : low + len(warp.target)] = warp.target
+        self._knot_sources[low : low + len(warp.target)] = warp.source
+        self._close_knots(low + len(warp.target))
+
+    def append_linear(self, start: float, end: float, anime: int, join: Join | None) -> None:
+        """``append`` of ``anime`` over [start, end) through the linear warp onto its whole
+        recording (``warp.linear_warp``), without building the placement."""
+        self._add(start, end, anime, join, 2)
+        low = self._knots
+        self._knot_targets[low] = start
+        self._knot_targets[low + 1] = end
+        self._knot_sources[low] = self.animes.start[anime]
+        self._knot_sources[low + 1] = self.animes.end[anime]
+        self._close_knots(low + 2)
+
+    def _add(self, start: float, end: float, anime: int, join: Join | None, knots: int) -> None:
+        """Room for one more placement of ``knots`` knots, its span, anime and left join."""
+        index = self._count
+        if index + 1 >= len(self._starts) or self._knots + knots > len(self._knot_targets):
+            self._grow(index + 2, self._knots + knots)
+        if index:
             if join is None:
                 raise ValueError("a placement after the first needs its join")
             self.joins.append(join)
-            self._join_kinds.append(_KIND_CODES.get(join.kind, _NO_CORRECTION))
-            self._join_examples[0].append(join.left_example)
-            self._join_examples[1].append(join.right_example)
-        self.placements.append(placement)
-        self._starts.append(placement.start)
-        self._ends.append(placement.end)
-        self._animes.append(placement.anime)
-        self._knot_targets.extend(placement.warp.target)
-        self._knot_sources.extend(placement.warp.source)
-        self._knot_offsets.append(self._knot_targets.count)
+            self._join_kinds[index - 1] = _KIND_CODES.get(join.kind, _NO_CORRECTION)
+            self._left_examples[index - 1] = join.left_example
+            self._right_examples[index - 1] = join.right_example
+        self._starts[index] = start
+        self._ends[index] = end
+        self._animes[index] = anime
+
+    def _close_knots(self, stop: int) -> None:
+        self._knots = stop
+        self._count += 1
+        self._knot_offsets[self._count] = stop
+
+    def _grow(self, placements: int, knots: int) -> None:
+        """Double the buffers until they hold ``placements`` placements and ``knots`` knots."""
+        rows = max(placements, 2 * len(self._starts))
+        for name in ("_starts", "_ends", "_animes", "_join_kinds", "_left_examples",
+                     "_right_examples"):  # fmt: skip
+            setattr(self, name, _resized(getattr(self, name), rows))
+        self._knot_offsets = _resized(self._knot_offsets, rows + 1)
+        if knots > len(self._knot_targets):
+            rows = max(knots, 2 * len(self._knot_targets))
+            self._knot_targets = _resized(self._knot_targets, rows)
+            self._knot_sources = _resized(self._knot_sources, rows)
 
     def evaluate(self, times: np.ndarray, left_continuous: bool = False) -> np.ndarray:
         """Track values (n, n_pc) at ascending ``times``; a time belongs to the last
@@ -93,17 +151,17 @@ class MotionTrack:
     def arrays(self) -> TrackArrays:
         """The track as the flat arrays that ``evaluate_track`` (and kernels calling it) read,
         in its argument order after ``times``."""
-        animes, motion = self.animes, self.animes.motion
+        animes, motion, count = self.animes, self.animes.motion, self._count
         return (
-            self._starts.view(),
-            self._ends.view(),
-            self._animes.view(),
-            self._knot_offsets.view(),
-            self._knot_targets.view(),
-            self._knot_sources.view(),
-            self._join_kinds.view(),
-            self._join_examples[0].view(),
-            self._join_examples[1].view(),
+            self._starts[:count],
+            self._ends[:count],
+            self._animes[:count],
+            self._knot_offsets[: count + 1],
+            self._knot_targets[: self._knots],
+            self._knot_sources[: self._knots],
+            self._join_kinds[: max(count - 1, 0)],
+            self._left_examples[: max(count - 1, 0)],
+            self._right_examples[: max(count - 1, 0)],
             animes.start,
             animes.end,
             animes.utterance,
@@ -111,6 +169,15 @@ class MotionTrack:
             motion.offsets,
             float(motion.rate),
         )
+
+
+def _resized(values: np.ndarray, rows: int) -> np.ndarray:
+    """``values`` in a buffer of ``rows`` (>= its length) rows, zeros after them."""
+    if rows == len(values):
+        return values
+    grown = np.zeros(rows, dtype=values.dtype)
+    grown[: len(values)] = values
+    return grown
 
 
 @njit(cache=True)
