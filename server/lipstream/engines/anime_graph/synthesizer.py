@@ -103,6 +103,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         self.fps = float(request.fps)
         self.options = options
         self._by_view: dict[str, _Searcher] = {}
+        self._by_emotion: dict[str | None, _Searcher] = {}  # a span's own emotion (or None)
         own = self._searcher_for(request.emotion)
         self.view, self.graph, self.matcher = own.view, own.graph, own.matcher
         self.spans: list[PhonemeSpan] = []
@@ -149,7 +150,10 @@ class AnimeGraphSynthesizer(Synthesizer):
         filled = fill_gaps(new, self.covered_until)
         self.options.check_size(len(self.spans) + len(filled))
         for span in filled:
-            searcher = self._searcher_for(self.request.emotion_of(span))
+            searcher = self._by_emotion.get(span.emotion)
+            if searcher is None:
+                searcher = self._searcher_for(self.request.emotion_of(span))
+                self._by_emotion[span.emotion] = searcher
             if self.searchers and searcher is not self.searchers[-1]:
                 self.run_starts.append(len(self.searchers))
             self.spans.append(span)
@@ -546,13 +550,12 @@ class AnimeGraphSynthesizer(Synthesizer):
     def _emit_causal(self) -> np.ndarray:
         """Frames whose time plus the lead lies within the decided spans (all, once
         finished): the damped filter stepped toward the track there."""
-        total = frame_count(self.covered_until, self.fps) if self.spans else 0
-        if self.finished and len(self.nodes) == len(self.query):
+        covered_until, decided = self.covered_until, len(self.nodes)
+        total = frame_count(covered_until, self.fps) if self.spans else 0
+        if self.finished and decided == self._labels.count:
             stop = total
-        elif self.nodes and self.spans[len(self.nodes) - 1].end >= self.lead_s:
-            stop = min(
-                total, frame_count(self.spans[len(self.nodes) - 1].end - self.lead_s, self.fps)
-            )
+        elif decided and self.spans[decided - 1].end >= self.lead_s:
+            stop = min(total, frame_count(self.spans[decided - 1].end - self.lead_s, self.fps))
         else:
             stop = self.emitted
         if stop <= self.emitted:
@@ -569,7 +572,7 @@ class AnimeGraphSynthesizer(Synthesizer):
             stop,
             self.fps,
             self.lead_s,
-            self.covered_until,
+            covered_until,
             state.x,
             state.v,
             state.t,
