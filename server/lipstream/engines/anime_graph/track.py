@@ -9,9 +9,12 @@ needs samples. Evaluating position j needs the joins on both of its sides,
 except with forward joins (causal rungs), which correct only the span after
 them; those rungs also evaluate left-continuously (a span's end belongs to
 it), so a decided span is evaluated up to its end.
-Placements and joins are also kept as flat, growing arrays, so one compiled
-call (``evaluate_track``) samples any stretch of the track: it runs on every
-streamed message, where per-fragment numpy calls cost more than the samples.
+Placements and joins are kept as flat arrays in buffers that double when full,
+so one compiled call (``evaluate_track``) samples any stretch of the track: it
+runs on every streamed message, where per-fragment numpy calls cost more than
+the samples. Adding a placement writes a few numbers into those buffers
+(``append_linear``: a linear warp's two knots, with no objects built); the
+``placements`` list is rebuilt from them when asked for.
 """
 
 from __future__ import annotations
