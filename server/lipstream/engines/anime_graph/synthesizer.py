@@ -163,7 +163,7 @@ class AnimeGraphSynthesizer(Synthesizer):
     @property
     def query(self) -> np.ndarray:
         """The searched label of every span so far (n,) int64, each in its span's view."""
-        return self._labels.view()
+        return self._labels.view()  # never dropped from: its length is ``_labels.count``
 
     def _searcher_for(self, emotion: str | None) -> _Searcher:
         view = self.model.view_for(emotion, self.options)
@@ -229,7 +229,7 @@ class AnimeGraphSynthesizer(Synthesizer):
     def _run_stop(self, start: int) -> int:
         """One past the last position of the run holding ``start``, as far as it is known."""
         index = bisect_right(self.run_starts, start)
-        return self.run_starts[index] if index < len(self.run_starts) else len(self.query)
+        return self.run_starts[index] if index < len(self.run_starts) else self._labels.count
 
     def _previous(self, start: int) -> tuple[int | None, int | None]:
         """For a tile at ``start``, in its searcher's graph: the node it may continue from,
@@ -251,7 +251,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         start = len(self.nodes)
         searcher = self.searchers[start]
         stop = self._run_stop(start)
-        closed = stop < len(self.query) or self.finished
+        closed = stop < self._labels.count or self.finished
         continuing, ranked = self._previous(start)
         if self.options.search == "pq":
             end = min(stop, start + self.options.pq_window)
@@ -326,7 +326,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         if self.finished and self.audio is not None and self.spans:
             self.audio.curves(self.covered_until)
         placed = len(self.nodes)
-        while len(self.nodes) < len(self.query):
+        while len(self.nodes) < self._labels.count:
             self.guard.check()
             tiles = self._next_tiles()
             if tiles is None:
@@ -467,7 +467,7 @@ class AnimeGraphSynthesizer(Synthesizer):
 
     def _track_final_until(self) -> float:
         """Time (s) before which the track is final; +inf once everything is decided."""
-        if self.finished and len(self.nodes) == len(self.query):
+        if self.finished and len(self.nodes) == self._labels.count:
             return math.inf
         if len(self.nodes) < 1:
             return 0.0
