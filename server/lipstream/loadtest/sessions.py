@@ -21,10 +21,11 @@ sent at once (``probe_phonemes`` phonemes in one ``phonemes`` message, as
 a TTS that has synthesized a sentence sends it) on one extra connection,
 one request after another, for as long as the load runs.
 
-A session the server refuses for load (``server_busy``, 1013) waits the
-``retry_after_ms`` it was given and tries again, as a client following the
-protocol does, up to ``BUSY_RETRIES`` times while its clip still fits before the
-deadline; ``RequestRecord.busy_retries`` counts them. Without this, a capacity
+A session the server refuses for load (``server_busy``, 1013, or HTTP 503 to its
+upgrade while the server sheds load or holds its cap of connections) waits the
+``retry_after_ms`` or ``Retry-After`` it was given and tries again, as a client
+following the protocol does, up to ``BUSY_RETRIES`` times while its clip still fits
+before the deadline; ``RequestRecord.busy_retries`` counts them. Without this, a capacity
 step that opens its sessions within a second meets load-based admission,
 which admits a burst of new sessions at the cost of the dearest rung the server
 holds, before it measures any load.
@@ -204,7 +205,7 @@ class _Session:
     def _fits(self, delay_s: float) -> bool:
         return time.perf_counter() + delay_s + self.plan.clip_s <= self.plan.deadline
 
-    async def _attempt(self, record: RequestRecord) -> ServerBusy | None:
+    async def _attempt(self, record: RequestRecord) -> ServerBusy | HandshakeRejected | None:
         """One try of the request into ``record``; the refusal, when the server was busy."""
         try:
             client = await self._connected()
@@ -218,6 +219,8 @@ class _Session:
             record.error = error.error.code if error.error else f"closed_{error.code}"
         except HandshakeRejected as error:
             record.error = f"http_{error.status}"
+            if error.retryable:
+                return error
         except TimeoutError:
             record.error = "timeout"
             await self._drop_connection()

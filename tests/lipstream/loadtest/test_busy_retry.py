@@ -28,3 +28,24 @@ def test_a_refused_session_waits_retry_after_and_completes(lerp_dir: Path) -> No
     assert clip["requests"] == 2 and clip["successful_requests"] == 2
     assert clip["errors"] == {}
     assert clip["busy_retries"] >= 1
+
+
+def test_an_upgrade_refused_with_503_waits_retry_after_and_completes(lerp_dir: Path) -> None:
+    # One connection at a time: the second session's upgrade gets HTTP 503 with
+    # Retry-After while the first holds the cap, and gets in on a later try.
+    with serving(lerp_dir, ServerSettings(max_connections=1)) as served:
+        config = LoadTestConfig(
+            url=served.ws,
+            streams=2,
+            requests=2,
+            clips_s=(1.0,),
+            fps=30.0,
+            engine="viseme-lerp",
+            character="demo",
+            pause_s=0.0,
+            max_duration_s=40.0,
+        )
+        clip = loadtest(config)["clips"][0]
+    assert clip["requests"] == 2 and clip["successful_requests"] == 2
+    assert clip["errors"] == {}
+    assert clip["busy_retries"] >= 1
