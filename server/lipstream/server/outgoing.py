@@ -51,7 +51,7 @@ class RequestClock:
         return replace(stats, first_frame_latency_ms=latency, max_lag_ms=lag_ms, budget_met=met)
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Stamped:
     """A message as sent, with what sending it measured (seconds)."""
 
@@ -61,7 +61,7 @@ class Stamped:
     first_frame_latency_s: float | None = None
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Outgoing:
     """A server message on its way out.
 

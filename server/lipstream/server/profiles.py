@@ -18,6 +18,7 @@ command line (``lipstream synth``) resolves its profiles here too.
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import cached_property
@@ -89,7 +90,10 @@ class ResolvedProfile:
         ValueError if the engine's frames are not finite (a server fault).
         """
         if self.identity and frames.shape[1] == len(self.columns):
-            if not np.isfinite(frames).all():
+            # One reduction, no temporary: a NaN or infinity makes the sum non-finite (float32
+            # values cannot overflow a float64 sum; a float64 one that does looks further).
+            total = float(np.add.reduce(frames, axis=None, dtype=np.float64))
+            if not math.isfinite(total) and not np.isfinite(frames).all():
                 raise ValueError("the engine produced non-finite values")
             return np.asarray(frames, dtype=np.float32)
         if self.retarget is not None:

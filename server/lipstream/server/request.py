@@ -126,6 +126,11 @@ class SentTail:
 
     def extend(self, rows: np.ndarray) -> None:
         """Append ``rows``, the frames from ``stop`` on."""
+        at = self.stop % self.capacity
+        if at + len(rows) <= len(self.rows):  # held already, no wrap: every call but a few
+            self.rows[at : at + len(rows)] = rows
+            self.stop += len(rows)
+            return
         stop = self.stop + len(rows)
         size = min(self.capacity, stop)
         if len(self.rows) < size:

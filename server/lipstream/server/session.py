@@ -185,7 +185,8 @@ class Session:
         extra_frames = 0
         if isinstance(received, Phonemes):
             phonemes = len(received.items)
-            until = max([until, *(item.end for item in received.items[-1:])])
+            if phonemes and received.items[-1].end > until:
+                until = received.items[-1].end
         elif isinstance(received, AudioChunk):
             phonemes = math.ceil(received.duration / PHONEME_S)
         else:

@@ -29,8 +29,8 @@ full; the connection then reads nothing more from that client
 ``await send`` forever. Frames are never dropped silently. A connection
 with no message and no active request for ``idle_timeout_s`` closes with
 1000; a request with no message for ``request_timeout_s`` ends with
-``request_timeout`` (the wait for the next message ends at the session's
-``next_expiry``); a draining one closes with 1001 as soon as its requests are
+``request_timeout`` (a per-connection timer, ``deadline.LaterDeadline``, ends the
+wait for the next message at the session's ``next_expiry``); a draining one closes with 1001 as soon as its requests are
 done.
 """
 
@@ -71,7 +71,7 @@ from lipstream_client.errors import (
 from lipstream_client.messages import JsonValue
 
 from .admission import TokenBucket, bearer_token, origin_allowed, token_accepted
-from .deadline import SendDeadline
+from .deadline import LaterDeadline, SendDeadline
 from .outgoing import Outgoing, Stamped
 from .read_ahead import DISCONNECT, ReadAhead, Received
 from .session import InputMessage, Session
@@ -181,6 +181,7 @@ class Connection:
         )
         self.loop = asyncio.get_running_loop()
         self.deadline = SendDeadline(self.loop, self.settings.send_timeout_s)
+        self.expiry = LaterDeadline(self.loop, self.session.next_expiry, self._wake)
         self.finished = False
         self.aborted = False
         self._task: asyncio.Task[Any] | None = None
@@ -224,6 +225,7 @@ class Connection:
                 )
         finally:
             self.deadline.disarm()
+            self.expiry.disarm()
             if self._receive_task is not None:
                 self._receive_task.cancel()
             self.session.close()
@@ -299,24 +301,28 @@ class Connection:
         ahead = self.read_ahead.pop()
         if ahead is not None:
             return ahead
-        self._receiving = True
         timeout: float | None = self.settings.idle_timeout_s
         if self.session.active_requests:
+            timeout = None  # the request timeout's own timer (``expiry``) wakes the wait
             expiry = self.session.next_expiry()
-            timeout = None if expiry is None else max(0.0, expiry - time.monotonic())
+            if expiry is not None:
+                if expiry <= time.monotonic():
+                    return _WAKE
+                self.expiry.arm(expiry)
+        self._receiving = True
         try:
             if self._receive_task is not None:
                 done, _ = await asyncio.wait({self._receive_task}, timeout=timeout)
                 if not done:
-                    return _WAKE if self.session.active_requests else _IDLE
+                    return _IDLE
                 task, self._receive_task = self._receive_task, None
                 return task.result()
-            if timeout is None:  # no timer per message while requests are active
+            if timeout is None:
                 return await self._receive()
             async with asyncio.timeout(timeout):
                 return await self._receive()
         except TimeoutError:
-            return _WAKE if self.session.active_requests else _IDLE
+            return _IDLE
         except asyncio.CancelledError:
             if not self._woken or self._task is None or self._task.uncancel():
                 raise

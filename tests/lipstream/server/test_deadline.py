@@ -1,10 +1,12 @@
-"""``SendDeadline``: one timer per connection cancels exactly the send that overran."""
+"""``SendDeadline``: one timer per connection cancels exactly the send that overran.
+``LaterDeadline``: a deadline that moves later fires once, at its last position."""
 
 from __future__ import annotations
 
 import asyncio
+from typing import Any
 
-from lipstream.server.deadline import SendDeadline
+from lipstream.server.deadline import LaterDeadline, SendDeadline
 
 TIMEOUT_S = 0.2
 
@@ -63,3 +65,51 @@ def test_disarm_cancels_the_pending_timer() -> None:
         return deadline.expired
 
     assert asyncio.run(scenario()) is False
+
+
+def test_a_deadline_moved_later_fires_once_at_its_last_position() -> None:
+    async def scenario() -> tuple[list[float], float, int, float]:
+        loop = asyncio.get_running_loop()
+        began = loop.time()
+        deadline_at = [began + TIMEOUT_S]
+        fired: list[float] = []
+        timers = 0
+        call_at = loop.call_at
+
+        def counting_call_at(
+            when: float, callback: Any, *args: Any, **kwargs: Any
+        ) -> asyncio.TimerHandle:
+            nonlocal timers
+            timers += getattr(callback, "__self__", None) is deadline
+            return call_at(when, callback, *args, **kwargs)
+
+        loop.call_at = counting_call_at  # type: ignore[method-assign,assignment]
+        deadline = LaterDeadline(loop, lambda: deadline_at[0], lambda: fired.append(loop.time()))
+        for _ in range(20):  # a message every 0.02 s moves the deadline on
+            deadline.arm(deadline_at[0])
+            await asyncio.sleep(0.02)
+            deadline_at[0] = loop.time() + TIMEOUT_S
+        moving_s = loop.time() - began
+        deadline.arm(deadline_at[0])
+        await asyncio.sleep(2 * TIMEOUT_S)
+        return [at - began for at in fired], deadline_at[0] - began, timers, moving_s
+
+    fired, last_due, timers, moving_s = asyncio.run(scenario())
+    assert len(fired) == 1 and fired[0] >= last_due
+    # a timer per timeout period the deadline moved through (and the last), not one per arm
+    assert timers <= moving_s / TIMEOUT_S + 2 < 21
+
+
+def test_a_deadline_that_lapses_calls_nothing_and_disarm_cancels() -> None:
+    async def scenario() -> list[str]:
+        loop = asyncio.get_running_loop()
+        calls: list[str] = []
+        gone = LaterDeadline(loop, lambda: None, lambda: calls.append("gone"))
+        gone.arm(loop.time() + 0.05)
+        disarmed = LaterDeadline(loop, lambda: loop.time(), lambda: calls.append("disarmed"))
+        disarmed.arm(loop.time() + 0.05)
+        disarmed.disarm()
+        await asyncio.sleep(0.15)
+        return calls
+
+    assert asyncio.run(scenario()) == []

@@ -130,6 +130,19 @@ def test_a_transform_beyond_float32_is_refused_and_engine_nan_is_a_fault() -> No
         resolved(None).apply(np.full((1, 4), np.nan, dtype=np.float32))
 
 
+@pytest.mark.parametrize("bad", [np.inf, -np.inf, np.nan])
+def test_an_identity_profile_passes_the_largest_finite_frames_and_refuses_non_finite(
+    bad: float,
+) -> None:
+    identity = resolved(None)
+    big = np.full((3, 4), np.finfo(np.float32).max, dtype=np.float32)
+    assert np.array_equal(identity.apply(big), big)
+    cancelling = np.array([[np.inf, -np.inf, 0.0, 0.0]], dtype=np.float32)  # sums to NaN
+    for frames in (cancelling, np.where(np.eye(3, 4, dtype=bool), bad, big)):
+        with pytest.raises(ValueError, match="non-finite"):
+            identity.apply(frames.astype(np.float32))
+
+
 # ---- Oculus visemes ----------------------------------------------------------------------
 
 MOUTH = tuple(f"mouthShape{index:02d}" for index in range(16))

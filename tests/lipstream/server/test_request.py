@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from lipstream.server.catalog import Catalog
-from lipstream.server.request import SENT_TAIL_VALUES, ActiveRequest, RequestLimits
+from lipstream.server.request import SENT_TAIL_VALUES, ActiveRequest, RequestLimits, SentTail
 from lipstream.server.session import Session, SessionLimits
 from lipstream_client import (
     Done,
@@ -137,3 +137,16 @@ def test_requests_without_a_message_for_the_timeout_end(catalog: Catalog) -> Non
     assert isinstance(unknown, ErrorMessage) and unknown.code == "unknown_request"
     assert [item.message.id for item in session.expire(9.0)] == ["a"]  # type: ignore[union-attr]
     assert session.active_requests == 0 and session.next_expiry() is None
+
+
+def test_the_sent_tail_holds_exactly_the_last_frames_sent_whatever_the_chunking() -> None:
+    rng = np.random.default_rng(3)
+    tail = SentTail(capacity=37, width=2)
+    sent: list[np.ndarray] = []
+    for _ in range(60):
+        rows = rng.random((int(rng.integers(0, 12)), 2)).astype(np.float32)
+        tail.extend(rows)
+        sent.extend(rows)
+        assert tail.stop == len(sent) and tail.oldest == max(0, len(sent) - 37)
+        for index in range(tail.oldest, tail.stop):
+            assert np.array_equal(tail.row(index), sent[index])
