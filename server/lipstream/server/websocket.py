@@ -30,8 +30,8 @@ full; the connection then reads nothing more from that client
 with no message and no active request for ``idle_timeout_s`` closes with
 1000; a request with no message for ``request_timeout_s`` ends with
 ``request_timeout`` (a per-connection timer, ``deadline.LaterDeadline``, ends the
-wait for the next message at the session's ``next_expiry``); a draining one closes with 1001 as soon as its requests are
-done.
+wait for the next message at the session's ``next_expiry``); a draining one closes
+with 1001 as soon as its requests are done.
 """
 
 from __future__ import annotations
