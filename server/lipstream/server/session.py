@@ -225,8 +225,10 @@ class Session:
         """End every request that has had no message for the request timeout by ``now``:
         the fatal ``request_timeout`` errors to send."""
         timeout = self.limits.request_timeout_s
-        if timeout is None:
+        if timeout is None or not self.requests:
             return []
+        if now - next(iter(self.requests.values())).last_input < timeout:
+            return []  # the longest-silent request is within its timeout: every message but few
         expired = list(takewhile(lambda r: now - r.last_input >= timeout, self.requests.values()))
         for request in expired:
             self._forget(request.id)

@@ -192,6 +192,8 @@ class Connection:
         self.read_ahead = ReadAhead(self.settings.max_message_bytes)
         self._receive_task: asyncio.Task[Received] | None = None
         self._peer_gone = False
+        self._engine_metrics: dict[str, tuple[Any, Any, Any]] = {}
+        self._message_counts: dict[str, Any] = {}
 
     # ---- lifecycle hooks (Drainable) ------------------------------------------------------
 
@@ -269,8 +271,7 @@ class Connection:
             decoded = received.decoded
             if decoded is None:
                 decoded = self._decode(received.event)
-            kind = "invalid" if isinstance(decoded, ProtocolError) else decoded.type
-            self.metrics.labelled(self.metrics.messages, kind).inc()
+            self._count(decoded)
             outgoing, payloads = await self._handle(decoded, received.at)
             self._track_active()
             if not await self._send_all(outgoing, payloads):
@@ -279,6 +280,15 @@ class Connection:
             if ending is not None:
                 await self._close(*ending)
                 return
+
+    def _count(self, decoded: InputMessage) -> None:
+        kind = "invalid" if isinstance(decoded, ProtocolError) else decoded.type
+        counter = self._message_counts.get(kind)
+        if counter is None:
+            counter = self._message_counts[kind] = self.metrics.labelled(
+                self.metrics.messages, kind
+            )
+        counter.inc()
 
     def _decode(self, event: Mapping[str, Any]) -> InputMessage:
         payload = event["bytes"] if event.get("bytes") is not None else event.get("text", "")
@@ -290,7 +300,8 @@ class Connection:
         """The errors of the requests that had no message for the request timeout by
         ``now`` (``Session.expire``)."""
         expired = self.session.expire(now)
-        self._track_active()
+        if expired:
+            self._track_active()
         return expired
 
     async def _next_event(self) -> object:
@@ -477,14 +488,25 @@ class Connection:
         message: ServerMessage = stamped.message
         if not isinstance(message, Frames) or stamped.engine is None:
             return
-        metrics = self.metrics
-        metrics.labelled(metrics.frames, stamped.engine).inc(message.n_frames)
+        frames, lag, first_frame = self._frame_metrics(stamped.engine)
+        frames.inc(message.n_frames)
         if stamped.lag_s is not None:
-            metrics.labelled(metrics.lag, stamped.engine).observe(stamped.lag_s)
+            lag.observe(stamped.lag_s)
         if stamped.first_frame_latency_s is not None:
-            metrics.labelled(metrics.first_frame, stamped.engine).observe(
-                stamped.first_frame_latency_s
+            first_frame.observe(stamped.first_frame_latency_s)
+
+    def _frame_metrics(self, engine: str) -> tuple[Any, Any, Any]:
+        """The frames counter and the lag and first-frame histograms of ``engine``, kept
+        per connection: a frames block is recorded without a label lookup."""
+        children = self._engine_metrics.get(engine)
+        if children is None:
+            metrics = self.metrics
+            children = self._engine_metrics[engine] = (
+                metrics.labelled(metrics.frames, engine),
+                metrics.labelled(metrics.lag, engine),
+                metrics.labelled(metrics.first_frame, engine),
             )
+        return children
 
     async def _close_now(self, code: int, reason: str) -> None:
         try:
