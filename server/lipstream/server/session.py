@@ -531,7 +531,7 @@ class Session:
         the input: the longest request)."""
         resolved = model.rung_for(options)
         if (resolved is None or resolved.name == estimate.rung.name) and all(
-            options.get(key) == _json_value(value) for key, value in estimate.rung.options.items()
+            options.get(key) == json_value(value) for key, value in estimate.rung.options.items()
         ):
             return estimate.rung.name, estimate.lookahead_ms
         settings = self.catalog.settings
@@ -575,17 +575,18 @@ def _merged_options(
 ) -> dict[str, JsonValue]:
     """Engine options: with a budget the rung's options win (they are what meets it);
     without one the client's do."""
-    selected = {key: _json_value(value) for key, value in rung.items()}
+    selected = {key: json_value(value) for key, value in rung.items()}
     return {**dict(client), **selected} if budgeted else {**selected, **dict(client)}
 
 
-def _json_value(value: Any) -> JsonValue:
+def json_value(value: Any) -> JsonValue:
+    """``value`` as a JSON value: numpy scalars and tuples converted, others as strings."""
     if hasattr(value, "item") and callable(value.item):
         value = value.item()
     if isinstance(value, (list, tuple)):
-        return [_json_value(item) for item in value]
+        return [json_value(item) for item in value]
     if isinstance(value, Mapping):
-        return {str(key): _json_value(item) for key, item in value.items()}
+        return {str(key): json_value(item) for key, item in value.items()}
     if value is None or isinstance(value, (bool, int, float, str)):
         return value
     return str(value)
