@@ -33,7 +33,7 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from lipstream_client import AsyncClient, Frames, ServerMessage
+from lipstream_client import AsyncClient, Frames, ServerMessage, Stream
 
 from ..engines.base import Rung
 from ..loadtest.clips import Span, synthetic_clip
@@ -81,17 +81,18 @@ class _Tap:
             self.lags_ms.append((received_at - self.sent_at - index / message.fps) * _MS)
 
 
+async def _start(client: AsyncClient, tap: _Tap, engine: str, character: str, rung: Rung,
+                 request_id: str) -> Stream:  # fmt: skip
+    """Start a request at ``rung`` (its options, no budget), its frames timed from now."""
+    tap.begin(request_id)
+    options = {key: json_value(value) for key, value in rung.options.items()}
+    return await client.start(engine, character, id=request_id, fps=FPS, options=options)
+
+
 async def _paced(client: AsyncClient, tap: _Tap, engine: str, character: str, rung: Rung,
                  spans: Sequence[Span], request_id: str) -> float:  # fmt: skip
     """Stream ``spans`` at lead 0; the lookahead ``ready`` reported (ms)."""
-    tap.begin(request_id)
-    stream = await client.start(
-        engine,
-        character,
-        id=request_id,
-        fps=FPS,
-        options={key: json_value(value) for key, value in rung.options.items()},
-    )
+    stream = await _start(client, tap, engine, character, rung, request_id)
     for label, start, end in spans:
         delay = tap.sent_at + start - time.perf_counter()
         if delay > 0:
@@ -111,14 +112,7 @@ async def _probe(client: AsyncClient, tap: _Tap, engine: str, character: str, ru
         (labels[k % len(labels)], k * PROBE_PHONEME_S, (k + 1) * PROBE_PHONEME_S)
         for k in range(PROBE_PHONEMES)
     ]
-    tap.begin(request_id)
-    stream = await client.start(
-        engine,
-        character,
-        id=request_id,
-        fps=FPS,
-        options={key: json_value(value) for key, value in rung.options.items()},
-    )
+    stream = await _start(client, tap, engine, character, rung, request_id)
     await stream.send_phonemes(items)
     await stream.end()
     await stream.done()

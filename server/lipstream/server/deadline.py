@@ -1,24 +1,22 @@
 """A connection's deadlines, each kept with one timer per connection, not per message.
 
-Sketch: every WebSocket send must finish within ``timeout_s``, because a
-client that stops reading pins ``await send`` forever. ``asyncio.timeout``
-around each send would arm and cancel a timer per message: at thousands of
-messages per second that bookkeeping (a heap entry each, cancelled ones
-lingering for ``timeout_s``) costs more than the sends, which almost never
-wait. Instead the connection marks when a send starts and stops. Starting a
-send arms a timer only if none is pending. When the timer fires it looks at
-the send in progress, if any: started ``timeout_s`` ago or more, it cancels
-the sending task and sets ``expired`` (the task turns that cancellation
-into ``TimeoutError``); started later, it re-arms for that send's due time;
-none, it lapses. Each send thus fails exactly at its own deadline, and a
-busy connection re-arms at most once per ``timeout_s``.
+Sketch: ``LaterDeadline`` keeps a deadline that only ever moves later with one
+timer. Arming keeps a pending timer, which is then early; when it fires it
+asks for the deadline again and re-arms for it, calls ``on_due`` once it has
+passed, or lapses when there is none. A deadline moved on by every message
+thus costs a timer per period it moves through, not one per message: at
+thousands of messages per second ``asyncio.timeout`` around each (a heap
+entry each, cancelled ones lingering until their time) would cost more than
+the sends and receives themselves.
 
-``LaterDeadline`` does the same for a deadline that only ever moves later,
-such as the request timeout (each message moves its request's expiry on):
-arming keeps the pending timer, which is then early; when it fires it asks
-for the deadline again and re-arms for it, or calls ``on_due`` once it has
-passed. The wait for a client's message thus arms a timer once per timeout
-period, not once per message.
+Two deadlines use it. Every WebSocket send must finish within ``timeout_s``,
+because a client that stops reading pins ``await send`` forever
+(``SendDeadline``): the deadline is the send in progress's start plus
+``timeout_s``, and when it passes the sending task is cancelled and
+``expired`` set (the task turns that cancellation into ``TimeoutError``); each
+send thus fails exactly at its own deadline. The request timeout ends the
+wait for a client's next message at the session's ``next_expiry``, which each
+message moves on.
 """
 
 from __future__ import annotations
@@ -37,14 +35,18 @@ class SendDeadline:
         self.expired = False
         self._since: float | None = None
         self._task: asyncio.Task[Any] | None = None
-        self._timer: asyncio.TimerHandle | None = None
+        self._timer = LaterDeadline(loop, self._due, self._expire)
+
+    @property
+    def pending(self) -> bool:
+        """A timer is armed."""
+        return self._timer.pending
 
     def started(self, task: asyncio.Task[Any]) -> None:
         """``task`` begins a send now."""
         self._since = self.loop.time()
         self._task = task
-        if self._timer is None:
-            self._timer = self.loop.call_at(self._since + self.timeout_s, self._check)
+        self._timer.arm(self._since + self.timeout_s)
 
     def stopped(self) -> None:
         """The send begun last has finished (or failed)."""
@@ -53,21 +55,15 @@ class SendDeadline:
 
     def disarm(self) -> None:
         """Cancel the pending timer (the connection is over)."""
-        if self._timer is not None:
-            self._timer.cancel()
-            self._timer = None
+        self._timer.disarm()
 
-    def _check(self) -> None:
-        self._timer = None
-        since, task = self._since, self._task
-        if since is None or task is None:
-            return
-        due = since + self.timeout_s
-        if self.loop.time() >= due:
+    def _due(self) -> float | None:
+        return None if self._since is None else self._since + self.timeout_s
+
+    def _expire(self) -> None:
+        if self._task is not None:
             self.expired = True
-            task.cancel()
-        else:
-            self._timer = self.loop.call_at(due, self._check)
+            self._task.cancel()
 
 
 class LaterDeadline:
@@ -84,6 +80,11 @@ class LaterDeadline:
         self.due = due
         self.on_due = on_due
         self._timer: asyncio.TimerHandle | None = None
+
+    @property
+    def pending(self) -> bool:
+        """A timer is armed."""
+        return self._timer is not None
 
     def arm(self, when: float) -> None:
         """Make sure a timer fires by ``when``, the deadline now (a pending timer is never

@@ -29,14 +29,14 @@ async def _send(deadline: SendDeadline, seconds: float) -> tuple[float, bool]:
 
 
 def test_sends_within_the_deadline_are_left_alone_and_the_timer_lapses() -> None:
-    async def scenario() -> tuple[list[tuple[float, bool]], bool, object]:
+    async def scenario() -> tuple[list[tuple[float, bool]], bool, bool]:
         deadline = SendDeadline(asyncio.get_running_loop(), TIMEOUT_S)
         sends = [await _send(deadline, 0.05) for _ in range(6)]  # 0.3 s in all: past one timeout
         await asyncio.sleep(TIMEOUT_S)
-        return sends, deadline.expired, deadline._timer
+        return sends, deadline.expired, deadline.pending
 
-    sends, expired, timer = asyncio.run(scenario())
-    assert not expired and timer is None
+    sends, expired, pending = asyncio.run(scenario())
+    assert not expired and not pending
     assert [cut for _, cut in sends] == [False] * 6
 
 
