@@ -375,3 +375,183 @@ def entry_costs(
             tc = _exact_tc(a, b, p, viseme, leaving, arriving, natural, len(natural), packed)
         f[j] = (0.0 + tc) + unary[j]
     return f
+
+
+SURE = 1e-9
+"""Relative margin by which a scanned node's best predecessor beats every other one for the
+fixed-lag search to reuse it in the next window (``lag_step``): far above the rounding of a
+window's sums (about 1e-15 relative), so a rerooted window that lowers every cost by one
+constant cannot reorder the two."""
+
+PRICED, NATURAL, UNCAPTURED = 0, 1, 2
+"""How a node's best predecessor was found (``lag_step``'s ``kind``): a priced pair, Rule 1
+(its captured predecessor, TC = 0) or Rule 4 (no captured predecessor: the cheapest one)."""
+
+
+@njit(cache=True, inline="always")
+def _margin(best: float) -> float:
+    return SURE * (abs(best) + 1.0)
+
+
+@njit(cache=True, inline="always")
+def _scan_sure(
+    members: np.ndarray, start: int, stop: int, penalty: float, best: float, arg: int,
+    second: float, terms: np.ndarray, b: int, p: int, prev_nodes: np.ndarray,
+    prev_f: np.ndarray, viseme: np.ndarray, leaving: np.ndarray, arriving: np.ndarray,
+    dims: int, packed: np.ndarray,
+) -> tuple[float, int, float]:  # fmt: skip
+    """``_scan`` with the bar raised from the best to the best + ``_margin``: the same pairs
+    replace the best, in the same order, and ``second`` (the least other cost seen) is exact
+    below the bar, so the best wins by the margin iff ``second`` ≥ the bar at the end. The
+    best pair's terms of the cost, (α3·PGap, VGap, PNT or 0, α2·DSC), go to ``terms``."""
+    bar = best + _margin(best)
+    for k in range(start, stop):
+        i = members[k]
+        floor = prev_f[i] + penalty
+        if floor >= bar:
+            break
+        a = prev_nodes[i]
+        if a == p:
+            continue
+        budget = bar - floor + SLACK * (abs(bar) + 1.0)
+        velocity = _velocity_squares(leaving, a, arriving, b, dims, budget * budget)
+        if velocity >= budget * budget:
+            continue
+        position = _squares(leaving, a, arriving, b, dims, 2 * dims)
+        gaps = packed[2] * math.sqrt(position)
+        speed = math.sqrt(velocity)
+        cost = prev_f[i] + gaps + speed
+        penalised = viseme[a] != viseme[p]
+        if penalised:
+            cost += packed[3]
+        if cost >= bar:
+            continue
+        smooth = packed[1] * _dsc(leaving, a, arriving, b, dims)
+        cost += smooth
+        if cost < best:
+            second = min(second, best)
+            best = cost
+            arg = i
+            bar = best + _margin(best)
+            terms[0] = gaps
+            terms[1] = speed
+            terms[2] = packed[3] if penalised else 0.0
+            terms[3] = smooth
+        elif cost < second:
+            second = cost
+    return best, arg, second
+
+
+@njit(cache=True)
+def lag_step(
+    prev_nodes: np.ndarray, prev_f: np.ndarray, next_nodes: np.ndarray, next_u: np.ndarray,
+    pre: np.ndarray, viseme: np.ndarray, leaving: np.ndarray, arriving: np.ndarray,
+    dims: int, packed: np.ndarray, position: np.ndarray, given: np.ndarray,
+    given_kind: np.ndarray, given_terms: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """``fast_step`` (same nodes, φ, order and predecessors, bit for bit) where the best
+    predecessor of some nodes is known: ``given[j]`` ≥ 0 is the position in ``prev_nodes`` of
+    next_nodes[j]'s, found by ``kind`` ``given_kind[j]`` with the cost terms
+    ``given_terms[j]`` (see ``_scan_sure``); −1: scanned. The cost of a given pair is summed
+    from its terms in ``_scan``'s order, so it is the value ``_scan`` computes. Returns, in
+    ascending φ: nodes, φ, predecessor positions, whether each best predecessor won by the
+    margin (``SURE``; a given one keeps its flag, true), kinds and terms."""
+    for i in range(len(prev_nodes)):
+        position[prev_nodes[i]] = i
+    members, starts = _groups(prev_nodes, viseme)
+    classes = len(starts) - 1
+    n = len(next_nodes)
+    f = np.empty(n)
+    back = np.empty(n, dtype=np.int64)
+    sure = np.ones(n, dtype=np.bool_)
+    kind = np.full(n, PRICED, dtype=np.int8)
+    terms = np.zeros((n, 4))
+    for j in range(n):
+        b = next_nodes[j]
+        p = pre[b]
+        if p < 0:
+            f[j] = prev_f[0] + packed[0] + next_u[j]
+            back[j] = 0
+            kind[j] = UNCAPTURED
+            continue
+        i = given[j]
+        if i >= 0:
+            if given_kind[j] == NATURAL:
+                best = prev_f[i]
+            else:
+                best = prev_f[i] + given_terms[j, 0] + given_terms[j, 1]
+                if given_terms[j, 2] != 0.0:
+                    best += given_terms[j, 2]
+                best += given_terms[j, 3]
+            f[j] = best + next_u[j]
+            back[j] = i
+            kind[j] = given_kind[j]
+            terms[j] = given_terms[j]
+            continue
+        best = np.inf
+        arg = 0
+        second = np.inf
+        if position[p] >= 0:
+            best = prev_f[position[p]]
+            arg = position[p]
+            kind[j] = NATURAL
+        own = viseme[p]
+        row = terms[j]
+        start = arg
+        if own < classes:
+            best, arg, second = _scan_sure(
+                members, starts[own], starts[own + 1], 0.0, best, arg, second, row, b, p,
+                prev_nodes, prev_f, viseme, leaving, arriving, dims, packed,
+            )  # fmt: skip
+        for v in range(classes):
+            if v != own and starts[v + 1] > starts[v]:
+                best, arg, second = _scan_sure(
+                    members, starts[v], starts[v + 1], packed[3], best, arg, second, row, b,
+                    p, prev_nodes, prev_f, viseme, leaving, arriving, dims, packed,
+                )  # fmt: skip
+        if kind[j] == NATURAL and arg != start:
+            kind[j] = PRICED
+        f[j] = best + next_u[j]
+        back[j] = arg
+        sure[j] = second >= best + _margin(best)
+    for i in range(len(prev_nodes)):
+        position[prev_nodes[i]] = -1
+    order = np.argsort(f, kind="mergesort")
+    return next_nodes[order], f[order], back[order], sure[order], kind[order], terms[order]
+
+
+@njit(cache=True)
+def replay_plan(
+    next_nodes: np.ndarray, old_nodes: np.ndarray, old_back: np.ndarray, old_sure: np.ndarray,
+    old_kind: np.ndarray, old_terms: np.ndarray, old_prev_nodes: np.ndarray,
+    old_prev_root: np.ndarray, root: int, prev_nodes: np.ndarray, old_position: np.ndarray,
+    position: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """``lag_step``'s ``given``, ``given_kind`` and ``given_terms`` for ``next_nodes`` from the
+    previous window's step into the same layer (``old_*``, in its ascending φ; its layer
+    before had the same nodes as ``prev_nodes``, now in the new window's order): a node's
+    best predecessor is given when it won by the margin and descends from ``root``, the node
+    the previous window committed (``old_prev_root``: each predecessor's node in that
+    window's first layer). ``old_position`` and ``position`` are scratch, all −1, left so."""
+    for i in range(len(old_nodes)):
+        old_position[old_nodes[i]] = i
+    for i in range(len(prev_nodes)):
+        position[prev_nodes[i]] = i
+    n = len(next_nodes)
+    given = np.full(n, -1, dtype=np.int64)
+    kind = np.zeros(n, dtype=np.int8)
+    terms = np.zeros((n, 4))
+    for j in range(n):
+        o = old_position[next_nodes[j]]
+        if o < 0 or not old_sure[o] or old_kind[o] == UNCAPTURED:
+            continue
+        if old_prev_root[old_back[o]] != root:
+            continue
+        given[j] = position[old_prev_nodes[old_back[o]]]
+        kind[j] = old_kind[o]
+        terms[j] = old_terms[o]
+    for i in range(len(old_nodes)):
+        old_position[old_nodes[i]] = -1
+    for i in range(len(prev_nodes)):
+        position[prev_nodes[i]] = -1
+    return given, kind, terms

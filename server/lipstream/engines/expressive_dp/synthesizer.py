@@ -59,6 +59,7 @@ from ..damped_fit import RawCurve
 from ..growable import Growable
 from ..work import WorkGuard
 from .causal_curve import follow_raw, raw_rows
+from .lag_search import LagMemory
 from .nodes import EMOTION_INDEX
 from .postprocess import RenderCache
 from .search import NO_NODE, LayerSpec, SearchSpace, one_layer, search
@@ -111,13 +112,16 @@ class PathSynthesizer(RenderingSynthesizer):
             PHONEME_INDEX[span.phoneme], EMOTION_INDEX[emotion], self.constrained.get(index, -1)
         )
 
+    memory: LagMemory | None = None
+    """The last fixed-lag window's search, for the next (``lag_search``)."""
+
     def commit(self) -> None:
         """Commit every node the input (and the lag) now decides."""
         decided = len(self.path)
         layers = [self.layer(k) for k in range(decided, len(self.spans))]
         priced, cost = extend_path(
             self.model.space, layers, self.excluded, self.lag, self.path, self.finished,
-            self.request.guard,
+            self.request.guard, self.memory,
         )  # fmt: skip
         self.stats["candidates"] += priced
         self.stats["path_cost"] += cost
@@ -150,6 +154,7 @@ class LagSynthesizer(PathSynthesizer):
     ) -> None:
         super().__init__(model, request, lag, constraints)
         self.kept = RenderCache()
+        self.memory = LagMemory(model.nodes.size)
 
     def final_until(self) -> float:
         if not self.spans or self.lag is None:
@@ -217,10 +222,13 @@ def extend_path(
     path: list[int],
     finished: bool,
     guard: WorkGuard | None = None,
+    memory: LagMemory | None = None,
 ) -> tuple[int, float]:
     """Append to ``path`` the nodes of ``layers`` (the spans after it) that ``lag`` decides
     now (``NO_NODE`` at a silence); the nodes priced and the Eq. 4 cost the new nodes add.
-    A silence closes its segment: every node before it is decided at once."""
+    A silence closes its segment: every node before it is decided at once. ``memory`` (a
+    stream's) searches each window of two or more layers reusing the last one's steps
+    (``lag_search``): the same nodes."""
     priced, added = 0, 0.0
     offset = 0
     while offset < len(layers):
@@ -245,7 +253,11 @@ def extend_path(
             path.append(node)
             offset += 1
             continue
-        found = search(space, layers[offset : last + 1], excluded, before=before, guard=guard)
+        window = layers[offset : last + 1]
+        if memory is not None:
+            found = memory.search(space, window, excluded, len(path), before, guard)
+        else:
+            found = search(space, window, excluded, before=before, guard=guard)
         priced += found.candidates
         for node in (found.path if whole else found.path[:1]).tolist():
             previous = path[-1] if path else NO_NODE

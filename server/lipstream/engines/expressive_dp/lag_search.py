@@ -1,0 +1,151 @@
+"""The fixed-lag search window after window: each window reuses its predecessor's steps.
+
+Method. A fixed-lag call searches the window of layers s .. e from the node c committed
+at s − 1 (``search.search``'s fast search over one segment) and commits the node o_s of
+its cheapest path. The next call searches s + 1 .. e + 1 from c' = o_s: both ends moved,
+so the whole window used to be searched again. Yet of its layers only e + 1 is new, and
+on the others most of the work of the last window stands:
+
+* φ' (this window's forward costs) and φ (the last window's) obey φ'(a) ≥ φ(a) − φ(c')
+  for every node a of layers s + 1 .. e, with equality when the last window's best path
+  into a runs through c' at layer s ("a descends from c'", followed through the
+  predecessor positions): a path from c' to a, led by the last window's way into c',
+  is a path of the last window.
+* So when a node b's best predecessor a* in the last window descends from c' and beat
+  every other predecessor by the margin ``fast_step.SURE`` (the step scans past the best
+  by that margin to know), a* is still b's best predecessor, every other one is dearer
+  by almost the margin (sums of 1e-15 relative rounding cannot close it), and the step
+  takes it without a scan; b's φ' is summed from a*'s φ' and the pair's cost terms as the
+  scan sums it, so it is the value the scan would find, bit for bit.
+* Every other node is scanned (``fast_step.lag_step``: ``fast_step``'s scan, the bar
+  raised by the margin), and so are the first layer (priced from c' as before) and the
+  new layer e + 1. Rule 4 nodes take the cheapest φ' as before.
+
+Every layer thus holds the nodes, φ, order and predecessors ``search`` finds for the
+window, so the path, its ties and the committed node are the same. Most nodes of the
+later layers descend from the committed node (the paths into them merge within a few
+layers), so a call scans about its first and new layers. A window that is not its
+predecessor moved by one layer (the first of a segment, after a one-layer commit, a
+silence) is searched afresh by the same step.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .fast_step import entry_costs, lag_step, replay_plan
+from .search import LayerSpec, SearchResult, SearchSpace, _candidates
+
+
+@dataclass(frozen=True)
+class PassLayer:
+    """One layer of a window's search: ``candidates`` as ``search._candidates`` gives them
+    (node order); in ascending φ: ``nodes``, ``f`` (φ), ``back`` (each one's best
+    predecessor's position in the layer before; 0 in the first layer), ``sure``, ``kind``
+    and ``terms`` (``fast_step.lag_step``), ``root`` (each one's node in the first layer)."""
+
+    candidates: np.ndarray
+    nodes: np.ndarray
+    f: np.ndarray
+    back: np.ndarray
+    sure: np.ndarray
+    kind: np.ndarray
+    terms: np.ndarray
+    root: np.ndarray
+
+
+class LagMemory:
+    """A stream's last fixed-lag window: its first layer's index and its layers."""
+
+    def __init__(self, size: int) -> None:
+        self.start = -1
+        self.layers: list[PassLayer] = []
+        self.scratch = (np.full(size, -1, dtype=np.int64), np.full(size, -1, dtype=np.int64))
+
+    def search(
+        self,
+        space: SearchSpace,
+        layers: Sequence[LayerSpec],
+        excluded: np.ndarray,
+        start: int,
+        before: int,
+        guard: object | None = None,
+    ) -> SearchResult:
+        """``search.search(space, layers, excluded, before=before)`` for ``layers`` (two or
+        more, none silent), the spans from index ``start`` on: the same path; the nodes
+        priced are those whose way in was searched."""
+        old = self.layers if self.start == start - 1 and before >= 0 else []
+        nodes, unary = _candidates(space, layers, excluded, 0, before >= 0, True, 0)
+        f = unary
+        if before >= 0:
+            records = space.records
+            f = entry_costs(
+                before, nodes, unary, space.nodes.pre, space.features.viseme,
+                records.leaving, records.arriving, records.natural, space.packed,
+            )  # fmt: skip
+        order = np.argsort(f, kind="stable")
+        count = len(nodes)
+        first = nodes[order]
+        passed = [
+            PassLayer(
+                nodes,
+                first,
+                f[order],
+                np.zeros(count, dtype=np.int64),
+                np.ones(count, dtype=bool),
+                np.zeros(count, dtype=np.int8),
+                np.zeros((count, 4)),
+                first,
+            )  # fmt: skip
+        ]
+        priced = count
+        for index in range(1, len(layers)):
+            if guard is not None:
+                guard.check()  # type: ignore[attr-defined]
+            previous = passed[-1]
+            candidates, unary = _candidates(space, layers, excluded, index, True, True, 0)
+            given, kind, terms = self._given(old, index, candidates, previous, before)
+            priced += int(np.count_nonzero(given < 0))
+            step = lag_step(
+                previous.nodes, previous.f, candidates, unary, space.nodes.pre,
+                space.features.viseme, space.records.leaving, space.records.arriving,
+                space.records.dims, space.packed, self.scratch[0], given, kind, terms,
+            )  # fmt: skip
+            ordered, f, back, sure, kinds, costs = step
+            passed.append(
+                PassLayer(candidates, ordered, f, back, sure, kinds, costs, previous.root[back])
+            )
+        self.start, self.layers = start, passed
+        position = int(np.argmin(passed[-1].f))
+        cost = float(passed[-1].f[position])
+        path = np.empty(len(layers), dtype=np.int64)
+        for index in range(len(layers) - 1, -1, -1):
+            path[index] = passed[index].nodes[position]
+            position = int(passed[index].back[position])
+        return SearchResult(path, cost, priced)
+
+    def _given(
+        self, old: list[PassLayer], index: int, candidates: np.ndarray, previous: PassLayer,
+        root: int,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+        """``lag_step``'s known predecessors of layer ``index`` of this window from layer
+        ``index + 1`` of the last (``old``), when the layer before had the same nodes."""
+        if index + 1 < len(old) and _same(old[index].candidates, previous.candidates):
+            before, layer = old[index], old[index + 1]
+            return replay_plan(
+                candidates, layer.nodes, layer.back, layer.sure, layer.kind, layer.terms,
+                before.nodes, before.root, root, previous.nodes, *self.scratch,
+            )  # fmt: skip
+        count = len(candidates)
+        return (
+            np.full(count, -1, dtype=np.int64),
+            np.zeros(count, dtype=np.int8),
+            np.zeros((count, 4)),
+        )
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    return a is b or (len(a) == len(b) and bool(np.array_equal(a, b)))
