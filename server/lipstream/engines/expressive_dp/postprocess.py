@@ -37,6 +37,8 @@ from functools import lru_cache
 from operator import attrgetter
 
 import numpy as np
+from scipy.linalg.lapack import dpbtrf as _pbtrf
+from scipy.linalg.lapack import dpbtrs as _pbtrs
 
 from ...numerics.banded import solve_spd_banded
 from ...phonemes import SILENCE
@@ -261,9 +263,19 @@ class Renderer:
 def smooth_join(fitted: np.ndarray, weights: np.ndarray, smoothness: float) -> np.ndarray:
     """argmin_g Σ_t weights_t (g_t − f_t)² + smoothness Σ_t (g_{t−1} − 2g_t + g_{t+1})² for
     every column of ``fitted`` (n, K): the normal equations (diag(W) + λ D²ᵀD²) g = W f are
-    pentadiagonal, one banded Cholesky solve with K right-hand sides."""
-    bands = _normal_bands(tuple(weights.tolist()), smoothness)
-    return solve_spd_banded(bands, weights[:, None] * fitted)
+    pentadiagonal, one banded Cholesky solve with K right-hand sides. The factor is kept per
+    weight pattern (``_normal_factor``) and only the substitutions run: LAPACK's dpbsv
+    (``numerics.banded.solve_spd_banded``) is dpbtrf then dpbtrs, so the solution is the
+    same to the last bit; a pattern without a factor, or a non-finite entry, goes the
+    general way, which raises."""
+    key = tuple(weights.tolist())
+    factor = _normal_factor(key, smoothness)
+    rhs = weights[:, None] * fitted
+    if factor is not None and np.isfinite(rhs).all():
+        solution, info = _pbtrs(factor, rhs, lower=1)
+        if info == 0:
+            return np.asarray(solution)
+    return solve_spd_banded(_normal_bands(key, smoothness), rhs)
 
 
 @lru_cache(maxsize=256)
@@ -279,6 +291,20 @@ def _normal_bands(weights: tuple[float, ...], smoothness: float) -> np.ndarray:
         bands[offset, : n - offset] = np.diagonal(normal, -offset)
     bands.setflags(write=False)
     return bands
+
+
+@lru_cache(maxsize=256)
+def _normal_factor(weights: tuple[float, ...], smoothness: float) -> np.ndarray | None:
+    """dpbtrf's banded Cholesky factor of ``_normal_bands`` (None when it fails)."""
+    bands = _normal_bands(weights, smoothness)
+    if not np.isfinite(bands).all():
+        return None
+    factor, info = _pbtrf(bands, lower=1)
+    if info != 0:
+        return None
+    factor = np.asarray(factor)
+    factor.setflags(write=False)
+    return factor
 
 
 def _span_at(spans: Sequence[PhonemeSpan], t: float) -> int:

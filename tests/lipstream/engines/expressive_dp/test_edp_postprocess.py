@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from lipstream.engines.expressive_dp.nodes import NodeDatabase
-from lipstream.engines.expressive_dp.postprocess import Renderer, smooth_join
+from lipstream.engines.expressive_dp.postprocess import Renderer, _normal_bands, smooth_join
+from lipstream.numerics.banded import solve_spd_banded
 from lipstream.phonemes import PHONEME_INDEX
 from lipstream.timeline import PhonemeSpan
 
@@ -25,6 +26,21 @@ def test_the_join_solve_equals_a_dense_least_squares_fit(count: int) -> None:
     target = np.vstack([np.sqrt(weights)[:, None] * fitted, np.zeros((count - 2, 4))])
     expected = np.linalg.lstsq(system, target, rcond=None)[0]
     np.testing.assert_allclose(smooth_join(fitted, weights, smoothness), expected, atol=1e-10)
+
+
+@pytest.mark.parametrize("count", [3, 4, 5, 6])
+def test_the_join_solve_from_a_kept_factor_is_the_banded_solvers_to_the_last_bit(
+    count: int,
+) -> None:
+    """The substitutions on a factor kept per weight pattern give what one dpbsv call (the
+    general banded solver) gives, bit for bit, for every right-hand side."""
+    rng = np.random.default_rng(10 + count)
+    for _ in range(20):
+        weights = rng.choice([0.5, 1.0, 2.0], count)
+        fitted = rng.normal(size=(count, 12)) * 10.0 ** rng.integers(-3, 4)
+        bands = _normal_bands(tuple(weights.tolist()), 1.0)
+        expected = solve_spd_banded(bands, weights[:, None] * fitted)
+        assert smooth_join(fitted, weights, 1.0).tobytes() == expected.tobytes()
 
 
 def _database() -> NodeDatabase:
