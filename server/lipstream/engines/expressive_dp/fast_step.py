@@ -442,22 +442,50 @@ def _scan_sure(
     return best, arg, second
 
 
+@njit(cache=True, inline="always")
+def _given(
+    b: int, root: int, position: np.ndarray, old_position: np.ndarray, old_back: np.ndarray,
+    old_sure: np.ndarray, old_kind: np.ndarray, old_prev_nodes: np.ndarray,
+    old_prev_root: np.ndarray,
+) -> tuple[int, int]:  # fmt: skip
+    """Node b's best predecessor in the last window (its position now, and its row there)
+    when it won by the margin and descends from ``root``; else (−1, −1)."""
+    o = old_position[b]
+    if o < 0 or not old_sure[o] or old_kind[o] == UNCAPTURED:
+        return -1, -1
+    if old_prev_root[old_back[o]] != root:
+        return -1, -1
+    return position[old_prev_nodes[old_back[o]]], o
+
+
 @njit(cache=True)
 def lag_step(
-    prev_nodes: np.ndarray, prev_f: np.ndarray, next_nodes: np.ndarray, next_u: np.ndarray,
-    pre: np.ndarray, viseme: np.ndarray, leaving: np.ndarray, arriving: np.ndarray,
-    dims: int, packed: np.ndarray, position: np.ndarray, given: np.ndarray,
-    given_kind: np.ndarray, given_terms: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
-    """``fast_step`` (same nodes, φ, order and predecessors, bit for bit) where the best
-    predecessor of some nodes is known: ``given[j]`` ≥ 0 is the position in ``prev_nodes`` of
-    next_nodes[j]'s, found by ``kind`` ``given_kind[j]`` with the cost terms
-    ``given_terms[j]`` (see ``_scan_sure``); −1: scanned. The cost of a given pair is summed
-    from its terms in ``_scan``'s order, so it is the value ``_scan`` computes. Returns, in
-    ascending φ: nodes, φ, predecessor positions, whether each best predecessor won by the
-    margin (``SURE``; a given one keeps its flag, true), kinds and terms."""
+    prev_nodes: np.ndarray, prev_f: np.ndarray, prev_root: np.ndarray, next_nodes: np.ndarray,
+    next_u: np.ndarray, pre: np.ndarray, viseme: np.ndarray, leaving: np.ndarray,
+    arriving: np.ndarray, dims: int, packed: np.ndarray, position: np.ndarray,
+    old_position: np.ndarray, old_nodes: np.ndarray, old_back: np.ndarray,
+    old_sure: np.ndarray, old_kind: np.ndarray, old_terms: np.ndarray,
+    old_prev_nodes: np.ndarray, old_prev_root: np.ndarray, root: int,
+) -> tuple[
+    np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int
+]:  # fmt: skip
+    """``fast_step`` (the same nodes, φ, order and predecessors, bit for bit), taking some
+    best predecessors from the last window's step into the same layer (``old_*``, in its
+    ascending φ; empty when there is none) instead of scanning: next_nodes[j]'s, when there
+    it won by the margin (``old_sure``) and descended from ``root``, the node that window
+    committed (``old_prev_root``: each predecessor's node in that window's first layer). The
+    layer before must hold the nodes it held there. A given pair's cost is summed from its
+    terms in ``_scan``'s order, so it is the value the scan computes.
+
+    ``prev_root``: each of ``prev_nodes``' node in this window's first layer. ``position``
+    and ``old_position`` (N) are scratch, all −1, and left so. Returns, in ascending φ:
+    nodes, φ, predecessor positions, sure (a scanned node's best predecessor won by the
+    margin; a given one keeps the flag), kinds (``PRICED``, ``NATURAL``, ``UNCAPTURED``),
+    the best pair's cost terms (see ``_scan_sure``) and roots; and the nodes scanned."""
     for i in range(len(prev_nodes)):
         position[prev_nodes[i]] = i
+    for i in range(len(old_nodes)):
+        old_position[old_nodes[i]] = i
     members, starts = _groups(prev_nodes, viseme)
     classes = len(starts) - 1
     n = len(next_nodes)
@@ -466,6 +494,7 @@ def lag_step(
     sure = np.ones(n, dtype=np.bool_)
     kind = np.full(n, PRICED, dtype=np.int8)
     terms = np.zeros((n, 4))
+    scanned = 0
     for j in range(n):
         b = next_nodes[j]
         p = pre[b]
@@ -474,20 +503,24 @@ def lag_step(
             back[j] = 0
             kind[j] = UNCAPTURED
             continue
-        i = given[j]
+        i, o = _given(
+            b, root, position, old_position, old_back, old_sure, old_kind, old_prev_nodes,
+            old_prev_root,
+        )  # fmt: skip
         if i >= 0:
-            if given_kind[j] == NATURAL:
+            if old_kind[o] == NATURAL:
                 best = prev_f[i]
             else:
-                best = prev_f[i] + given_terms[j, 0] + given_terms[j, 1]
-                if given_terms[j, 2] != 0.0:
-                    best += given_terms[j, 2]
-                best += given_terms[j, 3]
+                best = prev_f[i] + old_terms[o, 0] + old_terms[o, 1]
+                if old_terms[o, 2] != 0.0:
+                    best += old_terms[o, 2]
+                best += old_terms[o, 3]
             f[j] = best + next_u[j]
             back[j] = i
-            kind[j] = given_kind[j]
-            terms[j] = given_terms[j]
+            kind[j] = old_kind[o]
+            terms[j] = old_terms[o]
             continue
+        scanned += 1
         best = np.inf
         arg = 0
         second = np.inf
@@ -516,42 +549,11 @@ def lag_step(
         sure[j] = second >= best + _margin(best)
     for i in range(len(prev_nodes)):
         position[prev_nodes[i]] = -1
-    order = np.argsort(f, kind="mergesort")
-    return next_nodes[order], f[order], back[order], sure[order], kind[order], terms[order]
-
-
-@njit(cache=True)
-def replay_plan(
-    next_nodes: np.ndarray, old_nodes: np.ndarray, old_back: np.ndarray, old_sure: np.ndarray,
-    old_kind: np.ndarray, old_terms: np.ndarray, old_prev_nodes: np.ndarray,
-    old_prev_root: np.ndarray, root: int, prev_nodes: np.ndarray, old_position: np.ndarray,
-    position: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
-    """``lag_step``'s ``given``, ``given_kind`` and ``given_terms`` for ``next_nodes`` from the
-    previous window's step into the same layer (``old_*``, in its ascending φ; its layer
-    before had the same nodes as ``prev_nodes``, now in the new window's order): a node's
-    best predecessor is given when it won by the margin and descends from ``root``, the node
-    the previous window committed (``old_prev_root``: each predecessor's node in that
-    window's first layer). ``old_position`` and ``position`` are scratch, all −1, left so."""
-    for i in range(len(old_nodes)):
-        old_position[old_nodes[i]] = i
-    for i in range(len(prev_nodes)):
-        position[prev_nodes[i]] = i
-    n = len(next_nodes)
-    given = np.full(n, -1, dtype=np.int64)
-    kind = np.zeros(n, dtype=np.int8)
-    terms = np.zeros((n, 4))
-    for j in range(n):
-        o = old_position[next_nodes[j]]
-        if o < 0 or not old_sure[o] or old_kind[o] == UNCAPTURED:
-            continue
-        if old_prev_root[old_back[o]] != root:
-            continue
-        given[j] = position[old_prev_nodes[old_back[o]]]
-        kind[j] = old_kind[o]
-        terms[j] = old_terms[o]
     for i in range(len(old_nodes)):
         old_position[old_nodes[i]] = -1
-    for i in range(len(prev_nodes)):
-        position[prev_nodes[i]] = -1
-    return given, kind, terms
+    order = np.argsort(f, kind="mergesort")
+    ordered_back = back[order]
+    return (
+        next_nodes[order], f[order], ordered_back, sure[order], kind[order], terms[order],
+        prev_root[ordered_back], scanned,
+    )  # fmt: skip

@@ -31,12 +31,13 @@ silence) is searched afresh by the same step.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from .fast_step import entry_costs, lag_step, replay_plan
+from .fast_step import entry_costs, lag_step
 from .search import LayerSpec, SearchResult, SearchSpace, _candidates
 
 
@@ -44,8 +45,9 @@ from .search import LayerSpec, SearchResult, SearchSpace, _candidates
 class PassLayer:
     """One layer of a window's search: ``candidates`` as ``search._candidates`` gives them
     (node order); in ascending φ: ``nodes``, ``f`` (φ), ``back`` (each one's best
-    predecessor's position in the layer before; 0 in the first layer), ``sure``, ``kind``
-    and ``terms`` (``fast_step.lag_step``), ``root`` (each one's node in the first layer)."""
+    predecessor's position in the layer before), ``sure``, ``kind`` and ``terms``
+    (``fast_step.lag_step``; the three and ``back`` empty in the first layer), ``root``
+    (each one's node in the first layer)."""
 
     candidates: np.ndarray
     nodes: np.ndarray
@@ -61,9 +63,9 @@ class LagMemory:
     """A stream's last fixed-lag window: its first layer's index and its layers."""
 
     def __init__(self, size: int) -> None:
+        self.size = size
         self.start = -1
         self.layers: list[PassLayer] = []
-        self.scratch = (np.full(size, -1, dtype=np.int64), np.full(size, -1, dtype=np.int64))
 
     def search(
         self,
@@ -78,6 +80,7 @@ class LagMemory:
         more, none silent), the spans from index ``start`` on: the same path; the nodes
         priced are those whose way in was searched."""
         old = self.layers if self.start == start - 1 and before >= 0 else []
+        scratch = _scratch(self.size)
         nodes, unary = _candidates(space, layers, excluded, 0, before >= 0, True, 0)
         f = unary
         if before >= 0:
@@ -87,64 +90,72 @@ class LagMemory:
                 records.leaving, records.arriving, records.natural, space.packed,
             )  # fmt: skip
         order = np.argsort(f, kind="stable")
-        count = len(nodes)
         first = nodes[order]
+        empty = _EMPTY  # the first layer's nodes have no predecessor in the window
         passed = [
             PassLayer(
-                nodes,
-                first,
-                f[order],
-                np.zeros(count, dtype=np.int64),
-                np.ones(count, dtype=bool),
-                np.zeros(count, dtype=np.int8),
-                np.zeros((count, 4)),
-                first,
-            )  # fmt: skip
+                nodes, first, f[order], empty.back, empty.sure, empty.kind, empty.terms, first
+            )
         ]
+        count = len(nodes)
         priced = count
         for index in range(1, len(layers)):
             if guard is not None:
                 guard.check()  # type: ignore[attr-defined]
             previous = passed[-1]
             candidates, unary = _candidates(space, layers, excluded, index, True, True, 0)
-            given, kind, terms = self._given(old, index, candidates, previous, before)
-            priced += int(np.count_nonzero(given < 0))
-            step = lag_step(
-                previous.nodes, previous.f, candidates, unary, space.nodes.pre,
+            known, then = self._known(old, index, previous)
+            *made, scanned = lag_step(
+                previous.nodes, previous.f, previous.root, candidates, unary, space.nodes.pre,
                 space.features.viseme, space.records.leaving, space.records.arriving,
-                space.records.dims, space.packed, self.scratch[0], given, kind, terms,
+                space.records.dims, space.packed, *scratch, known.nodes, known.back,
+                known.sure, known.kind, known.terms, then.nodes, then.root, before,
             )  # fmt: skip
-            ordered, f, back, sure, kinds, costs = step
-            passed.append(
-                PassLayer(candidates, ordered, f, back, sure, kinds, costs, previous.root[back])
-            )
+            passed.append(PassLayer(candidates, *made))
+            priced += scanned
         self.start, self.layers = start, passed
         position = int(np.argmin(passed[-1].f))
         cost = float(passed[-1].f[position])
         path = np.empty(len(layers), dtype=np.int64)
-        for index in range(len(layers) - 1, -1, -1):
+        for index in range(len(layers) - 1, 0, -1):
             path[index] = passed[index].nodes[position]
             position = int(passed[index].back[position])
+        path[0] = first[position]
         return SearchResult(path, cost, priced)
 
-    def _given(
-        self, old: list[PassLayer], index: int, candidates: np.ndarray, previous: PassLayer,
-        root: int,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
-        """``lag_step``'s known predecessors of layer ``index`` of this window from layer
-        ``index + 1`` of the last (``old``), when the layer before had the same nodes."""
+    def _known(
+        self, old: list[PassLayer], index: int, previous: PassLayer
+    ) -> tuple[PassLayer, PassLayer]:
+        """Layer ``index + 1`` of the last window and the layer before it, for this window's
+        layer ``index`` when the layer before holds the same nodes; else empty layers."""
         if index + 1 < len(old) and _same(old[index].candidates, previous.candidates):
-            before, layer = old[index], old[index + 1]
-            return replay_plan(
-                candidates, layer.nodes, layer.back, layer.sure, layer.kind, layer.terms,
-                before.nodes, before.root, root, previous.nodes, *self.scratch,
-            )  # fmt: skip
-        count = len(candidates)
-        return (
-            np.full(count, -1, dtype=np.int64),
-            np.zeros(count, dtype=np.int8),
-            np.zeros((count, 4)),
-        )
+            return old[index + 1], old[index]
+        return _EMPTY, _EMPTY
+
+
+def _empty_layer() -> PassLayer:
+    none = np.zeros(0, dtype=np.int64)
+    return PassLayer(
+        none, none, np.zeros(0), none, np.zeros(0, dtype=bool), np.zeros(0, dtype=np.int8),
+        np.zeros((0, 4)), none,
+    )  # fmt: skip
+
+
+_EMPTY = _empty_layer()
+"""No layer: the last window's, when it has none to give."""
+
+
+_local = threading.local()
+
+
+def _scratch(size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Two (``size``,) position arrays, all −1, of this thread: ``lag_step`` leaves them so,
+    and a thread runs one step at a time, so its streams share them."""
+    kept: dict[int, tuple[np.ndarray, np.ndarray]] = _local.__dict__.setdefault("scratch", {})
+    pair = kept.get(size)
+    if pair is None:
+        pair = kept[size] = (np.full(size, -1, dtype=np.int64), np.full(size, -1, dtype=np.int64))
+    return pair
 
 
 def _same(a: np.ndarray, b: np.ndarray) -> bool:

@@ -254,7 +254,7 @@ def extend_path(
             offset += 1
             continue
         window = layers[offset : last + 1]
-        if memory is not None:
+        if memory is not None and last > offset + 1:  # a window of two has no layer to reuse
             found = memory.search(space, window, excluded, len(path), before, guard)
         else:
             found = search(space, window, excluded, before=before, guard=guard)

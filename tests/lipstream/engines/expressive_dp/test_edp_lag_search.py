@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from lipstream.engines.base import Model
 from lipstream.engines.expressive_dp import ExpressiveDpModel
 from lipstream.engines.expressive_dp.contamination import Contamination
-from lipstream.engines.expressive_dp.fast_step import SURE, lag_step, replay_plan
+from lipstream.engines.expressive_dp.fast_step import SURE, lag_step
 from lipstream.engines.expressive_dp.lag_search import LagMemory
 from lipstream.engines.expressive_dp.search import LayerSpec, SearchSpace, search
 from lipstream.engines.expressive_dp.synthesizer import extend_path
@@ -185,8 +185,8 @@ def test_the_demo_models_streams_are_those_of_the_full_re_search(
 @pytest.mark.parametrize("gap", [0.0, 1e-12, 1e-6])
 def test_a_best_predecessor_is_sure_only_when_it_wins_by_the_margin(gap: float) -> None:
     """Two predecessors whose costs into b differ by ``gap`` (relative): the step takes the
-    cheaper (the earlier on a tie) and calls it sure only past ``SURE``; a plan from that
-    step leaves an unsure node to be scanned again, and gives a sure one."""
+    cheaper (the earlier on a tie) and calls it sure only past ``SURE``; the next window's
+    step scans an unsure node again and takes a sure one as given, with the scan's φ."""
     rng = np.random.default_rng(5)
     n = 30
     space = random_space(rng, n, 3)
@@ -198,26 +198,24 @@ def test_a_best_predecessor_is_sure_only_when_it_wins_by_the_margin(gap: float) 
     prev_f = np.array([base - c1, base - c2 + gap * base])
     order = np.argsort(prev_f, kind="stable")
     prev_nodes, prev_f = np.array([a1, a2])[order], prev_f[order]
-    next_nodes = np.array([b])
-    records, scratch = space.records, np.full(n, -1, dtype=np.int64)
-    none = (np.full(1, -1, dtype=np.int64), np.zeros(1, dtype=np.int8), np.zeros((1, 4)))
-    step = lag_step(
-        prev_nodes, prev_f, next_nodes, np.zeros(1), pre, space.features.viseme,
-        records.leaving, records.arriving, records.dims, space.packed, scratch, *none,
-    )  # fmt: skip
-    nodes, f, back, sure, kind, terms = step
+    roots = np.full(2, 7)
+    records = space.records
+    scratch = (np.full(n, -1, dtype=np.int64), np.full(n, -1, dtype=np.int64))
+    none = np.zeros(0, dtype=np.int64)
+    empty = (none, none, np.zeros(0, dtype=bool), np.zeros(0, dtype=np.int8), np.zeros((0, 4)))
+
+    def step(*old: np.ndarray) -> tuple[Any, ...]:
+        return lag_step(  # type: ignore[no-any-return]
+            prev_nodes, prev_f, roots, np.array([b]), np.zeros(1), pre,
+            space.features.viseme, records.leaving, records.arriving, records.dims,
+            space.packed, *scratch, *old, 7,
+        )  # fmt: skip
+
+    nodes, f, back, sure, kind, terms, root, scanned = step(*empty, none, none)
+    assert scanned == 1 and root[0] == 7
     assert prev_nodes[back[0]] == (a1 if gap > 0 or order[0] == 0 else a2)
     assert bool(sure[0]) == (gap > SURE)
-    roots = np.full(2, 7)
-    plan = replay_plan(
-        next_nodes, nodes, back, sure, kind, terms, prev_nodes, roots, 7, prev_nodes,
-        np.full(n, -1, dtype=np.int64), np.full(n, -1, dtype=np.int64),
-    )  # fmt: skip
-    assert plan[0][0] == (back[0] if gap > SURE else -1)
-    if gap > SURE:  # the given predecessor's cost, summed from its terms, is the scan's
-        again = lag_step(
-            prev_nodes, prev_f, next_nodes, np.zeros(1), pre, space.features.viseme,
-            records.leaving, records.arriving, records.dims, space.packed, scratch, *plan,
-        )  # fmt: skip
-        assert again[1].tobytes() == f.tobytes()
-        assert again[2].tolist() == back.tolist()
+    again = step(nodes, back, sure, kind, terms, prev_nodes, roots)
+    assert again[-1] == (0 if gap > SURE else 1)
+    assert again[1].tobytes() == f.tobytes()
+    assert again[2].tolist() == back.tolist()
