@@ -25,6 +25,13 @@ a difference of about 1e-16 relative). Rule 1
 (pre(b) in the previous layer: φ(pre) + 0 starts the best) and Rule 4 (no predecessor:
 α1·PNT from the cheapest a) are taken without a scan.
 
+The fixed-lag stream's step (``lag_step``, for ``lag_search``) is this scan with the bar
+raised from the best to the best + ``SURE`` relative (the same pairs replace the best, in
+the same order), so it also knows whether the best beat every other predecessor by that
+margin; it keeps each best pair's cost terms, and takes the best predecessor of a node the
+last window's step found, won by the margin, and that descends from the committed node,
+summing its cost from the terms in the scan's order: the scan's value, bit for bit.
+
 Memory reads, more than arithmetic, set a priced pair's time: it read rows of six arrays
 spread over the database. ``JoinRecords`` lays out, once per model at first use, each
 node's leaving side (last velocity reordered, last position, DSC's leaving half) and
@@ -518,7 +525,8 @@ def lag_step(
             f[j] = best + next_u[j]
             back[j] = i
             kind[j] = old_kind[o]
-            terms[j] = old_terms[o]
+            for k in range(4):
+                terms[j, k] = old_terms[o, k]
             continue
         scanned += 1
         best = np.inf

@@ -18,15 +18,19 @@ on the others most of the work of the last window stands:
   takes it without a scan; b's φ' is summed from a*'s φ' and the pair's cost terms as the
   scan sums it, so it is the value the scan would find, bit for bit.
 * Every other node is scanned (``fast_step.lag_step``: ``fast_step``'s scan, the bar
-  raised by the margin), and so are the first layer (priced from c' as before) and the
-  new layer e + 1. Rule 4 nodes take the cheapest φ' as before.
+  raised by the margin); the first layer is priced from c' as before (every node's
+  exact TC, ``fast_step.entry_costs``), and Rule 4 nodes take the cheapest φ' as before.
 
 Every layer thus holds the nodes, φ, order and predecessors ``search`` finds for the
-window, so the path, its ties and the committed node are the same. Most nodes of the
-later layers descend from the committed node (the paths into them merge within a few
-layers), so a call scans about its first and new layers. A window that is not its
-predecessor moved by one layer (the first of a segment, after a one-layer commit, a
-silence) is searched afresh by the same step.
+window, so the path, its ties and the committed node are the same. The paths into a
+layer merge within a few layers, so most nodes of the later layers descend from the
+committed node: a call scans the new layer e + 1, the nodes layer e gains as it stops
+being the last (a last layer has no TC out of it, so its pruning bound is tighter), and
+the nodes whose best way in ran through another node than c'. A window of two layers
+has nothing to reuse and goes to ``search``; a window that is not its predecessor
+moved on by one layer (the first of a segment, one after a one-layer commit) is
+searched afresh by the same step. The nodes priced (``SearchResult.candidates``) are
+those of the first layer and those scanned.
 """
 
 from __future__ import annotations
@@ -99,12 +103,21 @@ class LagMemory:
         ]
         count = len(nodes)
         priced = count
+        aligned = True
         for index in range(1, len(layers)):
             if guard is not None:
                 guard.check()  # type: ignore[attr-defined]
             previous = passed[-1]
             candidates, unary = _candidates(space, layers, excluded, index, True, True, 0)
-            known, then = self._known(old, index, previous)
+            # the bound φ' ≥ φ − φ(c') holds when every layer before held the same nodes
+            aligned = (
+                aligned and index < len(old) and _same(old[index].candidates, previous.candidates)
+            )
+            known, then = (
+                (old[index + 1], old[index])
+                if aligned and index + 1 < len(old)
+                else (_EMPTY, _EMPTY)
+            )
             *made, scanned = lag_step(
                 previous.nodes, previous.f, previous.root, candidates, unary, space.nodes.pre,
                 space.features.viseme, space.records.leaving, space.records.arriving,
@@ -122,15 +135,6 @@ class LagMemory:
             position = int(passed[index].back[position])
         path[0] = first[position]
         return SearchResult(path, cost, priced)
-
-    def _known(
-        self, old: list[PassLayer], index: int, previous: PassLayer
-    ) -> tuple[PassLayer, PassLayer]:
-        """Layer ``index + 1`` of the last window and the layer before it, for this window's
-        layer ``index`` when the layer before holds the same nodes; else empty layers."""
-        if index + 1 < len(old) and _same(old[index].candidates, previous.candidates):
-            return old[index + 1], old[index]
-        return _EMPTY, _EMPTY
 
 
 def _empty_layer() -> PassLayer:

@@ -16,7 +16,9 @@ input belongs to the last span, at relative time 1).
   Σ W_j (g − f)² + Σ W_k (g − f)² + λ Σ (Δ²g)², W the visibility weight of each
   side's node phoneme (Table IV: 2 for /p b m f v w/, 0.5 for /k g ch ng r/, 1
   otherwise), λ = ``smoothness``. It is one banded solve per join for every
-  basis component at once (``numerics.banded.solve_spd_banded``).
+  basis component at once, the Cholesky factor kept per weight pattern and only
+  its substitutions run (``smooth_join``: what ``numerics.banded.solve_spd_banded``
+  gives, bit for bit).
 * Silence: a silence has no node (the search splits there, ``search``); its
   points are interpolated linearly from the last frame of the node before it
   (the last of one search segment) to the first frame of the node after it (the

@@ -3,7 +3,12 @@
 Method. Span j's node is committed once the input holds spans j .. j + lag
 (``lag``): the fast search over those spans, starting from the node committed
 at j − 1 (its TC into span j counts), taken at j and never revised, so the
-committed path is one path and its cost (Eq. 4) is well defined. With
+committed path is one path and its cost (Eq. 4) is well defined. A stream's
+windows of three or more layers reuse the last window's steps (``lag_search``):
+a node whose best predecessor there descends from the node just committed, and
+won by a margin, keeps it without a scan, so a call scans about the new layer,
+the first layer and the nodes whose best way in ran through another node, and
+commits the node the whole window's search commits. With
 ``lag: "full"`` nothing is committed before the input ends, then the whole
 optimum is searched at once. A frame in span k reads the nodes of spans
 k − 1 .. k + 2 (smoothing and silence reach one span each side; the output
