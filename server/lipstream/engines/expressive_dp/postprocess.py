@@ -7,7 +7,8 @@ the grid points g with start_k ≤ g/R < end_k (the point at the very end of the
 input belongs to the last span, at relative time 1).
 
 * Time warping: a non-silence span shows its node resampled linearly over the
-  span's relative time (``nodes.warp_node``), whatever the node's own length.
+  span's relative time (``nodes.warp_node``, compiled for a span's grid points in
+  ``warped_points``), whatever the node's own length.
 * Smoothing (Eq. 16): at a join of two non-silence spans whose nodes are not
   captured neighbours (pre(o_{k+1}) ≠ o_k), the last s points of span k and the
   first s of span k + 1 (s = ``half``; fewer when a span is short: a span gives
@@ -39,13 +40,14 @@ from functools import lru_cache
 from operator import attrgetter
 
 import numpy as np
+from numba import njit
 from scipy.linalg.lapack import dpbtrf as _pbtrf
 from scipy.linalg.lapack import dpbtrs as _pbtrs
 
 from ...numerics.banded import solve_spd_banded
 from ...phonemes import SILENCE
 from ...timeline import PhonemeSpan
-from .nodes import NodeDatabase, warp_node
+from .nodes import NodeDatabase
 
 VISIBILITY = {"P": 2.0, "B": 2.0, "M": 2.0, "F": 2.0, "V": 2.0, "W": 2.0} | {
     "K": 0.5, "G": 0.5, "CH": 0.5, "NG": 0.5, "R": 0.5,
@@ -95,11 +97,13 @@ class Renderer:
         """Span k's points before smoothing."""
         span = spans[k]
         low, high = owned(span, self.rate)
-        times = np.arange(low, high) / self.rate
         if span.phoneme != SILENCE:
-            relative = (times - span.start) / (span.end - span.start)
-            return warp_node(self.nodes.node_frames(int(path[k])), relative)
-        return self._silence(spans, path, k, times)
+            nodes = self.nodes
+            return warped_points(
+                nodes.frames, nodes.offsets, int(path[k]), low, high, self.rate, span.start,
+                span.end,
+            )  # fmt: skip
+        return self._silence(spans, path, k, np.arange(low, high) / self.rate)
 
     def _silence(
         self, spans: Sequence[PhonemeSpan], path: Sequence[int], k: int, times: np.ndarray
@@ -307,6 +311,30 @@ def _normal_factor(weights: tuple[float, ...], smoothness: float) -> np.ndarray 
     factor = np.asarray(factor)
     factor.setflags(write=False)
     return factor
+
+
+@njit(cache=True)
+def warped_points(
+    frames: np.ndarray, offsets: np.ndarray, node: int, low: int, high: int, rate: float,
+    start: float, end: float,
+) -> np.ndarray:  # fmt: skip
+    """``nodes.warp_node`` of ``node``'s frames at the grid points low .. high − 1 (times
+    g / ``rate``) of a span [``start``, ``end``), (high − low, K): the same operations on
+    each element as the array expression, in one compiled loop."""
+    first = offsets[node]
+    last = offsets[node + 1] - first - 1
+    out = np.empty((max(high - low, 0), frames.shape[1]))
+    length = end - start
+    for i in range(high - low):
+        position = min(max(((low + i) / rate - start) / length, 0.0), 1.0) * last
+        below = min(int(np.floor(position)), last)
+        above = min(below + 1, last)
+        fraction = position - below
+        for c in range(frames.shape[1]):
+            out[i, c] = (
+                frames[first + below, c] * (1.0 - fraction) + frames[first + above, c] * fraction
+            )
+    return out
 
 
 def _span_at(spans: Sequence[PhonemeSpan], t: float) -> int:

@@ -6,8 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lipstream.engines.expressive_dp.nodes import NodeDatabase
-from lipstream.engines.expressive_dp.postprocess import Renderer, _normal_bands, smooth_join
+from lipstream.engines.expressive_dp.nodes import NodeDatabase, warp_node
+from lipstream.engines.expressive_dp.postprocess import (
+    Renderer,
+    _normal_bands,
+    smooth_join,
+    warped_points,
+)
 from lipstream.numerics.banded import solve_spd_banded
 from lipstream.phonemes import PHONEME_INDEX
 from lipstream.timeline import PhonemeSpan
@@ -41,6 +46,27 @@ def test_the_join_solve_from_a_kept_factor_is_the_banded_solvers_to_the_last_bit
         bands = _normal_bands(tuple(weights.tolist()), 1.0)
         expected = solve_spd_banded(bands, weights[:, None] * fitted)
         assert smooth_join(fitted, weights, 1.0).tobytes() == expected.tobytes()
+
+
+def test_a_spans_warped_points_are_warp_nodes_to_the_last_bit() -> None:
+    """The compiled warp of a span's grid points against ``nodes.warp_node`` on the span's
+    relative times, for nodes of 2 to 9 frames and spans of every length and offset."""
+    rng = np.random.default_rng(4)
+    counts = rng.integers(2, 10, 40)
+    offsets = np.concatenate([[0], np.cumsum(counts)])
+    frames = rng.normal(size=(int(offsets[-1]), 5)) * 10.0 ** rng.integers(-2, 3)
+    rate = 120.0
+    for _ in range(300):
+        node = int(rng.integers(40))
+        start = float(rng.uniform(0.0, 3.0))
+        end = start + float(rng.choice([0.004, 0.02, rng.uniform(0.03, 0.4)]))
+        low, high = int(np.ceil(start * rate - 1e-9)), int(np.ceil(end * rate - 1e-9))
+        low -= int(rng.integers(0, 2))  # a point just before the span clips to its start
+        relative = (np.arange(low, high) / rate - start) / (end - start)
+        expected = warp_node(frames[offsets[node] : offsets[node + 1]], relative)
+        got = warped_points(frames, offsets, node, low, high, rate, start, end)
+        assert got.shape == expected.shape
+        assert got.tobytes() == expected.tobytes()
 
 
 def _database() -> NodeDatabase:
