@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Sequence
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -45,8 +45,7 @@ from .fast_step import entry_costs, lag_step
 from .search import LayerSpec, SearchResult, SearchSpace, _candidates
 
 
-@dataclass(frozen=True)
-class PassLayer:
+class PassLayer(NamedTuple):
     """One layer of a window's search: ``candidates`` as ``search._candidates`` gives them
     (node order); in ascending φ: ``nodes``, ``f`` (φ), ``back`` (each one's best
     predecessor's position in the layer before), ``sure``, ``kind`` and ``terms``
