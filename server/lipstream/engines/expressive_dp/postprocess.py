@@ -254,16 +254,9 @@ class Renderer:
     ) -> np.ndarray:
         """Coefficient frames at ``times`` (ascending), linear between grid points (``kept``:
         see ``grid``)."""
-        position = times * self.rate
-        low = np.floor(position + _EPS).astype(np.int64)
-        fraction = np.where(position - low > _EPS, position - low, 0.0)
-        needs_next = fraction > 0
-        top = int(low[-1] + (1 if needs_next[-1] else 0))
-        top = max(top, int((low + needs_next).max()))
+        low, fraction, top = _sampled(times, self.rate)
         grid = self.grid(spans, path, int(low[0]), top, kept)
-        base = grid[low - low[0]]
-        following = grid[np.minimum(low + 1, top) - low[0]]
-        return np.asarray(base + fraction[:, None] * (following - base))
+        return _interpolated(grid, low, fraction, top)
 
 
 def smooth_join(fitted: np.ndarray, weights: np.ndarray, smoothness: float) -> np.ndarray:
@@ -334,6 +327,37 @@ def warped_points(
             out[i, c] = (
                 frames[first + below, c] * (1.0 - fraction) + frames[first + above, c] * fraction
             )
+    return out
+
+
+@njit(cache=True)
+def _sampled(times: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """Each time's grid point at or before it (``low``), its fraction of the way to the next
+    (0 within ``_EPS`` of a point), and the last grid point the times read (``top``)."""
+    count = len(times)
+    low = np.empty(count, dtype=np.int64)
+    fraction = np.empty(count)
+    top = -(2**62)
+    for i in range(count):
+        position = times[i] * rate
+        point = int(np.floor(position + _EPS))
+        step = position - point
+        low[i] = point
+        fraction[i] = step if step > _EPS else 0.0
+        top = max(top, point + 1 if fraction[i] > 0 else point)
+    return low, fraction, top
+
+
+@njit(cache=True)
+def _interpolated(grid: np.ndarray, low: np.ndarray, fraction: np.ndarray, top: int) -> np.ndarray:
+    """Frames linear between grid points: grid[low] + fraction · (grid[low + 1] − grid[low]),
+    grid's rows from point low[0] on, element by element as the array expression."""
+    out = np.empty((len(low), grid.shape[1]))
+    for i in range(len(low)):
+        base = low[i] - low[0]
+        following = min(low[i] + 1, top) - low[0]
+        for c in range(grid.shape[1]):
+            out[i, c] = grid[base, c] + fraction[i] * (grid[following, c] - grid[base, c])
     return out
 
 

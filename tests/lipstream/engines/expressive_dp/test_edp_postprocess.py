@@ -9,7 +9,9 @@ import pytest
 from lipstream.engines.expressive_dp.nodes import NodeDatabase, warp_node
 from lipstream.engines.expressive_dp.postprocess import (
     Renderer,
+    _interpolated,
     _normal_bands,
+    _sampled,
     smooth_join,
     warped_points,
 )
@@ -67,6 +69,27 @@ def test_a_spans_warped_points_are_warp_nodes_to_the_last_bit() -> None:
         got = warped_points(frames, offsets, node, low, high, rate, start, end)
         assert got.shape == expected.shape
         assert got.tobytes() == expected.tobytes()
+
+
+def test_frames_between_grid_points_are_the_array_expressions_to_the_last_bit() -> None:
+    """The compiled sampling and interpolation of ``Renderer.frames`` against the numpy
+    expressions they replace, for output rates on and off the grid's."""
+    rng = np.random.default_rng(9)
+    for fps, rate in [(60.0, 120.0), (30.0, 120.0), (59.94, 120.0), (25.0, 100.0), (48.0, 120.0)]:
+        first = int(rng.integers(0, 500))
+        times = np.arange(first, first + int(rng.integers(1, 40)), dtype=np.float64) / fps
+        position = times * rate
+        low = np.floor(position + 1e-9).astype(np.int64)
+        fraction = np.where(position - low > 1e-9, position - low, 0.0)
+        top = max(int(low[-1] + (fraction[-1] > 0)), int((low + (fraction > 0)).max()))
+        got_low, got_fraction, got_top = _sampled(times, rate)
+        assert got_low.tolist() == low.tolist() and got_top == top
+        assert got_fraction.tobytes() == fraction.tobytes()
+        grid = rng.normal(size=(top - int(low[0]) + 1, 6))
+        base = grid[low - low[0]]
+        following = grid[np.minimum(low + 1, top) - low[0]]
+        expected = base + fraction[:, None] * (following - base)
+        assert _interpolated(grid, low, fraction, top).tobytes() == expected.tobytes()
 
 
 def _database() -> NodeDatabase:
