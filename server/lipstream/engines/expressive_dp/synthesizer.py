@@ -32,7 +32,8 @@ as they arrive, so a pause's line waits for one node after it.
 
 Stats: ``nodes`` (the committed node of every span, silences filled into gaps
 included, -1 at a silence, as space-separated ids: engine stats on the wire are
-scalars), ``path_cost`` (their Eq. 4 cost) and ``candidates`` (nodes priced).
+scalars), ``path_cost`` (their Eq. 4 cost) and ``candidates`` (nodes priced: of a
+reused window, those of its first layer and those whose way in was searched).
 
 Constraints name client phoneme indices (the spans as sent, not the silences
 filled into gaps; ``SpanSynthesizer`` hands each span's index to ``_accepted``).
