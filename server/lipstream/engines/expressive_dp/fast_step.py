@@ -25,6 +25,13 @@ a difference of about 1e-16 relative). Rule 1
 (pre(b) in the previous layer: φ(pre) + 0 starts the best) and Rule 4 (no predecessor:
 α1·PNT from the cheapest a) are taken without a scan.
 
+The fixed-lag stream's step (``lag_step``, for ``lag_search``) is this scan with the bar
+raised from the best to the best + ``SURE`` relative (the same pairs replace the best, in
+the same order), so it also knows whether the best beat every other predecessor by that
+margin; it keeps each best pair's cost terms, and takes the best predecessor of a node the
+last window's step found, won by the margin, and that descends from the committed node,
+summing its cost from the terms in the scan's order: the scan's value, bit for bit.
+
 Memory reads, more than arithmetic, set a priced pair's time: it read rows of six arrays
 spread over the database. ``JoinRecords`` lays out, once per model at first use, each
 node's leaving side (last velocity reordered, last position, DSC's leaving half) and
@@ -375,3 +382,186 @@ def entry_costs(
             tc = _exact_tc(a, b, p, viseme, leaving, arriving, natural, len(natural), packed)
         f[j] = (0.0 + tc) + unary[j]
     return f
+
+
+SURE = 1e-9
+"""Relative margin by which a scanned node's best predecessor beats every other one for the
+fixed-lag search to reuse it in the next window (``lag_step``): far above the rounding of a
+window's sums (about 1e-15 relative), so a rerooted window that lowers every cost by one
+constant cannot reorder the two."""
+
+PRICED, NATURAL, UNCAPTURED = 0, 1, 2
+"""How a node's best predecessor was found (``lag_step``'s ``kind``): a priced pair, Rule 1
+(its captured predecessor, TC = 0) or Rule 4 (no captured predecessor: the cheapest one)."""
+
+
+@njit(cache=True, inline="always")
+def _margin(best: float) -> float:
+    return SURE * (abs(best) + 1.0)
+
+
+@njit(cache=True, inline="always")
+def _scan_sure(
+    members: np.ndarray, start: int, stop: int, penalty: float, best: float, arg: int,
+    second: float, terms: np.ndarray, b: int, p: int, prev_nodes: np.ndarray,
+    prev_f: np.ndarray, viseme: np.ndarray, leaving: np.ndarray, arriving: np.ndarray,
+    dims: int, packed: np.ndarray,
+) -> tuple[float, int, float]:  # fmt: skip
+    """``_scan`` with the bar raised from the best to the best + ``_margin``: the same pairs
+    replace the best, in the same order, and ``second`` (the least other cost seen) is exact
+    below the bar, so the best wins by the margin iff ``second`` ≥ the bar at the end. The
+    best pair's terms of the cost, (α3·PGap, VGap, PNT or 0, α2·DSC), go to ``terms``."""
+    bar = best + _margin(best)
+    for k in range(start, stop):
+        i = members[k]
+        floor = prev_f[i] + penalty
+        if floor >= bar:
+            break
+        a = prev_nodes[i]
+        if a == p:
+            continue
+        budget = bar - floor + SLACK * (abs(bar) + 1.0)
+        velocity = _velocity_squares(leaving, a, arriving, b, dims, budget * budget)
+        if velocity >= budget * budget:
+            continue
+        position = _squares(leaving, a, arriving, b, dims, 2 * dims)
+        gaps = packed[2] * math.sqrt(position)
+        speed = math.sqrt(velocity)
+        cost = prev_f[i] + gaps + speed
+        penalised = viseme[a] != viseme[p]
+        if penalised:
+            cost += packed[3]
+        if cost >= bar:
+            continue
+        smooth = packed[1] * _dsc(leaving, a, arriving, b, dims)
+        cost += smooth
+        if cost < best:
+            second = min(second, best)
+            best = cost
+            arg = i
+            bar = best + _margin(best)
+            terms[0] = gaps
+            terms[1] = speed
+            terms[2] = packed[3] if penalised else 0.0
+            terms[3] = smooth
+        elif cost < second:
+            second = cost
+    return best, arg, second
+
+
+@njit(cache=True, inline="always")
+def _given(
+    b: int, root: int, position: np.ndarray, old_position: np.ndarray, old_back: np.ndarray,
+    old_sure: np.ndarray, old_kind: np.ndarray, old_prev_nodes: np.ndarray,
+    old_prev_root: np.ndarray,
+) -> tuple[int, int]:  # fmt: skip
+    """Node b's best predecessor in the last window (its position now, and its row there)
+    when it won by the margin and descends from ``root``; else (−1, −1)."""
+    o = old_position[b]
+    if o < 0 or not old_sure[o] or old_kind[o] == UNCAPTURED:
+        return -1, -1
+    if old_prev_root[old_back[o]] != root:
+        return -1, -1
+    return position[old_prev_nodes[old_back[o]]], o
+
+
+@njit(cache=True)
+def lag_step(
+    prev_nodes: np.ndarray, prev_f: np.ndarray, prev_root: np.ndarray, next_nodes: np.ndarray,
+    next_u: np.ndarray, pre: np.ndarray, viseme: np.ndarray, leaving: np.ndarray,
+    arriving: np.ndarray, dims: int, packed: np.ndarray, position: np.ndarray,
+    old_position: np.ndarray, old_nodes: np.ndarray, old_back: np.ndarray,
+    old_sure: np.ndarray, old_kind: np.ndarray, old_terms: np.ndarray,
+    old_prev_nodes: np.ndarray, old_prev_root: np.ndarray, root: int,
+) -> tuple[
+    np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int
+]:  # fmt: skip
+    """``fast_step`` (the same nodes, φ, order and predecessors, bit for bit), taking some
+    best predecessors from the last window's step into the same layer (``old_*``, in its
+    ascending φ; empty when there is none) instead of scanning: next_nodes[j]'s, when there
+    it won by the margin (``old_sure``) and descended from ``root``, the node that window
+    committed (``old_prev_root``: each predecessor's node in that window's first layer). The
+    layer before must hold the nodes it held there. A given pair's cost is summed from its
+    terms in ``_scan``'s order, so it is the value the scan computes.
+
+    ``prev_root``: each of ``prev_nodes``' node in this window's first layer. ``position``
+    and ``old_position`` (N) are scratch, all −1, and left so. Returns, in ascending φ:
+    nodes, φ, predecessor positions, sure (a scanned node's best predecessor won by the
+    margin; a given one keeps the flag), kinds (``PRICED``, ``NATURAL``, ``UNCAPTURED``),
+    the best pair's cost terms (see ``_scan_sure``) and roots; and the nodes scanned."""
+    for i in range(len(prev_nodes)):
+        position[prev_nodes[i]] = i
+    for i in range(len(old_nodes)):
+        old_position[old_nodes[i]] = i
+    members, starts = _groups(prev_nodes, viseme)
+    classes = len(starts) - 1
+    n = len(next_nodes)
+    f = np.empty(n)
+    back = np.empty(n, dtype=np.int64)
+    sure = np.ones(n, dtype=np.bool_)
+    kind = np.full(n, PRICED, dtype=np.int8)
+    terms = np.zeros((n, 4))
+    scanned = 0
+    for j in range(n):
+        b = next_nodes[j]
+        p = pre[b]
+        if p < 0:
+            f[j] = prev_f[0] + packed[0] + next_u[j]
+            back[j] = 0
+            kind[j] = UNCAPTURED
+            continue
+        i, o = _given(
+            b, root, position, old_position, old_back, old_sure, old_kind, old_prev_nodes,
+            old_prev_root,
+        )  # fmt: skip
+        if i >= 0:
+            if old_kind[o] == NATURAL:
+                best = prev_f[i]
+            else:
+                best = prev_f[i] + old_terms[o, 0] + old_terms[o, 1]
+                if old_terms[o, 2] != 0.0:
+                    best += old_terms[o, 2]
+                best += old_terms[o, 3]
+            f[j] = best + next_u[j]
+            back[j] = i
+            kind[j] = old_kind[o]
+            for k in range(4):
+                terms[j, k] = old_terms[o, k]
+            continue
+        scanned += 1
+        best = np.inf
+        arg = 0
+        second = np.inf
+        if position[p] >= 0:
+            best = prev_f[position[p]]
+            arg = position[p]
+            kind[j] = NATURAL
+        own = viseme[p]
+        row = terms[j]
+        start = arg
+        if own < classes:
+            best, arg, second = _scan_sure(
+                members, starts[own], starts[own + 1], 0.0, best, arg, second, row, b, p,
+                prev_nodes, prev_f, viseme, leaving, arriving, dims, packed,
+            )  # fmt: skip
+        for v in range(classes):
+            if v != own and starts[v + 1] > starts[v]:
+                best, arg, second = _scan_sure(
+                    members, starts[v], starts[v + 1], packed[3], best, arg, second, row, b,
+                    p, prev_nodes, prev_f, viseme, leaving, arriving, dims, packed,
+                )  # fmt: skip
+        if kind[j] == NATURAL and arg != start:
+            kind[j] = PRICED
+        f[j] = best + next_u[j]
+        back[j] = arg
+        sure[j] = second >= best + _margin(best)
+    for i in range(len(prev_nodes)):
+        position[prev_nodes[i]] = -1
+    for i in range(len(old_nodes)):
+        old_position[old_nodes[i]] = -1
+    order = np.argsort(f, kind="mergesort")
+    ordered_back = back[order]
+    return (
+        next_nodes[order], f[order], ordered_back, sure[order], kind[order], terms[order],
+        prev_root[ordered_back], scanned,
+    )  # fmt: skip

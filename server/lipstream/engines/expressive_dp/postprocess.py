@@ -7,7 +7,8 @@ the grid points g with start_k ≤ g/R < end_k (the point at the very end of the
 input belongs to the last span, at relative time 1).
 
 * Time warping: a non-silence span shows its node resampled linearly over the
-  span's relative time (``nodes.warp_node``), whatever the node's own length.
+  span's relative time (``nodes.warp_node``, compiled for a span's grid points in
+  ``warped_points``), whatever the node's own length.
 * Smoothing (Eq. 16): at a join of two non-silence spans whose nodes are not
   captured neighbours (pre(o_{k+1}) ≠ o_k), the last s points of span k and the
   first s of span k + 1 (s = ``half``; fewer when a span is short: a span gives
@@ -16,7 +17,9 @@ input belongs to the last span, at relative time 1).
   Σ W_j (g − f)² + Σ W_k (g − f)² + λ Σ (Δ²g)², W the visibility weight of each
   side's node phoneme (Table IV: 2 for /p b m f v w/, 0.5 for /k g ch ng r/, 1
   otherwise), λ = ``smoothness``. It is one banded solve per join for every
-  basis component at once (``numerics.banded.solve_spd_banded``).
+  basis component at once, the Cholesky factor kept per weight pattern and only
+  its substitutions run (``smooth_join``: what ``numerics.banded.solve_spd_banded``
+  gives, bit for bit).
 * Silence: a silence has no node (the search splits there, ``search``); its
   points are interpolated linearly from the last frame of the node before it
   (the last of one search segment) to the first frame of the node after it (the
@@ -37,11 +40,14 @@ from functools import lru_cache
 from operator import attrgetter
 
 import numpy as np
+from numba import njit
+from scipy.linalg.lapack import dpbtrf as _pbtrf
+from scipy.linalg.lapack import dpbtrs as _pbtrs
 
 from ...numerics.banded import solve_spd_banded
 from ...phonemes import SILENCE
 from ...timeline import PhonemeSpan
-from .nodes import NodeDatabase, warp_node
+from .nodes import NodeDatabase
 
 VISIBILITY = {"P": 2.0, "B": 2.0, "M": 2.0, "F": 2.0, "V": 2.0, "W": 2.0} | {
     "K": 0.5, "G": 0.5, "CH": 0.5, "NG": 0.5, "R": 0.5,
@@ -91,11 +97,13 @@ class Renderer:
         """Span k's points before smoothing."""
         span = spans[k]
         low, high = owned(span, self.rate)
-        times = np.arange(low, high) / self.rate
         if span.phoneme != SILENCE:
-            relative = (times - span.start) / (span.end - span.start)
-            return warp_node(self.nodes.node_frames(int(path[k])), relative)
-        return self._silence(spans, path, k, times)
+            nodes = self.nodes
+            return warped_points(
+                nodes.frames, nodes.offsets, int(path[k]), low, high, self.rate, span.start,
+                span.end,
+            )  # fmt: skip
+        return self._silence(spans, path, k, np.arange(low, high) / self.rate)
 
     def _silence(
         self, spans: Sequence[PhonemeSpan], path: Sequence[int], k: int, times: np.ndarray
@@ -246,24 +254,27 @@ class Renderer:
     ) -> np.ndarray:
         """Coefficient frames at ``times`` (ascending), linear between grid points (``kept``:
         see ``grid``)."""
-        position = times * self.rate
-        low = np.floor(position + _EPS).astype(np.int64)
-        fraction = np.where(position - low > _EPS, position - low, 0.0)
-        needs_next = fraction > 0
-        top = int(low[-1] + (1 if needs_next[-1] else 0))
-        top = max(top, int((low + needs_next).max()))
+        low, fraction, top = _sampled(times, self.rate)
         grid = self.grid(spans, path, int(low[0]), top, kept)
-        base = grid[low - low[0]]
-        following = grid[np.minimum(low + 1, top) - low[0]]
-        return np.asarray(base + fraction[:, None] * (following - base))
+        return _interpolated(grid, low, fraction, top)
 
 
 def smooth_join(fitted: np.ndarray, weights: np.ndarray, smoothness: float) -> np.ndarray:
     """argmin_g Σ_t weights_t (g_t − f_t)² + smoothness Σ_t (g_{t−1} − 2g_t + g_{t+1})² for
     every column of ``fitted`` (n, K): the normal equations (diag(W) + λ D²ᵀD²) g = W f are
-    pentadiagonal, one banded Cholesky solve with K right-hand sides."""
-    bands = _normal_bands(tuple(weights.tolist()), smoothness)
-    return solve_spd_banded(bands, weights[:, None] * fitted)
+    pentadiagonal, one banded Cholesky solve with K right-hand sides. The factor is kept per
+    weight pattern (``_normal_factor``) and only the substitutions run: LAPACK's dpbsv
+    (``numerics.banded.solve_spd_banded``) is dpbtrf then dpbtrs, so the solution is the
+    same to the last bit; a pattern without a factor, or a non-finite entry, goes the
+    general way, which raises."""
+    key = tuple(weights.tolist())
+    factor = _normal_factor(key, smoothness)
+    rhs = weights[:, None] * fitted
+    if factor is not None and np.isfinite(rhs).all():
+        solution, info = _pbtrs(factor, rhs, lower=1)
+        if info == 0:
+            return np.asarray(solution)
+    return solve_spd_banded(_normal_bands(key, smoothness), rhs)
 
 
 @lru_cache(maxsize=256)
@@ -279,6 +290,75 @@ def _normal_bands(weights: tuple[float, ...], smoothness: float) -> np.ndarray:
         bands[offset, : n - offset] = np.diagonal(normal, -offset)
     bands.setflags(write=False)
     return bands
+
+
+@lru_cache(maxsize=256)
+def _normal_factor(weights: tuple[float, ...], smoothness: float) -> np.ndarray | None:
+    """dpbtrf's banded Cholesky factor of ``_normal_bands`` (None when it fails)."""
+    bands = _normal_bands(weights, smoothness)
+    if not np.isfinite(bands).all():
+        return None
+    factor, info = _pbtrf(bands, lower=1)
+    if info != 0:
+        return None
+    factor = np.asarray(factor)
+    factor.setflags(write=False)
+    return factor
+
+
+@njit(cache=True)
+def warped_points(
+    frames: np.ndarray, offsets: np.ndarray, node: int, low: int, high: int, rate: float,
+    start: float, end: float,
+) -> np.ndarray:  # fmt: skip
+    """``nodes.warp_node`` of ``node``'s frames at the grid points low .. high − 1 (times
+    g / ``rate``) of a span [``start``, ``end``), (high − low, K): the same operations on
+    each element as the array expression, in one compiled loop."""
+    first = offsets[node]
+    last = offsets[node + 1] - first - 1
+    out = np.empty((max(high - low, 0), frames.shape[1]))
+    length = end - start
+    for i in range(high - low):
+        position = min(max(((low + i) / rate - start) / length, 0.0), 1.0) * last
+        below = min(int(np.floor(position)), last)
+        above = min(below + 1, last)
+        fraction = position - below
+        for c in range(frames.shape[1]):
+            out[i, c] = (
+                frames[first + below, c] * (1.0 - fraction) + frames[first + above, c] * fraction
+            )
+    return out
+
+
+@njit(cache=True)
+def _sampled(times: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """Each time's grid point at or before it (``low``), its fraction of the way to the next
+    (0 within ``_EPS`` of a point), and the last grid point the times read (``top``)."""
+    count = len(times)
+    low = np.empty(count, dtype=np.int64)
+    fraction = np.empty(count)
+    top = -(2**62)
+    for i in range(count):
+        position = times[i] * rate
+        point = int(np.floor(position + _EPS))
+        step = position - point
+        low[i] = point
+        fraction[i] = step if step > _EPS else 0.0
+        top = max(top, point + 1 if fraction[i] > 0 else point)
+    return low, fraction, top
+
+
+@njit(cache=True)
+def _interpolated(grid: np.ndarray, low: np.ndarray, fraction: np.ndarray, top: int) -> np.ndarray:
+    """Frames linear between grid points: grid[low] + fraction · (grid[low + 1] − grid[low]),
+    grid's rows from point low[0] on, element by element as the array expression."""
+    out = np.empty((len(low), grid.shape[1]))
+    for i in range(len(low)):
+        base = low[i] - low[0]
+        following = min(low[i] + 1, top) - low[0]
+        for c in range(grid.shape[1]):
+            out[i, c] = grid[base, c] + fraction[i] * (grid[following, c] - grid[base, c])
+    return out
 
 
 def _span_at(spans: Sequence[PhonemeSpan], t: float) -> int:

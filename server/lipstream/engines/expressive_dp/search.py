@@ -35,7 +35,9 @@ dropped from the cached set, which stays exact unless b* itself is contaminated
 (then the layer is pruned afresh).
 
 ``before`` is a node fixed ahead of the first layer (the fixed-lag search's last
-committed node); its TC into the first layer counts. Ties may pick different
+committed node); its TC into the first layer counts. A stream's successive fixed-lag
+windows are searched by ``lag_search``, which finds this search's nodes, φ and order in
+every layer while reusing the last window's steps. Ties may pick different
 paths of equal cost; the cost is the same.
 
 Silence splits the search, as /pau/ splits the paper's sentences. A silence

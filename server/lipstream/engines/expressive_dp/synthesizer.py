@@ -3,7 +3,12 @@
 Method. Span j's node is committed once the input holds spans j .. j + lag
 (``lag``): the fast search over those spans, starting from the node committed
 at j − 1 (its TC into span j counts), taken at j and never revised, so the
-committed path is one path and its cost (Eq. 4) is well defined. With
+committed path is one path and its cost (Eq. 4) is well defined. A stream's
+windows of three or more layers reuse the last window's steps (``lag_search``):
+a node whose best predecessor there descends from the node just committed, and
+won by a margin, keeps it without a scan, so a call scans about the new layer,
+the first layer and the nodes whose best way in ran through another node, and
+commits the node the whole window's search commits. With
 ``lag: "full"`` nothing is committed before the input ends, then the whole
 optimum is searched at once. A frame in span k reads the nodes of spans
 k − 1 .. k + 2 (smoothing and silence reach one span each side; the output
@@ -27,7 +32,8 @@ as they arrive, so a pause's line waits for one node after it.
 
 Stats: ``nodes`` (the committed node of every span, silences filled into gaps
 included, -1 at a silence, as space-separated ids: engine stats on the wire are
-scalars), ``path_cost`` (their Eq. 4 cost) and ``candidates`` (nodes priced).
+scalars), ``path_cost`` (their Eq. 4 cost) and ``candidates`` (nodes priced: of a
+reused window, those of its first layer and those whose way in was searched).
 
 Constraints name client phoneme indices (the spans as sent, not the silences
 filled into gaps; ``SpanSynthesizer`` hands each span's index to ``_accepted``).
@@ -59,6 +65,7 @@ from ..damped_fit import RawCurve
 from ..growable import Growable
 from ..work import WorkGuard
 from .causal_curve import follow_raw, raw_rows
+from .lag_search import LagMemory
 from .nodes import EMOTION_INDEX
 from .postprocess import RenderCache
 from .search import NO_NODE, LayerSpec, SearchSpace, one_layer, search
@@ -111,13 +118,16 @@ class PathSynthesizer(RenderingSynthesizer):
             PHONEME_INDEX[span.phoneme], EMOTION_INDEX[emotion], self.constrained.get(index, -1)
         )
 
+    memory: LagMemory | None = None
+    """The last fixed-lag window's search, for the next (``lag_search``)."""
+
     def commit(self) -> None:
         """Commit every node the input (and the lag) now decides."""
         decided = len(self.path)
         layers = [self.layer(k) for k in range(decided, len(self.spans))]
         priced, cost = extend_path(
             self.model.space, layers, self.excluded, self.lag, self.path, self.finished,
-            self.request.guard,
+            self.request.guard, self.memory,
         )  # fmt: skip
         self.stats["candidates"] += priced
         self.stats["path_cost"] += cost
@@ -150,6 +160,7 @@ class LagSynthesizer(PathSynthesizer):
     ) -> None:
         super().__init__(model, request, lag, constraints)
         self.kept = RenderCache()
+        self.memory = LagMemory(model.nodes.size)
 
     def final_until(self) -> float:
         if not self.spans or self.lag is None:
@@ -217,10 +228,13 @@ def extend_path(
     path: list[int],
     finished: bool,
     guard: WorkGuard | None = None,
+    memory: LagMemory | None = None,
 ) -> tuple[int, float]:
     """Append to ``path`` the nodes of ``layers`` (the spans after it) that ``lag`` decides
     now (``NO_NODE`` at a silence); the nodes priced and the Eq. 4 cost the new nodes add.
-    A silence closes its segment: every node before it is decided at once."""
+    A silence closes its segment: every node before it is decided at once. ``memory`` (a
+    stream's) searches each window of two or more layers reusing the last one's steps
+    (``lag_search``): the same nodes."""
     priced, added = 0, 0.0
     offset = 0
     while offset < len(layers):
@@ -245,7 +259,11 @@ def extend_path(
             path.append(node)
             offset += 1
             continue
-        found = search(space, layers[offset : last + 1], excluded, before=before, guard=guard)
+        window = layers[offset : last + 1]
+        if memory is not None and last > offset + 1:  # a window of two has no layer to reuse
+            found = memory.search(space, window, excluded, len(path), before, guard)
+        else:
+            found = search(space, window, excluded, before=before, guard=guard)
         priced += found.candidates
         for node in (found.path if whole else found.path[:1]).tolist():
             previous = path[-1] if path else NO_NODE

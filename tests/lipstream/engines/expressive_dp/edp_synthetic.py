@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -47,12 +48,28 @@ def random_database(rng: np.random.Generator, n: int, dims: int = 3) -> NodeData
 
 
 def random_space(
-    rng: np.random.Generator, n: int, dims: int = 3, coarse: bool = False, tight: bool = False
+    rng: np.random.Generator,
+    n: int,
+    dims: int = 3,
+    coarse: bool = False,
+    tight: bool = False,
+    copies: bool = False,
 ) -> SearchSpace:
     """A random database and weights; ``coarse`` rounds the frames to integers, so that many
     gaps, and so many path costs, tie exactly; ``tight`` draws every frame near one of three
-    poses, so that many joins cost nearly the same and every coordinate counts."""
+    poses, so that many joins cost nearly the same and every coordinate counts; ``copies``
+    gives every node three frames, one of four patterns, so that nodes of one pattern,
+    phoneme and emotion are interchangeable and whole paths tie exactly."""
     nodes = random_database(rng, n, dims)
+    if copies:
+        patterns = np.round(rng.normal(size=(4, 3, dims)))
+        nodes = replace(
+            nodes,
+            offsets=np.arange(n + 1) * 3,
+            frames=patterns[rng.integers(0, 4, n)].reshape(-1, dims),
+            phoneme=rng.choice(SPEECH[:2], n),
+            emotion=rng.integers(0, 2, n),
+        )
     if coarse:
         nodes.frames[:] = np.round(nodes.frames)
     if tight:

@@ -6,8 +6,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lipstream.engines.expressive_dp.nodes import NodeDatabase
-from lipstream.engines.expressive_dp.postprocess import Renderer, smooth_join
+from lipstream.engines.expressive_dp.nodes import NodeDatabase, warp_node
+from lipstream.engines.expressive_dp.postprocess import (
+    Renderer,
+    _interpolated,
+    _normal_bands,
+    _sampled,
+    smooth_join,
+    warped_points,
+)
+from lipstream.numerics.banded import solve_spd_banded
 from lipstream.phonemes import PHONEME_INDEX
 from lipstream.timeline import PhonemeSpan
 
@@ -25,6 +33,63 @@ def test_the_join_solve_equals_a_dense_least_squares_fit(count: int) -> None:
     target = np.vstack([np.sqrt(weights)[:, None] * fitted, np.zeros((count - 2, 4))])
     expected = np.linalg.lstsq(system, target, rcond=None)[0]
     np.testing.assert_allclose(smooth_join(fitted, weights, smoothness), expected, atol=1e-10)
+
+
+@pytest.mark.parametrize("count", [3, 4, 5, 6])
+def test_the_join_solve_from_a_kept_factor_is_the_banded_solvers_to_the_last_bit(
+    count: int,
+) -> None:
+    """The substitutions on a factor kept per weight pattern give what one dpbsv call (the
+    general banded solver) gives, bit for bit, for every right-hand side."""
+    rng = np.random.default_rng(10 + count)
+    for _ in range(20):
+        weights = rng.choice([0.5, 1.0, 2.0], count)
+        fitted = rng.normal(size=(count, 12)) * 10.0 ** rng.integers(-3, 4)
+        bands = _normal_bands(tuple(weights.tolist()), 1.0)
+        expected = solve_spd_banded(bands, weights[:, None] * fitted)
+        assert smooth_join(fitted, weights, 1.0).tobytes() == expected.tobytes()
+
+
+def test_a_spans_warped_points_are_warp_nodes_to_the_last_bit() -> None:
+    """The compiled warp of a span's grid points against ``nodes.warp_node`` on the span's
+    relative times, for nodes of 2 to 9 frames and spans of every length and offset."""
+    rng = np.random.default_rng(4)
+    counts = rng.integers(2, 10, 40)
+    offsets = np.concatenate([[0], np.cumsum(counts)])
+    frames = rng.normal(size=(int(offsets[-1]), 5)) * 10.0 ** rng.integers(-2, 3)
+    rate = 120.0
+    for _ in range(300):
+        node = int(rng.integers(40))
+        start = float(rng.uniform(0.0, 3.0))
+        end = start + float(rng.choice([0.004, 0.02, rng.uniform(0.03, 0.4)]))
+        low, high = int(np.ceil(start * rate - 1e-9)), int(np.ceil(end * rate - 1e-9))
+        low -= int(rng.integers(0, 2))  # a point just before the span clips to its start
+        relative = (np.arange(low, high) / rate - start) / (end - start)
+        expected = warp_node(frames[offsets[node] : offsets[node + 1]], relative)
+        got = warped_points(frames, offsets, node, low, high, rate, start, end)
+        assert got.shape == expected.shape
+        assert got.tobytes() == expected.tobytes()
+
+
+def test_frames_between_grid_points_are_the_array_expressions_to_the_last_bit() -> None:
+    """The compiled sampling and interpolation of ``Renderer.frames`` against the numpy
+    expressions they replace, for output rates on and off the grid's."""
+    rng = np.random.default_rng(9)
+    for fps, rate in [(60.0, 120.0), (30.0, 120.0), (59.94, 120.0), (25.0, 100.0), (48.0, 120.0)]:
+        first = int(rng.integers(0, 500))
+        times = np.arange(first, first + int(rng.integers(1, 40)), dtype=np.float64) / fps
+        position = times * rate
+        low = np.floor(position + 1e-9).astype(np.int64)
+        fraction = np.where(position - low > 1e-9, position - low, 0.0)
+        top = max(int(low[-1] + (fraction[-1] > 0)), int((low + (fraction > 0)).max()))
+        got_low, got_fraction, got_top = _sampled(times, rate)
+        assert got_low.tolist() == low.tolist() and got_top == top
+        assert got_fraction.tobytes() == fraction.tobytes()
+        grid = rng.normal(size=(top - int(low[0]) + 1, 6))
+        base = grid[low - low[0]]
+        following = grid[np.minimum(low + 1, top) - low[0]]
+        expected = base + fraction[:, None] * (following - base)
+        assert _interpolated(grid, low, fraction, top).tobytes() == expected.tobytes()
 
 
 def _database() -> NodeDatabase:
