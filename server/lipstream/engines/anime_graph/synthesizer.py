@@ -33,7 +33,10 @@ from the component's learned cutoff) steps from frame to frame toward the
 track at t + shift, evaluated at the output frame times themselves; the
 shift makes up the filter's lag as far as ``lead_ms`` allows
 (``AnimeGraphModel.causal_shift_s``). So the frame at t is final once the
-input covers t + shift.
+input covers t + shift. While the new spans stay in the view of the one before
+them, a streamed call is one compiled call (``causal_call.causal_step``: pick,
+place, emit) on per-request arrays (span bounds, the track's buffers, the
+filter's state) that it updates in place.
 """
 
 from __future__ import annotations
@@ -54,19 +57,18 @@ from ...errors import InvalidRequestError
 from ...phonemes import PHONEME_INDEX, SILENCE
 from ...timeline import PhonemeSpan, SpanLike, coerce_spans
 from ..base import SynthesisRequest, Synthesizer, fill_gaps, frame_count
-from ..damped import DampedState
 from ..growable import Growable
 from ..work import WorkGuard
 from .animes import summarize
-from .blending import Join, JoinKind, PairIndex, plan_join
+from .blending import Join, PairIndex, plan_join
+from .causal_call import causal_emit, causal_step
 from .costs import Ranking
-from .emission import causal_frames, channel_frames
+from .emission import channel_frames
 from .graph import SearchGraph
 from .options import SearchOptions
 from .pq import SearchTimeout, pq_window
 from .request_audio import RequestAudio
-from .search import GreedyArguments, Matcher, SuffixMatcher, count_jumps, missing
-from .suffix_search import greedy_tiles
+from .search import Matcher, SuffixMatcher, count_jumps, missing
 from .track import MotionTrack, Placement
 from .views import WHOLE, GraphView
 from .warp import Alignment, Warp, dtw_warps, linear_warp
@@ -75,7 +77,6 @@ if TYPE_CHECKING:
     from .model import AnimeGraphModel
 
 _SNAP = 1e-9
-_SEAMLESS, _CUT, _FORWARD = Join(JoinKind.SEAMLESS), Join(JoinKind.CUT), Join(JoinKind.FORWARD)
 _Result = TypeVar("_Result")
 
 
@@ -110,6 +111,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         self.searchers: list[_Searcher] = []
         self.run_starts: list[int] = []
         self._labels = Growable(np.int64)
+        self._bounds = Growable(np.float64, (2,))  # each span's start and end (s)
         self.nodes: list[int] = []
         self.audio: RequestAudio | None = None
         self.audio_mode: bool | None = None
@@ -121,10 +123,28 @@ class AnimeGraphSynthesizer(Synthesizer):
         self.smoothed = Growable(np.float64, (model.n_components,))
         self.emitted = 0
         self.finished = False
-        self.damped: DampedState | None = None
+        # The causal filter's value and velocity per PCA component, at rest before frame 0.
+        self._filter_x = np.empty(model.n_components)
+        self._filter_v = np.zeros(model.n_components)
         self.lead_s = model.causal_shift_s(options.lead_ms)
         self.guard = request.guard
-        self._greedy_arguments: dict[str, GreedyArguments] = {}
+        self._filter_arguments: tuple[Any, ...] = (
+            model.causal_omegas,
+            model.basis.components,
+            model.basis.mean,
+            model.channel_low,
+            model.channel_high,
+        )
+        motion = model.animes.motion
+        self._track_arguments: tuple[Any, ...] = (
+            model.animes.start,
+            model.animes.end,
+            model.animes.utterance,
+            motion.values,
+            motion.offsets,
+            float(motion.rate),
+        )
+        self._causal_arguments: dict[str, tuple[Any, ...]] = {}  # ``causal_step``'s, by view
         self.search_guard = WorkGuard(options.pq_budget_s, time.perf_counter, _search_timeout)
         self.stats: dict[str, Any] = {
             "frames": 0,
@@ -159,6 +179,7 @@ class AnimeGraphSynthesizer(Synthesizer):
             self.spans.append(span)
             self.searchers.append(searcher)
             self._labels.append(int(searcher.view.substitution[PHONEME_INDEX[span.phoneme]]))
+            self._bounds.append((span.start, span.end))
 
     @property
     def query(self) -> np.ndarray:
@@ -195,8 +216,7 @@ class AnimeGraphSynthesizer(Synthesizer):
 
     def frames(self) -> np.ndarray:
         if self.options.causal:
-            self._decide_causal()
-            return self._emit_causal()
+            return self._causal_frames()
         self._advance()
         return self._emit()
 
@@ -345,54 +365,69 @@ class AnimeGraphSynthesizer(Synthesizer):
             self.guard.check()
             self._place(position, anime, warp)
 
-    def _decide_causal(self) -> None:
-        """``_decide`` for a causal request, where every tile is one final phoneme: while
-        the new positions and the one before them share a view searched by suffix
-        automaton, one ``greedy_tiles`` call picks their nodes and each is placed with its
-        linear warp and forward join, without the general path's per-tile set-up."""
+    def _causal_frames(self) -> np.ndarray:
+        """A causal request's new frames: while the new positions and the one before them
+        share a view searched by suffix automaton, one compiled call (``causal_step``)
+        picks their nodes, places each with its linear warp and forward join, and emits,
+        without the general path's per-tile set-up; else ``_decide`` then
+        ``_emit_causal``."""
         placed, total = len(self.nodes), self._labels.count
-        if placed == total:
-            return
-        searcher = self.searchers[placed]
-        matcher = searcher.matcher
-        if (self.run_starts and self.run_starts[-1] >= placed) or not isinstance(
-            matcher, SuffixMatcher
-        ):
+        if placed < total:
+            searcher = self.searchers[placed]
+            matcher = searcher.matcher
+            if (not self.run_starts or self.run_starts[-1] < placed) and isinstance(
+                matcher, SuffixMatcher
+            ):
+                return self._causal_step(searcher, matcher, placed, total)
             self._decide()
-            return
+        return self._emit_causal()
+
+    def _causal_step(
+        self, searcher: _Searcher, matcher: SuffixMatcher, placed: int, total: int
+    ) -> np.ndarray:
+        """``_causal_frames`` by ``causal_step``, whose whole call counts as search time."""
         self.guard.check()
-        previous = self.nodes[-1] if placed else -1
-        arguments = self._greedy_arguments.get(searcher.view.name)
+        arguments = self._causal_arguments.get(searcher.view.name)
         if arguments is None:
             ranking = self.ranking(searcher.graph, placed, total)
-            arguments = matcher.kernel_arguments(ranking, ranking.summaries_of(placed, 0))
-            self._greedy_arguments[searcher.view.name] = arguments
-        query = self._labels.view()
+            greedy = matcher.kernel_arguments(ranking, ranking.summaries_of(placed, 0))
+            arguments = (*greedy, *self._filter_arguments, *self._track_arguments)
+            self._causal_arguments[searcher.view.name] = arguments
+        track, new = self.track, total - placed
+        buffers = track.reserve(new, 2 * new)
         self.search_guard.check()
         started = time.perf_counter()
-        chosen, _, _ = greedy_tiles(query[placed:], 1, previous, previous, False, *arguments)
+        chosen, jumps, stop, frames = causal_step(
+            self._labels.data,
+            placed,
+            total,
+            self._bounds.data,
+            self.nodes[-1] if placed else -1,
+            self.options.blend,
+            self.emitted,
+            self.finished,
+            self.fps,
+            self.lead_s,
+            self._filter_x,
+            self._filter_v,
+            placed,
+            track.knots,
+            *buffers,
+            *arguments,
+        )
         spent = time.perf_counter() - started  # what ``_timed`` adds, without its wrapping
         self.search_guard.spent_s += spent
-        self.stats["search_ms"] += 1000.0 * spent
-        if len(chosen) < total - placed:
-            missing(query, placed + len(chosen))
-        successor, track = matcher.graph.successor, self.track
-        pose_successor, blend = self.model.poses.successor, self.options.blend
-        jumps = 0
-        for anime in chosen.tolist():
-            self.guard.check()
-            position = len(self.nodes)
-            span = self.spans[position]
-            join = None
-            if position:
-                jumps += int(successor[previous]) != anime
-                join = _SEAMLESS if int(pose_successor[previous]) == anime else _FORWARD
-                join = join if blend or join is _SEAMLESS else _CUT
-            self.nodes.append(anime)
-            track.append_linear(span.start, span.end, anime, join)
-            previous = anime
-        self.stats["jumps"] += jumps
-        self.stats["tiles"] += len(chosen)
+        stats = self.stats
+        stats["search_ms"] += 1000.0 * spent
+        if len(chosen) < new:
+            missing(self._labels.view(), placed + len(chosen))
+        self.nodes.extend(chosen.tolist())
+        track.commit(new, 2 * new)
+        stats["jumps"] += jumps
+        stats["tiles"] += new
+        if stop > self.emitted:
+            self.emitted = stats["frames"] = stop
+        return frames
 
     def _animes(self, positions: range) -> list[int]:
         """The anime each decided node at ``positions`` shows, one batch per run."""
@@ -549,44 +584,27 @@ class AnimeGraphSynthesizer(Synthesizer):
 
     def _emit_causal(self) -> np.ndarray:
         """Frames whose time plus the lead lies within the decided spans (all, once
-        finished): the damped filter stepped toward the track there."""
-        covered_until, decided = self.covered_until, len(self.nodes)
-        total = frame_count(covered_until, self.fps) if self.spans else 0
-        if self.finished and decided == self._labels.count:
-            stop = total
-        elif decided and self.spans[decided - 1].end >= self.lead_s:
-            stop = min(total, frame_count(self.spans[decided - 1].end - self.lead_s, self.fps))
-        else:
-            stop = self.emitted
-        if stop <= self.emitted:
-            return np.zeros((0, len(self.model.channels)), dtype=np.float32)
-        self.guard.check()
-        at_rest = self.damped is None
-        if self.damped is None:
-            components = self.model.n_components
-            self.damped = DampedState(np.empty(components), np.zeros(components), 0.0)
-        state = self.damped
-        model = self.model
-        frames = causal_frames(
+        finished): the damped filter stepped toward the track there (``causal_emit``)."""
+        track = self.track
+        stop, frames = causal_emit(
             self.emitted,
-            stop,
+            self.finished,
+            len(self.nodes),
+            self._labels.count,
+            self._bounds.data,
             self.fps,
             self.lead_s,
-            covered_until,
-            state.x,
-            state.v,
-            state.t,
-            at_rest,
-            model.causal_omegas,
-            model.basis.components,
-            model.basis.mean,
-            model.channel_low,
-            model.channel_high,
-            *self.track.arrays(),
+            self._filter_x,
+            self._filter_v,
+            len(track),
+            track.knots,
+            *self._filter_arguments,
+            *track.reserve(0, 0),
+            *self._track_arguments,
         )
-        state.t = (stop - 1) / self.fps
-        self.emitted = stop
-        self.stats["frames"] = stop
+        if stop > self.emitted:
+            self.guard.check()
+            self.emitted = self.stats["frames"] = stop
         return frames
 
 
