@@ -64,12 +64,13 @@ from .blending import Join, PairIndex, plan_join
 from .causal_call import causal_emit, causal_step
 from .costs import Ranking
 from .emission import channel_frames
-from .graph import SearchGraph
+from .graph import AnimeGraph, SearchGraph
 from .options import SearchOptions
 from .pq import SearchTimeout, pq_window
 from .request_audio import RequestAudio
-from .search import Matcher, SuffixMatcher, count_jumps, missing
-from .track import MotionTrack, Placement
+from .search import GreedyArguments, Matcher, SuffixMatcher, count_jumps, missing
+from .suffix_search import greedy_tiles
+from .track import MotionTrack, Placement, evaluate_track
 from .views import WHOLE, GraphView
 from .warp import Alignment, Warp, dtw_warps, linear_warp
 
@@ -77,6 +78,7 @@ if TYPE_CHECKING:
     from .model import AnimeGraphModel
 
 _SNAP = 1e-9
+_FORGET_ROWS = 64
 _Result = TypeVar("_Result")
 
 
@@ -145,6 +147,7 @@ class AnimeGraphSynthesizer(Synthesizer):
             float(motion.rate),
         )
         self._causal_arguments: dict[str, tuple[Any, ...]] = {}  # ``causal_step``'s, by view
+        self._greedy_arguments: dict[str, GreedyArguments] = {}  # without audio, by view
         self.search_guard = WorkGuard(options.pq_budget_s, time.perf_counter, _search_timeout)
         self.stats: dict[str, Any] = {
             "frames": 0,
@@ -165,10 +168,13 @@ class AnimeGraphSynthesizer(Synthesizer):
     def feed(self, spans: Iterable[SpanLike], audio: Audio | None = None) -> None:
         if self.finished:
             raise InvalidRequestError("input fed after finish()", code="request_finished")
-        self._take_audio(audio)
-        new = coerce_spans(spans, after=self.covered_until, first_index=len(self.spans))
-        filled = fill_gaps(new, self.covered_until)
-        self.options.check_size(len(self.spans) + len(filled))
+        if audio is not None or self.audio_mode is None:  # else taking it changes nothing
+            self._take_audio(audio)
+        covered_until = self.covered_until
+        new = coerce_spans(spans, after=covered_until, first_index=len(self.spans))
+        filled = fill_gaps(new, covered_until)
+        if self.options.search == "pq":
+            self.options.check_size(len(self.spans) + len(filled))
         for span in filled:
             searcher = self._by_emotion.get(span.emotion)
             if searcher is None:
@@ -178,7 +184,7 @@ class AnimeGraphSynthesizer(Synthesizer):
                 self.run_starts.append(len(self.searchers))
             self.spans.append(span)
             self.searchers.append(searcher)
-            self._labels.append(int(searcher.view.substitution[PHONEME_INDEX[span.phoneme]]))
+            self._labels.append(searcher.view.label_of[span.phoneme])
             self._bounds.append((span.start, span.end))
 
     @property
@@ -297,6 +303,9 @@ class AnimeGraphSynthesizer(Synthesizer):
         but a last one that may still grow (it ends where the known input ends, below the
         cap) is final."""
         searcher = self.searchers[start]
+        matcher = searcher.matcher
+        if self.audio is None and isinstance(matcher, SuffixMatcher):
+            return self._suffix_tiles(searcher, matcher, start, stop, closed, continuing, ranked)
         ready = self._audio_ready_stop(start, stop)
         if ready == start:
             return None
@@ -309,6 +318,45 @@ class AnimeGraphSynthesizer(Synthesizer):
             )
         )
         return [tile.tolist() for tile in tiles] or None
+
+    def _suffix_tiles(
+        self,
+        searcher: _Searcher,
+        matcher: SuffixMatcher,
+        start: int,
+        stop: int,
+        closed: bool,
+        continuing: int | None,
+        ranked: int | None,
+    ) -> list[list[int]] | None:
+        """``_greedy_tiles`` without audio by suffix automaton: ``SuffixMatcher.tiles`` with
+        the view's kernel arguments kept (without audio they do not depend on the
+        positions) and the search timed as ``_timed`` does, without its wrapping."""
+        arguments = self._greedy_arguments.get(searcher.view.name)
+        if arguments is None:
+            ranking = self.ranking(searcher.graph, start, stop)
+            arguments = matcher.kernel_arguments(ranking, ranking.summaries_of(start, 0))
+            self._greedy_arguments[searcher.view.name] = arguments
+        guard = self.search_guard
+        guard.check()
+        started = time.perf_counter()
+        nodes, ends, pending = greedy_tiles(
+            self._labels.data[start:stop],
+            self.options.max_tile or 0,
+            -1 if continuing is None else continuing,
+            -1 if ranked is None else ranked,
+            not closed,
+            *arguments,
+        )
+        spent = time.perf_counter() - started
+        guard.spent_s += spent
+        self.stats["search_ms"] += 1000.0 * spent
+        if len(nodes) < stop - start and not pending:
+            missing(self.query, start + len(nodes))
+        if not len(ends):
+            return None
+        chosen, bounds = nodes.tolist(), [0, *ends.tolist()]
+        return [chosen[low:high] for low, high in zip(bounds, bounds[1:])]
 
     def _audio_ready_stop(self, start: int, stop: int) -> int:
         """The largest p in [start, stop] such that the audio covers spans start..p-1."""
@@ -325,7 +373,11 @@ class AnimeGraphSynthesizer(Synthesizer):
         continuing, _ = self._previous(start)
         lead = [] if continuing is None else [continuing]
         entered = int(start > 0 and continuing is None)
-        return entered + count_jumps(self.searchers[start].graph, np.asarray(lead + tile))
+        graph = self.searchers[start].graph
+        if isinstance(graph, AnimeGraph):  # an edge is a recorded succession
+            nodes, successor = lead + tile, graph.successor
+            return entered + sum(int(successor[a]) != b for a, b in zip(nodes, nodes[1:]))
+        return entered + count_jumps(graph, np.asarray(lead + tile))
 
     def _timed(self, call: Callable[[], _Result]) -> _Result:
         """Run one search step, adding its time to ``stats["search_ms"]`` and to what
@@ -361,6 +413,11 @@ class AnimeGraphSynthesizer(Synthesizer):
             return
         positions = range(placed, len(self.nodes))
         animes = self._animes(positions)
+        if self.audio is None:  # every warp is linear (``_alignment``): none is built
+            for position, anime in zip(positions, animes):
+                self.guard.check()
+                self._place(position, anime, None)
+            return
         for position, anime, warp in zip(positions, animes, self._warps(positions, animes)):
             self.guard.check()
             self._place(position, anime, warp)
@@ -471,7 +528,9 @@ class AnimeGraphSynthesizer(Synthesizer):
             source,
         )
 
-    def _place(self, position: int, anime: int, warp: Warp) -> None:
+    def _place(self, position: int, anime: int, warp: Warp | None) -> None:
+        """Lay ``anime`` on span ``position`` through ``warp`` (None: the linear warp onto
+        its whole recording), joined to the placement before."""
         span = self.spans[position]
         join: Join | None = None
         if position > 0:
@@ -485,7 +544,10 @@ class AnimeGraphSynthesizer(Synthesizer):
                 self.options.blend,
                 forward=self.options.causal,
             )
-        self.track.append(Placement(span.start, span.end, anime, warp), join)
+        if warp is None:
+            self.track.append_linear(span.start, span.end, anime, join)
+        else:
+            self.track.append(Placement(span.start, span.end, anime, warp), join)
 
     def _join_pairs(self, position: int) -> tuple[tuple[int, int], PairIndex]:
         """The labels of the join into ``position`` and the recorded pairs to blend it with:
@@ -513,8 +575,9 @@ class AnimeGraphSynthesizer(Synthesizer):
         have = self.raw.count - self.half_width if self.raw.count else 0
         if count <= have or not self.spans:
             return
-        grid = np.arange(have, count, dtype=np.float64) / self.model.fps
-        values = self.track.evaluate(np.minimum(grid, self.covered_until))
+        values = _grid_samples(
+            have, count, float(self.model.fps), self.covered_until, *self.track.arrays()
+        )
         if self.raw.count == 0:
             self.raw.extend(np.repeat(values[:1], self.half_width, axis=0))
         self.raw.extend(values)
@@ -544,12 +607,9 @@ class AnimeGraphSynthesizer(Synthesizer):
 
     def _emittable(self, total: int) -> int:
         """One past the last frame (of ``total``) the smoothed samples so far can interpolate:
-        the samples a frame needs grow with the frame, so a binary search finds it."""
-        return self.emitted + bisect_right(
-            range(self.emitted, total),
-            self.smoothed.count,
-            key=lambda frame: _samples_needed(frame, self.model.fps, self.fps),
-        )
+        the samples a frame needs grow with the frame, so a binary search finds it
+        (``bisect_right``'s, compiled)."""
+        return _emittable_stop(self.emitted, total, self.smoothed.count, self.model.fps, self.fps)
 
     def _emit(self) -> np.ndarray:
         total = frame_count(self.covered_until, self.fps) if self.spans else 0
@@ -578,9 +638,14 @@ class AnimeGraphSynthesizer(Synthesizer):
     def _forget_consumed(self) -> None:
         """Drop the samples no later frame reads: raw ones already smoothed, smoothed ones
         before the sample below the next frame (so a request holds a window, not its
-        whole utterance at the model's rate)."""
-        self.raw.drop_before(self.smoothed.count)
-        self.smoothed.drop_before(math.floor(self.emitted * self.model.fps / self.fps) - 1)
+        whole utterance at the model's rate), once ``_FORGET_ROWS`` of them pile up, since
+        dropping moves the rows kept."""
+        raw, smoothed = self.raw, self.smoothed
+        if smoothed.count - raw.first >= _FORGET_ROWS:
+            raw.drop_before(smoothed.count)
+        consumed = math.floor(self.emitted * self.model.fps / self.fps) - 1
+        if consumed - smoothed.first >= _FORGET_ROWS:
+            smoothed.drop_before(consumed)
 
     def _emit_causal(self) -> np.ndarray:
         """Frames whose time plus the lead lies within the decided spans (all, once
@@ -608,13 +673,62 @@ class AnimeGraphSynthesizer(Synthesizer):
         return frames
 
 
+@njit(cache=True)
+def _grid_samples(
+    first: int,
+    stop: int,
+    fps_model: float,
+    until: float,
+    starts: np.ndarray,
+    ends: np.ndarray,
+    animes: np.ndarray,
+    knot_offsets: np.ndarray,
+    knot_targets: np.ndarray,
+    knot_sources: np.ndarray,
+    join_kinds: np.ndarray,
+    left_examples: np.ndarray,
+    right_examples: np.ndarray,
+    anime_start: np.ndarray,
+    anime_end: np.ndarray,
+    utterance: np.ndarray,
+    values: np.ndarray,
+    offsets: np.ndarray,
+    rate: float,
+) -> np.ndarray:
+    """The track (``MotionTrack.arrays()``) at model-grid samples ``first`` .. ``stop`` - 1,
+    sample k at k / ``fps_model`` s but no later than ``until``: (stop - first, n_pc)."""
+    times = np.empty(stop - first)
+    for row in range(stop - first):
+        times[row] = min((first + row) / fps_model, until)
+    return evaluate_track(
+        times, starts, ends, animes, knot_offsets, knot_targets, knot_sources, join_kinds,
+        left_examples, right_examples, anime_start, anime_end, utterance, values, offsets,
+        rate, False,
+    )  # fmt: skip
+
+
+@njit(cache=True)
 def _samples_needed(frame: int, fps_model: float, fps: float) -> int:
     """Smoothed samples (count) needed to interpolate output ``frame``."""
     position = frame * fps_model / fps
-    nearest = round(position)
+    nearest = np.round(position)  # within _SNAP of position: how it rounds a tie is moot
     if abs(position - nearest) < _SNAP:
         return int(nearest) + 1
     return math.floor(position) + 2
+
+
+@njit(cache=True)
+def _emittable_stop(emitted: int, total: int, count: int, fps_model: float, fps: float) -> int:
+    """``emitted`` + ``bisect_right`` over frames ``emitted`` .. ``total`` - 1 of ``count``
+    by ``_samples_needed``: the first of them that needs more than ``count`` samples."""
+    low, high = 0, total - emitted
+    while low < high:
+        middle = (low + high) // 2
+        if count < _samples_needed(emitted + middle, fps_model, fps):
+            high = middle
+        else:
+            low = middle + 1
+    return emitted + low
 
 
 @njit(cache=True)
