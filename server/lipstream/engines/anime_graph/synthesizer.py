@@ -113,7 +113,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         self.searchers: list[_Searcher] = []
         self.run_starts: list[int] = []
         self._labels = Growable(np.int64)
-        self._bounds = Growable(np.float64, (2,))  # each span's start and end (s)
+        self._bounds = Growable(np.float64, (2,))  # each span's start and end (s), if causal
         self.nodes: list[int] = []
         self.audio: RequestAudio | None = None
         self.audio_mode: bool | None = None
@@ -175,6 +175,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         filled = fill_gaps(new, covered_until)
         if self.options.search == "pq":
             self.options.check_size(len(self.spans) + len(filled))
+        causal = self.options.causal
         for span in filled:
             searcher = self._by_emotion.get(span.emotion)
             if searcher is None:
@@ -185,7 +186,8 @@ class AnimeGraphSynthesizer(Synthesizer):
             self.spans.append(span)
             self.searchers.append(searcher)
             self._labels.append(searcher.view.label_of[span.phoneme])
-            self._bounds.append((span.start, span.end))
+            if causal:  # only the causal calls read the bounds
+                self._bounds.append((span.start, span.end))
 
     @property
     def query(self) -> np.ndarray:
@@ -776,15 +778,15 @@ def _interpolated_frames(
 @njit(cache=True)
 def _filter(block: np.ndarray, kernels: np.ndarray) -> np.ndarray:
     """Each component of ``block`` filtered by its kernel ('valid' correlation: output i
-    reads block rows i .. i + width - 1)."""
+    reads block rows i .. i + width - 1). Each output sums its taps in order from 0.0;
+    the loops run along rows, so the components of a row are summed side by side."""
     width = kernels.shape[1]
-    out = np.empty((len(block) - width + 1, block.shape[1]))
-    for component in range(block.shape[1]):
-        for row in range(len(out)):
-            total = 0.0
-            for tap in range(width):
-                total += block[row + tap, component] * kernels[component, tap]
-            out[row, component] = total
+    out = np.zeros((len(block) - width + 1, block.shape[1]))
+    taps = np.ascontiguousarray(kernels.T)
+    for row in range(len(out)):
+        for tap in range(width):
+            for component in range(block.shape[1]):
+                out[row, component] += block[row + tap, component] * taps[tap, component]
     return out
 
 
