@@ -490,6 +490,8 @@ class AnimeGraphSynthesizer(Synthesizer):
 
     def _animes(self, positions: range) -> list[int]:
         """The anime each decided node at ``positions`` shows, one batch per run."""
+        if self.options.graph == "unclustered":  # every view's anime graph: nodes are animes
+            return self.nodes[positions.start : positions.stop]
         animes: list[int] = []
         for searcher, run in groupby(positions, key=lambda position: self.searchers[position]):
             nodes = np.asarray([self.nodes[position] for position in run], dtype=np.int64)
@@ -577,8 +579,16 @@ class AnimeGraphSynthesizer(Synthesizer):
         have = self.raw.count - self.half_width if self.raw.count else 0
         if count <= have or not self.spans:
             return
+        track = self.track
         values = _grid_samples(
-            have, count, float(self.model.fps), self.covered_until, *self.track.arrays()
+            have,
+            count,
+            float(self.model.fps),
+            self.covered_until,
+            len(track),
+            track.knots,
+            *track.reserve(0, 0),
+            *self._track_arguments,
         )
         if self.raw.count == 0:
             self.raw.extend(np.repeat(values[:1], self.half_width, axis=0))
@@ -681,6 +691,8 @@ def _grid_samples(
     stop: int,
     fps_model: float,
     until: float,
+    count: int,
+    knots: int,
     starts: np.ndarray,
     ends: np.ndarray,
     animes: np.ndarray,
@@ -697,15 +709,18 @@ def _grid_samples(
     offsets: np.ndarray,
     rate: float,
 ) -> np.ndarray:
-    """The track (``MotionTrack.arrays()``) at model-grid samples ``first`` .. ``stop`` - 1,
-    sample k at k / ``fps_model`` s but no later than ``until``: (stop - first, n_pc)."""
+    """The track of ``count`` placements and ``knots`` knots (``MotionTrack.reserve``'s
+    buffers, then the anime arrays of ``MotionTrack.arrays()``) at model-grid samples
+    ``first`` .. ``stop`` - 1, sample k at k / ``fps_model`` s but no later than ``until``:
+    (stop - first, n_pc)."""
     times = np.empty(stop - first)
     for row in range(stop - first):
         times[row] = min((first + row) / fps_model, until)
+    joins = max(count - 1, 0)
     return evaluate_track(
-        times, starts, ends, animes, knot_offsets, knot_targets, knot_sources, join_kinds,
-        left_examples, right_examples, anime_start, anime_end, utterance, values, offsets,
-        rate, False,
+        times, starts[:count], ends[:count], animes[:count], knot_offsets[: count + 1],
+        knot_targets[:knots], knot_sources[:knots], join_kinds[:joins], left_examples[:joins],
+        right_examples[:joins], anime_start, anime_end, utterance, values, offsets, rate, False,
     )  # fmt: skip
 
 

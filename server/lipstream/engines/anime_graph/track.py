@@ -80,6 +80,7 @@ class MotionTrack:
         self._join_kinds = np.zeros(_MIN_PLACEMENTS, dtype=np.int64)
         self._left_examples = np.zeros(_MIN_PLACEMENTS, dtype=np.int64)
         self._right_examples = np.zeros(_MIN_PLACEMENTS, dtype=np.int64)
+        self._buffers = self._gather()
 
     def __len__(self) -> int:
         return self._count
@@ -160,6 +161,9 @@ class MotionTrack:
         count = self._count + placements
         if count >= len(self._starts) or self._knots + knots > len(self._knot_targets):
             self._grow(count + 1, self._knots + knots)
+        return self._buffers
+
+    def _gather(self) -> TrackBuffers:
         return (
             self._starts, self._ends, self._animes, self._knot_offsets, self._knot_targets,
             self._knot_sources, self._join_kinds, self._left_examples, self._right_examples,
@@ -191,6 +195,7 @@ class MotionTrack:
             rows = max(knots, 2 * len(self._knot_targets))
             self._knot_targets = _resized(self._knot_targets, rows)
             self._knot_sources = _resized(self._knot_sources, rows)
+        self._buffers = self._gather()
 
     def evaluate(self, times: np.ndarray, left_continuous: bool = False) -> np.ndarray:
         """Track values (n, n_pc) at ascending ``times``; a time belongs to the last
