@@ -125,6 +125,8 @@ def causal_step(
     index_high: np.ndarray,
     index_ends: np.ndarray,
     text_anime: np.ndarray,
+    single_offsets: np.ndarray,
+    single_starts: np.ndarray,
     labels: np.ndarray,
     successor: np.ndarray,
     use_audio: bool,
@@ -154,8 +156,8 @@ def causal_step(
     with no anime) nothing is placed or emitted: stop is ``first``, frames empty."""
     chosen, _, _ = greedy_tiles(
         query[placed:total], 1, previous, previous, False, limit, transitions, index_low,
-        index_high, index_ends, text_anime, labels, successor, use_audio, query_summaries,
-        summaries, last, pose_first, pose_successor,
+        index_high, index_ends, text_anime, single_offsets, single_starts, labels, successor,
+        use_audio, query_summaries, summaries, last, pose_first, pose_successor,
     )  # fmt: skip
     if len(chosen) < total - placed:
         return chosen, 0, first, np.zeros((0, components.shape[1]), dtype=np.float32)
