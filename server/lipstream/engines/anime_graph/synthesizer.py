@@ -793,15 +793,15 @@ def _interpolated_frames(
 @njit(cache=True)
 def _filter(block: np.ndarray, kernels: np.ndarray) -> np.ndarray:
     """Each component of ``block`` filtered by its kernel ('valid' correlation: output i
-    reads block rows i .. i + width - 1). Each output sums its taps in order from 0.0;
-    the loops run along rows, so the components of a row are summed side by side."""
+    reads block rows i .. i + width - 1)."""
     width = kernels.shape[1]
-    out = np.zeros((len(block) - width + 1, block.shape[1]))
-    taps = np.ascontiguousarray(kernels.T)
-    for row in range(len(out)):
-        for tap in range(width):
-            for component in range(block.shape[1]):
-                out[row, component] += block[row + tap, component] * taps[tap, component]
+    out = np.empty((len(block) - width + 1, block.shape[1]))
+    for component in range(block.shape[1]):
+        for row in range(len(out)):
+            total = 0.0
+            for tap in range(width):
+                total += block[row + tap, component] * kernels[component, tap]
+            out[row, component] = total
     return out
 
 
