@@ -108,22 +108,61 @@ def plan_join(
     if forward:
         return Join(JoinKind.FORWARD)
     labels, pairs = pairs_of()
+    if poses.last.dtype == poses.first.dtype == np.float64 and poses.last.shape[1] <= _BLOCK:
+        chosen = int(
+            _cheapest_pair(
+                pairs.offsets,
+                pairs.sources,
+                labels[0] * pairs.n_labels + labels[1],
+                -1 if limit is None else limit,
+                poses.last,
+                poses.first,
+                left,
+                right,
+            )
+        )
+        if chosen < 0:
+            return Join(JoinKind.EXTEND)
+        return Join(JoinKind.PAIR, chosen, int(poses.successor[chosen]))
     candidates = pairs.pairs(labels[0], labels[1], limit)
     if not len(candidates):
         return Join(JoinKind.EXTEND)
-    if poses.last.dtype == poses.first.dtype == np.float64 and poses.last.shape[1] <= _BLOCK:
-        chosen = int(_cheapest_meeting(candidates, poses.last, poses.first, left, right))
-    else:
-        meeting = poses.last[candidates]
-        cost = np.linalg.norm(meeting - poses.last[left], axis=1) + np.linalg.norm(
-            meeting - poses.first[right], axis=1
-        )
-        chosen = int(candidates[int(np.argmin(cost))])
+    meeting = poses.last[candidates]
+    cost = np.linalg.norm(meeting - poses.last[left], axis=1) + np.linalg.norm(
+        meeting - poses.first[right], axis=1
+    )
+    chosen = int(candidates[int(np.argmin(cost))])
     return Join(JoinKind.PAIR, chosen, int(poses.successor[chosen]))
 
 
 _BLOCK = 128
 """Rows up to this long numpy sums in one block (longer ones it splits in halves)."""
+
+
+@njit(cache=True)
+def _cheapest_pair(
+    offsets: np.ndarray,
+    sources: np.ndarray,
+    key: int,
+    limit: int,
+    last: np.ndarray,
+    first: np.ndarray,
+    left: int,
+    right: int,
+) -> int:
+    """``_cheapest_meeting`` of ``PairIndex.pairs`` of bigram ``key`` (at most ``limit``,
+    < 0: all), picked without numpy's temporaries; -1 when there is none."""
+    low, high = offsets[key], offsets[key + 1]
+    count = high - low
+    if limit >= 0 and count > limit:
+        candidates = np.empty(limit, dtype=sources.dtype)
+        for index in range(limit):
+            candidates[index] = sources[low + (index * count) // limit]
+    else:
+        candidates = sources[low:high]
+    if len(candidates) == 0:
+        return -1
+    return _cheapest_meeting(candidates, last, first, left, right)
 
 
 @njit(cache=True)

@@ -9,7 +9,8 @@ damped filter (``damped``) steps from its state to each t_k toward that sample, 
 PCA component's rate; a request's first frame starts the filter at rest on its sample.
 It is the arithmetic of ``MotionTrack.evaluate``, ``DampedState.follow`` and
 ``channel_frames`` in one call instead of a dozen numpy calls, because a causal request
-makes it on every streamed message and its few frames cost less than the calls' set-up.
+makes it on every streamed message and its few frames cost less than the calls' set-up;
+``causal_call`` runs it inside the compiled call that also picks and places the spans.
 """
 
 from __future__ import annotations

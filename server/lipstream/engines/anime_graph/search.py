@@ -26,7 +26,7 @@ exactly, while with a cap the jumps can exceed the minimum.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol, TypeAlias
 
 import numpy as np
@@ -35,11 +35,11 @@ from .costs import Labels, Ranking
 from .graph import AnimeGraph, SearchGraph, csr_offsets
 from .index import SuffixIndex
 from .layered import cheapest, reach
-from .suffix_search import greedy_tiles
+from .suffix_search import greedy_tiles, single_occurrences
 
 GreedyArguments: TypeAlias = tuple[
     int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-    bool, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+    np.ndarray, np.ndarray, bool, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
 ]  # fmt: skip
 
 
@@ -89,11 +89,25 @@ class Matcher(Protocol):
 class SuffixMatcher:
     """Longest runs from the suffix automaton; ``limit`` caps the occurrences ranked.
     ``match``/``choose`` take one tile at a time with numpy costs: the reference that the
-    compiled ``tiles`` is tested against."""
+    compiled ``tiles`` is tested against. The occurrences ranked for a one-phoneme run
+    (``suffix_search.single_occurrences``) are listed once, since a short tile asks for
+    them on most calls."""
 
     index: SuffixIndex
     graph: AnimeGraph
     limit: int | None = None
+    single_offsets: np.ndarray = field(init=False, repr=False)
+    single_starts: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self.single_offsets, self.single_starts = single_occurrences(
+            self.limit or 0,
+            self.index.transitions,
+            self.index.low,
+            self.index.high,
+            self.index.ends,
+            self.index.text_anime,
+        )
 
     def match(
         self, query: Labels, start: int, stop: int, cap: int | None, previous: int | None = None
@@ -158,6 +172,8 @@ class SuffixMatcher:
             index.high,
             index.ends,
             index.text_anime,
+            self.single_offsets,
+            self.single_starts,
             self.graph.labels,
             self.graph.successor,
             ranking.uses_audio,

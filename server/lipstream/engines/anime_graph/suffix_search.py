@@ -8,8 +8,10 @@ phoneme, giving the longest run and the automaton state whose end-position
 range lists every occurrence. At most ``limit`` occurrences, spread evenly
 over the range, are ranked by ``costs.cheapest_run`` (audio distance, or the
 pose jump from the previous tile); the cheapest, then the lowest anime id,
-wins. A query of l phonemes costs O(l + tiles x ranked occurrences), whatever
-the corpus size, and one interpreter round trip.
+wins. A one-phoneme run's occurrences are read from a list made once per index
+(``single_occurrences``) instead of gathered and sorted again. A query of l
+phonemes costs O(l + tiles x ranked occurrences), whatever the corpus size,
+and one interpreter round trip.
 """
 
 from __future__ import annotations
@@ -75,6 +77,8 @@ def greedy_tiles(
     high: np.ndarray,
     ends: np.ndarray,
     text_anime: np.ndarray,
+    single_offsets: np.ndarray,
+    single_starts: np.ndarray,
     labels: np.ndarray,
     successor: np.ndarray,
     use_audio: bool,
@@ -91,7 +95,9 @@ def greedy_tiles(
         query, which the first tile may continue, and ``joined`` the one its join is ranked
         from (they differ only when the query enters a view that lacks the anime shown
         last); ``query_summaries`` (l, D) are used when ``use_audio``; ``successor`` is the
-        graph's, ``last``/``first``/``pose_successor`` the ``costs.Poses``. Stops early, with
+        graph's, ``last``/``first``/``pose_successor`` the ``costs.Poses``;
+        ``single_offsets``/``single_starts`` are ``single_occurrences`` of the same index and
+        ``limit``. Stops early, with
         the last end short of l, at a phoneme the corpus never says. ``final_only`` leaves out a
     last tile that reaches the end of ``query`` below ``cap`` (more input may extend it):
     it is found without ranking its occurrences, which is most of a call."""
@@ -120,7 +126,11 @@ def greedy_tiles(
             if final_only and _grows(position, length, len(query), cap):
                 pending = True
                 break
-            starts = _occurrences(state, length, limit, low, high, ends, text_anime)
+            if length == 1:  # state is the root's child by this label
+                label = query[position]
+                starts = single_starts[single_offsets[label] : single_offsets[label + 1]]
+            else:
+                starts = _occurrences(state, length, limit, low, high, ends, text_anime)
             chosen = starts[
                 cheapest_run(
                     starts,
@@ -141,6 +151,35 @@ def greedy_tiles(
         n_tiles += 1
         previous = joined = chosen + length - 1
     return nodes[:position], tile_ends[:n_tiles], pending
+
+
+@njit(cache=True)
+def single_occurrences(
+    limit: int,
+    transitions: np.ndarray,
+    low: np.ndarray,
+    high: np.ndarray,
+    ends: np.ndarray,
+    text_anime: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``_occurrences`` of every one-phoneme run, as CSR by label: (offsets (n_labels + 1,),
+    starts): label l's are starts[offsets[l]:offsets[l + 1]] (none when the corpus never
+    says it)."""
+    n_labels = transitions.shape[1] - 1
+    offsets = np.zeros(n_labels + 1, dtype=np.int64)
+    lists = []
+    for label in range(n_labels):
+        state = transitions[0, label]
+        if state >= 0:
+            found = _occurrences(state, 1, limit, low, high, ends, text_anime)
+        else:
+            found = np.empty(0, dtype=np.int64)
+        lists.append(found)
+        offsets[label + 1] = offsets[label] + len(found)
+    starts = np.empty(offsets[n_labels], dtype=np.int64)
+    for label in range(n_labels):
+        starts[offsets[label] : offsets[label + 1]] = lists[label]
+    return offsets, starts
 
 
 @njit(cache=True)

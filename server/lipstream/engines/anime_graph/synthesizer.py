@@ -33,7 +33,10 @@ from the component's learned cutoff) steps from frame to frame toward the
 track at t + shift, evaluated at the output frame times themselves; the
 shift makes up the filter's lag as far as ``lead_ms`` allows
 (``AnimeGraphModel.causal_shift_s``). So the frame at t is final once the
-input covers t + shift.
+input covers t + shift. While the new spans stay in the view of the one before
+them, a streamed call is one compiled call (``causal_call.causal_step``: pick,
+place, emit) on per-request arrays (span bounds, the track's buffers, the
+filter's state) that it updates in place.
 """
 
 from __future__ import annotations
@@ -54,20 +57,20 @@ from ...errors import InvalidRequestError
 from ...phonemes import PHONEME_INDEX, SILENCE
 from ...timeline import PhonemeSpan, SpanLike, coerce_spans
 from ..base import SynthesisRequest, Synthesizer, fill_gaps, frame_count
-from ..damped import DampedState
 from ..growable import Growable
 from ..work import WorkGuard
 from .animes import summarize
-from .blending import Join, JoinKind, PairIndex, plan_join
+from .blending import Join, PairIndex, plan_join
+from .causal_call import causal_emit, causal_step
 from .costs import Ranking
-from .emission import causal_frames, channel_frames
-from .graph import SearchGraph
+from .emission import channel_frames
+from .graph import AnimeGraph, SearchGraph
 from .options import SearchOptions
 from .pq import SearchTimeout, pq_window
 from .request_audio import RequestAudio
 from .search import GreedyArguments, Matcher, SuffixMatcher, count_jumps, missing
 from .suffix_search import greedy_tiles
-from .track import MotionTrack, Placement
+from .track import MotionTrack, Placement, evaluate_track
 from .views import WHOLE, GraphView
 from .warp import Alignment, Warp, dtw_warps, linear_warp
 
@@ -75,7 +78,7 @@ if TYPE_CHECKING:
     from .model import AnimeGraphModel
 
 _SNAP = 1e-9
-_SEAMLESS, _CUT, _FORWARD = Join(JoinKind.SEAMLESS), Join(JoinKind.CUT), Join(JoinKind.FORWARD)
+_FORGET_ROWS = 64
 _Result = TypeVar("_Result")
 
 
@@ -110,6 +113,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         self.searchers: list[_Searcher] = []
         self.run_starts: list[int] = []
         self._labels = Growable(np.int64)
+        self._bounds = Growable(np.float64, (2,))  # each span's start and end (s), if causal
         self.nodes: list[int] = []
         self.audio: RequestAudio | None = None
         self.audio_mode: bool | None = None
@@ -121,10 +125,29 @@ class AnimeGraphSynthesizer(Synthesizer):
         self.smoothed = Growable(np.float64, (model.n_components,))
         self.emitted = 0
         self.finished = False
-        self.damped: DampedState | None = None
+        # The causal filter's value and velocity per PCA component, at rest before frame 0.
+        self._filter_x = np.empty(model.n_components)
+        self._filter_v = np.zeros(model.n_components)
         self.lead_s = model.causal_shift_s(options.lead_ms)
         self.guard = request.guard
-        self._greedy_arguments: dict[str, GreedyArguments] = {}
+        self._filter_arguments: tuple[Any, ...] = (
+            model.causal_omegas,
+            model.basis.components,
+            model.basis.mean,
+            model.channel_low,
+            model.channel_high,
+        )
+        motion = model.animes.motion
+        self._track_arguments: tuple[Any, ...] = (
+            model.animes.start,
+            model.animes.end,
+            model.animes.utterance,
+            motion.values,
+            motion.offsets,
+            float(motion.rate),
+        )
+        self._causal_arguments: dict[str, tuple[Any, ...]] = {}  # ``causal_step``'s, by view
+        self._greedy_arguments: dict[str, GreedyArguments] = {}  # without audio, by view
         self.search_guard = WorkGuard(options.pq_budget_s, time.perf_counter, _search_timeout)
         self.stats: dict[str, Any] = {
             "frames": 0,
@@ -145,10 +168,14 @@ class AnimeGraphSynthesizer(Synthesizer):
     def feed(self, spans: Iterable[SpanLike], audio: Audio | None = None) -> None:
         if self.finished:
             raise InvalidRequestError("input fed after finish()", code="request_finished")
-        self._take_audio(audio)
-        new = coerce_spans(spans, after=self.covered_until, first_index=len(self.spans))
-        filled = fill_gaps(new, self.covered_until)
-        self.options.check_size(len(self.spans) + len(filled))
+        if audio is not None or self.audio_mode is None:  # else taking it changes nothing
+            self._take_audio(audio)
+        covered_until = self.covered_until
+        new = coerce_spans(spans, after=covered_until, first_index=len(self.spans))
+        filled = fill_gaps(new, covered_until)
+        if self.options.search == "pq":
+            self.options.check_size(len(self.spans) + len(filled))
+        causal = self.options.causal
         for span in filled:
             searcher = self._by_emotion.get(span.emotion)
             if searcher is None:
@@ -158,7 +185,9 @@ class AnimeGraphSynthesizer(Synthesizer):
                 self.run_starts.append(len(self.searchers))
             self.spans.append(span)
             self.searchers.append(searcher)
-            self._labels.append(int(searcher.view.substitution[PHONEME_INDEX[span.phoneme]]))
+            self._labels.append(searcher.view.label_of[span.phoneme])
+            if causal:  # only the causal calls read the bounds
+                self._bounds.append((span.start, span.end))
 
     @property
     def query(self) -> np.ndarray:
@@ -195,8 +224,7 @@ class AnimeGraphSynthesizer(Synthesizer):
 
     def frames(self) -> np.ndarray:
         if self.options.causal:
-            self._decide_causal()
-            return self._emit_causal()
+            return self._causal_frames()
         self._advance()
         return self._emit()
 
@@ -277,6 +305,9 @@ class AnimeGraphSynthesizer(Synthesizer):
         but a last one that may still grow (it ends where the known input ends, below the
         cap) is final."""
         searcher = self.searchers[start]
+        matcher = searcher.matcher
+        if self.audio is None and isinstance(matcher, SuffixMatcher):
+            return self._suffix_tiles(searcher, matcher, start, stop, closed, continuing, ranked)
         ready = self._audio_ready_stop(start, stop)
         if ready == start:
             return None
@@ -289,6 +320,45 @@ class AnimeGraphSynthesizer(Synthesizer):
             )
         )
         return [tile.tolist() for tile in tiles] or None
+
+    def _suffix_tiles(
+        self,
+        searcher: _Searcher,
+        matcher: SuffixMatcher,
+        start: int,
+        stop: int,
+        closed: bool,
+        continuing: int | None,
+        ranked: int | None,
+    ) -> list[list[int]] | None:
+        """``_greedy_tiles`` without audio by suffix automaton: ``SuffixMatcher.tiles`` with
+        the view's kernel arguments kept (without audio they do not depend on the
+        positions) and the search timed as ``_timed`` does, without its wrapping."""
+        arguments = self._greedy_arguments.get(searcher.view.name)
+        if arguments is None:
+            ranking = self.ranking(searcher.graph, start, stop)
+            arguments = matcher.kernel_arguments(ranking, ranking.summaries_of(start, 0))
+            self._greedy_arguments[searcher.view.name] = arguments
+        guard = self.search_guard
+        guard.check()
+        started = time.perf_counter()
+        nodes, ends, pending = greedy_tiles(
+            self._labels.data[start:stop],
+            self.options.max_tile or 0,
+            -1 if continuing is None else continuing,
+            -1 if ranked is None else ranked,
+            not closed,
+            *arguments,
+        )
+        spent = time.perf_counter() - started
+        guard.spent_s += spent
+        self.stats["search_ms"] += 1000.0 * spent
+        if len(nodes) < stop - start and not pending:
+            missing(self.query, start + len(nodes))
+        if not len(ends):
+            return None
+        chosen, bounds = nodes.tolist(), [0, *ends.tolist()]
+        return [chosen[low:high] for low, high in zip(bounds, bounds[1:])]
 
     def _audio_ready_stop(self, start: int, stop: int) -> int:
         """The largest p in [start, stop] such that the audio covers spans start..p-1."""
@@ -305,7 +375,11 @@ class AnimeGraphSynthesizer(Synthesizer):
         continuing, _ = self._previous(start)
         lead = [] if continuing is None else [continuing]
         entered = int(start > 0 and continuing is None)
-        return entered + count_jumps(self.searchers[start].graph, np.asarray(lead + tile))
+        graph = self.searchers[start].graph
+        if isinstance(graph, AnimeGraph):  # an edge is a recorded succession
+            nodes, successor = lead + tile, graph.successor
+            return entered + sum(int(successor[a]) != b for a, b in zip(nodes, nodes[1:]))
+        return entered + count_jumps(graph, np.asarray(lead + tile))
 
     def _timed(self, call: Callable[[], _Result]) -> _Result:
         """Run one search step, adding its time to ``stats["search_ms"]`` and to what
@@ -341,61 +415,83 @@ class AnimeGraphSynthesizer(Synthesizer):
             return
         positions = range(placed, len(self.nodes))
         animes = self._animes(positions)
+        if self.audio is None:  # every warp is linear (``_alignment``): none is built
+            for position, anime in zip(positions, animes):
+                self.guard.check()
+                self._place(position, anime, None)
+            return
         for position, anime, warp in zip(positions, animes, self._warps(positions, animes)):
             self.guard.check()
             self._place(position, anime, warp)
 
-    def _decide_causal(self) -> None:
-        """``_decide`` for a causal request, where every tile is one final phoneme: while
-        the new positions and the one before them share a view searched by suffix
-        automaton, one ``greedy_tiles`` call picks their nodes and each is placed with its
-        linear warp and forward join, without the general path's per-tile set-up."""
+    def _causal_frames(self) -> np.ndarray:
+        """A causal request's new frames: while the new positions and the one before them
+        share a view searched by suffix automaton, one compiled call (``causal_step``)
+        picks their nodes, places each with its linear warp and forward join, and emits,
+        without the general path's per-tile set-up; else ``_decide`` then
+        ``_emit_causal``."""
         placed, total = len(self.nodes), self._labels.count
-        if placed == total:
-            return
-        searcher = self.searchers[placed]
-        matcher = searcher.matcher
-        if (self.run_starts and self.run_starts[-1] >= placed) or not isinstance(
-            matcher, SuffixMatcher
-        ):
+        if placed < total:
+            searcher = self.searchers[placed]
+            matcher = searcher.matcher
+            if (not self.run_starts or self.run_starts[-1] < placed) and isinstance(
+                matcher, SuffixMatcher
+            ):
+                return self._causal_step(searcher, matcher, placed, total)
             self._decide()
-            return
+        return self._emit_causal()
+
+    def _causal_step(
+        self, searcher: _Searcher, matcher: SuffixMatcher, placed: int, total: int
+    ) -> np.ndarray:
+        """``_causal_frames`` by ``causal_step``, whose whole call counts as search time."""
         self.guard.check()
-        previous = self.nodes[-1] if placed else -1
-        arguments = self._greedy_arguments.get(searcher.view.name)
+        arguments = self._causal_arguments.get(searcher.view.name)
         if arguments is None:
             ranking = self.ranking(searcher.graph, placed, total)
-            arguments = matcher.kernel_arguments(ranking, ranking.summaries_of(placed, 0))
-            self._greedy_arguments[searcher.view.name] = arguments
-        query = self._labels.view()
+            greedy = matcher.kernel_arguments(ranking, ranking.summaries_of(placed, 0))
+            arguments = (*greedy, *self._filter_arguments, *self._track_arguments)
+            self._causal_arguments[searcher.view.name] = arguments
+        track, new = self.track, total - placed
+        buffers = track.reserve(new, 2 * new)
         self.search_guard.check()
         started = time.perf_counter()
-        chosen, _, _ = greedy_tiles(query[placed:], 1, previous, previous, False, *arguments)
+        chosen, jumps, stop, frames = causal_step(
+            self._labels.data,
+            placed,
+            total,
+            self._bounds.data,
+            self.nodes[-1] if placed else -1,
+            self.options.blend,
+            self.emitted,
+            self.finished,
+            self.fps,
+            self.lead_s,
+            self._filter_x,
+            self._filter_v,
+            placed,
+            track.knots,
+            *buffers,
+            *arguments,
+        )
         spent = time.perf_counter() - started  # what ``_timed`` adds, without its wrapping
         self.search_guard.spent_s += spent
-        self.stats["search_ms"] += 1000.0 * spent
-        if len(chosen) < total - placed:
-            missing(query, placed + len(chosen))
-        successor, track = matcher.graph.successor, self.track
-        pose_successor, blend = self.model.poses.successor, self.options.blend
-        jumps = 0
-        for anime in chosen.tolist():
-            self.guard.check()
-            position = len(self.nodes)
-            span = self.spans[position]
-            join = None
-            if position:
-                jumps += int(successor[previous]) != anime
-                join = _SEAMLESS if int(pose_successor[previous]) == anime else _FORWARD
-                join = join if blend or join is _SEAMLESS else _CUT
-            self.nodes.append(anime)
-            track.append_linear(span.start, span.end, anime, join)
-            previous = anime
-        self.stats["jumps"] += jumps
-        self.stats["tiles"] += len(chosen)
+        stats = self.stats
+        stats["search_ms"] += 1000.0 * spent
+        if len(chosen) < new:
+            missing(self._labels.view(), placed + len(chosen))
+        self.nodes.extend(chosen.tolist())
+        track.commit(new, 2 * new)
+        stats["jumps"] += jumps
+        stats["tiles"] += new
+        if stop > self.emitted:
+            self.emitted = stats["frames"] = stop
+        return frames
 
     def _animes(self, positions: range) -> list[int]:
         """The anime each decided node at ``positions`` shows, one batch per run."""
+        if self.options.graph == "unclustered":  # every view's anime graph: nodes are animes
+            return self.nodes[positions.start : positions.stop]
         animes: list[int] = []
         for searcher, run in groupby(positions, key=lambda position: self.searchers[position]):
             nodes = np.asarray([self.nodes[position] for position in run], dtype=np.int64)
@@ -436,7 +532,9 @@ class AnimeGraphSynthesizer(Synthesizer):
             source,
         )
 
-    def _place(self, position: int, anime: int, warp: Warp) -> None:
+    def _place(self, position: int, anime: int, warp: Warp | None) -> None:
+        """Lay ``anime`` on span ``position`` through ``warp`` (None: the linear warp onto
+        its whole recording), joined to the placement before."""
         span = self.spans[position]
         join: Join | None = None
         if position > 0:
@@ -450,7 +548,10 @@ class AnimeGraphSynthesizer(Synthesizer):
                 self.options.blend,
                 forward=self.options.causal,
             )
-        self.track.append(Placement(span.start, span.end, anime, warp), join)
+        if warp is None:
+            self.track.append_linear(span.start, span.end, anime, join)
+        else:
+            self.track.append(Placement(span.start, span.end, anime, warp), join)
 
     def _join_pairs(self, position: int) -> tuple[tuple[int, int], PairIndex]:
         """The labels of the join into ``position`` and the recorded pairs to blend it with:
@@ -478,8 +579,17 @@ class AnimeGraphSynthesizer(Synthesizer):
         have = self.raw.count - self.half_width if self.raw.count else 0
         if count <= have or not self.spans:
             return
-        grid = np.arange(have, count, dtype=np.float64) / self.model.fps
-        values = self.track.evaluate(np.minimum(grid, self.covered_until))
+        track = self.track
+        values = _grid_samples(
+            have,
+            count,
+            float(self.model.fps),
+            self.covered_until,
+            len(track),
+            track.knots,
+            *track.reserve(0, 0),
+            *self._track_arguments,
+        )
         if self.raw.count == 0:
             self.raw.extend(np.repeat(values[:1], self.half_width, axis=0))
         self.raw.extend(values)
@@ -509,12 +619,9 @@ class AnimeGraphSynthesizer(Synthesizer):
 
     def _emittable(self, total: int) -> int:
         """One past the last frame (of ``total``) the smoothed samples so far can interpolate:
-        the samples a frame needs grow with the frame, so a binary search finds it."""
-        return self.emitted + bisect_right(
-            range(self.emitted, total),
-            self.smoothed.count,
-            key=lambda frame: _samples_needed(frame, self.model.fps, self.fps),
-        )
+        the samples a frame needs grow with the frame, so a binary search finds it
+        (``bisect_right``'s, compiled)."""
+        return _emittable_stop(self.emitted, total, self.smoothed.count, self.model.fps, self.fps)
 
     def _emit(self) -> np.ndarray:
         total = frame_count(self.covered_until, self.fps) if self.spans else 0
@@ -543,60 +650,102 @@ class AnimeGraphSynthesizer(Synthesizer):
     def _forget_consumed(self) -> None:
         """Drop the samples no later frame reads: raw ones already smoothed, smoothed ones
         before the sample below the next frame (so a request holds a window, not its
-        whole utterance at the model's rate)."""
-        self.raw.drop_before(self.smoothed.count)
-        self.smoothed.drop_before(math.floor(self.emitted * self.model.fps / self.fps) - 1)
+        whole utterance at the model's rate), once ``_FORGET_ROWS`` of them pile up, since
+        dropping moves the rows kept."""
+        raw, smoothed = self.raw, self.smoothed
+        if smoothed.count - raw.first >= _FORGET_ROWS:
+            raw.drop_before(smoothed.count)
+        consumed = math.floor(self.emitted * self.model.fps / self.fps) - 1
+        if consumed - smoothed.first >= _FORGET_ROWS:
+            smoothed.drop_before(consumed)
 
     def _emit_causal(self) -> np.ndarray:
         """Frames whose time plus the lead lies within the decided spans (all, once
-        finished): the damped filter stepped toward the track there."""
-        covered_until, decided = self.covered_until, len(self.nodes)
-        total = frame_count(covered_until, self.fps) if self.spans else 0
-        if self.finished and decided == self._labels.count:
-            stop = total
-        elif decided and self.spans[decided - 1].end >= self.lead_s:
-            stop = min(total, frame_count(self.spans[decided - 1].end - self.lead_s, self.fps))
-        else:
-            stop = self.emitted
-        if stop <= self.emitted:
-            return np.zeros((0, len(self.model.channels)), dtype=np.float32)
-        self.guard.check()
-        at_rest = self.damped is None
-        if self.damped is None:
-            components = self.model.n_components
-            self.damped = DampedState(np.empty(components), np.zeros(components), 0.0)
-        state = self.damped
-        model = self.model
-        frames = causal_frames(
+        finished): the damped filter stepped toward the track there (``causal_emit``)."""
+        track = self.track
+        stop, frames = causal_emit(
             self.emitted,
-            stop,
+            self.finished,
+            len(self.nodes),
+            self._labels.count,
+            self._bounds.data,
             self.fps,
             self.lead_s,
-            covered_until,
-            state.x,
-            state.v,
-            state.t,
-            at_rest,
-            model.causal_omegas,
-            model.basis.components,
-            model.basis.mean,
-            model.channel_low,
-            model.channel_high,
-            *self.track.arrays(),
+            self._filter_x,
+            self._filter_v,
+            len(track),
+            track.knots,
+            *self._filter_arguments,
+            *track.reserve(0, 0),
+            *self._track_arguments,
         )
-        state.t = (stop - 1) / self.fps
-        self.emitted = stop
-        self.stats["frames"] = stop
+        if stop > self.emitted:
+            self.guard.check()
+            self.emitted = self.stats["frames"] = stop
         return frames
 
 
+@njit(cache=True)
+def _grid_samples(
+    first: int,
+    stop: int,
+    fps_model: float,
+    until: float,
+    count: int,
+    knots: int,
+    starts: np.ndarray,
+    ends: np.ndarray,
+    animes: np.ndarray,
+    knot_offsets: np.ndarray,
+    knot_targets: np.ndarray,
+    knot_sources: np.ndarray,
+    join_kinds: np.ndarray,
+    left_examples: np.ndarray,
+    right_examples: np.ndarray,
+    anime_start: np.ndarray,
+    anime_end: np.ndarray,
+    utterance: np.ndarray,
+    values: np.ndarray,
+    offsets: np.ndarray,
+    rate: float,
+) -> np.ndarray:
+    """The track of ``count`` placements and ``knots`` knots (``MotionTrack.reserve``'s
+    buffers, then the anime arrays of ``MotionTrack.arrays()``) at model-grid samples
+    ``first`` .. ``stop`` - 1, sample k at k / ``fps_model`` s but no later than ``until``:
+    (stop - first, n_pc)."""
+    times = np.empty(stop - first)
+    for row in range(stop - first):
+        times[row] = min((first + row) / fps_model, until)
+    joins = max(count - 1, 0)
+    return evaluate_track(
+        times, starts[:count], ends[:count], animes[:count], knot_offsets[: count + 1],
+        knot_targets[:knots], knot_sources[:knots], join_kinds[:joins], left_examples[:joins],
+        right_examples[:joins], anime_start, anime_end, utterance, values, offsets, rate, False,
+    )  # fmt: skip
+
+
+@njit(cache=True)
 def _samples_needed(frame: int, fps_model: float, fps: float) -> int:
     """Smoothed samples (count) needed to interpolate output ``frame``."""
     position = frame * fps_model / fps
-    nearest = round(position)
+    nearest = np.round(position)  # within _SNAP of position: how it rounds a tie is moot
     if abs(position - nearest) < _SNAP:
         return int(nearest) + 1
     return math.floor(position) + 2
+
+
+@njit(cache=True)
+def _emittable_stop(emitted: int, total: int, count: int, fps_model: float, fps: float) -> int:
+    """``emitted`` + ``bisect_right`` over frames ``emitted`` .. ``total`` - 1 of ``count``
+    by ``_samples_needed``: the first of them that needs more than ``count`` samples."""
+    low, high = 0, total - emitted
+    while low < high:
+        middle = (low + high) // 2
+        if count < _samples_needed(emitted + middle, fps_model, fps):
+            high = middle
+        else:
+            low = middle + 1
+    return emitted + low
 
 
 @njit(cache=True)

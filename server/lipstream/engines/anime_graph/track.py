@@ -13,14 +13,16 @@ Placements and joins are kept as flat arrays in buffers that double when full,
 so one compiled call (``evaluate_track``) samples any stretch of the track: it
 runs on every streamed message, where per-fragment numpy calls cost more than
 the samples. Adding a placement writes a few numbers into those buffers
-(``append_linear``: a linear warp's two knots, with no objects built); the
-``placements`` list is rebuilt from them when asked for.
+(``append_linear``: a linear warp's two knots, with no objects built; a compiled
+caller may write them itself, into the buffers ``reserve`` returns, and
+``commit`` them); the ``placements`` and ``joins`` lists are rebuilt from them
+when asked for.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TypeAlias
+from typing import Any, TypeAlias
 
 import numpy as np
 from numba import njit
@@ -29,8 +31,18 @@ from .animes import AnimeTable, sample_into
 from .blending import Join, JoinKind
 from .warp import Warp
 
-_NO_CORRECTION, _PAIR, _EXTEND, _FORWARD = 0, 1, 2, 3
-_KIND_CODES = {JoinKind.PAIR: _PAIR, JoinKind.EXTEND: _EXTEND, JoinKind.FORWARD: _FORWARD}
+SEAMLESS_CODE, _PAIR, _EXTEND, FORWARD_CODE, CUT_CODE = 0, 1, 2, 3, 4
+"""A join's kind as stored in the track (``JoinKind`` order differs); seamless and cut joins
+add no correction."""
+_FORWARD = FORWARD_CODE
+_KIND_CODES = {
+    JoinKind.SEAMLESS: SEAMLESS_CODE,
+    JoinKind.PAIR: _PAIR,
+    JoinKind.EXTEND: _EXTEND,
+    JoinKind.FORWARD: FORWARD_CODE,
+    JoinKind.CUT: CUT_CODE,
+}
+_KINDS = {code: kind for kind, code in _KIND_CODES.items()}
 _MIN_PLACEMENTS = 16
 FORWARD_BLEND_SHARE = 0.5
 """A forward join blends the previous recording out over this share of the next span, so a
@@ -39,6 +51,7 @@ TrackArrays: TypeAlias = tuple[
     np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
     np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float,
 ]  # fmt: skip
+TrackBuffers: TypeAlias = tuple[Any, ...]  # ``MotionTrack.reserve``'s nine arrays
 
 
 @dataclass(frozen=True)
@@ -56,7 +69,6 @@ class MotionTrack:
 
     def __init__(self, animes: AnimeTable) -> None:
         self.animes = animes
-        self.joins: list[Join] = []
         self._count = 0
         self._knots = 0
         self._starts = np.zeros(_MIN_PLACEMENTS)
@@ -68,6 +80,7 @@ class MotionTrack:
         self._join_kinds = np.zeros(_MIN_PLACEMENTS, dtype=np.int64)
         self._left_examples = np.zeros(_MIN_PLACEMENTS, dtype=np.int64)
         self._right_examples = np.zeros(_MIN_PLACEMENTS, dtype=np.int64)
+        self._buffers = self._gather()
 
     def __len__(self) -> int:
         return self._count
@@ -87,6 +100,18 @@ class MotionTrack:
                 ),
             )
             for index in range(self._count)
+        ]
+
+    @property
+    def joins(self) -> list[Join]:
+        """The join into every placement after the first, rebuilt from the track's arrays."""
+        return [
+            Join(
+                _KINDS[int(self._join_kinds[index])],
+                int(self._left_examples[index]),
+                int(self._right_examples[index]),
+            )
+            for index in range(max(self._count - 1, 0))
         ]
 
     def anime_at(self, index: int) -> int:
@@ -121,13 +146,38 @@ class MotionTrack:
         if index:
             if join is None:
                 raise ValueError("a placement after the first needs its join")
-            self.joins.append(join)
-            self._join_kinds[index - 1] = _KIND_CODES.get(join.kind, _NO_CORRECTION)
+            self._join_kinds[index - 1] = _KIND_CODES[join.kind]
             self._left_examples[index - 1] = join.left_example
             self._right_examples[index - 1] = join.right_example
         self._starts[index] = start
         self._ends[index] = end
         self._animes[index] = anime
+
+    def reserve(self, placements: int, knots: int) -> TrackBuffers:
+        """The buffers (``arrays()``'s first nine, whole), with room for ``placements`` more
+        placements of ``knots`` more knots in all, for a compiled call to write them in place
+        (join ``i`` into placement ``i + 1``, as ``_KIND_CODES``, and each placement's knots
+        after the last, closing ``knot_offsets``); ``commit`` then counts them."""
+        count = self._count + placements
+        if count >= len(self._starts) or self._knots + knots > len(self._knot_targets):
+            self._grow(count + 1, self._knots + knots)
+        return self._buffers
+
+    def _gather(self) -> TrackBuffers:
+        return (
+            self._starts, self._ends, self._animes, self._knot_offsets, self._knot_targets,
+            self._knot_sources, self._join_kinds, self._left_examples, self._right_examples,
+        )  # fmt: skip
+
+    def commit(self, placements: int, knots: int) -> None:
+        """Count ``placements`` placements and ``knots`` knots written after ``reserve``."""
+        self._count += placements
+        self._knots += knots
+
+    @property
+    def knots(self) -> int:
+        """Knots held (``knot_targets`` entries in use)."""
+        return self._knots
 
     def _close_knots(self, stop: int) -> None:
         self._knots = stop
@@ -145,6 +195,7 @@ class MotionTrack:
             rows = max(knots, 2 * len(self._knot_targets))
             self._knot_targets = _resized(self._knot_targets, rows)
             self._knot_sources = _resized(self._knot_sources, rows)
+        self._buffers = self._gather()
 
     def evaluate(self, times: np.ndarray, left_continuous: bool = False) -> np.ndarray:
         """Track values (n, n_pc) at ascending ``times``; a time belongs to the last
@@ -220,7 +271,9 @@ def evaluate_track(
         out[row] = base
         for side in range(2):
             join = index - 1 if side == 0 else index
-            if join < 0 or join >= len(join_kinds) or join_kinds[join] == _NO_CORRECTION:
+            if join < 0 or join >= len(join_kinds):
+                continue
+            if join_kinds[join] == SEAMLESS_CODE or join_kinds[join] == CUT_CODE:
                 continue
             if join_kinds[join] == _FORWARD and side == 1:
                 continue

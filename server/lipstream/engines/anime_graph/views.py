@@ -22,6 +22,7 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -61,6 +62,11 @@ class GraphView:
     pairs: PairIndex
     cluster_graph: ClusterGraph | None
     cluster_of: np.ndarray
+
+    @cached_property
+    def label_of(self) -> dict[str, int]:
+        """The label searched for each phoneme (``substitution``), by its name."""
+        return {phoneme: int(self.substitution[index]) for phoneme, index in PHONEME_INDEX.items()}
 
     def holds(self, anime: int) -> bool:
         """Is ``anime`` one of the view's members?"""
