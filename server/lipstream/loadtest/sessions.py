@@ -97,6 +97,12 @@ class RequestRecord:
     server_max_lag_ms: float | None = None
     send_slip_ms: list[float] = field(default_factory=list)
     busy_retries: int = 0
+    streaming_s: list[float] | None = None
+
+    @property
+    def streaming_span(self) -> tuple[float, float] | None:
+        """(ready, done) on the machine's monotonic clock (s), when the request got both."""
+        return None if self.streaming_s is None else (self.streaming_s[0], self.streaming_s[1])
 
 
 @dataclass
@@ -280,6 +286,10 @@ def _fill(record: RequestRecord, trace: _Trace, done: Done) -> None:
             record.fps = trace.frames / span if span > 0 else None
     record.frames = trace.frames
     record.server_max_lag_ms = done.stats.max_lag_ms
+    if trace.ready_at is not None and trace.done_at is not None:
+        # one clock for every worker process: perf_counter's origin is per process
+        to_monotonic = time.monotonic() - time.perf_counter()
+        record.streaming_s = [trace.ready_at + to_monotonic, trace.done_at + to_monotonic]
 
 
 async def probe_first_frames(plan: ClipPlan, share: ClipShare, running: Callable[[], bool]) -> None:

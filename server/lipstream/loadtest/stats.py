@@ -53,6 +53,20 @@ def summarize(
     return {name: mean if q is None else percentile(ordered, q) for name, q in statistics}
 
 
+def peak_overlap(spans: Iterable[tuple[float, float]]) -> int:
+    """The most of the (start, end) ``spans`` that cover one instant; a span that ends as
+    another starts does not overlap it."""
+    events: list[tuple[float, int]] = []
+    for start, end in spans:
+        events += [(start, 1), (end, -1)]
+    events.sort()  # at equal times -1 sorts first: an end before a start
+    peak = running = 0
+    for _, step in events:
+        running += step
+        peak = max(peak, running)
+    return peak
+
+
 def _present(values: Iterable[float | None]) -> list[float]:
     return [value for value in values if value is not None]
 

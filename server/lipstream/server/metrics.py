@@ -117,6 +117,13 @@ class Metrics:
             ["code"],
             registry=registry,
         )
+        self.busy_refusals = Counter(
+            "lipstream_busy_refusals",
+            "WebSocket sessions refused with server_busy, by reason: memory, loop_lag, "
+            "loop_busy or sessions.",
+            ["reason"],
+            registry=registry,
+        )
         self.first_frame = Histogram(
             "lipstream_first_frame_latency_seconds",
             "From receiving start to sending the first frame.",

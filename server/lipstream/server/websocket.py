@@ -109,6 +109,7 @@ async def stream_endpoint(websocket: WebSocket) -> None:
         if busy is None and not state.lifecycle.admit(connection):
             busy = state.overload.policy.sessions_refusal(state.settings.max_sessions)
         if busy is not None:
+            state.metrics.busy_refusals.labels(busy.reason).inc()
             refusal, details = (busy.code, busy.message), busy.details
     try:
         await websocket.accept(subprotocol=subprotocol)

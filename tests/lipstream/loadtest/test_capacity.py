@@ -32,7 +32,9 @@ REFERENCE_URL = "ws://127.0.0.1:9/v1/stream"
 BASE = LoadTestConfig(engine="viseme-lerp", character="demo", workers=2, probe_phonemes=30)
 
 
-def _results(streams: int, p99_ms: float, failed: int = 0) -> dict[str, Any]:
+def _results(
+    streams: int, p99_ms: float, failed: int = 0, at_once: int | None = None
+) -> dict[str, Any]:
     """A load-test document as ``loadtest`` shapes it, for a fake run."""
     lag = {
         "p50": p99_ms - 40.0,
@@ -45,6 +47,8 @@ def _results(streams: int, p99_ms: float, failed: int = 0) -> dict[str, Any]:
         "requests": streams,
         "successful_requests": streams - failed,
         "errors": {"timeout": failed} if failed else {},
+        "peak_sessions": streams if at_once is None else at_once,
+        "busy_retries": 0,
         "frame_lag_ms": lag,
         "first_packet_latency_ms": {"p50": 1.0, "p99": 2.0, "max": 3.0},
         "fps": {"p1": 59.0},
@@ -155,6 +159,13 @@ def test_a_probe_with_failed_requests_fails_however_low_its_lag() -> None:
     assert not probe_summary(10, _results(10, 50.0), 50.0)["passed"]
 
 
+def test_a_probe_whose_sessions_never_all_stream_at_once_fails() -> None:
+    """Admission can spread a burst into waves: 10 requests that succeed with 9 at most
+    streaming together did not show that 10 are held."""
+    assert not probe_summary(10, _results(10, 5.0, at_once=9), 50.0)["passed"]
+    assert probe_summary(10, _results(10, 5.0, at_once=10), 50.0)["passed"]
+
+
 def test_searches_accumulate_in_one_file_by_key(tmp_path: Path) -> None:
     path = tmp_path / "capacity.json"
     key = {
@@ -225,6 +236,8 @@ def test_two_worker_processes_and_the_probe_measure_every_request() -> None:
     clip = results["clips"][0]
     assert clip["requests"] == 3 and clip["successful_requests"] == 3
     assert clip["frames"] == 3 * 51  # frames i with i / 50 <= 1 s, per request
+    # both sessions' first requests start within the 1 s stagger and last a 1 s clip
+    assert clip["peak_sessions"] == 2
     lag = clip["frame_lag_ms"]
     assert math.isfinite(lag["max"]) and lag["p50"] <= lag["p99"] <= lag["max"]
     assert clip["client_cpu_s"] > 0
