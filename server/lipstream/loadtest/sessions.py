@@ -296,19 +296,49 @@ async def probe_first_frames(plan: ClipPlan, share: ClipShare, running: Callable
     """While ``running()``, send whole ``probe_phonemes``-phoneme requests one after
     another on one connection and record each one's first-frame latency (ms): from
     sending ``start`` to receiving the first frames. It starts once every start delay of
-    the load has passed, so it measures at full concurrency."""
+    the load has passed, so it measures at full concurrency. Refused for load, it
+    reconnects after the time it was given, as the sessions do; refusals are not
+    latencies, so they are not recorded."""
     items = plan.probe_spans[: plan.probe_phonemes]
     await asyncio.sleep(max(plan.jitter_s, default=0.0))
-    try:
-        async with AsyncClient(plan.url, plan.encoding, plan.token) as client:
-            while running() and time.perf_counter() < plan.deadline:
-                try:
-                    share.probe_ms.append(await _probe_once(plan, client, items))
-                except LipstreamServerError as error:
-                    share.probe_errors.append(error.code)
-                await asyncio.sleep(PROBE_PAUSE_S)
-    except (OSError, LipstreamClientError) as error:
-        share.probe_errors.append(type(error).__name__)
+    for attempt in itertools.count():
+        try:
+            async with AsyncClient(plan.url, plan.encoding, plan.token) as client:
+                await _probe_requests(plan, share, client, items, running)
+            return
+        except (ServerBusy, HandshakeRejected) as refused:
+            if not refused.retryable or not _probing(plan, running):
+                share.probe_errors.append(_probe_error(refused))
+                return
+            await asyncio.sleep(retry_delay_s(refused, attempt))
+        except (OSError, LipstreamClientError) as error:
+            share.probe_errors.append(type(error).__name__)
+            return
+
+
+def _probing(plan: ClipPlan, running: Callable[[], bool]) -> bool:
+    return running() and time.perf_counter() < plan.deadline
+
+
+def _probe_error(refused: ServerBusy | HandshakeRejected) -> str:
+    if isinstance(refused, HandshakeRejected):
+        return f"http_{refused.status}"
+    return refused.error.code if refused.error else f"closed_{refused.code}"
+
+
+async def _probe_requests(
+    plan: ClipPlan,
+    share: ClipShare,
+    client: AsyncClient,
+    items: Sequence[Span],
+    running: Callable[[], bool],
+) -> None:
+    while _probing(plan, running):
+        try:
+            share.probe_ms.append(await _probe_once(plan, client, items))
+        except LipstreamServerError as error:
+            share.probe_errors.append(error.code)
+        await asyncio.sleep(PROBE_PAUSE_S)
 
 
 async def _probe_once(plan: ClipPlan, client: AsyncClient, items: Sequence[Span]) -> float:
