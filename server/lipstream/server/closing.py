@@ -19,14 +19,13 @@ from __future__ import annotations
 from asyncio import BaseTransport, Transport
 from typing import cast
 
-from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
-
 from .flush_watch import FlushWatch, flush_timeout_s
+from .read_window import ReadWindowProtocol
 
 
-class BoundedCloseProtocol(WebSocketsSansIOProtocol):
+class BoundedCloseProtocol(ReadWindowProtocol):
     """A WebSocket connection whose socket is freed once its unsent bytes stop moving after
-    the app is done with it."""
+    the app is done with it (and which reads ahead of the app, ``read_window``)."""
 
     def connection_made(self, transport: BaseTransport) -> None:
         super().connection_made(transport)

@@ -6,7 +6,8 @@ protocol's message limit (so a message between the two gets a
 ``message_too_large`` error before the 1009 close, and anything larger is
 cut off by the WebSocket layer itself), the WebSocket and HTTP protocols are
 uvicorn's own with a bound on how long a client that stops reading may hold
-its socket (``closing.BoundedCloseProtocol``,
+its socket (``closing.BoundedCloseProtocol``, which also reads up to a window of
+messages ahead of the app instead of pausing its socket after each, ``read_window``;
 ``http_flush.BoundedFlushHTTPProtocol``), the HTTP one also with a deadline
 for the request head and a cap on open connections
 (``handshake.GuardedHTTPProtocol``), and uvicorn's ``limit_concurrency``

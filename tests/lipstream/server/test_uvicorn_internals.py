@@ -1,4 +1,4 @@
-"""What ``closing``, ``http_flush`` and ``handshake`` take from uvicorn, named on real protocol
+"""What ``closing``, ``read_window``, ``http_flush`` and ``handshake`` take from uvicorn, named on real protocol
 objects.
 
 They subclass uvicorn's protocols, override their hooks and read their private
@@ -34,7 +34,13 @@ HTTP_HOOKS = (
     "on_response_complete",
     "handle_websocket_upgrade",
 )
-WS_HOOKS = ("connection_made", "connection_lost", "run_asgi")
+WS_HOOKS = (
+    "connection_made",
+    "connection_lost",
+    "run_asgi",
+    "send_receive_event_to_app",
+    "receive",
+)
 SHARED_STATE = ("loop", "app_state", "client", "transport")
 
 
@@ -103,6 +109,8 @@ def test_the_websocket_protocol_state_read_by_closing() -> None:
         for name in SHARED_STATE:
             assert hasattr(protocol, name), name
         assert protocol.loop is loop and protocol.app_state == {"k": 2}
+        # read_window's: the message being assembled, the app's queue, the pause flag
+        assert protocol.frames == [] and protocol.queue.empty() and protocol.read_paused is False
         protocol.transport.close()
         client_end.close()
 
