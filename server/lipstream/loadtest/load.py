@@ -245,9 +245,7 @@ def clip_report(
         "successful_requests": sum(record.error is None for record in records),
         "errors": dict(Counter(record.error for record in records if record.error)),
         "busy_retries": sum(record.busy_retries for record in records),
-        "peak_sessions": peak_overlap(
-            span for record in records if (span := record.streaming_span) is not None
-        ),
+        "peak_sessions": peak_overlap(share.session_spans),
         "first_packet_latency_ms": summarize(_present([r.first_packet_ms for r in records])),
         "first_frame_latency_ms": summarize(_present([r.first_frame_ms for r in records])),
         "fps": summarize(_present([r.fps for r in records])),

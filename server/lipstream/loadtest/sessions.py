@@ -116,9 +116,11 @@ class ClipShare:
     probe_ms: list[float] = field(default_factory=list)
     probe_errors: list[str] = field(default_factory=list)
     cpu_s: float = 0.0
+    session_spans: list[tuple[float, float]] = field(default_factory=list)
 
     def extend(self, other: ClipShare) -> None:
         self.records.extend(other.records)
+        self.session_spans.extend(other.session_spans)
         self.block_lag_ms.extend(other.block_lag_ms)
         self.block_frames.extend(other.block_frames)
         self.probe_ms.extend(other.probe_ms)
@@ -156,6 +158,7 @@ class _Session:
         self.traces: dict[str, _Trace] = {}
         self.client: AsyncClient | None = None
         self._ids = itertools.count(1)
+        self._held: list[tuple[float, float]] = []
 
     def on_message(self, message: ServerMessage, received_at: float) -> None:
         trace = self.traces.get(message.id or "")
@@ -181,10 +184,16 @@ class _Session:
                     self.share.records.append(RequestRecord(error="deadline"))
                     continue
                 await asyncio.sleep(self.plan.jitter_s[index])
-                self.share.records.append(await self._request())
+                record = await self._request()
+                self.share.records.append(record)
+                if (span := record.streaming_span) is not None:
+                    self._held.append(span)
         finally:
             if self.client is not None:
                 await self.client.close()
+            if self._held:
+                # held from its first request's ready to its last one's done
+                self.share.session_spans.append((self._held[0][0], self._held[-1][1]))
 
     async def _connected(self) -> AsyncClient:
         if self.client is None or self.client.closed is not None:

@@ -40,6 +40,7 @@ def encode_share(share: ClipShare) -> tuple[bytes, bytes, bytes]:
     header = {
         "records": [asdict(record) for record in share.records],
         "probe_ms": share.probe_ms,
+        "session_spans": share.session_spans,
         "probe_errors": share.probe_errors,
         "cpu_s": share.cpu_s,
     }
@@ -62,6 +63,7 @@ def decode_share(header: bytes, lags: bytes, frames: bytes) -> ClipShare:
         block_lag_ms=block_lag_ms,
         block_frames=block_frames,
         probe_ms=list(fields["probe_ms"]),
+        session_spans=[(start, end) for start, end in fields["session_spans"]],
         probe_errors=list(fields["probe_errors"]),
         cpu_s=float(fields["cpu_s"]),
     )

@@ -28,6 +28,7 @@ def test_a_refused_session_waits_retry_after_and_completes(lerp_dir: Path) -> No
     assert clip["requests"] == 2 and clip["successful_requests"] == 2
     assert clip["errors"] == {}
     assert clip["busy_retries"] >= 1
+    assert clip["peak_sessions"] == 1  # the cap held them one at a time
 
 
 def test_an_upgrade_refused_with_503_waits_retry_after_and_completes(lerp_dir: Path) -> None:

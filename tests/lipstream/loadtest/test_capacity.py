@@ -103,7 +103,7 @@ def test_find_capacity_runs_probes_and_documents_the_boundary() -> None:
     )
     document = find_capacity(search, run)
     assert [c.streams for c in configs] == [1, 100, 200, 400, 800, 600, 500, 450, 475]
-    assert all(c.requests == c.streams and c.clips_s == (10.0,) for c in configs)
+    assert all(c.requests == 2 * c.streams and c.clips_s == (10.0,) for c in configs)
     assert [c.workers for c in configs[:2]] == [1, 2]  # never more processes than sessions
     assert document["capacity_streams"] == 450 and document["upper_bound_streams"] == 475
     assert document["idle"]["streams"] == 1 and document["idle"]["passed"]
@@ -160,8 +160,8 @@ def test_a_probe_with_failed_requests_fails_however_low_its_lag() -> None:
 
 
 def test_a_probe_whose_sessions_never_all_stream_at_once_fails() -> None:
-    """Admission can spread a burst into waves: 10 requests that succeed with 9 at most
-    streaming together did not show that 10 are held."""
+    """Admission can spread a burst into waves: 10 sessions whose requests succeed with 9 at
+    most held together did not show that 10 are held."""
     assert not probe_summary(10, _results(10, 5.0, at_once=9), 50.0)["passed"]
     assert probe_summary(10, _results(10, 5.0, at_once=10), 50.0)["passed"]
 
@@ -204,12 +204,14 @@ def test_a_share_crosses_the_process_boundary_intact() -> None:
         records=[
             RequestRecord(),
             RequestRecord(error="timeout", frames=3, send_slip_ms=[0.5, 1.25]),
+            RequestRecord(frames=2, streaming_s=[100.25, 110.5]),
         ],
         block_lag_ms=array("d", [10.0, -2.5]),
         block_frames=array("q", [3, 1]),
         probe_ms=[4.0],
         probe_errors=["server_busy"],
         cpu_s=1.5,
+        session_spans=[(100.25, 121.0)],
     )
     assert decode_share(*encode_share(share)) == share
     # Row r of a block is scheduled r / fps after its first frame: at 50 fps, 20 ms each.
@@ -236,7 +238,8 @@ def test_two_worker_processes_and_the_probe_measure_every_request() -> None:
     clip = results["clips"][0]
     assert clip["requests"] == 3 and clip["successful_requests"] == 3
     assert clip["frames"] == 3 * 51  # frames i with i / 50 <= 1 s, per request
-    # both sessions' first requests start within the 1 s stagger and last a 1 s clip
+    # both sessions' first requests start within the 1 s stagger and last a 1 s clip, so
+    # the two sessions (one in each process) are held at once
     assert clip["peak_sessions"] == 2
     lag = clip["frame_lag_ms"]
     assert math.isfinite(lag["max"]) and lag["p50"] <= lag["p99"] <= lag["max"]
