@@ -3,11 +3,12 @@
 Sketch: a connection handles one message at a time. While a message's work
 runs in the pool, the connection keeps receiving, so the WebSocket layer
 keeps reading the socket and answering pings (past ``read_window``'s
-window, it pauses reading until the app receives again). What it receives waits here, with its receipt time
-and its decoded message, until the work is done; then it is handled before
-anything newer. The queue is bounded (``max_messages``, ``max_bytes``, at
-least one message): when it is full the connection stops receiving until
-its work is done, which pushes back on the client.
+window, it pauses reading until the app receives again). What it receives
+waits here, with its receipt time and its decoded message, until the work
+is done; then it is handled before anything newer. The queue is bounded
+(``max_messages``, ``max_bytes``, at least one message): when it is full the
+connection stops receiving until its work is done, which pushes back on the
+client.
 """
 
 from __future__ import annotations

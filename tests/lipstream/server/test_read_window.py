@@ -63,7 +63,9 @@ def test_reading_pauses_at_the_window_and_resumes_once_the_app_has_taken_every_m
     asyncio.run(run())
 
 
-def test_a_message_larger_than_the_window_pauses_at_once_and_the_count_survives_a_disconnect() -> None:
+def test_a_message_larger_than_the_window_pauses_at_once_and_the_count_survives_a_disconnect() -> (
+    None
+):
     async def run() -> None:
         protocol, transport = _protocol(asyncio.get_running_loop())
         _arrive(protocol, b"a" * (READ_WINDOW_BYTES + 1))

@@ -16,21 +16,15 @@ numpy and interpreter steps this replaces.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit
 
-from ..base import _EPS
+from ..base import frame_count
 from .emission import causal_frames
 from .suffix_search import greedy_tiles
 from .track import CUT_CODE, FORWARD_CODE, SEAMLESS_CODE
 
-
-@njit(cache=True)
-def _frame_count(end_s: float, fps: float) -> int:
-    """``base.frame_count``: frames i = 0.. with i / fps <= end_s."""
-    return math.floor(end_s * fps + _EPS) + 1
+_frame_count = njit(cache=True)(frame_count)  # the same function, callable from the kernels
 
 
 @njit(cache=True)

@@ -25,12 +25,13 @@ a difference of about 1e-16 relative). Rule 1
 (pre(b) in the previous layer: φ(pre) + 0 starts the best) and Rule 4 (no predecessor:
 α1·PNT from the cheapest a) are taken without a scan.
 
-The fixed-lag stream's step (``lag_step``, for ``lag_search``) is this scan with the bar
-raised from the best to the best + ``SURE`` relative (the same pairs replace the best, in
-the same order), so it also knows whether the best beat every other predecessor by that
-margin; it keeps each best pair's cost terms, and takes the best predecessor of a node the
-last window's step found, won by the margin, and that descends from the committed node,
-summing its cost from the terms in the scan's order: the scan's value, bit for bit.
+The scan's bar is the best + ``SURE`` relative rather than the best: the same pairs
+replace the best, in the same order, and the scan also knows whether the best beat every
+other predecessor by that margin. ``fast_step`` ignores that; the fixed-lag stream's
+step (``lag_step``, for ``lag_search``) keeps each best pair's cost terms, and takes the
+best predecessor of a node the last window's step found, won by the margin, and that
+descends from the committed node, summing its cost from the terms in the scan's order:
+the scan's value, bit for bit.
 
 Memory reads, more than arithmetic, set a priced pair's time: it read rows of six arrays
 spread over the database. ``JoinRecords`` lays out, once per model at first use, each
@@ -159,36 +160,71 @@ def _dsc(leaving: np.ndarray, a: int, arriving: np.ndarray, b: int, dims: int) -
     return float(total * (interior + 1))
 
 
+SURE = 1e-9
+"""Relative margin by which a scanned node's best predecessor beats every other one for the
+fixed-lag search to reuse it in the next window (``lag_step``): far above the rounding of a
+window's sums (about 1e-15 relative), so a rerooted window that lowers every cost by one
+constant cannot reorder the two."""
+
+PRICED, NATURAL, UNCAPTURED = 0, 1, 2
+"""How a node's best predecessor was found (``lag_step``'s ``kind``): a priced pair, Rule 1
+(its captured predecessor, TC = 0) or Rule 4 (no captured predecessor: the cheapest one)."""
+
+
+@njit(cache=True, inline="always")
+def _margin(best: float) -> float:
+    return SURE * (abs(best) + 1.0)
+
+
 @njit(cache=True, inline="always")
 def _scan(
     members: np.ndarray, start: int, stop: int, penalty: float, best: float, arg: int,
-    b: int, p: int, prev_nodes: np.ndarray, prev_f: np.ndarray, viseme: np.ndarray,
-    leaving: np.ndarray, arriving: np.ndarray, dims: int, packed: np.ndarray,
-) -> tuple[float, int]:  # fmt: skip
-    """One viseme group (``members[start:stop]``, ascending φ), every pair adding ``penalty``."""
+    second: float, terms: np.ndarray, b: int, p: int, prev_nodes: np.ndarray,
+    prev_f: np.ndarray, viseme: np.ndarray, leaving: np.ndarray, arriving: np.ndarray,
+    dims: int, packed: np.ndarray,
+) -> tuple[float, int, float]:  # fmt: skip
+    """One viseme group (``members[start:stop]``, ascending φ), every pair adding
+    ``penalty``, priced up to a bar of the best + ``_margin``: the same pairs replace the
+    best, in the same order, as with the bar at the best, and ``second`` (the least other
+    cost seen) is exact below the bar, so the best wins by the margin iff ``second`` ≥ the
+    bar at the end. The best pair's terms of the cost, (α3·PGap, VGap, PNT or 0, α2·DSC),
+    go to ``terms``."""
+    bar = best + _margin(best)
     for k in range(start, stop):
         i = members[k]
         floor = prev_f[i] + penalty
-        if floor >= best:
+        if floor >= bar:
             break
         a = prev_nodes[i]
         if a == p:
             continue
-        budget = best - floor + SLACK * (abs(best) + 1.0)
+        budget = bar - floor + SLACK * (abs(bar) + 1.0)
         velocity = _velocity_squares(leaving, a, arriving, b, dims, budget * budget)
         if velocity >= budget * budget:
             continue
         position = _squares(leaving, a, arriving, b, dims, 2 * dims)
-        cost = prev_f[i] + packed[2] * math.sqrt(position) + math.sqrt(velocity)
-        if viseme[a] != viseme[p]:
+        gaps = packed[2] * math.sqrt(position)
+        speed = math.sqrt(velocity)
+        cost = prev_f[i] + gaps + speed
+        penalised = viseme[a] != viseme[p]
+        if penalised:
             cost += packed[3]
-        if cost >= best:
+        if cost >= bar:
             continue
-        cost += packed[1] * _dsc(leaving, a, arriving, b, dims)
+        smooth = packed[1] * _dsc(leaving, a, arriving, b, dims)
+        cost += smooth
         if cost < best:
+            second = min(second, best)
             best = cost
             arg = i
-    return best, arg
+            bar = best + _margin(best)
+            terms[0] = gaps
+            terms[1] = speed
+            terms[2] = packed[3] if penalised else 0.0
+            terms[3] = smooth
+        elif cost < second:
+            second = cost
+    return best, arg, second
 
 
 @njit(cache=True)
@@ -207,6 +243,7 @@ def fast_step(
     classes = len(starts) - 1
     f = np.empty(len(next_nodes))
     back = np.empty(len(next_nodes), dtype=np.int64)
+    terms = np.empty(4)  # the best pair's terms, which this step does not keep
     for j in range(len(next_nodes)):
         b = next_nodes[j]
         p = pre[b]
@@ -216,20 +253,21 @@ def fast_step(
             continue
         best = np.inf
         arg = 0
+        second = np.inf
         if position[p] >= 0:
             best = prev_f[position[p]]
             arg = position[p]
         own = viseme[p]
         if own < classes:
-            best, arg = _scan(
-                members, starts[own], starts[own + 1], 0.0, best, arg, b, p, prev_nodes,
-                prev_f, viseme, leaving, arriving, dims, packed,
+            best, arg, second = _scan(
+                members, starts[own], starts[own + 1], 0.0, best, arg, second, terms, b, p,
+                prev_nodes, prev_f, viseme, leaving, arriving, dims, packed,
             )  # fmt: skip
         for v in range(classes):
             if v != own and starts[v + 1] > starts[v]:
-                best, arg = _scan(
-                    members, starts[v], starts[v + 1], packed[3], best, arg, b, p,
-                    prev_nodes, prev_f, viseme, leaving, arriving, dims, packed,
+                best, arg, second = _scan(
+                    members, starts[v], starts[v + 1], packed[3], best, arg, second, terms, b,
+                    p, prev_nodes, prev_f, viseme, leaving, arriving, dims, packed,
                 )  # fmt: skip
         f[j] = best + next_u[j]
         back[j] = arg
@@ -384,71 +422,6 @@ def entry_costs(
     return f
 
 
-SURE = 1e-9
-"""Relative margin by which a scanned node's best predecessor beats every other one for the
-fixed-lag search to reuse it in the next window (``lag_step``): far above the rounding of a
-window's sums (about 1e-15 relative), so a rerooted window that lowers every cost by one
-constant cannot reorder the two."""
-
-PRICED, NATURAL, UNCAPTURED = 0, 1, 2
-"""How a node's best predecessor was found (``lag_step``'s ``kind``): a priced pair, Rule 1
-(its captured predecessor, TC = 0) or Rule 4 (no captured predecessor: the cheapest one)."""
-
-
-@njit(cache=True, inline="always")
-def _margin(best: float) -> float:
-    return SURE * (abs(best) + 1.0)
-
-
-@njit(cache=True, inline="always")
-def _scan_sure(
-    members: np.ndarray, start: int, stop: int, penalty: float, best: float, arg: int,
-    second: float, terms: np.ndarray, b: int, p: int, prev_nodes: np.ndarray,
-    prev_f: np.ndarray, viseme: np.ndarray, leaving: np.ndarray, arriving: np.ndarray,
-    dims: int, packed: np.ndarray,
-) -> tuple[float, int, float]:  # fmt: skip
-    """``_scan`` with the bar raised from the best to the best + ``_margin``: the same pairs
-    replace the best, in the same order, and ``second`` (the least other cost seen) is exact
-    below the bar, so the best wins by the margin iff ``second`` ≥ the bar at the end. The
-    best pair's terms of the cost, (α3·PGap, VGap, PNT or 0, α2·DSC), go to ``terms``."""
-    bar = best + _margin(best)
-    for k in range(start, stop):
-        i = members[k]
-        floor = prev_f[i] + penalty
-        if floor >= bar:
-            break
-        a = prev_nodes[i]
-        if a == p:
-            continue
-        budget = bar - floor + SLACK * (abs(bar) + 1.0)
-        velocity = _velocity_squares(leaving, a, arriving, b, dims, budget * budget)
-        if velocity >= budget * budget:
-            continue
-        position = _squares(leaving, a, arriving, b, dims, 2 * dims)
-        gaps = packed[2] * math.sqrt(position)
-        speed = math.sqrt(velocity)
-        cost = prev_f[i] + gaps + speed
-        penalised = viseme[a] != viseme[p]
-        if penalised:
-            cost += packed[3]
-        if cost >= bar:
-            continue
-        smooth = packed[1] * _dsc(leaving, a, arriving, b, dims)
-        cost += smooth
-        if cost < best:
-            second = min(second, best)
-            best = cost
-            arg = i
-            bar = best + _margin(best)
-            terms[0] = gaps
-            terms[1] = speed
-            terms[2] = packed[3] if penalised else 0.0
-            terms[3] = smooth
-        elif cost < second:
-            second = cost
-    return best, arg, second
-
-
 @njit(cache=True, inline="always")
 def _given(
     b: int, root: int, position: np.ndarray, old_position: np.ndarray, old_back: np.ndarray,
@@ -488,7 +461,7 @@ def lag_step(
     and ``old_position`` (N) are scratch, all −1, and left so. Returns, in ascending φ:
     nodes, φ, predecessor positions, sure (a scanned node's best predecessor won by the
     margin; a given one keeps the flag), kinds (``PRICED``, ``NATURAL``, ``UNCAPTURED``),
-    the best pair's cost terms (see ``_scan_sure``) and roots; and the nodes scanned."""
+    the best pair's cost terms (see ``_scan``) and roots; and the nodes scanned."""
     for i in range(len(prev_nodes)):
         position[prev_nodes[i]] = i
     for i in range(len(old_nodes)):
@@ -540,13 +513,13 @@ def lag_step(
         row = terms[j]
         start = arg
         if own < classes:
-            best, arg, second = _scan_sure(
+            best, arg, second = _scan(
                 members, starts[own], starts[own + 1], 0.0, best, arg, second, row, b, p,
                 prev_nodes, prev_f, viseme, leaving, arriving, dims, packed,
             )  # fmt: skip
         for v in range(classes):
             if v != own and starts[v + 1] > starts[v]:
-                best, arg, second = _scan_sure(
+                best, arg, second = _scan(
                     members, starts[v], starts[v + 1], packed[3], best, arg, second, row, b,
                     p, prev_nodes, prev_f, viseme, leaving, arriving, dims, packed,
                 )  # fmt: skip
