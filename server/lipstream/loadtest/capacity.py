@@ -301,23 +301,34 @@ def _number(value: float | None, digits: int = 1) -> str:
     return "-" if value is None else f"{value:.{digits}f}"
 
 
+def read_results(path: Path) -> dict[str, Any]:
+    """The capacity results file at ``path`` (an empty one when there is none yet);
+    LipstreamError ``invalid_results_file`` when it cannot be read or holds something else,
+    which a search must not overwrite."""
+    if not path.exists():
+        return {"searches": []}
+    try:
+        document = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as error:
+        raise LipstreamError(
+            f"cannot read the results file: {error}", where=str(path), code="invalid_results_file"
+        ) from None
+    if not isinstance(document, dict) or not isinstance(document.get("searches"), list):
+        raise LipstreamError(
+            "the file is not a capacity results file (no 'searches' list); choose another "
+            "--results rather than overwrite it",
+            where=str(path),
+            code="invalid_results_file",
+        )
+    return document
+
+
 def merge_results(path: Path, search: dict[str, Any]) -> dict[str, Any]:
     """The results file with ``search`` added, replacing a search with the same key."""
-    document: dict[str, Any] = {"searches": []}
-    if path.exists():
-        try:
-            document = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as error:
-            raise LipstreamError(
-                f"cannot read the results file: {error}",
-                where=str(path),
-                code="invalid_results_file",
-            ) from None
+    document = read_results(path)
     key = tuple(search.get(name) for name in _SEARCH_KEY)
     kept = [
-        old
-        for old in document.get("searches", [])
-        if tuple(old.get(name) for name in _SEARCH_KEY) != key
+        old for old in document["searches"] if tuple(old.get(name) for name in _SEARCH_KEY) != key
     ]
     return {
         "tool": f"lipstream loadtest capacity {__version__}",

@@ -123,8 +123,9 @@ def _loadtest(args: argparse.Namespace, settings: Settings) -> None:
 
 
 def _capacity(args: argparse.Namespace, settings: Settings) -> None:
-    from .capacity import CapacitySearch, find_capacity, record_search
+    from .capacity import CapacitySearch, find_capacity, read_results, record_search
 
+    read_results(Path(args.results))  # before minutes of searching, not after
     base = _config(args, settings, latency_budget_ms=args.latency_budget_ms)
     engines = _capacity_engines(base.url, args.engine, args.character, args.token)
     references: dict[Any, dict[str, Any]] = {}

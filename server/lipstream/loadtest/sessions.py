@@ -228,12 +228,12 @@ class _Session:
         except LipstreamServerError as error:
             record.error = error.code
         except ServerBusy as busy:
-            record.error = busy.error.code if busy.error else f"closed_{busy.code}"
+            record.error = refusal_code(busy)
             return busy
         except ConnectionClosed as error:
             record.error = error.error.code if error.error else f"closed_{error.code}"
         except HandshakeRejected as error:
-            record.error = f"http_{error.status}"
+            record.error = refusal_code(error)
             if error.retryable:
                 return error
         except TimeoutError:
@@ -317,7 +317,7 @@ async def probe_first_frames(plan: ClipPlan, share: ClipShare, running: Callable
             return
         except (ServerBusy, HandshakeRejected) as refused:
             if not refused.retryable or not _probing(plan, running):
-                share.probe_errors.append(_probe_error(refused))
+                share.probe_errors.append(refusal_code(refused))
                 return
             await asyncio.sleep(retry_delay_s(refused, attempt))
         except (OSError, LipstreamClientError) as error:
@@ -329,7 +329,9 @@ def _probing(plan: ClipPlan, running: Callable[[], bool]) -> bool:
     return running() and time.perf_counter() < plan.deadline
 
 
-def _probe_error(refused: ServerBusy | HandshakeRejected) -> str:
+def refusal_code(refused: ServerBusy | HandshakeRejected) -> str:
+    """The error key of a refused connection: the server's code, ``closed_<code>`` for a
+    close without one, ``http_<status>`` for a refused upgrade."""
     if isinstance(refused, HandshakeRejected):
         return f"http_{refused.status}"
     return refused.error.code if refused.error else f"closed_{refused.code}"

@@ -13,7 +13,7 @@ from typing import Any
 
 import pytest
 
-from lipstream.errors import InvalidRequestError
+from lipstream.errors import InvalidRequestError, LipstreamError
 from lipstream.loadtest.capacity import (
     CapacitySearch,
     check_search,
@@ -21,6 +21,7 @@ from lipstream.loadtest.capacity import (
     merge_results,
     next_probe,
     probe_summary,
+    record_search,
 )
 from lipstream.loadtest.load import LoadTestConfig, loadtest
 from lipstream.loadtest.reference import ReferenceTraffic
@@ -188,6 +189,23 @@ def test_searches_accumulate_in_one_file_by_key(tmp_path: Path) -> None:
     path.write_text(json.dumps(document))
     budgeted = merge_results(path, {**key, "latency_budget_ms": 20.0, "capacity_streams": 90})
     assert [s["capacity_streams"] for s in budgeted["searches"]] == [200, 575, 90]
+
+
+def test_a_results_file_of_another_shape_is_refused_not_overwritten(tmp_path: Path) -> None:
+    path = tmp_path / "figures.json"
+    original = json.dumps({"note": "hand-made figures", "two_workers": [{"streams": 150}]})
+    path.write_text(original)
+    with pytest.raises(LipstreamError) as refused:
+        merge_results(path, {"engine": "viseme-lerp", "capacity_streams": 400})
+    assert refused.value.code == "invalid_results_file" and refused.value.where == str(path)
+    path.write_text("[1, 2")
+    with pytest.raises(LipstreamError) as unreadable:
+        merge_results(path, {"engine": "viseme-lerp", "capacity_streams": 400})
+    assert unreadable.value.code == "invalid_results_file"
+    path.write_text(original)
+    with pytest.raises(LipstreamError):
+        record_search(path, {"engine": "viseme-lerp", "capacity_streams": 400})
+    assert path.read_text() == original
 
 
 def test_search_bounds_are_checked() -> None:
