@@ -158,7 +158,7 @@ class _Session:
         self.traces: dict[str, _Trace] = {}
         self.client: AsyncClient | None = None
         self._ids = itertools.count(1)
-        self._held: list[tuple[float, float]] = []
+        self._held: tuple[float, float] | None = None  # first ready, last done
 
     def on_message(self, message: ServerMessage, received_at: float) -> None:
         trace = self.traces.get(message.id or "")
@@ -187,13 +187,12 @@ class _Session:
                 record = await self._request()
                 self.share.records.append(record)
                 if (span := record.streaming_span) is not None:
-                    self._held.append(span)
+                    self._held = span if self._held is None else (self._held[0], span[1])
         finally:
             if self.client is not None:
                 await self.client.close()
-            if self._held:
-                # held from its first request's ready to its last one's done
-                self.share.session_spans.append((self._held[0][0], self._held[-1][1]))
+            if self._held is not None:
+                self.share.session_spans.append(self._held)
 
     async def _connected(self) -> AsyncClient:
         if self.client is None or self.client.closed is not None:
@@ -231,7 +230,7 @@ class _Session:
             record.error = refusal_code(busy)
             return busy
         except ConnectionClosed as error:
-            record.error = error.error.code if error.error else f"closed_{error.code}"
+            record.error = refusal_code(error)
         except HandshakeRejected as error:
             record.error = refusal_code(error)
             if error.retryable:
@@ -329,9 +328,9 @@ def _probing(plan: ClipPlan, running: Callable[[], bool]) -> bool:
     return running() and time.perf_counter() < plan.deadline
 
 
-def refusal_code(refused: ServerBusy | HandshakeRejected) -> str:
-    """The error key of a refused connection: the server's code, ``closed_<code>`` for a
-    close without one, ``http_<status>`` for a refused upgrade."""
+def refusal_code(refused: ConnectionClosed | HandshakeRejected) -> str:
+    """The error key of a closed or refused connection: the server's code, ``closed_<code>``
+    for a close without one, ``http_<status>`` for a refused upgrade."""
     if isinstance(refused, HandshakeRejected):
         return f"http_{refused.status}"
     return refused.error.code if refused.error else f"closed_{refused.code}"

@@ -77,6 +77,9 @@ def test_session_cap_refuses_with_1013_and_frees_on_close(lerp_dir: Path) -> Non
             assert connection_error(messages) == ("server_busy", True, None)
             assert (code, reason) == (1013, "server_busy")
             assert httpx.get(f"{served.http}/healthz").status_code == 200
+            metrics = httpx.get(f"{served.http}/metrics").text
+            assert 'lipstream_busy_refusals_total{reason="sessions"} 1.0' in metrics
+            assert 'reason="loop_busy"' not in metrics and 'reason="memory"' not in metrics
         deadline = time.monotonic() + 30
         while httpx.get(f"{served.http}/metrics").text.count("lipstream_sessions 0.0") == 0:
             assert time.monotonic() < deadline
