@@ -1,0 +1,159 @@
+"""``lipstream.bench.report``: the committed README and reports match bench/*.json, and
+the renderer writes what a results file holds, saying what it lacks."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+
+from lipstream.bench.report import (
+    BLOCKS,
+    NOT_RECORDED,
+    Bench,
+    UnknownBlock,
+    main,
+    render_text,
+    report_files,
+    stale,
+)
+from tests.helpers import REPO
+
+README_LIMIT_BYTES = 10_000
+
+
+def engine_row(engine: str, rms: float, ms: float, closure: float) -> dict[str, object]:
+    return {
+        "engine": engine,
+        "train_seconds": 1.0,
+        "ms_per_phoneme": ms,
+        "real_time_factor": ms / 100,
+        "rms_error": rms,
+        "closure_rate": closure,
+        "train_ratio": 1.0,
+        "speed_ratio": ms / 0.01,
+        "rms_ratio": rms / 0.2,
+        "closure_ratio": closure,
+    }
+
+
+@pytest.fixture
+def bench(tmp_path: Path) -> Bench:
+    """A results file with hand-picked figures, and streamed-call timings without
+    machine, date or command."""
+    results = {
+        "date": "2030-01-02T03:04:05+00:00",
+        "machine": {"python": "3.11.7", "system": "Linux"},
+        "corpus": {
+            "name": "toy",
+            "digest": "0123456789abcdef",
+            "fps": 60.0,
+            "train_utterances": 9,
+            "heldout_utterances": 1,
+        },
+        "recorded": {"closure_rate": 0.75},
+        "engines": [
+            engine_row("anime-graph", 0.1, 0.05, 0.5),
+            engine_row("viseme-lerp", 0.2, 0.01, 1.0),
+        ],
+        "rungs": [
+            {
+                "engine": "viseme-lerp",
+                "rung": "causal",
+                "lookahead_ms": 0.0,
+                "rms_error": 0.25,
+                "closure_rate": 1.0,
+                "rms_vs_best": 0.03,
+            }
+        ],
+    }
+    calls = [
+        {
+            "engine": "viseme-lerp",
+            "rung": "causal",
+            "calls": 5,
+            "median_us": 12.4,
+            "p90_us": 20.0,
+            "mean_us": 13.0,
+        }
+    ]
+    (tmp_path / "results.json").write_text(json.dumps(results))
+    (tmp_path / "stream_calls.json").write_text(json.dumps(calls))
+    return Bench(tmp_path)
+
+
+def test_summary_rows_hold_the_results_figures(bench: Bench) -> None:
+    rendered = BLOCKS["engines-summary"](bench)
+    rows = [line for line in rendered.splitlines() if line.startswith("| `")]
+    # the baseline first, whatever the file's order; streamed call only where measured
+    assert rows[0].startswith("| `viseme-lerp` |")
+    assert "| 0.2000 (1.00) | 100.0% | 0.0100 (1.0×) | 12 µs |" in rows[0]
+    assert rows[1].startswith("| `anime-graph` |")
+    assert "| 0.1000 (0.50) | 50.0% | 0.0500 (5.0×) | – |" in rows[1]
+    assert "close on 75.0% of /p b m/" in rendered
+
+
+def test_source_line_names_what_the_file_lacks(bench: Bench) -> None:
+    engines = BLOCKS["engines"](bench)
+    assert engines.startswith(
+        "Source: `bench/results.json`; machine: python 3.11.7, system Linux; "
+        f"date: 2030-01-02T03:04:05+00:00; command: {NOT_RECORDED}."
+    )
+    calls = BLOCKS["stream-calls"](bench)
+    assert calls.startswith(
+        f"Source: `bench/stream_calls.json`; machine: {NOT_RECORDED}; date: {NOT_RECORDED}; "
+        f"command: {NOT_RECORDED}."
+    )
+
+
+def test_render_replaces_only_block_bodies(bench: Bench) -> None:
+    text = "intro 1.5 ms\n<!-- report: stream-calls -->\nold figures\n<!-- /report -->\noutro\n"
+    rendered = render_text(text, bench)
+    assert rendered.startswith("intro 1.5 ms\n<!-- report: stream-calls -->\n")
+    assert rendered.endswith("\n<!-- /report -->\noutro\n")
+    assert "old figures" not in rendered and "| `viseme-lerp` | `causal` | 5 | 12.4 |" in rendered
+    assert render_text(rendered, bench) == rendered
+
+
+def test_an_unknown_block_is_an_error(bench: Bench) -> None:
+    with pytest.raises(UnknownBlock, match="nope"):
+        render_text("<!-- report: nope -->\n<!-- /report -->\n", bench, "page.md")
+
+
+def test_check_finds_a_figure_edited_by_hand(tmp_path: Path) -> None:
+    shutil.copytree(REPO / "bench", tmp_path / "bench")
+    (tmp_path / "docs").mkdir()
+    readme = (REPO / "README.md").read_text(encoding="utf-8")
+    (tmp_path / "README.md").write_text(readme, encoding="utf-8")
+    assert stale(tmp_path) == []
+    block = readme[readme.index("<!-- report: engines-summary -->") :]
+    figure = re.search(r"\| (0\.\d{4}) \(", block)
+    assert figure
+    edited = readme.replace(figure.group(0), "| 0.0001 (", 1)
+    (tmp_path / "README.md").write_text(edited, encoding="utf-8")
+    assert stale(tmp_path) == [tmp_path / "README.md"]
+    assert main(["--repo", str(tmp_path), "--check"]) == 1
+    assert main(["--repo", str(tmp_path)]) == 0
+    assert (tmp_path / "README.md").read_text(encoding="utf-8") == readme
+
+
+def test_committed_readme_and_reports_match_the_bench_files() -> None:
+    """Re-rendering bench/*.json changes nothing: run ``python -m lipstream.bench.report``
+    after changing a results file."""
+    assert stale(REPO) == []
+
+
+def test_readme_figures_are_rendered() -> None:
+    files = report_files(REPO)
+    assert REPO / "README.md" in files
+    readme = (REPO / "README.md").read_text(encoding="utf-8")
+    assert "<!-- report: engines-summary -->" in readme
+
+
+def test_readme_is_a_front_page() -> None:
+    readme = (REPO / "README.md").read_bytes()
+    assert len(readme) <= README_LIMIT_BYTES, len(readme)
+    assert re.search(rb"20\d\d-\d\d-\d\d", readme) is None, "a dated figure belongs in a report"
