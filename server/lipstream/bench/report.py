@@ -2,8 +2,9 @@
 
 Sketch: a Markdown file holds report blocks, each between ``<!-- report: NAME -->``
 and ``<!-- /report -->``; ``BLOCKS[NAME]`` renders that block's body from the bench
-directory, opening with where its figures come from (file, machine, date, command,
-and "not recorded" for what the file lacks). ``render_text`` replaces every block
+directory, opening with where its figures come from: file, machine, date and command, each
+from the file itself, else from ``bench/provenance.json`` (marked "recovered": what
+the commit that added the file recorded), else "not recorded". ``render_text`` replaces every block
 of a text; ``python -m lipstream.bench.report`` rewrites the README and every page
 under docs/ in place, and ``--check`` only lists the files whose blocks differ from
 a fresh rendering (exit 1), so committed figures cannot drift from the JSON.
@@ -23,6 +24,8 @@ from typing import Any
 
 BLOCK = re.compile(r"(<!-- report: ([\w-]+) -->\n)(.*?)(<!-- /report -->)", re.DOTALL)
 NOT_RECORDED = "not recorded"
+RECOVERED = "recovered"
+PROVENANCE = "provenance.json"
 ENGINE_ORDER = ("viseme-lerp", "anime-graph", "dam", "cohen-massaro", "hmm", "expressive-dp")
 METHODS = {
     "viseme-lerp": "static viseme key poses, linear between phoneme centres: the baseline",
@@ -43,6 +46,19 @@ class Bench:
     def load(self, name: str) -> Any:
         return json.loads((self.directory / name).read_text(encoding="utf-8"))
 
+    def provenance(self, name: str) -> dict[str, Any]:
+        """What ``provenance.json`` recovered for ``name``: machine, date, command, labels."""
+        path = self.directory / PROVENANCE
+        if not path.is_file():
+            return {}
+        files = json.loads(path.read_text(encoding="utf-8")).get("files", {})
+        entry = files.get(name, {})
+        return entry if isinstance(entry, dict) else {}
+
+    def source(self, name: str, doc: Any) -> str:
+        """``source`` of ``name``, with what provenance.json recovered for it."""
+        return source(name, doc, self.provenance(name))
+
 
 def number(value: float, digits: int = 1) -> str:
     """``value`` rounded to ``digits`` decimals, with a true minus sign kept as ``-``."""
@@ -59,16 +75,29 @@ def table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _machine(doc: Any) -> str:
+def _machine(doc: Any, recovered: dict[str, Any]) -> str:
     machine = doc.get("machine") if isinstance(doc, dict) else None
-    if not isinstance(machine, dict):
-        return NOT_RECORDED
-    return ", ".join(f"{key} {value}" for key, value in machine.items())
+    if isinstance(machine, dict):
+        return ", ".join(f"{key} {value}" for key, value in machine.items())
+    if recovered.get("machine"):
+        return f"{recovered['machine']} ({RECOVERED})"
+    return NOT_RECORDED
 
 
-def _command(doc: Any) -> str:
+def _date(doc: Any, recovered: dict[str, Any]) -> str:
+    date = doc.get("date") if isinstance(doc, dict) else None
+    if date:
+        return str(date)
+    if recovered.get("date"):
+        return f"{recovered['date']} ({RECOVERED})"
+    return NOT_RECORDED
+
+
+def _command(doc: Any, recovered: dict[str, Any]) -> str:
     if isinstance(doc, dict) and doc.get("command"):
         return f"`{doc['command']}`"
+    if recovered.get("command"):
+        return f"`{recovered['command']}` ({RECOVERED})"
     if isinstance(doc, dict) and doc.get("tool"):
         return f"{NOT_RECORDED} (tool `{doc['tool']}`; its options are the file's `config`)"
     return NOT_RECORDED
@@ -80,12 +109,13 @@ def _notes(doc: Any) -> list[str]:
     return [f"{key}: {value}" for key, value in doc.items() if "note" in key and value]
 
 
-def source(name: str, doc: Any) -> str:
-    """Where a block's figures come from: file, machine, date, command, recorded notes."""
-    date = doc.get("date") if isinstance(doc, dict) else None
+def source(name: str, doc: Any, recovered: dict[str, Any] | None = None) -> str:
+    """Where a block's figures come from: file, machine, date, command, recorded notes.
+    ``recovered`` fills in what the file lacks (``Bench.provenance``)."""
+    known = recovered or {}
     line = (
-        f"Source: `bench/{name}`; machine: {_machine(doc)}; date: {date or NOT_RECORDED}; "
-        f"command: {_command(doc)}.\n"
+        f"Source: `bench/{name}`; machine: {_machine(doc, known)}; "
+        f"date: {_date(doc, known)}; command: {_command(doc, known)}.\n"
     )
     notes = _notes(doc)
     if notes:
@@ -142,7 +172,7 @@ def engines(bench: Bench) -> str:
     """Every engine's figures from ``lipstream bench``, each with the run it comes from."""
     results = bench.load("results.json")
     corpus = results["corpus"]
-    text = source("results.json", results)
+    text = bench.source("results.json", results)
     text += (
         f"Corpus `{corpus['name']}` (digest `{corpus['digest'][:12]}`, {corpus['fps']:g} fps): "
         f"{corpus['train_utterances']} training and {corpus['heldout_utterances']} held-out "
@@ -212,7 +242,7 @@ def engines(bench: Bench) -> str:
 
 def stream_calls(bench: Bench) -> str:
     calls = bench.load("stream_calls.json")
-    return source("stream_calls.json", calls) + table(
+    return bench.source("stream_calls.json", calls) + table(
         ["engine", "rung", "calls", "median µs", "p90 µs", "mean µs"],
         (
             [
@@ -230,7 +260,7 @@ def stream_calls(bench: Bench) -> str:
 
 def lead0(bench: Bench) -> str:
     rows = bench.load("lead0_rungs.json")
-    return source("lead0_rungs.json", rows) + table(
+    return bench.source("lead0_rungs.json", rows) + table(
         [
             "engine",
             "rung",
@@ -255,7 +285,7 @@ def lead0(bench: Bench) -> str:
 
 def hmm_first_frame(bench: Bench) -> str:
     doc = bench.load("hmm_first_frame.json")
-    text = source("hmm_first_frame.json", doc)
+    text = bench.source("hmm_first_frame.json", doc)
     text += (
         f"Utterance `{doc['utterance']}` ({doc['audio_s']:.2f} s of audio) sent alone in "
         f"{doc['chunk_ms']:g} ms chunks at real time, {doc['fps']:g} fps:\n\n"
@@ -341,7 +371,7 @@ def _capacity(name: str, key: str = "searches") -> Callable[[Bench], str]:
         searches = doc[key]
         first = searches[0]
         budget = first.get("latency_budget_ms")
-        text = source(name, doc)
+        text = bench.source(name, doc)
         text += (
             f"{first['fps']:g} fps, {first['clip_s']:g} s clips, phonemes sent "
             f"{first['lead_ms']:g} ms early, "
@@ -355,7 +385,7 @@ def _capacity(name: str, key: str = "searches") -> Callable[[Bench], str]:
 
 def capacity_workers(bench: Bench) -> str:
     doc = bench.load("capacity_workers.json")
-    text = source("capacity_workers.json", doc)
+    text = bench.source("capacity_workers.json", doc)
     for key in ("two_workers", "ray_serve_two_replicas"):
         if doc.get(key):
             text += f"`{key}`:\n\n" + table(CAPACITY_HEADER, _capacity_rows(doc[key])) + "\n"
@@ -365,7 +395,7 @@ def capacity_workers(bench: Bench) -> str:
 def loadtest(bench: Bench) -> str:
     doc = bench.load("loadtest.json")
     config = doc["config"]
-    text = source("loadtest.json", doc)
+    text = bench.source("loadtest.json", doc)
     text += (
         f"{config['streams']} sessions, {config['requests']} requests per clip, "
         f"`{config['engine']}` at {config['fps']:g} fps, phonemes sent {config['lead_ms']:g} ms "
@@ -396,7 +426,7 @@ def loadtest(bench: Bench) -> str:
 
 def scale_out(bench: Bench) -> str:
     memory = bench.load("workers_memory.json")
-    text = source("workers_memory.json", memory)
+    text = bench.source("workers_memory.json", memory)
     rows = []
     for workers, processes in memory.items():
         served = [process for process in processes if process["role"] == "worker"]
@@ -413,7 +443,7 @@ def scale_out(bench: Bench) -> str:
         rows,
     )
     resume = bench.load("resume_time.json")
-    text += "\n" + source("resume_time.json", resume)
+    text += "\n" + bench.source("resume_time.json", resume)
     text += table(
         ["utterances", "resume p50 ms", "resume max ms", "frames lost", "frames duplicated"],
         [
@@ -427,11 +457,18 @@ def scale_out(bench: Bench) -> str:
         ],
     )
     proxy = bench.load("proxy_latency.json")
-    text += "\n" + source("proxy_latency.json", proxy)
+    text += "\n" + bench.source("proxy_latency.json", proxy)
+    labels = bench.provenance("proxy_latency.json").get("labels", {})
     return text + table(
-        ["URL", "blocks", "round trip p50 ms", "p99 ms"],
+        ["URL", "what serves it", "blocks", "round trip p50 ms", "p99 ms"],
         (
-            [f"`{url}`", str(row["blocks"]), number(row["p50_ms"]), number(row["p99_ms"])]
+            [
+                f"`{url}`",
+                labels.get(url, NOT_RECORDED),
+                str(row["blocks"]),
+                number(row["p50_ms"]),
+                number(row["p99_ms"]),
+            ]
             for url, row in proxy.items()
         ),
     )
@@ -442,7 +479,7 @@ def soak(bench: Bench) -> str:
     config = doc["config"]
     valid = doc["valid"]
     healthz = doc["healthz"]
-    text = source("soak.json", doc)
+    text = bench.source("soak.json", doc)
     text += (
         f"{config['duration_s']:g} s; {config['valid_sessions']} valid `{config['engine']}` "
         f"sessions at a time ({config['clip_s']:g} s clips, {config['fps']:g} fps, phonemes "
@@ -490,7 +527,7 @@ def soak(bench: Bench) -> str:
 
 def storm(bench: Bench) -> str:
     doc = bench.load("storm.json")
-    text = source("storm.json", doc)
+    text = bench.source("storm.json", doc)
     rows = []
     for run, row in doc.items():
         if not isinstance(row, dict):
