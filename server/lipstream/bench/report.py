@@ -46,6 +46,9 @@ class Bench:
     def load(self, name: str) -> Any:
         return json.loads((self.directory / name).read_text(encoding="utf-8"))
 
+    def exists(self, name: str) -> bool:
+        return (self.directory / name).is_file()
+
     def provenance(self, name: str) -> dict[str, Any]:
         """What ``provenance.json`` recovered for ``name``: machine, date, command, labels."""
         path = self.directory / PROVENANCE
@@ -555,7 +558,45 @@ def storm(bench: Bench) -> str:
     )
 
 
+FIRST_START = "first_start.json"
+
+
+def _seconds(value: float) -> str:
+    return f"{value:.1f} s"
+
+
+def first_start_summary(bench: Bench) -> str:
+    """The README's line on start-up time, from ``first_start.json`` when it exists."""
+    link = "[docs/reports/first-start.md](docs/reports/first-start.md)"
+    if not bench.exists(FIRST_START):
+        return f"Phase times of a first and a later start: {link}.\n"
+    starts = bench.load(FIRST_START)["starts"]
+    told = "; ".join(f"{start['start']} start {_seconds(start['total_s'])}" for start in starts)
+    return f"Measured with `lipstream serve`: {told} (each phase, machine and date: {link}).\n"
+
+
+def first_start(bench: Bench) -> str:
+    """Each phase of a first start (empty ``$LIPSTREAM_HOME``) and of a later one."""
+    if not bench.exists(FIRST_START):
+        return (
+            f"Not measured yet: no `bench/{FIRST_START}`. Its shape: `machine`, `date`, "
+            "`command`, and `starts`, a list of `{start, total_s, phases: {name: seconds}}`.\n"
+        )
+    doc = bench.load(FIRST_START)
+    text = bench.source(FIRST_START, doc)
+    for start in doc["starts"]:
+        text += f"{start['start'].capitalize()} start, {_seconds(start['total_s'])} in all:\n\n"
+        text += table(
+            ["phase", "seconds"],
+            ([f"`{name}`", f"{seconds:.1f}"] for name, seconds in start["phases"].items()),
+        )
+        text += "\n"
+    return text
+
+
 BLOCKS: dict[str, Callable[[Bench], str]] = {
+    "first-start-summary": first_start_summary,
+    "first-start": first_start,
     "engines-summary": engines_summary,
     "engines": engines,
     "stream-calls": stream_calls,

@@ -157,3 +157,51 @@ def test_readme_is_a_front_page() -> None:
     readme = (REPO / "README.md").read_bytes()
     assert len(readme) <= README_LIMIT_BYTES, len(readme)
     assert re.search(rb"20\d\d-\d\d-\d\d", readme) is None, "a dated figure belongs in a report"
+
+
+def test_provenance_fills_in_only_what_a_file_lacks(bench: Bench) -> None:
+    recovered = {
+        "results.json": {"date": "1999-01-01", "command": "lipstream bench --results x.json"},
+        "stream_calls.json": {"machine": "a 2-core box", "date": "2030-02-03"},
+    }
+    (bench.directory / "provenance.json").write_text(json.dumps({"files": recovered}))
+    engines = BLOCKS["engines"](bench)
+    # the file's own date wins; the command it lacks is recovered, and says so
+    assert engines.startswith(
+        "Source: `bench/results.json`; machine: python 3.11.7, system Linux; "
+        "date: 2030-01-02T03:04:05+00:00; "
+        "command: `lipstream bench --results x.json` (recovered)."
+    )
+    calls = BLOCKS["stream-calls"](bench)
+    assert calls.startswith(
+        "Source: `bench/stream_calls.json`; machine: a 2-core box (recovered); "
+        f"date: 2030-02-03 (recovered); command: {NOT_RECORDED}."
+    )
+
+
+def test_first_start_renders_each_phase(bench: Bench) -> None:
+    assert "Not measured yet" in BLOCKS["first-start"](bench)
+    doc = {
+        "date": "2030-03-04",
+        "command": "lipstream serve",
+        "starts": [
+            {"start": "first", "total_s": 48.25, "phases": {"speech": 9.04, "train": 30.0}},
+            {"start": "later", "total_s": 3.5, "phases": {"load": 3.5}},
+        ],
+    }
+    (bench.directory / "first_start.json").write_text(json.dumps(doc))
+    assert BLOCKS["first-start-summary"](bench).startswith(
+        "Measured with `lipstream serve`: first start 48.2 s; later start 3.5 s ("
+    )
+    rendered = BLOCKS["first-start"](bench)
+    assert "First start, 48.2 s in all:" in rendered and "Later start, 3.5 s in all:" in rendered
+    assert "| `speech` | 9.0 |" in rendered and "| `train` | 30.0 |" in rendered
+
+
+def test_every_results_file_is_rendered() -> None:
+    """A results file added to bench/ needs a report block: its figures are otherwise
+    unread data or, worse, hand-copied into prose."""
+    rendered = "".join(path.read_text(encoding="utf-8") for path in report_files(REPO))
+    shown = set(re.findall(r"Source: `bench/([\w.-]+\.json)`", rendered))
+    results = {path.name for path in (REPO / "bench").glob("*.json")} - {"provenance.json"}
+    assert results - shown == set()
