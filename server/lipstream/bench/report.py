@@ -427,11 +427,22 @@ def loadtest(bench: Bench) -> str:
     )
 
 
+def _measured(doc: dict[str, Any], kind: type) -> list[tuple[str, Any]]:
+    """The entries of a file keyed by what was measured (worker counts, URLs, runs),
+    without its machine, date, command or notes."""
+    skip = {"machine", "date", "command", "tool"}
+    return [
+        (key, value)
+        for key, value in doc.items()
+        if isinstance(value, kind) and key not in skip and "note" not in key
+    ]
+
+
 def scale_out(bench: Bench) -> str:
     memory = bench.load("workers_memory.json")
     text = bench.source("workers_memory.json", memory)
     rows = []
-    for workers, processes in memory.items():
+    for workers, processes in _measured(memory.get("workers", memory), list):
         served = [process for process in processes if process["role"] == "worker"]
         rows.append(
             [
@@ -472,7 +483,7 @@ def scale_out(bench: Bench) -> str:
                 number(row["p50_ms"]),
                 number(row["p99_ms"]),
             ]
-            for url, row in proxy.items()
+            for url, row in _measured(proxy, dict)
         ),
     )
 
@@ -532,9 +543,7 @@ def storm(bench: Bench) -> str:
     doc = bench.load("storm.json")
     text = bench.source("storm.json", doc)
     rows = []
-    for run, row in doc.items():
-        if not isinstance(row, dict):
-            continue
+    for run, row in _measured(doc, dict):
         rows.append(
             [
                 f"`{run}`",
@@ -542,7 +551,11 @@ def storm(bench: Bench) -> str:
                 ", ".join(f"{outcome} {n}" for outcome, n in row["outcomes"].items()),
                 f"{row['probes'] - row['probes_failed']} of {row['probes']}",
                 f"{row['slowest_probe_ms']:.0f}",
-                f"{1000 * row['lag_p50_s']:g} / {1000 * row['lag_p99_s']:g}",
+                (
+                    f"{1000 * row['lag_p50_s']:g} / {1000 * row['lag_p99_s']:g}"
+                    if "lag_p99_s" in row
+                    else "–"
+                ),
             ]
         )
     return text + table(
