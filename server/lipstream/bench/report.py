@@ -441,6 +441,11 @@ def _measured(doc: dict[str, Any], kind: type) -> list[tuple[str, Any]]:
 def scale_out(bench: Bench) -> str:
     memory = bench.load("workers_memory.json")
     text = bench.source("workers_memory.json", memory)
+    models = memory.get("models")
+    if isinstance(models, list) and models:
+        engines = ", ".join(f"`{model['engine']}`" for model in models)
+        megabytes = sum(model["bytes"] for model in models) / 1e6
+        text += f"Models loaded: {engines} ({megabytes:.0f} MB of model files).\n\n"
     rows = []
     for workers, processes in _measured(memory.get("workers", memory), list):
         served = [process for process in processes if process["role"] == "worker"]

@@ -205,3 +205,44 @@ def test_every_results_file_is_rendered() -> None:
     shown = set(re.findall(r"Source: `bench/([\w.-]+\.json)`", rendered))
     results = {path.name for path in (REPO / "bench").glob("*.json")} - {"provenance.json"}
     assert results - shown == set()
+
+
+def test_workers_memory_in_either_shape(tmp_path: Path) -> None:
+    """The file as first written (worker counts at the top) and with its machine, date,
+    command and models beside ``workers`` render the same table."""
+    processes = {
+        "1": [{"pid": 1, "role": "worker", "rss_mib": 300.4, "pss_mib": 280.2}],
+        "2": [
+            {"pid": 2, "role": "supervisor", "rss_mib": 265.0, "pss_mib": 181.0},
+            {"pid": 3, "role": "worker", "rss_mib": 297.0, "pss_mib": 202.0},
+            {"pid": 4, "role": "worker", "rss_mib": 298.0, "pss_mib": 203.0},
+        ],
+    }
+    stamped = {
+        "date": "2030-04-05T06:07:08+00:00",
+        "command": "python -m lipstream.bench.workers_memory --models M --workers 1 2",
+        "machine": {"cpus": 2},
+        "models": [{"name": "a", "engine": "dam", "bytes": 3_000_000}],
+        "workers": processes,
+    }
+    tables = []
+    for doc in (processes, stamped):
+        (tmp_path / "workers_memory.json").write_text(json.dumps(doc))
+        (tmp_path / "resume_time.json").write_text(
+            json.dumps(
+                {
+                    "utterances": 2,
+                    "resume_ms_p50": 1.0,
+                    "resume_ms_max": 2.0,
+                    "frames_lost": 0,
+                    "frames_duplicated": 0,
+                }
+            )
+        )
+        (tmp_path / "proxy_latency.json").write_text(json.dumps({}))
+        rendered = BLOCKS["scale-out"](Bench(tmp_path))
+        memory_table = rendered[: rendered.index("bench/resume_time.json")]
+        tables.append([line for line in memory_table.splitlines() if re.match(r"\| \d", line)])
+    assert tables[0] == tables[1] == ["| 1 | 300 | 280 | 280 |", "| 2 | 298 | 203 | 586 |"]
+    assert "date: 2030-04-05T06:07:08+00:00" in rendered
+    assert "Models loaded: `dam` (3 MB of model files)." in rendered
