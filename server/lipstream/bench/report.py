@@ -120,9 +120,9 @@ def source(name: str, doc: Any, recovered: dict[str, Any] | None = None) -> str:
         f"Source: `bench/{name}`; machine: {_machine(doc, known)}; "
         f"date: {_date(doc, known)}; command: {_command(doc, known)}.\n"
     )
-    notes = _notes(doc)
+    notes = _notes(doc) + [f"{note} ({RECOVERED})" for note in _notes(known)]
     if notes:
-        line += "Notes recorded in the file:\n\n" + "".join(f"- {note}\n" for note in notes)
+        line += "Notes:\n\n" + "".join(f"- {note}\n" for note in notes)
     return line + "\n"
 
 
