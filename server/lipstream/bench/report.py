@@ -636,6 +636,21 @@ class UnknownBlock(ValueError):
     """A ``<!-- report: NAME -->`` marker whose NAME no renderer has."""
 
 
+class UnreadableResults(ValueError):
+    """A results file that lacks what its block's renderer reads, or is not JSON."""
+
+
+def render_block(name: str, bench: Bench, where: str) -> str:
+    try:
+        return BLOCKS[name](bench)
+    except (KeyError, TypeError, ValueError, OSError) as error:
+        raise UnreadableResults(
+            f"{where}: report block {name!r} ({BLOCKS[name].__name__} in "
+            f"lipstream/bench/report.py) cannot read {bench.directory}: "
+            f"{type(error).__name__}: {error}"
+        ) from error
+
+
 def render_text(text: str, bench: Bench, where: str = "text") -> str:
     """``text`` with the body of every report block rendered afresh."""
 
@@ -643,7 +658,8 @@ def render_text(text: str, bench: Bench, where: str = "text") -> str:
         name = match.group(2)
         if name not in BLOCKS:
             raise UnknownBlock(f"{where}: no report block named {name!r}; known: {sorted(BLOCKS)}")
-        return match.group(1) + "\n" + BLOCKS[name](bench).strip("\n") + "\n\n" + match.group(4)
+        rendered = render_block(name, bench, where)
+        return match.group(1) + "\n" + rendered.strip("\n") + "\n\n" + match.group(4)
 
     return BLOCK.sub(replace, text)
 
@@ -674,18 +690,26 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--check", action="store_true", help="change nothing; exit 1 if a block is out of date"
     )
     args = parser.parse_args(argv)
-    repo: Path = args.repo
-    if args.check:
+    try:
+        return _run(args.repo, args.check)
+    except (UnknownBlock, UnreadableResults) as error:
+        print(error, file=sys.stderr)
+        return 2
+
+
+def _run(repo: Path, check: bool) -> int:
+    if check:
         out_of_date = stale(repo)
         for path in out_of_date:
             print(f"{path}: report blocks differ from bench/*.json", file=sys.stderr)
         return 1 if out_of_date else 0
     bench = Bench(repo / "bench")
-    for path in report_files(repo):
-        text = path.read_text(encoding="utf-8")
-        rendered = render_text(text, bench, str(path))
-        if rendered != text:
-            path.write_text(rendered, encoding="utf-8")
+    pages = {path: path.read_text(encoding="utf-8") for path in report_files(repo)}
+    # every page rendered before any is written: a file that cannot be read changes nothing
+    rendered = {path: render_text(text, bench, str(path)) for path, text in pages.items()}
+    for path, text in rendered.items():
+        if text != pages[path]:
+            path.write_text(text, encoding="utf-8")
             print(f"rendered {path}")
     return 0
 

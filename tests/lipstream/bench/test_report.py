@@ -246,3 +246,21 @@ def test_workers_memory_in_either_shape(tmp_path: Path) -> None:
     assert tables[0] == tables[1] == ["| 1 | 300 | 280 | 280 |", "| 2 | 298 | 203 | 586 |"]
     assert "date: 2030-04-05T06:07:08+00:00" in rendered
     assert "Models loaded: `dam` (3 MB of model files)." in rendered
+
+
+def test_a_results_file_it_cannot_read_changes_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    shutil.copytree(REPO / "bench", tmp_path / "bench")
+    reports = tmp_path / "docs" / "reports"
+    reports.mkdir(parents=True)
+    (tmp_path / "README.md").write_text("no blocks\n", encoding="utf-8")
+    # a.md renders (and is out of date); b.md's results file lacks what its block reads
+    stale_page = "<!-- report: storm -->\nold\n<!-- /report -->\n"
+    (reports / "a.md").write_text(stale_page, encoding="utf-8")
+    (reports / "b.md").write_text("<!-- report: soak -->\n<!-- /report -->\n", encoding="utf-8")
+    (tmp_path / "bench" / "soak.json").write_text('{"config": {}}')
+    assert main(["--repo", str(tmp_path)]) == 2
+    error = capsys.readouterr().err
+    assert "b.md: report block 'soak' (soak in" in error and "KeyError" in error
+    assert (reports / "a.md").read_text(encoding="utf-8") == stale_page
