@@ -2,21 +2,91 @@
 
 from __future__ import annotations
 
+import asyncio
 import os
+import selectors
 import socket
 import subprocess
 import sys
+import time
+from collections.abc import Callable, Coroutine
 from pathlib import Path
+from typing import Any, TypeVar
 
 REPO = Path(__file__).resolve().parents[1]
 # Real Live Link Face exports, when present: .ci/run points it at ../shared/data/livelink-face.
 LIVELINK_DIR_VARIABLE = "LIPSTREAM_LIVELINK_DIR"
+# A wait is a number of polls, not a speed: a minute of pauses, generous on a loaded machine.
+EVENTUALLY_POLLS = 3000
+EVENTUALLY_PAUSE_S = 0.02
+T = TypeVar("T")
+
+
+def eventually(
+    condition: Callable[[], T],
+    what: str,
+    polls: int = EVENTUALLY_POLLS,
+    pause_s: float = EVENTUALLY_PAUSE_S,
+) -> T:
+    """The first truthy value of ``condition()``, asked up to ``polls`` times ``pause_s``
+    apart. It fails the test only when the condition never held, however long each poll
+    took: a bound on waiting, not on speed."""
+    for _ in range(polls):
+        value = condition()
+        if value:
+            return value
+        time.sleep(pause_s)
+    raise AssertionError(f"never held in {polls} polls {pause_s:g} s apart: {what}")
 
 
 def real_livelink_takes() -> list[Path]:
     """The ``*.csv`` exports in ``$LIPSTREAM_LIVELINK_DIR``; none when the variable is unset."""
     directory = os.environ.get(LIVELINK_DIR_VARIABLE, "").strip()
     return sorted(Path(directory).glob("*.csv")) if directory else []
+
+
+class VirtualClock:
+    """Loop time for ``run_on_virtual_time``: it stands still while callbacks run, and a test
+    may move it on by hand (``now``) to stand for a loop held up."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def time(self) -> float:
+        return self.now
+
+
+class _JumpingSelector(selectors.DefaultSelector):  # type: ignore[misc,valid-type]
+    """Where the loop would sleep until its next timer, the clock jumps there instead."""
+
+    def __init__(self, clock: VirtualClock) -> None:
+        super().__init__()
+        self.clock = clock
+
+    def select(self, timeout: float | None = None) -> list[tuple[Any, int]]:
+        ready: list[tuple[Any, int]] = super().select(0)
+        if ready or timeout == 0:
+            return ready
+        if timeout is None:  # no timer at all: only real I/O can wake the loop
+            waited: list[tuple[Any, int]] = super().select(None)
+            return waited
+        self.clock.now += timeout
+        return ready
+
+
+def run_on_virtual_time(
+    scenario: Callable[[VirtualClock], Coroutine[Any, Any, T]],
+) -> T:
+    """Run ``scenario(clock)`` on an event loop whose ``time()`` is ``clock``: timers fire
+    in their order at exactly their due times, however slow the machine, and no test waits
+    for them in wall time."""
+    clock = VirtualClock()
+    loop = asyncio.SelectorEventLoop(_JumpingSelector(clock))
+    loop.time = clock.time  # type: ignore[method-assign]
+    try:
+        return loop.run_until_complete(scenario(clock))
+    finally:
+        loop.close()
 
 
 def run_cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:

@@ -19,12 +19,12 @@ from typing import TYPE_CHECKING
 import httpx
 from prometheus_client.multiprocess import MultiProcessCollector
 
-from tests.helpers import free_port, serve_command
+from tests.helpers import EVENTUALLY_PAUSE_S, eventually, free_port, serve_command
 
 if TYPE_CHECKING:
     from lipstream.engines.base import Model
 
-READY_TIMEOUT_S = 120.0  # a bound on a busy machine, not a speed claim
+READY_POLLS = round(120.0 / EVENTUALLY_PAUSE_S)  # a bound on a busy machine, not a speed claim
 
 
 @dataclass(frozen=True)
@@ -69,14 +69,12 @@ def live_server(models_dir: Path, *extra: str) -> Iterator[LiveServer]:
         )
         base = f"http://127.0.0.1:{port}"
         try:
-            deadline = time.monotonic() + READY_TIMEOUT_S
-            while not _ready(base):
-                if process.poll() is not None:
-                    log.seek(0)
-                    raise RuntimeError(f"lipstream serve exited: {log.read()[-2000:]}")
-                if time.monotonic() > deadline:
-                    raise RuntimeError(f"lipstream serve not ready within {READY_TIMEOUT_S} s")
-                time.sleep(0.1)
+            eventually(
+                lambda: process.poll() is not None or _ready(base), "lipstream serve ready", READY_POLLS
+            )
+            if process.poll() is not None:
+                log.seek(0)
+                raise RuntimeError(f"lipstream serve exited: {log.read()[-2000:]}")
             yield LiveServer(base, models_dir, process.pid)
         finally:
             stop_process(process)
@@ -109,20 +107,6 @@ def _descendants(pid: int) -> list[int]:
     return found
 
 
-def wait_for(condition: Callable[[], bool], timeout: float, what: str) -> None:
-    deadline = time.monotonic() + timeout
-    while not condition():
-        assert time.monotonic() < deadline, f"not within {timeout} s: {what}"
-        time.sleep(0.05)
-
-
-def wait_for_value(read: Callable[[], float], expected: float, timeout: float, what: str) -> None:
-    deadline = time.monotonic() + timeout
-    while (last := read()) != expected:
-        assert time.monotonic() < deadline, f"{what}: {last:g}, not {expected:g}, after {timeout} s"
-        time.sleep(0.05)
-
-
 @contextmanager
 def lipstream_serve(
     models: Path, workers: int, environ: dict[str, str], log: Path
@@ -141,10 +125,10 @@ def lipstream_serve(
     base = f"http://127.0.0.1:{port}"
     try:
         # /readyz answers once one worker is ready; each logs its own startup.
-        wait_for(
+        eventually(
             lambda: process.poll() is not None or started(log) == workers,
-            READY_TIMEOUT_S,
             "every worker started",
+            READY_POLLS,
         )
         if process.poll() is not None or not ready(base):
             raise RuntimeError(f"lipstream serve did not start: {log.read_text()[-2000:]}")

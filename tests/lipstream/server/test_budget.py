@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import math
 from itertools import pairwise
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pytest
 
-from lipstream.engines.base import CallCost, Lookahead, Rung
+from lipstream.engines.base import CallCost, Lookahead, Rung, SynthesisRequest
 from lipstream.phonemes import SILENCE
 from lipstream.server.budget import BudgetInfeasible, choose_rung, estimate, lookahead_ms
 from lipstream.server.calibration import CALIBRATION_PHONEMES, calibration_spans, measure
@@ -64,14 +65,55 @@ def test_an_impossible_budget_names_the_smallest_feasible_one() -> None:
     assert choose_rung(ladder(), float(error.value.min_budget_ms)).rung.name == "greedy"
 
 
-def test_calibration_utterance_and_measurement(trained_models: dict[str, Model]) -> None:
+PHONEME_COST_S = 0.001
+FRAME_COST_S = 0.00001
+
+
+class _ChargedSynthesizer:
+    """A real synthesizer whose ``feed`` takes, on the fake clock, ``PHONEME_COST_S`` a
+    phoneme and ``FRAME_COST_S`` for each frame its spans' ends add at the request's fps."""
+
+    def __init__(self, real: Any, clock: _Clock, fps: float) -> None:
+        self.real, self.clock, self.fps, self.charged_frames = real, clock, fps, 0
+
+    def feed(self, spans: list, audio: object = None) -> None:  # type: ignore[type-arg]
+        self.real.feed(spans, audio)
+        frames = math.floor(spans[-1].end * self.fps + 1e-9) + 1  # frames i with i/fps <= end
+        self.clock.now += PHONEME_COST_S * len(spans)
+        self.clock.now += FRAME_COST_S * (frames - self.charged_frames)
+        self.charged_frames = frames
+
+    def frames(self) -> object:
+        return self.real.frames()
+
+    def finish(self) -> object:
+        return self.real.finish()
+
+
+class _ChargedModel:
+    def __init__(self, real: Model, clock: _Clock) -> None:
+        self.real, self.clock, self.uses_audio = real, clock, real.uses_audio
+
+    def start(self, request: SynthesisRequest) -> _ChargedSynthesizer:
+        return _ChargedSynthesizer(self.real.start(request), self.clock, request.fps)
+
+
+def test_calibration_utterance_and_measurement(
+    trained_models: dict[str, Model], monkeypatch: pytest.MonkeyPatch
+) -> None:
     spans = calibration_spans()
     assert len(spans) == CALIBRATION_PHONEMES
     assert all(left.end == pytest.approx(right.start) for left, right in pairwise(spans))
-    cost = measure(trained_models["viseme-lerp"], Rung("default", Lookahead(phonemes=1)))
-    assert 0.0 < cost.per_phoneme_ms <= cost.max_call_ms < 1000.0
-    # A frame costs something, and less than a phoneme with its 4.8 frames at 60 fps.
-    assert 0.0 < cost.per_frame_ms < cost.per_phoneme_ms
+    clock = _Clock()
+    monkeypatch.setattr("lipstream.server.calibration.time", clock)
+    model = _ChargedModel(trained_models["viseme-lerp"], clock)
+    cost = measure(model, Rung("default", Lookahead(phonemes=1)))  # type: ignore[arg-type]
+    # 48 phonemes of 80 ms at 60 fps: frames 0..4 come with the first (4.8 frames each, so
+    # 4 or 5 after it), 231 in all (3.84 s). The slowest call is the first: 1 + 5 × 0.01 ms.
+    assert cost.max_call_ms == pytest.approx(1.05)
+    assert cost.per_phoneme_ms == pytest.approx((48 * 1.0 + 231 * 0.01) / 48)
+    # The extra frames of the higher rate cost what each frame was charged.
+    assert cost.per_frame_ms == pytest.approx(0.01)
 
 
 def test_catalog_resolves_models_and_names_the_missing_field(catalog: Catalog) -> None:

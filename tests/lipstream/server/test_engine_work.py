@@ -30,6 +30,7 @@ from lipstream_client import (
     Ready,
     Start,
 )
+from tests.helpers import eventually
 from tests.lipstream.server.harness import Client, Served, client, serving
 
 ANSWER_BOUND_S = 5.0  # whether the server answers at all, not how fast
@@ -58,13 +59,6 @@ def metric(served: Served, name: str) -> float:
     text = httpx.get(f"{served.http}/metrics", timeout=ANSWER_BOUND_S).text
     found = re.search(rf"^{name} ([0-9.e+]+)$", text, flags=re.MULTILINE)
     return float(found.group(1)) if found else 0.0
-
-
-def eventually(condition: Callable[[], bool], what: str, bound_s: float = 10.0) -> None:
-    deadline = time.monotonic() + bound_s
-    while not condition():
-        assert time.monotonic() < deadline, f"not within {bound_s} s: {what}"
-        time.sleep(0.05)
 
 
 def short_request_completes(served: Served, identifier: str, options: dict) -> None:  # type: ignore[type-arg]

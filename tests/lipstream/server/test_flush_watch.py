@@ -16,6 +16,7 @@ from contextlib import contextmanager
 from typing import Any, cast
 
 from lipstream.server.flush_watch import FlushWatch, unsent_bytes
+from tests.helpers import eventually
 
 TIMEOUT_S = 2.5
 
@@ -179,17 +180,6 @@ def loopback_pair(receive_buffer: int) -> Iterator[tuple[socket.socket, socket.s
         yield writer, reader
 
 
-def settled(condition: Callable[[], bool]) -> bool:
-    """Whether ``condition`` holds within 10 s (acknowledgements take a moment; the bound
-    only matters when it never holds, so it is generous for a busy machine)."""
-    deadline = time.monotonic() + 10.0
-    while not condition():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.001)
-    return True
-
-
 def test_unsent_bytes_count_what_the_kernel_holds_unacknowledged() -> None:
     with loopback_pair(4096) as (writer, reader):
         writer.setblocking(False)
@@ -206,10 +196,10 @@ def test_unsent_bytes_count_what_the_kernel_holds_unacknowledged() -> None:
             return len(reader.recv(1 << 20, socket.MSG_PEEK | socket.MSG_DONTWAIT))
 
         # What the reader's kernel holds is acknowledged; the rest is still the writer's.
-        assert settled(lambda: unsent_bytes(transport) == 123 + sent - unread())
+        eventually(lambda: unsent_bytes(transport) == 123 + sent - unread(), "acknowledged")
         assert 0 < unread() < sent
         received = 0
         while received < sent:
             received += len(reader.recv(1 << 16))
-        assert settled(lambda: unsent_bytes(transport) == 123)
+        eventually(lambda: unsent_bytes(transport) == 123, "all acknowledged")
     assert unsent_bytes(transport) == 123  # closed: the kernel holds nothing for it

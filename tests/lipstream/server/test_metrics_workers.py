@@ -27,7 +27,8 @@ from prometheus_client.parser import text_string_to_metric_families
 from lipstream.engines.base import Model
 from lipstream.server.metrics import MULTIPROCESS_ENV, multiprocess_directory
 from lipstream_client import AsyncClient, StreamResult
-from tests.live_server import lipstream_serve, per_worker, sessions_by_worker, wait_for_value
+from tests.helpers import eventually
+from tests.live_server import lipstream_serve, per_worker, sessions_by_worker
 
 FPS = 60.0
 LINE = [
@@ -140,7 +141,7 @@ def test_metrics_of_two_workers_are_summed_exactly(
         open_scrapes = [scrape(base) for _ in range(4)]
         shares = sessions_by_worker(directory)
         runner.run(close_all(clients))
-        wait_for_value(lambda: open_sessions(base), 0, 30, "open sessions")
+        eventually(lambda: open_sessions(base) == 0, "no open sessions")
         closed_scrapes = [scrape(base) for _ in range(4)]
         worker_frames = frames_by_worker(directory)
 
@@ -154,10 +155,8 @@ def test_metrics_of_two_workers_are_summed_exactly(
                 held,
             )
         )
-        wait_for_value(
-            lambda: sum(sessions_by_worker(directory).values()),
-            len(held),
-            EVENTUALLY_S,
+        eventually(
+            lambda: sum(sessions_by_worker(directory).values()) == len(held),
             "held sessions in the workers' files",
         )
         holding = sessions_by_worker(directory)
@@ -168,15 +167,13 @@ def test_metrics_of_two_workers_are_summed_exactly(
         # The sum drops a worker's live gauges once its process is gone: after uvicorn's
         # supervisor (every 0.5 s, slower on a busy machine) has reaped it. A bound on an
         # eventual state, not a speed.
-        wait_for_value(
-            lambda: open_sessions(base),
-            survivors,
-            EVENTUALLY_S,
+        eventually(
+            lambda: open_sessions(base) == survivors,
             f"open sessions after killing a worker that held {holding[victim]:g}",
         )
         after_kill = scrape(base)
         runner.run(close_all(held))
-        wait_for_value(lambda: open_sessions(base), 0, 30, "open sessions")
+        eventually(lambda: open_sessions(base) == 0, "no open sessions")
         process.terminate()
         process.wait(timeout=60)  # a bound for a busy machine, not a speed
 
@@ -263,10 +260,8 @@ def test_several_workers_without_a_directory_get_a_private_one(
                 clients,
             )
         )
-        wait_for_value(
-            lambda: sum(sessions_by_worker(directory).values()),
-            len(clients),
-            EVENTUALLY_S,
+        eventually(
+            lambda: sum(sessions_by_worker(directory).values()) == len(clients),
             "sessions in the workers' files",
         )
         scrapes = [scrape(base) for _ in range(4)]
@@ -284,10 +279,8 @@ def test_a_killed_worker_not_yet_reaped_counts_as_gone() -> None:
     try:
         assert _running(child.pid)
         os.kill(child.pid, signal.SIGKILL)
-        deadline = time.monotonic() + EVENTUALLY_S
-        while _running(child.pid):  # a zombie until reaped below: signal 0 still reaches it
-            assert time.monotonic() < deadline, "the killed child still counts as running"
-            time.sleep(0.05)
+        # a zombie until reaped below: signal 0 still reaches it
+        eventually(lambda: not _running(child.pid), "the killed child counts as gone")
     finally:
         child.wait(timeout=EVENTUALLY_S)
     assert not _running(child.pid)

@@ -16,8 +16,9 @@ import pytest
 
 from lipstream.engines import engine_names
 from lipstream.store import ARRAYS_NAME, load_arrays, save_model_dir
-from tests.helpers import free_port, serve_command
-from tests.live_server import READY_TIMEOUT_S, stop_process
+from tests.helpers import eventually, free_port, serve_command
+from tests.live_server import READY_POLLS, stop_process
+from tests.live_server import ready as is_ready
 
 if TYPE_CHECKING:
     from lipstream.engines.base import Model
@@ -64,16 +65,8 @@ def served(mixed_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterato
             serve_command(mixed_dir, port), stdout=log, stderr=subprocess.STDOUT
         )
         try:
-            deadline = time.monotonic() + READY_TIMEOUT_S
-            while True:
-                assert process.poll() is None, log_path.read_text()[-3000:]
-                assert time.monotonic() < deadline, "not ready in time"
-                try:
-                    if httpx.get(f"{base}/readyz", timeout=1.0).status_code == 200:
-                        break
-                except httpx.TransportError:
-                    pass
-                time.sleep(0.1)
+            eventually(lambda: process.poll() is not None or is_ready(base), "ready", READY_POLLS)
+            assert process.poll() is None, log_path.read_text()[-3000:]
             yield {"http": base, "log": log_path, "models": mixed_dir}
         finally:
             stop_process(process)

@@ -31,8 +31,9 @@ from lipstream_client import (
     ResumeFailed,
     ResumePolicy,
 )
+from tests.helpers import eventually
 from tests.live_server import _descendants as descendants
-from tests.live_server import lipstream_serve, sessions_by_worker, wait_for_value
+from tests.live_server import lipstream_serve, sessions_by_worker
 
 FPS = 60.0
 SPANS = [
@@ -58,10 +59,8 @@ async def stream_utterance(url: str, kill: Path | None) -> tuple[list[Frames], i
         received = [first] if first is not None else []
         if kill is not None:
             await asyncio.to_thread(
-                wait_for_value,
-                lambda: sum(sessions_by_worker(kill).values()),
-                1,
-                EVENTUALLY_S,
+                eventually,
+                lambda: sum(sessions_by_worker(kill).values()) == 1,
                 "the session in the workers' files",
             )
             [victim] = [pid for pid, n in sessions_by_worker(kill).items() if n == 1]

@@ -6,10 +6,10 @@ test that SIGTERM reaches it, with one worker and with several.
 
 from __future__ import annotations
 
+import asyncio
 import os
 import signal
 import subprocess
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -20,20 +20,14 @@ import pytest
 
 from lipstream.config import ServerSettings
 from lipstream.server.catalog import Catalog
+from lipstream.server.lifecycle import Drainable, Lifecycle
 from lipstream_client import Done, End, ErrorMessage, PhonemeItem, Phonemes, Ready, Start
-from tests.helpers import free_port, serve_command
+from tests.helpers import VirtualClock, eventually, free_port, run_on_virtual_time, serve_command
 from tests.lipstream.server.harness import client, frame_rows, serving
-from tests.live_server import READY_TIMEOUT_S
+from tests.live_server import READY_POLLS
 
 SPANS = [("HH", 0.0, 0.1), ("AY1", 0.1, 0.4), ("M", 0.4, 0.5), ("sil", 0.5, 0.7)]
 ITEMS = tuple(PhonemeItem(*span) for span in SPANS)
-
-
-def wait_for(predicate, timeout: float = 30.0) -> None:  # type: ignore[no-untyped-def]
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, "condition not reached in time"
-        time.sleep(0.02)
 
 
 def readyz(base: str) -> int:
@@ -50,7 +44,7 @@ def test_drain_finishes_in_flight_requests_then_closes_with_1001(
         ws.send(Start("a", "viseme-lerp", "demo"), Phonemes("a", ITEMS[:2]))
         assert isinstance(ws.recv(), Ready)
         drained = served.call_soon(served.app.state.lifecycle.drain(20))
-        wait_for(lambda: readyz(served.http) == 503)
+        eventually(lambda: readyz(served.http) == 503, "not ready while draining")
         assert httpx.get(f"{served.http}/healthz").status_code == 200
         with client(served.ws) as late:
             messages, code, reason = late.closed()
@@ -78,13 +72,47 @@ def test_the_drain_timeout_bounds_the_wait(lerp_dir: Path) -> None:
     with serving(lerp_dir, ServerSettings(drain_timeout_s=0.3)) as served, client(served.ws) as ws:
         ws.send(Start("a", "viseme-lerp", "demo"), Phonemes("a", ITEMS[:1]))
         assert isinstance(ws.recv(), Ready)
-        began = time.monotonic()
         drained = served.call_soon(served.app.state.lifecycle.drain(0.3))
         messages, code, reason = ws.closed()
-        assert drained.result(5) == 1  # one session cut off ...
-        assert time.monotonic() - began >= 0.3 - 0.01  # ... only once the drain timed out
+        assert drained.result(5) == 1  # one session cut off (when: the test below)
     assert (code, reason) == (1001, "shutting_down")
     assert any(isinstance(m, ErrorMessage) and m.code == "shutting_down" for m in messages)
+
+
+Events = list[tuple[str, float]]
+
+
+class RecordedConnection:
+    """A ``Drainable`` that records when (loop time) it was asked to drain and aborted, and
+    leaves ``finish_s`` after the drain began (never: None), or at once when aborted."""
+
+    def __init__(self, lifecycle: Lifecycle, finish_s: float | None) -> None:
+        self.lifecycle, self.finish_s = lifecycle, finish_s
+        self.loop = asyncio.get_running_loop()
+        self.events: Events = []
+
+    def drain(self) -> None:
+        self.events.append(("drain", self.loop.time()))
+        if self.finish_s is not None:
+            self.loop.call_later(self.finish_s, self.lifecycle.release, self)
+
+    def abort(self) -> None:
+        self.events.append(("abort", self.loop.time()))
+        self.loop.call_soon(self.lifecycle.release, self)
+
+
+def test_the_drain_waits_its_timeout_then_aborts_only_the_unfinished() -> None:
+    async def scenario(_: VirtualClock) -> tuple[int, Events, Events, set[Drainable]]:
+        lifecycle = Lifecycle(max_sessions=3)
+        finishing, stuck = RecordedConnection(lifecycle, 0.2), RecordedConnection(lifecycle, None)
+        assert lifecycle.admit(finishing) and lifecycle.admit(stuck)
+        cut = await lifecycle.drain(0.5)
+        return cut, finishing.events, stuck.events, lifecycle.connections
+
+    cut, finishing, stuck, left = run_on_virtual_time(scenario)
+    assert (cut, left) == (1, set())
+    assert finishing == [("drain", 0.0)]
+    assert stuck == [("drain", 0.0), ("abort", pytest.approx(0.5))]
 
 
 @contextmanager
@@ -99,7 +127,7 @@ def lipstream_serve(models: Path, *flags: str) -> Iterator[tuple[subprocess.Pope
     )
     base = f"http://127.0.0.1:{port}"
     try:
-        wait_for(lambda: readyz(base) == 200, timeout=READY_TIMEOUT_S)
+        eventually(lambda: readyz(base) == 200, "ready", polls=READY_POLLS)
         yield process, base
     finally:
         if process.poll() is None:
@@ -118,7 +146,7 @@ def test_sigterm_loses_no_in_flight_utterance(
                 ws.send(Start("a", "viseme-lerp", "demo"), Phonemes("a", ITEMS[:2]))
                 assert isinstance(ws.recv(), Ready)
             process.send_signal(signal.SIGTERM)
-            wait_for(lambda: readyz(base) in (0, 503))
+            eventually(lambda: readyz(base) in (0, 503), "not ready after SIGTERM")
             outcomes = []
             for ws in (first, second):
                 ws.send(Phonemes("a", ITEMS[2:]), End("a"))
