@@ -192,7 +192,9 @@ def test_loadtest_against_the_real_server(served: LiveServer, tmp_path: Path) ->
     assert clip["successful_requests"] == 2, clip["errors"]
     assert results["config"]["character"] == "demo"
     assert clip["frames"] == 2 * (math.floor(1.0 * 60) + 1)
-    assert clip["first_packet_latency_ms"]["max"] < 1000
+    latency = clip["first_packet_latency_ms"]
+    # measured from each request's start to its first packet, within the run
+    assert 0 < latency["p50"] <= latency["max"] < 1000.0 * clip["wall_s"]
     assert clip["frame_lag_ms"]["p99"] is not None
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -18,6 +19,7 @@ from lipstream_client import (
 )
 
 CLIENT_SDK = Path(__file__).resolve().parents[2] / "client_sdk"
+PROTOCOL_DOC = Path(__file__).resolve().parents[2] / "docs" / "reference" / "protocol.md"
 WITHOUT_NUMPY = """
 import sys
 sys.modules["numpy"] = None
@@ -135,8 +137,18 @@ def test_oculus_visemes_order_and_spellings() -> None:
         assert canonical_viseme(stranger) is None
 
 
+def documented_preston_blair_order() -> tuple[str, ...]:
+    """The shapes in the column order docs/reference/protocol.md gives, each a letter
+    followed by its description: `A` (closed: P B M), `B` (...), ..."""
+    text = PROTOCOL_DOC.read_text(encoding="utf-8")
+    paragraph = text.split("**Preston Blair mouth shapes**", 1)[1].split("\n\n", 1)[0]
+    return tuple(re.findall(r"`([A-Z])` \(", paragraph))
+
+
 def test_preston_blair_shapes_and_spellings() -> None:
-    assert PRESTON_BLAIR_SHAPES == ("A", "B", "C", "D", "E", "F", "G", "H", "X")
+    # Rhubarb Lip Sync's six basic shapes A-F, then its extended G, H and X, as documented.
+    assert documented_preston_blair_order() == (*"ABCDEF", "G", "H", "X")
+    assert PRESTON_BLAIR_SHAPES == documented_preston_blair_order()
     assert VISEME_CHANNELS == {"oculus15": OCULUS15_VISEMES, "preston-blair": PRESTON_BLAIR_SHAPES}
     assert [canonical_viseme(name, "preston-blair") for name in ("a", "X", " h ")] == [
         "A",

@@ -264,4 +264,6 @@ def test_two_worker_processes_and_the_probe_measure_every_request() -> None:
     assert clip["client_cpu_s"] > 0
     probe = clip["probe"]
     assert probe["phonemes"] == 5 and probe["errors"] == {} and probe["requests"] >= 1
-    assert 0 < probe["first_frame_latency_ms"]["p50"] < 200
+    latency = probe["first_frame_latency_ms"]
+    # measured from its request's start to its first frame, within the run
+    assert 0 < latency["p50"] <= latency["max"] < 1000.0 * clip["wall_s"]

@@ -10,13 +10,12 @@ import numpy as np
 import pytest
 
 from lipstream.config import ServerSettings
-from lipstream.engines.base import Model, Rung, frame_count
-from lipstream.models import ModelRegistry
+from lipstream.engines.base import Model, frame_count
 from lipstream.server.budget import choose_rung
-from lipstream.server.calibration import ComputeCost
 from lipstream.server.catalog import Catalog
 from lipstream.timeline import PhonemeSpan
 from lipstream_client import End, Frames, PhonemeItem, Phonemes, Ready, Start
+from tests.lipstream.server.conftest import FIXED_COMPUTE_MS, fixed_calibration
 from tests.lipstream.server.harness import Served, client, frame_rows, serving
 
 ENGINES = ("viseme-lerp", "anime-graph")
@@ -30,31 +29,17 @@ SPANS = [
 ITEMS = tuple(PhonemeItem(label, start, end) for label, start, end in SPANS)
 
 
-# Every rung computes in 1 ms (plus the 5 ms margin): the rungs chosen below follow from the
-# models' lookahead alone, not from how fast this machine calibrated them.
-COMPUTE_MS = 1.0
 MARGIN_MS = ServerSettings().compute_margin_ms
 
 
-def fixed_cost(model: Model, rung: Rung) -> ComputeCost:
-    return ComputeCost(max_call_ms=COMPUTE_MS, per_phoneme_ms=COMPUTE_MS, per_frame_ms=0.001)
+@pytest.fixture(scope="module")
+def catalog(fixed_cost_catalog: Catalog) -> Catalog:
+    return fixed_cost_catalog
 
 
 @pytest.fixture(scope="module")
-def fixed_calibration() -> Iterator[None]:
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr("lipstream.server.catalog.measure", fixed_cost)
-        yield
-
-
-@pytest.fixture(scope="module")
-def catalog(all_models_dir: Path, fixed_calibration: None) -> Catalog:
-    return Catalog.build(ModelRegistry.load(all_models_dir), ServerSettings())
-
-
-@pytest.fixture(scope="module")
-def served(all_models_dir: Path, fixed_calibration: None) -> Iterator[Served]:
-    with serving(all_models_dir, ServerSettings()) as running:
+def served(all_models_dir: Path) -> Iterator[Served]:
+    with fixed_calibration(), serving(all_models_dir, ServerSettings()) as running:
         yield running
 
 
@@ -70,7 +55,7 @@ def test_a_20_ms_budget_is_met_by_every_engine_without_waiting_for_a_phoneme(
     catalog: Catalog, engine: str
 ) -> None:
     ladder = catalog.ladder(catalog.model(engine, "demo"))
-    assert [rung.compute_ms for rung in ladder] == [COMPUTE_MS + MARGIN_MS] * len(ladder)
+    assert [rung.compute_ms for rung in ladder] == [FIXED_COMPUTE_MS + MARGIN_MS] * len(ladder)
     chosen = choose_rung(ladder, 20.0)
     assert chosen in ladder[-2:] and chosen.rung.lookahead.phonemes == 0
     assert chosen.worst_case_ms <= 20.0
