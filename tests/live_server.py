@@ -7,10 +7,9 @@ import os
 import signal
 import subprocess
 import tempfile
-import time
 import urllib.error
 import urllib.request
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -70,7 +69,9 @@ def live_server(models_dir: Path, *extra: str) -> Iterator[LiveServer]:
         base = f"http://127.0.0.1:{port}"
         try:
             eventually(
-                lambda: process.poll() is not None or _ready(base), "lipstream serve ready", READY_POLLS
+                lambda: process.poll() is not None or _ready(base),
+                "lipstream serve ready",
+                READY_POLLS,
             )
             if process.poll() is not None:
                 log.seek(0)

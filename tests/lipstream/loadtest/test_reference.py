@@ -13,10 +13,11 @@ from lipstream.engines.base import Model, frame_count
 from lipstream.loadtest.load import LoadTestConfig, loadtest
 from lipstream.loadtest.reference import ReferenceTraffic, engine_traffic, reference_server
 from lipstream_client.client import AsyncClient
-from tests.lipstream.server.harness import Served, serving
+from tests.lipstream.server.harness import Served, fixed_calibration, serving
 
 FPS = 60.0
-CAUSAL_BUDGET_MS = 20.0  # viseme-lerp's causal rung (tests/lipstream/server/test_causal_serving)
+# viseme-lerp's causal rung at a fixed calibration (tests/lipstream/server/test_causal_serving)
+CAUSAL_BUDGET_MS = 20.0
 SPANS = [("sil", 0.0, 0.05), ("B", 0.05, 0.11), ("AA1", 0.11, 0.3), ("M", 0.3, 0.38)]
 WAIT_S = 10.0
 Block = tuple[int, int, int]  # first frame, frames, data bytes
@@ -25,7 +26,7 @@ Block = tuple[int, int, int]  # first frame, frames, data bytes
 @pytest.fixture(scope="module")
 def served(trained_models: dict[str, Model], tmp_path: Path) -> Iterator[Served]:
     trained_models["viseme-lerp"].save(tmp_path / "viseme-lerp")
-    with serving(tmp_path, ServerSettings()) as running:
+    with fixed_calibration(), serving(tmp_path, ServerSettings()) as running:
         yield running
 
 

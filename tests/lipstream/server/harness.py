@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import asyncio
 import threading
-import time
 from collections import deque
 from collections.abc import Coroutine, Iterator
 from concurrent.futures import Future
@@ -19,13 +18,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
+import pytest
 import uvicorn
 from fastapi import FastAPI
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import ClientConnection, connect
 
 from lipstream.config import ServerSettings
+from lipstream.engines.base import Model, Rung
 from lipstream.server.app import create_app
+from lipstream.server.calibration import ComputeCost
 from lipstream.server.runner import uvicorn_options
 from lipstream_client import (
     Done,
@@ -38,9 +40,8 @@ from lipstream_client import (
     encode,
     subprotocol_for,
 )
-from tests.helpers import free_port
+from tests.helpers import eventually, free_port
 
-STARTUP_TIMEOUT_S = 60.0  # a server loading every engine took 37 s on a loaded 2-core machine
 RECEIVE_TIMEOUT_S = 10.0
 T = TypeVar("T")
 
@@ -71,11 +72,9 @@ def serving(models: Path, settings: ServerSettings | None = None) -> Iterator[Se
     loop = asyncio.new_event_loop()
     thread = threading.Thread(target=loop.run_until_complete, args=(server.serve(),), daemon=True)
     thread.start()
-    deadline = time.monotonic() + STARTUP_TIMEOUT_S
-    while not server.started:
-        if not thread.is_alive() or time.monotonic() > deadline:
-            raise RuntimeError("the test server did not start")
-        time.sleep(0.01)
+    eventually(lambda: server.started or not thread.is_alive(), "the test server starts")
+    if not server.started:
+        raise RuntimeError("the test server did not start")
     try:
         yield Served(
             f"http://127.0.0.1:{port}", f"ws://127.0.0.1:{port}/v1/stream", app, loop, server
@@ -84,6 +83,24 @@ def serving(models: Path, settings: ServerSettings | None = None) -> Iterator[Se
         server.should_exit = True
         thread.join(timeout=15)
         loop.close()
+
+
+# What every rung costs under ``fixed_calibration``: rung choices then follow from the
+# models' lookahead alone, not from how fast a (loaded) machine ran the calibration.
+FIXED_COMPUTE_MS = 1.0
+
+
+def _fixed_cost(model: Model, rung: Rung) -> ComputeCost:
+    return ComputeCost(FIXED_COMPUTE_MS, FIXED_COMPUTE_MS, per_frame_ms=0.001)
+
+
+@contextmanager
+def fixed_calibration() -> Iterator[None]:
+    """Catalogs built meanwhile (a server's too) measure every rung at ``FIXED_COMPUTE_MS``;
+    the warm-up still runs, since it compiles the engines' kernels."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr("lipstream.server.catalog.measure", _fixed_cost)
+        yield
 
 
 class Client:

@@ -21,6 +21,8 @@ def catalog(fixed_cost_catalog: Catalog) -> Catalog:
     """Calibrated at a fixed cost: the rungs' order is their lookahead's, not a race between
     the lead rung's few milliseconds of wait and the causal rung's measured compute."""
     return fixed_cost_catalog
+
+
 WORDS = [
     ("sil", 0.0, 0.12),
     ("HH", 0.12, 0.2),

@@ -15,8 +15,14 @@ from lipstream.server.budget import choose_rung
 from lipstream.server.catalog import Catalog
 from lipstream.timeline import PhonemeSpan
 from lipstream_client import End, Frames, PhonemeItem, Phonemes, Ready, Start
-from tests.lipstream.server.conftest import FIXED_COMPUTE_MS, fixed_calibration
-from tests.lipstream.server.harness import Served, client, frame_rows, serving
+from tests.lipstream.server.harness import (
+    FIXED_COMPUTE_MS,
+    Served,
+    client,
+    fixed_calibration,
+    frame_rows,
+    serving,
+)
 
 ENGINES = ("viseme-lerp", "anime-graph")
 SPANS = [

@@ -40,8 +40,8 @@ from lipstream.config import ServerSettings
 from lipstream.engines.base import Model
 from lipstream.server.flush_watch import unsent_bytes
 from lipstream_client import SUBPROTOCOL_MSGPACK, Done, End, PhonemeItem, Phonemes, Start
-from tests.lipstream.server.harness import Served, client, frame_rows, serving
 from tests.helpers import eventually
+from tests.lipstream.server.harness import Served, client, frame_rows, serving
 from tests.lipstream.server.test_slow_consumer import (
     SPANS,
     TCP_STATES_GONE,
