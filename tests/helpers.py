@@ -56,7 +56,7 @@ class VirtualClock:
         return self.now
 
 
-class _JumpingSelector(selectors.DefaultSelector):  # type: ignore[misc,valid-type]
+class _JumpingSelector(selectors.DefaultSelector):
     """Where the loop would sleep until its next timer, the clock jumps there instead."""
 
     def __init__(self, clock: VirtualClock) -> None:
