@@ -23,12 +23,19 @@ protocol with ``http_flush``'s bound on unsent bytes) adds:
   server reads anything from it;
 - *shedding*: while the event loop lags far behind (``overload.OverloadPolicy.shedding``),
   a WebSocket upgrade gets the same 503 at once, with no WebSocket work;
+- a *head size limit*: a request head (request line and header fields) of more than
+  ``MAX_HEAD_BYTES`` gets HTTP 431 and the connection is closed, whether the head arrives
+  whole (h11 parses any complete head) or in pieces (h11 stops buffering an incomplete one
+  past the same size), and whether it asks for an upgrade or not. Once answered, what the
+  client still sends is read and dropped until it stops, for at most ``LINGER_S`` or
+  ``LINGER_BYTES``: closing a socket with unread bytes sends a TCP reset, which can
+  destroy the answer before the client reads it;
 - ``GET /healthz`` answered by a bare ASGI callable in front of the app: no routing, no
   middleware, no lifespan state, the cheapest answer the event loop can give.
 
-Connections closed at the deadline, refused past the cap and shed are counted in
-``lipstream_connections_refused`` (codes ``handshake_timeout``, ``too_many_connections`` and
-``shedding``).
+Connections closed at the deadline, refused past the cap, shed and refused for their head's
+size are counted in ``lipstream_connections_refused`` (codes ``handshake_timeout``,
+``too_many_connections``, ``shedding`` and ``head_too_large``).
 """
 
 from __future__ import annotations
@@ -40,7 +47,13 @@ from asyncio import Transport
 from collections.abc import Mapping
 from typing import Any
 
-from uvicorn._types import ASGI3Application, ASGIReceiveCallable, ASGISendCallable, Scope
+from uvicorn._types import (
+    ASGI3Application,
+    ASGIReceiveCallable,
+    ASGISendCallable,
+    HTTPScope,
+    Scope,
+)
 from uvicorn.server import ServerState as UvicornState
 
 from .http_flush import BoundedFlushHTTPProtocol
@@ -50,6 +63,10 @@ from .state import ServerState
 HANDSHAKE_TIMEOUT = "handshake_timeout"
 TOO_MANY_CONNECTIONS = "too_many_connections"
 SHEDDING = "shedding"
+HEAD_TOO_LARGE = "head_too_large"
+MAX_HEAD_BYTES = 16 * 1024  # h11's own bound on an incomplete head
+LINGER_S = 2.0
+LINGER_BYTES = 4 * 1024 * 1024
 HEALTHZ_PATH = "/healthz"
 HEALTHZ_BODY = json.dumps({"status": "ok"}, separators=(",", ":")).encode()
 PROBE_LANE = 64
@@ -70,6 +87,27 @@ BUSY_RESPONSE = (
     + b"\r\n"
     + BUSY_BODY
 )
+
+
+def head_too_large(size: int) -> tuple[list[tuple[bytes, bytes]], bytes]:
+    """The headers and body of HTTP 431 for a head of at least ``size`` bytes."""
+    body = (
+        f"the request head has at least {size} bytes, more than the limit of "
+        f"{MAX_HEAD_BYTES} bytes\n"
+    ).encode()
+    headers = [
+        (b"content-type", b"text/plain; charset=utf-8"),
+        (b"content-length", str(len(body)).encode()),
+        (b"connection", b"close"),
+    ]
+    return headers, body
+
+
+def head_size(scope: HTTPScope) -> int:
+    """The bytes of a parsed request head: its request line and header fields."""
+    line = len(scope["method"]) + len(scope["raw_path"] or b"") + len(scope["query_string"])
+    return line + 12 + sum(len(name) + len(value) + 4 for name, value in scope["headers"])
+
 
 _over_cap: weakref.WeakKeyDictionary[UvicornState, set[GuardedHTTPProtocol]]
 _over_cap = weakref.WeakKeyDictionary()
@@ -124,6 +162,7 @@ class GuardedHTTPProtocol(BoundedFlushHTTPProtocol):
         super().connection_made(transport)
         self.head_timer: asyncio.TimerHandle | None = None
         self.over_cap = False
+        self.lingering = 0  # bytes dropped after a 431, while lingering
         self.app_behind_gate = self.app
         self.app = self._route
         timeout, cap = head_limits(self.app_state)
@@ -149,8 +188,33 @@ class GuardedHTTPProtocol(BoundedFlushHTTPProtocol):
         if not under_way and not self.transport.is_closing():
             self._arm_head_timer()
 
+    def data_received(self, data: bytes) -> None:
+        if self.lingering:
+            self.lingering += len(data)
+            if self.lingering > LINGER_BYTES:
+                self.transport.close()
+            return
+        super().data_received(data)
+
+    def eof_received(self) -> None:
+        if self.lingering:
+            self.transport.close()
+
+    def send_400_response(self, msg: str) -> None:
+        """uvicorn's answer to any request h11 cannot parse; 431 when h11 stopped buffering an
+        incomplete head past ``MAX_HEAD_BYTES``."""
+        buffered = len(self.conn.trailing_data[0])
+        if buffered > MAX_HEAD_BYTES:
+            self._refuse_head(buffered)
+            return
+        super().send_400_response(msg)
+
     def handle_websocket_upgrade(self, *request: Any) -> None:
         self._head_done()
+        size = head_size(self.scope)
+        if size > MAX_HEAD_BYTES:
+            self._refuse_head(size)
+            return
         if self.over_cap:
             self._refuse(TOO_MANY_CONNECTIONS)
             return
@@ -165,12 +229,39 @@ class GuardedHTTPProtocol(BoundedFlushHTTPProtocol):
         """The app for a request whose head is complete: ``/healthz`` first, then the cap."""
         self._head_done()
         app: ASGI3Application = self.app_behind_gate
+        size = head_size(scope) if scope["type"] == "http" else 0
+        if size > MAX_HEAD_BYTES:
+            refused(self.app_state, HEAD_TOO_LARGE)
+            await self._answer_head_too_large(size, send)
+            return
         if scope["type"] == "http" and scope["method"] == "GET" and scope["path"] == HEALTHZ_PATH:
             app = answer_healthz
         elif self.over_cap:
             refused(self.app_state, TOO_MANY_CONNECTIONS)
             app = answer_busy
         await app(scope, receive, send)
+
+    async def _answer_head_too_large(self, size: int, send: ASGISendCallable) -> None:
+        headers, body = head_too_large(size)
+        await send({"type": "http.response.start", "status": 431, "headers": headers})
+        await send({"type": "http.response.body", "body": body})
+
+    def _refuse_head(self, size: int) -> None:
+        """431 and close, after reading what the client still sends (``LINGER_S``)."""
+        self._head_done()
+        if self.transport.is_closing():
+            return
+        refused(self.app_state, HEAD_TOO_LARGE)
+        self.lingering = 1
+        headers, body = head_too_large(size)
+        self.transport.write(
+            b"HTTP/1.1 431 Request Header Fields Too Large\r\n"
+            + b"".join(name + b": " + value + b"\r\n" for name, value in headers)
+            + b"\r\n"
+            + body
+        )
+        self.transport.write_eof()
+        self.loop.call_later(LINGER_S, self.transport.close)
 
     def _arm_head_timer(self) -> None:
         if self.head_timer is None:
