@@ -90,6 +90,13 @@ class Metrics:
             registry=registry,
             multiprocess_mode="livesum",
         )
+        self.answer_bytes = Gauge(
+            "lipstream_rest_answer_bytes",
+            "Frames held for POST /v1/synthesize answers still being sent, in bytes "
+            "(counted toward the memory ceiling; summed over the workers).",
+            registry=registry,
+            multiprocess_mode="livesum",
+        )
         self.requests = Counter(
             "lipstream_requests",
             "Finished requests by how they ended (end, cancel, interrupt, error).",

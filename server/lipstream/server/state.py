@@ -31,6 +31,7 @@ class ServerState:
     heavy: ThreadPoolExecutor
     overload: Overload
     loaded: bool = True
+    answer_bytes: int = 0  # frames held by REST answers still being sent (``rest``)
 
     @property
     def ready(self) -> bool:
