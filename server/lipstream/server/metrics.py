@@ -92,7 +92,7 @@ class Metrics:
         )
         self.answer_bytes = Gauge(
             "lipstream_rest_answer_bytes",
-            "Frames held for POST /v1/synthesize answers still being sent, in bytes "
+            "Bytes held for POST /v1/synthesize answers still being sent "
             "(counted toward the memory ceiling; summed over the workers).",
             registry=registry,
             multiprocess_mode="livesum",
@@ -122,6 +122,13 @@ class Metrics:
             "lipstream_connections_refused",
             "WebSocket connections refused or closed by policy, by error code.",
             ["code"],
+            registry=registry,
+        )
+        self.client_refusals = Counter(
+            "lipstream_client_refusals",
+            "Connections refused with too_many_client_connections (one client address over "
+            "its limits), by reason: connections or upgrade_rate.",
+            ["reason"],
             registry=registry,
         )
         self.busy_refusals = Counter(

@@ -14,19 +14,22 @@ the request's type), carries ``ready``'s resolved parameters, every frame
 (float32 little-endian ``bin`` in msgpack, rows of shortest float32 decimals
 in JSON) and ``done``'s stats; with ``Accept: text/csv`` it is the frames
 alone as the corpus frame CSV (``time`` and one column per output channel,
-``%.6f``). A JSON answer is streamed (chunked transfer encoding): its
+``%.6f``). Every answer is streamed (chunked transfer encoding), each
+piece once the previous one is in the connection's buffer. A JSON answer's
 numbers are encoded ``JSON_CHUNK_VALUES`` at a time in the synthesis pool,
-each piece once the previous one is in the connection's buffer, so the JSON
-encoder (a C call that holds the GIL for its whole input: seconds for a
-long answer at 1000 fps) never holds the event loop for more than one piece,
-a client that reads slowly holds its rows as float32 (a third of their
-JSON), not as text, and the bytes are exactly those of one ``json.dumps`` of
-the whole answer. From the end of its synthesis until its last byte is
-written or its client is gone, an answer's frames count toward the memory
+so the JSON encoder (a C call that holds the GIL for its whole input:
+seconds for a long answer at 1000 fps) never holds the event loop for more
+than one piece, a client that reads slowly holds its rows as float32 (a
+third of their JSON), not as text, and the bytes are exactly those of one
+``json.dumps`` of the whole answer; a msgpack or CSV answer (milliseconds to
+encode) is encoded whole in the pool and sent ``SLICE_BYTES`` at a time.
+From the end of its synthesis until its last piece is handed to the
+connection or its client is gone, an answer's held bytes (a JSON answer's
+frames, a msgpack or CSV answer's encoding) count toward the memory
 ceiling (``ServerState.answer_bytes``, ``lipstream_rest_answer_bytes``):
 each new request is checked against the latest resident-memory figure
 plus them, so a burst of answers left unread is refused before the next
-sample could see it (frames already in that figure count twice, the safe
+sample could see it (bytes already in that figure count twice, the safe
 side). Errors answer with an HTTP status and
 ``{"error": {"code", "message", "details"}}`` in the response's type (JSON
 when CSV was asked for); above the memory ceiling (``overload``) the request
@@ -118,6 +121,7 @@ STATUS = {
 UNPROCESSABLE = 422
 JSON_CHUNK_VALUES = 4096  # numbers per piece of a streamed JSON answer: milliseconds of GIL
 JSON_SEPARATORS = (",", ":")
+SLICE_BYTES = 1 << 18  # a piece of a msgpack or CSV answer
 
 
 class HttpError(Exception):
@@ -158,14 +162,16 @@ async def synthesize(request: Request, state: ServerState) -> Response:
         body = await _read_body(request, state.settings.max_body_bytes)
         messages = _messages(_parse(body, request_encoding), request_encoding)
         loop = asyncio.get_running_loop()
-        response: Response
         if response_encoding == "json":
             result = await loop.run_in_executor(state.heavy, _run, messages, state)
-            response = _streamed_json(result, state)
+            response = _held_answer(
+                _json_pieces(result, state), result.frames.nbytes, "json", state
+            )
         else:
-            response = await loop.run_in_executor(
+            whole = await loop.run_in_executor(
                 state.heavy, _answer, messages, state, response_encoding
             )
+            response = _held_answer(_slices(whole), len(whole), response_encoding, state)
     except HttpError as error:
         state.metrics.errors.labels(error.code).inc()
         return error_response(error, "json" if response_encoding == "csv" else response_encoding)
@@ -173,10 +179,16 @@ async def synthesize(request: Request, state: ServerState) -> Response:
     return response
 
 
-def _answer(messages: list[Message], state: ServerState, encoding: ResponseFormat) -> Response:
-    """Synthesize and encode a msgpack or CSV response (in the thread pool: both scale with
+def _answer(messages: list[Message], state: ServerState, encoding: ResponseFormat) -> bytes:
+    """Synthesize and encode a msgpack or CSV answer (in the thread pool: both scale with
     the utterance; their encoders take milliseconds where JSON's takes seconds)."""
-    return _response(_run(messages, state), encoding)
+    result = _run(messages, state)
+    if encoding == "csv":
+        return frames_csv_text(result.frames, result.ready.channels, result.ready.fps).encode()
+    body = _fields(result)
+    body["data"] = np.ascontiguousarray(result.frames, dtype="<f4").tobytes()
+    packed: bytes = msgpack.packb(body, use_bin_type=True)
+    return packed
 
 
 def _request_encoding(request: Request) -> Encoding:
@@ -316,18 +328,9 @@ def _run(messages: list[Message], state: ServerState) -> Synthesis:
     return Synthesis(ready, frames, done)
 
 
-def _response(result: Synthesis, encoding: ResponseFormat) -> Response:
-    """A whole msgpack or CSV answer."""
-    ready, frames = result.ready, result.frames
-    if encoding == "csv":
-        return Response(frames_csv_text(frames, ready.channels, ready.fps), media_type=CSV_TYPE)
-    body = _fields(result)
-    body["data"] = np.ascontiguousarray(frames, dtype="<f4").tobytes()
-    return Response(msgpack.packb(body, use_bin_type=True), media_type=RESPONSE_TYPES[encoding])
-
-
-class StreamedAnswer(StreamingResponse):
-    """A streamed answer that runs ``on_end`` once, however its sending ends."""
+class HeldAnswer(StreamingResponse):
+    """A streamed answer that runs ``on_end`` once, however its sending ends (the last
+    piece handed to the connection, or the client gone)."""
 
     def __init__(self, pieces: AsyncIterator[bytes], media_type: str, on_end: Callable[[], None]):
         super().__init__(pieces, media_type=media_type)
@@ -340,10 +343,11 @@ class StreamedAnswer(StreamingResponse):
             self.on_end()
 
 
-def _streamed_json(result: Synthesis, state: ServerState) -> StreamedAnswer:
-    """The JSON answer, encoded piece by piece in the pool as the client takes it; its
-    frames count in ``state.answer_bytes`` until it ends."""
-    held = result.frames.nbytes
+def _held_answer(
+    pieces: AsyncIterator[bytes], held: int, encoding: ResponseFormat, state: ServerState
+) -> HeldAnswer:
+    """``pieces`` as a streamed answer whose ``held`` bytes count in ``state.answer_bytes``
+    until it ends."""
     state.answer_bytes += held
     state.metrics.answer_bytes.set(state.answer_bytes)
 
@@ -351,7 +355,16 @@ def _streamed_json(result: Synthesis, state: ServerState) -> StreamedAnswer:
         state.answer_bytes -= held
         state.metrics.answer_bytes.set(state.answer_bytes)
 
-    return StreamedAnswer(_json_pieces(result, state), RESPONSE_TYPES["json"], release)
+    media_type = CSV_TYPE if encoding == "csv" else RESPONSE_TYPES[encoding]
+    return HeldAnswer(pieces, media_type, release)
+
+
+async def _slices(whole: bytes) -> AsyncIterator[bytes]:
+    """An encoded answer ``SLICE_BYTES`` at a time, each once the previous one is in the
+    connection's buffer."""
+    view = memoryview(whole)
+    for start in range(0, len(whole), SLICE_BYTES):
+        yield bytes(view[start : start + SLICE_BYTES])
 
 
 async def _json_pieces(result: Synthesis, state: ServerState) -> AsyncIterator[bytes]:

@@ -18,21 +18,25 @@ import msgpack
 import numpy as np
 import pytest
 
-from lipstream.server.load import LoadMonitor
+from lipstream.config import ServerSettings
+from lipstream.server.load import MIB, LoadMonitor
 from lipstream.server.overload import LoadLimits, Overload, OverloadPolicy
 from lipstream.server.rest import JSON_CHUNK_VALUES
+from lipstream.server.state import ServerState
 from lipstream_client import Done, End, PhonemeItem, Phonemes, Start
 from tests.lipstream.server.harness import Served, client, serving
 
-SECONDS = 30  # at 1000 fps about 8 MB of JSON: more than the kernel's buffers hold
-FPS = 1000
+PHONEMES = 999  # 99.9 s of 0.1 s phonemes
+FPS = 1000  # about 25 MB of JSON: far more than the kernel's buffers hold
+FRAMES = 99_901  # both ends included
 CHANNELS = 28  # the demo viseme-lerp model's
 ITEMS = [
     {"phoneme": "AA1" if index % 2 else "M", "start": index / 10, "end": (index + 1) / 10}
-    for index in range(SECONDS * 10)
+    for index in range(PHONEMES)
 ]
 BODY = {"engine": "viseme-lerp", "character": "demo", "fps": FPS, "items": ITEMS}
-ANSWER_BYTES = (SECONDS * FPS + 1) * CHANNELS * 4  # float32 frames, both ends included
+ANSWER_BYTES = FRAMES * CHANNELS * 4  # float32 frames
+CEILING_MB = 1000
 SMALL_RECEIVE_BUFFER = 1 << 16
 POLLS = 2000
 
@@ -58,7 +62,7 @@ def wait_for_metric(base: str, name: str, value: float) -> None:
     raise AssertionError(f"{name} never read {value}: {metric(base, name)}")
 
 
-def post_json(served: Served) -> socket.socket:
+def post_json(served: Served, accept: str = "application/json") -> socket.socket:
     """A connection with a small receive buffer that has sent the long JSON request."""
     port = int(served.http.rsplit(":", 1)[1])
     sock = socket.socket()
@@ -68,7 +72,7 @@ def post_json(served: Served) -> socket.socket:
     body = json.dumps(BODY).encode()
     sock.sendall(
         b"POST /v1/synthesize HTTP/1.1\r\nHost: test\r\nContent-Type: application/json\r\n"
-        b"Accept: application/json\r\n"
+        + f"Accept: {accept}\r\n".encode()
         + f"Content-Length: {len(body)}\r\n\r\n".encode()
         + body
     )
@@ -158,7 +162,7 @@ def test_a_long_json_answer_is_streamed_while_others_are_served(served: Served) 
     body = b"".join(pieces)
     assert body == expected
     assert json.loads(body) == json.loads(expected)
-    assert len(json.loads(body)["data"]) == SECONDS * FPS + 1
+    assert len(json.loads(body)["data"]) == FRAMES
     for piece in pieces[1:-1]:  # each piece of rows holds at most JSON_CHUNK_VALUES numbers
         rows = json.loads(b"[" + piece.removeprefix(b",") + b"]")
         assert 0 < sum(map(len, rows)) <= JSON_CHUNK_VALUES
@@ -166,18 +170,59 @@ def test_a_long_json_answer_is_streamed_while_others_are_served(served: Served) 
     wait_for_metric(served.http, "lipstream_rest_answer_bytes", 0.0)
 
 
-def test_answers_left_unread_are_held_as_frames_and_released(served: Served) -> None:
-    unread = 6
+def test_answers_left_unread_are_held_and_released(served: Served) -> None:
+    """JSON answers hold their float32 frames; a msgpack or CSV answer its encoding."""
+    packed = httpx.post(
+        f"{served.http}/v1/synthesize",
+        json=BODY,
+        timeout=120,
+        headers={"Accept": "application/msgpack"},
+    )
+    csv = httpx.post(
+        f"{served.http}/v1/synthesize", json=BODY, timeout=120, headers={"Accept": "text/csv"}
+    )
+    assert packed.status_code == csv.status_code == 200
+    unread_json = 4
+    held = unread_json * ANSWER_BYTES + len(packed.content) + len(csv.content)
     with ExitStack() as stack:
-        for _ in range(unread):
+        for _ in range(unread_json):
             stack.enter_context(post_json(served))
-        wait_for_metric(served.http, "lipstream_rest_answer_bytes", unread * ANSWER_BYTES)
+        stack.enter_context(post_json(served, "application/msgpack"))
+        stack.enter_context(post_json(served, "text/csv"))
+        wait_for_metric(served.http, "lipstream_rest_answer_bytes", held)
         assert httpx.get(f"{served.http}/healthz").json() == {"status": "ok"}
         a_session_is_served(served)
     wait_for_metric(served.http, "lipstream_rest_answer_bytes", 0.0)
 
 
-def test_frames_held_for_answers_count_toward_the_memory_ceiling() -> None:
+async def _resident_figure_frozen_at(state: ServerState, rss_mb: float) -> None:
+    """Stop the load monitor and fix its resident-memory figure (the injected reading)."""
+    state.overload.monitor.stop()
+    state.overload.monitor.rss_mb = rss_mb
+
+
+def test_answers_left_unread_are_refused_beyond_the_memory_ceiling(lerp_dir: Path) -> None:
+    with serving(lerp_dir, ServerSettings(max_memory_mb=CEILING_MB)) as served:
+        state: ServerState = served.server.lifespan.state["server"]
+        # Room for one and a half answers: the second is admitted with one held, the third
+        # would hold two.
+        rss_mb = CEILING_MB - 1.5 * ANSWER_BYTES / MIB
+        served.call_soon(_resident_figure_frozen_at(state, rss_mb)).result(timeout=10)
+        with ExitStack() as stack:
+            for held in (1, 2):
+                stack.enter_context(post_json(served))
+                wait_for_metric(served.http, "lipstream_rest_answer_bytes", held * ANSWER_BYTES)
+            refused = httpx.post(f"{served.http}/v1/synthesize", json=BODY, timeout=120)
+            assert refused.status_code == 503 and "retry-after" in refused.headers
+            error = refused.json()["error"]
+            assert (error["code"], error["details"]["reason"]) == ("server_busy", "memory")
+            assert httpx.get(f"{served.http}/healthz").json() == {"status": "ok"}
+        wait_for_metric(served.http, "lipstream_rest_answer_bytes", 0.0)
+        admitted = httpx.post(f"{served.http}/v1/synthesize", json=BODY, timeout=120)
+        assert admitted.status_code == 200 and len(admitted.json()["data"]) == FRAMES
+
+
+def test_bytes_held_for_answers_count_toward_the_memory_ceiling() -> None:
     limits = LoadLimits(max_memory_mb=1000.0, max_lag_ms=50.0, max_busy=0.75, session_cost=0.1)
     monitor = LoadMonitor()
     monitor.rss_mb = 900.0
