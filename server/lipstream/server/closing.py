@@ -19,6 +19,9 @@ end of the stream) from ``websockets``, which uvicorn never sends: it neither wr
 closes, and the connection, out of the head deadline's reach since the upgrade, would stay
 open for good. So the refusal is written and the transport closed here, counted in
 ``lipstream_connections_refused`` (``head_too_large`` for a size, else ``invalid_upgrade``).
+
+The connection's client was counted by the HTTP protocol (``client_limits``); once upgraded,
+its closing is reported here.
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ from typing import cast
 from websockets.exceptions import HeaderLineTooLong, RequestLineTooLong, TooManyHeaders
 
 from .flush_watch import FlushWatch, flush_timeout_s
-from .handshake import HEAD_TOO_LARGE, refused
+from .handshake import HEAD_TOO_LARGE, client_limits, refused
 from .read_window import ReadWindowProtocol
 
 INVALID_UPGRADE = "invalid_upgrade"
@@ -63,6 +66,11 @@ class BoundedCloseProtocol(ReadWindowProtocol):
     def connection_lost(self, exc: Exception | None) -> None:
         super().connection_lost(exc)
         self.flush_watch.stop()
+        # The HTTP protocol counted this connection for its client and handed it over with
+        # the upgrade; its own connection_lost never runs.
+        limits = client_limits(self.app_state)
+        if limits is not None and self.client:
+            limits.closed(self.client[0], self.loop.time())
 
     async def run_asgi(self) -> None:
         await super().run_asgi()

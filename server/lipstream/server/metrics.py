@@ -90,6 +90,12 @@ class Metrics:
             registry=registry,
             multiprocess_mode="livesum",
         )
+        self.memory_ceiling = Gauge(
+            "lipstream_memory_ceiling_bytes",
+            "The memory ceiling above which new work is refused (summed over the workers).",
+            registry=registry,
+            multiprocess_mode="livesum",
+        )
         self.answer_bytes = Gauge(
             "lipstream_rest_answer_bytes",
             "Bytes held for POST /v1/synthesize answers still being sent "
