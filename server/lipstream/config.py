@@ -42,9 +42,9 @@ class ServerSettings:
     log_level: str = "info"
     max_sessions: int = 500
     max_connections: int = 4096
-    max_client_connections: int = 1024
-    client_upgrade_rate: float = 100.0
-    client_upgrade_burst: int = 500
+    max_client_connections: int = 256
+    client_upgrade_rate: float = 20.0
+    client_upgrade_burst: int = 100
     handshake_timeout_s: float = 10.0
     max_memory_mb: int = 0
     max_loop_lag_ms: float = 50.0
