@@ -62,7 +62,15 @@ from lipstream_client.exceptions import (
     LipstreamClientError,
     LipstreamServerError,
 )
-from lipstream_client.messages import ClientMessage, Encoding, End, PhonemeItem, Phonemes, Start
+from lipstream_client.messages import (
+    ClientMessage,
+    Encoding,
+    End,
+    JsonValue,
+    PhonemeItem,
+    Phonemes,
+    Start,
+)
 
 from .clips import Span, synthetic_clip
 
@@ -375,7 +383,7 @@ async def pq_connections(target: Target, tally: KindTally) -> None:
 
     async def one() -> None:
         async with _client(target) as client:
-            options = {"search": "pq", "pq_window": PQ_WINDOW}
+            options: dict[str, JsonValue] = {"search": "pq", "pq_window": PQ_WINDOW}
             stream = await client.start("anime-graph", character, options=options)
             await stream.send_phonemes(spans)
             await stream.end()
