@@ -62,6 +62,7 @@ RESUME_MISMATCH = "resume_mismatch"
 RATE_LIMITED = "rate_limited"
 IDLE_TIMEOUT = "idle_timeout"
 SERVER_BUSY = "server_busy"
+TOO_MANY_CLIENT_CONNECTIONS = "too_many_client_connections"
 SHUTTING_DOWN = "shutting_down"
 UNAUTHORIZED = "unauthorized"
 ORIGIN_NOT_ALLOWED = "origin_not_allowed"
@@ -275,6 +276,15 @@ ERROR_CODES: dict[str, ErrorCodeInfo] = {
         "the server is at its capacity: its session cap, its measured load (event-loop lag "
         "or busy time) or its memory ceiling; details.retry_after_ms says when to retry. "
         "Refusing a `start` (memory), it ends only that request",
+        "server",
+        "connection",
+        CloseCode.TRY_AGAIN_LATER,
+    ),
+    TOO_MANY_CLIENT_CONNECTIONS: ErrorCodeInfo(
+        "the client's address holds the server's maximum of open connections, or opened "
+        "WebSockets faster than its upgrade rate (details.reason: connections or "
+        "upgrade_rate); refused before the upgrade with HTTP 503, this code in the JSON body "
+        "and Retry-After",
         "server",
         "connection",
         CloseCode.TRY_AGAIN_LATER,

@@ -42,6 +42,9 @@ class ServerSettings:
     log_level: str = "info"
     max_sessions: int = 500
     max_connections: int = 4096
+    max_client_connections: int = 256
+    client_upgrade_rate: float = 20.0
+    client_upgrade_burst: int = 100
     handshake_timeout_s: float = 10.0
     max_memory_mb: int = 0
     max_loop_lag_ms: float = 50.0
@@ -187,6 +190,27 @@ ENV_SETTINGS: tuple[EnvSetting, ...] = (
         "open TCP connections per worker (HTTP, WebSocket, and those still sending their "
         "request head), at most the open-file limit less a reserve; beyond: HTTP 503 with "
         "`Retry-After`, only `/healthz` answered",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MAX_CLIENT_CONNECTIONS",
+        "max_client_connections",
+        _integer(0, 10_000_000),
+        "open TCP connections per worker from one client address; beyond: HTTP 503 "
+        "`too_many_client_connections` with `Retry-After`, only `/healthz` answered; 0 = no "
+        "cap (behind a reverse proxy, where every client has the proxy's address)",
+    ),
+    EnvSetting(
+        "LIPSTREAM_CLIENT_UPGRADE_RATE",
+        "client_upgrade_rate",
+        _number(0.0, 1e9),
+        "sustained WebSocket upgrades per second per worker from one client address; beyond: "
+        "HTTP 503 `too_many_client_connections`; 0 = no limit",
+    ),
+    EnvSetting(
+        "LIPSTREAM_CLIENT_UPGRADE_BURST",
+        "client_upgrade_burst",
+        _integer(1, 1_000_000_000),
+        "WebSocket upgrades one client address may make at once above the rate",
     ),
     EnvSetting(
         "LIPSTREAM_HANDSHAKE_TIMEOUT_S",

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -241,7 +242,7 @@ def _soak(args: argparse.Namespace, settings: Settings) -> None:
         seed=args.seed,
         token=args.token,
     )
-    results = soak(config)
+    results = soak(config, command="lipstream " + shlex.join(sys.argv[1:]))
     write_results(results, Path(args.results))
     print(json.dumps(results, indent=2) if args.json else format_report(results))
     print(f"results written to {args.results}", file=sys.stderr)
@@ -255,8 +256,10 @@ def _add_soak_parser(runs: Any) -> None:
         help="valid real-time sessions among hostile clients, for a bounded time",
         description="Valid real-time sessions among hostile clients (silent sockets, partial "
         "headers, PQ searches, JSON floods, many requests, clients that stop reading, "
-        "malformed messages) against a lipstream server on this machine: the valid "
-        "sessions' lag, /healthz latency, peak server memory and undocumented errors.",
+        "malformed messages, oversized heads, audio floods, PQ on many connections, JSON "
+        "REST floods left unread, one client's flood of connections) against a lipstream "
+        "server on this machine: the valid sessions' lag, /healthz latency, peak server "
+        "memory against its ceiling and undocumented errors.",
     )
     _target_options(soak, required_target=False)
     soak.add_argument("--duration", type=float, default=60.0, help="seconds (at most 3600)")

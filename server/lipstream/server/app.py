@@ -38,9 +38,11 @@ from ..models import ModelRegistry
 from ..status import phase
 from . import demo_page, docs_page, openapi, phoneme_maps
 from .catalog import Catalog
+from .client_limits import ClientLimits
 from .handshake import head_limits
 from .lifecycle import Lifecycle, install_drain_on_signals
 from .liveness import LivenessServer
+from .load import MIB
 from .log_throttle import install as throttle_repeated_log_lines
 from .metrics import Metrics, forget_this_process
 from .open_files import open_file_limit
@@ -91,11 +93,13 @@ def create_app(
     loaded: ModelRegistry | None = None,
     *,
     serving_process: bool = False,
+    drain_flag: Path | None = None,
 ) -> FastAPI:
     """An app serving every model found under ``models_path`` (or the models already
     ``loaded`` from there) with ``settings`` (default: the ``LIPSTREAM_*`` environment).
     ``serving_process``: this process exists to serve the app, so its lifespan may change
-    process-wide state (``freeze_long_lived_objects``)."""
+    process-wide state (``freeze_long_lived_objects``). ``drain_flag``: the file whose
+    existence says the workers' supervisor drains (``runner.DrainingSupervisor``)."""
     settings = settings or load_server_settings()
     metrics = Metrics()
     lifecycle = Lifecycle(settings.max_sessions, on_drain=lambda: metrics.draining.set(1))
@@ -112,8 +116,19 @@ def create_app(
         heavy = ThreadPoolExecutor(settings.heavy_threads, thread_name_prefix="lipstream-heavy")
         catalog = Catalog.build(registry, settings, report)
         overload = overload_for(settings, catalog, metrics.observe_load)
+        metrics.memory_ceiling.set(overload.policy.limits.max_memory_mb * MIB)
+        clients = ClientLimits.from_settings(settings)
         server = ServerState(
-            registry, catalog, settings, metrics, lifecycle, executor, heavy, overload
+            registry,
+            catalog,
+            settings,
+            metrics,
+            lifecycle,
+            executor,
+            heavy,
+            overload,
+            clients,
+            drain_flag=drain_flag,
         )
         _log_limits(server)
         overload.monitor.start()

@@ -90,6 +90,19 @@ class Metrics:
             registry=registry,
             multiprocess_mode="livesum",
         )
+        self.memory_ceiling = Gauge(
+            "lipstream_memory_ceiling_bytes",
+            "The memory ceiling above which new work is refused (summed over the workers).",
+            registry=registry,
+            multiprocess_mode="livesum",
+        )
+        self.answer_bytes = Gauge(
+            "lipstream_rest_answer_bytes",
+            "Bytes held for POST /v1/synthesize answers still being sent "
+            "(counted toward the memory ceiling; summed over the workers).",
+            registry=registry,
+            multiprocess_mode="livesum",
+        )
         self.requests = Counter(
             "lipstream_requests",
             "Finished requests by how they ended (end, cancel, interrupt, error).",
@@ -115,6 +128,13 @@ class Metrics:
             "lipstream_connections_refused",
             "WebSocket connections refused or closed by policy, by error code.",
             ["code"],
+            registry=registry,
+        )
+        self.client_refusals = Counter(
+            "lipstream_client_refusals",
+            "Connections refused with too_many_client_connections (one client address over "
+            "its limits), by reason: connections or upgrade_rate.",
+            ["reason"],
             registry=registry,
         )
         self.busy_refusals = Counter(

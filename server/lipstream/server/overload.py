@@ -196,10 +196,11 @@ class Overload:
     def shedding(self, sessions: int) -> bool:
         return self.policy.shedding(self.monitor.sample(), sessions)
 
-    def request_refusal(self) -> Refusal | None:
-        """Memory only, from the monitor's latest figure: safe from the synthesis pool's
+    def request_refusal(self, held_mb: float = 0.0) -> Refusal | None:
+        """Memory only, from the monitor's latest figure plus ``held_mb`` the caller knows the
+        process holds and the figure may not show yet: safe from the synthesis pool's
         threads, where a session may handle its ``start``."""
-        return self.policy.request_refusal(LoadSample(rss_mb=self.monitor.rss_mb))
+        return self.policy.request_refusal(LoadSample(rss_mb=self.monitor.rss_mb + held_mb))
 
 
 def memory_ceiling_mb(settings: ServerSettings) -> float:

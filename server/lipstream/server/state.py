@@ -4,10 +4,12 @@ from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from pathlib import Path
 
 from ..config import ServerSettings
 from ..models import ModelRegistry
 from .catalog import Catalog
+from .client_limits import ClientLimits
 from .lifecycle import Lifecycle
 from .metrics import Metrics
 from .overload import Overload
@@ -20,7 +22,7 @@ class ServerState:
     """Resident models and what was derived from them, settings, metrics, the connections'
     lifecycle, the two thread pools (``executor`` for ordinary engine work, ``heavy`` for
     costly messages, large JSON answers and REST, so those never queue ordinary sessions
-    behind them) and the load-based admission."""
+    behind them), the load-based admission and the per-client limits."""
 
     registry: ModelRegistry
     catalog: Catalog
@@ -30,12 +32,17 @@ class ServerState:
     executor: ThreadPoolExecutor
     heavy: ThreadPoolExecutor
     overload: Overload
+    clients: ClientLimits
     loaded: bool = True
+    answer_bytes: int = 0  # bytes held by REST answers still being sent (``rest``)
+    drain_flag: Path | None = None  # marked by the workers' supervisor (``runner``)
 
     @property
     def ready(self) -> bool:
-        """Models are loaded and the process is not draining."""
-        return self.loaded and not self.lifecycle.draining
+        """Models are loaded and neither this process nor its supervisor drains."""
+        if not self.loaded or self.lifecycle.draining:
+            return False
+        return self.drain_flag is None or not self.drain_flag.exists()
 
     @property
     def session_limits(self) -> SessionLimits:

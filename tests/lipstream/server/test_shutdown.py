@@ -20,6 +20,7 @@ import pytest
 
 from lipstream.config import ServerSettings
 from lipstream.server.catalog import Catalog
+from lipstream.server.runner import DRAIN_MARKED
 from lipstream_client import Done, End, ErrorMessage, PhonemeItem, Phonemes, Ready, Start
 from tests.helpers import free_port, serve_command
 from tests.lipstream.server.harness import client, frame_rows, serving
@@ -131,3 +132,40 @@ def test_sigterm_loses_no_in_flight_utterance(
         np.testing.assert_array_equal(np.array([rows[i] for i in sorted(rows)]), expected)
         assert isinstance(answers[-1], Done)
         assert (code, reason) == (1001, "shutting_down")
+
+
+def test_readyz_answers_503_once_the_supervisor_of_two_workers_has_the_signal(
+    lerp_dir: Path,
+) -> None:
+    """``lipstream serve --workers 2``: uvicorn's supervisor looks at a signal only every half
+    second before it passes it on, and until then each worker said ready. Now the first
+    /readyz after the supervisor's mark (its log line, the ordering point) is 503, from
+    whichever worker answers: a request left in flight keeps its worker serving."""
+    port = free_port()
+    env = {**os.environ, "LIPSTREAM_DRAIN_TIMEOUT_S": "20", "LIPSTREAM_LOG_LEVEL": "warning"}
+    process = subprocess.Popen(
+        serve_command(lerp_dir, port, "--workers", "2"),
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    base = f"http://127.0.0.1:{port}"
+    try:
+        wait_for(lambda: readyz(base) == 200, timeout=READY_TIMEOUT_S)
+        with client(base.replace("http://", "ws://") + "/v1/stream") as ws:
+            ws.send(Start("a", "viseme-lerp", "demo"), Phonemes("a", ITEMS[:2]))
+            assert isinstance(ws.recv(), Ready)
+            process.send_signal(signal.SIGTERM)
+            assert process.stderr is not None
+            # Bounded: the supervisor's log ends when it exits, at the latest after the drain.
+            marked = any(DRAIN_MARKED in line for line in iter(process.stderr.readline, ""))
+            assert marked, "the supervisor never marked the drain"
+            assert readyz(base) == 503
+            ws.send(Phonemes("a", ITEMS[2:]), End("a"))
+            assert isinstance(ws.until_done("a")[-1], Done)
+        process.wait(timeout=30)
+    finally:
+        if process.poll() is None:
+            process.kill()
+        process.wait(timeout=10)
