@@ -263,10 +263,11 @@ def _bench(args: argparse.Namespace, settings: Settings) -> None:
     corpus_dir = Path(args.corpus) if args.corpus else settings.demo_dir / DEMO_CORPUS_DIR
     if args.corpus is None and not corpus_dir.exists():
         build_demo(settings.demo_dir, progress=True)
+    path = settings.results_file(args.results, "results.json")
     results = run_bench(
         load_corpus(corpus_dir, progress=True), engine_benches=not args.no_engine_benches
     )
-    write_results(results, Path(args.results))
+    write_results(results, path)
     if args.json:
         print(json.dumps(results, indent=2))
     else:
@@ -408,8 +409,7 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument("--json", action="store_true", help="print JSON instead of a table")
     bench.add_argument(
         "--results",
-        default="bench/results.json",
-        help="JSON file to write the results to (default bench/results.json)",
+        help="JSON file to write the results to (default $LIPSTREAM_HOME/bench/results.json)",
     )
     bench.add_argument(
         "--no-engine-benches",

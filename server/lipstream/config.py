@@ -22,6 +22,7 @@ ENV_PREFIX = "LIPSTREAM_"
 DEMO_DIR = "demo"
 DEMO_MODELS_DIR = "models"
 KERNEL_CACHE_DIR = "numba-cache"
+RESULTS_DIR = "bench"
 NUMBA_CACHE_VARIABLE = "NUMBA_CACHE_DIR"
 
 
@@ -101,6 +102,12 @@ class Settings:
     @property
     def demo_models_dir(self) -> Path:
         return self.demo_dir / DEMO_MODELS_DIR
+
+    def results_file(self, given: str | None, name: str) -> Path:
+        """Where a measuring command writes its results: ``given`` (``--results``) when
+        there is one, else ``$LIPSTREAM_HOME/bench/<name>``, never the current directory
+        unasked (a checkout's committed ``bench/*.json`` are measurements)."""
+        return Path(given) if given else self.home / RESULTS_DIR / name
 
 
 Parser = Callable[[str, str], Any]
