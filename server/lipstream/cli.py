@@ -28,6 +28,8 @@ if TYPE_CHECKING:
     from lipstream_client import OutputProfile
 
     from .audio import Audio
+    from .engines.base import Model
+    from .retarget import RetargetMap
 
 
 def _build_demo(args: argparse.Namespace, settings: Settings) -> None:
@@ -221,7 +223,6 @@ def _retarget(args: argparse.Namespace, settings: Settings) -> None:
     from .retarget import (
         RETARGET_DIR,
         fit_map,
-        model_maps,
         read_pairs,
         save_map,
         target_pairs,
@@ -231,7 +232,7 @@ def _retarget(args: argparse.Namespace, settings: Settings) -> None:
     directory = Path(args.model)
     model = load_model(directory)
     if args.action == "show":
-        for name, retarget in model_maps(model, directory, only=args.name).items():
+        for name, retarget in _shown_maps(model, directory, args.name).items():
             errors = retarget.reproduction_error()
             print(
                 f"{name}: {len(retarget.channels)} channels -> {len(retarget.controls)} controls, "
@@ -252,6 +253,24 @@ def _retarget(args: argparse.Namespace, settings: Settings) -> None:
     out = save_map(Path(args.out) if args.out else directory / RETARGET_DIR / name, retarget)
     worst = max(retarget.reproduction_error().values())
     print(f"wrote retarget map {name} to {out} (largest key-pose error {worst:.3g})")
+
+
+def _shown_maps(model: Model, directory: Path, name: str | None) -> dict[str, RetargetMap]:
+    """Every map the model is served through, or only the one named (``unknown_retarget``
+    when it has none of that name)."""
+    from .retarget import model_maps, offered_targets
+
+    maps = model_maps(model, directory, only=name)
+    if name is None:
+        return maps
+    if name not in maps:
+        known = ", ".join(dict.fromkeys([*offered_targets(model.channels), *maps]))
+        raise LipstreamError(
+            f"the model has no retarget map {name!r}; its maps: {known}",
+            where=str(directory),
+            code="unknown_retarget",
+        )
+    return {name: maps[name]}
 
 
 def _bench(args: argparse.Namespace, settings: Settings) -> None:
