@@ -9,19 +9,32 @@ supervisor, and multiprocessing's resource tracker (a helper). RSS counts
 every resident page a process maps; PSS divides each shared page among the
 processes that map it, so the PSS of all processes sums to what they cost
 together, and RSS minus PSS is what sharing saved.
-Then SIGTERM, and the next N. Linux only.
+Then SIGTERM, and the next N. Linux only. ``--markdown`` prints the deploy
+guide's table (docs/how-to/deploy.md) rendered from a results file.
 
     python -m lipstream.bench.workers_memory --models DIR --workers 1 2 4 --json out.json
+    python -m lipstream.bench.workers_memory --markdown bench/workers_memory.json
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import platform
+import shlex
+import sys
 from dataclasses import asdict, dataclass
+from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
+from .._version import __version__
+from ..models import model_dirs
+from ..store import read_manifest
 from .serving import children, serving
+
+TOOL = "python -m lipstream.bench.workers_memory"
 
 
 @dataclass(frozen=True)
@@ -67,24 +80,131 @@ def measure(models: Path, workers: int) -> list[ProcessMemory]:
         ]
 
 
+def describe_models(models: Path) -> list[dict[str, Any]]:
+    """Each model directory served: its name, engine and size on disk in bytes."""
+    described = []
+    for directory in model_dirs(models):
+        files = [path for path in directory.rglob("*") if path.is_file()]
+        described.append(
+            {
+                "name": directory.name,
+                "engine": read_manifest(directory).engine,
+                "bytes": sum(path.stat().st_size for path in files),
+            }
+        )
+    return described
+
+
+def machine() -> dict[str, Any]:
+    return {
+        "cpus": os.cpu_count(),
+        "platform": platform.platform(),
+        "python": platform.python_version(),
+        "load_average": [round(load, 2) for load in os.getloadavg()],
+    }
+
+
+def run(models: Path, workers: list[int], argv: list[str]) -> dict[str, Any]:
+    """The results file: how it was measured, then every process of each ``--workers N``."""
+    results: dict[str, Any] = {
+        "tool": f"lipstream.bench.workers_memory {__version__}",
+        "command": shlex.join([*TOOL.split(), *argv]),
+        "date": datetime.now(UTC).isoformat(timespec="seconds"),
+        "machine": machine(),
+        "models": describe_models(models),
+        "workers": {},
+    }
+    for count in workers:
+        processes = measure(models, count)
+        results["workers"][str(count)] = [asdict(process) for process in processes]
+        print(summary_line(count, processes), flush=True)
+    return results
+
+
+def summary_line(workers: int, processes: list[ProcessMemory]) -> str:
+    workers_only = [p for p in processes if p.role == "worker"]
+    return (
+        f"{workers} worker(s): RSS per worker "
+        f"{', '.join(f'{p.rss_mib:.0f}' for p in workers_only)} MiB; PSS per worker "
+        f"{', '.join(f'{p.pss_mib:.0f}' for p in workers_only)} MiB; "
+        f"PSS of all processes {sum(p.pss_mib for p in processes):.0f} MiB"
+    )
+
+
+def _mean(values: list[float]) -> float:
+    return sum(values) / len(values)
+
+
+def render_markdown(results: dict[str, Any]) -> str:
+    """The deploy guide's paragraph on memory: the engines, the command, the table of
+    every N (each worker's figure is the mean over the workers) and the cost per worker,
+    fitted as a line through the two largest N's totals."""
+    engines = ", ".join(f"`{model['engine']}`" for model in results["models"])
+    megabytes = sum(model["bytes"] for model in results["models"]) / 1e6
+    rows = []
+    totals: dict[int, float] = {}
+    shared: list[float] = []
+    for key, processes in sorted(results["workers"].items(), key=lambda item: int(item[0])):
+        by_role: dict[str, list[dict[str, float]]] = {}
+        for process in processes:
+            by_role.setdefault(str(process["role"]), []).append(process)
+        workers = by_role["worker"]
+        rss = _mean([p["rss_mib"] for p in workers])
+        pss = _mean([p["pss_mib"] for p in workers])
+        totals[int(key)] = sum(p["pss_mib"] for p in processes)
+        if "supervisor" in by_role:
+            supervisor = by_role["supervisor"][0]
+            held = f"{supervisor['rss_mib']:.0f} / {supervisor['pss_mib']:.0f} MiB"
+            shared.append(rss - pss)
+        else:
+            held = "(none: the process is the worker)"
+        rows.append(f"| {key} | {rss:.0f} MiB | {pss:.0f} MiB | {held} | {totals[int(key)]:.0f} MiB |")
+    lines = [
+        f"Memory with every engine of the demo character loaded ({engines}; "
+        f"{megabytes:.0f} MB of model files), measured with `{results['command']}` "
+        f"on {results['date'][:10]} (`/proc/<pid>/smaps_rollup` once every worker is ready; "
+        "`bench/workers_memory.json`, rendered by "
+        "`python -m lipstream.bench.workers_memory --markdown bench/workers_memory.json`):",
+        "",
+        "| workers | RSS per worker | PSS per worker | supervisor (RSS / PSS) | all processes, PSS |",
+        "|---|---|---|---|---|",
+        *rows,
+    ]
+    helpers = [p for ps in results["workers"].values() for p in ps if p["role"] == "helper"]
+    if helpers:
+        lines += [
+            "",
+            f"With several workers, multiprocessing's resource tracker adds "
+            f"{_mean([p['rss_mib'] for p in helpers]):.0f} MiB RSS, "
+            f"{_mean([p['pss_mib'] for p in helpers]):.0f} MiB PSS, counted in the last column.",
+        ]
+    if len(shared) >= 2:
+        low, high = sorted(totals)[-2:]
+        per_worker = (totals[high] - totals[low]) / (high - low)
+        fixed = totals[high] - per_worker * high
+        lines += [
+            f"A worker shares {min(shared):.0f}–{max(shared):.0f} MiB with the others "
+            f"(its RSS less its PSS). N workers cost about {fixed:.0f} MiB + "
+            f"{per_worker:.0f} MiB × N (the line through N = {low} and N = {high}), "
+            f"against {totals[min(totals)]:.0f} MiB for one process.",
+        ]
+    return "\n".join(lines) + "\n"
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--models", type=Path, required=True)
+    parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
+    parser.add_argument("--models", type=Path)
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2, 4])
     parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--markdown", type=Path, default=None, metavar="RESULTS")
     args = parser.parse_args(argv)
-    results: dict[str, list[dict[str, object]]] = {}
-    for workers in args.workers:
-        processes = measure(args.models, workers)
-        results[str(workers)] = [asdict(process) for process in processes]
-        workers_only = [p for p in processes if p.role == "worker"]
-        total_pss = sum(p.pss_mib for p in processes)
-        print(
-            f"{workers} worker(s): RSS per worker "
-            f"{', '.join(f'{p.rss_mib:.0f}' for p in workers_only)} MiB; PSS per worker "
-            f"{', '.join(f'{p.pss_mib:.0f}' for p in workers_only)} MiB; "
-            f"PSS of all processes {total_pss:.0f} MiB"
-        )
+    if args.markdown is not None:
+        print(render_markdown(json.loads(args.markdown.read_text())), end="")
+        return 0
+    if args.models is None:
+        parser.error("--models is required unless --markdown is given")
+    given = argv if argv is not None else sys.argv[1:]
+    results = run(args.models, args.workers, list(given))
     if args.json is not None:
         args.json.write_text(json.dumps(results, indent=2) + "\n")
     return 0

@@ -21,7 +21,7 @@ if TYPE_CHECKING:
     from .intervals import LabelledInterval
 
 MAX_PROBLEMS = 100
-"""Problems one load reports at most (docs/corpus-formats.md); then it stops looking."""
+"""Problems one load reports at most (docs/reference/corpus-formats.md); then it stops looking."""
 
 Arguments = ParamSpec("Arguments")
 Result = TypeVar("Result")
