@@ -1,6 +1,9 @@
-"""Memory of ``lipstream serve --workers N``: RSS and PSS of each process, from smaps_rollup.
+"""Memory of ``lipstream serve --workers N``: RSS, PSS and USS of each process (smaps_rollup).
 
-Method: for each N, start ``lipstream serve --workers N`` on a free loopback
+Method: first one unmeasured start with one worker, so that numba's kernel
+cache is warm: the figures are those of every later start (a first start
+also keeps the memory that compiling the kernels took).
+Then, for each N, start ``lipstream serve --workers N`` on a free loopback
 port with the given models, wait until every worker has logged its start-up
 (models loaded, warmed up and calibrated) and ``/readyz`` answers, then read
 ``/proc/<pid>/smaps_rollup`` of the serving processes: with one worker the
@@ -8,7 +11,10 @@ process itself, with several each worker (the supervisor's children), the
 supervisor, and multiprocessing's resource tracker (a helper). RSS counts
 every resident page a process maps; PSS divides each shared page among the
 processes that map it, so the PSS of all processes sums to what they cost
-together, and RSS minus PSS is what sharing saved.
+together, and RSS minus PSS is what sharing saved; USS counts the pages
+the process alone maps (private), which no sharing can save. PSS also
+shares library pages with unrelated processes mapping the same files (other
+Python programs' numpy), so on a busy machine it is lower; USS is not.
 Then SIGTERM, and the next N. Linux only. ``--markdown`` prints the deploy
 guide's table (docs/how-to/deploy.md) rendered from a results file.
 
@@ -39,12 +45,13 @@ TOOL = "python -m lipstream.bench.workers_memory"
 
 @dataclass(frozen=True)
 class ProcessMemory:
-    """One process's resident (RSS) and proportional (PSS) set sizes, in MiB."""
+    """One process's resident (RSS), proportional (PSS) and unique (USS) set sizes, in MiB."""
 
     pid: int
     role: str
     rss_mib: float
     pss_mib: float
+    uss_mib: float
 
 
 def smaps_rollup(pid: int) -> dict[str, int]:
@@ -60,7 +67,10 @@ def smaps_rollup(pid: int) -> dict[str, int]:
 
 def memory_of(pid: int, role: str) -> ProcessMemory:
     fields = smaps_rollup(pid)
-    return ProcessMemory(pid, role, fields["Rss"] / 1024.0, fields["Pss"] / 1024.0)
+    private = fields["Private_Clean"] + fields["Private_Dirty"]
+    return ProcessMemory(
+        pid, role, fields["Rss"] / 1024.0, fields["Pss"] / 1024.0, private / 1024.0
+    )
 
 
 def role_of(pid: int) -> str:
@@ -114,6 +124,8 @@ def run(models: Path, workers: list[int], argv: list[str]) -> dict[str, Any]:
         "models": describe_models(models),
         "workers": {},
     }
+    with serving(models, 1):
+        pass
     for count in workers:
         processes = measure(models, count)
         results["workers"][str(count)] = [asdict(process) for process in processes]
@@ -126,69 +138,94 @@ def summary_line(workers: int, processes: list[ProcessMemory]) -> str:
     return (
         f"{workers} worker(s): RSS per worker "
         f"{', '.join(f'{p.rss_mib:.0f}' for p in workers_only)} MiB; PSS per worker "
-        f"{', '.join(f'{p.pss_mib:.0f}' for p in workers_only)} MiB; "
+        f"{', '.join(f'{p.pss_mib:.0f}' for p in workers_only)} MiB; USS per worker "
+        f"{', '.join(f'{p.uss_mib:.0f}' for p in workers_only)} MiB; "
         f"PSS of all processes {sum(p.pss_mib for p in processes):.0f} MiB"
     )
+
+
+HEADER = (
+    "| workers | RSS per worker | PSS per worker | USS per worker | supervisor (RSS / PSS) "
+    "| all processes, PSS |\n|---|---|---|---|---|---|"
+)
 
 
 def _mean(values: list[float]) -> float:
     return sum(values) / len(values)
 
 
-def render_markdown(results: dict[str, Any]) -> str:
-    """The deploy guide's paragraph on memory: the engines, the command, the table of
-    every N (each worker's figure is the mean over the workers) and the cost per worker,
-    fitted as a line through the two largest N's totals."""
-    engines = ", ".join(f"`{model['engine']}`" for model in results["models"])
-    megabytes = sum(model["bytes"] for model in results["models"]) / 1e6
-    rows = []
-    totals: dict[int, float] = {}
-    shared: list[float] = []
-    for key, processes in sorted(results["workers"].items(), key=lambda item: int(item[0])):
-        by_role: dict[str, list[dict[str, float]]] = {}
-        for process in processes:
-            by_role.setdefault(str(process["role"]), []).append(process)
-        workers = by_role["worker"]
-        rss = _mean([p["rss_mib"] for p in workers])
-        pss = _mean([p["pss_mib"] for p in workers])
-        totals[int(key)] = sum(p["pss_mib"] for p in processes)
-        if "supervisor" in by_role:
-            supervisor = by_role["supervisor"][0]
-            held = f"{supervisor['rss_mib']:.0f} / {supervisor['pss_mib']:.0f} MiB"
-            shared.append(rss - pss)
-        else:
-            held = "(none: the process is the worker)"
-        rows.append(f"| {key} | {rss:.0f} MiB | {pss:.0f} MiB | {held} | {totals[int(key)]:.0f} MiB |")
-    lines = [
-        f"Memory with every engine of the demo character loaded ({engines}; "
-        f"{megabytes:.0f} MB of model files), measured with `{results['command']}` "
-        f"on {results['date'][:10]} (`/proc/<pid>/smaps_rollup` once every worker is ready; "
-        "`bench/workers_memory.json`, rendered by "
-        "`python -m lipstream.bench.workers_memory --markdown bench/workers_memory.json`):",
-        "",
-        "| workers | RSS per worker | PSS per worker | supervisor (RSS / PSS) | all processes, PSS |",
-        "|---|---|---|---|---|",
-        *rows,
-    ]
-    helpers = [p for ps in results["workers"].values() for p in ps if p["role"] == "helper"]
+def _of_role(processes: list[dict[str, Any]], role: str) -> list[dict[str, Any]]:
+    return [process for process in processes if process["role"] == role]
+
+
+def _row(workers: str, processes: list[dict[str, Any]]) -> str:
+    """One table row; a worker's figures are the mean over the workers."""
+    each = _of_role(processes, "worker")
+    rss = _mean([p["rss_mib"] for p in each])
+    pss = _mean([p["pss_mib"] for p in each])
+    uss = _mean([p["uss_mib"] for p in each])
+    held = "(none: the process is the worker)"
+    for supervisor in _of_role(processes, "supervisor"):
+        held = f"{supervisor['rss_mib']:.0f} / {supervisor['pss_mib']:.0f} MiB"
+    total = sum(p["pss_mib"] for p in processes)
+    own = f"{rss:.0f} MiB | {pss:.0f} MiB | {uss:.0f} MiB"
+    return f"| {workers} | {own} | {held} | {total:.0f} MiB |"
+
+
+def _sharing(by_count: dict[int, list[dict[str, Any]]]) -> list[str]:
+    """The resource tracker's cost, what a worker shares (its RSS less its PSS) and the
+    cost per worker: the line through the two largest N's totals."""
+    several = {count: processes for count, processes in by_count.items() if count > 1}
+    helpers = [p for processes in several.values() for p in _of_role(processes, "helper")]
+    lines = []
     if helpers:
-        lines += [
-            "",
+        lines.append(
             f"With several workers, multiprocessing's resource tracker adds "
             f"{_mean([p['rss_mib'] for p in helpers]):.0f} MiB RSS, "
-            f"{_mean([p['pss_mib'] for p in helpers]):.0f} MiB PSS, counted in the last column.",
+            f"{_mean([p['pss_mib'] for p in helpers]):.0f} MiB PSS, counted in the last column."
+        )
+    if len(several) >= 2:
+        shared = [
+            _mean([p["rss_mib"] - p["pss_mib"] for p in _of_role(processes, "worker")])
+            for processes in several.values()
         ]
-    if len(shared) >= 2:
-        low, high = sorted(totals)[-2:]
+        totals = {n: sum(p["pss_mib"] for p in processes) for n, processes in by_count.items()}
+        low, high = sorted(several)[-2:]
         per_worker = (totals[high] - totals[low]) / (high - low)
         fixed = totals[high] - per_worker * high
-        lines += [
+        alone = f", against {totals[1]:.0f} MiB for one process" if 1 in totals else ""
+        lines.append(
             f"A worker shares {min(shared):.0f}–{max(shared):.0f} MiB with the others "
             f"(its RSS less its PSS). N workers cost about {fixed:.0f} MiB + "
-            f"{per_worker:.0f} MiB × N (the line through N = {low} and N = {high}), "
-            f"against {totals[min(totals)]:.0f} MiB for one process.",
-        ]
-    return "\n".join(lines) + "\n"
+            f"{per_worker:.0f} MiB × N (the line through N = {low} and N = {high}){alone}."
+        )
+    return lines
+
+
+def render_markdown(results: dict[str, Any]) -> str:
+    """The deploy guide's paragraph on memory: the engines, the command, the table of
+    every N and what the workers share, all from ``results``."""
+    engines = ", ".join(f"`{model['engine']}`" for model in results["models"])
+    megabytes = sum(model["bytes"] for model in results["models"]) / 1e6
+    by_count = {int(key): processes for key, processes in results["workers"].items()}
+    rows = [_row(str(count), by_count[count]) for count in sorted(by_count)]
+    sharing = _sharing(by_count)
+    return (
+        "\n".join(
+            [
+                f"Memory with every engine of the demo character loaded ({engines}; "
+                f"{megabytes:.0f} MB of model files), measured with `{results['command']}` "
+                f"on {results['date'][:10]} (`/proc/<pid>/smaps_rollup` once every worker is "
+                "ready; `bench/workers_memory.json`, rendered by "
+                "`python -m lipstream.bench.workers_memory --markdown bench/workers_memory.json`):",
+                "",
+                HEADER,
+                *rows,
+                *([""] + sharing if sharing else []),
+            ]
+        )
+        + "\n"
+    )
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -21,8 +21,8 @@ RESULTS = REPO / "bench" / "workers_memory.json"
 DEPLOY = REPO / "docs" / "how-to" / "deploy.md"
 
 
-def _process(role: str, rss: float, pss: float) -> dict[str, Any]:
-    return {"pid": 1, "role": role, "rss_mib": rss, "pss_mib": pss}
+def _process(role: str, rss: float, pss: float, uss: float = 0.0) -> dict[str, Any]:
+    return {"pid": 1, "role": role, "rss_mib": rss, "pss_mib": pss, "uss_mib": uss}
 
 
 HAND_MADE: dict[str, Any] = {
@@ -33,17 +33,17 @@ HAND_MADE: dict[str, Any] = {
         {"name": "b", "engine": "dam", "bytes": 9_000_000},
     ],
     "workers": {
-        "1": [_process("worker", 300.0, 280.0)],
+        "1": [_process("worker", 300.0, 280.0, 250.0)],
         "2": [
             _process("supervisor", 260.0, 180.0),
             _process("helper", 12.0, 6.0),
-            _process("worker", 300.0, 200.0),
-            _process("worker", 302.0, 202.0),
+            _process("worker", 300.0, 200.0, 150.0),
+            _process("worker", 302.0, 202.0, 153.0),
         ],
         "4": [
             _process("supervisor", 260.0, 170.0),
             _process("helper", 12.0, 6.0),
-            *[_process("worker", 300.0, 180.0) for _ in range(4)],
+            *[_process("worker", 300.0, 180.0, 140.0) for _ in range(4)],
         ],
     },
 }
@@ -58,9 +58,9 @@ def test_the_table_is_rendered_from_the_results() -> None:
     )
     # Totals by hand: 280; 180 + 6 + 200 + 202 = 588; 170 + 6 + 4 x 180 = 896.
     assert (
-        "| 1 | 300 MiB | 280 MiB | (none: the process is the worker) | 280 MiB |\n"
-        "| 2 | 301 MiB | 201 MiB | 260 / 180 MiB | 588 MiB |\n"
-        "| 4 | 300 MiB | 180 MiB | 260 / 170 MiB | 896 MiB |\n"
+        "| 1 | 300 MiB | 280 MiB | 250 MiB | (none: the process is the worker) | 280 MiB |\n"
+        "| 2 | 301 MiB | 201 MiB | 152 MiB | 260 / 180 MiB | 588 MiB |\n"
+        "| 4 | 300 MiB | 180 MiB | 140 MiB | 260 / 170 MiB | 896 MiB |\n"
     ) in rendered
     assert "resource tracker adds 12 MiB RSS, 6 MiB PSS" in rendered
     # Shared: 301 - 201 and 300 - 180; the line through (2, 588) and (4, 896).
@@ -78,7 +78,7 @@ def test_the_deploy_guide_shows_the_committed_results_of_every_engine() -> None:
 
 def test_smaps_rollup_reads_this_process() -> None:
     fields = smaps_rollup(os.getpid())
-    assert fields["Rss"] >= fields["Pss"] > 0
+    assert fields["Rss"] >= fields["Pss"] >= fields["Private_Clean"] + fields["Private_Dirty"] > 0
 
 
 @pytest.mark.slow
@@ -100,3 +100,4 @@ def test_a_run_records_the_command_machine_models_and_each_process(
     assert results["models"] == [{"name": "lerp", "engine": "viseme-lerp", "bytes": on_disk}]
     [worker] = results["workers"]["1"]
     assert worker["role"] == "worker" and worker["rss_mib"] >= worker["pss_mib"] > 10
+    assert worker["pss_mib"] >= worker["uss_mib"] > 0
