@@ -195,8 +195,10 @@ def _sharing(by_count: dict[int, list[dict[str, Any]]]) -> list[str]:
         fixed = totals[high] - per_worker * high
         alone = f", against {totals[1]:.0f} MiB for one process" if 1 in totals else ""
         lines.append(
-            f"A worker shares {min(shared):.0f}–{max(shared):.0f} MiB with the others "
-            f"(its RSS less its PSS). N workers cost about {fixed:.0f} MiB + "
+            f"A worker's RSS less its PSS, {min(shared):.0f}–{max(shared):.0f} MiB, is what it "
+            "shares with the other processes that map the same pages (the other workers, "
+            "the supervisor, other Python programs' libraries). "
+            f"N workers cost about {fixed:.0f} MiB + "
             f"{per_worker:.0f} MiB × N (the line through N = {low} and N = {high}){alone}."
         )
     return lines

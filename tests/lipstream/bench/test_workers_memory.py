@@ -64,7 +64,7 @@ def test_the_table_is_rendered_from_the_results() -> None:
     ) in rendered
     assert "resource tracker adds 12 MiB RSS, 6 MiB PSS" in rendered
     # Shared: 301 - 201 and 300 - 180; the line through (2, 588) and (4, 896).
-    assert "shares 100–120 MiB with the others" in rendered
+    assert "A worker's RSS less its PSS, 100–120 MiB, is what it shares" in rendered
     assert "about 280 MiB + 154 MiB × N" in rendered and "against 280 MiB for one" in rendered
 
 
