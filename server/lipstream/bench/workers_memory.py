@@ -15,11 +15,10 @@ together, and RSS minus PSS is what sharing saved; USS counts the pages
 the process alone maps (private), which no sharing can save. PSS also
 shares library pages with unrelated processes mapping the same files (other
 Python programs' numpy), so on a busy machine it is lower; USS is not.
-Then SIGTERM, and the next N. Linux only. ``--markdown`` prints the deploy
-guide's table (docs/how-to/deploy.md) rendered from a results file.
+Then SIGTERM, and the next N. Linux only. ``lipstream.bench.report`` renders
+the results into docs/reports/scale-out.md.
 
     python -m lipstream.bench.workers_memory --models DIR --workers 1 2 4 --json out.json
-    python -m lipstream.bench.workers_memory --markdown bench/workers_memory.json
 """
 
 from __future__ import annotations
@@ -144,104 +143,12 @@ def summary_line(workers: int, processes: list[ProcessMemory]) -> str:
     )
 
 
-HEADER = (
-    "| workers | RSS per worker | PSS per worker | USS per worker | supervisor (RSS / PSS) "
-    "| all processes, PSS |\n|---|---|---|---|---|---|"
-)
-
-
-def _mean(values: list[float]) -> float:
-    return sum(values) / len(values)
-
-
-def _of_role(processes: list[dict[str, Any]], role: str) -> list[dict[str, Any]]:
-    return [process for process in processes if process["role"] == role]
-
-
-def _row(workers: str, processes: list[dict[str, Any]]) -> str:
-    """One table row; a worker's figures are the mean over the workers."""
-    each = _of_role(processes, "worker")
-    rss = _mean([p["rss_mib"] for p in each])
-    pss = _mean([p["pss_mib"] for p in each])
-    uss = _mean([p["uss_mib"] for p in each])
-    held = "(none: the process is the worker)"
-    for supervisor in _of_role(processes, "supervisor"):
-        held = f"{supervisor['rss_mib']:.0f} / {supervisor['pss_mib']:.0f} MiB"
-    total = sum(p["pss_mib"] for p in processes)
-    own = f"{rss:.0f} MiB | {pss:.0f} MiB | {uss:.0f} MiB"
-    return f"| {workers} | {own} | {held} | {total:.0f} MiB |"
-
-
-def _sharing(by_count: dict[int, list[dict[str, Any]]]) -> list[str]:
-    """The resource tracker's cost, what a worker shares (its RSS less its PSS) and the
-    cost per worker: the line through the two largest N's totals."""
-    several = {count: processes for count, processes in by_count.items() if count > 1}
-    helpers = [p for processes in several.values() for p in _of_role(processes, "helper")]
-    lines = []
-    if helpers:
-        lines.append(
-            f"With several workers, multiprocessing's resource tracker adds "
-            f"{_mean([p['rss_mib'] for p in helpers]):.0f} MiB RSS, "
-            f"{_mean([p['pss_mib'] for p in helpers]):.0f} MiB PSS, counted in the last column."
-        )
-    if len(several) >= 2:
-        shared = [
-            _mean([p["rss_mib"] - p["pss_mib"] for p in _of_role(processes, "worker")])
-            for processes in several.values()
-        ]
-        totals = {n: sum(p["pss_mib"] for p in processes) for n, processes in by_count.items()}
-        low, high = sorted(several)[-2:]
-        per_worker = (totals[high] - totals[low]) / (high - low)
-        fixed = totals[high] - per_worker * high
-        alone = f", against {totals[1]:.0f} MiB for one process" if 1 in totals else ""
-        lines.append(
-            f"A worker's RSS less its PSS, {min(shared):.0f}–{max(shared):.0f} MiB, is what it "
-            "shares with the other processes that map the same pages (the other workers, "
-            "the supervisor, other Python programs' libraries). "
-            f"N workers cost about {fixed:.0f} MiB + "
-            f"{per_worker:.0f} MiB × N (the line through N = {low} and N = {high}){alone}."
-        )
-    return lines
-
-
-def render_markdown(results: dict[str, Any]) -> str:
-    """The deploy guide's paragraph on memory: the engines, the command, the table of
-    every N and what the workers share, all from ``results``."""
-    engines = ", ".join(f"`{model['engine']}`" for model in results["models"])
-    megabytes = sum(model["bytes"] for model in results["models"]) / 1e6
-    by_count = {int(key): processes for key, processes in results["workers"].items()}
-    rows = [_row(str(count), by_count[count]) for count in sorted(by_count)]
-    sharing = _sharing(by_count)
-    return (
-        "\n".join(
-            [
-                f"Memory with every engine of the demo character loaded ({engines}; "
-                f"{megabytes:.0f} MB of model files), measured with `{results['command']}` "
-                f"on {results['date'][:10]} (`/proc/<pid>/smaps_rollup` once every worker is "
-                "ready; `bench/workers_memory.json`, rendered by "
-                "`python -m lipstream.bench.workers_memory --markdown bench/workers_memory.json`):",
-                "",
-                HEADER,
-                *rows,
-                *([""] + sharing if sharing else []),
-            ]
-        )
-        + "\n"
-    )
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
-    parser.add_argument("--models", type=Path)
+    parser.add_argument("--models", type=Path, required=True)
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 2, 4])
     parser.add_argument("--json", type=Path, default=None)
-    parser.add_argument("--markdown", type=Path, default=None, metavar="RESULTS")
     args = parser.parse_args(argv)
-    if args.markdown is not None:
-        print(render_markdown(json.loads(args.markdown.read_text())), end="")
-        return 0
-    if args.models is None:
-        parser.error("--models is required unless --markdown is given")
     given = argv if argv is not None else sys.argv[1:]
     results = run(args.models, args.workers, list(given))
     if args.json is not None:

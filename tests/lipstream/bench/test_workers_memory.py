@@ -1,5 +1,5 @@
-"""The workers' memory bench: it records how and where it measured, its table is rendered
-from the results file, and the deploy guide shows the committed results of every engine."""
+"""The workers' memory bench: it records how and where it measured and each process's RSS,
+PSS and USS; the committed results hold every engine and are rendered into the report."""
 
 from __future__ import annotations
 
@@ -10,7 +10,8 @@ from typing import TYPE_CHECKING, Any
 
 import pytest
 
-from lipstream.bench.workers_memory import main, render_markdown, smaps_rollup
+from lipstream.bench.report import BLOCKS, Bench
+from lipstream.bench.workers_memory import main, smaps_rollup
 from lipstream.engines import engine_names
 from tests.helpers import REPO
 
@@ -18,62 +19,56 @@ if TYPE_CHECKING:
     from lipstream.corpus import Corpus
 
 RESULTS = REPO / "bench" / "workers_memory.json"
-DEPLOY = REPO / "docs" / "how-to" / "deploy.md"
+SCALE_OUT = REPO / "docs" / "reports" / "scale-out.md"
 
 
-def _process(role: str, rss: float, pss: float, uss: float = 0.0) -> dict[str, Any]:
+def _process(role: str, rss: float, pss: float, uss: float) -> dict[str, Any]:
     return {"pid": 1, "role": role, "rss_mib": rss, "pss_mib": pss, "uss_mib": uss}
 
 
-HAND_MADE: dict[str, Any] = {
-    "command": "python -m lipstream.bench.workers_memory --models M --workers 1 2 4",
-    "date": "2026-12-04T02:00:00+00:00",
-    "models": [
-        {"name": "a", "engine": "viseme-lerp", "bytes": 2_000_000},
-        {"name": "b", "engine": "dam", "bytes": 9_000_000},
-    ],
-    "workers": {
-        "1": [_process("worker", 300.0, 280.0, 250.0)],
-        "2": [
-            _process("supervisor", 260.0, 180.0),
-            _process("helper", 12.0, 6.0),
-            _process("worker", 300.0, 200.0, 150.0),
-            _process("worker", 302.0, 202.0, 153.0),
-        ],
-        "4": [
-            _process("supervisor", 260.0, 170.0),
-            _process("helper", 12.0, 6.0),
-            *[_process("worker", 300.0, 180.0, 140.0) for _ in range(4)],
-        ],
-    },
-}
-
-
-def test_the_table_is_rendered_from_the_results() -> None:
-    rendered = render_markdown(HAND_MADE)
-    assert rendered.startswith(
-        "Memory with every engine of the demo character loaded (`viseme-lerp`, `dam`; "
-        "11 MB of model files), measured with "
-        "`python -m lipstream.bench.workers_memory --models M --workers 1 2 4` on 2026-12-04 "
+def test_the_report_shows_uss_when_the_file_records_it(tmp_path: Path) -> None:
+    memory = {
+        "date": "2030-04-05T06:07:08+00:00",
+        "command": "python -m lipstream.bench.workers_memory --models M --workers 1 2",
+        "machine": {"cpus": 2},
+        "models": [{"name": "a", "engine": "dam", "bytes": 3_000_000}],
+        "workers": {
+            "1": [_process("worker", 300.0, 280.0, 250.0)],
+            "2": [
+                _process("supervisor", 260.0, 180.0, 150.0),
+                _process("helper", 12.0, 6.0, 5.0),
+                _process("worker", 300.0, 200.0, 150.0),
+                _process("worker", 302.0, 202.0, 153.0),
+            ],
+        },
+    }
+    (tmp_path / "workers_memory.json").write_text(json.dumps(memory))
+    (tmp_path / "resume_time.json").write_text(
+        json.dumps(
+            {"utterances": 1, "resume_ms_p50": 1.0, "resume_ms_max": 1.0}
+            | {"frames_lost": 0, "frames_duplicated": 0}
+        )
     )
-    # Totals by hand: 280; 180 + 6 + 200 + 202 = 588; 170 + 6 + 4 x 180 = 896.
+    (tmp_path / "proxy_latency.json").write_text("{}")
+    rendered = BLOCKS["scale-out"](Bench(tmp_path))
+    # the largest worker's figures; all processes: 180 + 6 + 200 + 202 = 588
     assert (
-        "| 1 | 300 MiB | 280 MiB | 250 MiB | (none: the process is the worker) | 280 MiB |\n"
-        "| 2 | 301 MiB | 201 MiB | 152 MiB | 260 / 180 MiB | 588 MiB |\n"
-        "| 4 | 300 MiB | 180 MiB | 140 MiB | 260 / 170 MiB | 896 MiB |\n"
+        "| workers | RSS per worker MiB | PSS per worker MiB | USS per worker MiB "
+        "| PSS of all processes MiB |\n|---|---|---|---|---|\n"
+        "| 1 | 300 | 280 | 250 | 280 |\n"
+        "| 2 | 302 | 202 | 153 | 588 |\n"
     ) in rendered
-    assert "resource tracker adds 12 MiB RSS, 6 MiB PSS" in rendered
-    # Shared: 301 - 201 and 300 - 180; the line through (2, 588) and (4, 896).
-    assert "A worker's RSS less its PSS, 100–120 MiB, is what it shares" in rendered
-    assert "about 280 MiB + 154 MiB × N" in rendered and "against 280 MiB for one" in rendered
 
 
-def test_the_deploy_guide_shows_the_committed_results_of_every_engine() -> None:
+def test_the_committed_results_hold_every_engine_and_how_they_were_measured() -> None:
     results = json.loads(RESULTS.read_text())
-    assert {"command", "date", "machine"} <= set(results)
     assert results["command"].startswith("python -m lipstream.bench.workers_memory ")
+    assert results["date"] and results["machine"]["cpus"]
     assert sorted(model["engine"] for model in results["models"]) == sorted(engine_names())
-    assert render_markdown(results) in DEPLOY.read_text()
+    assert sorted(results["workers"], key=int) == ["1", "2", "4"]
+    shown = SCALE_OUT.read_text()
+    assert all(f"`{engine}`" in shown for engine in engine_names())
+    assert "(recovered)" not in shown.split("bench/workers_memory.json")[1].split("\n")[0]
 
 
 def test_smaps_rollup_reads_this_process() -> None:
