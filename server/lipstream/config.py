@@ -21,6 +21,9 @@ from .errors import LipstreamError, UnknownEngineError
 ENV_PREFIX = "LIPSTREAM_"
 DEMO_DIR = "demo"
 DEMO_MODELS_DIR = "models"
+KERNEL_CACHE_DIR = "numba-cache"
+RESULTS_DIR = "bench"
+NUMBA_CACHE_VARIABLE = "NUMBA_CACHE_DIR"
 
 
 def _home(environ: Mapping[str, str]) -> Path:
@@ -102,6 +105,12 @@ class Settings:
     @property
     def demo_models_dir(self) -> Path:
         return self.demo_dir / DEMO_MODELS_DIR
+
+    def results_file(self, given: str | None, name: str) -> Path:
+        """Where a measuring command writes its results: ``given`` (``--results``) when
+        there is one, else ``$LIPSTREAM_HOME/bench/<name>``, never the current directory
+        unasked (a checkout's committed ``bench/*.json`` are measurements)."""
+        return Path(given) if given else self.home / RESULTS_DIR / name
 
 
 Parser = Callable[[str, str], Any]
@@ -465,6 +474,28 @@ def demo_model_path(engine: str = "viseme-lerp", settings: Settings | None = Non
             f"unknown engine {engine!r}; available: {', '.join(engine_names())}", where="engine"
         )
     return (settings or load_settings()).demo_models_dir / engine
+
+
+def kernel_cache_dir(environ: Mapping[str, str] | None = None) -> Path:
+    """Where numba caches lipstream's compiled kernels: ``$NUMBA_CACHE_DIR`` when set, else
+    ``$LIPSTREAM_HOME/numba-cache/lipstream-<version>-py<X.Y>-numba<version>``, one folder
+    per combination, so an upgrade starts a fresh one and the old can be deleted whole."""
+    import sys
+    from importlib.metadata import PackageNotFoundError, version
+
+    from ._version import __version__
+
+    environ = os.environ if environ is None else environ
+    explicit = environ.get(NUMBA_CACHE_VARIABLE, "").strip()
+    if explicit:
+        return Path(explicit)
+    try:
+        numba_version = version("numba")
+    except PackageNotFoundError:
+        numba_version = "unknown"
+    python = f"{sys.version_info.major}.{sys.version_info.minor}"
+    folder = f"lipstream-{__version__}-py{python}-numba{numba_version}"
+    return _home(environ) / KERNEL_CACHE_DIR / folder
 
 
 def server_setting_fields() -> tuple[str, ...]:

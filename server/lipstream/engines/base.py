@@ -52,7 +52,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, ClassVar, Self, TypeVar
+from typing import Any, ClassVar, Self, SupportsIndex, TypeVar, overload
 
 import numpy as np
 
@@ -166,7 +166,9 @@ class SynthesisRequest:
 class SynthesisResult:
     """Offline output: ``frames`` float32 (n_frames, n_channels) at ``fps``, frame i at i/fps s.
 
-    Unpacks as ``frames, channels, fps = model.synthesize(...)``.
+    Unpacks as ``frames, channels, fps = model.synthesize(...)`` and is indexed the same
+    way (``result[0]`` is ``frames``, ``len(result) == 3``). Not a NamedTuple: ``stats``
+    (the engine's counters) would then unpack as a fourth value.
     """
 
     frames: np.ndarray
@@ -174,8 +176,23 @@ class SynthesisResult:
     fps: float
     stats: dict[str, Any] = field(default_factory=dict)
 
+    def _unpacked(self) -> tuple[np.ndarray, tuple[str, ...], float]:
+        return (self.frames, self.channels, self.fps)
+
     def __iter__(self) -> Iterator[Any]:
-        return iter((self.frames, self.channels, self.fps))
+        return iter(self._unpacked())
+
+    def __len__(self) -> int:
+        return 3
+
+    @overload
+    def __getitem__(self, index: SupportsIndex) -> Any: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> tuple[Any, ...]: ...
+
+    def __getitem__(self, index: SupportsIndex | slice) -> Any:
+        return self._unpacked()[index]
 
 
 def frame_count(end_s: float, fps: float) -> int:

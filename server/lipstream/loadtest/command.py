@@ -18,7 +18,6 @@ import json
 import shlex
 import sys
 from dataclasses import replace
-from pathlib import Path
 from typing import Any
 
 from ..config import Settings
@@ -117,16 +116,18 @@ def _loadtest(args: argparse.Namespace, settings: Settings) -> None:
         pause_s=args.pause,
         max_duration_s=args.max_duration,
     )
+    path = settings.results_file(args.results, "loadtest.json")
     results = loadtest(config)
-    write_results(results, Path(args.results))
+    write_results(results, path)
     print(json.dumps(results, indent=2) if args.json else format_table(results))
-    print(f"results written to {args.results}", file=sys.stderr)
+    print(f"results written to {path}", file=sys.stderr)
 
 
 def _capacity(args: argparse.Namespace, settings: Settings) -> None:
     from .capacity import CapacitySearch, find_capacity, read_results, record_search
 
-    read_results(Path(args.results))  # before minutes of searching, not after
+    path = settings.results_file(args.results, "capacity.json")
+    read_results(path)  # before minutes of searching, not after
     base = _config(args, settings, latency_budget_ms=args.latency_budget_ms)
     engines = _capacity_engines(base.url, args.engine, args.character, args.token)
     references: dict[Any, dict[str, Any]] = {}
@@ -143,8 +144,8 @@ def _capacity(args: argparse.Namespace, settings: Settings) -> None:
         )
         print(f"{engine}:")
         result = find_capacity(search, progress=print, references=references)
-        record_search(Path(args.results), result)
-        print(_capacity_line(result, args))
+        record_search(path, result)
+        print(f"{_capacity_line(result, args)}; written to {path}")
 
 
 def _capacity_engines(url: str, engine: str, character: str, token: str | None) -> list[str]:
@@ -175,7 +176,7 @@ def _capacity_line(result: dict[str, Any], args: argparse.Namespace) -> str:
             f"; reference server {reference['capacity_streams']} sessions, ratio "
             f"{'-' if ratio is None else f'{ratio:.2f}'}"
         )
-    return f"{line}; written to {args.results}"
+    return line
 
 
 def _add_capacity_parser(runs: Any) -> None:
@@ -213,8 +214,7 @@ def _add_capacity_parser(runs: Any) -> None:
     )
     capacity.add_argument(
         "--results",
-        default="bench/capacity.json",
-        help="JSON file to write the results to (default bench/capacity.json)",
+        help="JSON file to write the results to (default $LIPSTREAM_HOME/bench/capacity.json)",
     )
     capacity.set_defaults(run=_capacity)
 
@@ -242,10 +242,11 @@ def _soak(args: argparse.Namespace, settings: Settings) -> None:
         seed=args.seed,
         token=args.token,
     )
+    path = settings.results_file(args.results, "soak.json")
     results = soak(config, command="lipstream " + shlex.join(sys.argv[1:]))
-    write_results(results, Path(args.results))
+    write_results(results, path)
     print(json.dumps(results, indent=2) if args.json else format_report(results))
-    print(f"results written to {args.results}", file=sys.stderr)
+    print(f"results written to {path}", file=sys.stderr)
 
 
 def _add_soak_parser(runs: Any) -> None:
@@ -288,8 +289,7 @@ def _add_soak_parser(runs: Any) -> None:
     soak.add_argument("--json", action="store_true", help="print JSON instead of a summary")
     soak.add_argument(
         "--results",
-        default="bench/soak.json",
-        help="JSON file to write the results to (default bench/soak.json)",
+        help="JSON file to write the results to (default $LIPSTREAM_HOME/bench/soak.json)",
     )
     soak.set_defaults(run=_soak)
 
@@ -369,8 +369,7 @@ def add_loadtest_parser(commands: Any) -> None:
     load.add_argument("--json", action="store_true", help="print JSON instead of a table")
     load.add_argument(
         "--results",
-        default="bench/loadtest.json",
-        help="JSON file to write the results to (default bench/loadtest.json)",
+        help="JSON file to write the results to (default $LIPSTREAM_HOME/bench/loadtest.json)",
     )
     load.set_defaults(run=_loadtest)
     runs = load.add_subparsers(dest="loadtest_run", metavar="{capacity,soak,storm}")
