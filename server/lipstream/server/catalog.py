@@ -9,13 +9,18 @@ stored in its directory), and, per character, the viseme projectors (one per
 output viseme set), the preset output profile and the default emotion. Each
 model is warmed up first (its first calls compile or load its kernels) and
 then calibrated; ``build`` reports both steps through ``report`` when given.
-After ``build`` it is read-only, so sessions on the event loop and in the
+Calibration is bounded (``calibration``): a model whose warm-up and calibration
+use more than ``calibration_cpu_s`` of the injectable ``clock``, or whose rung
+would need more than ``max_model_session_cost`` of a core per session, is
+dropped (``model_too_costly``) before its cost reaches admission, and the others
+are served. After ``build`` it is read-only, so sessions on the event loop and in the
 synthesis thread pool share it without locks.
 """
 
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,7 +32,8 @@ from lipstream_client import OutputProfile
 from lipstream_client.errors import UNKNOWN_CHARACTER, UNKNOWN_ENGINE
 
 from ..config import ServerSettings
-from ..engines.base import CallCost, Model
+from ..engines.base import CallCost, Model, Rung
+from ..engines.work import WorkGuard
 from ..errors import LipstreamError, ModelStoreError
 from ..models import ModelRegistry
 from ..phonemes import SILENCE
@@ -37,7 +43,7 @@ from ..store import MANIFEST_NAME
 from ..timeline import EMOTIONS, PhonemeSpan
 from ..visemes import OCULUS15
 from .budget import RungEstimate, estimate
-from .calibration import measure, warm_up
+from .calibration import calibration_guard, measure, warm_up
 from .profiles import (
     ProfileError,
     ProfileRequest,
@@ -80,16 +86,22 @@ class Catalog:
     facts: dict[int, ModelFacts] = field(default_factory=dict)
     presets: dict[str, OutputProfile] = field(default_factory=dict)
     default_emotions: dict[str, str] = field(default_factory=dict)
+    clock: Callable[[], float] = time.thread_time
 
     @classmethod
     def build(
-        cls, registry: ModelRegistry, settings: ServerSettings, report: Report | None = None
+        cls,
+        registry: ModelRegistry,
+        settings: ServerSettings,
+        report: Report | None = None,
+        clock: Callable[[], float] = time.thread_time,
     ) -> Catalog:
         """Measure and probe every model, reporting each step to ``report``; a model whose
-        probes or stored preset fail is dropped from ``registry`` (see
+        probes or stored preset fail, or whose calibration is out of range (its bound runs
+        on ``clock``, by default this thread's CPU time), is dropped from ``registry`` (see
         ``ModelRegistry.require_models`` for when that raises); LipstreamError for a preset
         from ``settings`` that does not fit."""
-        catalog = cls(registry, settings)
+        catalog = cls(registry, settings, clock=clock)
         probed: dict[int, tuple[dict[str, VisemeProjector], np.ndarray]] = {}
         for name, model in list(registry.models.items()):
             try:
@@ -106,7 +118,7 @@ class Catalog:
                     model, registry.directories.get(name), viseme_poses=viseme_poses
                 )
                 catalog.facts[id(model)] = ModelFacts(
-                    catalog._ladder(model, report), rest, projectors, retargets
+                    catalog._ladder(name, model, report), rest, projectors, retargets
                 )
             except LipstreamError as error:
                 registry.drop(name, error)
@@ -176,26 +188,35 @@ class Catalog:
         ``default_emotion``, else the model's (``Model.default_emotion``)."""
         return self.default_emotions.get(model.name, model.default_emotion)
 
-    def _ladder(self, model: Model, report: Report | None) -> tuple[RungEstimate, ...]:
+    def _ladder(
+        self, name: str, model: Model, report: Report | None
+    ) -> tuple[RungEstimate, ...]:
+        """The model's rungs as calibrated, within ``calibration_guard``'s bound;
+        ``ModelCostError`` naming the model's directory and the rung otherwise."""
         settings = self.settings
         ladder = model.fidelity_ladder()
         label = f"{model.manifest.engine} ({model.name})"
-        with phase(f"warming up {label}", report):
-            warm_up(model, ladder[0])
+        where = str(self.registry.directories.get(name, Path(name)))
+        guard = calibration_guard(settings.calibration_cpu_s, f"{where}: calibration", self.clock)
         rungs = []
-        with phase(f"calibrating {label}: timing {len(ladder)} fidelity rung(s)", report):
-            for rung in ladder:
-                cost = measure(model, rung)
-                rungs.append(
-                    estimate(
-                        rung,
-                        settings.max_phoneme_ms,
-                        cost.max_call_ms,
-                        settings.compute_margin_ms,
-                        cost.call_cost,
-                    )
-                )
+        with guard.metering():
+            with phase(f"warming up {label}", report):
+                warm_up(model, ladder[0], guard)
+            with phase(f"calibrating {label}: timing {len(ladder)} fidelity rung(s)", report):
+                for rung in ladder:
+                    rungs.append(self._rung(where, model, rung, guard))
         return tuple(rungs)
+
+    def _rung(self, where: str, model: Model, rung: Rung, guard: WorkGuard) -> RungEstimate:
+        settings = self.settings
+        cost = measure(model, rung, guard, settings.max_model_session_cost, where)
+        return estimate(
+            rung,
+            settings.max_phoneme_ms,
+            cost.max_call_ms,
+            settings.compute_margin_ms,
+            cost.call_cost,
+        )
 
     def _check_presets(self) -> None:
         for character, preset in self.presets.items():
