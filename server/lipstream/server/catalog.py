@@ -201,7 +201,7 @@ class Catalog:
         rungs = []
         with guard.metering():
             with phase(f"warming up {label}", report):
-                warm_up(model, ladder[0], guard)
+                warm_up(model, ladder[0], guard, where)
             with phase(f"calibrating {label}: timing {len(ladder)} fidelity rung(s)", report):
                 for rung in ladder:
                     rungs.append(self._rung(where, model, rung, guard))

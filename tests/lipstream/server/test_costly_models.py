@@ -2,10 +2,12 @@
 or to serve is set aside (``model_too_costly``, in ``/readyz``, ``/v1/characters`` and the
 log) before its cost reaches admission, and the other engines keep admitting sessions.
 
-The costly model is a trained ``expressive-dp`` model with its six α weights only
-reordered (the issue's case): small phoneme and emotion mismatch weights leave the search
-nothing to prune. The calibration bound runs on an injected clock, so it is tested
-without timing anything.
+The costly model is a trained ``expressive-dp`` model whose six α weights are each inside
+the bounds its weight search covers (the issue's case reordered them, which the load
+checks now refuse): the least weight on phoneme and emotion mismatch and the most on
+joins leave the search little to prune, and a session on its best rung needs some 50 to
+150 times what the trained weights need. The calibration bound runs on an injected clock,
+so it is tested without timing anything.
 """
 
 from __future__ import annotations
@@ -34,16 +36,16 @@ from tests.lipstream.server.harness import client
 if TYPE_CHECKING:
     from lipstream.engines.base import Model
 
-REORDERED = [5, 4, 2, 3, 1, 0]  # α1, α2 <- α6, α5 (50, 50); α5, α6 <- α2, α1
-MAX_SESSION_COST = 0.1  # a hundred times what these engines' rungs need on the demo corpus
+COSTLY_ALPHAS = [10.0, 10.0, 1.0, 0.5, 0.1, 0.1]  # α1, α2 at their highest; α5, α6 lowest
+MAX_SESSION_COST = 0.02  # ten times what these engines' rungs need on the demo corpus
 CLOCK_STEP_S = 10.0
 ITEMS = [PhonemeItem(p, i * 0.08, (i + 1) * 0.08) for i, p in enumerate(["HH", "AH", "L", "OW"])]
 
 
-def _reordered_expressive_dp(model: Model, directory: Path) -> None:
+def _costly_expressive_dp(model: Model, directory: Path) -> None:
     model.save(directory)
     arrays = {name: np.array(array) for name, array in load_arrays(directory).items()}
-    arrays["alphas"] = arrays["alphas"][REORDERED]
+    arrays["alphas"] = np.array(COSTLY_ALPHAS)
     save_model_dir(directory, model.manifest, arrays)
     load_model(directory)  # it passes every load check
 
@@ -55,7 +57,7 @@ def costly_dir(
     directory = tmp_path_factory.mktemp("models-costly")
     trained_models["viseme-lerp"].save(directory / "viseme-lerp")
     trained_models["dam"].save(directory / "dam")
-    _reordered_expressive_dp(trained_models["expressive-dp"], directory / "expressive-dp")
+    _costly_expressive_dp(trained_models["expressive-dp"], directory / "expressive-dp")
     return directory
 
 
