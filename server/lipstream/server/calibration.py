@@ -200,9 +200,7 @@ def _per_frame_ms(
     times = []
     for fps in (CALIBRATION_FPS, FRAME_CALIBRATION_FPS):
         request = _request(fps, rung, guard)
-        passes = [
-            _offline(model, request, spans, probe) for _ in range(CALIBRATION_PASSES + 1)
-        ]
+        passes = [_offline(model, request, spans, probe) for _ in range(CALIBRATION_PASSES + 1)]
         times.append(min(passes[1:]))
     extra = frame_count(spans[-1].end, FRAME_CALIBRATION_FPS) - frame_count(
         spans[-1].end, CALIBRATION_FPS

@@ -13,8 +13,9 @@ Calibration is bounded (``calibration``): a model whose warm-up and calibration
 use more than ``calibration_cpu_s`` of the injectable ``clock``, or whose rung
 would need more than ``max_model_session_cost`` of a core per session, is
 dropped (``model_too_costly``) before its cost reaches admission, and the others
-are served. After ``build`` it is read-only, so sessions on the event loop and in the
-synthesis thread pool share it without locks.
+are served. Calibration also probes every rung: a non-finite frame drops the model
+with ``model_invalid`` (``calibration.check_frames``). After ``build`` it is read-only,
+so sessions on the event loop and in the synthesis thread pool share it without locks.
 """
 
 from __future__ import annotations
@@ -188,9 +189,7 @@ class Catalog:
         ``default_emotion``, else the model's (``Model.default_emotion``)."""
         return self.default_emotions.get(model.name, model.default_emotion)
 
-    def _ladder(
-        self, name: str, model: Model, report: Report | None
-    ) -> tuple[RungEstimate, ...]:
+    def _ladder(self, name: str, model: Model, report: Report | None) -> tuple[RungEstimate, ...]:
         """The model's rungs as calibrated, within ``calibration_guard``'s bound;
         ``ModelCostError`` naming the model's directory and the rung otherwise."""
         settings = self.settings

@@ -106,7 +106,10 @@ def test_a_value_outside_its_documented_range_is_refused(
 
     _variant(saved[engine], tmp_path / engine, name, change)
     error = _refusal(tmp_path / engine)
-    assert (error.code, error.where) == ("model_invalid", f"{tmp_path / engine / ARRAYS_NAME}: {name}")
+    assert (error.code, error.where) == (
+        "model_invalid",
+        f"{tmp_path / engine / ARRAYS_NAME}: {name}",
+    )
     assert words in error.message
 
 

@@ -1,12 +1,14 @@
 """Issue 29, defect 6: a model that passes every load check but costs too much to calibrate
 or to serve is set aside (``model_too_costly``, in ``/readyz``, ``/v1/characters`` and the
 log) before its cost reaches admission, and the other engines keep admitting sessions.
+Beside it on the same server, defect 7's ``viseme-lerp`` with ``kappa[0] = 1e300`` is
+refused at load naming the array.
 
 The costly model is a trained ``expressive-dp`` model whose six α weights are each inside
 the bounds its weight search covers (the issue's case reordered them, which the load
 checks now refuse): the least weight on phoneme and emotion mismatch and the most on
-joins leave the search little to prune, and a session on its best rung needs some 50 to
-150 times what the trained weights need. The calibration bound runs on an injected clock,
+joins leave the search little to prune, and a session on its best rung needs about fifty
+times what the trained weights need. The calibration bound runs on an injected clock,
 so it is tested without timing anything.
 """
 
@@ -30,8 +32,8 @@ from lipstream.server.catalog import Catalog
 from lipstream.store import load_arrays, save_model_dir
 from lipstream_client import Done, End, Frames, PhonemeItem, Phonemes, Ready, Start
 from tests.helpers import free_port, serve_command
-from tests.live_server import READY_TIMEOUT_S, stop_process
 from tests.lipstream.server.harness import client
+from tests.live_server import READY_TIMEOUT_S, stop_process
 
 if TYPE_CHECKING:
     from lipstream.engines.base import Model
@@ -51,14 +53,21 @@ def _costly_expressive_dp(model: Model, directory: Path) -> None:
 
 
 @pytest.fixture(scope="module")
-def costly_dir(
-    trained_models: dict[str, Model], tmp_path_factory: pytest.TempPathFactory
-) -> Path:
+def costly_dir(trained_models: dict[str, Model], tmp_path_factory: pytest.TempPathFactory) -> Path:
     directory = tmp_path_factory.mktemp("models-costly")
     trained_models["viseme-lerp"].save(directory / "viseme-lerp")
     trained_models["dam"].save(directory / "dam")
     _costly_expressive_dp(trained_models["expressive-dp"], directory / "expressive-dp")
+    _absurd_viseme_lerp(trained_models["viseme-lerp"], directory / "absurd-viseme-lerp")
     return directory
+
+
+def _absurd_viseme_lerp(model: Model, directory: Path) -> None:
+    """Defect 7's example: κ[0] = 1e300 is finite, and loaded before the range checks."""
+    model.save(directory)
+    arrays = {name: np.array(array) for name, array in load_arrays(directory).items()}
+    arrays["kappa"][0] = 1e300
+    save_model_dir(directory, model.manifest, arrays)
 
 
 class SteppingClock:
@@ -97,8 +106,7 @@ def test_a_model_whose_calibration_runs_past_its_bound_is_set_aside(
     )
     # Stopped at the first check past 60 s: the seventh step of 10 s.
     assert failure.error.message == (
-        "its calibration used 70 s of CPU, more than the 60 s allowed "
-        "(LIPSTREAM_CALIBRATION_CPU_S)"
+        "its calibration used 70 s of CPU, more than the 60 s allowed (LIPSTREAM_CALIBRATION_CPU_S)"
     )
     assert failure.to_json()["engine"] == "dam"
 
@@ -135,7 +143,15 @@ def test_a_costly_model_is_reported_and_the_others_admit_sessions(
     base = served["http"]
     body = httpx.get(f"{base}/readyz").json()
     assert body["ready"] is True
-    (failure,) = body["failed_models"]
+    absurd, failure = body["failed_models"]
+    assert absurd == {
+        "model": "absurd-viseme-lerp",
+        "engine": "viseme-lerp",
+        "character": "demo",
+        "code": "model_invalid",
+        "where": "absurd-viseme-lerp/arrays.npz: kappa",
+        "message": "value 1e+300 at (0,) is outside [0.1, 100]",
+    }
     message = failure.pop("message")
     assert failure == {
         "model": "expressive-dp",
@@ -148,9 +164,13 @@ def test_a_costly_model_is_reported_and_the_others_admit_sessions(
 
     listing = httpx.get(f"{base}/v1/characters").json()
     assert listing["characters"] == [{"name": "demo", "engines": ["dam", "viseme-lerp"]}]
-    assert [entry["code"] for entry in listing["failed_models"]] == ["model_too_costly"]
+    assert [entry["code"] for entry in listing["failed_models"]] == [
+        "model_invalid",
+        "model_too_costly",
+    ]
     log = served["log"].read_text()
     assert f"model {costly_dir / 'expressive-dp'} is not served: " in log
+    assert f"model {costly_dir / 'absurd-viseme-lerp'} is not served: " in log
 
     for engine in ("viseme-lerp", "dam"):
         with client(base.replace("http://", "ws://") + "/v1/stream") as ws:
