@@ -7,7 +7,7 @@ spans' durations in the training alignments. A phoneme seen fewer than
 answers the expected (median, e^mean) duration of a phoneme; the causal rungs
 scale each phoneme's filter speed by it, so a short closure is reached within
 its span. The statistics are three arrays of the model file (``arrays``,
-``from_arrays``); a stored median must lie between 1 ms and 10 s and a spread
+``from_arrays``); a stored median must lie between 1 ms and 60 s and a spread
 between 0 and 5 log units.
 """
 
@@ -24,8 +24,8 @@ from ..timeline import PhonemeSpan
 
 MIN_SPANS = 3
 ARRAY_NAMES = ("duration_count", "duration_log_mean", "duration_log_std")
-LOG_MEAN_RANGE = (float(np.log(1e-3)), float(np.log(10.0)))
-"""Stored medians lie between 1 ms and 10 s (log seconds)."""
+LOG_MEAN_RANGE = (float(np.log(1e-3)), float(np.log(60.0)))
+"""Stored medians lie between 1 ms and 60 s (log seconds)."""
 LOG_STD_RANGE = (0.0, 5.0)
 """Stored spreads of log seconds: 5 is a factor of e^5 (about 150) per standard deviation."""
 
