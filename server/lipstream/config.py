@@ -342,7 +342,7 @@ ENV_SETTINGS: tuple[EnvSetting, ...] = (
         "LIPSTREAM_CALIBRATION_CPU_S",
         "calibration_cpu_s",
         _number(0.0, 86_400.0, above=True),
-        "CPU seconds one model's start-up warm-up and calibration may take; a model that "
+        "CPU seconds one model's start-up probes, warm-up and calibration may take; a model that "
         "needs more is not served (`model_too_costly`, in `/readyz` and the log)",
     ),
     EnvSetting(
