@@ -71,6 +71,8 @@ class ServerSettings:
     return_ms: float = 150.0
     max_phoneme_ms: float = 200.0
     compute_margin_ms: float = 5.0
+    calibration_cpu_s: float = 60.0
+    max_model_session_cost: float = 0.25
     inline_work_ms: float = 2.0
     request_cpu_s: float = 10.0
     synth_threads: int = 2
@@ -368,6 +370,20 @@ ENV_SETTINGS: tuple[EnvSetting, ...] = (
         "compute_margin_ms",
         _number(0.0, 60_000.0),
         "added to each rung's measured compute time in latency estimates",
+    ),
+    EnvSetting(
+        "LIPSTREAM_CALIBRATION_CPU_S",
+        "calibration_cpu_s",
+        _number(0.0, 86_400.0, above=True),
+        "CPU seconds one model's start-up probes, warm-up and calibration may take; a model that "
+        "needs more is not served (`model_too_costly`, in `/readyz` and the log)",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MAX_MODEL_SESSION_COST",
+        "max_model_session_cost",
+        _number(0.0, 100.0, above=True),
+        "largest fraction of one core a session of real-time speech may need on any of a "
+        "model's rungs, as calibrated; a costlier model is not served (`model_too_costly`)",
     ),
     EnvSetting(
         "LIPSTREAM_INLINE_WORK_MS",

@@ -54,6 +54,13 @@ class ModelStoreError(LipstreamError):
     code = "model_invalid"
 
 
+class ModelCostError(LipstreamError):
+    """A model that loads but costs too much to serve: its calibration ran past its CPU
+    bound, or a session on one of its rungs would need too much of a core."""
+
+    code = "model_too_costly"
+
+
 class UnknownEngineError(LipstreamError):
     code = "unknown_engine"
 

@@ -404,7 +404,8 @@ class Model(ABC):
                 f"extra.{DEFAULT_EMOTION_KEY}",
                 f"must be one of {', '.join(EMOTIONS)}, got {emotion!r}",
             )
-        return cls.from_arrays(manifest, load_arrays(directory), directory)
+        arrays = load_arrays(directory, manifest.array_sizes)
+        return cls.from_arrays(manifest, arrays, directory)
 
 
 def resolved_rung(
