@@ -608,6 +608,8 @@ class AnimeGraphSynthesizer(Synthesizer):
         limit = self._track_final_until()
         fps_model = self.model.fps
         if math.isinf(limit):
+            if not self.spans:  # finished with no input: no sample, and no frame, to make
+                return
             last = frame_count(self.covered_until, self.fps) - 1 if self.spans else -1
             needed = math.floor(last * fps_model / self.fps + _SNAP) + 2
             self._extend_raw(needed + self.half_width)
