@@ -89,8 +89,15 @@ from .catalog import Catalog
 from .outgoing import Outgoing, RequestClock
 from .overload import Refusal
 from .profiles import requested_profile, resolve_profile
-from .request import ActiveRequest, RequestError, RequestLimits, RequestSpec, protocol_code
-from .resume import ResumeCursor, pinned_rung
+from .request import (
+    ActiveRequest,
+    RequestError,
+    RequestLimits,
+    RequestSpec,
+    most_blocks,
+    protocol_code,
+)
+from .resume import ResumeCursor, check_seq_room, pinned_rung
 from .text_input import (
     engine_audio,
     phoneme_items,
@@ -296,8 +303,11 @@ class Session:
         guard = self.guards[request.id]
         request.last_input = now
         self.requests[request.id] = self.requests.pop(request.id)
+        cursor = self.resumes.get(request.id)
         try:
             outgoing = self._metered(guard, request, received, now, meter_clock)
+            if cursor is not None:
+                outgoing = cursor.filter(outgoing)
         except LipstreamError as error:
             if guard.cancelled and not isinstance(received, Cancel):
                 # Stopped by the client's cancel, which follows in order and ends it, or by
@@ -317,9 +327,6 @@ class Session:
                     clock=request.spec.clock,
                 )
             ]
-        cursor = self.resumes.get(request.id)
-        if cursor is not None:
-            outgoing = cursor.filter(outgoing)
         if isinstance(received, (End, Cancel, Interrupt)):
             self._forget(request.id)
             self._remember(request.id, _REASONS[type(received)])
@@ -480,6 +487,7 @@ class Session:
             )
         emotion = start.emotion or catalog.default_emotion(model)
         ladder = catalog.ladder(model)
+        check_seq_room(start.resume, most_blocks(self.limits.request))
         estimate = pinned_rung(ladder, start.resume) or choose_rung(ladder, start.latency_budget_ms)
         profile = resolve_profile(
             model.channels,
