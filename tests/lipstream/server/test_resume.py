@@ -205,7 +205,7 @@ def test_the_server_never_numbers_a_block_past_the_bound(catalog: Catalog) -> No
     start = Start("a", "viseme-lerp", "demo", fps=FPS, resume=Resume(0, 0))
     assert isinstance(play(session, [start])[0], Ready)
     session.resumes["a"].seq = MAX_SEQ  # as if the request had sent that many blocks
-    answers = play(session, [Phonemes("a", ITEMS[:6]), Phonemes("a", ITEMS[6:]), End("a")])
+    answers = play(session, [Phonemes("a", ITEMS[:6]), Phonemes("a", ITEMS[6:])])
     seqs = [b.seq for b in blocks(answers)]
     assert seqs == [MAX_SEQ]
     [error] = [m for m in answers if isinstance(m, ErrorMessage)]
@@ -214,7 +214,7 @@ def test_the_server_never_numbers_a_block_past_the_bound(catalog: Catalog) -> No
     request = Start("b", "viseme-lerp", "demo", fps=FPS)
     assert isinstance(play(session, [request])[0], Ready)
     session.requests["b"].seq = MAX_SEQ
-    answers = play(session, [Phonemes("b", ITEMS[:6]), Phonemes("b", ITEMS[6:]), End("b")])
+    answers = play(session, [Phonemes("b", ITEMS[:6]), Phonemes("b", ITEMS[6:])])
     assert [b.seq for b in blocks(answers)] == [MAX_SEQ]
     [error] = [m for m in answers if isinstance(m, ErrorMessage)]
     assert (error.code, error.id, error.fatal) == ("output_too_large", "b", True)
