@@ -226,6 +226,12 @@ class Synthesizer(ABC):
     def finish(self) -> np.ndarray:
         """Declare the input complete and return every frame not yet returned."""
 
+    @property
+    def held_input_bytes(self) -> int:
+        """Bytes this request holds of its audio input (samples and the features made of
+        them), which the server counts against its memory ceiling as input arrives."""
+        return 0
+
 
 class Model(ABC):
     """A trained, read-only model. Subclasses define ``render`` and the array round trip."""

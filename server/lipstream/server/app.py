@@ -39,6 +39,7 @@ from ..status import phase
 from . import demo_page, docs_page, openapi, phoneme_maps
 from .catalog import Catalog
 from .handshake import head_limits
+from .held_input import InputLedger, input_budget_bytes
 from .lifecycle import Lifecycle, install_drain_on_signals
 from .liveness import LivenessServer
 from .log_throttle import install as throttle_repeated_log_lines
@@ -112,9 +113,13 @@ def create_app(
         heavy = ThreadPoolExecutor(settings.heavy_threads, thread_name_prefix="lipstream-heavy")
         catalog = Catalog.build(registry, settings, report)
         overload = overload_for(settings, catalog, metrics.observe_load)
-        server = ServerState(
-            registry, catalog, settings, metrics, lifecycle, executor, heavy, overload
+        ledger = InputLedger(
+            input_budget_bytes(settings, overload.policy.limits.max_memory_mb)
         )
+        server = ServerState(
+            registry, catalog, settings, metrics, lifecycle, executor, heavy, overload,
+            input_ledger=ledger,
+        )  # fmt: skip
         _log_limits(server)
         overload.monitor.start()
         liveness = _liveness(settings, overload.monitor.last_tick)

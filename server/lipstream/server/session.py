@@ -70,6 +70,7 @@ from lipstream_client.errors import (
     UNKNOWN_REQUEST,
     UNKNOWN_TYPE,
 )
+from lipstream_client.float32 import FLOAT32_BYTES
 from lipstream_client.messages import DoneReason, JsonValue
 
 from ..engines.base import CallCost, Model, Rung, SynthesisRequest, frame_count
@@ -86,6 +87,7 @@ from .budget import (
 )
 from .calibration import PHONEME_S
 from .catalog import Catalog
+from .held_input import UNLIMITED_INPUT, Holding, InputLedger
 from .outgoing import Outgoing, RequestClock
 from .overload import Refusal
 from .profiles import requested_profile, resolve_profile
@@ -141,12 +143,17 @@ class Session:
         catalog: Catalog,
         limits: SessionLimits,
         refuse_start: Callable[[], Refusal | None] = lambda: None,
+        input_ledger: InputLedger | None = None,
     ) -> None:
         """``refuse_start`` says whether the server takes on a new request now (its memory
-        ceiling: ``overload``); a refusal ends the ``start`` with its code and details."""
+        ceiling: ``overload``); a refusal ends the ``start`` with its code and details.
+        ``input_ledger`` counts the audio input the process's requests hold (``held_input``;
+        by default this session's own, without a limit)."""
         self.catalog = catalog
         self.limits = limits
         self.refuse_start = refuse_start
+        self.input_ledger = input_ledger or InputLedger(UNLIMITED_INPUT)
+        self.holdings: dict[str, Holding] = {}
         self.requests: dict[str, ActiveRequest] = {}
         self.costs: dict[str, CallCost] = {}
         self.guards: dict[str, WorkGuard] = {}
@@ -173,6 +180,9 @@ class Session:
         self.costs.clear()
         self.guards.clear()
         self.resumes.clear()
+        for holding in self.holdings.values():
+            holding.release()
+        self.holdings.clear()
         self.output_values = 0
         return dropped
 
@@ -330,7 +340,23 @@ class Session:
         if isinstance(received, (End, Cancel, Interrupt)):
             self._forget(request.id)
             self._remember(request.id, _REASONS[type(received)])
+        else:
+            self._hold(request)
         return outgoing
+
+    def _hold(self, request: ActiveRequest) -> None:
+        """Count what ``request`` holds of its input now."""
+        holding = self.holdings.get(request.id)
+        if holding is None:
+            holding = self.holdings[request.id] = self.input_ledger.holding()
+        holding.update(request.synthesizer.held_input_bytes)
+
+    def _admit_input(self, request: ActiveRequest, chunk: AudioChunk) -> None:
+        """``input_too_large`` unless the process may take in ``chunk`` for ``request`` (as
+        float32 samples, while its engine reduces them to features)."""
+        if request.spec.uses_audio:
+            holding = self.holdings.get(request.id) or self.input_ledger.holding()
+            holding.admit(chunk.n_samples * FLOAT32_BYTES)
 
     def _metered(
         self,
@@ -358,6 +384,7 @@ class Session:
                 self.output_values += request.output_values - before
         if isinstance(received, AudioChunk):
             _check_audio_start(request, received)
+            self._admit_input(request, received)
             return request.add_audio(received, now)
         if isinstance(received, Text):
             return self._speak(request, received, now)
@@ -373,7 +400,9 @@ class Session:
         speech = speak(received)
         start = speech_start(request)
         outgoing = speech_messages(request, speech, start)
-        outgoing += request.add_audio(engine_audio(request, speech, start), now)
+        chunk = engine_audio(request, speech, start)
+        self._admit_input(request, chunk)
+        outgoing += request.add_audio(chunk, now)
         with reading_arpabet(request):
             phonemes = Phonemes(request.id, phoneme_items(speech, start))
             outgoing += self._apply(request, phonemes, now)
@@ -406,6 +435,9 @@ class Session:
         self.costs.pop(identifier, None)
         self.guards.pop(identifier, None)
         self.resumes.pop(identifier, None)
+        holding = self.holdings.pop(identifier, None)
+        if holding is not None:
+            holding.release()
 
     def _remember(self, identifier: str, reason: DoneReason) -> None:
         self.ended[identifier] = reason

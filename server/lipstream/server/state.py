@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from ..config import ServerSettings
 from ..models import ModelRegistry
 from .catalog import Catalog
+from .held_input import UNLIMITED_INPUT, InputLedger
 from .lifecycle import Lifecycle
 from .metrics import Metrics
 from .overload import Overload
@@ -20,7 +21,8 @@ class ServerState:
     """Resident models and what was derived from them, settings, metrics, the connections'
     lifecycle, the two thread pools (``executor`` for ordinary engine work, ``heavy`` for
     costly messages, large JSON answers and REST, so those never queue ordinary sessions
-    behind them) and the load-based admission."""
+    behind them), the load-based admission and the ledger of the audio input requests
+    hold."""
 
     registry: ModelRegistry
     catalog: Catalog
@@ -31,6 +33,7 @@ class ServerState:
     heavy: ThreadPoolExecutor
     overload: Overload
     loaded: bool = True
+    input_ledger: InputLedger = field(default_factory=lambda: InputLedger(UNLIMITED_INPUT))
 
     @property
     def ready(self) -> bool:

@@ -176,7 +176,12 @@ class Connection:
         self.state = state
         self.settings = state.settings
         self.metrics = state.metrics
-        self.session = Session(state.catalog, state.session_limits, state.overload.request_refusal)
+        self.session = Session(
+            state.catalog,
+            state.session_limits,
+            state.overload.request_refusal,
+            state.input_ledger,
+        )
         self.bucket = TokenBucket(
             self.settings.message_rate, self.settings.message_burst, time.monotonic()
         )

@@ -204,6 +204,10 @@ class AnimeGraphSynthesizer(Synthesizer):
             )
         return self._by_view[view.name]
 
+    @property
+    def held_input_bytes(self) -> int:
+        return self.audio.held_bytes if self.audio is not None else 0
+
     def _take_audio(self, audio: Audio | None) -> None:
         if self.options.causal:
             self.audio_mode = False
