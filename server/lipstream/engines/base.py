@@ -232,6 +232,11 @@ class Synthesizer(ABC):
         them), which the server counts against its memory ceiling as input arrives."""
         return 0
 
+    def held_input_bytes_after(self, n_samples: int, sample_rate: int) -> int:
+        """A bound on ``held_input_bytes`` while this request takes in ``n_samples`` more
+        samples of audio at ``sample_rate`` Hz (0 when the engine does not keep audio)."""
+        return 0
+
 
 class Model(ABC):
     """A trained, read-only model. Subclasses define ``render`` and the array round trip."""

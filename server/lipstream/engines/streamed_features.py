@@ -82,6 +82,14 @@ class StreamedFeatures:
         """Bytes of the buffers that hold the samples and the features."""
         return int(self.samples.data.nbytes + self.features.data.nbytes)
 
+    def held_bytes_after(self, n_samples: int, sample_rate: int) -> int:
+        """A bound on ``held_bytes`` while ``n_samples`` more samples at ``sample_rate`` are
+        taken in (each buffer grown as ``Growable`` grows it, before samples are dropped)."""
+        samples, features = self.samples, self.features
+        new_frames = frames_covered(self.length + n_samples, sample_rate, self.config)
+        rows = features.held + max(0, new_frames - features.count)
+        return _grown(samples, samples.held + n_samples) + _grown(features, rows)
+
     def through(self, stop: int) -> np.ndarray:
         """Frames 0 .. ``stop`` − 1 and any others computed (a view, valid until the next
         call); frames past ``covered`` are final only once the input is finished."""
@@ -95,3 +103,11 @@ class StreamedFeatures:
             next_frame = max(0, self.features.count - self.lookback)
             samples.drop_before(first_sample_read(next_frame, self.sample_rate, self.config))
         return self.features.view()
+
+
+def _grown(buffer: Growable, rows: int) -> int:
+    """Bytes of ``buffer`` once it holds ``rows`` rows."""
+    capacity = len(buffer.data)
+    if rows > capacity:
+        capacity = max(rows, 2 * capacity)
+    return capacity * (buffer.data.nbytes // len(buffer.data))

@@ -114,7 +114,8 @@ def create_app(
         catalog = Catalog.build(registry, settings, report)
         overload = overload_for(settings, catalog, metrics.observe_load)
         ledger = InputLedger(
-            input_budget_bytes(settings, overload.policy.limits.max_memory_mb)
+            input_budget_bytes(settings, overload.policy.limits.max_memory_mb),
+            metrics.observe_input,
         )
         server = ServerState(
             registry, catalog, settings, metrics, lifecycle, executor, heavy, overload,

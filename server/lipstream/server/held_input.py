@@ -15,6 +15,7 @@ threads (the synthesis pools), so the totals change under a lock.
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 
 from lipstream_client.errors import INPUT_TOO_LARGE
 
@@ -30,8 +31,12 @@ UNLIMITED_INPUT = 1 << 62
 class InputLedger:
     """Bytes held by every request's input (``held``), and the most ever held (``peak``)."""
 
-    def __init__(self, budget_bytes: int) -> None:
+    def __init__(
+        self, budget_bytes: int, observe: Callable[[int, int], None] | None = None
+    ) -> None:
+        """``observe(held, peak)`` after every change (the metrics)."""
         self.budget_bytes = budget_bytes
+        self.observe = observe
         self.held = 0
         self.peak = 0
         self.refused = 0
@@ -42,8 +47,14 @@ class InputLedger:
 
     def _change(self, delta: int) -> None:
         with self._lock:
-            self.held += delta
-            self.peak = max(self.peak, self.held)
+            self._add(delta)
+
+    def _add(self, delta: int) -> None:
+        """Under the lock."""
+        self.held += delta
+        self.peak = max(self.peak, self.held)
+        if self.observe is not None:
+            self.observe(self.held, self.peak)
 
 
 class Holding:
@@ -53,24 +64,29 @@ class Holding:
         self.ledger = ledger
         self.bytes = 0
 
-    def admit(self, incoming: int) -> None:
-        """``RequestError`` (``input_too_large``) unless the process may hold ``incoming``
-        bytes more while this request takes them in."""
+    def admit(self, needed: int) -> None:
+        """Count ``needed`` bytes as this request's if the process may hold them, else
+        ``RequestError`` (``input_too_large``)."""
         ledger = self.ledger
         with ledger._lock:
-            if ledger.held + incoming <= ledger.budget_bytes:
-                return
-            ledger.refused += 1
-            held = ledger.held
+            others = ledger.held - self.bytes
+            fits = others + needed <= ledger.budget_bytes
+            if fits:
+                ledger._add(needed - self.bytes)
+                self.bytes = needed
+            else:
+                ledger.refused += 1
+        if fits:
+            return
         raise RequestError(
-            f"taking in {incoming} bytes of audio would bring the input the server holds to "
-            f"{held + incoming} bytes, past its limit of {ledger.budget_bytes} "
-            "(LIPSTREAM_MAX_INPUT_MB); this request has ended",
+            f"taking in this audio, the request would hold up to {needed} bytes of input "
+            f"beside the {others} the server's other requests hold, past the limit of "
+            f"{ledger.budget_bytes} (LIPSTREAM_MAX_INPUT_MB); this request has ended",
             code=INPUT_TOO_LARGE,
             where="audio",
             details={
-                "incoming_bytes": incoming,
-                "held_bytes": held,
+                "needed_bytes": needed,
+                "held_bytes": others,
                 "max_input_bytes": ledger.budget_bytes,
             },
         )

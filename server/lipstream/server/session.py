@@ -352,11 +352,16 @@ class Session:
         holding.update(request.synthesizer.held_input_bytes)
 
     def _admit_input(self, request: ActiveRequest, chunk: AudioChunk) -> None:
-        """``input_too_large`` unless the process may take in ``chunk`` for ``request`` (as
-        float32 samples, while its engine reduces them to features)."""
-        if request.spec.uses_audio:
-            holding = self.holdings.get(request.id) or self.input_ledger.holding()
-            holding.admit(chunk.n_samples * FLOAT32_BYTES)
+        """``input_too_large`` unless the process may hold what ``request`` holds while it
+        takes in ``chunk`` (its engine's bound, and the chunk as float32 samples); that much
+        is counted until the request reports what it holds after."""
+        if not request.spec.uses_audio:
+            return
+        holding = self.holdings.get(request.id)
+        if holding is None:
+            holding = self.holdings[request.id] = self.input_ledger.holding()
+        bound = request.synthesizer.held_input_bytes_after(chunk.n_samples, chunk.sample_rate)
+        holding.admit(bound + chunk.n_samples * FLOAT32_BYTES)
 
     def _metered(
         self,

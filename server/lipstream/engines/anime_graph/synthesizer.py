@@ -208,6 +208,12 @@ class AnimeGraphSynthesizer(Synthesizer):
     def held_input_bytes(self) -> int:
         return self.audio.held_bytes if self.audio is not None else 0
 
+    def held_input_bytes_after(self, n_samples: int, sample_rate: int) -> int:
+        if self.audio is None and (self.audio_mode is False or not self.model.has_audio):
+            return 0  # audio this request takes is not kept
+        audio = self.audio or RequestAudio(self.model.mfcc)
+        return audio.stream.held_bytes_after(n_samples, sample_rate)
+
     def _take_audio(self, audio: Audio | None) -> None:
         if self.options.causal:
             self.audio_mode = False

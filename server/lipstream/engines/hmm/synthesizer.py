@@ -186,6 +186,11 @@ class HmmSynthesizer(Synthesizer):
     def held_input_bytes(self) -> int:
         return self.audio.held_bytes
 
+    def held_input_bytes_after(self, n_samples: int, sample_rate: int) -> int:
+        if self.model.vocal is None or self.mode == PHONEMES:
+            return 0  # audio this request takes is not kept
+        return self.audio.stream.held_bytes_after(n_samples, sample_rate)
+
     # -- input ------------------------------------------------------------------------------
 
     def _drive(self, mode: str | None) -> None:
