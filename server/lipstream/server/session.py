@@ -154,6 +154,7 @@ class Session:
         self.refuse_start = refuse_start
         self.input_ledger = input_ledger or InputLedger(UNLIMITED_INPUT)
         self.holdings: dict[str, Holding] = {}
+        self.too_large: dict[str, LipstreamError] = {}
         self.requests: dict[str, ActiveRequest] = {}
         self.costs: dict[str, CallCost] = {}
         self.guards: dict[str, WorkGuard] = {}
@@ -183,6 +184,7 @@ class Session:
         for holding in self.holdings.values():
             holding.release()
         self.holdings.clear()
+        self.too_large.clear()
         self.output_values = 0
         return dropped
 
@@ -216,6 +218,22 @@ class Session:
         released = min(frame_count(until, fps), self.limits.request.max_frames)
         frames = max(0, released - request.next_frame) + extra_frames
         return self.costs[received.id].ms(phonemes, frames)
+
+    def check_queued(self, identifier: str, phonemes: int) -> None:
+        """Active request ``identifier`` has ``phonemes`` more phonemes received and waiting
+        (read ahead while its work runs): if its engine cannot take that many more
+        (``Synthesizer.check_more_phonemes``: PQ-Matching's ``search_too_large``), stop its
+        work now; its next message handled ends it with that error. (The count is a lower
+        bound, since the message being handled is no longer waiting and the engine may not
+        have taken it yet, so no request is refused that would have been taken.)"""
+        request = self.requests.get(identifier)
+        if request is None or identifier in self.too_large:
+            return
+        try:
+            request.synthesizer.check_more_phonemes(phonemes)
+        except LipstreamError as error:
+            self.too_large[identifier] = error
+            self.stop_work(identifier)
 
     def stop_work(self, identifier: str) -> None:
         """Stop the work of active request ``identifier`` at its next step (the client sent
@@ -314,35 +332,45 @@ class Session:
         request.last_input = now
         self.requests[request.id] = self.requests.pop(request.id)
         cursor = self.resumes.get(request.id)
+        too_large = self.too_large.get(request.id)
+        if too_large is not None and not isinstance(received, Cancel):
+            return self._end_with(request, too_large)
         try:
             outgoing = self._metered(guard, request, received, now, meter_clock)
             if cursor is not None:
                 outgoing = cursor.filter(outgoing)
         except LipstreamError as error:
+            too_large = self.too_large.get(request.id)
+            if too_large is not None and not isinstance(received, Cancel):
+                return self._end_with(request, too_large)
             if guard.cancelled and not isinstance(received, Cancel):
                 # Stopped by the client's cancel, which follows in order and ends it, or by
                 # the end of the connection.
                 self.stopped_work += 1
                 return []
-            self._forget(request.id)
-            details = error.details if isinstance(error, RequestError) else None
-            code = error.code if isinstance(error, RequestError) else None
-            return [
-                _error(
-                    code or protocol_code(error, INVALID_REQUEST),
-                    _located(error),
-                    request.id,
-                    fatal=True,
-                    details=details,
-                    clock=request.spec.clock,
-                )
-            ]
+            return self._end_with(request, error)
         if isinstance(received, (End, Cancel, Interrupt)):
             self._forget(request.id)
             self._remember(request.id, _REASONS[type(received)])
         else:
             self._hold(request)
         return outgoing
+
+    def _end_with(self, request: ActiveRequest, error: LipstreamError) -> list[Outgoing]:
+        """End ``request`` with ``error``, fatal."""
+        self._forget(request.id)
+        details = error.details if isinstance(error, RequestError) else None
+        code = error.code if isinstance(error, RequestError) else None
+        return [
+            _error(
+                code or protocol_code(error, INVALID_REQUEST),
+                _located(error),
+                request.id,
+                fatal=True,
+                details=details,
+                clock=request.spec.clock,
+            )
+        ]
 
     def _hold(self, request: ActiveRequest) -> None:
         """Count what ``request`` holds of its input now."""
@@ -443,6 +471,7 @@ class Session:
         holding = self.holdings.pop(identifier, None)
         if holding is not None:
             holding.release()
+        self.too_large.pop(identifier, None)
 
     def _remember(self, identifier: str, reason: DoneReason) -> None:
         self.ended[identifier] = reason

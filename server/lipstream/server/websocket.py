@@ -53,6 +53,7 @@ from lipstream_client import (
     Encoding,
     ErrorMessage,
     Frames,
+    Phonemes,
     ProtocolError,
     ServerMessage,
     decode,
@@ -417,6 +418,8 @@ class Connection:
         if isinstance(decoded, Cancel) and not self.read_ahead.starts(decoded.id):
             self.session.stop_work(decoded.id)
         self.read_ahead.push(Received(received.event, received.at, decoded))
+        if isinstance(decoded, Phonemes) and not self.read_ahead.starts(decoded.id):
+            self.session.check_queued(decoded.id, self.read_ahead.phonemes(decoded.id))
 
     def _track_active(self) -> None:
         active = self.session.active_requests

@@ -173,8 +173,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         covered_until = self.covered_until
         new = coerce_spans(spans, after=covered_until, first_index=len(self.spans))
         filled = fill_gaps(new, covered_until)
-        if self.options.search == "pq":
-            self.options.check_size(len(self.spans) + len(filled))
+        self.check_more_phonemes(len(filled))
         causal = self.options.causal
         for span in filled:
             searcher = self._by_emotion.get(span.emotion)
@@ -207,6 +206,10 @@ class AnimeGraphSynthesizer(Synthesizer):
     @property
     def held_input_bytes(self) -> int:
         return self.audio.held_bytes if self.audio is not None else 0
+
+    def check_more_phonemes(self, count: int) -> None:
+        if self.options.search == "pq":
+            self.options.check_size(len(self.spans) + count)
 
     def held_input_bytes_after(self, n_samples: int, sample_rate: int) -> int:
         if self.audio is None and (self.audio_mode is False or not self.model.has_audio):
