@@ -289,9 +289,7 @@ def _run(messages: list[Message], state: ServerState) -> Synthesis:
                 if isinstance(answer, Ready):
                     ready = answer
                 elif isinstance(answer, Frames):
-                    blocks.append(
-                        np.frombuffer(answer.data, "<f4").reshape(-1, answer.n_channels)
-                    )
+                    blocks.append(np.frombuffer(answer.data, "<f4").reshape(-1, answer.n_channels))
                 elif isinstance(answer, Done):
                     done = answer
     finally:

@@ -43,7 +43,9 @@ HEAVY = ("a", "b", "c")
 
 
 @pytest.fixture(scope="module")
-def audio_models_dir(trained_models: dict[str, Model], tmp_path_factory: pytest.TempPathFactory) -> Path:
+def audio_models_dir(
+    trained_models: dict[str, Model], tmp_path_factory: pytest.TempPathFactory
+) -> Path:
     directory = tmp_path_factory.mktemp("server-models-audio")
     for name in ("hmm", "viseme-lerp"):
         trained_models[name].save(directory / name)
