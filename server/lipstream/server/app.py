@@ -211,13 +211,14 @@ def _log_limits(server: ServerState) -> None:
     limits = server.overload.policy.limits
     startup_log.info(
         "limits: %d open files (hard limit %d), %d connections, %d sessions, "
-        "%.0f MiB of memory; admission refuses at %g ms of event-loop lag or %.0f %% busy "
-        "(a session's calibrated cost: %.2f %%)",
+        "%.0f MiB of memory (%.0f MiB of it for held audio input); admission refuses at "
+        "%g ms of event-loop lag or %.0f %% busy (a session's calibrated cost: %.2f %%)",
         files.soft,
         files.hard,
         connections,
         server.settings.max_sessions,
         limits.max_memory_mb,
+        server.input_ledger.budget_bytes / (1 << 20),
         limits.max_lag_ms,
         100 * limits.max_busy,
         100 * limits.session_cost,

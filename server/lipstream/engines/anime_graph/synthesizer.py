@@ -623,7 +623,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         if math.isinf(limit):
             if not self.spans:  # finished with no input: no sample, and no frame, to make
                 return
-            last = frame_count(self.covered_until, self.fps) - 1 if self.spans else -1
+            last = frame_count(self.covered_until, self.fps) - 1
             needed = math.floor(last * fps_model / self.fps + _SNAP) + 2
             self._extend_raw(needed + self.half_width)
             self._extend_smoothed(needed)
