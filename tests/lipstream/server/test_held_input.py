@@ -1,12 +1,13 @@
 """Audio input counted against the server's memory as it arrives, on a real server.
 
-Requests of ``hmm`` (driven by audio alone) once kept all their audio, and the
-memory ceiling was checked only at ``start``. Now each request holds its speech
+Requests of ``hmm`` (driven by audio alone) and ``anime-graph`` once kept all
+their audio, and the memory ceiling was checked only at ``start``. Now each request holds its speech
 features and a window of samples, the process counts what they hold, and a
 chunk that would take the total past ``LIPSTREAM_MAX_INPUT_MB`` ends only its
-request with ``input_too_large``. One connection streams 40 s of audio into
-each of three requests, far more than the 0.25 MiB allowed (40 s of features
-alone are 448 kB a request): each request ends with the code; the connection
+request with ``input_too_large``. One connection streams 60 s of audio into
+each of four requests, far more than the 0.25 MiB allowed (60 s of features
+alone are 672 kB for ``hmm``, 312 kB for ``anime-graph``): each request ends
+with the code; the connection
 then serves a new request, another connection's request finishes, and the
 held-input gauges show the peak within the limit and nothing held at the end.
 """
@@ -37,9 +38,9 @@ from tests.lipstream.server.harness import client, serving
 
 BUDGET_BYTES = 262_144  # LIPSTREAM_MAX_INPUT_MB = 0.25
 RATE = 16_000
-SECONDS = 40
+SECONDS = 60
 ITEMS = (PhonemeItem("HH", 0.0, 0.1), PhonemeItem("AY1", 0.1, 0.3), PhonemeItem("sil", 0.3, 0.5))
-HEAVY = ("a", "b", "c")
+HEAVY = {"a": "hmm", "b": "anime-graph", "c": "hmm", "e": "hmm"}
 
 
 @pytest.fixture(scope="module")
@@ -47,7 +48,7 @@ def audio_models_dir(
     trained_models: dict[str, Model], tmp_path_factory: pytest.TempPathFactory
 ) -> Path:
     directory = tmp_path_factory.mktemp("server-models-audio")
-    for name in ("hmm", "viseme-lerp"):
+    for name in ("hmm", "anime-graph", "viseme-lerp"):
         trained_models[name].save(directory / name)
     return directory
 
@@ -66,7 +67,7 @@ def test_audio_past_the_input_limit_ends_only_its_request(audio_models_dir: Path
         client(served.ws, max_queue=None) as heavy,
         client(served.ws) as other,
     ):
-        heavy.send(*(Start(identifier, "hmm", "demo") for identifier in HEAVY))
+        heavy.send(*(Start(identifier, engine, "demo") for identifier, engine in HEAVY.items()))
         assert [type(heavy.recv()) for _ in HEAVY] == [Ready] * len(HEAVY)
         other.send(Start("o", "viseme-lerp", "demo"), Phonemes("o", ITEMS[:1]))
         for _ in range(SECONDS):
