@@ -373,7 +373,10 @@ class Session:
         ]
 
     def _hold(self, request: ActiveRequest) -> None:
-        """Count what ``request`` holds of its input now."""
+        """Count what ``request`` holds of its input now (only an engine that reads audio
+        holds any)."""
+        if not request.spec.uses_audio:
+            return
         holding = self.holdings.get(request.id)
         if holding is None:
             holding = self.holdings[request.id] = self.input_ledger.holding()
