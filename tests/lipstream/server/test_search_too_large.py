@@ -8,7 +8,9 @@ work is stopped (checking as the real search does, every few steps, for at
 most ``HOLD_S``), so that every later message is certainly read ahead while
 it runs. Once the phonemes waiting cross the cap, the running search
 stops and the request ends with ``search_too_large``: at most that one window
-was searched, where the old code searched one per message (61).
+was searched, where the old code searched one per message (61). The same on
+the sans-I/O session: phonemes reported waiting past the cap stop the
+request's work, and its next message ends it, nothing searched.
 """
 
 from __future__ import annotations
@@ -23,7 +25,10 @@ import pytest
 
 from lipstream.engines.anime_graph import synthesizer
 from lipstream.engines.base import Model
-from lipstream_client import Done, End, ErrorMessage, PhonemeItem, Phonemes, Start
+from lipstream.server.catalog import Catalog
+from lipstream.server.request import RequestLimits
+from lipstream.server.session import Session, SessionLimits
+from lipstream_client import Done, End, ErrorMessage, PhonemeItem, Phonemes, Ready, Start
 from tests.lipstream.server.harness import client, serving
 
 HOLD_S = 20.0  # a bound on a stalled machine, not a speed
@@ -94,3 +99,28 @@ def test_pq_past_its_cap_is_refused_before_searching_the_queued_phonemes(
         ws.send(*one_phoneme_messages("b", 8), End("b"))
         assert isinstance(ws.until_done("b")[-1], Done)
     assert searches.calls > before
+
+
+def test_phonemes_waiting_past_the_cap_end_the_request_at_its_next_message(
+    catalog: Catalog, searches: Searches
+) -> None:
+    searches.hold = False
+    session = Session(catalog, SessionLimits(2, RequestLimits(1000, 100_000, 100.0)))
+    options = {"search": "pq", "pq_window": WINDOW}
+    messages = one_phoneme_messages("a", ALLOWED + 1)
+    assert isinstance(
+        session.handle(Start("a", "anime-graph", "demo", options=options), 0.0)[0].message, Ready
+    )
+    for message in messages[:3]:  # fewer than a window: nothing searched yet
+        session.handle(message, 0.0)
+    session.check_queued("a", ALLOWED - 3)  # at the cap: nothing happens
+    assert not session.guards["a"].cancelled
+    session.check_queued("a", ALLOWED - 2)
+    assert session.guards["a"].cancelled  # the running work stops at its next step
+    [answer] = session.handle(messages[3], 0.0)
+    error = answer.message
+    assert isinstance(error, ErrorMessage)
+    assert (error.code, error.id, error.fatal) == ("search_too_large", "a", True)
+    assert "at most 64 phonemes" in error.message
+    assert searches.calls == 0
+    assert session.active_requests == 0
