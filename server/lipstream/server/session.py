@@ -539,6 +539,9 @@ class Session:
         self.requests[start.id] = request
         self.costs[start.id] = cost
         self.guards[start.id] = guard
+        # A count of waiting phonemes may have landed on this id's previous request (in
+        # another thread) just as it ended.
+        self.too_large.pop(start.id, None)
         if start.resume is not None:
             self.resumes[start.id] = ResumeCursor.of(start.resume)
         self.ended.pop(start.id, None)
