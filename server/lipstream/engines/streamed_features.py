@@ -23,24 +23,13 @@ from ..errors import InvalidRequestError
 from ..features import MfccConfig, first_sample_read, frames_covered
 from .growable import Growable
 
-Analyse = Callable[[np.ndarray, int, int, int, MfccConfig, int], np.ndarray]
-"""(samples, sample_rate, first, stop, config, offset) -> float32 frames first .. stop − 1
-(``features.mfcc``, ``features.speech_features``)."""
-
-
-def _mfcc_call(analyse: Callable[..., np.ndarray]) -> Analyse:
-    def call(
-        samples: np.ndarray, rate: int, first: int, stop: int, config: MfccConfig, offset: int
-    ) -> np.ndarray:
-        return analyse(samples, rate, first, stop, config, offset)
-
-    return call
-
 
 class StreamedFeatures:
     """The features (float32 (n_frames, ``width``)) of one request's audio, at one sample
-    rate; ``lookback`` is how many frames before frame k its ``analyse`` reads (1 for the
-    deltas of ``speech_features``)."""
+    rate. ``analyse(samples, sample_rate, first, stop, config, offset)`` computes frames
+    first .. stop − 1 of a signal held from sample ``offset`` on (``features.mfcc``,
+    ``features.speech_features``); ``lookback`` is how many frames before frame k it reads
+    (1 for the deltas of ``speech_features``)."""
 
     def __init__(
         self,
@@ -50,7 +39,7 @@ class StreamedFeatures:
         lookback: int = 0,
     ) -> None:
         self.config = config
-        self.analyse = _mfcc_call(analyse)
+        self.analyse = analyse
         self.lookback = lookback
         self.sample_rate: int | None = None
         self.length = 0
