@@ -50,6 +50,7 @@ CPU_BUDGET_EXCEEDED = "cpu_budget_exceeded"
 SEARCH_TOO_LARGE = "search_too_large"
 SEARCH_TIMEOUT = "search_timeout"
 OUTPUT_TOO_LARGE = "output_too_large"
+INPUT_TOO_LARGE = "input_too_large"
 AUDIO_ONLY_UNSUPPORTED = "audio_only_unsupported"
 REQUEST_TIMEOUT = "request_timeout"
 EMPTY_TEXT = "empty_text"
@@ -251,12 +252,20 @@ ERROR_CODES: dict[str, ErrorCodeInfo] = {
         "server",
         "request",
     ),
+    INPUT_TOO_LARGE: ErrorCodeInfo(
+        "holding the request's audio input (its speech features and a window of samples, "
+        "and the chunk being taken in) would take the input all requests hold past the "
+        "server's share of its memory ceiling; details name the sizes",
+        "server",
+        "request",
+    ),
     REQUEST_TIMEOUT: ErrorCodeInfo(
         "no message for the request arrived within the request timeout", "server", "request"
     ),
     RESUME_MISMATCH: ErrorCodeInfo(
         "a resuming start names a fidelity rung this server's model lacks, so the frames the "
-        "client holds cannot be continued",
+        "client holds cannot be continued, or a resume.seq that leaves too little room below "
+        "the bound on seq for the blocks the request may send",
         "server",
         "request",
     ),

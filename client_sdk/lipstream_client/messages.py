@@ -46,6 +46,9 @@ MAX_TIME_S = 86_400.0
 MIN_SAMPLE_RATE = 8_000
 MAX_SAMPLE_RATE = 192_000
 MAX_INTEGER = 2**53 - 1
+MAX_SEQ = 2**31 - 1
+"""The largest ``seq`` of a ``frames`` block, and of ``resume.seq``: a bound far above any
+request's blocks that leaves a resumed request room to number its own."""
 MAX_VOICE_LENGTH = 64
 MIN_RATE_WPM = 80
 MAX_RATE_WPM = 450

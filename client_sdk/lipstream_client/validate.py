@@ -62,6 +62,7 @@ from .messages import (
     MAX_RATE_WPM,
     MAX_RETURN_MS,
     MAX_SAMPLE_RATE,
+    MAX_SEQ,
     MAX_TIME_S,
     MAX_VOICE_LENGTH,
     MIN_FPS,
@@ -211,7 +212,7 @@ def _resume(value: object) -> Resume:
     obj = read_object(value, where, ("frames", "seq"), ("fidelity", "audio"))
     return Resume(
         frames=read_integer(obj["frames"], f"{where}.frames"),
-        seq=read_integer(obj["seq"], f"{where}.seq"),
+        seq=read_integer(obj["seq"], f"{where}.seq", maximum=MAX_SEQ),
         fidelity=read_text(obj["fidelity"], f"{where}.fidelity", MAX_NAME_LENGTH)
         if present(obj, "fidelity")
         else None,
@@ -414,7 +415,7 @@ def _frames(payload: Mapping[str, Any], encoding: Encoding) -> Frames:
         raise InvalidField(INVALID_FRAMES, "data", "values must be finite")
     return Frames(
         id=identifier,
-        seq=read_integer(obj["seq"], "seq"),
+        seq=read_integer(obj["seq"], "seq", maximum=MAX_SEQ),
         first_frame=read_integer(obj["first_frame"], "first_frame"),
         fps=read_number(obj["fps"], "fps", minimum=MIN_FPS, maximum=MAX_FPS),
         n_channels=n_channels,

@@ -50,6 +50,7 @@ class ServerSettings:
     client_upgrade_burst: int = 100
     handshake_timeout_s: float = 10.0
     max_memory_mb: int = 0
+    max_input_mb: float = 0.0
     max_loop_lag_ms: float = 50.0
     max_loop_busy: float = 0.9
     max_requests_per_session: int = 64
@@ -237,6 +238,14 @@ ENV_SETTINGS: tuple[EnvSetting, ...] = (
         "resident memory (MiB) per worker above which new sessions, `start`s and "
         "`POST /v1/synthesize` are refused with `server_busy`; 0 = 80 % of the machine's "
         "(or container's) memory divided by the workers",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MAX_INPUT_MB",
+        "max_input_mb",
+        _number(0.0, float(1 << 30)),
+        "audio input (MiB) all requests of a worker may hold at once (speech features and a "
+        "window of samples each); a request whose next chunk would pass it ends with "
+        "`input_too_large`; 0 = a quarter of the memory ceiling",
     ),
     EnvSetting(
         "LIPSTREAM_MAX_LOOP_LAG_MS",

@@ -243,6 +243,24 @@ class Synthesizer(ABC):
     def finish(self) -> np.ndarray:
         """Declare the input complete and return every frame not yet returned."""
 
+    @property
+    def held_input_bytes(self) -> int:
+        """Bytes this request holds of its audio input (samples and the features made of
+        them), which the server counts against its memory ceiling as input arrives."""
+        return 0
+
+    def check_more_phonemes(self, count: int) -> None:
+        """Raise the engine's error (``LipstreamError``) if this request could not take
+        ``count`` more phonemes: an engine whose work grows too fast with a request's length
+        caps it, and the server asks as soon as it receives phonemes, before any search.
+        By default there is no cap."""
+        return None
+
+    def held_input_bytes_after(self, n_samples: int, sample_rate: int) -> int:
+        """A bound on ``held_input_bytes`` while this request takes in ``n_samples`` more
+        samples of audio at ``sample_rate`` Hz (0 when the engine does not keep audio)."""
+        return 0
+
 
 class Model(ABC):
     """A trained, read-only model. Subclasses define ``render`` and the array round trip."""

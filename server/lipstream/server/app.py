@@ -40,6 +40,7 @@ from . import demo_page, docs_page, openapi, phoneme_maps
 from .catalog import Catalog
 from .client_limits import ClientLimits
 from .handshake import head_limits
+from .held_input import InputLedger, input_budget_bytes
 from .lifecycle import Lifecycle, install_drain_on_signals
 from .liveness import LivenessServer
 from .load import MIB
@@ -118,6 +119,10 @@ def create_app(
         overload = overload_for(settings, catalog, metrics.observe_load)
         metrics.memory_ceiling.set(overload.policy.limits.max_memory_mb * MIB)
         clients = ClientLimits.from_settings(settings)
+        ledger = InputLedger(
+            input_budget_bytes(settings, overload.policy.limits.max_memory_mb),
+            metrics.observe_input,
+        )
         server = ServerState(
             registry,
             catalog,
@@ -129,6 +134,7 @@ def create_app(
             overload,
             clients,
             drain_flag=drain_flag,
+            input_ledger=ledger,
         )
         _log_limits(server)
         overload.monitor.start()
@@ -220,13 +226,14 @@ def _log_limits(server: ServerState) -> None:
     limits = server.overload.policy.limits
     startup_log.info(
         "limits: %d open files (hard limit %d), %d connections, %d sessions, "
-        "%.0f MiB of memory; admission refuses at %g ms of event-loop lag or %.0f %% busy "
-        "(a session's calibrated cost: %.2f %%)",
+        "%.0f MiB of memory (%.0f MiB of it for held audio input); admission refuses at "
+        "%g ms of event-loop lag or %.0f %% busy (a session's calibrated cost: %.2f %%)",
         files.soft,
         files.hard,
         connections,
         server.settings.max_sessions,
         limits.max_memory_mb,
+        server.input_ledger.budget_bytes / (1 << 20),
         limits.max_lag_ms,
         100 * limits.max_busy,
         100 * limits.session_cost,

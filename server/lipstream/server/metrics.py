@@ -103,6 +103,19 @@ class Metrics:
             registry=registry,
             multiprocess_mode="livesum",
         )
+        self.input_held = Gauge(
+            "lipstream_input_held_bytes",
+            "Audio input the requests hold: speech features and windows of samples, as "
+            "counted against LIPSTREAM_MAX_INPUT_MB (summed over the workers).",
+            registry=registry,
+            multiprocess_mode="livesum",
+        )
+        self.input_held_peak = Gauge(
+            "lipstream_input_held_peak_bytes",
+            "The most audio input the requests of one worker held at once.",
+            registry=registry,
+            multiprocess_mode="livemax",
+        )
         self.requests = Counter(
             "lipstream_requests",
             "Finished requests by how they ended (end, cancel, interrupt, error).",
@@ -170,6 +183,11 @@ class Metrics:
         self.loop_lag.set(load.lag_ms / 1000.0)
         self.loop_busy.set(load.loop_busy)
         self.resident_memory.set(load.rss_mb * MIB)
+
+    def observe_input(self, held: int, peak: int) -> None:
+        """Publish what the requests hold of their input (``held_input``), as it changes."""
+        self.input_held.set(held)
+        self.input_held_peak.set(peak)
 
     def labelled(self, metric: MetricWrapperBase, *values: str) -> Any:
         """``metric.labels(*values)``, cached: the hot path avoids the label lookup."""

@@ -7,7 +7,8 @@ the clients' message rate), so ``OverloadPolicy`` admits a new session only whil
 measured load (``load.LoadSample``) leaves room:
 
 - resident memory at most ``max_memory_mb`` (also checked for every ``start`` and
-  ``POST /v1/synthesize``: past it nothing new is taken on, while work under way finishes);
+  ``POST /v1/synthesize``: past it nothing new is taken on, while work under way finishes;
+  the audio that requests take in later is counted as it arrives, ``held_input``);
 - the event-loop lag at most ``max_lag_ms``, once ``LAG_FROM_SESSIONS`` sessions are open
   (with fewer, a lagging loop says more about the machine, other processes taking its
   cores, than about the sessions, and refusing more would not relieve it);

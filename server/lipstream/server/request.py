@@ -54,7 +54,7 @@ from lipstream_client.errors import (
     UNKNOWN_EMOTION,
     UNKNOWN_PHONEME,
 )
-from lipstream_client.messages import DoneReason, JsonValue
+from lipstream_client.messages import MAX_FPS, MAX_RETURN_MS, MAX_SEQ, DoneReason, JsonValue
 
 from ..audio import Audio
 from ..engines.base import Synthesizer, frame_count, frames_before
@@ -108,6 +108,13 @@ class RequestLimits:
     max_values: int | None = None
     tail_values: int = SENT_TAIL_VALUES
     max_seconds: float | None = None
+
+
+def most_blocks(limits: RequestLimits) -> int:
+    """The most ``frames`` blocks one request may send: a block per frame up to its limit
+    (one more for audio that ends on the limit), then an interrupt's return to rest of
+    ``MAX_RETURN_MS`` at ``MAX_FPS``, a block per row."""
+    return limits.max_frames + 1 + math.ceil(MAX_RETURN_MS * MAX_FPS / 1000.0) + 1
 
 
 class SentTail:
@@ -449,6 +456,14 @@ class ActiveRequest:
                 if covered_at is not None
                 else self.coverage.received_at(index / spec.fps)
             )
+            if self.seq > MAX_SEQ:
+                raise RequestError(
+                    f"the request's next frames block would be numbered past the protocol's "
+                    f"bound of {MAX_SEQ}",
+                    code=OUTPUT_TOO_LARGE,
+                    where="seq",
+                    details={"max_seq": MAX_SEQ},
+                )
             data = np.ascontiguousarray(chunk, dtype="<f4").tobytes()
             frames = Frames(spec.id, self.seq, index, spec.fps, spec.profile.n_channels, data)
             self.seq += 1

@@ -112,6 +112,7 @@ STATUS = {
     "unknown_engine": 404,
     "unknown_character": 404,
     MESSAGE_TOO_LARGE: 413,
+    "input_too_large": 503,
     UNAUTHORIZED: 401,
     "unsupported_media_type": 415,
     "not_acceptable": 406,
@@ -306,21 +307,28 @@ def _decoded(kind: str, fields: dict[str, Any], encoding: Encoding) -> Message:
 
 def _run(messages: list[Message], state: ServerState) -> Synthesis:
     """Play the messages through a one-request session (in the thread pool)."""
-    session = Session(state.catalog, replace(state.session_limits, max_requests=1))
+    session = Session(
+        state.catalog,
+        replace(state.session_limits, max_requests=1),
+        input_ledger=state.input_ledger,
+    )
     ready: Ready | None = None
     done: Done | None = None
     blocks: list[np.ndarray] = []
-    for message in messages:
-        for outgoing in session.handle(message, time.monotonic()):
-            answer = outgoing.message
-            if isinstance(answer, ErrorMessage):
-                raise HttpError(answer.code, answer.message, details=answer.details)
-            if isinstance(answer, Ready):
-                ready = answer
-            elif isinstance(answer, Frames):
-                blocks.append(np.frombuffer(answer.data, "<f4").reshape(-1, answer.n_channels))
-            elif isinstance(answer, Done):
-                done = answer
+    try:
+        for message in messages:
+            for outgoing in session.handle(message, time.monotonic()):
+                answer = outgoing.message
+                if isinstance(answer, ErrorMessage):
+                    raise HttpError(answer.code, answer.message, details=answer.details)
+                if isinstance(answer, Ready):
+                    ready = answer
+                elif isinstance(answer, Frames):
+                    blocks.append(np.frombuffer(answer.data, "<f4").reshape(-1, answer.n_channels))
+                elif isinstance(answer, Done):
+                    done = answer
+    finally:
+        session.close()  # releases what the request held of its input
     if ready is None or done is None:
         raise HttpError(INTERNAL_ERROR, "the synthesis did not complete")
     width = len(ready.channels)

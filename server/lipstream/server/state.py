@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..config import ServerSettings
 from ..models import ModelRegistry
 from .catalog import Catalog
 from .client_limits import ClientLimits
+from .held_input import UNLIMITED_INPUT, InputLedger
 from .lifecycle import Lifecycle
 from .metrics import Metrics
 from .overload import Overload
@@ -22,7 +23,8 @@ class ServerState:
     """Resident models and what was derived from them, settings, metrics, the connections'
     lifecycle, the two thread pools (``executor`` for ordinary engine work, ``heavy`` for
     costly messages, large JSON answers and REST, so those never queue ordinary sessions
-    behind them), the load-based admission and the per-client limits."""
+    behind them), the load-based admission, the per-client limits and the ledger of the
+    audio input requests hold."""
 
     registry: ModelRegistry
     catalog: Catalog
@@ -36,6 +38,7 @@ class ServerState:
     loaded: bool = True
     answer_bytes: int = 0  # bytes held by REST answers still being sent (``rest``)
     drain_flag: Path | None = None  # marked by the workers' supervisor (``runner``)
+    input_ledger: InputLedger = field(default_factory=lambda: InputLedger(UNLIMITED_INPUT))
 
     @property
     def ready(self) -> bool:

@@ -14,17 +14,18 @@ and in the heavy lane (a pool of its own) above (with its frames encoded
 there too), so the event loop never waits on a long synthesis and ordinary
 sessions never queue behind a costly one; answers of more than
 ``JSON_INLINE_VALUES`` JSON numbers are encoded in the pool as well (in the
-heavy lane above ``JSON_HEAVY_VALUES``). While work runs in the pool the connection
-keeps receiving (``read_ahead``): the socket is read and pings answered, a
-``cancel`` stops its request's work at once (``Session.stop_work``), a
-closed socket stops all of it, and the messages read wait, in order, for
-their turn. Then the task stamps and sends the answers itself. Sending from
-the same task, rather than handing each answer to a writer task, saves a
-task switch and a queue round trip per message, the largest cost left once
-the engine is fast. A send waits only when the client's socket buffers are
-full; the connection then reads nothing more from that client
-(backpressure), and a send that misses its deadline
-(``deadline.SendDeadline``) closes the connection with 1008
+heavy lane above ``JSON_HEAVY_VALUES``). While work runs in the pool the
+connection keeps receiving (``read_ahead``): the socket is read and pings
+answered, a ``cancel`` stops its request's work at once
+(``Session.stop_work``), so do phonemes that take their request past its
+engine's cap (``Session.check_queued``), a closed socket stops all of it,
+and the messages read wait, in order, for their turn. Then the task stamps
+and sends the answers itself. Sending from the same task, rather than
+handing each answer to a writer task, saves a task switch and a queue round
+trip per message, the largest cost left once the engine is fast. A send
+waits only when the client's socket buffers are full; the connection then
+reads nothing more from that client (backpressure), and a send that misses
+its deadline (``deadline.SendDeadline``) closes the connection with 1008
 ``slow_consumer``: a client that stops reading would otherwise pin
 ``await send`` forever. Frames are never dropped silently. A connection
 with no message and no active request for ``idle_timeout_s`` closes with
@@ -53,6 +54,7 @@ from lipstream_client import (
     Encoding,
     ErrorMessage,
     Frames,
+    Phonemes,
     ProtocolError,
     ServerMessage,
     decode,
@@ -176,7 +178,12 @@ class Connection:
         self.state = state
         self.settings = state.settings
         self.metrics = state.metrics
-        self.session = Session(state.catalog, state.session_limits, state.overload.request_refusal)
+        self.session = Session(
+            state.catalog,
+            state.session_limits,
+            state.overload.request_refusal,
+            state.input_ledger,
+        )
         self.bucket = TokenBucket(
             self.settings.message_rate, self.settings.message_burst, time.monotonic()
         )
@@ -412,6 +419,8 @@ class Connection:
         if isinstance(decoded, Cancel) and not self.read_ahead.starts(decoded.id):
             self.session.stop_work(decoded.id)
         self.read_ahead.push(Received(received.event, received.at, decoded))
+        if isinstance(decoded, Phonemes) and not self.read_ahead.starts(decoded.id):
+            self.session.check_queued(decoded.id, self.read_ahead.phonemes(decoded.id))
 
     def _track_active(self) -> None:
         active = self.session.active_requests

@@ -174,3 +174,47 @@ def test_a_resumed_text_request_sends_the_speech_and_frames_the_client_lacks(
     answers = play(new_session(catalog), [replace(start, resume=resume), *texts, End("a")])
     assert answers[0] == ready
     assert answers[1:] == first[cut:]
+
+
+MAX_SEQ = 2**31 - 1  # the protocol's bound on a block's seq, stated independently here
+
+
+def test_a_resume_seq_without_room_for_the_requests_blocks_is_refused_before_ready(
+    catalog: Catalog,
+) -> None:
+    # The session's requests may send 10,000 frames; an interrupt's return to rest at most
+    # 10 s x 1000 fps + 1 rows: a resumed request may need that many block numbers from seq.
+    most_blocks = 10_000 + 1 + 10_001
+    last_fitting = MAX_SEQ + 1 - most_blocks
+    for seq in (MAX_SEQ, last_fitting + 1):
+        start = Start("a", "viseme-lerp", "demo", fps=FPS, resume=Resume(0, seq))
+        [error] = play(new_session(catalog), [start])
+        assert isinstance(error, ErrorMessage)
+        assert (error.code, error.id, error.fatal) == (RESUME_MISMATCH, "a", True)
+        assert error.message.startswith("resume.seq: ")
+        assert str(MAX_SEQ) in error.message
+    start = Start("a", "viseme-lerp", "demo", fps=FPS, resume=Resume(0, last_fitting))
+    answers = play(new_session(catalog), [start, Phonemes("a", ITEMS), End("a")])
+    resumed = blocks(answers)
+    assert [b.seq for b in resumed] == list(range(last_fitting, last_fitting + len(resumed)))
+    assert answers[-1].type == "done"
+
+
+def test_the_server_never_numbers_a_block_past_the_bound(catalog: Catalog) -> None:
+    session = new_session(catalog)
+    start = Start("a", "viseme-lerp", "demo", fps=FPS, resume=Resume(0, 0))
+    assert isinstance(play(session, [start])[0], Ready)
+    session.resumes["a"].seq = MAX_SEQ  # as if the request had sent that many blocks
+    answers = play(session, [Phonemes("a", ITEMS[:6]), Phonemes("a", ITEMS[6:])])
+    seqs = [b.seq for b in blocks(answers)]
+    assert seqs == [MAX_SEQ]
+    [error] = [m for m in answers if isinstance(m, ErrorMessage)]
+    assert (error.code, error.id, error.fatal) == (RESUME_MISMATCH, "a", True)
+    assert session.active_requests == 0
+    request = Start("b", "viseme-lerp", "demo", fps=FPS)
+    assert isinstance(play(session, [request])[0], Ready)
+    session.requests["b"].seq = MAX_SEQ
+    answers = play(session, [Phonemes("b", ITEMS[:6]), Phonemes("b", ITEMS[6:])])
+    assert [b.seq for b in blocks(answers)] == [MAX_SEQ]
+    [error] = [m for m in answers if isinstance(m, ErrorMessage)]
+    assert (error.code, error.id, error.fatal) == ("output_too_large", "b", True)

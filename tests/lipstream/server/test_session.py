@@ -196,6 +196,31 @@ def test_interrupt_after_the_input_cuts_at_its_end_with_the_default_return(
     assert out[-1].stats.frames == 6  # type: ignore[union-attr]
 
 
+@pytest.mark.parametrize(
+    "engine", ["viseme-lerp", "anime-graph", "dam", "cohen-massaro", "hmm", "expressive-dp"]
+)
+def test_a_request_ended_or_interrupted_before_any_input_is_done_with_the_rest_pose(
+    catalog: Catalog, engine: str
+) -> None:
+    # anime-graph once answered internal_error (negative dimensions) at every fps from 120 up.
+    session = new_session(catalog)
+    model = catalog.model(engine, "demo")
+    rest = catalog.rest_pose(model, catalog.default_emotion(model)).astype(np.float32)
+    for fps in (1.0, 60.0, 119.0, 120.0, 121.0, 240.0, 999.5, 1000.0):
+        out = play(session, Start("a", engine, "demo", fps=fps), End("a"))
+        assert isinstance(out[0], Ready)
+        assert out[1:] == [Done("a", out[-1].stats, "end")], (fps, out)  # type: ignore[union-attr]
+        assert out[-1].stats.frames == 0  # type: ignore[union-attr]
+        out = play(
+            session, Start("a", engine, "demo", fps=fps), Interrupt("a", at=0.0, return_ms=0)
+        )
+        assert errors(out) == [], (fps, out)
+        [block] = [m for m in out if isinstance(m, Frames)]
+        assert (block.first_frame, block.n_frames) == (0, 1)
+        np.testing.assert_array_equal(np.frombuffer(block.data, "<f4"), rest)
+        assert out[-1] == Done("a", out[-1].stats, "interrupt")  # type: ignore[union-attr]
+
+
 def test_oculus_visemes_through_the_session_are_distributions(catalog: Catalog) -> None:
     session = new_session(catalog)
     out = play(
