@@ -93,10 +93,9 @@ from .request import ActiveRequest, RequestError, RequestLimits, RequestSpec, pr
 from .resume import ResumeCursor, pinned_rung
 from .text_input import (
     engine_audio,
-    phoneme_items,
-    reading_arpabet,
     speak,
     speech_messages,
+    speech_spans,
     speech_start,
 )
 
@@ -362,14 +361,21 @@ class Session:
 
     def _speak(self, request: ActiveRequest, received: Text, now: float) -> list[Outgoing]:
         """Speak ``received`` (``text_input``): its ``audio`` messages, then the frames of the
-        audio and phonemes it feeds the engine."""
+        speech and spans it hands the engine together."""
         speech = speak(received)
         start = speech_start(request)
         outgoing = speech_messages(request, speech, start)
-        outgoing += request.add_audio(engine_audio(request, speech, start), now)
-        with reading_arpabet(request):
-            phonemes = Phonemes(request.id, phoneme_items(speech, start))
-            outgoing += self._apply(request, phonemes, now)
+        before = request.output_values
+        try:
+            outgoing += request.add_speech(
+                speech_spans(speech, start),
+                engine_audio(request, speech, start),
+                now,
+                self.limits.max_values,
+                self.output_values - before,
+            )
+        finally:
+            self.output_values += request.output_values - before
         return outgoing
 
     def _orphan(self, received: RequestInput) -> list[Outgoing]:
