@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from bisect import bisect_right
 from collections import OrderedDict
 from collections.abc import Callable, Mapping
@@ -133,10 +134,13 @@ class Session:
         catalog: Catalog,
         limits: SessionLimits,
         refuse_start: Callable[[], Refusal | None] = lambda: None,
+        timer: Callable[[], float] = time.perf_counter,
     ) -> None:
         """``refuse_start`` says whether the server takes on a new request now (its memory
-        ceiling: ``overload``); a refusal ends the ``start`` with its code and details."""
+        ceiling: ``overload``); a refusal ends the ``start`` with its code and details.
+        ``timer`` (s) times speech synthesis, which a text request's lag does not count."""
         self.catalog = catalog
+        self.timer = timer
         self.limits = limits
         self.refuse_start = refuse_start
         self.requests: dict[str, ActiveRequest] = {}
@@ -361,8 +365,14 @@ class Session:
 
     def _speak(self, request: ActiveRequest, received: Text, now: float) -> list[Outgoing]:
         """Speak ``received`` (``text_input``): its ``audio`` messages, then the frames of the
-        speech and spans it hands the engine together."""
+        speech and spans it hands the engine together. The speech was ready the synthesis
+        time after ``now``: its frames' lag counts from then, and the synthesis time is
+        reported apart (``done.stats.speech_synthesis_ms``)."""
+        began = self.timer()
         speech = speak(received)
+        synthesis_s = max(0.0, self.timer() - began)
+        request.spec.clock.spoke(synthesis_s)
+        ready_at = now + synthesis_s
         start = speech_start(request)
         outgoing = speech_messages(request, speech, start)
         before = request.output_values
@@ -370,7 +380,7 @@ class Session:
             outgoing += request.add_speech(
                 speech_spans(speech, start),
                 engine_audio(request, speech, start),
-                now,
+                ready_at,
                 self.limits.max_values,
                 self.output_values - before,
             )
