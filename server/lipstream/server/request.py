@@ -21,7 +21,10 @@ model can be driven by audio alone (``Model.accepts_audio_only``: ``hmm`` with a
 vocal model); its input then covers the audio received. Any other request
 that sent audio and no phonemes ends at ``end`` with ``audio_only_unsupported``.
 
-Endings: ``end`` flushes the engine and sends ``done``; ``cancel`` sends
+Endings: ``end`` flushes the engine, then settles the face: the frames after the
+last one blend from it to the rest pose with the same smoothstep over the default
+``return_ms`` (at least one frame; the last one is the rest pose, so a face never
+stays mid-word, whatever the engine), then ``done``; ``cancel`` sends
 ``done`` at once; ``interrupt`` at time ``at`` flushes the engine, sends the
 frames before ``ceil(at × fps)`` not yet sent, then a block starting at that
 frame that blends, in output space, from the face there to the rest pose
@@ -421,7 +424,19 @@ class ActiveRequest:
     def end(self, now: float) -> list[Outgoing]:
         self._check_drivable()
         blocks = self._emit(self._finish(), now)
+        blocks += self._send(self._settling(), now)
         return blocks + [self._done("end", self.next_frame)]
+
+    def _settling(self) -> np.ndarray:
+        """The frames after the last one sent that take the face to rest (none when no
+        frame was sent: the face never left rest)."""
+        if self.next_frame == 0:
+            return self._no_rows()
+        face = np.asarray(self.tail.row(self.next_frame - 1), dtype=np.float64)
+        steps = max(1, settle_frames(self.limits.default_return_ms, self.spec.fps))
+        weights = _smoothstep(np.arange(1, steps + 1) / steps)
+        rows = face + (self.spec.rest - face) * weights[:, None]
+        return rows.astype(np.float32)
 
     def cancel(self) -> list[Outgoing]:
         return [self._done("cancel", self.next_frame)]
@@ -435,8 +450,9 @@ class ActiveRequest:
         unsent = self.spec.profile.apply(final) if len(final) else self._no_rows()
         blocks = self._send(unsent[: max(0, first_return - base)], now)
         face = self._face(first_return, base, unsent)
-        seconds = (self.limits.default_return_ms if return_ms is None else return_ms) / 1000.0
-        steps = max(0, math.ceil(seconds * fps - TIME_TOLERANCE_S))
+        steps = settle_frames(
+            self.limits.default_return_ms if return_ms is None else return_ms, fps
+        )
         weights = _smoothstep(np.arange(steps + 1) / steps) if steps else np.ones(1)
         rows = face + (self.spec.rest - face) * weights[:, None]
         blocks += self._blocks(rows.astype(np.float32), first_return, covered_at=now)
@@ -494,6 +510,11 @@ class ActiveRequest:
     def _done(self, reason: DoneReason, frames: int) -> Outgoing:
         stats = DoneStats(frames=frames, engine=json_safe(self.synthesizer.stats))
         return Outgoing(Done(self.spec.id, stats, reason), self.spec.clock)
+
+
+def settle_frames(return_ms: float, fps: float) -> int:
+    """The frames a return to rest over ``return_ms`` takes after the face it starts from."""
+    return max(0, math.ceil(return_ms / 1000.0 * fps - TIME_TOLERANCE_S))
 
 
 def _smoothstep(u: np.ndarray) -> np.ndarray:

@@ -90,7 +90,14 @@ from .catalog import Catalog
 from .outgoing import Outgoing, RequestClock
 from .overload import Refusal
 from .profiles import requested_profile, resolve_profile
-from .request import ActiveRequest, RequestError, RequestLimits, RequestSpec, protocol_code
+from .request import (
+    ActiveRequest,
+    RequestError,
+    RequestLimits,
+    RequestSpec,
+    protocol_code,
+    settle_frames,
+)
 from .resume import ResumeCursor, pinned_rung
 from .text_input import (
     engine_audio,
@@ -194,11 +201,10 @@ class Session:
             phonemes = math.ceil(received.duration / PHONEME_S)
         else:
             phonemes = len(request.ends) - bisect_right(request.ends, request.next_frame / fps)
-            if isinstance(received, Interrupt):
+            return_ms = self.limits.request.default_return_ms
+            if isinstance(received, Interrupt) and received.return_ms is not None:
                 return_ms = received.return_ms
-                if return_ms is None:
-                    return_ms = self.limits.request.default_return_ms
-                extra_frames = math.ceil(return_ms * fps / 1000.0) + 1
+            extra_frames = settle_frames(return_ms, fps) + 1  # the return to rest
         released = min(frame_count(until, fps), self.limits.request.max_frames)
         frames = max(0, released - request.next_frame) + extra_frames
         return self.costs[received.id].ms(phonemes, frames)

@@ -1,7 +1,8 @@
 """Text on every engine, as a new user sends it: no options, the real SDK, a real
 ``lipstream serve`` on loopback. Each engine's frames equal what its model makes offline of
 espeak-ng's own spans and speech, handed over together (so ``hmm`` with a vocal model is
-driven by both, as a text request must be)."""
+driven by both, as a text request must be), and then the face settles to the character's
+rest pose: the model's face in the middle of a second of silence."""
 
 from __future__ import annotations
 
@@ -13,7 +14,9 @@ import pytest
 
 from lipstream.engines import engine_names
 from lipstream.engines.base import Model, frame_count
+from lipstream.phonemes import SILENCE
 from lipstream.speech.text_frontend import speak_text
+from lipstream.timeline import PhonemeSpan
 from lipstream_client import Client, StreamResult
 from tests.live_server import LiveServer, live_server, save_models
 
@@ -21,6 +24,7 @@ pytestmark = pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espea
 
 FPS = 60.0
 SENTENCE = "Hello there, my name is Mia."
+SETTLE_FRAMES = 9  # the default return to rest, 150 ms at 60 fps
 
 
 @pytest.fixture(scope="module")
@@ -44,15 +48,29 @@ def test_the_hmm_under_test_hears_audio(trained_models: dict[str, Model]) -> Non
     assert trained_models["hmm"].uses_audio
 
 
+def rest_pose(model: Model, emotion: str | None) -> np.ndarray:
+    """The model's face in the middle of one second of silence."""
+    silence = [PhonemeSpan(SILENCE, 0.0, 1.0)]
+    frames = model.synthesize(silence, fps=float(model.manifest.fps), emotion=emotion).frames
+    return np.asarray(frames[len(frames) // 2], dtype=np.float32)
+
+
+def smoothstep_to(face: np.ndarray, rest: np.ndarray, steps: int) -> np.ndarray:
+    u = np.arange(1, steps + 1) / steps
+    weights = u * u * (3 - 2 * u)
+    return np.stack([face + (rest - face) * w for w in weights])
+
+
 @pytest.mark.parametrize("engine", engine_names())
-def test_text_with_no_options_plays_on_every_engine(
+def test_text_with_no_options_plays_on_every_engine_and_ends_at_rest(
     served: LiveServer, trained_models: dict[str, Model], engine: str
 ) -> None:
     result = say(served, engine, SENTENCE)
     spoken = speak_text(SENTENCE)  # a fresh espeak-ng worker says the same
     duration = len(spoken.pcm16) / 2 / spoken.sample_rate
+    spoken_frames = frame_count(duration, FPS)
     assert result.done.reason == "end"
-    assert result.frames and result.done.stats.frames == frame_count(duration, FPS)
+    assert result.done.stats.frames == spoken_frames + SETTLE_FRAMES
     assert result.speech_pcm16() == spoken.pcm16
     model = trained_models[engine]
     offline = model.synthesize(
@@ -62,5 +80,9 @@ def test_text_with_no_options_plays_on_every_engine(
         **dict(result.ready.options),
     ).frames
     rows = np.asarray(result.rows(), dtype=np.float32)
-    assert rows.shape == offline.shape
-    assert np.allclose(rows, offline, atol=1e-5)
+    assert rows.shape == (spoken_frames + SETTLE_FRAMES, len(model.channels))
+    assert np.allclose(rows[:spoken_frames], offline, atol=1e-5)
+    rest = rest_pose(model, result.ready.emotion)
+    assert np.array_equal(rows[-1], rest)
+    settle = smoothstep_to(offline[-1].astype(np.float64), rest.astype(np.float64), SETTLE_FRAMES)
+    assert np.allclose(rows[spoken_frames:], settle, atol=1e-5)
