@@ -14,10 +14,9 @@ import pytest
 
 from lipstream.engines import engine_names
 from lipstream.engines.base import Model, frame_count
-from lipstream.phonemes import SILENCE
 from lipstream.speech.text_frontend import speak_text
-from lipstream.timeline import PhonemeSpan
 from lipstream_client import Client, StreamResult
+from tests.helpers import rest_pose
 from tests.live_server import LiveServer, live_server, save_models
 
 pytestmark = pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng missing")
@@ -46,13 +45,6 @@ def say(served: LiveServer, engine: str, text: str) -> StreamResult:
 def test_the_hmm_under_test_hears_audio(trained_models: dict[str, Model]) -> None:
     # The defect needs a model that takes both inputs: hmm trained with its vocal model.
     assert trained_models["hmm"].uses_audio
-
-
-def rest_pose(model: Model, emotion: str | None) -> np.ndarray:
-    """The model's face in the middle of one second of silence."""
-    silence = [PhonemeSpan(SILENCE, 0.0, 1.0)]
-    frames = model.synthesize(silence, fps=float(model.manifest.fps), emotion=emotion).frames
-    return np.asarray(frames[len(frames) // 2], dtype=np.float32)
 
 
 def smoothstep_to(face: np.ndarray, rest: np.ndarray, steps: int) -> np.ndarray:

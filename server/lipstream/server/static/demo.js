@@ -6,9 +6,10 @@
 // t0 + their `start`, an uploaded WAV at t0, and every animation frame shows the frame for
 // the audio clock's time (currentTime - t0), not the last frame that arrived.
 //
-// A request ends with the face at rest (every channel 0, as drawn before any request):
-// after `done`, once playback passes the last frame, and at once on an error, the face
-// eases from what it shows to rest over RETURN_S with a smoothstep.
+// A request ends with the face at rest. After `done`, playback reaches the last frame, which
+// the server makes the character's rest pose, and the face stays there. An error leaves no
+// such frame: the face eases at once from what it shows to the page's neutral face (every
+// channel 0, as drawn before any request) over RETURN_S with a smoothstep.
 
 import { Face } from "./face.js";
 import { parseLab, parseTextGrid } from "./phones.js";
@@ -304,7 +305,7 @@ function showFrame(row) {
   face.apply(values);
 }
 
-// Ease the face from what it shows now to rest (once per request).
+// Ease the face from what it shows now to the neutral face (once per request).
 function returnToRest() {
   if (current.returning) return;
   current.returning = { from: { ...face.values }, at: now() };
@@ -329,8 +330,7 @@ function tick() {
     showReturn();
   } else if (t !== null && t >= 0 && !current.frozen) {
     const end = current.frames.length / current.fps;
-    if (current.state === "done" && t >= end) returnToRest();
-    else showFrame(frameAt(Math.floor(t * current.fps)));
+    showFrame(frameAt(Math.floor(t * current.fps)));
     if (current.state === "streaming" || current.state === "done") {
       setStatus(t < end ? `speaking: ${t.toFixed(2)} s` : "done");
     }
