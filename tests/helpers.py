@@ -100,3 +100,11 @@ def rest_pose(model: Model, emotion: str | None) -> np.ndarray:
     silence = [PhonemeSpan(SILENCE, 0.0, 1.0)]
     frames = model.synthesize(silence, fps=float(model.manifest.fps), emotion=emotion).frames
     return np.asarray(frames[len(frames) // 2], dtype=np.float32)
+
+
+def return_frames(fps: float, return_ms: float = 150.0) -> int:
+    """The frames a request sends after its input's end to return the face to rest: its
+    return time (the server's default, 150 ms) at ``fps``, rounded up, at least one."""
+    import math
+
+    return max(1, math.ceil(round(return_ms * fps / 1000.0, 9)))

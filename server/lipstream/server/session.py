@@ -201,10 +201,12 @@ class Session:
             phonemes = math.ceil(received.duration / PHONEME_S)
         else:
             phonemes = len(request.ends) - bisect_right(request.ends, request.next_frame / fps)
-            return_ms = self.limits.request.default_return_ms
-            if isinstance(received, Interrupt) and received.return_ms is not None:
-                return_ms = received.return_ms
-            extra_frames = settle_frames(return_ms, fps) + 1  # the return to rest
+            default_ms = self.limits.request.default_return_ms
+            if isinstance(received, Interrupt):  # the return to rest, from the cut frame on
+                return_ms = default_ms if received.return_ms is None else received.return_ms
+                extra_frames = settle_frames(return_ms, fps) + 1
+            else:  # the return to rest after the last frame
+                extra_frames = max(1, settle_frames(default_ms, fps))
         released = min(frame_count(until, fps), self.limits.request.max_frames)
         frames = max(0, released - request.next_frame) + extra_frames
         return self.costs[received.id].ms(phonemes, frames)
