@@ -46,8 +46,8 @@ from lipstream_client.client import AsyncClient
 from lipstream_client.codec import decode, encode, encoding_for_subprotocol, select_subprotocol
 from lipstream_client.messages import Encoding, End
 
-from ..engines.base import frame_count
 from ..config import ServerSettings
+from ..engines.base import frame_count
 from ..server.request import VALUES_PER_MESSAGE, settle_frames
 
 REFERENCE_ENV = "LIPSTREAM_REFERENCE_TRAFFIC"
