@@ -435,8 +435,8 @@ class ActiveRequest:
         face = np.asarray(self.tail.row(self.next_frame - 1), dtype=np.float64)
         steps = max(1, settle_frames(self.limits.default_return_ms, self.spec.fps))
         weights = _smoothstep(np.arange(1, steps + 1) / steps)
-        rows = face + (self.spec.rest - face) * weights[:, None]
-        return rows.astype(np.float32)
+        rows: np.ndarray = face + (self.spec.rest - face) * weights[:, None]
+        return np.asarray(rows, dtype=np.float32)
 
     def cancel(self) -> list[Outgoing]:
         return [self._done("cancel", self.next_frame)]
