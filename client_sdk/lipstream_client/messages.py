@@ -358,17 +358,17 @@ class DoneStats:
     sending the first frame; ``max_lag_ms`` the longest time from receiving
     the input covering t to sending frame t (for ``text``, from when its speech
     was ready); ``budget_met`` whether that lag stayed within the latency
-    budget (None without a budget); ``speech_synthesis_ms`` the time the
-    server spent speaking the request's ``text`` messages (None without
-    text); ``engine`` holds engine statistics (e.g. jumps, cost).
+    budget (None without a budget); ``engine`` holds engine statistics (e.g.
+    jumps, cost); ``speech_synthesis_ms`` the time the server spent speaking
+    the request's ``text`` messages (None without text).
     """
 
     frames: int
     first_frame_latency_ms: float | None = None
     max_lag_ms: float | None = None
     budget_met: bool | None = None
-    speech_synthesis_ms: float | None = None
     engine: JsonMap = field(default_factory=_empty_map)
+    speech_synthesis_ms: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
