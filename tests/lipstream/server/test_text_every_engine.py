@@ -63,6 +63,8 @@ def test_text_with_no_options_plays_on_every_engine_and_ends_at_rest(
     spoken_frames = frame_count(duration, FPS)
     assert result.done.reason == "end"
     assert result.done.stats.frames == spoken_frames + SETTLE_FRAMES
+    synthesis_ms = result.done.stats.speech_synthesis_ms  # reported apart from the lag
+    assert synthesis_ms is not None and synthesis_ms > 0
     assert result.speech_pcm16() == spoken.pcm16
     model = trained_models[engine]
     offline = model.synthesize(
