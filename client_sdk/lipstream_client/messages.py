@@ -359,9 +359,11 @@ class DoneStats:
 
     ``frames`` sent; ``first_frame_latency_ms`` from receiving ``start`` to
     sending the first frame; ``max_lag_ms`` the longest time from receiving
-    the input covering t to sending frame t; ``budget_met`` whether that lag
-    stayed within the latency budget (None without a budget); ``engine``
-    holds engine statistics (e.g. jumps, cost).
+    the input covering t to sending frame t (for ``text``, from when its speech
+    was ready); ``budget_met`` whether that lag stayed within the latency
+    budget (None without a budget); ``engine`` holds engine statistics (e.g.
+    jumps, cost); ``speech_synthesis_ms`` the time the server spent speaking
+    the request's ``text`` messages (None without text).
     """
 
     frames: int
@@ -369,6 +371,7 @@ class DoneStats:
     max_lag_ms: float | None = None
     budget_met: bool | None = None
     engine: JsonMap = field(default_factory=_empty_map)
+    speech_synthesis_ms: float | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -469,7 +469,10 @@ def _done(payload: Mapping[str, Any], encoding: Encoding) -> Done:
 def _stats(value: object) -> DoneStats:
     where = "stats"
     obj = read_object(
-        value, where, ("frames",), ("first_frame_latency_ms", "max_lag_ms", "budget_met", "engine")
+        value,
+        where,
+        ("frames",),
+        ("first_frame_latency_ms", "max_lag_ms", "budget_met", "speech_synthesis_ms", "engine"),
     )
 
     def duration(key: str) -> float | None:
@@ -482,6 +485,7 @@ def _stats(value: object) -> DoneStats:
         budget_met=read_bool(obj["budget_met"], f"{where}.budget_met")
         if present(obj, "budget_met")
         else None,
+        speech_synthesis_ms=duration("speech_synthesis_ms"),
         engine=read_json_map(obj["engine"], f"{where}.engine") if present(obj, "engine") else {},
     )
 

@@ -366,7 +366,7 @@ ENV_SETTINGS: tuple[EnvSetting, ...] = (
         "LIPSTREAM_RETURN_MS",
         "return_ms",
         _number(0.0, 10_000.0),
-        "default time for the face to return to rest after `interrupt`",
+        "time for the face to return to rest after `end` and (by default) `interrupt`",
     ),
     EnvSetting(
         "LIPSTREAM_MAX_PHONEME_MS",

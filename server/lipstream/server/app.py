@@ -170,11 +170,11 @@ def create_app(
     docs_page.install(app, app.title)
     demo_page.install(app)
 
-    @app.get("/healthz")
+    @app.get("/healthz", summary="Liveness: the server answers", operation_id="healthz")
     async def healthz() -> dict[str, str]:
         return {"status": "ok"}
 
-    @app.get("/readyz")
+    @app.get("/readyz", summary="Readiness: the models are loaded", operation_id="readyz")
     async def readyz(request: Request) -> JSONResponse:
         """Ready or not, with the model directories that are not served and why."""
         server = _server(request)
@@ -182,12 +182,12 @@ def create_app(
         detail = {"ready": ready, "failed_models": server.registry.failure_report()}
         return JSONResponse(detail, status_code=200 if ready else 503)
 
-    @app.get("/v1/engines")
+    @app.get("/v1/engines", summary="List the engines", operation_id="list_engines")
     async def engines(request: Request) -> dict[str, Any]:
         loaded = {model.manifest.engine for model in _server(request).registry.models.values()}
         return {"engines": [{"name": name, "loaded": name in loaded} for name in ENGINES]}
 
-    @app.get("/v1/characters")
+    @app.get("/v1/characters", summary="List the characters", operation_id="list_characters")
     async def characters(request: Request) -> dict[str, Any]:
         registry = _server(request).registry
         return {
@@ -199,13 +199,22 @@ def create_app(
         }
 
     @app.post(
-        "/v1/synthesize", openapi_extra=openapi.synthesize_operation(), response_class=Response
+        "/v1/synthesize",
+        summary="Synthesize a whole utterance",
+        operation_id="synthesize",
+        openapi_extra=openapi.synthesize_operation(),
+        response_class=Response,
     )
     async def synthesize_route(request: Request) -> Response:
         """A whole utterance in, all its frames out (the frames /v1/stream would send)."""
         return await synthesize(request, _server(request))
 
-    @app.get("/metrics", response_class=Response)
+    @app.get(
+        "/metrics",
+        summary="Prometheus metrics",
+        operation_id="metrics",
+        response_class=Response,
+    )
     async def metrics_route(request: Request) -> Response:
         """Prometheus text exposition."""
         body, content_type = metrics.render()

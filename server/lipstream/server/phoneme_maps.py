@@ -247,6 +247,8 @@ def install(app: FastAPI) -> None:
 
     @app.get(
         PREFIX + "/phoneme-maps/{phoneme}",
+        summary="A phoneme's map (expressive-dp)",
+        operation_id="get_phoneme_map",
         response_class=Response,
         openapi_extra=_operation(None, "the phoneme's map: frames, triangles and nodes"),
     )
@@ -256,6 +258,8 @@ def install(app: FastAPI) -> None:
 
     @app.post(
         PREFIX + "/phoneme-maps/{phoneme}/pick",
+        summary="Pick a point of a phoneme's map",
+        operation_id="pick_phoneme_map_point",
         response_class=Response,
         openapi_extra=_operation(
             _schema({"x": NUMBER, "y": NUMBER}, ["x", "y"]),
@@ -268,6 +272,8 @@ def install(app: FastAPI) -> None:
 
     @app.post(
         PREFIX + "/phoneme-maps/candidates",
+        summary="Constraint candidates for one phoneme",
+        operation_id="phoneme_constraint_candidates",
         response_class=Response,
         openapi_extra=_operation(
             _schema(
@@ -287,6 +293,8 @@ def install(app: FastAPI) -> None:
 
     @app.get(
         PREFIX + "/contamination",
+        summary="The contaminated nodes",
+        operation_id="get_contamination",
         response_class=Response,
         openapi_extra=_operation(None, "the contaminated node ids"),
     )
@@ -296,6 +304,8 @@ def install(app: FastAPI) -> None:
 
     @app.post(
         PREFIX + "/contamination",
+        summary="Mark and restore contaminated nodes",
+        operation_id="change_contamination",
         response_class=Response,
         openapi_extra=_operation(
             _schema({"mark": IDS, "restore": IDS}, []),

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from bisect import bisect_right
 from collections import OrderedDict
 from collections.abc import Callable, Mapping
@@ -98,14 +99,14 @@ from .request import (
     RequestSpec,
     most_blocks,
     protocol_code,
+    settle_frames,
 )
 from .resume import ResumeCursor, check_seq_room, pinned_rung
 from .text_input import (
     engine_audio,
-    phoneme_items,
-    reading_arpabet,
     speak,
     speech_messages,
+    speech_spans,
     speech_start,
 )
 
@@ -144,12 +145,15 @@ class Session:
         limits: SessionLimits,
         refuse_start: Callable[[], Refusal | None] = lambda: None,
         input_ledger: InputLedger | None = None,
+        timer: Callable[[], float] = time.perf_counter,
     ) -> None:
         """``refuse_start`` says whether the server takes on a new request now (its memory
         ceiling: ``overload``); a refusal ends the ``start`` with its code and details.
         ``input_ledger`` counts the audio input the process's requests hold (``held_input``;
-        by default this session's own, without a limit)."""
+        by default this session's own, without a limit). ``timer`` (s) times speech
+        synthesis, which a text request's lag does not count."""
         self.catalog = catalog
+        self.timer = timer
         self.limits = limits
         self.refuse_start = refuse_start
         self.input_ledger = input_ledger or InputLedger(UNLIMITED_INPUT)
@@ -210,11 +214,12 @@ class Session:
             phonemes = math.ceil(received.duration / PHONEME_S)
         else:
             phonemes = len(request.ends) - bisect_right(request.ends, request.next_frame / fps)
-            if isinstance(received, Interrupt):
-                return_ms = received.return_ms
-                if return_ms is None:
-                    return_ms = self.limits.request.default_return_ms
-                extra_frames = math.ceil(return_ms * fps / 1000.0) + 1
+            default_ms = self.limits.request.default_return_ms
+            if isinstance(received, Interrupt):  # the return to rest, from the cut frame on
+                return_ms = default_ms if received.return_ms is None else received.return_ms
+                extra_frames = settle_frames(return_ms, fps) + 1
+            else:  # the return to rest after the last frame
+                extra_frames = max(1, settle_frames(default_ms, fps))
         released = min(frame_count(until, fps), self.limits.request.max_frames)
         frames = max(0, released - request.next_frame) + extra_frames
         return self.costs[received.id].ms(phonemes, frames)
@@ -432,16 +437,29 @@ class Session:
 
     def _speak(self, request: ActiveRequest, received: Text, now: float) -> list[Outgoing]:
         """Speak ``received`` (``text_input``): its ``audio`` messages, then the frames of the
-        audio and phonemes it feeds the engine."""
+        speech and spans it hands the engine together. The speech was ready the synthesis
+        time after ``now``: its frames' lag counts from then, and the synthesis time is
+        reported apart (``done.stats.speech_synthesis_ms``)."""
+        began = self.timer()
         speech = speak(received)
+        synthesis_s = max(0.0, self.timer() - began)
+        request.spec.clock.spoke(synthesis_s)
+        ready_at = now + synthesis_s
         start = speech_start(request)
         outgoing = speech_messages(request, speech, start)
         chunk = engine_audio(request, speech, start)
         self._admit_input(request, chunk)
-        outgoing += request.add_audio(chunk, now)
-        with reading_arpabet(request):
-            phonemes = Phonemes(request.id, phoneme_items(speech, start))
-            outgoing += self._apply(request, phonemes, now)
+        before = request.output_values
+        try:
+            outgoing += request.add_speech(
+                speech_spans(speech, start),
+                chunk,
+                ready_at,
+                self.limits.max_values,
+                self.output_values - before,
+            )
+        finally:
+            self.output_values += request.output_values - before
         return outgoing
 
     def _orphan(self, received: RequestInput) -> list[Outgoing]:

@@ -22,7 +22,7 @@ from lipstream.config import ServerSettings
 from lipstream.server.catalog import Catalog
 from lipstream.server.runner import DRAIN_MARKED
 from lipstream_client import Done, End, ErrorMessage, PhonemeItem, Phonemes, Ready, Start
-from tests.helpers import free_port, serve_command
+from tests.helpers import free_port, return_frames, serve_command
 from tests.lipstream.server.harness import client, frame_rows, serving
 from tests.live_server import READY_TIMEOUT_S
 
@@ -68,7 +68,8 @@ def test_drain_finishes_in_flight_requests_then_closes_with_1001(
     assert isinstance(answers[-1], Done) and answers[-1].reason == "end"
     rows = frame_rows(answers)
     expected = catalog.model("viseme-lerp", "demo").synthesize(SPANS, fps=60).frames
-    np.testing.assert_array_equal(np.array([rows[i] for i in sorted(rows)]), expected)
+    assert sorted(rows) == list(range(len(expected) + return_frames(60)))
+    np.testing.assert_array_equal(np.array([rows[i] for i in range(len(expected))]), expected)
     assert [(m.code, m.id, m.fatal) for m in messages] == [  # type: ignore[union-attr]
         ("shutting_down", None, True)
     ]
@@ -129,7 +130,8 @@ def test_sigterm_loses_no_in_flight_utterance(
     expected = catalog.model("viseme-lerp", "demo").synthesize(SPANS, fps=60).frames
     for answers, (_, code, reason) in outcomes:
         rows = frame_rows(answers)
-        np.testing.assert_array_equal(np.array([rows[i] for i in sorted(rows)]), expected)
+        assert sorted(rows) == list(range(len(expected) + return_frames(60)))
+        np.testing.assert_array_equal(np.array([rows[i] for i in range(len(expected))]), expected)
         assert isinstance(answers[-1], Done)
         assert (code, reason) == (1001, "shutting_down")
 
