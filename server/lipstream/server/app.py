@@ -39,6 +39,7 @@ from ..status import phase
 from . import demo_page, docs_page, openapi, phoneme_maps
 from .catalog import Catalog
 from .handshake import head_limits
+from .lanes import FairLane
 from .lifecycle import Lifecycle, install_drain_on_signals
 from .liveness import LivenessServer
 from .log_throttle import install as throttle_repeated_log_lines
@@ -109,11 +110,12 @@ def create_app(
             with phase(f"loading the models in {models_path}", report):
                 registry = ModelRegistry.load(models_path, strict=settings.strict_models)
         executor = ThreadPoolExecutor(settings.synth_threads, thread_name_prefix="lipstream-synth")
-        heavy = ThreadPoolExecutor(settings.heavy_threads, thread_name_prefix="lipstream-heavy")
+        heavy = FairLane(settings.heavy_threads, "lipstream-heavy")
+        speech = FairLane(settings.speech_threads, "lipstream-speech")
         catalog = Catalog.build(registry, settings, report)
         overload = overload_for(settings, catalog, metrics.observe_load)
         server = ServerState(
-            registry, catalog, settings, metrics, lifecycle, executor, heavy, overload
+            registry, catalog, settings, metrics, lifecycle, executor, heavy, speech, overload
         )
         _log_limits(server)
         overload.monitor.start()
@@ -131,6 +133,7 @@ def create_app(
             server.loaded = False
             executor.shutdown(wait=False, cancel_futures=True)
             heavy.shutdown(wait=False, cancel_futures=True)
+            speech.shutdown(wait=False, cancel_futures=True)
             forget_this_process()
 
     app = FastAPI(

@@ -142,13 +142,18 @@ async def synthesize(request: Request, state: ServerState) -> Response:
         messages = _messages(_parse(body, request_encoding), request_encoding)
         loop = asyncio.get_running_loop()
         response = await loop.run_in_executor(
-            state.heavy, _answer, messages, state, response_encoding
+            state.speech.client(rest_client(request)), _answer, messages, state, response_encoding
         )
     except HttpError as error:
         state.metrics.errors.labels(error.code).inc()
         return error_response(error, "json" if response_encoding == "csv" else response_encoding)
     state.metrics.synthesize.observe(time.perf_counter() - started)
     return response
+
+
+def rest_client(request: Request) -> tuple[str, str]:
+    """The key a REST call takes its turns in the speech lane under: its client's address."""
+    return ("rest", request.client.host if request.client is not None else "")
 
 
 def _answer(messages: list[Message], state: ServerState, encoding: ResponseFormat) -> Response:

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from ..config import ServerSettings
 from ..models import ModelRegistry
 from .catalog import Catalog
+from .lanes import FairLane
 from .lifecycle import Lifecycle
 from .metrics import Metrics
 from .overload import Overload
@@ -18,9 +19,10 @@ from .session import SessionLimits
 @dataclass
 class ServerState:
     """Resident models and what was derived from them, settings, metrics, the connections'
-    lifecycle, the two thread pools (``executor`` for ordinary engine work, ``heavy`` for
-    costly messages, large JSON answers and REST, so those never queue ordinary sessions
-    behind them) and the load-based admission."""
+    lifecycle, the thread pools (``executor`` for ordinary engine work; two fair lanes,
+    ``lanes.FairLane``: ``heavy`` for costly engine messages and large JSON answers, so those
+    never queue ordinary sessions behind them, and ``speech`` for speech synthesis and REST,
+    so those never queue behind a costly search) and the load-based admission."""
 
     registry: ModelRegistry
     catalog: Catalog
@@ -28,7 +30,8 @@ class ServerState:
     metrics: Metrics
     lifecycle: Lifecycle
     executor: ThreadPoolExecutor
-    heavy: ThreadPoolExecutor
+    heavy: FairLane
+    speech: FairLane
     overload: Overload
     loaded: bool = True
 

@@ -10,9 +10,11 @@ close code. An admitted connection is one task that takes one message at a
 time: rate limit (token bucket), decode (size-limited, sans I/O), then
 ``Session.handle``, inline when the engine's estimate of its work is below
 ``inline_work_ms``, in the synthesis thread pool up to ``heavy_work_ms``,
-and in the heavy lane (a pool of its own) above (with its frames encoded
-there too), so the event loop never waits on a long synthesis and ordinary
-sessions never queue behind a costly one; answers of more than
+and in the heavy lane (a pool of its own, ``lanes.FairLane``, taking turns
+between connections) above (with its frames encoded there too), and a ``text``
+message in the speech lane, apart from both, so the event loop never waits on
+a long synthesis, ordinary sessions never queue behind a costly one, and
+speech never queues behind a search; answers of more than
 ``JSON_INLINE_VALUES`` JSON numbers are encoded in the pool as well (in the
 heavy lane above ``JSON_HEAVY_VALUES``). While work runs in the pool the connection
 keeps receiving (``read_ahead``): the socket is read and pings answered, a
@@ -40,7 +42,7 @@ import asyncio
 import logging
 import time
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Executor
 from typing import Any, TypeAlias, TypeVar
 
 from starlette.websockets import WebSocket, WebSocketDisconnect
@@ -55,6 +57,7 @@ from lipstream_client import (
     Frames,
     ProtocolError,
     ServerMessage,
+    Text,
     decode,
     encode,
     encoding_for_subprotocol,
@@ -355,7 +358,10 @@ class Connection:
         when sending)."""
         work_ms = self.session.estimated_work_ms(decoded)
         if work_ms > self.settings.inline_work_ms:
-            pool = self._pool(work_ms > self.settings.heavy_work_ms)
+            if isinstance(decoded, Text):
+                pool = self.state.speech.client(self)
+            else:
+                pool = self._pool(work_ms > self.settings.heavy_work_ms)
             return await self._in_pool(
                 lambda: self._encoded(self.session.handle(decoded, now)), pool
             )
@@ -368,8 +374,9 @@ class Connection:
             return await self._in_pool(lambda: self._encoded(outgoing), pool)
         return outgoing, [None] * len(outgoing)
 
-    def _pool(self, heavy: bool) -> ThreadPoolExecutor:
-        return self.state.heavy if heavy else self.state.executor
+    def _pool(self, heavy: bool) -> Executor:
+        """The synthesis pool, or the heavy lane's turn of this connection."""
+        return self.state.heavy.client(self) if heavy else self.state.executor
 
     def _encoded(self, outgoing: list[Outgoing]) -> Answers:
         """``outgoing`` with each frames block encoded (stamping leaves those unchanged);
@@ -385,7 +392,7 @@ class Connection:
             )
         return outgoing, payloads
 
-    async def _in_pool(self, job: Callable[[], T], pool: ThreadPoolExecutor) -> T:
+    async def _in_pool(self, job: Callable[[], T], pool: Executor) -> T:
         """Run ``job`` in ``pool``, reading the client's messages ahead meanwhile."""
         future = self.loop.run_in_executor(pool, job)
         while not future.done() and not self._peer_gone and self.read_ahead.has_room():

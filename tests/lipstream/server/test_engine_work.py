@@ -16,8 +16,10 @@ from collections.abc import Callable
 from pathlib import Path
 
 import httpx
+import pytest
 
 from lipstream.config import ServerSettings
+from lipstream.engines.base import Model
 from lipstream_client import (
     Cancel,
     Done,
@@ -29,8 +31,10 @@ from lipstream_client import (
     Phonemes,
     Ready,
     Start,
+    Text,
 )
 from tests.lipstream.server.harness import Client, Served, client, serving
+from tests.live_server import save_models
 
 ANSWER_BOUND_S = 5.0  # whether the server answers at all, not how fast
 WORK_BOUND_S = 60.0  # a budget of CPU seconds takes longer on a busy machine
@@ -38,6 +42,15 @@ WORK_BOUND_S = 60.0  # a budget of CPU seconds takes longer on a busy machine
 PQ = {"search": "pq", "pq_window": 6, "match_emotion": False}
 PQ_PHONEMES = 42  # 6 × 42 = 252, within the cap of 256
 ITEMS = tuple(PhonemeItem("AA1", 0.08 * i, 0.08 * (i + 1)) for i in range(PQ_PHONEMES))
+REST_BODY = {
+    "engine": "viseme-lerp",
+    "character": "demo",
+    "fps": 50,
+    "items": [
+        {"phoneme": "HH", "start": 0.0, "end": 0.1},
+        {"phoneme": "AY1", "start": 0.1, "end": 0.3},
+    ],
+}
 SHORT = tuple(
     PhonemeItem(label, 0.1 * i, 0.1 * (i + 1)) for i, label in enumerate("M AA1 sil".split())
 )
@@ -226,6 +239,64 @@ def test_ordinary_work_does_not_queue_behind_a_costly_request(all_models_dir: Pa
         # The search was still running when the short request finished: it was stopped.
         assert isinstance(done, Done) and done.reason == "cancel"
         assert metric(served, "lipstream_work_stopped_total") == 1.0
+
+
+@pytest.fixture(scope="module")
+def graph_and_lerp_dir(
+    trained_models: dict[str, Model], tmp_path_factory: pytest.TempPathFactory
+) -> Path:
+    """The anime-graph (the search) and viseme-lerp (speech, REST) demo models."""
+    return save_models(
+        {name: trained_models[name] for name in ("anime-graph", "viseme-lerp")},
+        tmp_path_factory.mktemp("graph-and-lerp"),
+    )
+
+
+def test_speech_and_rest_do_not_wait_behind_other_connections_searches(
+    graph_and_lerp_dir: Path,
+) -> None:
+    # Three connections each queue a search in the heavy lane (one thread: one runs, two
+    # wait, each ended only by its CPU budget or a cancel); another client's text request
+    # and REST call must be answered while all three are still there. In one FIFO pool
+    # they waited behind every search: each search then ended on its CPU budget first.
+    settings = ServerSettings(request_cpu_s=10.0, heavy_threads=1)
+    with serving(graph_and_lerp_dir, settings) as served:
+        with client(served.ws) as a, client(served.ws) as b, client(served.ws) as c:
+            costly = (a, b, c)
+            for ws in costly:
+                ws.send(Start("pq", "anime-graph", "demo", options=PQ))
+                assert isinstance(ws.recv(timeout=WORK_BOUND_S), Ready)
+            for ws in costly:
+                ws.send(Phonemes("pq", ITEMS))
+            eventually(
+                lambda: (
+                    labelled_metric(served, "lipstream_messages_received_total", 'type="phonemes"')
+                    == 3
+                ),
+                "the three searches handed to the heavy lane",
+                WORK_BOUND_S,
+            )
+            with client(served.ws) as other:
+                other.send(Start("t", "viseme-lerp", "demo", fps=60.0))
+                other.send(Text("t", "Hello there."), End("t"))
+                spoken = final(other, "t")
+            answer = httpx.post(
+                f"{served.http}/v1/synthesize", json=REST_BODY, timeout=WORK_BOUND_S
+            )
+            for ws in costly:
+                ws.send(Cancel("pq"))
+            ends = [final(ws, "pq")[-1] for ws in costly]
+        assert isinstance(spoken[-1], Done) and spoken[-1].reason == "end"
+        assert any(isinstance(message, Frames) for message in spoken)
+        assert answer.status_code == 200 and answer.json()["n_frames"] == 16
+        # No search had ended: each was stopped by its cancel, after both answers.
+        assert [(type(end), getattr(end, "reason", None)) for end in ends] == [(Done, "cancel")] * 3
+
+
+def labelled_metric(served: Served, name: str, labels: str) -> float:
+    text = httpx.get(f"{served.http}/metrics", timeout=ANSWER_BOUND_S).text
+    found = re.search(rf"^{name}{{{labels}}} ([0-9.e+]+)$", text, flags=re.MULTILINE)
+    return float(found.group(1)) if found else 0.0
 
 
 def _pool_threads() -> set[int]:
