@@ -110,8 +110,13 @@ def create_app(
             with phase(f"loading the models in {models_path}", report):
                 registry = ModelRegistry.load(models_path, strict=settings.strict_models)
         executor = ThreadPoolExecutor(settings.synth_threads, thread_name_prefix="lipstream-synth")
-        heavy = FairLane(settings.heavy_threads, "lipstream-heavy")
-        speech = FairLane(settings.speech_threads, "lipstream-speech")
+        ahead = metrics.lane_jobs_ahead
+        heavy = FairLane(
+            settings.heavy_threads, "lipstream-heavy", metrics.labelled(ahead, "heavy").observe
+        )
+        speech = FairLane(
+            settings.speech_threads, "lipstream-speech", metrics.labelled(ahead, "speech").observe
+        )
         catalog = Catalog.build(registry, settings, report)
         overload = overload_for(settings, catalog, metrics.observe_load)
         server = ServerState(
@@ -209,7 +214,8 @@ def _log_limits(server: ServerState) -> None:
     startup_log.info(
         "limits: %d open files (hard limit %d), %d connections, %d sessions, "
         "%.0f MiB of memory; admission refuses at %g ms of event-loop lag or %.0f %% busy "
-        "(a session's calibrated cost: %.2f %%)",
+        "(a session's calibrated cost: %.2f %% for the cheapest engine, %.2f %% for the "
+        "dearest)",
         files.soft,
         files.hard,
         connections,
@@ -218,6 +224,7 @@ def _log_limits(server: ServerState) -> None:
         limits.max_lag_ms,
         100 * limits.max_busy,
         100 * limits.session_cost,
+        100 * max(limits.engine_costs.values(), default=limits.session_cost),
     )
 
 

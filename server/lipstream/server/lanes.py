@@ -14,6 +14,12 @@ jobs already running); a key's own jobs still run in the order it submitted them
 work that must not wait behind each other at all get lanes of their own (``ServerState``:
 ``heavy`` for costly engine messages, ``speech`` for speech synthesis and REST).
 
+So what one connection's queue may cost another's job is bounded in jobs (one per other
+key with work queued), and each job in time: an engine call by the request's CPU budget
+(``LIPSTREAM_REQUEST_CPU_S``), speech synthesis and REST by their own limits. The lane
+reports, per job, how many jobs started between its submission and its own start
+(``on_wait``: the ``lipstream_lane_jobs_ahead`` histogram).
+
 ``FairLane`` is a ``concurrent.futures.Executor``, so ``loop.run_in_executor`` takes it;
 ``client(key)`` is the executor submitting under ``key``, and ``submit`` without one uses a
 key shared by all such callers.
@@ -80,16 +86,21 @@ class FairQueue(Generic[K, T]):
         return self._size
 
 
-_Job = tuple[Future[Any], Callable[[], Any]]
+_Job = tuple[Future[Any], Callable[[], Any], int]
 
 
 class FairLane(Executor):
     """Up to ``threads`` daemon threads named ``name-N``, started as work arrives, taking
-    jobs from a ``FairQueue``."""
+    jobs from a ``FairQueue``; ``on_wait`` gets, as each job starts, how many jobs started
+    while it waited."""
 
-    def __init__(self, threads: int, name: str) -> None:
+    def __init__(
+        self, threads: int, name: str, on_wait: Callable[[int], None] | None = None
+    ) -> None:
         self.max_threads = threads
         self.name = name
+        self.on_wait = on_wait
+        self.started = 0
         self._queue: FairQueue[Hashable, _Job] = FairQueue()
         self._changed = threading.Condition()
         self._threads: list[threading.Thread] = []
@@ -111,7 +122,7 @@ class FairLane(Executor):
         with self._changed:
             if self._closed:
                 raise RuntimeError(f"the {self.name} lane is shut down")
-            self._queue.push(key, (future, lambda: fn(*args, **kwargs)))
+            self._queue.push(key, (future, lambda: fn(*args, **kwargs), self.started))
             if len(self._queue) > self._idle and len(self._threads) < self.max_threads:
                 thread = threading.Thread(
                     target=self._work, name=f"{self.name}-{len(self._threads)}", daemon=True
@@ -150,9 +161,13 @@ class FairLane(Executor):
                     self._changed.wait()
                     self._idle -= 1
                     job = self._queue.pop()
-            future, call = job
-            if not future.set_running_or_notify_cancel():
-                continue
+                future, call, started_before = job
+                if not future.set_running_or_notify_cancel():
+                    continue
+                ahead = self.started - started_before
+                self.started += 1
+            if self.on_wait is not None:
+                self.on_wait(ahead)
             try:
                 result = call()
             except BaseException as error:  # handed to the waiting caller, as a pool does

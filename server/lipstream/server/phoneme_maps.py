@@ -36,7 +36,7 @@ from fastapi.responses import Response
 from ..errors import LipstreamError
 from ..phonemes import PHONEME_INDEX, PHONEMES, SILENCE, normalize_phoneme
 from ..timeline import EMOTIONS, coerce_spans
-from .rest import rest_client, HttpError, authorize, error_response
+from .rest import HttpError, authorize, error_response, rest_client
 from .state import ServerState
 
 if TYPE_CHECKING:

@@ -133,10 +133,11 @@ class Session:
         self,
         catalog: Catalog,
         limits: SessionLimits,
-        refuse_start: Callable[[], Refusal | None] = lambda: None,
+        refuse_start: Callable[[str], Refusal | None] = lambda engine: None,
     ) -> None:
-        """``refuse_start`` says whether the server takes on a new request now (its memory
-        ceiling: ``overload``); a refusal ends the ``start`` with its code and details."""
+        """``refuse_start`` says whether the server takes on a new request of an engine now
+        (its memory ceiling and load: ``overload``); a refusal ends the ``start`` with its
+        code and details."""
         self.catalog = catalog
         self.limits = limits
         self.refuse_start = refuse_start
@@ -428,7 +429,7 @@ class Session:
                     fatal=True,
                 )
             ]
-        refusal = self.refuse_start()
+        refusal = self.refuse_start(start.engine)
         if refusal is not None:
             return [
                 _error(refusal.code, refusal.message, start.id, fatal=True, details=refusal.details)

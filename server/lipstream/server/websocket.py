@@ -77,6 +77,7 @@ from .admission import TokenBucket, bearer_token, origin_allowed, token_accepted
 from .deadline import LaterDeadline, SendDeadline
 from .outgoing import Outgoing, Stamped
 from .read_ahead import DISCONNECT, ReadAhead, Received
+from .read_window import ARRIVED_AT
 from .session import InputMessage, Session
 from .state import ServerState
 
@@ -108,7 +109,7 @@ async def stream_endpoint(websocket: WebSocket) -> None:
     connection = Connection(websocket, encoding, state)
     details: dict[str, JsonValue] | None = None
     if refusal is None:
-        busy = state.overload.session_refusal(len(state.lifecycle.connections))
+        busy = state.overload.session_refusal(len(state.lifecycle.connections), connection)
         if busy is None and not state.lifecycle.admit(connection):
             busy = state.overload.policy.sessions_refusal(state.settings.max_sessions)
         if busy is not None:
@@ -127,6 +128,7 @@ async def stream_endpoint(websocket: WebSocket) -> None:
             state.metrics.sessions.dec()
     finally:
         state.lifecycle.release(connection)
+        state.overload.policy.closed(connection)
 
 
 def _refusal(websocket: WebSocket, state: ServerState) -> tuple[str, str] | None:
@@ -179,7 +181,11 @@ class Connection:
         self.state = state
         self.settings = state.settings
         self.metrics = state.metrics
-        self.session = Session(state.catalog, state.session_limits, state.overload.request_refusal)
+        self.session = Session(
+            state.catalog,
+            state.session_limits,
+            lambda engine: state.overload.start_refusal(self, engine),
+        )
         self.bucket = TokenBucket(
             self.settings.message_rate, self.settings.message_burst, time.monotonic()
         )
@@ -347,11 +353,19 @@ class Connection:
             self._woken = False
 
     async def _receive(self) -> Received:
+        """The next ASGI event, received when its bytes reached the process (``ARRIVED_AT``,
+        from the transport), with its wait for the app recorded as the receive lag."""
         try:
             event: Mapping[str, Any] = await self.websocket.receive()
         except _PEER_GONE:
             event = DISCONNECT
-        return Received(event, time.monotonic())
+        now = time.monotonic()
+        arrived = event.get(ARRIVED_AT)
+        if not isinstance(arrived, float) or arrived > now:
+            return Received(event, now)
+        self.state.overload.monitor.observe_receive(now - arrived)
+        self.metrics.receive_lag.observe(now - arrived)
+        return Received(event, arrived)
 
     async def _handle(self, decoded: InputMessage, now: float) -> Answers:
         """The answers to ``decoded``, with the payloads encoded in the pool (None: encode
@@ -424,6 +438,8 @@ class Connection:
         active = self.session.active_requests
         if active != self._active:
             self.metrics.requests_active.inc(active - self._active)
+            if (active > 0) != (self._active > 0):
+                self.state.overload.policy.set_streaming(self, active > 0)
             self._active = active
         stopped = self.session.stopped_work
         if stopped != self._stopped:
@@ -440,7 +456,8 @@ class Connection:
         was closed as a slow consumer)."""
         for index, item in enumerate(items):
             self._observe(item)
-            stamped = item.stamp(time.monotonic())
+            stamped_at = time.monotonic()
+            stamped = item.stamp(stamped_at)
             encoded = payloads[index] if index < len(payloads) else None
             payload = encoded or encode(stamped.message, self.encoding, validate=False)
             try:
@@ -451,7 +468,7 @@ class Connection:
             except _PEER_GONE:
                 self.finished = True
                 return False
-            self._record(stamped)
+            self._record(stamped, time.monotonic() - stamped_at)
         return True
 
     async def _send_payload(self, payload: bytes | str) -> None:
@@ -492,14 +509,16 @@ class Connection:
         self.metrics.errors.labels(SLOW_CONSUMER).inc()
         await self._close_now(CloseCode.POLICY_VIOLATION, SLOW_CONSUMER)
 
-    def _record(self, stamped: Stamped) -> None:
+    def _record(self, stamped: Stamped, sending_s: float) -> None:
+        """Count a sent frames block; its lag runs until its send returned (``sending_s``
+        after it was stamped): from socket to socket, as far as the process sees."""
         message: ServerMessage = stamped.message
         if not isinstance(message, Frames) or stamped.engine is None:
             return
         frames, lag, first_frame = self._frame_metrics(stamped.engine)
         frames.inc(message.n_frames)
         if stamped.lag_s is not None:
-            lag.observe(stamped.lag_s)
+            lag.observe(stamped.lag_s + sending_s)
         if stamped.first_frame_latency_s is not None:
             first_frame.observe(stamped.first_frame_latency_s)
 
