@@ -21,7 +21,7 @@ from __future__ import annotations
 import gc
 import logging
 import sys
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Hashable
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -110,12 +110,9 @@ def create_app(
             with phase(f"loading the models in {models_path}", report):
                 registry = ModelRegistry.load(models_path, strict=settings.strict_models)
         executor = ThreadPoolExecutor(settings.synth_threads, thread_name_prefix="lipstream-synth")
-        ahead = metrics.lane_jobs_ahead
-        heavy = FairLane(
-            settings.heavy_threads, "lipstream-heavy", metrics.labelled(ahead, "heavy").observe
-        )
+        heavy = FairLane(settings.heavy_threads, "lipstream-heavy", _lane_waits(metrics, "heavy"))
         speech = FairLane(
-            settings.speech_threads, "lipstream-speech", metrics.labelled(ahead, "speech").observe
+            settings.speech_threads, "lipstream-speech", _lane_waits(metrics, "speech")
         )
         catalog = Catalog.build(registry, settings, report)
         overload = overload_for(settings, catalog, metrics.observe_load)
@@ -205,6 +202,17 @@ def create_app(
     phoneme_maps.install(app)
 
     return app
+
+
+def _lane_waits(metrics: Metrics, lane: str) -> Callable[[Hashable, int], None]:
+    """Observe a job's wait in ``lane`` (``lipstream_lane_jobs_ahead``) by its source: a
+    REST client (its key is ``("rest", address)``) or a WebSocket connection (``stream``)."""
+
+    def observe(key: Hashable, ahead: int) -> None:
+        source = key[0] if isinstance(key, tuple) and key else "stream"
+        metrics.labelled(metrics.lane_jobs_ahead, lane, str(source)).observe(ahead)
+
+    return observe
 
 
 def _log_limits(server: ServerState) -> None:

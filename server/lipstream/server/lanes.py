@@ -18,7 +18,7 @@ So what one connection's queue may cost another's job is bounded in jobs (one pe
 key with work queued), and each job in time: an engine call by the request's CPU budget
 (``LIPSTREAM_REQUEST_CPU_S``), speech synthesis and REST by their own limits. The lane
 reports, per job, how many jobs started between its submission and its own start
-(``on_wait``: the ``lipstream_lane_jobs_ahead`` histogram).
+(``on_wait``, with the job's key: the ``lipstream_lane_jobs_ahead`` histogram).
 
 ``FairLane`` is a ``concurrent.futures.Executor``, so ``loop.run_in_executor`` takes it;
 ``client(key)`` is the executor submitting under ``key``, and ``submit`` without one uses a
@@ -86,16 +86,16 @@ class FairQueue(Generic[K, T]):
         return self._size
 
 
-_Job = tuple[Future[Any], Callable[[], Any], int]
+_Job = tuple[Future[Any], Callable[[], Any], int, Hashable]
 
 
 class FairLane(Executor):
     """Up to ``threads`` daemon threads named ``name-N``, started as work arrives, taking
-    jobs from a ``FairQueue``; ``on_wait`` gets, as each job starts, how many jobs started
-    while it waited."""
+    jobs from a ``FairQueue``; ``on_wait`` gets, as each job starts, its key and how many
+    jobs started while it waited."""
 
     def __init__(
-        self, threads: int, name: str, on_wait: Callable[[int], None] | None = None
+        self, threads: int, name: str, on_wait: Callable[[Hashable, int], None] | None = None
     ) -> None:
         self.max_threads = threads
         self.name = name
@@ -122,7 +122,7 @@ class FairLane(Executor):
         with self._changed:
             if self._closed:
                 raise RuntimeError(f"the {self.name} lane is shut down")
-            self._queue.push(key, (future, lambda: fn(*args, **kwargs), self.started))
+            self._queue.push(key, (future, lambda: fn(*args, **kwargs), self.started, key))
             if len(self._queue) > self._idle and len(self._threads) < self.max_threads:
                 thread = threading.Thread(
                     target=self._work, name=f"{self.name}-{len(self._threads)}", daemon=True
@@ -161,20 +161,20 @@ class FairLane(Executor):
                     self._changed.wait()
                     self._idle -= 1
                     job = self._queue.pop()
-                future, call, started_before = job
+                future, call, started_before, key = job
                 if not future.set_running_or_notify_cancel():
                     continue
                 ahead = self.started - started_before
                 self.started += 1
             if self.on_wait is not None:
-                self.on_wait(ahead)
+                self.on_wait(key, ahead)
             try:
                 result = call()
             except BaseException as error:  # handed to the waiting caller, as a pool does
                 future.set_exception(error)
             else:
                 future.set_result(result)
-            del future, call, job
+            del future, call, job, key
 
 
 class _Client(Executor):

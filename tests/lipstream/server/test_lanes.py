@@ -95,7 +95,8 @@ def held(gate: threading.Event, started: threading.Event) -> bool:
 
 
 def test_a_lane_thread_takes_the_jobs_in_turn() -> None:
-    lane = FairLane(1, "test-lane")
+    waits: list[tuple[object, int]] = []
+    lane = FairLane(1, "test-lane", lambda key, ahead: waits.append((key, ahead)))
     gate, started = threading.Event(), threading.Event()
     order: list[str] = []
     try:
@@ -109,6 +110,8 @@ def test_a_lane_thread_takes_the_jobs_in_turn() -> None:
         for future in futures:
             future.result(timeout=30)
         assert order == ["a2", "b1", "c1", "a3", "a4"]
+        # The jobs started while each waited: all of them were queued while "a"'s first ran.
+        assert waits == [("a", 0), ("a", 0), ("b", 1), ("c", 2), ("a", 3), ("a", 4)]
     finally:
         gate.set()
         lane.shutdown()
