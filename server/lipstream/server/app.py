@@ -42,6 +42,7 @@ from .handshake import head_limits
 from .lanes import FairLane
 from .lifecycle import Lifecycle, install_drain_on_signals
 from .liveness import LivenessServer
+from .load import MIB
 from .log_throttle import install as throttle_repeated_log_lines
 from .metrics import Metrics, forget_this_process
 from .open_files import open_file_limit
@@ -116,6 +117,7 @@ def create_app(
         )
         catalog = Catalog.build(registry, settings, report)
         overload = overload_for(settings, catalog, metrics.observe_load)
+        metrics.memory_ceiling.set(overload.policy.limits.max_memory_mb * MIB)
         server = ServerState(
             registry, catalog, settings, metrics, lifecycle, executor, heavy, speech, overload
         )

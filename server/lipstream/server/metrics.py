@@ -91,6 +91,12 @@ class Metrics:
             registry=registry,
             multiprocess_mode="livesum",
         )
+        self.memory_ceiling = Gauge(
+            "lipstream_memory_ceiling_bytes",
+            "The memory ceiling of admission (summed over the workers).",
+            registry=registry,
+            multiprocess_mode="livesum",
+        )
         self.requests = Counter(
             "lipstream_requests",
             "Finished requests by how they ended (end, cancel, interrupt, error).",
