@@ -155,17 +155,17 @@ class OverloadPolicy:
         return None
 
     def session_refusal(
-        self, load: LoadSample, sessions: int, now: float, key: Hashable | None = None
+        self, load: LoadSample, sessions: int, now: float, key: Hashable
     ) -> Refusal | None:
-        """A refusal for a new session with ``sessions`` open, or None after counting it
-        (``key``; None: a fresh one) as admitted and pending at ``now``."""
+        """A refusal for a new session ``key`` with ``sessions`` open, or None after counting
+        it as admitted and pending at ``now``."""
         with self.lock:
             self._learn(load, now)
             refusal = self.request_refusal(load) or self._lag_refusal(load, sessions)
             if refusal is None:
                 refusal = self._busy_refusal(load, now, self.session_cost, "another session")
             if refusal is None:
-                self.pending[object() if key is None else key] = now
+                self.pending[key] = now
             return refusal
 
     def start_refusal(
@@ -272,7 +272,7 @@ class Overload:
     policy: OverloadPolicy
     monitor: LoadMonitor
 
-    def session_refusal(self, sessions: int, key: Hashable | None = None) -> Refusal | None:
+    def session_refusal(self, sessions: int, key: Hashable) -> Refusal | None:
         return self.policy.session_refusal(self.monitor.sample(), sessions, time.monotonic(), key)
 
     def start_refusal(self, key: Hashable, engine: str) -> Refusal | None:

@@ -11,6 +11,7 @@ import socket
 import threading
 import time
 from contextlib import ExitStack
+from dataclasses import replace
 from pathlib import Path
 from urllib.parse import urlsplit
 
@@ -57,7 +58,7 @@ def policy(limits: LoadLimits = LIMITS) -> OverloadPolicy:
 
 def admitted_in_a_burst(overload: OverloadPolicy, load: LoadSample, now: float) -> int:
     for count in range(1000):
-        if overload.session_refusal(load, 0, now) is not None:
+        if overload.session_refusal(load, 0, now, object()) is not None:
             return count
     raise AssertionError("the burst was never refused")
 
@@ -67,7 +68,7 @@ def test_a_burst_is_admitted_up_to_the_busy_limit_and_stays_counted_until_it_str
     keys = [f"s{index}" for index in range(6)]
     for key in keys:
         assert overload.session_refusal(QUIET, 0, 0.0, key) is None
-    refusal = overload.session_refusal(QUIET, 0, 0.0)  # 7 x 0.125 > 0.75
+    refusal = overload.session_refusal(QUIET, 0, 0.0, object())  # 7 x 0.125 > 0.75
     assert refusal is not None and refusal.reason == "loop_busy"
     # Half a window later none of the six has started a request: the window has measured
     # nothing of them, so they still fill the loop (counting them by their age, as a
@@ -91,7 +92,9 @@ def test_a_closed_pending_session_frees_its_share() -> None:
     overload = policy()
     for key in range(6):
         assert overload.session_refusal(QUIET, 0, 0.0, key) is None
-    assert overload.session_refusal(QUIET, 0, 5.0) is not None  # still pending, still counted
+    assert (
+        overload.session_refusal(QUIET, 0, 5.0, object()) is not None
+    )  # still pending, still counted
     overload.closed(0)
     overload.closed(1)
     assert admitted_in_a_burst(overload, QUIET, now=5.0) == 2
@@ -138,18 +141,25 @@ def test_engine_costs_are_each_engines_costliest_default_rung(catalog: Catalog) 
 
 def test_lag_and_memory_refuse_at_their_limits() -> None:
     at_limits = LoadSample(lag_ms=50.0, loop_busy=0.0, rss_mb=1000.0)
-    assert policy().session_refusal(at_limits, LAG_FROM_SESSIONS, 0.0) is None
-    lagging = policy().session_refusal(LoadSample(50.5, 0.0, 100.0), LAG_FROM_SESSIONS, 0.0)
+    assert policy().session_refusal(at_limits, LAG_FROM_SESSIONS, 0.0, object()) is None
+    lagging = policy().session_refusal(
+        LoadSample(50.5, 0.0, 100.0), LAG_FROM_SESSIONS, 0.0, object()
+    )
     assert lagging is not None and lagging.reason == "loop_lag"
     waiting = LoadSample(1.0, 0.0, 100.0, receive_lag_ms=50.5)
-    queued = policy().session_refusal(waiting, LAG_FROM_SESSIONS, 0.0)
+    queued = policy().session_refusal(waiting, LAG_FROM_SESSIONS, 0.0, object())
     assert queued is not None and queued.reason == "receive_lag"
     assert "50 ms" in queued.message
     # With fewer sessions open the lag is the machine's, not theirs: no refusal.
-    few = policy().session_refusal(LoadSample(500.0, 0.0, 100.0), LAG_FROM_SESSIONS - 1, 0.0)
+    few = policy().session_refusal(
+        LoadSample(500.0, 0.0, 100.0), LAG_FROM_SESSIONS - 1, 0.0, object()
+    )
     assert few is None
     full = LoadSample(lag_ms=1.0, loop_busy=0.0, rss_mb=1000.5)
-    for refusal in (policy().session_refusal(full, 0, 0.0), policy().request_refusal(full)):
+    for refusal in (
+        policy().session_refusal(full, 0, 0.0, object()),
+        policy().request_refusal(full),
+    ):
         assert refusal is not None and refusal.reason == "memory"
         assert refusal.code == "server_busy"
         assert MEMORY_RETRY_AFTER_MS <= refusal.retry_after_ms < 2 * MEMORY_RETRY_AFTER_MS
@@ -161,7 +171,7 @@ def test_retry_after_is_spread_over_one_more_base() -> None:
     lagging = LoadSample(lag_ms=99.0, loop_busy=0.0, rss_mb=1.0)
     waits = []
     for _ in range(40):
-        refusal = overload.session_refusal(lagging, LAG_FROM_SESSIONS, 0.0)
+        refusal = overload.session_refusal(lagging, LAG_FROM_SESSIONS, 0.0, object())
         assert refusal is not None
         assert refusal.details == {"retry_after_ms": refusal.retry_after_ms, "reason": "loop_lag"}
         assert f"retry in {refusal.retry_after_ms} ms" in refusal.message
@@ -174,15 +184,15 @@ def test_the_session_cost_is_learned_from_the_streaming_sessions_only() -> None:
     overload = policy(LoadLimits(1000.0, 50.0, 0.75, session_cost=0.01))
     for key in range(LEARN_FROM_SESSIONS - 1):
         overload.set_streaming(key, True)
-    overload.session_refusal(LoadSample(1.0, 0.6, 1.0), 100, 0.0)
+    overload.session_refusal(LoadSample(1.0, 0.6, 1.0), 100, 0.0, object())
     assert overload.session_cost == 0.01  # too few streaming to learn from: the calibrated
     overload.set_streaming(LEARN_FROM_SESSIONS - 1, True)
     # 16 streaming among 116 open (100 admitted, not started): 0.64 / 16, not 0.64 / 116.
-    overload.session_refusal(LoadSample(1.0, 0.64, 1.0), 116, 10.0)
+    overload.session_refusal(LoadSample(1.0, 0.64, 1.0), 116, 10.0, object())
     assert math.isclose(overload.session_cost, 0.04)
     for key in range(LEARN_FROM_SESSIONS, 2 * LEARN_FROM_SESSIONS):
         overload.set_streaming(key, True)
-    overload.session_refusal(LoadSample(1.0, 0.64, 1.0), 132, 20.0)
+    overload.session_refusal(LoadSample(1.0, 0.64, 1.0), 132, 20.0, object())
     assert math.isclose(overload.session_cost, 0.038)  # 0.04 + 0.1 x (0.02 - 0.04)
     for key in range(2 * LEARN_FROM_SESSIONS):
         overload.closed(key)
@@ -190,7 +200,7 @@ def test_the_session_cost_is_learned_from_the_streaming_sessions_only() -> None:
     dear = policy(LoadLimits(1000.0, 50.0, 0.75, session_cost=0.125))
     for key in range(16):
         dear.set_streaming(key, True)
-    dear.session_refusal(LoadSample(1.0, 0.32, 1.0), 16, 0.0)
+    dear.session_refusal(LoadSample(1.0, 0.32, 1.0), 16, 0.0, object())
     # measured below the calibrated estimate: the calibrated one stands
     assert math.isclose(dear.session_cost, 0.125)
 
@@ -328,3 +338,23 @@ def test_a_loop_held_far_behind_sheds_upgrades_with_http_503(lerp_dir: Path) -> 
         assert answer.startswith(b"HTTP/1.1 503 Service Unavailable\r\n")
         metrics = httpx.get(f"{served.http}/metrics").text
         assert 'lipstream_connections_refused_total{code="shedding"} 1.0' in metrics
+
+
+def test_an_engine_priced_out_refuses_its_start_and_not_the_session(lerp_dir: Path) -> None:
+    """On a real server: with viseme-lerp priced at three cores (as a model whose
+    calibration went wrong once priced every engine), the handshake is admitted at the
+    cheapest cost, the ``start`` is refused with ``server_busy`` for that request only, and
+    once the engine fits, a ``start`` on the same connection gets ``ready``."""
+    with serving(lerp_dir) as served:
+        policy = served.server.lifespan.state["server"].overload.policy
+        policy.limits = replace(policy.limits, session_cost=0.0, engine_costs={"viseme-lerp": 3.0})
+        with client(served.ws) as ws:
+            ws.send(Start("a", "viseme-lerp", "demo"))
+            refused = ws.recv()
+            assert isinstance(refused, ErrorMessage)
+            assert (refused.code, refused.id, refused.fatal) == ("server_busy", "a", True)
+            assert refused.details["reason"] == "loop_busy"
+            assert "viseme-lerp" in refused.message
+            policy.limits = replace(policy.limits, engine_costs={"viseme-lerp": 0.0})
+            ws.send(Start("b", "viseme-lerp", "demo"))
+            assert isinstance(ws.recv(), Ready)
