@@ -136,10 +136,9 @@ class OverloadPolicy:
         return max(self.learned_cost, self.limits.session_cost)
 
     def engine_cost(self, engine: str) -> float:
-        """The cost of a session of ``engine``: its calibrated cost, or the learned one when
-        higher (an engine not loaded: the cost of an unknown one)."""
-        calibrated = self.limits.engine_costs.get(engine, self.limits.session_cost)
-        return max(self.learned_cost, calibrated)
+        """The cost of a session of loaded ``engine``: its calibrated cost, or the learned
+        one when higher."""
+        return max(self.learned_cost, self.limits.engine_costs[engine])
 
     def request_refusal(self, load: LoadSample) -> Refusal | None:
         """A refusal for a new request (``start``, ``POST /v1/synthesize``) while memory is
@@ -172,12 +171,16 @@ class OverloadPolicy:
         self, load: LoadSample, key: Hashable, engine: str, now: float
     ) -> Refusal | None:
         """A refusal for a ``start`` of ``engine`` by session ``key``: memory for every
-        ``start``; for the session's first one, also the loop's CPU at the engine's cost (the
-        session is then priced and leaves the pending ones)."""
+        ``start``; for the session's first one of a loaded engine, also the loop's CPU at the
+        engine's cost (the session is then priced and leaves the pending ones). A ``start``
+        of an engine not loaded is refused later, as ``unknown_engine``, and prices
+        nothing."""
         with self.lock:
             refusal = self.request_refusal(load)
             if refusal is not None or key in self.priced:
                 return refusal
+            if engine not in self.limits.engine_costs:
+                return None
             self.pending.pop(key, None)
             cost = self.engine_cost(engine)
             refusal = self._busy_refusal(load, now, cost, f"a session of {engine}")

@@ -48,7 +48,7 @@ from lipstream_client import (
 from tests.lipstream.server.harness import client, serving
 
 # Binary fractions, so the hand-computed admission counts are exact.
-LIMITS = LoadLimits(max_memory_mb=1000.0, max_lag_ms=50.0, max_busy=0.75, session_cost=0.125)
+LIMITS = LoadLimits(1000.0, 50.0, 0.75, session_cost=0.125, engine_costs={"viseme-lerp": 0.125})
 QUIET = LoadSample(lag_ms=1.0, loop_busy=0.0, rss_mb=100.0)
 
 
@@ -116,6 +116,9 @@ def test_each_engine_is_priced_at_its_own_cost_at_the_first_start() -> None:
     assert overload.start_refusal(LoadSample(1.0, 0.74, 100.0), "a", "viseme-lerp", 9.0) is None
     full = overload.start_refusal(LoadSample(1.0, 0.0, 1000.5), "a", "viseme-lerp", 9.0)
     assert full is not None and full.reason == "memory"
+    # A start of an engine not loaded prices nothing (it is refused as unknown_engine).
+    assert overload.start_refusal(QUIET, "dear", "no-such-engine", 9.0) is None
+    assert "dear" not in overload.priced
     # The refused session stays unpriced: a later start that fits is admitted.
     assert overload.start_refusal(QUIET, "dear", "viseme-lerp", 9.0) is None
     # With 0.5 of the loop busy, a session of 0.125 fits twice more, and not a third time.
