@@ -358,6 +358,13 @@ def test_an_engine_priced_out_refuses_its_start_and_not_the_session(lerp_dir: Pa
             assert (refused.code, refused.id, refused.fatal) == ("server_busy", "a", True)
             assert refused.details["reason"] == "loop_busy"
             assert "viseme-lerp" in refused.message
+            assert len(policy.pending) == 0 and len(policy.priced) == 0
             policy.limits = replace(policy.limits, engine_costs={"viseme-lerp": 0.0})
             ws.send(Start("b", "viseme-lerp", "demo"))
             assert isinstance(ws.recv(), Ready)
+            assert len(policy.priced) == 1 and len(policy.streaming) == 1
+        for _ in range(500):  # the server's side of the close runs on its own loop
+            if not (policy.priced or policy.streaming or policy.pending):
+                break
+            time.sleep(0.02)
+        assert not (policy.priced or policy.streaming or policy.pending)
