@@ -311,6 +311,7 @@ def _storm(args: argparse.Namespace, settings: Settings) -> None:
             args.health_url,
             args.baseline,
             args.server_pid,
+            args.processes,
         )
     )
     results = storm_results(report, sys.argv)
@@ -345,6 +346,12 @@ def _add_storm_parser(runs: Any) -> None:
         type=int,
         default=8,
         help="sessions opened before the storm, streaming through it (default 8)",
+    )
+    storm.add_argument(
+        "--processes",
+        type=int,
+        default=1,
+        help="client processes sharing the storm's connections (default 1; at most 64)",
     )
     storm.add_argument(
         "--healthz-url",

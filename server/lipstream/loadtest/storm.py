@@ -5,7 +5,10 @@ Sketch: ``storm`` first opens ``baseline`` sessions and lets them stream for
 ``silent`` TCP sockets that never send a byte, ``partial`` ones that send half a request
 head and stop, or ``sessions``: WebSockets that each start a request and stream one phoneme
 every ``PHONEME_S`` (real time) for ``duration_s``, then end it (the baseline sessions
-stream on through the storm). Meanwhile a probe process of its own asks each ``/healthz``
+stream on through the storm). The storm's connections are shared among ``processes`` client
+processes (this one and ``processes - 1`` spawned ones, released together once all have
+started), so that beyond a few hundred sessions the client is not what limits the figures.
+Meanwhile a probe process of its own asks each ``/healthz``
 given (the serving port's, and the liveness port's) every ``PROBE_EVERY_S`` with a
 ``PROBE_TIMEOUT_S`` timeout, and samples the server's resident memory every
 ``RSS_EVERY_S``: from ``/proc`` (the process and its children) with ``server_pid``, else
@@ -18,9 +21,9 @@ frame (phoneme ``floor(t / PHONEME_S)`` for a frame at ``t`` s; ``end`` for fram
 last). With a latency budget at the floor (20 ms) the rung has no lookahead, so all of that
 is the server's queueing and work, the network's, and the client's own delay in reading:
 the report gives the client's event-loop lag too (``client_loop_lag_ms``, a timer every
-``CLIENT_TICK_S``), and when it is high the lag figures are the client's, so run several
-stormers. The server's own frame-lag histogram (``lipstream_frame_lag_seconds``, as bucket
-bounds) is reported beside it.
+``CLIENT_TICK_S``, in every client process), and when it is high the lag figures are the
+client's: give more processes. The server's own frame-lag histogram
+(``lipstream_frame_lag_seconds``, as bucket bounds) is reported beside it.
 
 The report counts how the connections ended (admitted and finished, refused with
 ``server_busy`` by ``details.reason``, other errors by code, upgrade refused with HTTP 503,
@@ -29,7 +32,8 @@ probe's latency percentiles and failures, and the peak resident memory against t
 server's memory ceiling (``lipstream_memory_ceiling_bytes``).
 
     lipstream loadtest storm --url ws://127.0.0.1:8000/v1/stream --kind sessions -n 1100 \\
-        --baseline 8 --latency-budget-ms 20 --health-url http://127.0.0.1:8081/healthz
+        --baseline 8 --latency-budget-ms 20 --health-url http://127.0.0.1:8081/healthz \\
+        --processes 4
 """
 
 from __future__ import annotations
@@ -73,6 +77,8 @@ PROBE_START_S = 30.0  # a spawned process imports the standard library first
 RSS_EVERY_S = 0.5
 CLIENT_TICK_S = 0.1
 BASELINE_LEAD_S = 2.0
+MAX_PROCESSES = 64
+SHARE_GRACE_S = 120.0  # beyond the sessions' duration: handshakes, refusals, the last frames
 LAG_METRIC = "lipstream_frame_lag_seconds_bucket"
 RSS_METRIC = "lipstream_resident_memory_bytes"
 CEILING_METRIC = "lipstream_memory_ceiling_bytes"
@@ -99,6 +105,7 @@ class StormReport:
     kind: str
     connections: int
     baseline: int = 0
+    processes: int = 1
     outcomes: dict[str, int] = field(default_factory=dict)
     refusals: dict[str, int] = field(default_factory=dict)
     admitted: int = 0
@@ -123,6 +130,69 @@ class _Lags:
     admitted: bool = False
 
 
+@dataclass(frozen=True)
+class _Plan:
+    """What every storm connection does."""
+
+    url: str
+    kind: str
+    duration_s: float
+    engine: str
+    character: str
+    latency_budget_ms: float | None
+
+
+@dataclass
+class _ShareResult:
+    """How one client process's connections ended, their lags, and its own loop's lag."""
+
+    outcomes: list[str]
+    lags: list[_Lags]
+    ticks: list[float]
+
+
+async def _share(plan: _Plan, count: int, tick: bool) -> _ShareResult:
+    """Open ``count`` connections of ``plan`` at once; with ``tick``, time this loop too."""
+    ticks: list[float] = []
+    ticking = asyncio.create_task(_client_ticks(ticks)) if tick else None
+    lags = [_Lags() for _ in range(count)]
+    if plan.kind == "sessions":
+        jobs = [
+            _session(
+                plan.url,
+                plan.engine,
+                plan.character,
+                plan.duration_s,
+                plan.latency_budget_ms,
+                each,
+            )
+            for each in lags
+        ]
+    else:
+        jobs = [_raw(plan.url, plan.kind == "partial", plan.duration_s) for _ in range(count)]
+    outcomes = list(await asyncio.gather(*jobs))
+    if ticking is not None:
+        ticking.cancel()
+    return _ShareResult(outcomes, lags, ticks)
+
+
+def _start_share(
+    context: Any, plan: _Plan, count: int, go: EventType
+) -> tuple[multiprocessing.process.BaseProcess, Connection]:
+    """A client process for ``count`` of the storm's connections, started; it says "ready"
+    on the pipe, waits for ``go``, then sends its ``_ShareResult``."""
+    answers, sender = context.Pipe(duplex=False)
+    process = context.Process(target=_share_process, args=(plan, count, go, sender), daemon=True)
+    process.start()
+    return process, answers
+
+
+def _share_process(plan: _Plan, count: int, go: EventType, answers: Connection) -> None:
+    answers.send("ready")
+    go.wait()
+    answers.send(asyncio.run(_share(plan, count, tick=True)))
+
+
 async def storm(
     url: str,
     kind: str,
@@ -135,15 +205,19 @@ async def storm(
     health_port_url: str | None = None,
     baseline: int = 0,
     server_pid: int | None = None,
+    processes: int = 1,
 ) -> StormReport:
     """Open ``baseline`` sessions, then ``connections`` of ``kind`` against the WebSocket
-    ``url`` at once (see above). The probes ask ``healthz_url`` (default: ``/healthz`` of the
-    serving port) and ``health_port_url`` if given. Sessions ask for ``latency_budget_ms``.
-    ``server_pid``: read the server's memory from ``/proc``."""
+    ``url`` at once (see above), shared among ``processes`` client processes. The probes
+    ask ``healthz_url`` (default: ``/healthz`` of the serving port) and ``health_port_url``
+    if given. Sessions ask for ``latency_budget_ms``. ``server_pid``: read the server's
+    memory from ``/proc``."""
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {', '.join(KINDS)}, not {kind!r}")
+    if not 1 <= processes <= MAX_PROCESSES:
+        raise ValueError(f"processes must be within 1..{MAX_PROCESSES}, not {processes}")
     base = _http_base(url)
-    report = StormReport(kind, connections, baseline)
+    report = StormReport(kind, connections, baseline, processes)
     metrics_before = _metrics(base)
     lag_before = _lag_buckets(metrics_before)
     ceiling = _metric_sum(metrics_before, CEILING_METRIC)
@@ -161,6 +235,14 @@ async def storm(
     watcher.start()
     if answers.poll(PROBE_START_S):
         answers.recv()  # probing from now on
+    plan = _Plan(url, kind, duration_s, engine, character, latency_budget_ms)
+    counts = [connections // processes + (i < connections % processes) for i in range(processes)]
+    go = context.Event()
+    helpers = [_start_share(context, plan, count, go) for count in counts[1:]]
+    for _, pipe in helpers:  # each has imported its modules and waits for go
+        if not await asyncio.to_thread(pipe.poll, PROBE_START_S):
+            raise RuntimeError("a storm client process did not start")
+        pipe.recv()
     ticks: list[float] = []
     ticking = asyncio.create_task(_client_ticks(ticks))
     lead = BASELINE_LEAD_S if baseline else 0.0
@@ -172,17 +254,17 @@ async def storm(
         for lags in steady
     ]
     await asyncio.sleep(lead)
-    stormed = [_Lags() for _ in range(connections)]
-    if kind == "sessions":
-        jobs = [
-            _session(url, engine, character, duration_s, latency_budget_ms, lags)
-            for lags in stormed
-        ]
-    else:
-        jobs = [_raw(url, kind == "partial", duration_s) for _ in range(connections)]
-    outcomes = await asyncio.gather(*jobs)
+    go.set()
+    shares = [await _share(plan, counts[0], tick=False)]
+    for process, pipe in helpers:
+        if await asyncio.to_thread(pipe.poll, duration_s + SHARE_GRACE_S):
+            shares.append(pipe.recv())
+        process.join(PROBE_START_S)
     baseline_outcomes = await asyncio.gather(*steady_jobs)
     ticking.cancel()
+    outcomes = [outcome for share in shares for outcome in share.outcomes]
+    stormed = [lags for share in shares for lags in share.lags]
+    ticks += [tick for share in shares for tick in share.ticks]
     stop.set()
     if answers.poll(PROBE_EVERY_S + PROBE_TIMEOUT_S + PROBE_START_S):
         watched: dict[str, Any] = answers.recv()

@@ -58,6 +58,18 @@ def test_sessions_past_the_cap_are_counted_by_reason_with_the_lag_on_the_clients
     assert report.peak_rss_mb is not None and 10.0 < report.peak_rss_mb < 4000.0
 
 
+def test_the_storm_is_shared_among_client_processes(lerp_dir: Path) -> None:
+    with serving(lerp_dir, ServerSettings(max_sessions=3)) as served:
+        report = asyncio.run(storm(served.ws, "sessions", 7, 0.5, processes=3))
+    # 7 connections as 3 + 2 + 2, over processes that each lag-time their own loop
+    assert report.outcomes == {"finished": 3, "server_busy:sessions": 4}
+    assert report.admitted == 3 and report.processes == 3
+    assert report.lag_blocks >= 3 * round(0.5 / PHONEME_S)
+    assert report.client_loop_lag_ms["p50"] is not None
+    with pytest.raises(ValueError, match="processes"):
+        asyncio.run(storm(served.ws, "sessions", 1, processes=0))
+
+
 def test_sessions_ask_for_the_latency_budget_given(lerp_dir: Path) -> None:
     """A budget below every rung's need reaches the server: it refuses each session with
     ``budget_infeasible``, which the storm counts as a failure of that kind."""
