@@ -79,6 +79,7 @@ class ServerSettings:
     synth_threads: int = 2
     heavy_work_ms: float = 50.0
     heavy_threads: int = 1
+    speech_threads: int = 1
     profiles: Path | None = None
     ping_interval_s: float = 20.0
     ping_timeout_s: float = 20.0
@@ -423,7 +424,16 @@ ENV_SETTINGS: tuple[EnvSetting, ...] = (
         "LIPSTREAM_HEAVY_THREADS",
         "heavy_threads",
         _integer(1, 256),
-        "threads of the heavy lane (costly messages, large JSON answers, `POST /v1/synthesize`)",
+        "threads of the heavy lane (costly engine messages, large JSON answers), which takes "
+        "turns between connections",
+    ),
+    EnvSetting(
+        "LIPSTREAM_SPEECH_THREADS",
+        "speech_threads",
+        _integer(1, 256),
+        "threads of the speech lane (`text` messages, `POST /v1/synthesize`, the phoneme-map "
+        "routes), apart from the heavy lane; it takes turns between connections and REST "
+        "clients",
     ),
     EnvSetting(
         "LIPSTREAM_PROFILES", "profiles", _path, "JSON file of preset output profiles per character"

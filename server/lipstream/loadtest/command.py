@@ -296,9 +296,8 @@ def _add_soak_parser(runs: Any) -> None:
 
 def _storm(args: argparse.Namespace, settings: Settings) -> None:
     import asyncio
-    from dataclasses import asdict
 
-    from .storm import storm
+    from .storm import storm, storm_results, write_storm_results
 
     url = args.url or default_url(settings)
     engine, character = args.engine or "viseme-lerp", args.character or "demo"
@@ -312,9 +311,17 @@ def _storm(args: argparse.Namespace, settings: Settings) -> None:
             character,
             args.healthz_url,
             args.latency_budget_ms,
+            args.health_url,
+            args.baseline,
+            args.server_pid,
+            args.processes,
         )
     )
-    print(json.dumps(asdict(report), indent=2))
+    results = storm_results(report, sys.argv)
+    if args.results:
+        write_storm_results(results, Path(args.results), args.name)
+        print(f"results written to {args.results} under {args.name!r}", file=sys.stderr)
+    print(json.dumps(results, indent=2))
 
 
 def _add_storm_parser(runs: Any) -> None:
@@ -324,8 +331,11 @@ def _add_storm_parser(runs: Any) -> None:
         "storm",
         help="a burst of connections of one kind at once: does admission hold?",
         description="Open many connections at once, all of one kind (streaming sessions, "
-        "silent sockets or half-sent request heads), probe /healthz from another process "
-        "meanwhile, and report how the connections ended and the server's frame lag.",
+        "silent sockets or half-sent request heads), after a few sessions opened before it; "
+        "probe /healthz on both ports and the server's memory from another process "
+        "meanwhile, and report how the connections ended, the refusals by reason, the "
+        "admitted sessions' frame lag on the client's clock, the probes' latency and the "
+        "peak memory against the ceiling.",
     )
     _target_options(storm, required_target=False)
     _budget_option(storm)
@@ -335,10 +345,38 @@ def _add_storm_parser(runs: Any) -> None:
     )
     storm.add_argument("--duration", type=float, default=20.0, help="seconds per connection")
     storm.add_argument(
-        "--healthz-url",
-        help="what the probe asks (default: /healthz of the serving port; "
-        "e.g. http://127.0.0.1:8081/healthz for LIPSTREAM_HEALTH_PORT=8081)",
+        "--baseline",
+        type=int,
+        default=8,
+        help="sessions opened before the storm, streaming through it (default 8)",
     )
+    storm.add_argument(
+        "--processes",
+        type=int,
+        default=1,
+        help="client processes sharing the storm's connections (default 1; at most 64)",
+    )
+    storm.add_argument(
+        "--healthz-url",
+        help="the serving port's probe (default: /healthz of the serving port)",
+    )
+    storm.add_argument(
+        "--health-url",
+        help="the liveness port's probe, e.g. http://127.0.0.1:8081/healthz for "
+        "LIPSTREAM_HEALTH_PORT=8081",
+    )
+    storm.add_argument(
+        "--server-pid",
+        type=int,
+        help="read the server's memory from /proc/PID (and its children); "
+        "default: lipstream_resident_memory_bytes from /metrics",
+    )
+    storm.add_argument(
+        "--results",
+        default="bench/storm.json",
+        help="JSON file to add the run to (default bench/storm.json; empty: none)",
+    )
+    storm.add_argument("--name", default="client_clock", help="the run's key in the results file")
     storm.set_defaults(run=_storm)
 
 

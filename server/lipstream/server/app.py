@@ -21,7 +21,7 @@ from __future__ import annotations
 import gc
 import logging
 import sys
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Hashable
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -41,6 +41,7 @@ from .catalog import Catalog
 from .client_limits import ClientLimits
 from .handshake import head_limits
 from .held_input import InputLedger, input_budget_bytes
+from .lanes import FairLane
 from .lifecycle import Lifecycle, install_drain_on_signals
 from .liveness import LivenessServer
 from .load import MIB
@@ -114,7 +115,10 @@ def create_app(
             with phase(f"loading the models in {models_path}", report):
                 registry = ModelRegistry.load(models_path, strict=settings.strict_models)
         executor = ThreadPoolExecutor(settings.synth_threads, thread_name_prefix="lipstream-synth")
-        heavy = ThreadPoolExecutor(settings.heavy_threads, thread_name_prefix="lipstream-heavy")
+        heavy = FairLane(settings.heavy_threads, "lipstream-heavy", _lane_waits(metrics, "heavy"))
+        speech = FairLane(
+            settings.speech_threads, "lipstream-speech", _lane_waits(metrics, "speech")
+        )
         catalog = Catalog.build(registry, settings, report)
         overload = overload_for(settings, catalog, metrics.observe_load)
         metrics.memory_ceiling.set(overload.policy.limits.max_memory_mb * MIB)
@@ -131,6 +135,7 @@ def create_app(
             lifecycle,
             executor,
             heavy,
+            speech,
             overload,
             clients,
             drain_flag=drain_flag,
@@ -152,6 +157,7 @@ def create_app(
             server.loaded = False
             executor.shutdown(wait=False, cancel_futures=True)
             heavy.shutdown(wait=False, cancel_futures=True)
+            speech.shutdown(wait=False, cancel_futures=True)
             forget_this_process()
 
     app = FastAPI(
@@ -229,6 +235,17 @@ def create_app(
     return app
 
 
+def _lane_waits(metrics: Metrics, lane: str) -> Callable[[Hashable, int], None]:
+    """Observe a job's wait in ``lane`` (``lipstream_lane_jobs_ahead``) by its source: a
+    REST client (its key is ``("rest", address)``) or a WebSocket connection (``stream``)."""
+
+    def observe(key: Hashable, ahead: int) -> None:
+        source = key[0] if isinstance(key, tuple) and key else "stream"
+        metrics.labelled(metrics.lane_jobs_ahead, lane, str(source)).observe(ahead)
+
+    return observe
+
+
 def _log_limits(server: ServerState) -> None:
     files = open_file_limit()
     _, connections = head_limits({"server": server})
@@ -236,7 +253,8 @@ def _log_limits(server: ServerState) -> None:
     startup_log.info(
         "limits: %d open files (hard limit %d), %d connections, %d sessions, "
         "%.0f MiB of memory (%.0f MiB of it for held audio input); admission refuses at "
-        "%g ms of event-loop lag or %.0f %% busy (a session's calibrated cost: %.2f %%)",
+        "%g ms of event-loop lag or %.0f %% busy (a session's calibrated cost: %.2f %% "
+        "for the cheapest engine, %.2f %% for the dearest)",
         files.soft,
         files.hard,
         connections,
@@ -246,6 +264,7 @@ def _log_limits(server: ServerState) -> None:
         limits.max_lag_ms,
         100 * limits.max_busy,
         100 * limits.session_cost,
+        100 * max(limits.engine_costs.values(), default=limits.session_cost),
     )
 
 

@@ -43,6 +43,7 @@ from prometheus_client.multiprocess import MultiProcessCollector, mark_process_d
 from .load import MIB, LoadSample
 
 LATENCY_BUCKETS_S = (0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0)
+JOBS_AHEAD_BUCKETS = (0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 16.0, 32.0, 64.0)
 MULTIPROCESS_ENV = "PROMETHEUS_MULTIPROC_DIR"
 LIVE_GAUGE_FILES = "gauge_live*_*.db"
 
@@ -166,9 +167,26 @@ class Metrics:
         )
         self.lag = Histogram(
             "lipstream_frame_lag_seconds",
-            "Per frames block: from receiving the input covering its first frame to sending it.",
+            "Per frames block: from the input covering its first frame reaching the process "
+            "to its send returning.",
             ["engine"],
             buckets=LATENCY_BUCKETS_S,
+            registry=registry,
+        )
+        self.receive_lag = Histogram(
+            "lipstream_receive_lag_seconds",
+            "Per client WebSocket message: from its bytes reaching the process to the app "
+            "taking it.",
+            buckets=LATENCY_BUCKETS_S,
+            registry=registry,
+        )
+        self.lane_jobs_ahead = Histogram(
+            "lipstream_lane_jobs_ahead",
+            "Per job of a fair lane (heavy, speech): the jobs that started in that lane "
+            "between its submission and its own start, by lane and source (stream: a "
+            "WebSocket connection, rest: a REST client).",
+            ["lane", "source"],
+            buckets=JOBS_AHEAD_BUCKETS,
             registry=registry,
         )
         self.synthesize = Histogram(

@@ -143,12 +143,13 @@ class Session:
         self,
         catalog: Catalog,
         limits: SessionLimits,
-        refuse_start: Callable[[], Refusal | None] = lambda: None,
+        refuse_start: Callable[[str], Refusal | None] = lambda engine: None,
         input_ledger: InputLedger | None = None,
         timer: Callable[[], float] = time.perf_counter,
     ) -> None:
-        """``refuse_start`` says whether the server takes on a new request now (its memory
-        ceiling: ``overload``); a refusal ends the ``start`` with its code and details.
+        """``refuse_start`` says whether the server takes on a new request of an engine now
+        (its memory ceiling and load: ``overload``); a refusal ends the ``start`` with its
+        code and details.
         ``input_ledger`` counts the audio input the process's requests hold (``held_input``;
         by default this session's own, without a limit). ``timer`` (s) times speech
         synthesis, which a text request's lag does not count."""
@@ -522,7 +523,7 @@ class Session:
                     fatal=True,
                 )
             ]
-        refusal = self.refuse_start()
+        refusal = self.refuse_start(start.engine)
         if refusal is not None:
             return [
                 _error(refusal.code, refusal.message, start.id, fatal=True, details=refusal.details)

@@ -11,6 +11,7 @@ from ..models import ModelRegistry
 from .catalog import Catalog
 from .client_limits import ClientLimits
 from .held_input import UNLIMITED_INPUT, InputLedger
+from .lanes import FairLane
 from .lifecycle import Lifecycle
 from .metrics import Metrics
 from .overload import Overload
@@ -21,10 +22,11 @@ from .session import SessionLimits
 @dataclass
 class ServerState:
     """Resident models and what was derived from them, settings, metrics, the connections'
-    lifecycle, the two thread pools (``executor`` for ordinary engine work, ``heavy`` for
-    costly messages, large JSON answers and REST, so those never queue ordinary sessions
-    behind them), the load-based admission, the per-client limits and the ledger of the
-    audio input requests hold."""
+    lifecycle, the thread pools (``executor`` for ordinary engine work; two fair lanes,
+    ``lanes.FairLane``: ``heavy`` for costly engine messages and large JSON answers, so those
+    never queue ordinary sessions behind them, and ``speech`` for speech synthesis and REST,
+    so those never queue behind a costly search), the load-based admission, the per-client
+    limits and the ledger of the audio input requests hold."""
 
     registry: ModelRegistry
     catalog: Catalog
@@ -32,7 +34,8 @@ class ServerState:
     metrics: Metrics
     lifecycle: Lifecycle
     executor: ThreadPoolExecutor
-    heavy: ThreadPoolExecutor
+    heavy: FairLane
+    speech: FairLane
     overload: Overload
     clients: ClientLimits
     loaded: bool = True
