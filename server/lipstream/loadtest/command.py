@@ -318,9 +318,9 @@ def _storm(args: argparse.Namespace, settings: Settings) -> None:
         )
     )
     results = storm_results(report, sys.argv)
-    if args.results:
-        write_storm_results(results, Path(args.results), args.name)
-        print(f"results written to {args.results} under {args.name!r}", file=sys.stderr)
+    path = settings.results_file(args.results, "storm.json")
+    write_storm_results(results, path, args.name)
+    print(f"results written to {path} under {args.name!r}", file=sys.stderr)
     print(json.dumps(results, indent=2))
 
 
@@ -373,8 +373,7 @@ def _add_storm_parser(runs: Any) -> None:
     )
     storm.add_argument(
         "--results",
-        default="bench/storm.json",
-        help="JSON file to add the run to (default bench/storm.json; empty: none)",
+        help="JSON file to add the run to (default $LIPSTREAM_HOME/bench/storm.json)",
     )
     storm.add_argument("--name", default="client_clock", help="the run's key in the results file")
     storm.set_defaults(run=_storm)
