@@ -11,7 +11,12 @@ import sys
 import time
 from collections.abc import Callable, Coroutine
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from lipstream.engines.base import Model
 
 REPO = Path(__file__).resolve().parents[1]
 # Real Live Link Face exports, when present: .ci/run points it at ../shared/data/livelink-face.
@@ -151,3 +156,24 @@ def textgrid_long(intervals: list[tuple[float, float, str]], tier: str = "phones
             f'            text = "{label}"',
         ]
     return "\n".join(lines) + "\n"
+
+
+def rest_pose(model: Model, emotion: str | None) -> np.ndarray:
+    """The character's rest pose as its model holds it: the model's face in the middle of
+    one second of silence, float32 (n_channels,)."""
+    import numpy as np
+
+    from lipstream.phonemes import SILENCE
+    from lipstream.timeline import PhonemeSpan
+
+    silence = [PhonemeSpan(SILENCE, 0.0, 1.0)]
+    frames = model.synthesize(silence, fps=float(model.manifest.fps), emotion=emotion).frames
+    return np.asarray(frames[len(frames) // 2], dtype=np.float32)
+
+
+def return_frames(fps: float, return_ms: float = 150.0) -> int:
+    """The frames a request sends after its input's end to return the face to rest: its
+    return time (the server's default, 150 ms) at ``fps``, rounded up, at least one."""
+    import math
+
+    return max(1, math.ceil(round(return_ms * fps / 1000.0, 9)))

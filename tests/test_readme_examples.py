@@ -155,17 +155,18 @@ def test_server_example_runs(example: Example, checkout: Path, server: LiveServe
     assert result.returncode == 0, result.stderr
     if "text/csv" in example.code:
         rows = result.stdout.splitlines()
-        assert rows[0] == "time,A,B,C,D,E,F,G,H,X" and len(rows) == 1 + 11  # 0.35 s at 30 fps
+        # 0.35 s at 30 fps, then 150 ms of return to rest.
+        assert rows[0] == "time,A,B,C,D,E,F,G,H,X" and len(rows) == 1 + 11 + 5
     elif "curl" in example.code:
         body = json.loads(result.stdout)
         assert body["fps"] == 30 and body["channels"][:2] == ["viseme_sil", "viseme_PP"]
-        assert body["stats"]["frames"] == 11  # 0.35 s at 30 fps
+        assert body["stats"]["frames"] == 11 + 5  # 0.35 s at 30 fps, then the return to rest
     elif "lipstream.v1.json" in example.code:
         printed = result.stdout.splitlines()
-        assert printed[0] == "ready 0" and printed[-1] == "done 11", printed  # 0.35 s at 30 fps
+        assert printed[0] == "ready 0" and printed[-1] == "done 16", printed  # 11 + 5 return frames
         blocks = [line.split() for line in printed[1:-1]]
         assert blocks and all(kind == "frames" for kind, _ in blocks)
-        assert sum(int(count) for _, count in blocks) == 11
+        assert sum(int(count) for _, count in blocks) == 16
     elif "game_loop.py" in example.code:
         assert re.search(r"done: end, \d+ frames", result.stdout), result.stdout
     else:

@@ -42,3 +42,8 @@ def resolve_target(args: argparse.Namespace) -> tuple[str, str]:
         return args.engine, args.character
     engine, character = RestClient(args.url, args.token).default_target()
     return args.engine or engine, args.character or character
+
+
+def milliseconds(value: float | None) -> str:
+    """A server's timing for a reader: ``12.3 ms``, or ``n/a`` when it sent none."""
+    return "n/a" if value is None else f"{value:.1f} ms"

@@ -33,7 +33,7 @@ import sys
 import time
 from dataclasses import dataclass
 
-from _shared import CANNED_LINE, add_server_arguments, resolve_target
+from _shared import CANNED_LINE, add_server_arguments, milliseconds, resolve_target
 
 from lipstream_client import AsyncClient, Done, LipstreamClientError, Stream
 
@@ -157,7 +157,7 @@ async def reply(
     print(
         f"  {len(speech.spans)} phonemes over {speech.spans[-1][2]:.2f} s, {frames} frames, "
         f"latest frame {worst:+.0f} ms against its time; done: {done.reason}, "
-        f"first frame after {done.stats.first_frame_latency_ms} ms (server)"
+        f"first frame after {milliseconds(done.stats.first_frame_latency_ms)} (server)"
     )
     return done
 

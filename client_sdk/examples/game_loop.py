@@ -17,7 +17,7 @@ import argparse
 import sys
 import time
 
-from _shared import CANNED_LINE, add_server_arguments, resolve_target
+from _shared import CANNED_LINE, add_server_arguments, milliseconds, resolve_target
 
 from lipstream_client import LipstreamClientError, Ready
 from lipstream_client.frame_timeline import FrameTimeline
@@ -77,7 +77,7 @@ def play(args: argparse.Namespace) -> int:
     print(
         f"played {tick + 1} ticks at {TICK_HZ:g} Hz; {len(timeline)} frames received; "
         f"{late} late ticks; done: {done.reason}, {done.stats.frames} frames, "
-        f"server max lag {done.stats.max_lag_ms} ms"
+        f"server max lag {milliseconds(done.stats.max_lag_ms)}"
     )
     return 0
 

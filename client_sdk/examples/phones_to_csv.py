@@ -6,9 +6,11 @@ phonemes in messages of at most ``CHUNK`` items (to stay far below the
 server's message-size limit), then ``end``, and collects the frames. The CSV
 has the corpus format that ``lipstream synth`` writes: a ``time`` column
 (frame i at i / fps s) and one column per channel, values printed with
-``%.6f``. Files are read with ``lipstream.phones_io`` when lipstream is
-installed (all three formats, validated with file and line); with the client
-package alone, JSON lists of ``{"phoneme", "start", "end"}`` are read.
+``%.6f``; its rows are those of ``lipstream synth``, then the frames of the
+server's return to rest after the last phoneme. Files are read with
+``lipstream.phones_io`` when lipstream is installed (all three formats,
+validated with file and line); with the client package alone, JSON lists of
+``{"phoneme", "start", "end"}`` are read.
 A file that fails is reported on one line and the others still convert.
 
     python client_sdk/examples/phones_to_csv.py --url ws://127.0.0.1:8000/v1/stream \\

@@ -50,6 +50,7 @@ CPU_BUDGET_EXCEEDED = "cpu_budget_exceeded"
 SEARCH_TOO_LARGE = "search_too_large"
 SEARCH_TIMEOUT = "search_timeout"
 OUTPUT_TOO_LARGE = "output_too_large"
+INPUT_TOO_LARGE = "input_too_large"
 AUDIO_ONLY_UNSUPPORTED = "audio_only_unsupported"
 REQUEST_TIMEOUT = "request_timeout"
 EMPTY_TEXT = "empty_text"
@@ -62,6 +63,7 @@ RESUME_MISMATCH = "resume_mismatch"
 RATE_LIMITED = "rate_limited"
 IDLE_TIMEOUT = "idle_timeout"
 SERVER_BUSY = "server_busy"
+TOO_MANY_CLIENT_CONNECTIONS = "too_many_client_connections"
 SHUTTING_DOWN = "shutting_down"
 UNAUTHORIZED = "unauthorized"
 ORIGIN_NOT_ALLOWED = "origin_not_allowed"
@@ -250,12 +252,20 @@ ERROR_CODES: dict[str, ErrorCodeInfo] = {
         "server",
         "request",
     ),
+    INPUT_TOO_LARGE: ErrorCodeInfo(
+        "holding the request's audio input (its speech features and a window of samples, "
+        "and the chunk being taken in) would take the input all requests hold past the "
+        "server's share of its memory ceiling; details name the sizes",
+        "server",
+        "request",
+    ),
     REQUEST_TIMEOUT: ErrorCodeInfo(
         "no message for the request arrived within the request timeout", "server", "request"
     ),
     RESUME_MISMATCH: ErrorCodeInfo(
         "a resuming start names a fidelity rung this server's model lacks, so the frames the "
-        "client holds cannot be continued",
+        "client holds cannot be continued, or a resume.seq that leaves too little room below "
+        "the bound on seq for the blocks the request may send",
         "server",
         "request",
     ),
@@ -275,6 +285,15 @@ ERROR_CODES: dict[str, ErrorCodeInfo] = {
         "the server is at its capacity: its session cap, its measured load (event-loop lag "
         "or busy time) or its memory ceiling; details.retry_after_ms says when to retry. "
         "Refusing a `start` (memory), it ends only that request",
+        "server",
+        "connection",
+        CloseCode.TRY_AGAIN_LATER,
+    ),
+    TOO_MANY_CLIENT_CONNECTIONS: ErrorCodeInfo(
+        "the client's address holds the server's maximum of open connections, or opened "
+        "WebSockets faster than its upgrade rate (details.reason: connections or "
+        "upgrade_rate); refused before the upgrade with HTTP 503, this code in the JSON body "
+        "and Retry-After",
         "server",
         "connection",
         CloseCode.TRY_AGAIN_LATER,

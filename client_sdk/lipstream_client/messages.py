@@ -46,6 +46,9 @@ MAX_TIME_S = 86_400.0
 MIN_SAMPLE_RATE = 8_000
 MAX_SAMPLE_RATE = 192_000
 MAX_INTEGER = 2**53 - 1
+MAX_SEQ = 2**31 - 1
+"""The largest ``seq`` of a ``frames`` block, and of ``resume.seq``: a bound far above any
+request's blocks that leaves a resumed request room to number its own."""
 MAX_VOICE_LENGTH = 64
 MIN_RATE_WPM = 80
 MAX_RATE_WPM = 450
@@ -356,9 +359,11 @@ class DoneStats:
 
     ``frames`` sent; ``first_frame_latency_ms`` from receiving ``start`` to
     sending the first frame; ``max_lag_ms`` the longest time from receiving
-    the input covering t to sending frame t; ``budget_met`` whether that lag
-    stayed within the latency budget (None without a budget); ``engine``
-    holds engine statistics (e.g. jumps, cost).
+    the input covering t to sending frame t (for ``text``, from when its speech
+    was ready); ``budget_met`` whether that lag stayed within the latency
+    budget (None without a budget); ``engine`` holds engine statistics (e.g.
+    jumps, cost); ``speech_synthesis_ms`` the time the server spent speaking
+    the request's ``text`` messages (None without text).
     """
 
     frames: int
@@ -366,6 +371,7 @@ class DoneStats:
     max_lag_ms: float | None = None
     budget_met: bool | None = None
     engine: JsonMap = field(default_factory=_empty_map)
+    speech_synthesis_ms: float | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -62,6 +62,7 @@ from .messages import (
     MAX_RATE_WPM,
     MAX_RETURN_MS,
     MAX_SAMPLE_RATE,
+    MAX_SEQ,
     MAX_TIME_S,
     MAX_VOICE_LENGTH,
     MIN_FPS,
@@ -211,7 +212,7 @@ def _resume(value: object) -> Resume:
     obj = read_object(value, where, ("frames", "seq"), ("fidelity", "audio"))
     return Resume(
         frames=read_integer(obj["frames"], f"{where}.frames"),
-        seq=read_integer(obj["seq"], f"{where}.seq"),
+        seq=read_integer(obj["seq"], f"{where}.seq", maximum=MAX_SEQ),
         fidelity=read_text(obj["fidelity"], f"{where}.fidelity", MAX_NAME_LENGTH)
         if present(obj, "fidelity")
         else None,
@@ -414,7 +415,7 @@ def _frames(payload: Mapping[str, Any], encoding: Encoding) -> Frames:
         raise InvalidField(INVALID_FRAMES, "data", "values must be finite")
     return Frames(
         id=identifier,
-        seq=read_integer(obj["seq"], "seq"),
+        seq=read_integer(obj["seq"], "seq", maximum=MAX_SEQ),
         first_frame=read_integer(obj["first_frame"], "first_frame"),
         fps=read_number(obj["fps"], "fps", minimum=MIN_FPS, maximum=MAX_FPS),
         n_channels=n_channels,
@@ -468,7 +469,10 @@ def _done(payload: Mapping[str, Any], encoding: Encoding) -> Done:
 def _stats(value: object) -> DoneStats:
     where = "stats"
     obj = read_object(
-        value, where, ("frames",), ("first_frame_latency_ms", "max_lag_ms", "budget_met", "engine")
+        value,
+        where,
+        ("frames",),
+        ("first_frame_latency_ms", "max_lag_ms", "budget_met", "speech_synthesis_ms", "engine"),
     )
 
     def duration(key: str) -> float | None:
@@ -481,6 +485,7 @@ def _stats(value: object) -> DoneStats:
         budget_met=read_bool(obj["budget_met"], f"{where}.budget_met")
         if present(obj, "budget_met")
         else None,
+        speech_synthesis_ms=duration("speech_synthesis_ms"),
         engine=read_json_map(obj["engine"], f"{where}.engine") if present(obj, "engine") else {},
     )
 

@@ -184,6 +184,7 @@ def _stats(stats: DoneStats) -> Payload:
             "first_frame_latency_ms": stats.first_frame_latency_ms,
             "max_lag_ms": stats.max_lag_ms,
             "budget_met": stats.budget_met,
+            "speech_synthesis_ms": stats.speech_synthesis_ms,
             "engine": dict(stats.engine) or None,
         }
     )

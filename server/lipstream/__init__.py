@@ -11,6 +11,8 @@ Public, stable API for in-process use::
 
 from __future__ import annotations
 
+# First: numba reads NUMBA_CACHE_DIR when it is imported (kernel_cache.py says why).
+from . import kernel_cache  # noqa: F401
 from ._version import __version__
 from .config import demo_model_path
 from .engines import load_model

@@ -28,6 +28,8 @@ if TYPE_CHECKING:
     from lipstream_client import OutputProfile
 
     from .audio import Audio
+    from .engines.base import Model
+    from .retarget import RetargetMap
 
 
 def _build_demo(args: argparse.Namespace, settings: Settings) -> None:
@@ -221,7 +223,6 @@ def _retarget(args: argparse.Namespace, settings: Settings) -> None:
     from .retarget import (
         RETARGET_DIR,
         fit_map,
-        model_maps,
         read_pairs,
         save_map,
         target_pairs,
@@ -231,7 +232,7 @@ def _retarget(args: argparse.Namespace, settings: Settings) -> None:
     directory = Path(args.model)
     model = load_model(directory)
     if args.action == "show":
-        for name, retarget in model_maps(model, directory, only=args.name).items():
+        for name, retarget in _shown_maps(model, directory, args.name).items():
             errors = retarget.reproduction_error()
             print(
                 f"{name}: {len(retarget.channels)} channels -> {len(retarget.controls)} controls, "
@@ -254,6 +255,24 @@ def _retarget(args: argparse.Namespace, settings: Settings) -> None:
     print(f"wrote retarget map {name} to {out} (largest key-pose error {worst:.3g})")
 
 
+def _shown_maps(model: Model, directory: Path, name: str | None) -> dict[str, RetargetMap]:
+    """Every map the model is served through, or only the one named (``unknown_retarget``
+    when it has none of that name)."""
+    from .retarget import model_maps, offered_targets
+
+    maps = model_maps(model, directory, only=name)
+    if name is None:
+        return maps
+    if name not in maps:
+        known = ", ".join(dict.fromkeys([*offered_targets(model.channels), *maps]))
+        raise LipstreamError(
+            f"the model has no retarget map {name!r}; its maps: {known}",
+            where=str(directory),
+            code="unknown_retarget",
+        )
+    return {name: maps[name]}
+
+
 def _bench(args: argparse.Namespace, settings: Settings) -> None:
     from .bench.harness import format_engine_benches, format_table, run_bench, write_results
     from .bench.rungs import format_rungs
@@ -263,10 +282,11 @@ def _bench(args: argparse.Namespace, settings: Settings) -> None:
     corpus_dir = Path(args.corpus) if args.corpus else settings.demo_dir / DEMO_CORPUS_DIR
     if args.corpus is None and not corpus_dir.exists():
         build_demo(settings.demo_dir, progress=True)
+    path = settings.results_file(args.results, "results.json")
     results = run_bench(
         load_corpus(corpus_dir, progress=True), engine_benches=not args.no_engine_benches
     )
-    write_results(results, Path(args.results))
+    write_results(results, path)
     if args.json:
         print(json.dumps(results, indent=2))
     else:
@@ -410,8 +430,7 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument("--json", action="store_true", help="print JSON instead of a table")
     bench.add_argument(
         "--results",
-        default="bench/results.json",
-        help="JSON file to write the results to (default bench/results.json)",
+        help="JSON file to write the results to (default $LIPSTREAM_HOME/bench/results.json)",
     )
     bench.add_argument(
         "--no-engine-benches",

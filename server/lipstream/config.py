@@ -21,6 +21,9 @@ from .errors import LipstreamError, UnknownEngineError
 ENV_PREFIX = "LIPSTREAM_"
 DEMO_DIR = "demo"
 DEMO_MODELS_DIR = "models"
+KERNEL_CACHE_DIR = "numba-cache"
+RESULTS_DIR = "bench"
+NUMBA_CACHE_VARIABLE = "NUMBA_CACHE_DIR"
 
 
 def _home(environ: Mapping[str, str]) -> Path:
@@ -42,8 +45,12 @@ class ServerSettings:
     log_level: str = "info"
     max_sessions: int = 500
     max_connections: int = 4096
+    max_client_connections: int = 256
+    client_upgrade_rate: float = 20.0
+    client_upgrade_burst: int = 100
     handshake_timeout_s: float = 10.0
     max_memory_mb: int = 0
+    max_input_mb: float = 0.0
     max_loop_lag_ms: float = 50.0
     max_loop_busy: float = 0.9
     max_requests_per_session: int = 64
@@ -65,11 +72,14 @@ class ServerSettings:
     return_ms: float = 150.0
     max_phoneme_ms: float = 200.0
     compute_margin_ms: float = 5.0
+    calibration_cpu_s: float = 60.0
+    max_model_session_cost: float = 0.25
     inline_work_ms: float = 2.0
     request_cpu_s: float = 10.0
     synth_threads: int = 2
     heavy_work_ms: float = 50.0
     heavy_threads: int = 1
+    speech_threads: int = 1
     profiles: Path | None = None
     ping_interval_s: float = 20.0
     ping_timeout_s: float = 20.0
@@ -99,6 +109,12 @@ class Settings:
     @property
     def demo_models_dir(self) -> Path:
         return self.demo_dir / DEMO_MODELS_DIR
+
+    def results_file(self, given: str | None, name: str) -> Path:
+        """Where a measuring command writes its results: ``given`` (``--results``) when
+        there is one, else ``$LIPSTREAM_HOME/bench/<name>``, never the current directory
+        unasked (a checkout's committed ``bench/*.json`` are measurements)."""
+        return Path(given) if given else self.home / RESULTS_DIR / name
 
 
 Parser = Callable[[str, str], Any]
@@ -189,6 +205,27 @@ ENV_SETTINGS: tuple[EnvSetting, ...] = (
         "`Retry-After`, only `/healthz` answered",
     ),
     EnvSetting(
+        "LIPSTREAM_MAX_CLIENT_CONNECTIONS",
+        "max_client_connections",
+        _integer(0, 10_000_000),
+        "open TCP connections per worker from one client address; beyond: HTTP 503 "
+        "`too_many_client_connections` with `Retry-After`, only `/healthz` answered; 0 = no "
+        "cap (behind a reverse proxy, where every client has the proxy's address)",
+    ),
+    EnvSetting(
+        "LIPSTREAM_CLIENT_UPGRADE_RATE",
+        "client_upgrade_rate",
+        _number(0.0, 1e9),
+        "sustained WebSocket upgrades per second per worker from one client address; beyond: "
+        "HTTP 503 `too_many_client_connections`; 0 = no limit",
+    ),
+    EnvSetting(
+        "LIPSTREAM_CLIENT_UPGRADE_BURST",
+        "client_upgrade_burst",
+        _integer(1, 1_000_000_000),
+        "WebSocket upgrades one client address may make at once above the rate",
+    ),
+    EnvSetting(
         "LIPSTREAM_HANDSHAKE_TIMEOUT_S",
         "handshake_timeout_s",
         _number(0.0, 3600.0, above=True),
@@ -202,6 +239,14 @@ ENV_SETTINGS: tuple[EnvSetting, ...] = (
         "resident memory (MiB) per worker above which new sessions, `start`s and "
         "`POST /v1/synthesize` are refused with `server_busy`; 0 = 80 % of the machine's "
         "(or container's) memory divided by the workers",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MAX_INPUT_MB",
+        "max_input_mb",
+        _number(0.0, float(1 << 30)),
+        "audio input (MiB) all requests of a worker may hold at once (speech features and a "
+        "window of samples each); a request whose next chunk would pass it ends with "
+        "`input_too_large`; 0 = a quarter of the memory ceiling",
     ),
     EnvSetting(
         "LIPSTREAM_MAX_LOOP_LAG_MS",
@@ -322,7 +367,7 @@ ENV_SETTINGS: tuple[EnvSetting, ...] = (
         "LIPSTREAM_RETURN_MS",
         "return_ms",
         _number(0.0, 10_000.0),
-        "default time for the face to return to rest after `interrupt`",
+        "time for the face to return to rest after `end` and (by default) `interrupt`",
     ),
     EnvSetting(
         "LIPSTREAM_MAX_PHONEME_MS",
@@ -335,6 +380,20 @@ ENV_SETTINGS: tuple[EnvSetting, ...] = (
         "compute_margin_ms",
         _number(0.0, 60_000.0),
         "added to each rung's measured compute time in latency estimates",
+    ),
+    EnvSetting(
+        "LIPSTREAM_CALIBRATION_CPU_S",
+        "calibration_cpu_s",
+        _number(0.0, 86_400.0, above=True),
+        "CPU seconds one model's start-up probes, warm-up and calibration may take; a model that "
+        "needs more is not served (`model_too_costly`, in `/readyz` and the log)",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MAX_MODEL_SESSION_COST",
+        "max_model_session_cost",
+        _number(0.0, 100.0, above=True),
+        "largest fraction of one core a session of real-time speech may need on any of a "
+        "model's rungs, as calibrated; a costlier model is not served (`model_too_costly`)",
     ),
     EnvSetting(
         "LIPSTREAM_INLINE_WORK_MS",
@@ -365,7 +424,16 @@ ENV_SETTINGS: tuple[EnvSetting, ...] = (
         "LIPSTREAM_HEAVY_THREADS",
         "heavy_threads",
         _integer(1, 256),
-        "threads of the heavy lane (costly messages, large JSON answers, `POST /v1/synthesize`)",
+        "threads of the heavy lane (costly engine messages, large JSON answers), which takes "
+        "turns between connections",
+    ),
+    EnvSetting(
+        "LIPSTREAM_SPEECH_THREADS",
+        "speech_threads",
+        _integer(1, 256),
+        "threads of the speech lane (`text` messages, `POST /v1/synthesize`, the phoneme-map "
+        "routes), apart from the heavy lane; it takes turns between connections and REST "
+        "clients",
     ),
     EnvSetting(
         "LIPSTREAM_PROFILES", "profiles", _path, "JSON file of preset output profiles per character"
@@ -441,6 +509,28 @@ def demo_model_path(engine: str = "viseme-lerp", settings: Settings | None = Non
             f"unknown engine {engine!r}; available: {', '.join(engine_names())}", where="engine"
         )
     return (settings or load_settings()).demo_models_dir / engine
+
+
+def kernel_cache_dir(environ: Mapping[str, str] | None = None) -> Path:
+    """Where numba caches lipstream's compiled kernels: ``$NUMBA_CACHE_DIR`` when set, else
+    ``$LIPSTREAM_HOME/numba-cache/lipstream-<version>-py<X.Y>-numba<version>``, one folder
+    per combination, so an upgrade starts a fresh one and the old can be deleted whole."""
+    import sys
+    from importlib.metadata import PackageNotFoundError, version
+
+    from ._version import __version__
+
+    environ = os.environ if environ is None else environ
+    explicit = environ.get(NUMBA_CACHE_VARIABLE, "").strip()
+    if explicit:
+        return Path(explicit)
+    try:
+        numba_version = version("numba")
+    except PackageNotFoundError:
+        numba_version = "unknown"
+    python = f"{sys.version_info.major}.{sys.version_info.minor}"
+    folder = f"lipstream-{__version__}-py{python}-numba{numba_version}"
+    return _home(environ) / KERNEL_CACHE_DIR / folder
 
 
 def server_setting_fields() -> tuple[str, ...]:

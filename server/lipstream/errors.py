@@ -7,6 +7,8 @@ column or message field that was at fault.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 
 class LipstreamError(Exception):
     """A user-facing error with a stable code and a location."""
@@ -33,8 +35,30 @@ class CorpusError(LipstreamError):
     code = "corpus_invalid"
 
 
+class CorpusProblems(CorpusError):
+    """Several problems found in one corpus in one run: ``problems``, each a ``LipstreamError``
+    with its own code and ``where`` (file:line); the message lists them one per line.
+    ``more``: the search stopped at its limit, so there may be others."""
+
+    def __init__(
+        self, problems: Sequence[LipstreamError], *, where: str | None, more: bool = False
+    ) -> None:
+        self.problems = tuple(problems)
+        self.more = more
+        stopped = f", stopped at the first {len(self.problems)}" if more else ""
+        listed = "".join(f"\n  {problem}" for problem in self.problems)
+        super().__init__(f"{len(self.problems)} problems{stopped}:{listed}", where=where)
+
+
 class ModelStoreError(LipstreamError):
     code = "model_invalid"
+
+
+class ModelCostError(LipstreamError):
+    """A model that loads but costs too much to serve: its calibration ran past its CPU
+    bound, or a session on one of its rungs would need too much of a core."""
+
+    code = "model_too_costly"
 
 
 class UnknownEngineError(LipstreamError):

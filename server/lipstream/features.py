@@ -120,6 +120,12 @@ def _window_starts(first: int, stop: int, sample_rate: int, config: MfccConfig) 
     return centres - _window_length(sample_rate, config) // 2
 
 
+def first_sample_read(frame: int, sample_rate: int, config: MfccConfig = DEFAULT_MFCC) -> int:
+    """The earliest sample frame ``frame``'s analysis reads (its window's first, less the one
+    before it that pre-emphasis reads); may be negative."""
+    return int(_window_starts(frame, frame + 1, sample_rate, config)[0]) - 1
+
+
 def frames_covered(n_samples: int, sample_rate: int, config: MfccConfig = DEFAULT_MFCC) -> int:
     """How many leading frames have their whole window inside the first ``n_samples``."""
     length = _window_length(sample_rate, config)
@@ -147,13 +153,16 @@ def mfcc(
     first: int = 0,
     stop: int | None = None,
     config: MfccConfig = DEFAULT_MFCC,
+    offset: int = 0,
 ) -> np.ndarray:
     """MFCC frames ``first .. stop - 1`` of mono ``samples`` at ``sample_rate`` Hz.
 
     ``stop`` defaults to the frames up to the signal's duration. Returns float32
-    (n_frames, n_coefficients); frame i is centred at i / rate seconds.
+    (n_frames, n_coefficients); frame i is centred at i / rate seconds. ``offset`` is the
+    signal's sample that ``samples[0]`` is, when only its tail is held: the frames must
+    read nothing before it.
     """
-    return _analyse(samples, sample_rate, first, stop, config, with_energy=False)
+    return _analyse(samples, sample_rate, first, stop, config, False, offset)
 
 
 def speech_features(
@@ -162,19 +171,21 @@ def speech_features(
     first: int = 0,
     stop: int | None = None,
     config: MfccConfig = DEFAULT_MFCC,
+    offset: int = 0,
 ) -> np.ndarray:
     """MFCC plus log energy, with their deltas: float32 (n_frames, 2 (n_coefficients + 1)).
 
     The log energy is that of the pre-emphasised, windowed frame (as a density, like the
     band energies). Deltas are backward differences (frame i minus frame i − 1; zero at
-    frame 0), so a frame is final as soon as its own window is, as for ``mfcc``.
+    frame 0), so a frame is final as soon as its own window is, as for ``mfcc``; they read
+    frame ``first`` − 1's window too. ``offset`` as for ``mfcc``.
     """
     if stop is None:
-        stop = frame_count(len(samples) / sample_rate, config)
+        stop = frame_count((offset + len(samples)) / sample_rate, config)
     if stop <= first:
         return np.zeros((0, 2 * (config.n_coefficients + 1)), dtype=np.float32)
     start = max(0, first - 1)
-    static = _analyse(samples, sample_rate, start, stop, config, with_energy=True)
+    static = _analyse(samples, sample_rate, start, stop, config, True, offset)
     deltas = np.diff(static, axis=0, prepend=static[:1])
     both = np.concatenate([static, deltas], axis=1)[first - start :]
     return np.ascontiguousarray(both, dtype=np.float32)
@@ -187,15 +198,16 @@ def _analyse(
     stop: int | None,
     config: MfccConfig,
     with_energy: bool,
+    offset: int = 0,
 ) -> np.ndarray:
     width = config.n_coefficients + (1 if with_energy else 0)
     if stop is None:
-        stop = frame_count(len(samples) / sample_rate, config)
+        stop = frame_count((offset + len(samples)) / sample_rate, config)
     if stop <= first:
         return np.zeros((0, width), dtype=np.float32)
     analysis = _analysis(int(sample_rate), config)
     length = analysis.length
-    starts = _window_starts(first, stop, sample_rate, config)
+    starts = _window_starts(first, stop, sample_rate, config) - offset
     coefficient = np.float32(config.pre_emphasis ** (REFERENCE_RATE / sample_rate))
     padded = _windows(  # rfft's zero padding past each window
         np.asarray(samples),

@@ -5,7 +5,15 @@ stored index out of range reads outside memory and kills the process, and one
 NaN poisons every frame. Nothing stored reaches them unchecked: a model's
 loader reads each manifest field through a ``FieldReader`` and each array
 through an ``ArrayReader`` once, when the model loads, and declares what it
-needs (dtype kind, shape, index bounds, monotone offsets, finite values).
+needs (dtype kind, shape, index bounds, monotone offsets, finite values,
+value ranges).
+
+Ranges: a finite value can still be absurd (a filter rate of 1e300 loads and
+then makes every frame NaN), so every stored float also lies in a range: the
+one its loader documents for that array, else [-``MAX_MAGNITUDE``,
+``MAX_MAGNITUDE``], far beyond any channel value, weight, cost or time a
+model holds, and small enough that a kernel's sums and squares of them stay
+finite.
 Every failure is a ``ModelStoreError`` (code ``model_invalid``) whose
 ``where`` names the file and the field or array, for example
 ``.../model.json: hyperparameters.max_tile`` or
@@ -26,6 +34,8 @@ import numpy as np
 from .errors import ModelStoreError
 
 MAX_NAME_LENGTH = 128
+MAX_MAGNITUDE = 1e6
+"""The largest magnitude of a stored float whose loader documents no narrower range."""
 Shape = Sequence[int | None]
 """An expected shape: one entry per dimension, None where any length is allowed."""
 
@@ -158,6 +168,20 @@ def check_finite(where: str, array: np.ndarray) -> None:
         )
 
 
+def check_range(where: str, array: np.ndarray, low: float, high: float) -> None:
+    """Every value lies in [low, high] (NaN lies nowhere)."""
+    if array.size == 0:
+        return
+    inside = (array >= low) & (array <= high)
+    if not inside.all():
+        first = np.unravel_index(int(np.argmin(inside)), array.shape)
+        raise ModelStoreError(
+            f"value {array[first]:.6g} at {tuple(int(i) for i in first)} is outside "
+            f"[{low:g}, {high:g}]",
+            where=where,
+        )
+
+
 def check_indices(where: str, array: np.ndarray, low: int, high: int) -> None:
     """Every value lies in [low, high)."""
     if array.size == 0:
@@ -223,10 +247,18 @@ class ArrayReader:
             check_indices(self.where(name), array, low, high)
         return array
 
-    def floats(self, name: str, shape: Shape) -> np.ndarray:
-        """A floating-point array of ``shape`` without NaN or infinity."""
+    def floats(
+        self,
+        name: str,
+        shape: Shape,
+        low: float = -MAX_MAGNITUDE,
+        high: float = MAX_MAGNITUDE,
+    ) -> np.ndarray:
+        """A floating-point array of ``shape`` without NaN or infinity, every value in
+        [low, high] (by default within ``MAX_MAGNITUDE``)."""
         array = self._get(name, "f", shape)
         check_finite(self.where(name), array)
+        check_range(self.where(name), array, low, high)
         return array
 
     def offsets(self, name: str, rows: int | None, n_items: int, *, nonempty: bool) -> np.ndarray:

@@ -217,12 +217,18 @@ def model_maps(
     in ``directory/retarget/``, which replace a shipped one of the same name."""
     stored = stored_maps(directory, model.channels) if directory is not None else {}
     maps: dict[str, RetargetMap] = {}
-    for target in TARGETS:
-        offered = target != "arkit52" or any(name in ARKIT_BLENDSHAPES for name in model.channels)
-        if offered and target not in stored and only in (None, target):
+    for target in offered_targets(model.channels):
+        if target not in stored and only in (None, target):
             maps[target] = fit_map(target, target_pairs(model, target, viseme_poses))
     maps.update(stored)
     return maps
+
+
+def offered_targets(channels: Sequence[str]) -> tuple[str, ...]:
+    """The shipped targets a model with ``channels`` is served through: ``arkit52`` only
+    when some channel has an ARKit name."""
+    arkit = any(name in ARKIT_BLENDSHAPES for name in channels)
+    return tuple(target for target in TARGETS if target != "arkit52" or arkit)
 
 
 def _oculus15_pairs(model: Model, viseme_poses: np.ndarray | None) -> KeyPosePairs:

@@ -103,3 +103,27 @@ def test_a_malformed_pairs_file_exits_with_the_code_file_and_field(
     )
     unknown = run_cli("retarget", "build", "--model", str(lerp_model), "--target", "rig9")
     assert unknown.returncode == 2 and "target: no shipped retarget target" in unknown.stderr
+
+
+def test_show_with_a_name_shows_only_that_map_and_refuses_an_unknown_one(
+    lerp_model: Path, tmp_path: Path
+) -> None:
+    pairs = tmp_path / "pairs.json"
+    pairs.write_text(json.dumps(PAIRS))
+    fitted = run_cli(
+        "retarget", "fit", "--model", str(lerp_model), "--pairs", str(pairs), "--name", "jaw"
+    )
+    assert fitted.returncode == 0, fitted.stderr
+    for name, controls in (("jaw", "open, shut"), ("oculus15", "viseme_sil")):
+        shown = run_cli("retarget", "show", "--model", str(lerp_model), name)
+        assert shown.returncode == 0, shown.stderr
+        headers = [line for line in shown.stdout.splitlines() if not line[0].isspace()]
+        assert [header.split(":")[0] for header in headers] == [name]
+        assert f"  controls: {controls}" in shown.stdout
+    unknown = run_cli("retarget", "show", "--model", str(lerp_model), "nope")
+    assert unknown.returncode == 2
+    assert unknown.stdout == ""
+    assert unknown.stderr == (
+        f"error [unknown_retarget]: {lerp_model}: the model has no retarget map 'nope'; "
+        "its maps: oculus15, arkit52, jaw\n"
+    )

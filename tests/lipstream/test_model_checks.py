@@ -14,6 +14,7 @@ from lipstream.model_checks import (
     check_indices,
     check_kind,
     check_offsets,
+    check_range,
     check_shape,
 )
 
@@ -120,3 +121,22 @@ def test_field_reads_name_the_field(read: str, value: object, message: str) -> N
 def test_a_long_value_is_not_echoed_whole() -> None:
     error = _refused(FieldReader("m/model.json").flag, "x" * 10_000, "f")
     assert error.message == "must be true or false, got str (10002 characters)"
+
+
+def test_values_outside_a_range_name_the_first_position() -> None:
+    check_range(WHERE, np.array([0.1, 100.0]), 0.1, 100.0)
+    error = _refused(check_range, WHERE, np.array([[1.0, 2.0], [1e300, -5.0]]), 0.0, 10.0)
+    assert error.message == "value 1e+300 at (1, 0) is outside [0, 10]"
+    assert error.where == WHERE
+
+
+def test_floats_stay_within_the_default_magnitude_unless_given_a_range() -> None:
+    reader = ArrayReader({"x": np.array([-1e6, 1e6]), "y": np.array([2e6])}, "m/arrays.npz")
+    reader.floats("x", (2,))
+    error = _refused(reader.floats, "y", (1,))
+    assert (error.where, error.message) == (
+        "m/arrays.npz: y",
+        "value 2e+06 at (0,) is outside [-1e+06, 1e+06]",
+    )
+    reader.floats("y", (1,), 0.0, 1e7)
+    assert "outside [0, 1]" in _refused(reader.floats, "x", (2,), 0.0, 1.0).message

@@ -22,6 +22,7 @@ from lipstream_client.messages import (
     MAX_RATE_WPM,
     MAX_RETURN_MS,
     MAX_SAMPLE_RATE,
+    MAX_SEQ,
     MIN_FPS,
     MIN_RATE_WPM,
     MIN_SAMPLE_RATE,
@@ -122,7 +123,7 @@ def output_profiles(draw: st.DrawFn) -> OutputProfile:
 resumes = st.builds(
     Resume,
     frames=st.integers(0, MAX_INTEGER),
-    seq=st.integers(0, MAX_INTEGER),
+    seq=st.integers(0, MAX_SEQ),
     fidelity=st.none() | names,
     audio=st.integers(0, MAX_INTEGER),
 )
@@ -194,7 +195,12 @@ def frames_messages(draw: st.DrawFn) -> Frames:
         st.lists(float32_values, min_size=n_channels * n_frames, max_size=n_channels * n_frames)
     )
     return Frames(
-        draw(ids), draw(counts), draw(counts), draw(fps_values), n_channels, pack_float32(values)
+        draw(ids),
+        draw(st.integers(0, MAX_SEQ)),
+        draw(counts),
+        draw(fps_values),
+        n_channels,
+        pack_float32(values),
     )
 
 

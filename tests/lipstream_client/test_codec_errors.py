@@ -243,6 +243,14 @@ def test_unknown_type_and_wrong_direction() -> None:
             "return_ms",
             "must be <= 10000",
         ),
+        # A resume.seq of 2^53 - 1 once passed, and the server then numbered a block 2^53.
+        (
+            {**START, "resume": {"frames": 0, "seq": 2**53 - 1}},
+            "resume.seq",
+            "must be in [0, 2147483647]",
+        ),
+        ({**START, "resume": {"frames": 0, "seq": 2**31}}, "resume.seq", "2147483647"),
+        ({**FRAMES, "seq": 2**31}, "seq", "must be in [0, 2147483647]"),
     ],
 )
 def test_invalid_fields_name_the_field(

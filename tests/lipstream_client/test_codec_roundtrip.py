@@ -206,7 +206,8 @@ def test_audio_is_bin_in_msgpack_and_base64_in_json() -> None:
 
 
 def test_done_and_ready_round_trip_with_all_fields() -> None:
-    done = Done("a", DoneStats(90, 12.5, 30.0, True, {"jumps": 3, "cost": 1.5}), "interrupt")
+    stats = DoneStats(90, 12.5, 30.0, True, {"jumps": 3, "cost": 1.5}, speech_synthesis_ms=150.25)
+    done = Done("a", stats, "interrupt")
     ready = Ready(
         "a",
         "dp",

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from lipstream.engines.base import Model
-from tests.helpers import REPO, run_cli, textgrid_long
+from tests.helpers import REPO, return_frames, run_cli, textgrid_long
 from tests.live_server import LiveServer, live_server, save_models
 
 EXAMPLES = REPO / "client_sdk" / "examples"
@@ -61,13 +61,15 @@ def test_game_loop_plays_every_frame(served: LiveServer, trained_models: dict[st
     assert character_engine is not None, result.stdout
     model = trained_models[character_engine.group(1)]
     assert int(character_engine.group(2)) == len(model.channels)
-    expected = len(model.synthesize(canned_line(), fps=60.0).frames)
+    # The line's frames, then the return to rest (150 ms at 60 fps).
+    expected = len(model.synthesize(canned_line(), fps=60.0).frames) + return_frames(60.0)
     summary = re.search(
         r"(\d+) frames received; (\d+) late ticks; done: end, (\d+) frames", result.stdout
     )
     assert summary is not None, result.stdout
     assert int(summary.group(1)) == int(summary.group(3)) == expected
     assert result.stdout.count("t=") >= 3
+    assert re.search(r"server max lag \d+\.\d ms$", result.stdout, re.MULTILINE), result.stdout
 
 
 def test_chat_avatar_streams_replies_and_handles_barge_in(served: LiveServer) -> None:
@@ -87,6 +89,8 @@ def test_chat_avatar_streams_replies_and_handles_barge_in(served: LiveServer) ->
     assert result.returncode == 0, result.stderr
     dones = re.findall(r"done: (\w+)", result.stdout)
     assert dones == ["interrupt", "end"], result.stdout
+    latencies = re.findall(r"first frame after (\S+ ms) \(server\)", result.stdout)
+    assert len(latencies) == 2 and all(re.fullmatch(r"\d+\.\d ms", v) for v in latencies)
     assert "reply 2: 'Goodbye.'" in result.stdout  # spoken by espeak-ng, not the canned line
     # The default engine and lead: viseme-lerp, which then never waits for input.
     assert result.stdout.startswith("viseme-lerp/demo, each phoneme sent 400 ms before")
@@ -163,4 +167,8 @@ def test_phones_to_csv_matches_lipstream_synth(served: LiveServer, tmp_path: Pat
         )
         assert synth.returncode == 0, synth.stderr
         converted = (tmp_path / "out" / name).with_suffix(".csv")
-        assert converted.read_text(encoding="utf-8") == reference.read_text(encoding="utf-8")
+        lines = converted.read_text(encoding="utf-8").splitlines()
+        expected = reference.read_text(encoding="utf-8").splitlines()
+        # The offline frames, then the server's return to rest: 150 ms at 60 fps.
+        assert len(lines) == len(expected) + return_frames(60.0)
+        assert lines[: len(expected)] == expected

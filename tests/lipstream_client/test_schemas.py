@@ -140,6 +140,7 @@ BOUNDARIES = sorted(
             m.MIN_SAMPLE_RATE,
             m.MAX_SAMPLE_RATE,
             m.MAX_INTEGER,
+            m.MAX_SEQ,
             m.MAX_CHANNELS,
             m.MAX_TIME_S * 1000.0,
             2**63,

@@ -446,21 +446,25 @@ def scale_out(bench: Bench) -> str:
         engines = ", ".join(f"`{model['engine']}`" for model in models)
         megabytes = sum(model["bytes"] for model in models) / 1e6
         text += f"Models loaded: {engines} ({megabytes:.0f} MB of model files).\n\n"
+    measured = _measured(memory.get("workers", memory), list)
+    # USS (private pages): files written before it was recorded lack it.
+    with_uss = all("uss_mib" in p for _, processes in measured for p in processes)
     rows = []
-    for workers, processes in _measured(memory.get("workers", memory), list):
+    for workers, processes in measured:
         served = [process for process in processes if process["role"] == "worker"]
+        uss = [f"{max(p['uss_mib'] for p in served):.0f}"] if with_uss else []
         rows.append(
             [
                 workers,
                 f"{max(p['rss_mib'] for p in served):.0f}",
                 f"{max(p['pss_mib'] for p in served):.0f}",
+                *uss,
                 f"{sum(p['pss_mib'] for p in processes):.0f}",
             ]
         )
-    text += table(
-        ["workers", "RSS per worker MiB", "PSS per worker MiB", "PSS of all processes MiB"],
-        rows,
-    )
+    header = ["workers", "RSS per worker MiB", "PSS per worker MiB"]
+    header += ["USS per worker MiB"] if with_uss else []
+    text += table([*header, "PSS of all processes MiB"], rows)
     resume = bench.load("resume_time.json")
     text += "\n" + bench.source("resume_time.json", resume)
     text += table(

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..errors import CorpusError
 from .table import CsvTable, FrameTable, read_csv_table
+from .validation import MAX_PROBLEMS, raise_each
 
 TIME_COLUMN = "time"
 START_TOLERANCE = 1e-6  # seconds; the writer's %.6f resolution
@@ -35,14 +36,15 @@ def read_frames_csv(path: str | Path) -> FrameTable:
     if not channels:
         raise CorpusError("no channel columns besides 'time'", where=table.where(1))
     require_rows(table, 2)
-    times = table.numeric_columns((TIME_COLUMN,))[:, 0]
+    values = table.numeric_columns((TIME_COLUMN, *channels))
+    times = values[:, 0]
     check_increasing(table, times)
     if abs(times[0]) > START_TOLERANCE:
         raise CorpusError(
             f"the first time is {times[0]:g} s; frame times must start at 0",
             where=table.where(table.lines[0]),
         )
-    frames = table.numeric_columns(channels).astype(np.float32)
+    frames = values[:, 1:].astype(np.float32)
     return FrameTable(times, frames, channels)
 
 
@@ -55,16 +57,19 @@ def require_rows(table: CsvTable, minimum: int) -> None:
 
 
 def check_increasing(table: CsvTable, times: np.ndarray) -> None:
-    """Raise at the first row whose time is not after the previous row's."""
-    steps = np.diff(times)
-    bad = np.flatnonzero(steps <= 0)
-    if bad.size:
-        row = int(bad[0]) + 1
-        raise CorpusError(
-            f"time {times[row]:.9g} s is not after the previous row's {times[row - 1]:.9g} s;"
-            " times must increase strictly",
-            where=table.where(table.lines[row]),
-        )
+    """Name every row whose time is not after the previous row's."""
+    rows = np.flatnonzero(np.diff(times) <= 0)[: MAX_PROBLEMS + 1] + 1
+    raise_each(
+        [
+            CorpusError(
+                f"time {times[row]:.9g} s is not after the previous row's {times[row - 1]:.9g} s;"
+                " times must increase strictly",
+                where=table.where(table.lines[row]),
+            )
+            for row in rows
+        ],
+        where=table.path.name,
+    )
 
 
 def write_frames_csv(

@@ -5,8 +5,11 @@ utterance in sorted stem order: read the frames (plain CSV, or a Live Link
 Face export recognized by its ``Timecode`` column), check the channel set
 against the first utterance, read the phone intervals and check they stay
 within the frames, resample the frames onto the corpus grid ``i / fps`` (the
-only normalization; see ``grid``), and attach audio and metadata. Any problem
-raises ``CorpusError`` naming the file (and line or column) at fault.
+only normalization; see ``grid``), and attach audio and metadata. A problem
+does not stop the load: it goes on to the utterance's other files and the
+next utterances, and at the end raises every problem found (up to
+``validation.MAX_PROBLEMS``), each naming the file (and line or column) at
+fault: one as its own ``CorpusError``, several as ``CorpusProblems``.
 """
 
 from __future__ import annotations
@@ -20,10 +23,11 @@ from tqdm import tqdm
 
 from ..audio import read_wav
 from ..errors import CorpusError
+from ..timeline import PhonemeSpan
 from .config import CONFIG_FILE, CorpusConfig, read_corpus_config
 from .frames_csv import read_frames_csv
 from .grid import estimate_fps, resample_to_grid
-from .intervals import to_phoneme_spans
+from .intervals import LabelledInterval, to_phoneme_spans
 from .lab import lab_spans, read_lab_intervals
 from .layout import UtteranceFiles, discover_utterances
 from .livelink import is_livelink_header, read_livelink_csv
@@ -31,7 +35,12 @@ from .metadata import UtteranceMetadata, read_utterance_metadata
 from .model import Corpus, Utterance
 from .table import FrameTable
 from .textgrid import read_textgrid_tier
-from .validation import check_channel_selection, check_phones_within_frames, check_same_channels
+from .validation import (
+    Problems,
+    check_channel_selection,
+    check_phones_within_frames,
+    check_same_channels,
+)
 
 
 @dataclass
@@ -59,15 +68,24 @@ def load_corpus(path: str | Path, *, progress: bool = False, tier: str | None = 
             "empty corpus: no utterances (<stem>.csv with <stem>.TextGrid or <stem>.lab)",
             where=str(root),
         )
-    _check_heldout(config, files)
+    problems = Problems()
+    problems.attempt(_check_heldout, config, files)
     name = config.name or root.resolve().name
     grid: _Grid | None = None
     utterances: list[Utterance] = []
     bar = tqdm(files, desc=f"loading {name}", unit="utt", disable=not progress, file=sys.stderr)
     for utterance_files in bar:
-        table = read_frames(utterance_files.frames)
-        grid = _settle_grid(grid, config, utterance_files.frames, table)
-        utterances.append(_utterance(utterance_files, table, grid, config.tier))
+        if problems.full:
+            problems.more = True
+            break
+        table = problems.attempt(read_frames, utterance_files.frames)
+        if table is not None:
+            settled = problems.attempt(_settle_grid, grid, config, utterance_files.frames, table)
+            grid, table = (grid, None) if settled is None else (settled, table)
+        utterance = _utterance(utterance_files, table, grid, config.tier, problems)
+        if utterance is not None:
+            utterances.append(utterance)
+    problems.raise_any(where=str(root))
     assert grid is not None
     return Corpus(name, grid.fps, grid.channels, utterances, heldout=config.heldout)
 
@@ -120,27 +138,53 @@ def _settle_grid(
 
 
 def _utterance(
-    files: UtteranceFiles, table: FrameTable, grid: _Grid, tier: str | None
-) -> Utterance:
-    frames_end = float(table.times[-1])
-    if files.phones_are_textgrid:
-        phone_tier = read_textgrid_tier(files.phones, tier)
-        check_phones_within_frames(phone_tier.intervals, frames_end, grid.fps, files.frames.name)
-        phones = to_phoneme_spans(phone_tier.intervals, source=phone_tier.source)
-    else:
-        intervals = read_lab_intervals(files.phones, frames_duration=frames_end)
-        check_phones_within_frames(intervals, frames_end, grid.fps, files.frames.name)
-        phones = lab_spans(intervals)
+    files: UtteranceFiles,
+    table: FrameTable | None,
+    grid: _Grid | None,
+    tier: str | None,
+    problems: Problems,
+) -> Utterance | None:
+    """The utterance, or None when any of its files has a problem (added to ``problems``);
+    its phones, metadata and audio are read even when its frames could not be, so their
+    problems are found in the same run."""
+    framed = table is not None and grid is not None
+    frames_end = float(table.times[-1]) if table is not None else None
+    phones = problems.attempt(_phones, files, tier, frames_end, grid.fps if grid else None)
+    metadata = (
+        problems.attempt(read_utterance_metadata, files.metadata)
+        if files.metadata
+        else UtteranceMetadata()
+    )
+    audio = problems.attempt(read_wav, files.audio) if files.audio else None
+    if not framed or phones is None or metadata is None or (files.audio and audio is None):
+        return None
+    assert table is not None and grid is not None
     columns = [table.channels.index(name) for name in grid.channels]
-    frames = resample_to_grid(table.times, table.frames[:, columns], grid.fps)
-    metadata = read_utterance_metadata(files.metadata) if files.metadata else UtteranceMetadata()
     return Utterance(
         stem=files.stem,
-        frames=frames,
+        frames=resample_to_grid(table.times, table.frames[:, columns], grid.fps),
         phones=phones,
         fps=grid.fps,
-        audio=read_wav(files.audio) if files.audio else None,
+        audio=audio,
         emotion=metadata.emotion,
         speaker=metadata.speaker,
         text=metadata.text,
     )
+
+
+def _phones(
+    files: UtteranceFiles, tier: str | None, frames_end: float | None, fps: float | None
+) -> list[PhonemeSpan]:
+    """The utterance's phones, checked to end with its frames when those could be read."""
+
+    def check(intervals: list[LabelledInterval]) -> None:
+        if frames_end is not None and fps is not None:
+            check_phones_within_frames(intervals, frames_end, fps, files.frames.name)
+
+    if files.phones_are_textgrid:
+        phone_tier = read_textgrid_tier(files.phones, tier)
+        check(phone_tier.intervals)
+        return to_phoneme_spans(phone_tier.intervals, source=phone_tier.source)
+    intervals = read_lab_intervals(files.phones, frames_duration=frames_end)
+    check(intervals)
+    return lab_spans(intervals)

@@ -4,7 +4,8 @@ Sketch: read the file with the ``csv`` module (quoting, BOM and CRLF handled),
 keep each data row with its 1-based editor line, reject duplicate or blank
 header names, ragged rows and blank lines inside the data, then convert
 columns to float64 in one go; only when that fails (or yields NaN/inf) scan
-the cells to name the first bad one by line and column.
+the cells to name every bad one by line and column. A file's ragged rows are
+all named too.
 """
 
 from __future__ import annotations
@@ -16,8 +17,8 @@ from typing import NamedTuple, TextIO
 
 import numpy as np
 
-from ..errors import CorpusError
-from .validation import at_line
+from ..errors import CorpusError, LipstreamError
+from .validation import MAX_PROBLEMS, at_line, raise_each
 
 
 class FrameTable(NamedTuple):
@@ -63,25 +64,27 @@ class CsvTable:
         except ValueError:
             values = None
         if values is None or not np.all(np.isfinite(values)):
-            self._raise_first_bad_cell(names, indices)
+            raise_each(self._bad_cells(names, indices), where=self.path.name)
         assert values is not None
         return values
 
-    def _raise_first_bad_cell(self, names: tuple[str, ...], indices: list[int]) -> None:
+    def _bad_cells(self, names: tuple[str, ...], indices: list[int]) -> list[LipstreamError]:
+        """Every cell of the named columns that is not a finite number, by line and column,
+        up to one more than ``MAX_PROBLEMS``."""
+        bad: list[LipstreamError] = []
         for row, line in zip(self.rows, self.lines):
             for name, index in zip(names, indices):
                 cell = row[index]
                 try:
-                    value = float(cell)
+                    finite = bool(np.isfinite(float(cell)))
+                    message = f"column {name!r}: {cell.strip()!r} is not a finite number"
                 except ValueError:
-                    raise CorpusError(
-                        f"column {name!r}: {cell!r} is not a number", where=self.where(line)
-                    ) from None
-                if not np.isfinite(value):
-                    raise CorpusError(
-                        f"column {name!r}: {cell.strip()!r} is not a finite number",
-                        where=self.where(line),
-                    )
+                    finite, message = False, f"column {name!r}: {cell!r} is not a number"
+                if not finite:
+                    bad.append(CorpusError(message, where=self.where(line)))
+                if len(bad) > MAX_PROBLEMS:
+                    return bad
+        return bad
 
 
 def read_csv_table(path: Path) -> CsvTable:
@@ -99,14 +102,22 @@ def read_csv_table(path: Path) -> CsvTable:
     header = tuple(cell.strip() for cell in raw_header)
     _check_header(path, header_line, header)
     body = _strip_trailing_blank(numbered[1:])
+    problems: list[LipstreamError] = []
     for line, row in body:
         if not row:
-            raise CorpusError("blank line inside the data", where=at_line(path.name, line))
-        if len(row) != len(header):
-            raise CorpusError(
-                f"row has {len(row)} cells but the header has {len(header)} columns",
-                where=at_line(path.name, line),
+            problems.append(
+                CorpusError("blank line inside the data", where=at_line(path.name, line))
             )
+        elif len(row) != len(header):
+            problems.append(
+                CorpusError(
+                    f"row has {len(row)} cells but the header has {len(header)} columns",
+                    where=at_line(path.name, line),
+                )
+            )
+        if len(problems) > MAX_PROBLEMS:
+            break
+    raise_each(problems, where=path.name)
     return CsvTable(path, header, [row for _, row in body], [line for line, _ in body])
 
 

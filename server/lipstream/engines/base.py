@@ -52,7 +52,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, ClassVar, Self, TypeVar
+from typing import Any, ClassVar, Self, SupportsIndex, TypeVar, overload
 
 import numpy as np
 
@@ -166,7 +166,9 @@ class SynthesisRequest:
 class SynthesisResult:
     """Offline output: ``frames`` float32 (n_frames, n_channels) at ``fps``, frame i at i/fps s.
 
-    Unpacks as ``frames, channels, fps = model.synthesize(...)``.
+    Unpacks as ``frames, channels, fps = model.synthesize(...)`` and is indexed the same
+    way (``result[0]`` is ``frames``, ``len(result) == 3``). Not a NamedTuple: ``stats``
+    (the engine's counters) would then unpack as a fourth value.
     """
 
     frames: np.ndarray
@@ -174,8 +176,23 @@ class SynthesisResult:
     fps: float
     stats: dict[str, Any] = field(default_factory=dict)
 
+    def _unpacked(self) -> tuple[np.ndarray, tuple[str, ...], float]:
+        return (self.frames, self.channels, self.fps)
+
     def __iter__(self) -> Iterator[Any]:
-        return iter((self.frames, self.channels, self.fps))
+        return iter(self._unpacked())
+
+    def __len__(self) -> int:
+        return 3
+
+    @overload
+    def __getitem__(self, index: SupportsIndex) -> Any: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> tuple[Any, ...]: ...
+
+    def __getitem__(self, index: SupportsIndex | slice) -> Any:
+        return self._unpacked()[index]
 
 
 def frame_count(end_s: float, fps: float) -> int:
@@ -225,6 +242,24 @@ class Synthesizer(ABC):
     @abstractmethod
     def finish(self) -> np.ndarray:
         """Declare the input complete and return every frame not yet returned."""
+
+    @property
+    def held_input_bytes(self) -> int:
+        """Bytes this request holds of its audio input (samples and the features made of
+        them), which the server counts against its memory ceiling as input arrives."""
+        return 0
+
+    def check_more_phonemes(self, count: int) -> None:
+        """Raise the engine's error (``LipstreamError``) if this request could not take
+        ``count`` more phonemes: an engine whose work grows too fast with a request's length
+        caps it, and the server asks as soon as it receives phonemes, before any search.
+        By default there is no cap."""
+        return None
+
+    def held_input_bytes_after(self, n_samples: int, sample_rate: int) -> int:
+        """A bound on ``held_input_bytes`` while this request takes in ``n_samples`` more
+        samples of audio at ``sample_rate`` Hz (0 when the engine does not keep audio)."""
+        return 0
 
 
 class Model(ABC):
@@ -387,7 +422,8 @@ class Model(ABC):
                 f"extra.{DEFAULT_EMOTION_KEY}",
                 f"must be one of {', '.join(EMOTIONS)}, got {emotion!r}",
             )
-        return cls.from_arrays(manifest, load_arrays(directory), directory)
+        arrays = load_arrays(directory, manifest.array_sizes)
+        return cls.from_arrays(manifest, arrays, directory)
 
 
 def resolved_rung(

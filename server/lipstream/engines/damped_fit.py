@@ -7,6 +7,8 @@ Method: a damped rung's filter runs at ω = κ / (the phoneme's median duration)
 has the least squared error against the recorded frames. A causal rung that
 follows a raw curve (``dam``, ``cohen-massaro``, ``expressive-dp``) computes each
 utterance's curve once and runs only the filter per κ (``best_following_kappa``).
+A model stores its κ, and a stored κ outside ``KAPPA_RANGE`` ([0.1, 100]) is refused at
+load.
 """
 
 from __future__ import annotations
@@ -20,6 +22,9 @@ from ..numerics.basis import MotionBasis
 from .damped import filter_raw
 
 KAPPAS = (1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0)
+KAPPA_RANGE = (0.1, 100.0)
+"""A stored κ lies here: a tenth of the least and about four times the most that ``KAPPAS``
+offers."""
 VALIDATION_STEP = 4
 MAX_VALIDATION = 50
 

@@ -7,7 +7,8 @@ spans' durations in the training alignments. A phoneme seen fewer than
 answers the expected (median, e^mean) duration of a phoneme; the causal rungs
 scale each phoneme's filter speed by it, so a short closure is reached within
 its span. The statistics are three arrays of the model file (``arrays``,
-``from_arrays``).
+``from_arrays``); a stored median must lie between 1 ms and 60 s and a spread
+between 0 and 5 log units.
 """
 
 from __future__ import annotations
@@ -23,6 +24,10 @@ from ..timeline import PhonemeSpan
 
 MIN_SPANS = 3
 ARRAY_NAMES = ("duration_count", "duration_log_mean", "duration_log_std")
+LOG_MEAN_RANGE = (float(np.log(1e-3)), float(np.log(60.0)))
+"""Stored medians lie between 1 ms and 60 s (log seconds)."""
+LOG_STD_RANGE = (0.0, 5.0)
+"""Stored spreads of log seconds: 5 is a factor of e^5 (about 150) per standard deviation."""
 
 
 @dataclass(frozen=True)
@@ -76,10 +81,8 @@ class DurationModel:
         """The statistics stored in a model's arrays, each checked by ``reader``."""
         shape = (len(PHONEMES),)
         count = reader.integers("duration_count", shape)
-        log_mean = reader.floats("duration_log_mean", shape)
-        log_std = reader.floats("duration_log_std", shape)
+        log_mean = reader.floats("duration_log_mean", shape, *LOG_MEAN_RANGE)
+        log_std = reader.floats("duration_log_std", shape, *LOG_STD_RANGE)
         if np.any(count < 0):
             raise reader.error("duration_count", "counts must not be negative")
-        if np.any(log_std < 0):
-            raise reader.error("duration_log_std", "spreads must not be negative")
         return cls(count.astype(np.int64), log_mean.astype(np.float64), log_std.astype(np.float64))

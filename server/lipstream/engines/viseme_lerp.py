@@ -19,6 +19,10 @@ The rungs' leads are ``LEADS_MS``: ``damped_lead`` (at most 120 ms) and
 ``causal`` (0, the floor); κ of each is the
 value of ``KAPPAS`` with the least squared error on training utterances
 (``damped_fit``), stored in the model.
+
+Stored ranges (checked at load): key poses within ``MAX_MAGNITUDE``; leads in
+[0, 1000] ms; κ in [0.1, 100] (``KAPPA_RANGE``); durations as in
+``durations``.
 """
 
 from __future__ import annotations
@@ -48,7 +52,7 @@ from .base import (
     lead_ms_option,
     resolved_rung,
 )
-from .damped_fit import KAPPAS, best_kappa, validation_utterances
+from .damped_fit import KAPPA_RANGE, KAPPAS, best_kappa, validation_utterances
 from .damped_synthesis import DampedTargets, DampedTimelineSynthesizer
 from .durations import DurationModel
 from .lerp_keys import KeyedSpans, lerp_frames
@@ -174,11 +178,9 @@ class VisemeLerpModel(Model):
         reader = ArrayReader(arrays, str(path / ARRAYS_NAME))
         poses = reader.floats("poses", (len(scheme.classes), len(manifest.channels)))
         leads = reader.floats("lead_ms", (None,))
-        kappas = reader.floats("kappa", (len(leads),))
+        kappas = reader.floats("kappa", (len(leads),), *KAPPA_RANGE)
         if len(leads) == 0 or not (np.all(leads >= 0) and np.all(leads <= MAX_LEAD_MS)):
             raise reader.error("lead_ms", f"must hold leads in [0, {MAX_LEAD_MS:g}] ms")
-        if not np.all(kappas > 0):
-            raise reader.error("kappa", "must be positive")
         return cls(manifest, poses, DurationModel.from_arrays(reader), leads, kappas)
 
 

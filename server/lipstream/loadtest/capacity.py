@@ -21,8 +21,9 @@ with no load, and the idle first-frame latency. Each probe records the load
 generator's and the server's CPU seconds, so a reader can tell which side
 ran out of CPU.
 
-Searches accumulate in one results file (``bench/capacity.json``): a new
-search replaces the one with the same engine, character, fps, lead and clip.
+Searches accumulate in one results file (``--results``, by default
+``$LIPSTREAM_HOME/bench/capacity.json``): a new search replaces the one with
+the same engine, character, fps, lead and clip.
 
 Capacity as a ratio: an absolute count says as much about the machine as
 about the code, so the same run also searches the capacity of the
@@ -56,7 +57,6 @@ from .load import LoadTestConfig, check_config, loadtest
 from .reference import ReferenceTraffic, engine_traffic, reference_server
 from .sessions import event_loop_name
 
-DEFAULT_RESULTS = "bench/capacity.json"
 REQUESTS_PER_SESSION = 2
 MAX_PROBES = 24
 _SEARCH_KEY = (

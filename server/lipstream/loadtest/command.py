@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import sys
 from dataclasses import replace
-from pathlib import Path
 from typing import Any
 
 from ..config import Settings
@@ -116,16 +116,18 @@ def _loadtest(args: argparse.Namespace, settings: Settings) -> None:
         pause_s=args.pause,
         max_duration_s=args.max_duration,
     )
+    path = settings.results_file(args.results, "loadtest.json")
     results = loadtest(config)
-    write_results(results, Path(args.results))
+    write_results(results, path)
     print(json.dumps(results, indent=2) if args.json else format_table(results))
-    print(f"results written to {args.results}", file=sys.stderr)
+    print(f"results written to {path}", file=sys.stderr)
 
 
 def _capacity(args: argparse.Namespace, settings: Settings) -> None:
     from .capacity import CapacitySearch, find_capacity, read_results, record_search
 
-    read_results(Path(args.results))  # before minutes of searching, not after
+    path = settings.results_file(args.results, "capacity.json")
+    read_results(path)  # before minutes of searching, not after
     base = _config(args, settings, latency_budget_ms=args.latency_budget_ms)
     engines = _capacity_engines(base.url, args.engine, args.character, args.token)
     references: dict[Any, dict[str, Any]] = {}
@@ -142,8 +144,8 @@ def _capacity(args: argparse.Namespace, settings: Settings) -> None:
         )
         print(f"{engine}:")
         result = find_capacity(search, progress=print, references=references)
-        record_search(Path(args.results), result)
-        print(_capacity_line(result, args))
+        record_search(path, result)
+        print(f"{_capacity_line(result, args)}; written to {path}")
 
 
 def _capacity_engines(url: str, engine: str, character: str, token: str | None) -> list[str]:
@@ -174,7 +176,7 @@ def _capacity_line(result: dict[str, Any], args: argparse.Namespace) -> str:
             f"; reference server {reference['capacity_streams']} sessions, ratio "
             f"{'-' if ratio is None else f'{ratio:.2f}'}"
         )
-    return f"{line}; written to {args.results}"
+    return line
 
 
 def _add_capacity_parser(runs: Any) -> None:
@@ -212,8 +214,7 @@ def _add_capacity_parser(runs: Any) -> None:
     )
     capacity.add_argument(
         "--results",
-        default="bench/capacity.json",
-        help="JSON file to write the results to (default bench/capacity.json)",
+        help="JSON file to write the results to (default $LIPSTREAM_HOME/bench/capacity.json)",
     )
     capacity.set_defaults(run=_capacity)
 
@@ -241,10 +242,11 @@ def _soak(args: argparse.Namespace, settings: Settings) -> None:
         seed=args.seed,
         token=args.token,
     )
-    results = soak(config)
-    write_results(results, Path(args.results))
+    path = settings.results_file(args.results, "soak.json")
+    results = soak(config, command="lipstream " + shlex.join(sys.argv[1:]))
+    write_results(results, path)
     print(json.dumps(results, indent=2) if args.json else format_report(results))
-    print(f"results written to {args.results}", file=sys.stderr)
+    print(f"results written to {path}", file=sys.stderr)
 
 
 def _add_soak_parser(runs: Any) -> None:
@@ -255,8 +257,10 @@ def _add_soak_parser(runs: Any) -> None:
         help="valid real-time sessions among hostile clients, for a bounded time",
         description="Valid real-time sessions among hostile clients (silent sockets, partial "
         "headers, PQ searches, JSON floods, many requests, clients that stop reading, "
-        "malformed messages) against a lipstream server on this machine: the valid "
-        "sessions' lag, /healthz latency, peak server memory and undocumented errors.",
+        "malformed messages, oversized heads, audio floods, PQ on many connections, JSON "
+        "REST floods left unread, one client's flood of connections) against a lipstream "
+        "server on this machine: the valid sessions' lag, /healthz latency, peak server "
+        "memory against its ceiling and undocumented errors.",
     )
     _target_options(soak, required_target=False)
     soak.add_argument("--duration", type=float, default=60.0, help="seconds (at most 3600)")
@@ -285,17 +289,15 @@ def _add_soak_parser(runs: Any) -> None:
     soak.add_argument("--json", action="store_true", help="print JSON instead of a summary")
     soak.add_argument(
         "--results",
-        default="bench/soak.json",
-        help="JSON file to write the results to (default bench/soak.json)",
+        help="JSON file to write the results to (default $LIPSTREAM_HOME/bench/soak.json)",
     )
     soak.set_defaults(run=_soak)
 
 
 def _storm(args: argparse.Namespace, settings: Settings) -> None:
     import asyncio
-    from dataclasses import asdict
 
-    from .storm import storm
+    from .storm import storm, storm_results, write_storm_results
 
     url = args.url or default_url(settings)
     engine, character = args.engine or "viseme-lerp", args.character or "demo"
@@ -309,9 +311,17 @@ def _storm(args: argparse.Namespace, settings: Settings) -> None:
             character,
             args.healthz_url,
             args.latency_budget_ms,
+            args.health_url,
+            args.baseline,
+            args.server_pid,
+            args.processes,
         )
     )
-    print(json.dumps(asdict(report), indent=2))
+    results = storm_results(report, sys.argv)
+    path = settings.results_file(args.results, "storm.json")
+    write_storm_results(results, path, args.name)
+    print(f"results written to {path} under {args.name!r}", file=sys.stderr)
+    print(json.dumps(results, indent=2))
 
 
 def _add_storm_parser(runs: Any) -> None:
@@ -321,8 +331,11 @@ def _add_storm_parser(runs: Any) -> None:
         "storm",
         help="a burst of connections of one kind at once: does admission hold?",
         description="Open many connections at once, all of one kind (streaming sessions, "
-        "silent sockets or half-sent request heads), probe /healthz from another process "
-        "meanwhile, and report how the connections ended and the server's frame lag.",
+        "silent sockets or half-sent request heads), after a few sessions opened before it; "
+        "probe /healthz on both ports and the server's memory from another process "
+        "meanwhile, and report how the connections ended, the refusals by reason, the "
+        "admitted sessions' frame lag on the client's clock, the probes' latency and the "
+        "peak memory against the ceiling.",
     )
     _target_options(storm, required_target=False)
     _budget_option(storm)
@@ -332,10 +345,37 @@ def _add_storm_parser(runs: Any) -> None:
     )
     storm.add_argument("--duration", type=float, default=20.0, help="seconds per connection")
     storm.add_argument(
-        "--healthz-url",
-        help="what the probe asks (default: /healthz of the serving port; "
-        "e.g. http://127.0.0.1:8081/healthz for LIPSTREAM_HEALTH_PORT=8081)",
+        "--baseline",
+        type=int,
+        default=8,
+        help="sessions opened before the storm, streaming through it (default 8)",
     )
+    storm.add_argument(
+        "--processes",
+        type=int,
+        default=1,
+        help="client processes sharing the storm's connections (default 1; at most 64)",
+    )
+    storm.add_argument(
+        "--healthz-url",
+        help="the serving port's probe (default: /healthz of the serving port)",
+    )
+    storm.add_argument(
+        "--health-url",
+        help="the liveness port's probe, e.g. http://127.0.0.1:8081/healthz for "
+        "LIPSTREAM_HEALTH_PORT=8081",
+    )
+    storm.add_argument(
+        "--server-pid",
+        type=int,
+        help="read the server's memory from /proc/PID (and its children); "
+        "default: lipstream_resident_memory_bytes from /metrics",
+    )
+    storm.add_argument(
+        "--results",
+        help="JSON file to add the run to (default $LIPSTREAM_HOME/bench/storm.json)",
+    )
+    storm.add_argument("--name", default="client_clock", help="the run's key in the results file")
     storm.set_defaults(run=_storm)
 
 
@@ -366,8 +406,7 @@ def add_loadtest_parser(commands: Any) -> None:
     load.add_argument("--json", action="store_true", help="print JSON instead of a table")
     load.add_argument(
         "--results",
-        default="bench/loadtest.json",
-        help="JSON file to write the results to (default bench/loadtest.json)",
+        help="JSON file to write the results to (default $LIPSTREAM_HOME/bench/loadtest.json)",
     )
     load.set_defaults(run=_loadtest)
     runs = load.add_subparsers(dest="loadtest_run", metavar="{capacity,soak,storm}")

@@ -18,6 +18,20 @@ and what failed on the client's side. The kinds:
 - ``stops_reading``: a request for many frames whose client never reads
   (its receive queue holds one message), held until the server lets go.
 - ``malformed``: undecodable, unknown and incomplete messages.
+- ``big_heads``: a WebSocket upgrade with one header line of ``BIG_HEADER_BYTES``.
+- ``audio_flood``: one connection starting ``AUDIO_REQUESTS`` requests (on
+  anime-graph when a character has it: it keeps a request's audio), then
+  sending each ``AUDIO_SECONDS`` of 192 kHz audio, then their ends.
+- ``pq_connections``: ``PQ_CONNECTIONS`` connections at once, each with one
+  PQ request (``pq_window`` 6, ``PQ_PHONEMES`` phonemes), read to the end
+  (skipped without an anime-graph model).
+- ``rest_json_flood``: ``POST /v1/synthesize`` in JSON at ``flood_fps`` over
+  ``flood_seconds`` of speech, its answer's head read and the rest left
+  unread for ``UNREAD_HOLD_S``.
+- ``client_flood``: ``CLIENT_FLOOD_SOCKETS`` WebSocket upgrades opened at once
+  from a second loopback address (``FLOOD_ADDRESS``, so the per-client limits
+  meet the flood and not the valid sessions, which come from 127.0.0.1), held
+  for ``CLIENT_FLOOD_HOLD_S`` (skipped unless the target is 127.0.0.1).
 
 The soak only measures: nothing here checks what the server should do.
 """
@@ -27,11 +41,13 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import random
 import time
 from collections import Counter
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import Any
+from urllib.parse import urlsplit
 
 from websockets.asyncio.client import connect
 from websockets.exceptions import ConnectionClosed as WebSocketClosed
@@ -46,7 +62,15 @@ from lipstream_client.exceptions import (
     LipstreamClientError,
     LipstreamServerError,
 )
-from lipstream_client.messages import ClientMessage, Encoding, End, PhonemeItem, Phonemes, Start
+from lipstream_client.messages import (
+    ClientMessage,
+    Encoding,
+    End,
+    JsonValue,
+    PhonemeItem,
+    Phonemes,
+    Start,
+)
 
 from .clips import Span, synthetic_clip
 
@@ -58,8 +82,27 @@ HOSTILE_KINDS: tuple[str, ...] = (
     "many_requests",
     "stops_reading",
     "malformed",
+    "big_heads",
+    "audio_flood",
+    "pq_connections",
+    "rest_json_flood",
+    "client_flood",
 )
 SLOW_HEADER_S = 1.0
+BIG_HEADER_BYTES = 64 * 1024
+AUDIO_REQUESTS = 4
+AUDIO_SECONDS = 60
+AUDIO_RATE = 192_000
+PQ_CONNECTIONS = 5
+PQ_WINDOW = 6
+PQ_PHONEMES = 42
+UNREAD_HOLD_S = 10.0
+HEAD_BYTES = 64 * 1024
+CLIENT_FLOOD_SOCKETS = 1500  # far above the default per-client cap (256)
+CLIENT_FLOOD_HOLD_S = 2.0
+LOOPBACK = "127.0.0.1"
+FLOOD_ADDRESS = "127.0.0.2"
+UPGRADE_KEY = "dGhlIHNhbXBsZSBub25jZQ=="
 HOLD_REQUESTS_S = 2.0
 MANY_REQUESTS = 80  # above the default per-session limit (64)
 STOPS_READING_S = 60.0  # of speech at the flood's fps: megabytes of frames
@@ -289,6 +332,151 @@ def _error_code(reply: str | bytes) -> str | None:
     return None
 
 
+def _upgrade_head(target: Target, extra: str = "") -> bytes:
+    path = urlsplit(target.url).path or "/"
+    auth = f"Authorization: Bearer {target.token}\r\n" if target.token else ""
+    return (
+        f"GET {path} HTTP/1.1\r\nHost: {target.host}:{target.port}\r\nUpgrade: websocket\r\n"
+        f"Connection: Upgrade\r\nSec-WebSocket-Key: {UPGRADE_KEY}\r\n"
+        f"Sec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: {subprotocol_for('json')}\r\n"
+        f"{auth}{extra}\r\n"
+    ).encode()
+
+
+async def big_heads(target: Target, tally: KindTally) -> None:
+    reader, writer = await asyncio.open_connection(target.host, target.port)
+    try:
+        writer.write(_upgrade_head(target, f"X-Big: {'a' * BIG_HEADER_BYTES}\r\n"))
+        await writer.drain()
+        await _until_closed(reader, tally)
+    finally:
+        writer.close()
+
+
+async def audio_flood(target: Target, tally: KindTally) -> None:
+    engine, character = target.engine, target.character
+    if target.pq_character is not None:
+        engine, character = "anime-graph", target.pq_character
+    second = random.Random(target.seed).randbytes(2 * AUDIO_RATE)
+    async with _client(target) as client:
+        streams = [await client.start(engine, character) for _ in range(AUDIO_REQUESTS)]
+        for _ in range(AUDIO_SECONDS):
+            for stream in streams:
+                if not stream.is_over:
+                    await stream.send_audio(second, AUDIO_RATE)
+        for stream in streams:
+            if not stream.is_over:
+                await stream.end()
+        for stream in streams:
+            try:
+                await stream.done()
+            except LipstreamServerError as error:
+                tally.server_error(error)
+
+
+async def pq_connections(target: Target, tally: KindTally) -> None:
+    if target.pq_character is None:
+        tally.skipped = "no character has an anime-graph model"
+        return
+    spans = _spans(PQ_PHONEMES, target.seed)
+    character = target.pq_character
+
+    async def one() -> None:
+        async with _client(target) as client:
+            options: dict[str, JsonValue] = {"search": "pq", "pq_window": PQ_WINDOW}
+            stream = await client.start("anime-graph", character, options=options)
+            await stream.send_phonemes(spans)
+            await stream.end()
+            async for _ in stream.frames():
+                pass
+
+    results = await asyncio.gather(*(one() for _ in range(PQ_CONNECTIONS)), return_exceptions=True)
+    for result in results:
+        if isinstance(result, LipstreamServerError):
+            tally.server_error(result)
+        elif isinstance(result, ConnectionClosed):
+            tally.closed(result)
+        elif isinstance(result, BaseException):
+            raise result
+
+
+async def rest_json_flood(target: Target, tally: KindTally) -> None:
+    items = [
+        {"phoneme": phoneme, "start": start, "end": end}
+        for phoneme, start, end in synthetic_clip(target.flood_seconds, target.seed)
+    ]
+    body = json.dumps(
+        {
+            "engine": target.engine,
+            "character": target.character,
+            "fps": target.flood_fps,
+            "items": items,
+        }
+    ).encode()
+    auth = f"Authorization: Bearer {target.token}\r\n" if target.token else ""
+    reader, writer = await asyncio.open_connection(target.host, target.port)
+    try:
+        writer.write(
+            f"POST /v1/synthesize HTTP/1.1\r\nHost: {target.host}:{target.port}\r\n"
+            f"Content-Type: application/json\r\nAccept: application/json\r\n{auth}"
+            f"Content-Length: {len(body)}\r\n\r\n".encode()
+            + body
+        )
+        await writer.drain()
+        head = await reader.read(HEAD_BYTES)
+        tally.closes[_http_status(head) if head else "eof"] += 1
+        code = _error_code_of_json(head.partition(b"\r\n\r\n")[2])
+        if code is not None:
+            tally.error_codes[code] += 1
+        await asyncio.sleep(UNREAD_HOLD_S)
+    finally:
+        writer.close()
+
+
+async def client_flood(target: Target, tally: KindTally) -> None:
+    if target.host != LOOPBACK:
+        tally.skipped = f"floods from {FLOOD_ADDRESS}, which reaches only a {LOOPBACK} target"
+        return
+    head = _upgrade_head(target)
+    writers: list[asyncio.StreamWriter] = []
+
+    async def one() -> None:
+        reader, writer = await asyncio.open_connection(
+            target.host, target.port, local_addr=(FLOOD_ADDRESS, 0)
+        )
+        writers.append(writer)
+        writer.write(head)
+        try:
+            answer = await asyncio.wait_for(reader.read(HEAD_BYTES), REPLY_TIMEOUT_S)
+        except TimeoutError:
+            answer = b""
+        tally.closes[_http_status(answer) if answer else "no_answer"] += 1
+        code = _error_code_of_json(answer.partition(b"\r\n\r\n")[2])
+        if code is not None:
+            tally.error_codes[code] += 1
+
+    try:
+        opened = await asyncio.gather(
+            *(one() for _ in range(CLIENT_FLOOD_SOCKETS)), return_exceptions=True
+        )
+        for result in opened:
+            if isinstance(result, BaseException):
+                tally.failures[type(result).__name__] += 1
+        await asyncio.sleep(CLIENT_FLOOD_HOLD_S)
+    finally:
+        for writer in writers:
+            writer.close()
+
+
+def _error_code_of_json(body: bytes) -> str | None:
+    try:
+        document = json.loads(body)
+    except ValueError:
+        return None
+    error = document.get("error") if isinstance(document, dict) else None
+    return str(error.get("code")) if isinstance(error, dict) else None
+
+
 ATTACKS: dict[str, Attack] = {
     "silent_tcp": silent_tcp,
     "partial_headers": partial_headers,
@@ -297,4 +485,9 @@ ATTACKS: dict[str, Attack] = {
     "many_requests": many_requests,
     "stops_reading": stops_reading,
     "malformed": malformed,
+    "big_heads": big_heads,
+    "audio_flood": audio_flood,
+    "pq_connections": pq_connections,
+    "rest_json_flood": rest_json_flood,
+    "client_flood": client_flood,
 }

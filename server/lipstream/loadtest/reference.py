@@ -12,7 +12,8 @@ frames whose time plus the engine's lookahead the input now covers (time at
 most the input's end less the lookahead, as the causal rungs release them), as
 ``frames`` blocks of the same width and at most the same values per message,
 filled with zeros; ``end`` releases the rest (frames up to the input's end)
-and ``done`` follows. So a client sees messages of the same size at the same
+and the return to rest after them (``return_ms``, the server's default), and
+``done`` follows. So a client sees messages of the same size at the same
 rate, and what the reference cannot hold is the cost of the protocol, the
 sockets and the event loop on this machine.
 
@@ -45,8 +46,9 @@ from lipstream_client.client import AsyncClient
 from lipstream_client.codec import decode, encode, encoding_for_subprotocol, select_subprotocol
 from lipstream_client.messages import Encoding, End
 
+from ..config import ServerSettings
 from ..engines.base import frame_count
-from ..server.request import VALUES_PER_MESSAGE
+from ..server.request import VALUES_PER_MESSAGE, settle_frames
 
 REFERENCE_ENV = "LIPSTREAM_REFERENCE_TRAFFIC"
 APP_FACTORY = "lipstream.loadtest.reference:app_from_environment"
@@ -62,12 +64,14 @@ Send = Callable[[MutableMapping[str, Any]], Awaitable[None]]
 @dataclass(frozen=True)
 class ReferenceTraffic:
     """What the reference imitates: the engine's output channels, its declared lookahead
-    and rung, and the server's limit of values per ``frames`` message."""
+    and rung, the server's limit of values per ``frames`` message and its return to rest
+    after ``end`` (ms)."""
 
     channels: tuple[str, ...]
     lookahead_ms: float = 0.0
     fidelity: str = "reference"
     values_per_message: int = VALUES_PER_MESSAGE
+    return_ms: float = ServerSettings().return_ms
 
     def to_json(self) -> str:
         return json.dumps(asdict(self))
@@ -80,6 +84,7 @@ class ReferenceTraffic:
             lookahead_ms=float(fields["lookahead_ms"]),
             fidelity=str(fields["fidelity"]),
             values_per_message=int(fields["values_per_message"]),
+            return_ms=float(fields["return_ms"]),
         )
 
 
@@ -91,6 +96,7 @@ class _Request:
         self.width = len(traffic.channels)
         self.rows_per_message = max(1, traffic.values_per_message // self.width)
         self.lookahead_s = traffic.lookahead_ms / 1000.0
+        self.return_frames = max(1, settle_frames(traffic.return_ms, start.fps))
         self.covered = 0.0
         self.sent = 0
         self.seq = 0
@@ -114,6 +120,8 @@ class _Request:
 
     def finish(self) -> list[Frames | Done]:
         frames = frame_count(self.covered, self.start.fps) if self.covered > 0 else 0
+        if frames:
+            frames += self.return_frames
         return [*self.release(frames), Done(self.start.id, DoneStats(frames=frames))]
 
 

@@ -11,9 +11,11 @@ every ``healthz_interval_s`` on a fresh connection, and the server's
 resident memory is sampled: from ``/proc/<pid>/status`` (the process and
 its children, such as uvicorn's workers) when ``server_pid`` is given, else
 from ``process_resident_memory_bytes`` in ``/metrics`` when the server
-exports it. The report gives the valid sessions' frame-lag percentiles and
-errors, the health checks' latency percentiles and failures, the peak
-resident memory, each hostile kind's tally, and every error code that
+exports it. The report gives the valid (admitted) sessions' frame-lag
+percentiles and errors, the health checks' latency percentiles and
+failures, the peak resident memory against the server's memory ceiling
+(``lipstream_memory_ceiling_bytes`` in ``/metrics``, summed over its
+workers), each hostile kind's tally, and every error code that
 ``lipstream_client.errors.ERROR_CODES`` does not document, and every close
 code outside ``CloseCode``, seen by anyone.
 
@@ -29,9 +31,11 @@ import multiprocessing
 import os
 import platform
 import random
+import resource
 import time
 from collections import Counter
 from dataclasses import asdict, dataclass, field
+from datetime import UTC, datetime
 from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
@@ -205,12 +209,29 @@ def _rss_bytes(pid: int) -> int | None:
 
 def metrics_rss(text: str) -> int | None:
     """The sum of ``process_resident_memory_bytes`` in a Prometheus exposition, if any."""
+    return metrics_sum(text, "process_resident_memory_bytes")
+
+
+def metrics_sum(text: str, name: str) -> int | None:
+    """The sum of the samples of ``name`` in a Prometheus exposition, if any."""
     values = [
         float(line.rsplit(" ", 1)[1])
         for line in text.splitlines()
-        if line.startswith("process_resident_memory_bytes")
+        if line.startswith(name) and line[len(name) : len(name) + 1] in (" ", "{")
     ]
     return int(sum(values)) if values else None
+
+
+async def memory_ceiling(host: str, port: int) -> int | None:
+    """The server's memory ceiling in bytes (all workers), from ``/metrics``; None if it does
+    not say."""
+    try:
+        status, body = await asyncio.wait_for(http_get(host, port, "/metrics"), HEALTH_TIMEOUT_S)
+    except (OSError, TimeoutError):
+        return None
+    if status != 200:
+        return None
+    return metrics_sum(body.decode("utf-8", "replace"), "lipstream_memory_ceiling_bytes")
 
 
 async def _sample_memory(config: SoakConfig, host: str, port: int, memory: _Memory) -> None:
@@ -302,6 +323,9 @@ async def _run_hostile(config: SoakConfig, target: Target, deadline: float) -> d
 
 
 def _hostile_process(config: SoakConfig, target: Target, deadline: float, pipe: Connection) -> None:
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if soft != hard:  # the client flood holds thousands of sockets
+        resource.setrlimit(resource.RLIMIT_NOFILE, (hard, hard))
     tallies = run_coroutine(_run_hostile(config, target, deadline))
     pipe.send_bytes(json.dumps({kind: t.as_dict() for kind, t in tallies.items()}).encode())
     pipe.close()
@@ -359,8 +383,9 @@ def _undocumented(share: ClipShare, hostile: dict[str, dict[str, Any]]) -> dict[
     }
 
 
-def soak(config: SoakConfig) -> dict[str, Any]:
-    """Run the soak and return its results document (see docs/how-to/load-testing.md, "Soak")."""
+def soak(config: SoakConfig, command: str | None = None) -> dict[str, Any]:
+    """Run the soak and return its results document (see docs/how-to/load-testing.md, "Soak");
+    ``command``: the command line that ran it, for the record."""
     check_soak(config)
     engine, character, pq_character = _targets(config)
     parts = urlsplit(config.url)
@@ -378,6 +403,8 @@ def soak(config: SoakConfig) -> dict[str, Any]:
         flood_fps=config.flood_fps,
         seed=config.seed,
     )
+    ceiling = run_coroutine(memory_ceiling(target.host, target.port))
+    date = datetime.now(UTC).isoformat(timespec="seconds")
     began = time.perf_counter()
     plan = _plan(config, engine, character, began + config.duration_s)
     share, hostile, health, memory = _run(config, target, plan)
@@ -385,8 +412,11 @@ def soak(config: SoakConfig) -> dict[str, Any]:
     lag = summarize(share.frame_lags_ms(config.fps), LAG_STATISTICS)
     health_latency = summarize(health.latencies_ms, LAG_STATISTICS)
     undocumented = _undocumented(share, hostile)
+    peak = memory.peak_bytes
     return {
         "tool": f"lipstream loadtest soak {__version__}",
+        "date": date,
+        "command": command,
         "machine": {
             "cpus": os.cpu_count(),
             "platform": platform.platform(),
@@ -420,14 +450,17 @@ def soak(config: SoakConfig) -> dict[str, Any]:
         "server_memory": {
             "source": memory.source,
             "samples": memory.samples,
-            "peak_rss_bytes": memory.peak_bytes,
+            "peak_rss_bytes": peak,
+            "ceiling_bytes": ceiling,
         },
         "hostile": hostile,
         "undocumented_errors": undocumented,
         "summary": {
             "valid_frame_lag_p99_ms": lag["p99"],
             "healthz_latency_p99_ms": health_latency["p99"],
-            "peak_server_rss_bytes": memory.peak_bytes,
+            "peak_server_rss_bytes": peak,
+            "memory_ceiling_bytes": ceiling,
+            "peak_rss_of_ceiling": None if peak is None or not ceiling else peak / ceiling,
             "undocumented_errors": sum(undocumented.values()),
         },
     }
@@ -445,7 +478,7 @@ def _number(value: float | None, digits: int = 1) -> str:
 def format_report(results: dict[str, Any]) -> str:
     """The headline figures and one line per hostile kind."""
     valid, health, summary = results["valid"], results["healthz"], results["summary"]
-    rss = summary["peak_server_rss_bytes"]
+    rss, ceiling = summary["peak_server_rss_bytes"], summary["memory_ceiling_bytes"]
     lines = [
         f"valid sessions: {valid['successful_requests']}/{valid['requests']} requests ok, "
         f"frame lag p50 {_number(valid['frame_lag_ms']['p50'])} ms, "
@@ -453,7 +486,8 @@ def format_report(results: dict[str, Any]) -> str:
         f"/healthz: {health['polls']} polls, p99 {_number(summary['healthz_latency_p99_ms'])} ms, "
         f"failures {health['failures'] or '-'}",
         f"peak server RSS: {'-' if rss is None else f'{rss / 2**20:.0f} MiB'} "
-        f"({results['server_memory']['source']})",
+        f"({results['server_memory']['source']}), ceiling "
+        f"{'-' if ceiling is None else f'{ceiling / 2**20:.0f} MiB'}",
         f"undocumented errors: {results['undocumented_errors'] or 'none'}",
     ]
     for kind, tally in results["hostile"].items():

@@ -21,7 +21,7 @@ from __future__ import annotations
 import gc
 import logging
 import sys
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Hashable
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import asynccontextmanager
 from pathlib import Path
@@ -38,9 +38,13 @@ from ..models import ModelRegistry
 from ..status import phase
 from . import demo_page, docs_page, openapi, phoneme_maps
 from .catalog import Catalog
+from .client_limits import ClientLimits
 from .handshake import head_limits
+from .held_input import InputLedger, input_budget_bytes
+from .lanes import FairLane
 from .lifecycle import Lifecycle, install_drain_on_signals
 from .liveness import LivenessServer
+from .load import MIB
 from .log_throttle import install as throttle_repeated_log_lines
 from .metrics import Metrics, forget_this_process
 from .open_files import open_file_limit
@@ -91,11 +95,13 @@ def create_app(
     loaded: ModelRegistry | None = None,
     *,
     serving_process: bool = False,
+    drain_flag: Path | None = None,
 ) -> FastAPI:
     """An app serving every model found under ``models_path`` (or the models already
     ``loaded`` from there) with ``settings`` (default: the ``LIPSTREAM_*`` environment).
     ``serving_process``: this process exists to serve the app, so its lifespan may change
-    process-wide state (``freeze_long_lived_objects``)."""
+    process-wide state (``freeze_long_lived_objects``). ``drain_flag``: the file whose
+    existence says the workers' supervisor drains (``runner.DrainingSupervisor``)."""
     settings = settings or load_server_settings()
     metrics = Metrics()
     lifecycle = Lifecycle(settings.max_sessions, on_drain=lambda: metrics.draining.set(1))
@@ -109,11 +115,31 @@ def create_app(
             with phase(f"loading the models in {models_path}", report):
                 registry = ModelRegistry.load(models_path, strict=settings.strict_models)
         executor = ThreadPoolExecutor(settings.synth_threads, thread_name_prefix="lipstream-synth")
-        heavy = ThreadPoolExecutor(settings.heavy_threads, thread_name_prefix="lipstream-heavy")
+        heavy = FairLane(settings.heavy_threads, "lipstream-heavy", _lane_waits(metrics, "heavy"))
+        speech = FairLane(
+            settings.speech_threads, "lipstream-speech", _lane_waits(metrics, "speech")
+        )
         catalog = Catalog.build(registry, settings, report)
         overload = overload_for(settings, catalog, metrics.observe_load)
+        metrics.memory_ceiling.set(overload.policy.limits.max_memory_mb * MIB)
+        clients = ClientLimits.from_settings(settings)
+        ledger = InputLedger(
+            input_budget_bytes(settings, overload.policy.limits.max_memory_mb),
+            metrics.observe_input,
+        )
         server = ServerState(
-            registry, catalog, settings, metrics, lifecycle, executor, heavy, overload
+            registry,
+            catalog,
+            settings,
+            metrics,
+            lifecycle,
+            executor,
+            heavy,
+            speech,
+            overload,
+            clients,
+            drain_flag=drain_flag,
+            input_ledger=ledger,
         )
         _log_limits(server)
         overload.monitor.start()
@@ -131,6 +157,7 @@ def create_app(
             server.loaded = False
             executor.shutdown(wait=False, cancel_futures=True)
             heavy.shutdown(wait=False, cancel_futures=True)
+            speech.shutdown(wait=False, cancel_futures=True)
             forget_this_process()
 
     app = FastAPI(
@@ -149,11 +176,11 @@ def create_app(
     docs_page.install(app, app.title)
     demo_page.install(app)
 
-    @app.get("/healthz")
+    @app.get("/healthz", summary="Liveness: the server answers", operation_id="healthz")
     async def healthz() -> dict[str, str]:
         return {"status": "ok"}
 
-    @app.get("/readyz")
+    @app.get("/readyz", summary="Readiness: the models are loaded", operation_id="readyz")
     async def readyz(request: Request) -> JSONResponse:
         """Ready or not, with the model directories that are not served and why."""
         server = _server(request)
@@ -161,12 +188,12 @@ def create_app(
         detail = {"ready": ready, "failed_models": server.registry.failure_report()}
         return JSONResponse(detail, status_code=200 if ready else 503)
 
-    @app.get("/v1/engines")
+    @app.get("/v1/engines", summary="List the engines", operation_id="list_engines")
     async def engines(request: Request) -> dict[str, Any]:
         loaded = {model.manifest.engine for model in _server(request).registry.models.values()}
         return {"engines": [{"name": name, "loaded": name in loaded} for name in ENGINES]}
 
-    @app.get("/v1/characters")
+    @app.get("/v1/characters", summary="List the characters", operation_id="list_characters")
     async def characters(request: Request) -> dict[str, Any]:
         registry = _server(request).registry
         return {
@@ -178,13 +205,22 @@ def create_app(
         }
 
     @app.post(
-        "/v1/synthesize", openapi_extra=openapi.synthesize_operation(), response_class=Response
+        "/v1/synthesize",
+        summary="Synthesize a whole utterance",
+        operation_id="synthesize",
+        openapi_extra=openapi.synthesize_operation(),
+        response_class=Response,
     )
     async def synthesize_route(request: Request) -> Response:
         """A whole utterance in, all its frames out (the frames /v1/stream would send)."""
         return await synthesize(request, _server(request))
 
-    @app.get("/metrics", response_class=Response)
+    @app.get(
+        "/metrics",
+        summary="Prometheus metrics",
+        operation_id="metrics",
+        response_class=Response,
+    )
     async def metrics_route(request: Request) -> Response:
         """Prometheus text exposition."""
         body, content_type = metrics.render()
@@ -199,22 +235,36 @@ def create_app(
     return app
 
 
+def _lane_waits(metrics: Metrics, lane: str) -> Callable[[Hashable, int], None]:
+    """Observe a job's wait in ``lane`` (``lipstream_lane_jobs_ahead``) by its source: a
+    REST client (its key is ``("rest", address)``) or a WebSocket connection (``stream``)."""
+
+    def observe(key: Hashable, ahead: int) -> None:
+        source = key[0] if isinstance(key, tuple) and key else "stream"
+        metrics.labelled(metrics.lane_jobs_ahead, lane, str(source)).observe(ahead)
+
+    return observe
+
+
 def _log_limits(server: ServerState) -> None:
     files = open_file_limit()
     _, connections = head_limits({"server": server})
     limits = server.overload.policy.limits
     startup_log.info(
         "limits: %d open files (hard limit %d), %d connections, %d sessions, "
-        "%.0f MiB of memory; admission refuses at %g ms of event-loop lag or %.0f %% busy "
-        "(a session's calibrated cost: %.2f %%)",
+        "%.0f MiB of memory (%.0f MiB of it for held audio input); admission refuses at "
+        "%g ms of event-loop lag or %.0f %% busy (a session's calibrated cost: %.2f %% "
+        "for the cheapest engine, %.2f %% for the dearest)",
         files.soft,
         files.hard,
         connections,
         server.settings.max_sessions,
         limits.max_memory_mb,
+        server.input_ledger.budget_bytes / (1 << 20),
         limits.max_lag_ms,
         100 * limits.max_busy,
         100 * limits.session_cost,
+        100 * max(limits.engine_costs.values(), default=limits.session_cost),
     )
 
 

@@ -9,13 +9,19 @@ stored in its directory), and, per character, the viseme projectors (one per
 output viseme set), the preset output profile and the default emotion. Each
 model is warmed up first (its first calls compile or load its kernels) and
 then calibrated; ``build`` reports both steps through ``report`` when given.
-After ``build`` it is read-only, so sessions on the event loop and in the
-synthesis thread pool share it without locks.
+Start-up is bounded per model (``calibration``): a model whose probes, warm-up and
+calibration use more than ``calibration_cpu_s`` of the injectable ``clock``, or whose rung
+would need more than ``max_model_session_cost`` of a core per session, is
+dropped (``model_too_costly``) before its cost reaches admission, and the others
+are served. Calibration also probes every rung: a non-finite frame drops the model
+with ``model_invalid`` (``calibration.check_frames``). After ``build`` it is read-only,
+so sessions on the event loop and in the synthesis thread pool share it without locks.
 """
 
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,7 +33,8 @@ from lipstream_client import OutputProfile
 from lipstream_client.errors import UNKNOWN_CHARACTER, UNKNOWN_ENGINE
 
 from ..config import ServerSettings
-from ..engines.base import CallCost, Model
+from ..engines.base import CallCost, Model, Rung, SynthesisRequest
+from ..engines.work import WorkGuard
 from ..errors import LipstreamError, ModelStoreError
 from ..models import ModelRegistry
 from ..phonemes import SILENCE
@@ -37,7 +44,7 @@ from ..store import MANIFEST_NAME
 from ..timeline import EMOTIONS, PhonemeSpan
 from ..visemes import OCULUS15
 from .budget import RungEstimate, estimate
-from .calibration import measure, warm_up
+from .calibration import calibration_guard, measure, warm_up
 from .profiles import (
     ProfileError,
     ProfileRequest,
@@ -83,31 +90,38 @@ class Catalog:
 
     @classmethod
     def build(
-        cls, registry: ModelRegistry, settings: ServerSettings, report: Report | None = None
+        cls,
+        registry: ModelRegistry,
+        settings: ServerSettings,
+        report: Report | None = None,
+        clock: Callable[[], float] = time.thread_time,
     ) -> Catalog:
         """Measure and probe every model, reporting each step to ``report``; a model whose
-        probes or stored preset fail is dropped from ``registry`` (see
+        probes or stored preset fail, or whose calibration is out of range (its bound runs
+        on ``clock``, by default this thread's CPU time), is dropped from ``registry`` (see
         ``ModelRegistry.require_models`` for when that raises); LipstreamError for a preset
         from ``settings`` that does not fit."""
         catalog = cls(registry, settings)
         probed: dict[int, tuple[dict[str, VisemeProjector], np.ndarray]] = {}
         for name, model in list(registry.models.items()):
+            where = str(registry.directories.get(name, Path(name)))
+            guard = calibration_guard(settings.calibration_cpu_s, f"{where}: calibration", clock)
             try:
-                source = _viseme_source(registry, model)
-                if id(source) not in probed:
-                    poses = probe_phoneme_poses(source)
-                    probed[id(source)] = (
-                        projectors_from(poses, source.channels),
-                        key_poses(poses, OCULUS15),
+                with guard.metering():
+                    source = _viseme_source(registry, model)
+                    if id(source) not in probed:
+                        poses = probe_phoneme_poses(source, guard)
+                        probed[id(source)] = (
+                            projectors_from(poses, source.channels),
+                            key_poses(poses, OCULUS15),
+                        )
+                    projectors, viseme_poses = probed[id(source)]
+                    rest = _rest_poses(model, guard)
+                    retargets = model_maps(
+                        model, registry.directories.get(name), viseme_poses=viseme_poses
                     )
-                projectors, viseme_poses = probed[id(source)]
-                rest = _rest_poses(model)
-                retargets = model_maps(
-                    model, registry.directories.get(name), viseme_poses=viseme_poses
-                )
-                catalog.facts[id(model)] = ModelFacts(
-                    catalog._ladder(model, report), rest, projectors, retargets
-                )
+                    ladder = catalog._ladder(where, model, guard, report)
+                catalog.facts[id(model)] = ModelFacts(ladder, rest, projectors, retargets)
             except LipstreamError as error:
                 registry.drop(name, error)
             except Exception as error:  # a fault in one model's probe must not stop the rest
@@ -176,26 +190,32 @@ class Catalog:
         ``default_emotion``, else the model's (``Model.default_emotion``)."""
         return self.default_emotions.get(model.name, model.default_emotion)
 
-    def _ladder(self, model: Model, report: Report | None) -> tuple[RungEstimate, ...]:
-        settings = self.settings
+    def _ladder(
+        self, where: str, model: Model, guard: WorkGuard, report: Report | None
+    ) -> tuple[RungEstimate, ...]:
+        """The model (stored at ``where``) warmed up and its rungs calibrated, under
+        ``guard`` (``calibration_guard``, metered by the caller): ``ModelCostError`` naming
+        the model's directory and the rung when out of bounds."""
         ladder = model.fidelity_ladder()
         label = f"{model.manifest.engine} ({model.name})"
         with phase(f"warming up {label}", report):
-            warm_up(model, ladder[0])
+            warm_up(model, ladder[0], guard, where)
         rungs = []
         with phase(f"calibrating {label}: timing {len(ladder)} fidelity rung(s)", report):
             for rung in ladder:
-                cost = measure(model, rung)
-                rungs.append(
-                    estimate(
-                        rung,
-                        settings.max_phoneme_ms,
-                        cost.max_call_ms,
-                        settings.compute_margin_ms,
-                        cost.call_cost,
-                    )
-                )
+                rungs.append(self._rung(where, model, rung, guard))
         return tuple(rungs)
+
+    def _rung(self, where: str, model: Model, rung: Rung, guard: WorkGuard) -> RungEstimate:
+        settings = self.settings
+        cost = measure(model, rung, guard, settings.max_model_session_cost, where)
+        return estimate(
+            rung,
+            settings.max_phoneme_ms,
+            cost.max_call_ms,
+            settings.compute_margin_ms,
+            cost.call_cost,
+        )
 
     def _check_presets(self) -> None:
         for character, preset in self.presets.items():
@@ -218,12 +238,16 @@ class Catalog:
                     ) from None
 
 
-def _rest_poses(model: Model) -> dict[str | None, np.ndarray]:
-    """The rest pose per emotion; a model whose silence is not finite is refused."""
+def _rest_poses(model: Model, guard: WorkGuard) -> dict[str | None, np.ndarray]:
+    """The rest pose per emotion, synthesized under ``guard``; a model whose silence is not
+    finite is refused."""
     silence = [PhonemeSpan(SILENCE, 0.0, REST_PROBE_S)]
     poses: dict[str | None, np.ndarray] = {}
     for emotion in (None, *EMOTIONS):
-        frames = model.synthesize(silence, fps=float(model.manifest.fps), emotion=emotion).frames
+        fps = float(model.manifest.fps)
+        synthesizer = model.start(SynthesisRequest(fps=fps, emotion=emotion, guard=guard))
+        synthesizer.feed(silence)
+        frames = synthesizer.finish()
         if not np.isfinite(frames).all():
             raise ModelStoreError(
                 f"synthesizes NaN or infinite frames for silence (emotion {emotion})",

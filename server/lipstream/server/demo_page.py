@@ -3,7 +3,8 @@
 Sketch: plain HTML, CSS and JavaScript modules in ``static/`` (no build step,
 nothing loaded from elsewhere, so it works without internet). ``/`` is
 ``index.html``; ``/demo/<file>`` serves the page's other files, found by name
-among the files the package ships, so no other path can be reached. The page
+among the files the package ships, so no other path can be reached, and
+``/favicon.ico`` is the page's icon (an SVG, as browsers ask that path first). The page
 talks to the server only through the public protocol: ``GET /v1/engines`` and
 ``/v1/characters`` for its controls and the WebSocket ``/v1/stream`` (JSON
 subprotocol, ``text`` and ``phonemes`` requests) for frames and speech.
@@ -19,7 +20,13 @@ from fastapi.responses import FileResponse
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 PAGE_URL = "/"
 ASSETS_URL = "/demo"
-MEDIA_TYPES = {".js": "text/javascript", ".css": "text/css", ".html": "text/html"}
+MEDIA_TYPES = {
+    ".js": "text/javascript",
+    ".css": "text/css",
+    ".html": "text/html",
+    ".svg": "image/svg+xml",
+}
+ICON = "favicon.svg"
 ASSETS = {
     path.name: MEDIA_TYPES[path.suffix]
     for path in sorted(STATIC_DIR.iterdir())
@@ -33,6 +40,10 @@ def install(app: FastAPI) -> None:
     @app.get(PAGE_URL, include_in_schema=False)
     async def page() -> FileResponse:
         return FileResponse(STATIC_DIR / "index.html", media_type="text/html")
+
+    @app.get("/favicon.ico", include_in_schema=False)
+    async def icon() -> FileResponse:
+        return FileResponse(STATIC_DIR / ICON, media_type=MEDIA_TYPES[".svg"])
 
     @app.get(ASSETS_URL + "/{name}", include_in_schema=False)
     async def asset(name: str) -> FileResponse:

@@ -21,14 +21,30 @@ protocol with ``http_flush``'s bound on unsent bytes) adds:
   while the worker holds as many connections as it can. At most ``PROBE_LANE`` connections
   wait over the cap at once; one beyond that gets the 503 at once and is closed, before the
   server reads anything from it;
+- *per-client limits* (``client_limits``): a connection that finds its address holding
+  ``LIPSTREAM_MAX_CLIENT_CONNECTIONS`` open connections is over that client's cap and is
+  treated as one over the worker's cap (``/healthz`` answered within ``PROBE_HEAD_S``, at
+  most ``CLIENT_PROBE_LANE`` of an address waiting at once), and a WebSocket upgrade beyond
+  the address's ``LIPSTREAM_CLIENT_UPGRADE_RATE`` is refused too; both get HTTP 503 with
+  ``too_many_client_connections`` in a JSON error body, ``Retry-After`` and
+  ``Connection: close``, so one client cannot fill the worker's cap for everyone else;
 - *shedding*: while the event loop lags far behind (``overload.OverloadPolicy.shedding``),
   a WebSocket upgrade gets the same 503 at once, with no WebSocket work;
+- a *head size limit*: a request head (request line and header fields) of more than
+  ``MAX_HEAD_BYTES`` gets HTTP 431 and the connection is closed, whether the head arrives
+  whole (h11 parses any complete head) or in pieces (h11 stops buffering an incomplete one
+  past the same size), and whether it asks for an upgrade or not. Once answered, what the
+  client still sends is read and dropped until it stops, for at most ``LINGER_S`` or
+  ``LINGER_BYTES``: closing a socket with unread bytes sends a TCP reset, which can
+  destroy the answer before the client reads it;
 - ``GET /healthz`` answered by a bare ASGI callable in front of the app: no routing, no
   middleware, no lifespan state, the cheapest answer the event loop can give.
 
-Connections closed at the deadline, refused past the cap and shed are counted in
-``lipstream_connections_refused`` (codes ``handshake_timeout``, ``too_many_connections`` and
-``shedding``).
+Connections closed at the deadline, refused past the cap, refused past a client's limits,
+shed and refused for their head's size are counted in ``lipstream_connections_refused``
+(codes ``handshake_timeout``, ``too_many_connections``, ``too_many_client_connections``,
+``shedding`` and ``head_too_large``); a client's refusals also in
+``lipstream_client_refusals`` by reason.
 """
 
 from __future__ import annotations
@@ -40,9 +56,16 @@ from asyncio import Transport
 from collections.abc import Mapping
 from typing import Any
 
-from uvicorn._types import ASGI3Application, ASGIReceiveCallable, ASGISendCallable, Scope
+from uvicorn._types import (
+    ASGI3Application,
+    ASGIReceiveCallable,
+    ASGISendCallable,
+    HTTPScope,
+    Scope,
+)
 from uvicorn.server import ServerState as UvicornState
 
+from .client_limits import CONNECTIONS, UPGRADE_RATE, ClientLimits, refusal_body, refusal_headers
 from .http_flush import BoundedFlushHTTPProtocol
 from .open_files import connection_cap, open_file_limit
 from .state import ServerState
@@ -50,6 +73,12 @@ from .state import ServerState
 HANDSHAKE_TIMEOUT = "handshake_timeout"
 TOO_MANY_CONNECTIONS = "too_many_connections"
 SHEDDING = "shedding"
+HEAD_TOO_LARGE = "head_too_large"
+TOO_MANY_CLIENT_CONNECTIONS = "too_many_client_connections"
+CLIENT_PROBE_LANE = 4
+MAX_HEAD_BYTES = 16 * 1024  # h11's own bound on an incomplete head
+LINGER_S = 2.0
+LINGER_BYTES = 4 * 1024 * 1024
 HEALTHZ_PATH = "/healthz"
 HEALTHZ_BODY = json.dumps({"status": "ok"}, separators=(",", ":")).encode()
 PROBE_LANE = 64
@@ -71,6 +100,27 @@ BUSY_RESPONSE = (
     + BUSY_BODY
 )
 
+
+def head_too_large(size: int) -> tuple[list[tuple[bytes, bytes]], bytes]:
+    """The headers and body of HTTP 431 for a head of at least ``size`` bytes."""
+    body = (
+        f"the request head has at least {size} bytes, more than the limit of "
+        f"{MAX_HEAD_BYTES} bytes\n"
+    ).encode()
+    headers = [
+        (b"content-type", b"text/plain; charset=utf-8"),
+        (b"content-length", str(len(body)).encode()),
+        (b"connection", b"close"),
+    ]
+    return headers, body
+
+
+def head_size(scope: HTTPScope) -> int:
+    """The bytes of a parsed request head: its request line and header fields."""
+    line = len(scope["method"]) + len(scope["raw_path"] or b"") + len(scope["query_string"])
+    return line + 12 + sum(len(name) + len(value) + 4 for name, value in scope["headers"])
+
+
 _over_cap: weakref.WeakKeyDictionary[UvicornState, set[GuardedHTTPProtocol]]
 _over_cap = weakref.WeakKeyDictionary()
 
@@ -89,6 +139,20 @@ def shedding(app_state: Mapping[str, Any]) -> bool:
     return isinstance(server, ServerState) and server.overload.shedding(
         len(server.lifecycle.connections)
     )
+
+
+def client_limits(app_state: Mapping[str, Any]) -> ClientLimits | None:
+    """The per-client limits of the app whose lifespan state is ``app_state``."""
+    server = app_state.get("server")
+    return server.clients if isinstance(server, ServerState) else None
+
+
+def refused_client(app_state: Mapping[str, Any], reason: str) -> None:
+    """Count a connection refused with ``too_many_client_connections``."""
+    refused(app_state, TOO_MANY_CLIENT_CONNECTIONS)
+    server = app_state.get("server")
+    if isinstance(server, ServerState):
+        server.metrics.labelled(server.metrics.client_refusals, reason).inc()
 
 
 def head_limits(app_state: Mapping[str, Any]) -> tuple[float, int]:
@@ -124,8 +188,13 @@ class GuardedHTTPProtocol(BoundedFlushHTTPProtocol):
         super().connection_made(transport)
         self.head_timer: asyncio.TimerHandle | None = None
         self.over_cap = False
+        self.lingering = 0  # bytes dropped after a 431, while lingering
         self.app_behind_gate = self.app
         self.app = self._route
+        self.limits = client_limits(self.app_state)
+        self.address = self.client[0] if self.client else ""
+        self.over_client_cap = False
+        self.client_waiting = False
         timeout, cap = head_limits(self.app_state)
         self.head_timeout_s = timeout
         if len(self.connections) > cap:
@@ -136,11 +205,21 @@ class GuardedHTTPProtocol(BoundedFlushHTTPProtocol):
             waiting.add(self)
             self.over_cap = True
             self.head_timeout_s = min(timeout, PROBE_HEAD_S)
+        if self.limits is not None and self.address:
+            if not self.limits.opened(self.address, self.loop.time()):
+                if self.limits.wait(self.address) >= CLIENT_PROBE_LANE:
+                    self.limits.done_waiting(self.address)
+                    self._refuse_client(CONNECTIONS)
+                    return
+                self.client_waiting = self.over_client_cap = True
+                self.head_timeout_s = min(self.head_timeout_s, PROBE_HEAD_S)
         self._arm_head_timer()
 
     def connection_lost(self, exc: Exception | None) -> None:
         super().connection_lost(exc)
         self._head_done()
+        if self.limits is not None and self.address:
+            self.limits.closed(self.address, self.loop.time())
 
     def on_response_complete(self) -> None:
         super().on_response_complete()
@@ -149,11 +228,43 @@ class GuardedHTTPProtocol(BoundedFlushHTTPProtocol):
         if not under_way and not self.transport.is_closing():
             self._arm_head_timer()
 
+    def data_received(self, data: bytes) -> None:
+        if self.lingering:
+            self.lingering += len(data)
+            if self.lingering > LINGER_BYTES:
+                self.transport.close()
+            return
+        super().data_received(data)
+
+    def eof_received(self) -> None:
+        if self.lingering:
+            self.transport.close()
+
+    def send_400_response(self, msg: str) -> None:
+        """uvicorn's answer to any request h11 cannot parse; 431 when h11 stopped buffering an
+        incomplete head past ``MAX_HEAD_BYTES``."""
+        buffered = len(self.conn.trailing_data[0])
+        if buffered > MAX_HEAD_BYTES:
+            self._refuse_head(buffered)
+            return
+        super().send_400_response(msg)
+
     def handle_websocket_upgrade(self, *request: Any) -> None:
         self._head_done()
+        size = head_size(self.scope)
+        if size > MAX_HEAD_BYTES:
+            self._refuse_head(size)
+            return
         if self.over_cap:
             self._refuse(TOO_MANY_CONNECTIONS)
             return
+        if self.over_client_cap:
+            self._refuse_client(CONNECTIONS)
+            return
+        if self.limits is not None and self.address:
+            if not self.limits.upgrade(self.address, self.loop.time()):
+                self._refuse_client(UPGRADE_RATE)
+                return
         if shedding(self.app_state):
             self._refuse(SHEDDING)
             return
@@ -165,12 +276,46 @@ class GuardedHTTPProtocol(BoundedFlushHTTPProtocol):
         """The app for a request whose head is complete: ``/healthz`` first, then the cap."""
         self._head_done()
         app: ASGI3Application = self.app_behind_gate
+        size = head_size(scope) if scope["type"] == "http" else 0
+        if size > MAX_HEAD_BYTES:
+            refused(self.app_state, HEAD_TOO_LARGE)
+            await self._answer_head_too_large(size, send)
+            return
         if scope["type"] == "http" and scope["method"] == "GET" and scope["path"] == HEALTHZ_PATH:
             app = answer_healthz
         elif self.over_cap:
             refused(self.app_state, TOO_MANY_CONNECTIONS)
             app = answer_busy
+        elif self.over_client_cap and self.limits is not None:
+            refused_client(self.app_state, CONNECTIONS)
+            body = refusal_body(self.limits, self.address, CONNECTIONS)
+            headers = refusal_headers(self.limits, CONNECTIONS, body)
+            await send({"type": "http.response.start", "status": 503, "headers": headers})
+            await send({"type": "http.response.body", "body": body})
+            return
         await app(scope, receive, send)
+
+    async def _answer_head_too_large(self, size: int, send: ASGISendCallable) -> None:
+        headers, body = head_too_large(size)
+        await send({"type": "http.response.start", "status": 431, "headers": headers})
+        await send({"type": "http.response.body", "body": body})
+
+    def _refuse_head(self, size: int) -> None:
+        """431 and close, after reading what the client still sends (``LINGER_S``)."""
+        self._head_done()
+        if self.transport.is_closing():
+            return
+        refused(self.app_state, HEAD_TOO_LARGE)
+        self.lingering = 1
+        headers, body = head_too_large(size)
+        self.transport.write(
+            b"HTTP/1.1 431 Request Header Fields Too Large\r\n"
+            + b"".join(name + b": " + value + b"\r\n" for name, value in headers)
+            + b"\r\n"
+            + body
+        )
+        self.transport.write_eof()
+        self.loop.call_later(LINGER_S, self.transport.close)
 
     def _arm_head_timer(self) -> None:
         if self.head_timer is None:
@@ -183,6 +328,9 @@ class GuardedHTTPProtocol(BoundedFlushHTTPProtocol):
         waiting = _over_cap.get(self.server_state)
         if waiting is not None:
             waiting.discard(self)
+        if self.client_waiting and self.limits is not None:
+            self.client_waiting = False
+            self.limits.done_waiting(self.address)
 
     def _head_late(self) -> None:
         self.head_timer = None
@@ -190,6 +338,24 @@ class GuardedHTTPProtocol(BoundedFlushHTTPProtocol):
         if not self.transport.is_closing():
             refused(self.app_state, HANDSHAKE_TIMEOUT)
             self.transport.close()
+
+    def _refuse_client(self, reason: str) -> None:
+        """HTTP 503 ``too_many_client_connections`` and close."""
+        self.over_client_cap = True
+        if self.limits is None or self.transport.is_closing():
+            return
+        refused_client(self.app_state, reason)
+        body = refusal_body(self.limits, self.address, reason)
+        self.transport.write(
+            b"HTTP/1.1 503 Service Unavailable\r\n"
+            + b"".join(
+                name + b": " + value + b"\r\n"
+                for name, value in refusal_headers(self.limits, reason, body)
+            )
+            + b"\r\n"
+            + body
+        )
+        self.transport.close()
 
     def _refuse(self, code: str) -> None:
         """HTTP 503 and close, whatever the client sent or will send; counted as ``code``."""

@@ -10,7 +10,10 @@ of another thread holding the GIL does not count; a saturated loop lags on every
 more if the next tick is overdue already (a long batch of callbacks, say a burst of
 handshakes admitted one after another, holds the ticks back while it runs), the loop's busy
 fraction of one core over the window (at least a whole window, so the first moments after
-start do not count as busy all the time), and the latest RSS. ``machine_memory_mb``
+start do not count as busy all the time), the receive lag (the median over the window's
+ticks of the longest wait, within each tick, of a client message between the socket's bytes
+reaching the process and the app taking it: ``observe_receive``, fed by the WebSocket
+transport, ``read_window``), and the latest RSS. ``machine_memory_mb``
 is the memory this process may use: the physical memory, or a smaller cgroup limit
 (a container's).
 """
@@ -41,11 +44,12 @@ CGROUP_LIMITS = (
 @dataclass(frozen=True)
 class LoadSample:
     """The median event-loop lag (ms) and the loop's busy fraction of one core over the last
-    window, and the resident memory (MiB) now."""
+    window, the resident memory (MiB) now, and the receive lag (ms) over the window."""
 
     lag_ms: float = 0.0
     loop_busy: float = 0.0
     rss_mb: float = 0.0
+    receive_lag_ms: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -53,6 +57,7 @@ class _Tick:
     wall: float
     cpu: float
     lag_s: float
+    receive_lag_s: float = 0.0
 
 
 class LoadMonitor:
@@ -74,6 +79,7 @@ class LoadMonitor:
         self._thread: int | None = None
         self._timer: asyncio.TimerHandle | None = None
         self._due = 0.0
+        self._receive_lag_s = 0.0
         self.last_tick_s = time.monotonic()
 
     def start(self) -> None:
@@ -87,6 +93,11 @@ class LoadMonitor:
     def last_tick(self) -> float:
         """Monotonic seconds of the loop's last tick (read from any thread)."""
         return self.last_tick_s
+
+    def observe_receive(self, waited_s: float) -> None:
+        """A client message waited ``waited_s`` between reaching the process and the app
+        (on the loop's thread)."""
+        self._receive_lag_s = max(self._receive_lag_s, waited_s)
 
     def stop(self) -> None:
         if self._timer is not None:
@@ -112,7 +123,8 @@ class LoadMonitor:
         # way would otherwise count as a loop busy all the time.
         busy = (last.cpu - first.cpu) / max(last.wall - first.wall, self.window_s)
         lag_s = max(statistics.median(tick.lag_s for tick in ticks[1:]), overdue_s)
-        return LoadSample(1000.0 * lag_s, min(busy, 1.0), self.rss_mb)
+        receive_lag_s = statistics.median(tick.receive_lag_s for tick in ticks[1:])
+        return LoadSample(1000.0 * lag_s, min(busy, 1.0), self.rss_mb, 1000.0 * receive_lag_s)
 
     def _schedule(self, now: float) -> None:
         assert self._loop is not None
@@ -122,7 +134,9 @@ class LoadMonitor:
     def _tick(self) -> None:
         assert self._loop is not None
         now = self._loop.time()
-        self.ticks.append(_Tick(time.monotonic(), time.thread_time(), max(0.0, now - self._due)))
+        lag_s = max(0.0, now - self._due)
+        self.ticks.append(_Tick(time.monotonic(), time.thread_time(), lag_s, self._receive_lag_s))
+        self._receive_lag_s = 0.0
         self.last_tick_s = time.monotonic()
         self.rss_mb = resident_mb()
         self._schedule(now)

@@ -43,6 +43,7 @@ from prometheus_client.multiprocess import MultiProcessCollector, mark_process_d
 from .load import MIB, LoadSample
 
 LATENCY_BUCKETS_S = (0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0)
+JOBS_AHEAD_BUCKETS = (0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 16.0, 32.0, 64.0)
 MULTIPROCESS_ENV = "PROMETHEUS_MULTIPROC_DIR"
 LIVE_GAUGE_FILES = "gauge_live*_*.db"
 
@@ -90,6 +91,32 @@ class Metrics:
             registry=registry,
             multiprocess_mode="livesum",
         )
+        self.memory_ceiling = Gauge(
+            "lipstream_memory_ceiling_bytes",
+            "The memory ceiling above which new work is refused (summed over the workers).",
+            registry=registry,
+            multiprocess_mode="livesum",
+        )
+        self.answer_bytes = Gauge(
+            "lipstream_rest_answer_bytes",
+            "Bytes held for POST /v1/synthesize answers still being sent "
+            "(counted toward the memory ceiling; summed over the workers).",
+            registry=registry,
+            multiprocess_mode="livesum",
+        )
+        self.input_held = Gauge(
+            "lipstream_input_held_bytes",
+            "Audio input the requests hold: speech features and windows of samples, as "
+            "counted against LIPSTREAM_MAX_INPUT_MB (summed over the workers).",
+            registry=registry,
+            multiprocess_mode="livesum",
+        )
+        self.input_held_peak = Gauge(
+            "lipstream_input_held_peak_bytes",
+            "The most audio input the requests of one worker held at once.",
+            registry=registry,
+            multiprocess_mode="livemax",
+        )
         self.requests = Counter(
             "lipstream_requests",
             "Finished requests by how they ended (end, cancel, interrupt, error).",
@@ -117,6 +144,13 @@ class Metrics:
             ["code"],
             registry=registry,
         )
+        self.client_refusals = Counter(
+            "lipstream_client_refusals",
+            "Connections refused with too_many_client_connections (one client address over "
+            "its limits), by reason: connections or upgrade_rate.",
+            ["reason"],
+            registry=registry,
+        )
         self.busy_refusals = Counter(
             "lipstream_busy_refusals",
             "WebSocket sessions refused with server_busy, by reason: memory, loop_lag, "
@@ -133,9 +167,26 @@ class Metrics:
         )
         self.lag = Histogram(
             "lipstream_frame_lag_seconds",
-            "Per frames block: from receiving the input covering its first frame to sending it.",
+            "Per frames block: from the input covering its first frame reaching the process "
+            "to its send returning.",
             ["engine"],
             buckets=LATENCY_BUCKETS_S,
+            registry=registry,
+        )
+        self.receive_lag = Histogram(
+            "lipstream_receive_lag_seconds",
+            "Per client WebSocket message: from its bytes reaching the process to the app "
+            "taking it.",
+            buckets=LATENCY_BUCKETS_S,
+            registry=registry,
+        )
+        self.lane_jobs_ahead = Histogram(
+            "lipstream_lane_jobs_ahead",
+            "Per job of a fair lane (heavy, speech): the jobs that started in that lane "
+            "between its submission and its own start, by lane and source (stream: a "
+            "WebSocket connection, rest: a REST client).",
+            ["lane", "source"],
+            buckets=JOBS_AHEAD_BUCKETS,
             registry=registry,
         )
         self.synthesize = Histogram(
@@ -150,6 +201,11 @@ class Metrics:
         self.loop_lag.set(load.lag_ms / 1000.0)
         self.loop_busy.set(load.loop_busy)
         self.resident_memory.set(load.rss_mb * MIB)
+
+    def observe_input(self, held: int, peak: int) -> None:
+        """Publish what the requests hold of their input (``held_input``), as it changes."""
+        self.input_held.set(held)
+        self.input_held_peak.set(peak)
 
     def labelled(self, metric: MetricWrapperBase, *values: str) -> Any:
         """``metric.labels(*values)``, cached: the hot path avoids the label lookup."""

@@ -27,6 +27,12 @@ class RequestClock:
     budget_ms: float | None
     first_sent_at: float | None = None
     max_lag_s: float | None = None
+    speech_s: float | None = None
+    """Seconds spent speaking the request's ``text`` (None: it had none)."""
+
+    def spoke(self, seconds: float) -> None:
+        """Record ``seconds`` of speech synthesis for one ``text`` message."""
+        self.speech_s = (self.speech_s or 0.0) + max(0.0, seconds)
 
     def frames_sent(self, covered_at: float, now: float) -> tuple[float, float | None]:
         """Record a block sent at ``now``; (its lag, the first-frame latency if it is the
@@ -40,7 +46,8 @@ class RequestClock:
         return lag, first_latency
 
     def final_stats(self, stats: DoneStats) -> DoneStats:
-        """``stats`` (frames, engine) completed with latency, lag and the budget verdict."""
+        """``stats`` (frames, engine) completed with latency, lag, the budget verdict and the
+        speech synthesis time."""
         latency = (
             None
             if self.first_sent_at is None
@@ -48,7 +55,14 @@ class RequestClock:
         )
         lag_ms = None if self.max_lag_s is None else _MS * self.max_lag_s
         met = None if self.budget_ms is None else (lag_ms is None or lag_ms <= self.budget_ms)
-        return replace(stats, first_frame_latency_ms=latency, max_lag_ms=lag_ms, budget_met=met)
+        speech_ms = None if self.speech_s is None else _MS * self.speech_s
+        return replace(
+            stats,
+            first_frame_latency_ms=latency,
+            max_lag_ms=lag_ms,
+            budget_met=met,
+            speech_synthesis_ms=speech_ms,
+        )
 
 
 @dataclass(slots=True)

@@ -7,22 +7,36 @@ the clients' message rate), so ``OverloadPolicy`` admits a new session only whil
 measured load (``load.LoadSample``) leaves room:
 
 - resident memory at most ``max_memory_mb`` (also checked for every ``start`` and
-  ``POST /v1/synthesize``: past it nothing new is taken on, while work under way finishes);
-- the event-loop lag at most ``max_lag_ms``, once ``LAG_FROM_SESSIONS`` sessions are open
-  (with fewer, a lagging loop says more about the machine, other processes taking its
-  cores, than about the sessions, and refusing more would not relieve it);
-- the loop's busy fraction over the last ``RECENT_S`` (the monitor's window), plus the cost
-  of this session and of those admitted within that window, at most ``max_busy``. A session
-  admitted ``age`` seconds ago counts with weight ``1 - age / RECENT_S``: the window has
-  measured that part of it streaming already. Without this a burst of connections would all
-  be admitted before the first of them shows in the measurement. A session's cost is the
-  learned one once there is one: the busy fraction per open session, averaged over the
-  samples taken with at least ``LEARN_FROM_SESSIONS`` sessions open (fewer say more about
-  the clients than about the sessions); before that, the calibrated one
-  (``calibrated_session_cost``: the costliest loaded model's default rung, at one phoneme per
-  ``PHONEME_S`` of speech, as start-up calibration measured it, plus
-  ``MESSAGE_OVERHEAD_MS`` per message for the work outside the engine, as profiled in
-  docs/reports/throughput.md).
+  ``POST /v1/synthesize``: past it nothing new is taken on, while work under way finishes;
+  the audio that requests take in later is counted as it arrives, ``held_input``);
+- the lag at most ``max_lag_ms``, once ``LAG_FROM_SESSIONS`` sessions are open (with fewer,
+  a lagging loop says more about the machine, other processes taking its cores, than about
+  the sessions, and refusing more would not relieve it). Two lags count: the event loop's
+  (how late its timer runs: ``loop_lag``) and the receive lag (how long client messages
+  wait between the socket's bytes reaching the process and the app taking them:
+  ``receive_lag``), which is where a storm's queueing shows first;
+- the loop's CPU: its busy fraction over the last ``RECENT_S`` (the monitor's window), plus
+  the cost of what that window has not measured yet, plus this session's, at most
+  ``max_busy``. Not measured yet are the sessions admitted that have not started a request
+  (*pending*: a whole session each, for as long as they stay pending), and those that
+  started their first request ``age`` seconds ago (weight ``1 - age / RECENT_S``: the
+  window has measured that part of it streaming already). Without this a burst of
+  connections would all be admitted before the first of them shows in the measurement.
+
+A session's engine is known only at its first ``start``, so its price is paid twice: at the
+handshake, as a pending session, at the cheapest engine's cost (``session_cost``), and at
+that ``start``, at its engine's cost (``start_refusal``; a refusal ends only that request,
+and the session stays unpriced until a later ``start`` fits). So one engine's cost never
+refuses another engine's sessions. An engine's cost is the calibrated one
+(``calibrated_session_cost``: its costliest model's default rung, at one phoneme per
+``PHONEME_S`` of speech, as start-up calibration measured it, plus ``MESSAGE_OVERHEAD_MS``
+per message for the work outside the engine, as profiled in docs/reports/throughput.md), or
+the learned one when that is higher: the busy fraction per streaming session (those with a
+request active, less the part of the recent starters the window has not measured), averaged
+over the samples taken with at least ``LEARN_FROM_SESSIONS`` of them (fewer say more about
+the clients than about the sessions). Pending sessions are not counted in it: a burst of
+connections that have not started yet would otherwise make each session look cheap just
+when the burst needs it to look dear.
 
 A refusal through the WebSocket (accept, ``error``, close) costs the loop about as much as
 a short request; in a storm of connections those refusals alone keep the loop behind. So
@@ -41,9 +55,10 @@ the same instant.
 from __future__ import annotations
 
 import random
+import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Hashable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 from lipstream_client.errors import SERVER_BUSY
@@ -68,8 +83,8 @@ MESSAGE_OVERHEAD_MS = 0.13  # uvicorn, websockets, codec and session per message
 
 @dataclass(frozen=True)
 class Refusal:
-    """Why new work is refused now (``reason``: memory, loop_lag, loop_busy or sessions), and
-    when to ask again."""
+    """Why new work is refused now (``reason``: memory, loop_lag, receive_lag, loop_busy or
+    sessions), and when to ask again."""
 
     reason: str
     message: str
@@ -83,13 +98,15 @@ class Refusal:
 
 @dataclass(frozen=True)
 class LoadLimits:
-    """The thresholds (``ServerSettings``) and the calibrated cost of one session, as a
-    fraction of one core."""
+    """The thresholds (``ServerSettings``) and the calibrated costs, as fractions of one
+    core: ``engine_costs`` of a session of each engine, ``session_cost`` of one whose engine
+    is not known yet (the cheapest engine's)."""
 
     max_memory_mb: float
     max_lag_ms: float
     max_busy: float
     session_cost: float
+    engine_costs: Mapping[str, float] = field(default_factory=dict)
 
 
 def calibrated_session_cost(ladders: Iterable[Sequence[RungEstimate]]) -> float:
@@ -102,16 +119,27 @@ def calibrated_session_cost(ladders: Iterable[Sequence[RungEstimate]]) -> float:
 
 @dataclass
 class OverloadPolicy:
-    """The admission verdicts; ``now`` is monotonic time in seconds."""
+    """The admission verdicts; ``now`` is monotonic time in seconds, a ``key`` names one
+    session (its connection) from admission (``session_refusal``) to ``closed``."""
 
     limits: LoadLimits
     rng: random.Random = field(default_factory=random.Random)
-    recent: deque[float] = field(default_factory=deque)
     learned_cost: float = 0.0
+    pending: dict[Hashable, float] = field(default_factory=dict)
+    priced: set[Hashable] = field(default_factory=set)
+    streaming: set[Hashable] = field(default_factory=set)
+    recent: deque[tuple[float, float]] = field(default_factory=deque)
+    lock: threading.Lock = field(default_factory=threading.Lock)
 
     @property
     def session_cost(self) -> float:
-        return self.learned_cost or self.limits.session_cost
+        """The cost of a session whose engine is not known yet."""
+        return max(self.learned_cost, self.limits.session_cost)
+
+    def engine_cost(self, engine: str) -> float:
+        """The cost of a session of loaded ``engine``: its calibrated cost, or the learned
+        one when higher."""
+        return max(self.learned_cost, self.limits.engine_costs[engine])
 
     def request_refusal(self, load: LoadSample) -> Refusal | None:
         """A refusal for a new request (``start``, ``POST /v1/synthesize``) while memory is
@@ -126,40 +154,64 @@ class OverloadPolicy:
             )
         return None
 
-    def session_refusal(self, load: LoadSample, sessions: int, now: float) -> Refusal | None:
-        """A refusal for a new session with ``sessions`` open, or None after counting it as
-        admitted at ``now``."""
-        self._learn(load, sessions)
-        while self.recent and now - self.recent[0] >= RECENT_S:
-            self.recent.popleft()
-        refusal = self.request_refusal(load)
-        limits = self.limits
-        unmeasured = sum(1.0 - (now - admitted) / RECENT_S for admitted in self.recent)
-        projected = load.loop_busy + (unmeasured + 1.0) * self.session_cost
-        lagging = load.lag_ms > limits.max_lag_ms and sessions >= LAG_FROM_SESSIONS
-        if refusal is None and lagging:
-            refusal = self._refusal(
-                "loop_lag",
-                f"the server's event loop lags {load.lag_ms:.0f} ms behind, more than "
-                f"{limits.max_lag_ms:g} ms",
-                RETRY_AFTER_MS,
-            )
-        if refusal is None and projected > limits.max_busy:
-            refusal = self._refusal(
-                "loop_busy",
-                f"another session would make the server's event loop {100 * projected:.0f} % "
-                f"busy, more than {100 * limits.max_busy:.0f} %",
-                RETRY_AFTER_MS,
-            )
-        if refusal is None:
-            self.recent.append(now)
-        return refusal
+    def session_refusal(
+        self, load: LoadSample, sessions: int, now: float, key: Hashable
+    ) -> Refusal | None:
+        """A refusal for a new session ``key`` with ``sessions`` open, or None after counting
+        it as admitted and pending at ``now``."""
+        with self.lock:
+            self._learn(load, now)
+            refusal = self.request_refusal(load) or self._lag_refusal(load, sessions)
+            if refusal is None:
+                refusal = self._busy_refusal(load, now, self.session_cost, "another session")
+            if refusal is None:
+                self.pending[key] = now
+            return refusal
+
+    def start_refusal(
+        self, load: LoadSample, key: Hashable, engine: str, now: float
+    ) -> Refusal | None:
+        """A refusal for a ``start`` of ``engine`` by session ``key``: memory for every
+        ``start``; for the session's first one of a loaded engine, also the loop's CPU at the
+        engine's cost (the session is then priced and leaves the pending ones). A ``start``
+        of an engine not loaded is refused later, as ``unknown_engine``, and prices
+        nothing."""
+        with self.lock:
+            refusal = self.request_refusal(load)
+            if refusal is not None or key in self.priced:
+                return refusal
+            if engine not in self.limits.engine_costs:
+                return None
+            self.pending.pop(key, None)
+            cost = self.engine_cost(engine)
+            refusal = self._busy_refusal(load, now, cost, f"a session of {engine}")
+            if refusal is None:
+                self.priced.add(key)
+                self.recent.append((now, cost))
+            return refusal
+
+    def set_streaming(self, key: Hashable, streaming: bool) -> None:
+        """Whether session ``key`` has a request active (the sessions the cost is learned
+        from)."""
+        with self.lock:
+            if streaming:
+                self.streaming.add(key)
+            else:
+                self.streaming.discard(key)
+
+    def closed(self, key: Hashable) -> None:
+        """Session ``key`` is gone."""
+        with self.lock:
+            self.pending.pop(key, None)
+            self.priced.discard(key)
+            self.streaming.discard(key)
 
     def shedding(self, load: LoadSample, sessions: int) -> bool:
         """Whether the loop lags so far behind (``SHED_FACTOR`` x ``max_lag_ms``, with
         ``LAG_FROM_SESSIONS`` sessions open) that even refusing a WebSocket with an
         ``error`` costs too much: new upgrades then get HTTP 503 before any WebSocket work."""
-        return sessions >= LAG_FROM_SESSIONS and load.lag_ms > SHED_FACTOR * self.limits.max_lag_ms
+        lag_ms = max(load.lag_ms, load.receive_lag_ms)
+        return sessions >= LAG_FROM_SESSIONS and lag_ms > SHED_FACTOR * self.limits.max_lag_ms
 
     def sessions_refusal(self, max_sessions: int) -> Refusal:
         return self._refusal(
@@ -168,10 +220,44 @@ class OverloadPolicy:
             RETRY_AFTER_MS,
         )
 
-    def _learn(self, load: LoadSample, sessions: int) -> None:
-        if sessions < LEARN_FROM_SESSIONS:
+    def unmeasured(self, now: float) -> float:
+        """The cost the load window has not measured yet: every pending session whole, and
+        the part of each recent first ``start`` after ``now - RECENT_S`` not yet in the
+        window."""
+        while self.recent and now - self.recent[0][0] >= RECENT_S:
+            self.recent.popleft()
+        started = sum(cost * (1.0 - (now - at) / RECENT_S) for at, cost in self.recent)
+        return started + len(self.pending) * self.session_cost
+
+    def _lag_refusal(self, load: LoadSample, sessions: int) -> Refusal | None:
+        limit = self.limits.max_lag_ms
+        if sessions < LAG_FROM_SESSIONS:
+            return None
+        if load.lag_ms > limit:
+            what = f"the server's event loop lags {load.lag_ms:.0f} ms behind"
+            return self._refusal("loop_lag", f"{what}, more than {limit:g} ms", RETRY_AFTER_MS)
+        if load.receive_lag_ms > limit:
+            what = f"client messages wait {load.receive_lag_ms:.0f} ms for the server"
+            return self._refusal("receive_lag", f"{what}, more than {limit:g} ms", RETRY_AFTER_MS)
+        return None
+
+    def _busy_refusal(self, load: LoadSample, now: float, cost: float, what: str) -> Refusal | None:
+        projected = load.loop_busy + self.unmeasured(now) + cost
+        if projected <= self.limits.max_busy:
+            return None
+        return self._refusal(
+            "loop_busy",
+            f"{what} would make the server's event loop {100 * projected:.0f} % busy, more "
+            f"than {100 * self.limits.max_busy:.0f} %",
+            RETRY_AFTER_MS,
+        )
+
+    def _learn(self, load: LoadSample, now: float) -> None:
+        self.unmeasured(now)
+        measured = len(self.streaming) - sum(1.0 - (now - at) / RECENT_S for at, _ in self.recent)
+        if measured < LEARN_FROM_SESSIONS:
             return
-        observed = load.loop_busy / sessions
+        observed = load.loop_busy / measured
         if self.learned_cost == 0.0:
             self.learned_cost = observed
         else:
@@ -190,16 +276,22 @@ class Overload:
     policy: OverloadPolicy
     monitor: LoadMonitor
 
-    def session_refusal(self, sessions: int) -> Refusal | None:
-        return self.policy.session_refusal(self.monitor.sample(), sessions, time.monotonic())
+    def session_refusal(self, sessions: int, key: Hashable) -> Refusal | None:
+        return self.policy.session_refusal(self.monitor.sample(), sessions, time.monotonic(), key)
+
+    def start_refusal(self, key: Hashable, engine: str) -> Refusal | None:
+        """For a session's ``start``; safe from the synthesis pool's threads, where a
+        session may handle it."""
+        return self.policy.start_refusal(self.monitor.sample(), key, engine, time.monotonic())
 
     def shedding(self, sessions: int) -> bool:
         return self.policy.shedding(self.monitor.sample(), sessions)
 
-    def request_refusal(self) -> Refusal | None:
-        """Memory only, from the monitor's latest figure: safe from the synthesis pool's
+    def request_refusal(self, held_mb: float = 0.0) -> Refusal | None:
+        """Memory only, from the monitor's latest figure plus ``held_mb`` the caller knows the
+        process holds and the figure may not show yet: safe from the synthesis pool's
         threads, where a session may handle its ``start``."""
-        return self.policy.request_refusal(LoadSample(rss_mb=self.monitor.rss_mb))
+        return self.policy.request_refusal(LoadSample(rss_mb=self.monitor.rss_mb + held_mb))
 
 
 def memory_ceiling_mb(settings: ServerSettings) -> float:
@@ -210,6 +302,17 @@ def memory_ceiling_mb(settings: ServerSettings) -> float:
     return AUTO_MEMORY_SHARE * machine_memory_mb() / settings.workers
 
 
+def engine_costs(catalog: Catalog) -> dict[str, float]:
+    """Each loaded engine's calibrated session cost (``calibrated_session_cost`` over its
+    models)."""
+    ladders: dict[str, list[Sequence[RungEstimate]]] = {}
+    for model in catalog.registry.models.values():
+        facts = catalog.facts.get(id(model))
+        if facts is not None:
+            ladders.setdefault(model.manifest.engine, []).append(facts.ladder)
+    return {engine: calibrated_session_cost(each) for engine, each in ladders.items()}
+
+
 def overload_for(
     settings: ServerSettings,
     catalog: Catalog,
@@ -217,11 +320,12 @@ def overload_for(
 ) -> Overload:
     """The admission of a server with ``settings`` serving ``catalog``'s models, its monitor
     (which passes each sample to ``on_sample``) not yet started."""
-    ladders = [facts.ladder for facts in catalog.facts.values()]
+    costs = engine_costs(catalog)
     limits = LoadLimits(
         memory_ceiling_mb(settings),
         settings.max_loop_lag_ms,
         settings.max_loop_busy,
-        calibrated_session_cost(ladders),
+        min(costs.values(), default=calibrated_session_cost([])),
+        costs,
     )
     return Overload(OverloadPolicy(limits), LoadMonitor(on_sample=on_sample))

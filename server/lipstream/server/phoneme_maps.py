@@ -2,7 +2,7 @@
 
 Sketch: each route names a character (``/v1/characters/{character}/...``)
 and works on that character's ``expressive-dp`` model (``unknown_model``, 404,
-when it has none). The work runs in the heavy thread pool, as REST synthesis
+when it has none). The work runs in the speech lane, as REST synthesis
 does, and answers JSON; errors answer ``{"error": {"code", "message"}}`` with
 the statuses of ``rest``. Routes:
 
@@ -36,7 +36,7 @@ from fastapi.responses import Response
 from ..errors import LipstreamError
 from ..phonemes import PHONEME_INDEX, PHONEMES, SILENCE, normalize_phoneme
 from ..timeline import EMOTIONS, coerce_spans
-from .rest import HttpError, authorize, error_response
+from .rest import HttpError, authorize, error_response, rest_client
 from .state import ServerState
 
 if TYPE_CHECKING:
@@ -56,8 +56,8 @@ def _state(request: Request) -> ServerState:
 async def _answer(
     request: Request, work: Callable[[ExpressiveDpModel, dict[str, Any]], dict[str, Any]]
 ) -> Response:
-    """Authorize, read the JSON body (if any), find the model and run ``work`` in the heavy
-    pool; the result or the error as JSON."""
+    """Authorize, read the JSON body (if any), find the model and run ``work`` in the speech
+    lane; the result or the error as JSON."""
     state = _state(request)
     try:
         authorize(request, state)
@@ -75,7 +75,8 @@ async def _answer(
             body = parsed
         model = _model(state, request.path_params["character"])
         loop = asyncio.get_running_loop()
-        result = await loop.run_in_executor(state.heavy, _guarded, work, model, body)
+        lane = state.speech.client(rest_client(request))
+        result = await loop.run_in_executor(lane, _guarded, work, model, body)
     except HttpError as error:
         state.metrics.errors.labels(error.code).inc()
         return error_response(error, "json")
@@ -247,6 +248,8 @@ def install(app: FastAPI) -> None:
 
     @app.get(
         PREFIX + "/phoneme-maps/{phoneme}",
+        summary="A phoneme's map (expressive-dp)",
+        operation_id="get_phoneme_map",
         response_class=Response,
         openapi_extra=_operation(None, "the phoneme's map: frames, triangles and nodes"),
     )
@@ -256,6 +259,8 @@ def install(app: FastAPI) -> None:
 
     @app.post(
         PREFIX + "/phoneme-maps/{phoneme}/pick",
+        summary="Pick a point of a phoneme's map",
+        operation_id="pick_phoneme_map_point",
         response_class=Response,
         openapi_extra=_operation(
             _schema({"x": NUMBER, "y": NUMBER}, ["x", "y"]),
@@ -268,6 +273,8 @@ def install(app: FastAPI) -> None:
 
     @app.post(
         PREFIX + "/phoneme-maps/candidates",
+        summary="Constraint candidates for one phoneme",
+        operation_id="phoneme_constraint_candidates",
         response_class=Response,
         openapi_extra=_operation(
             _schema(
@@ -287,6 +294,8 @@ def install(app: FastAPI) -> None:
 
     @app.get(
         PREFIX + "/contamination",
+        summary="The contaminated nodes",
+        operation_id="get_contamination",
         response_class=Response,
         openapi_extra=_operation(None, "the contaminated node ids"),
     )
@@ -296,6 +305,8 @@ def install(app: FastAPI) -> None:
 
     @app.post(
         PREFIX + "/contamination",
+        summary="Mark and restore contaminated nodes",
+        operation_id="change_contamination",
         response_class=Response,
         openapi_extra=_operation(
             _schema({"mark": IDS, "restore": IDS}, []),

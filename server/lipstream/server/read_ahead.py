@@ -18,7 +18,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from lipstream_client import Start
+from lipstream_client import Phonemes, Start
 
 from .session import InputMessage
 
@@ -70,6 +70,14 @@ class ReadAhead:
     def clear(self) -> None:
         self.items.clear()
         self.bytes = 0
+
+    def phonemes(self, identifier: str) -> int:
+        """How many phonemes of request ``identifier`` wait here."""
+        return sum(
+            len(item.decoded.items)
+            for item in self.items
+            if isinstance(item.decoded, Phonemes) and item.decoded.id == identifier
+        )
 
     def starts(self, identifier: str) -> bool:
         """Whether a ``start`` of ``identifier`` waits here (a later message names that new

@@ -10,10 +10,15 @@ that: a client sending faster than its connection takes messages in. It resumes 
 uvicorn does, once the app has taken the queue empty. What one connection holds queued
 stays bounded: under ``READ_WINDOW_BYTES`` plus one message (at most ``ws_max_size``),
 as uvicorn's one message was.
+
+Each message queued for the app carries, under ``ARRIVED_AT``, the monotonic time its last
+bytes reached the process: the app measures from it how long the message waited for it (the
+receive lag, which a storm's queueing inflates before any timer of the app sees it).
 """
 
 from __future__ import annotations
 
+import time
 from collections import deque
 from typing import Any
 
@@ -21,6 +26,7 @@ from uvicorn._types import ASGIReceiveEvent
 from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 
 READ_WINDOW_BYTES = 1 << 16
+ARRIVED_AT = "lipstream.arrived_at"
 
 
 class ReadWindowProtocol(WebSocketsSansIOProtocol):
@@ -30,6 +36,7 @@ class ReadWindowProtocol(WebSocketsSansIOProtocol):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self.queued_sizes: deque[int] = deque()
+        self.queued_arrivals: deque[float] = deque()
         self.queued_bytes = 0
 
     def send_receive_event_to_app(self) -> None:
@@ -41,6 +48,7 @@ class ReadWindowProtocol(WebSocketsSansIOProtocol):
         self.read_paused = paused
         if self.queue.qsize() > waiting:
             self.queued_sizes.append(size)
+            self.queued_arrivals.append(time.monotonic())
             self.queued_bytes += size
         if not paused and self.queued_bytes >= READ_WINDOW_BYTES:
             self.read_paused = True
@@ -50,4 +58,5 @@ class ReadWindowProtocol(WebSocketsSansIOProtocol):
         message = await super().receive()
         if message["type"] == "websocket.receive" and self.queued_sizes:
             self.queued_bytes -= self.queued_sizes.popleft()
+            message[ARRIVED_AT] = self.queued_arrivals.popleft()  # type: ignore[literal-required]
         return message

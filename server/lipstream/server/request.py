@@ -21,7 +21,10 @@ model can be driven by audio alone (``Model.accepts_audio_only``: ``hmm`` with a
 vocal model); its input then covers the audio received. Any other request
 that sent audio and no phonemes ends at ``end`` with ``audio_only_unsupported``.
 
-Endings: ``end`` flushes the engine and sends ``done``; ``cancel`` sends
+Endings: ``end`` flushes the engine, then settles the face: the frames after the
+last one blend from it to the rest pose with the same smoothstep over the default
+``return_ms`` (at least one frame; the last one is the rest pose, so a face never
+stays mid-word, whatever the engine), then ``done``; ``cancel`` sends
 ``done`` at once; ``interrupt`` at time ``at`` flushes the engine, sends the
 frames before ``ceil(at × fps)`` not yet sent, then a block starting at that
 frame that blends, in output space, from the face there to the rest pose
@@ -54,7 +57,7 @@ from lipstream_client.errors import (
     UNKNOWN_EMOTION,
     UNKNOWN_PHONEME,
 )
-from lipstream_client.messages import DoneReason, JsonValue
+from lipstream_client.messages import MAX_FPS, MAX_RETURN_MS, MAX_SEQ, DoneReason, JsonValue
 
 from ..audio import Audio
 from ..engines.base import Synthesizer, frame_count, frames_before
@@ -108,6 +111,13 @@ class RequestLimits:
     max_values: int | None = None
     tail_values: int = SENT_TAIL_VALUES
     max_seconds: float | None = None
+
+
+def most_blocks(limits: RequestLimits) -> int:
+    """The most ``frames`` blocks one request may send: a block per frame up to its limit
+    (one more for audio that ends on the limit), then an interrupt's return to rest of
+    ``MAX_RETURN_MS`` at ``MAX_FPS``, a block per row."""
+    return limits.max_frames + 1 + math.ceil(MAX_RETURN_MS * MAX_FPS / 1000.0) + 1
 
 
 class SentTail:
@@ -230,25 +240,53 @@ class ActiveRequest:
     ) -> list[Outgoing]:
         """Take the next phonemes; the connection may send ``session_max_values`` values
         (None: no limit), of which its other requests hold ``others``."""
-        if self.n_phonemes + len(items) > self.limits.max_phonemes:
-            raise RequestError(
-                f"the request would hold {self.n_phonemes + len(items)} phonemes; the server "
-                f"allows {self.limits.max_phonemes} per request",
-                code=TOO_MANY_PHONEMES,
-                where="items",
-                details={"max_phonemes": self.limits.max_phonemes},
-            )
+        self._check_count(len(items), "items")
         spans = [
             self._span(item, f"items[{index}]", self.phonemes_end if index == 0 else None)
             for index, item in enumerate(items)
         ]
         self._check_output(spans[-1].end, session_max_values, others)
         self._feed(spans, None, INVALID_REQUEST)
+        return self._took(spans, now)
+
+    def add_speech(
+        self,
+        spans: Sequence[PhonemeSpan],
+        speech: Audio,
+        now: float,
+        session_max_values: int | None = None,
+        others: int = 0,
+    ) -> list[Outgoing]:
+        """Take spoken text: its canonical ``spans``, contiguous from the end of the input so
+        far, and ``speech``, the audio that says them, continuing the request's audio. The
+        engine gets both in one call, so a model that hears and reads is driven by both."""
+        self._check_count(len(spans), "text")
+        for span in spans:
+            self._check_end(span.end, "text")
+        self._check_output(spans[-1].end, session_max_values, others)
+        self._check_audio(speech.sample_rate, speech.duration)
+        self._feed(list(spans), speech if self.spec.uses_audio else None, INVALID_REQUEST)
+        self.audio_rate = speech.sample_rate
+        self.audio_s += speech.duration
+        return self._took(spans, now)
+
+    def _took(self, spans: Sequence[PhonemeSpan], now: float) -> list[Outgoing]:
+        """The frames the engine released after taking ``spans``."""
         self.n_phonemes += len(spans)
         self.ends.extend(span.end for span in spans)
         self.phonemes_end = spans[-1].end
         self.coverage.advance(self._covered_until(), now)
         return self._emit(self.synthesizer.frames(), now)
+
+    def _check_count(self, count: int, where: str) -> None:
+        if self.n_phonemes + count > self.limits.max_phonemes:
+            raise RequestError(
+                f"the request would hold {self.n_phonemes + count} phonemes; the server "
+                f"allows {self.limits.max_phonemes} per request",
+                code=TOO_MANY_PHONEMES,
+                where=where,
+                details={"max_phonemes": self.limits.max_phonemes},
+            )
 
     def _span(self, item: PhonemeItem, where: str, previous_end: float | None) -> PhonemeSpan:
         if previous_end is not None and item.start < previous_end - TIME_TOLERANCE_S:
@@ -270,23 +308,27 @@ class ActiveRequest:
                 code=UNKNOWN_EMOTION,
                 where=f"{where}.emotion",
             )
-        if frame_count(item.end, self.spec.fps) > self.limits.max_frames:
+        self._check_end(item.end, f"{where}.end")
+        return PhonemeSpan(phoneme, item.start, item.end, item.emotion)
+
+    def _check_end(self, end: float, where: str) -> None:
+        """INVALID_TIMES for input ending beyond the server's frames or seconds per request."""
+        if frame_count(end, self.spec.fps) > self.limits.max_frames:
             raise RequestError(
-                f"ends at {item.end} s, beyond the server's limit of {self.limits.max_frames} "
+                f"ends at {end} s, beyond the server's limit of {self.limits.max_frames} "
                 f"frames per request at {self.spec.fps:g} fps",
                 code=INVALID_TIMES,
-                where=f"{where}.end",
+                where=where,
                 details={"max_frames": self.limits.max_frames},
             )
         longest = self.limits.max_seconds
-        if longest is not None and item.end > longest + TIME_TOLERANCE_S:
+        if longest is not None and end > longest + TIME_TOLERANCE_S:
             raise RequestError(
-                f"ends at {item.end} s, beyond the server's limit of {longest:g} s per request",
+                f"ends at {end} s, beyond the server's limit of {longest:g} s per request",
                 code=INVALID_TIMES,
-                where=f"{where}.end",
+                where=where,
                 details={"max_request_s": longest},
             )
-        return PhonemeSpan(phoneme, item.start, item.end, item.emotion)
 
     def _check_output(self, end_s: float, session_max_values: int | None, others: int) -> None:
         """OUTPUT_TOO_LARGE if input up to ``end_s`` would commit this request to more output
@@ -320,21 +362,7 @@ class ActiveRequest:
         )
 
     def add_audio(self, chunk: AudioChunk, now: float) -> list[Outgoing]:
-        if self.audio_rate is not None and chunk.sample_rate != self.audio_rate:
-            raise RequestError(
-                f"{chunk.sample_rate} Hz follows audio at {self.audio_rate} Hz in this request",
-                code=INVALID_AUDIO,
-                where="sample_rate",
-            )
-        limit_s = self.limits.max_frames / self.spec.fps
-        if self.limits.max_seconds is not None:
-            limit_s = min(limit_s, self.limits.max_seconds)
-        if self.audio_s + chunk.duration > limit_s:
-            raise RequestError(
-                f"the request's audio would exceed the server's limit of {limit_s:g} s",
-                code=INVALID_AUDIO,
-                where="pcm16",
-            )
+        self._check_audio(chunk.sample_rate, chunk.duration)
         self.audio_rate = chunk.sample_rate
         self.audio_s += chunk.duration
         if not self.spec.uses_audio:
@@ -342,6 +370,24 @@ class ActiveRequest:
         self._feed([], Audio.from_pcm16(chunk.pcm16, chunk.sample_rate), INVALID_AUDIO)
         self.coverage.advance(self._covered_until(), now)
         return self._emit(self.synthesizer.frames(), now)
+
+    def _check_audio(self, sample_rate: int, duration: float) -> None:
+        """INVALID_AUDIO for audio at another rate than the request's, or beyond its limit."""
+        if self.audio_rate is not None and sample_rate != self.audio_rate:
+            raise RequestError(
+                f"{sample_rate} Hz follows audio at {self.audio_rate} Hz in this request",
+                code=INVALID_AUDIO,
+                where="sample_rate",
+            )
+        limit_s = self.limits.max_frames / self.spec.fps
+        if self.limits.max_seconds is not None:
+            limit_s = min(limit_s, self.limits.max_seconds)
+        if self.audio_s + duration > limit_s:
+            raise RequestError(
+                f"the request's audio would exceed the server's limit of {limit_s:g} s",
+                code=INVALID_AUDIO,
+                where="pcm16",
+            )
 
     def _covered_until(self) -> float:
         if self.spec.uses_audio and self.audio_rate is not None:
@@ -385,7 +431,19 @@ class ActiveRequest:
     def end(self, now: float) -> list[Outgoing]:
         self._check_drivable()
         blocks = self._emit(self._finish(), now)
+        blocks += self._send(self._settling(), now)
         return blocks + [self._done("end", self.next_frame)]
+
+    def _settling(self) -> np.ndarray:
+        """The frames after the last one sent that take the face to rest (none when no
+        frame was sent: the face never left rest)."""
+        if self.next_frame == 0:
+            return self._no_rows()
+        face = np.asarray(self.tail.row(self.next_frame - 1), dtype=np.float64)
+        steps = max(1, settle_frames(self.limits.default_return_ms, self.spec.fps))
+        weights = _smoothstep(np.arange(1, steps + 1) / steps)
+        rows: np.ndarray = face + (self.spec.rest - face) * weights[:, None]
+        return np.asarray(rows, dtype=np.float32)
 
     def cancel(self) -> list[Outgoing]:
         return [self._done("cancel", self.next_frame)]
@@ -399,8 +457,9 @@ class ActiveRequest:
         unsent = self.spec.profile.apply(final) if len(final) else self._no_rows()
         blocks = self._send(unsent[: max(0, first_return - base)], now)
         face = self._face(first_return, base, unsent)
-        seconds = (self.limits.default_return_ms if return_ms is None else return_ms) / 1000.0
-        steps = max(0, math.ceil(seconds * fps - TIME_TOLERANCE_S))
+        steps = settle_frames(
+            self.limits.default_return_ms if return_ms is None else return_ms, fps
+        )
         weights = _smoothstep(np.arange(steps + 1) / steps) if steps else np.ones(1)
         rows = face + (self.spec.rest - face) * weights[:, None]
         blocks += self._blocks(rows.astype(np.float32), first_return, covered_at=now)
@@ -449,6 +508,14 @@ class ActiveRequest:
                 if covered_at is not None
                 else self.coverage.received_at(index / spec.fps)
             )
+            if self.seq > MAX_SEQ:
+                raise RequestError(
+                    f"the request's next frames block would be numbered past the protocol's "
+                    f"bound of {MAX_SEQ}",
+                    code=OUTPUT_TOO_LARGE,
+                    where="seq",
+                    details={"max_seq": MAX_SEQ},
+                )
             data = np.ascontiguousarray(chunk, dtype="<f4").tobytes()
             frames = Frames(spec.id, self.seq, index, spec.fps, spec.profile.n_channels, data)
             self.seq += 1
@@ -458,6 +525,11 @@ class ActiveRequest:
     def _done(self, reason: DoneReason, frames: int) -> Outgoing:
         stats = DoneStats(frames=frames, engine=json_safe(self.synthesizer.stats))
         return Outgoing(Done(self.spec.id, stats, reason), self.spec.clock)
+
+
+def settle_frames(return_ms: float, fps: float) -> int:
+    """The frames a return to rest over ``return_ms`` takes after the face it starts from."""
+    return max(0, math.ceil(return_ms / 1000.0 * fps - TIME_TOLERANCE_S))
 
 
 def _smoothstep(u: np.ndarray) -> np.ndarray:

@@ -14,7 +14,23 @@ the request's type), carries ``ready``'s resolved parameters, every frame
 (float32 little-endian ``bin`` in msgpack, rows of shortest float32 decimals
 in JSON) and ``done``'s stats; with ``Accept: text/csv`` it is the frames
 alone as the corpus frame CSV (``time`` and one column per output channel,
-``%.6f``). Errors answer with an HTTP status and
+``%.6f``). Every answer is streamed (chunked transfer encoding), each
+piece once the previous one is in the connection's buffer. A JSON answer's
+numbers are encoded ``JSON_CHUNK_VALUES`` at a time in the synthesis pool,
+so the JSON encoder (a C call that holds the GIL for its whole input:
+seconds for a long answer at 1000 fps) never holds the event loop for more
+than one piece, a client that reads slowly holds its rows as float32 (a
+third of their JSON), not as text, and the bytes are exactly those of one
+``json.dumps`` of the whole answer; a msgpack or CSV answer (milliseconds to
+encode) is encoded whole in the pool and sent ``SLICE_BYTES`` at a time.
+From the end of its synthesis until its last piece is handed to the
+connection or its client is gone, an answer's held bytes (a JSON answer's
+frames, a msgpack or CSV answer's encoding) count toward the memory
+ceiling (``ServerState.answer_bytes``, ``lipstream_rest_answer_bytes``):
+each new request is checked against the latest resident-memory figure
+plus them, so a burst of answers left unread is refused before the next
+sample could see it (bytes already in that figure count twice, the safe
+side). Errors answer with an HTTP status and
 ``{"error": {"code", "message", "details"}}`` in the response's type (JSON
 when CSV was asked for); above the memory ceiling (``overload``) the request
 is refused before its body is read, with 503 ``server_busy``,
@@ -27,14 +43,15 @@ import asyncio
 import json
 import math
 import time
-from collections.abc import Mapping
+from collections.abc import AsyncIterator, Callable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import msgpack
 import numpy as np
 from starlette.requests import Request
-from starlette.responses import Response
+from starlette.responses import Response, StreamingResponse
+from starlette.types import Receive, Scope, Send
 
 from lipstream_client import (
     Done,
@@ -58,6 +75,7 @@ from lipstream_client.errors import (
 
 from ..corpus.frames_csv import frames_csv_text
 from .admission import bearer_token, token_accepted
+from .load import MIB
 from .session import Session
 from .state import ServerState
 
@@ -94,6 +112,7 @@ STATUS = {
     "unknown_engine": 404,
     "unknown_character": 404,
     MESSAGE_TOO_LARGE: 413,
+    "input_too_large": 503,
     UNAUTHORIZED: 401,
     "unsupported_media_type": 415,
     "not_acceptable": 406,
@@ -101,6 +120,9 @@ STATUS = {
     SERVER_BUSY: 503,
 }
 UNPROCESSABLE = 422
+JSON_CHUNK_VALUES = 4096  # numbers per piece of a streamed JSON answer: milliseconds of GIL
+JSON_SEPARATORS = (",", ":")
+SLICE_BYTES = 1 << 18  # a piece of a msgpack or CSV answer
 
 
 class HttpError(Exception):
@@ -141,9 +163,15 @@ async def synthesize(request: Request, state: ServerState) -> Response:
         body = await _read_body(request, state.settings.max_body_bytes)
         messages = _messages(_parse(body, request_encoding), request_encoding)
         loop = asyncio.get_running_loop()
-        response = await loop.run_in_executor(
-            state.heavy, _answer, messages, state, response_encoding
-        )
+        lane = state.speech.client(rest_client(request))
+        if response_encoding == "json":
+            result = await loop.run_in_executor(lane, _run, messages, state)
+            response = _held_answer(
+                _json_pieces(result, state), result.frames.nbytes, "json", state
+            )
+        else:
+            whole = await loop.run_in_executor(lane, _answer, messages, state, response_encoding)
+            response = _held_answer(_slices(whole), len(whole), response_encoding, state)
     except HttpError as error:
         state.metrics.errors.labels(error.code).inc()
         return error_response(error, "json" if response_encoding == "csv" else response_encoding)
@@ -151,10 +179,21 @@ async def synthesize(request: Request, state: ServerState) -> Response:
     return response
 
 
-def _answer(messages: list[Message], state: ServerState, encoding: ResponseFormat) -> Response:
-    """Synthesize and encode the response (in the thread pool: both scale with the
-    utterance)."""
-    return _response(_run(messages, state), encoding)
+def rest_client(request: Request) -> tuple[str, str]:
+    """The key a REST call takes its turns in the speech lane under: its client's address."""
+    return ("rest", request.client.host if request.client is not None else "")
+
+
+def _answer(messages: list[Message], state: ServerState, encoding: ResponseFormat) -> bytes:
+    """Synthesize and encode a msgpack or CSV answer (in the thread pool: both scale with
+    the utterance; their encoders take milliseconds where JSON's takes seconds)."""
+    result = _run(messages, state)
+    if encoding == "csv":
+        return frames_csv_text(result.frames, result.ready.channels, result.ready.fps).encode()
+    body = _fields(result)
+    body["data"] = np.ascontiguousarray(result.frames, dtype="<f4").tobytes()
+    packed: bytes = msgpack.packb(body, use_bin_type=True)
+    return packed
 
 
 def _request_encoding(request: Request) -> Encoding:
@@ -191,8 +230,9 @@ def _response_encoding(request: Request, default: Encoding) -> ResponseFormat:
 
 
 def _admit(state: ServerState) -> None:
-    """503 ``server_busy`` while the server is above its memory ceiling (``overload``)."""
-    refusal = state.overload.request_refusal()
+    """503 ``server_busy`` while the server, with the frames of the answers still being
+    sent, is above its memory ceiling (``overload``)."""
+    refusal = state.overload.request_refusal(held_mb=state.answer_bytes / MIB)
     if refusal is not None:
         raise HttpError(refusal.code, refusal.message, details=refusal.details)
 
@@ -271,21 +311,28 @@ def _decoded(kind: str, fields: dict[str, Any], encoding: Encoding) -> Message:
 
 def _run(messages: list[Message], state: ServerState) -> Synthesis:
     """Play the messages through a one-request session (in the thread pool)."""
-    session = Session(state.catalog, replace(state.session_limits, max_requests=1))
+    session = Session(
+        state.catalog,
+        replace(state.session_limits, max_requests=1),
+        input_ledger=state.input_ledger,
+    )
     ready: Ready | None = None
     done: Done | None = None
     blocks: list[np.ndarray] = []
-    for message in messages:
-        for outgoing in session.handle(message, time.monotonic()):
-            answer = outgoing.message
-            if isinstance(answer, ErrorMessage):
-                raise HttpError(answer.code, answer.message, details=answer.details)
-            if isinstance(answer, Ready):
-                ready = answer
-            elif isinstance(answer, Frames):
-                blocks.append(np.frombuffer(answer.data, "<f4").reshape(-1, answer.n_channels))
-            elif isinstance(answer, Done):
-                done = answer
+    try:
+        for message in messages:
+            for outgoing in session.handle(message, time.monotonic()):
+                answer = outgoing.message
+                if isinstance(answer, ErrorMessage):
+                    raise HttpError(answer.code, answer.message, details=answer.details)
+                if isinstance(answer, Ready):
+                    ready = answer
+                elif isinstance(answer, Frames):
+                    blocks.append(np.frombuffer(answer.data, "<f4").reshape(-1, answer.n_channels))
+                elif isinstance(answer, Done):
+                    done = answer
+    finally:
+        session.close()  # releases what the request held of its input
     if ready is None or done is None:
         raise HttpError(INTERNAL_ERROR, "the synthesis did not complete")
     width = len(ready.channels)
@@ -293,10 +340,69 @@ def _run(messages: list[Message], state: ServerState) -> Synthesis:
     return Synthesis(ready, frames, done)
 
 
-def _response(result: Synthesis, encoding: ResponseFormat) -> Response:
+class HeldAnswer(StreamingResponse):
+    """A streamed answer that runs ``on_end`` once, however its sending ends (the last
+    piece handed to the connection, or the client gone)."""
+
+    def __init__(self, pieces: AsyncIterator[bytes], media_type: str, on_end: Callable[[], None]):
+        super().__init__(pieces, media_type=media_type)
+        self.on_end = on_end
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        try:
+            await super().__call__(scope, receive, send)
+        finally:
+            self.on_end()
+
+
+def _held_answer(
+    pieces: AsyncIterator[bytes], held: int, encoding: ResponseFormat, state: ServerState
+) -> HeldAnswer:
+    """``pieces`` as a streamed answer whose ``held`` bytes count in ``state.answer_bytes``
+    until it ends."""
+    state.answer_bytes += held
+    state.metrics.answer_bytes.set(state.answer_bytes)
+
+    def release() -> None:
+        state.answer_bytes -= held
+        state.metrics.answer_bytes.set(state.answer_bytes)
+
+    media_type = CSV_TYPE if encoding == "csv" else RESPONSE_TYPES[encoding]
+    return HeldAnswer(pieces, media_type, release)
+
+
+async def _slices(whole: bytes) -> AsyncIterator[bytes]:
+    """An encoded answer ``SLICE_BYTES`` at a time, each once the previous one is in the
+    connection's buffer."""
+    view = memoryview(whole)
+    for start in range(0, len(whole), SLICE_BYTES):
+        yield bytes(view[start : start + SLICE_BYTES])
+
+
+async def _json_pieces(result: Synthesis, state: ServerState) -> AsyncIterator[bytes]:
+    """The bytes of ``json.dumps(answer)``: the fields up to ``"data":[``, the rows
+    ``JSON_CHUNK_VALUES`` numbers at a time (each encoded in the pool), then ``]}``."""
+    loop = asyncio.get_running_loop()
+    frames = result.frames
+    head = json.dumps({**_fields(result), "data": []}, allow_nan=False, separators=JSON_SEPARATORS)
+    yield head[: -len("]}")].encode()
+    rows = max(1, JSON_CHUNK_VALUES // max(1, frames.shape[1]))
+    for start in range(0, len(frames), rows):
+        piece = await loop.run_in_executor(state.executor, _json_rows, frames[start : start + rows])
+        yield piece if start == 0 else b"," + piece
+    yield b"]}"
+
+
+def _json_rows(frames: np.ndarray) -> bytes:
+    """``frames`` as JSON rows of shortest float32 decimals, without the enclosing list's
+    brackets."""
+    rows = [[float(value) for value in row] for row in frames.astype(str)]
+    return json.dumps(rows, allow_nan=False, separators=JSON_SEPARATORS)[1:-1].encode()
+
+
+def _fields(result: Synthesis) -> dict[str, Any]:
+    """The answer's fields before ``data``: ``ready``'s parameters and ``done``'s stats."""
     ready, frames = result.ready, result.frames
-    if encoding == "csv":
-        return Response(frames_csv_text(frames, ready.channels, ready.fps), media_type=CSV_TYPE)
     body: dict[str, Any] = {
         "engine": ready.engine,
         "character": ready.character,
@@ -313,15 +419,7 @@ def _response(result: Synthesis, encoding: ResponseFormat) -> Response:
         "n_channels": len(ready.channels),
         "stats": {"frames": result.done.stats.frames, "engine": dict(result.done.stats.engine)},
     }
-    body = {key: value for key, value in body.items() if value is not None}
-    if encoding == "msgpack":
-        body["data"] = np.ascontiguousarray(frames, dtype="<f4").tobytes()
-        return Response(msgpack.packb(body, use_bin_type=True), media_type=RESPONSE_TYPES[encoding])
-    body["data"] = [[float(value) for value in row] for row in frames.astype(str)]
-    return Response(
-        json.dumps(body, allow_nan=False, separators=(",", ":")),
-        media_type=RESPONSE_TYPES[encoding],
-    )
+    return {key: value for key, value in body.items() if value is not None}
 
 
 def error_response(error: HttpError, encoding: Encoding) -> Response:

@@ -29,6 +29,7 @@ from dataclasses import dataclass, replace
 from lipstream_client import AudioChunk, Frames, Resume
 from lipstream_client.errors import RESUME_MISMATCH
 from lipstream_client.float32 import FLOAT32_BYTES
+from lipstream_client.messages import MAX_SEQ
 
 from ..errors import LipstreamError
 from .budget import CUSTOM_FIDELITY, RungEstimate
@@ -55,6 +56,18 @@ def pinned_rung(ladder: Sequence[RungEstimate], resume: Resume | None) -> RungEs
         f"this server's model has no fidelity rung {resume.fidelity!r} (it has {names}), "
         f"so it cannot continue the request's frames; start the request anew",
         where="resume.fidelity",
+    )
+
+
+def check_seq_room(resume: Resume | None, most_blocks: int) -> None:
+    """``ResumeMismatch`` when a request that may send ``most_blocks`` blocks, numbered from
+    ``resume.seq``, could need a ``seq`` past ``MAX_SEQ``, the protocol's bound."""
+    if resume is None or resume.seq + most_blocks - 1 <= MAX_SEQ:
+        return
+    raise ResumeMismatch(
+        f"{resume.seq} leaves no room to number the up to {most_blocks} frames blocks this "
+        f"request may send within the protocol's bound of {MAX_SEQ}; start the request anew",
+        where="resume.seq",
     )
 
 
@@ -97,6 +110,12 @@ class ResumeCursor:
         held = 0 if superseding else max(0, min(self.frames, block.end_frame) - block.first_frame)
         if held == block.n_frames:
             return None
+        if self.seq > MAX_SEQ:
+            raise ResumeMismatch(
+                f"the request's next frames block would be numbered past the protocol's bound "
+                f"of {MAX_SEQ}",
+                where="resume.seq",
+            )
         data = block.data[held * block.n_channels * FLOAT32_BYTES :]
         unsent = replace(block, seq=self.seq, first_frame=block.first_frame + held, data=data)
         self.seq += 1

@@ -23,39 +23,83 @@ workers whole, as JSON in one private variable (``WORKER_APP_ENV``) that is
 set only while uvicorn runs, so serving leaves ``os.environ`` as it found it.
 Either way the app is told it owns its process (``serving_process``), so it
 freezes the collector's view of its models once they load.
+
+With several workers, SIGTERM reaches the supervisor, which uvicorn's loop looks at only
+every half second before it signals the workers: until then each worker's ``/readyz``
+would still say ready. So the supervisor (``DrainingSupervisor``) marks the drain in
+state the workers share, a file in a private directory named in ``WORKER_APP_ENV``, from
+its signal handler, before uvicorn's loop sees the signal; a worker's ``/readyz`` answers
+503 from then on (``ServerState.ready``).
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import os
+import shutil
+import signal
+import socket
+import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import asdict
 from pathlib import Path
+from types import FrameType
 from typing import Any
 
 import uvicorn
 from fastapi import FastAPI
+from uvicorn.supervisors import Multiprocess
 
 from ..config import ServerSettings, load_settings
 from ..models import ModelRegistry
 from .app import create_app
 from .closing import BoundedCloseProtocol
 from .handshake import GuardedHTTPProtocol
+from .lifecycle import DRAIN_SIGNALS
 from .open_files import raise_open_file_limit
+
+logger = logging.getLogger("uvicorn.error")
 
 APP_FACTORY = "lipstream.server.runner:app_from_environment"
 WORKER_APP_ENV = "LIPSTREAM_WORKER_APP"
 GRACEFUL_EXIT_S = 5.0
 WORKER_HEALTHCHECK_S = 30
+DRAIN_FLAG = "draining"
+DRAIN_MARKED = "draining: /readyz answers 503 from now on"
 
 
-def encode_worker_app(models: Path, server: ServerSettings) -> str:
-    """The models path and settings of the serving process, for its workers."""
+class DrainingSupervisor(Multiprocess):
+    """uvicorn's supervisor of worker processes, which marks the drain in ``drain_flag`` as
+    soon as a drain signal arrives."""
+
+    def __init__(self, config: uvicorn.Config, sockets: list[socket.socket], drain_flag: Path):
+        super().__init__(config, sockets)
+        self.drain_flag = drain_flag
+        for sig in DRAIN_SIGNALS:
+            signal.signal(sig, self.on_drain_signal)
+
+    def on_drain_signal(self, sig: int, frame: FrameType | None) -> None:
+        if not self.drain_flag.exists():
+            self.drain_flag.touch()
+            logger.warning(DRAIN_MARKED)
+        self.signal_queue.append(sig)
+
+
+def encode_worker_app(models: Path, server: ServerSettings, drain_flag: Path | None = None) -> str:
+    """The models path and settings of the serving process, and where its supervisor marks
+    the drain, for its workers."""
     fields = asdict(server)
     fields["profiles"] = None if server.profiles is None else str(server.profiles)
-    return json.dumps({"models": str(models), "server": fields})
+    flag = None if drain_flag is None else str(drain_flag)
+    return json.dumps({"models": str(models), "server": fields, "drain_flag": flag})
+
+
+def worker_drain_flag(text: str) -> Path | None:
+    """Where the supervisor of the workers ``text`` describes marks the drain."""
+    flag = json.loads(text).get("drain_flag")
+    return None if flag is None else Path(flag)
 
 
 def decode_worker_app(text: str) -> tuple[Path, ServerSettings]:
@@ -74,7 +118,8 @@ def app_from_environment() -> FastAPI:
     described = os.environ.get(WORKER_APP_ENV)
     if described:
         models, server = decode_worker_app(described)
-        return create_app(models, server, serving_process=True)
+        flag = worker_drain_flag(described)
+        return create_app(models, server, serving_process=True, drain_flag=flag)
     settings = load_settings()
     return create_app(settings.models, settings.server, serving_process=True)
 
@@ -123,16 +168,39 @@ def serve(
     SIGINT, draining first (see ``lifecycle``)."""
     raise_open_file_limit()
     if server.workers > 1:
-        with exported(WORKER_APP_ENV, encode_worker_app(models, server)):
-            uvicorn.run(
-                APP_FACTORY,
-                factory=True,
-                host=host,
-                port=port,
-                workers=server.workers,
-                **uvicorn_options(server),
-            )
+        with drain_flag_path() as flag:
+            with exported(WORKER_APP_ENV, encode_worker_app(models, server, flag)):
+                supervise(host, port, server, flag)
         return
     app = create_app(models, server, registry, serving_process=True)
     config = uvicorn.Config(app, host=host, port=port, **uvicorn_options(server))
     uvicorn.Server(config).run()
+
+
+@contextmanager
+def drain_flag_path() -> Iterator[Path]:
+    """Where a supervisor marks the drain: a file not yet there, in a private directory that
+    is removed with it afterwards."""
+    directory = Path(tempfile.mkdtemp(prefix="lipstream-drain-"))
+    try:
+        yield directory / DRAIN_FLAG
+    finally:
+        shutil.rmtree(directory, ignore_errors=True)
+
+
+def supervise(host: str, port: int, server: ServerSettings, drain_flag: Path) -> None:
+    """``server.workers`` worker processes of ``APP_FACTORY`` under a ``DrainingSupervisor``
+    (what ``uvicorn.run`` does for several workers, with that supervisor)."""
+    config = uvicorn.Config(
+        APP_FACTORY,
+        factory=True,
+        host=host,
+        port=port,
+        workers=server.workers,
+        **uvicorn_options(server),
+    )
+    sock = config.bind_socket()
+    try:
+        DrainingSupervisor(config, [sock], drain_flag).run()
+    except KeyboardInterrupt:
+        pass

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from bisect import bisect_right
 from collections import OrderedDict
 from collections.abc import Callable, Mapping
@@ -70,6 +71,7 @@ from lipstream_client.errors import (
     UNKNOWN_REQUEST,
     UNKNOWN_TYPE,
 )
+from lipstream_client.float32 import FLOAT32_BYTES
 from lipstream_client.messages import DoneReason, JsonValue
 
 from ..engines.base import CallCost, Model, Rung, SynthesisRequest, frame_count
@@ -86,17 +88,25 @@ from .budget import (
 )
 from .calibration import PHONEME_S
 from .catalog import Catalog
+from .held_input import UNLIMITED_INPUT, Holding, InputLedger
 from .outgoing import Outgoing, RequestClock
 from .overload import Refusal
 from .profiles import requested_profile, resolve_profile
-from .request import ActiveRequest, RequestError, RequestLimits, RequestSpec, protocol_code
-from .resume import ResumeCursor, pinned_rung
+from .request import (
+    ActiveRequest,
+    RequestError,
+    RequestLimits,
+    RequestSpec,
+    most_blocks,
+    protocol_code,
+    settle_frames,
+)
+from .resume import ResumeCursor, check_seq_room, pinned_rung
 from .text_input import (
     engine_audio,
-    phoneme_items,
-    reading_arpabet,
     speak,
     speech_messages,
+    speech_spans,
     speech_start,
 )
 
@@ -133,13 +143,23 @@ class Session:
         self,
         catalog: Catalog,
         limits: SessionLimits,
-        refuse_start: Callable[[], Refusal | None] = lambda: None,
+        refuse_start: Callable[[str], Refusal | None] = lambda engine: None,
+        input_ledger: InputLedger | None = None,
+        timer: Callable[[], float] = time.perf_counter,
     ) -> None:
-        """``refuse_start`` says whether the server takes on a new request now (its memory
-        ceiling: ``overload``); a refusal ends the ``start`` with its code and details."""
+        """``refuse_start`` says whether the server takes on a new request of an engine now
+        (its memory ceiling and load: ``overload``); a refusal ends the ``start`` with its
+        code and details.
+        ``input_ledger`` counts the audio input the process's requests hold (``held_input``;
+        by default this session's own, without a limit). ``timer`` (s) times speech
+        synthesis, which a text request's lag does not count."""
         self.catalog = catalog
+        self.timer = timer
         self.limits = limits
         self.refuse_start = refuse_start
+        self.input_ledger = input_ledger or InputLedger(UNLIMITED_INPUT)
+        self.holdings: dict[str, Holding] = {}
+        self.too_large: dict[str, LipstreamError] = {}
         self.requests: dict[str, ActiveRequest] = {}
         self.costs: dict[str, CallCost] = {}
         self.guards: dict[str, WorkGuard] = {}
@@ -166,6 +186,10 @@ class Session:
         self.costs.clear()
         self.guards.clear()
         self.resumes.clear()
+        for holding in self.holdings.values():
+            holding.release()
+        self.holdings.clear()
+        self.too_large.clear()
         self.output_values = 0
         return dropped
 
@@ -191,14 +215,31 @@ class Session:
             phonemes = math.ceil(received.duration / PHONEME_S)
         else:
             phonemes = len(request.ends) - bisect_right(request.ends, request.next_frame / fps)
-            if isinstance(received, Interrupt):
-                return_ms = received.return_ms
-                if return_ms is None:
-                    return_ms = self.limits.request.default_return_ms
-                extra_frames = math.ceil(return_ms * fps / 1000.0) + 1
+            default_ms = self.limits.request.default_return_ms
+            if isinstance(received, Interrupt):  # the return to rest, from the cut frame on
+                return_ms = default_ms if received.return_ms is None else received.return_ms
+                extra_frames = settle_frames(return_ms, fps) + 1
+            else:  # the return to rest after the last frame
+                extra_frames = max(1, settle_frames(default_ms, fps))
         released = min(frame_count(until, fps), self.limits.request.max_frames)
         frames = max(0, released - request.next_frame) + extra_frames
         return self.costs[received.id].ms(phonemes, frames)
+
+    def check_queued(self, identifier: str, phonemes: int) -> None:
+        """Active request ``identifier`` has ``phonemes`` more phonemes received and waiting
+        (read ahead while its work runs): if its engine cannot take that many more
+        (``Synthesizer.check_more_phonemes``: PQ-Matching's ``search_too_large``), stop its
+        work now; its next message handled ends it with that error. (The count is a lower
+        bound, since the message being handled is no longer waiting and the engine may not
+        have taken it yet, so no request is refused that would have been taken.)"""
+        request = self.requests.get(identifier)
+        if request is None or identifier in self.too_large:
+            return
+        try:
+            request.synthesizer.check_more_phonemes(phonemes)
+        except LipstreamError as error:
+            self.too_large[identifier] = error
+            self.stop_work(identifier)
 
     def stop_work(self, identifier: str) -> None:
         """Stop the work of active request ``identifier`` at its next step (the client sent
@@ -296,34 +337,68 @@ class Session:
         guard = self.guards[request.id]
         request.last_input = now
         self.requests[request.id] = self.requests.pop(request.id)
+        cursor = self.resumes.get(request.id)
+        too_large = self.too_large.get(request.id)
+        if too_large is not None and not isinstance(received, Cancel):
+            return self._end_with(request, too_large)
         try:
             outgoing = self._metered(guard, request, received, now, meter_clock)
+            if cursor is not None:
+                outgoing = cursor.filter(outgoing)
         except LipstreamError as error:
+            too_large = self.too_large.get(request.id)
+            if too_large is not None and not isinstance(received, Cancel):
+                return self._end_with(request, too_large)
             if guard.cancelled and not isinstance(received, Cancel):
                 # Stopped by the client's cancel, which follows in order and ends it, or by
                 # the end of the connection.
                 self.stopped_work += 1
                 return []
-            self._forget(request.id)
-            details = error.details if isinstance(error, RequestError) else None
-            code = error.code if isinstance(error, RequestError) else None
-            return [
-                _error(
-                    code or protocol_code(error, INVALID_REQUEST),
-                    _located(error),
-                    request.id,
-                    fatal=True,
-                    details=details,
-                    clock=request.spec.clock,
-                )
-            ]
-        cursor = self.resumes.get(request.id)
-        if cursor is not None:
-            outgoing = cursor.filter(outgoing)
+            return self._end_with(request, error)
         if isinstance(received, (End, Cancel, Interrupt)):
             self._forget(request.id)
             self._remember(request.id, _REASONS[type(received)])
+        else:
+            self._hold(request)
         return outgoing
+
+    def _end_with(self, request: ActiveRequest, error: LipstreamError) -> list[Outgoing]:
+        """End ``request`` with ``error``, fatal."""
+        self._forget(request.id)
+        details = error.details if isinstance(error, RequestError) else None
+        code = error.code if isinstance(error, RequestError) else None
+        return [
+            _error(
+                code or protocol_code(error, INVALID_REQUEST),
+                _located(error),
+                request.id,
+                fatal=True,
+                details=details,
+                clock=request.spec.clock,
+            )
+        ]
+
+    def _hold(self, request: ActiveRequest) -> None:
+        """Count what ``request`` holds of its input now (only an engine that reads audio
+        holds any)."""
+        if not request.spec.uses_audio:
+            return
+        holding = self.holdings.get(request.id)
+        if holding is None:
+            holding = self.holdings[request.id] = self.input_ledger.holding()
+        holding.update(request.synthesizer.held_input_bytes)
+
+    def _admit_input(self, request: ActiveRequest, chunk: AudioChunk) -> None:
+        """``input_too_large`` unless the process may hold what ``request`` holds while it
+        takes in ``chunk`` (its engine's bound, and the chunk as float32 samples); that much
+        is counted until the request reports what it holds after."""
+        if not request.spec.uses_audio:
+            return
+        holding = self.holdings.get(request.id)
+        if holding is None:
+            holding = self.holdings[request.id] = self.input_ledger.holding()
+        bound = request.synthesizer.held_input_bytes_after(chunk.n_samples, chunk.sample_rate)
+        holding.admit(bound + chunk.n_samples * FLOAT32_BYTES)
 
     def _metered(
         self,
@@ -351,6 +426,7 @@ class Session:
                 self.output_values += request.output_values - before
         if isinstance(received, AudioChunk):
             _check_audio_start(request, received)
+            self._admit_input(request, received)
             return request.add_audio(received, now)
         if isinstance(received, Text):
             return self._speak(request, received, now)
@@ -362,14 +438,29 @@ class Session:
 
     def _speak(self, request: ActiveRequest, received: Text, now: float) -> list[Outgoing]:
         """Speak ``received`` (``text_input``): its ``audio`` messages, then the frames of the
-        audio and phonemes it feeds the engine."""
+        speech and spans it hands the engine together. The speech was ready the synthesis
+        time after ``now``: its frames' lag counts from then, and the synthesis time is
+        reported apart (``done.stats.speech_synthesis_ms``)."""
+        began = self.timer()
         speech = speak(received)
+        synthesis_s = max(0.0, self.timer() - began)
+        request.spec.clock.spoke(synthesis_s)
+        ready_at = now + synthesis_s
         start = speech_start(request)
         outgoing = speech_messages(request, speech, start)
-        outgoing += request.add_audio(engine_audio(request, speech, start), now)
-        with reading_arpabet(request):
-            phonemes = Phonemes(request.id, phoneme_items(speech, start))
-            outgoing += self._apply(request, phonemes, now)
+        chunk = engine_audio(request, speech, start)
+        self._admit_input(request, chunk)
+        before = request.output_values
+        try:
+            outgoing += request.add_speech(
+                speech_spans(speech, start),
+                chunk,
+                ready_at,
+                self.limits.max_values,
+                self.output_values - before,
+            )
+        finally:
+            self.output_values += request.output_values - before
         return outgoing
 
     def _orphan(self, received: RequestInput) -> list[Outgoing]:
@@ -399,6 +490,10 @@ class Session:
         self.costs.pop(identifier, None)
         self.guards.pop(identifier, None)
         self.resumes.pop(identifier, None)
+        holding = self.holdings.pop(identifier, None)
+        if holding is not None:
+            holding.release()
+        self.too_large.pop(identifier, None)
 
     def _remember(self, identifier: str, reason: DoneReason) -> None:
         self.ended[identifier] = reason
@@ -428,7 +523,7 @@ class Session:
                     fatal=True,
                 )
             ]
-        refusal = self.refuse_start()
+        refusal = self.refuse_start(start.engine)
         if refusal is not None:
             return [
                 _error(refusal.code, refusal.message, start.id, fatal=True, details=refusal.details)
@@ -463,6 +558,9 @@ class Session:
         self.requests[start.id] = request
         self.costs[start.id] = cost
         self.guards[start.id] = guard
+        # A count of waiting phonemes may have landed on this id's previous request (in
+        # another thread) just as it ended.
+        self.too_large.pop(start.id, None)
         if start.resume is not None:
             self.resumes[start.id] = ResumeCursor.of(start.resume)
         self.ended.pop(start.id, None)
@@ -480,6 +578,7 @@ class Session:
             )
         emotion = start.emotion or catalog.default_emotion(model)
         ladder = catalog.ladder(model)
+        check_seq_room(start.resume, most_blocks(self.limits.request))
         estimate = pinned_rung(ladder, start.resume) or choose_rung(ladder, start.latency_budget_ms)
         profile = resolve_profile(
             model.channels,

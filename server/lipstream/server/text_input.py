@@ -8,21 +8,23 @@ cuts the PCM16 into ``audio`` messages of at most ``AUDIO_CHUNK_S`` with their
 ``start`` on the utterance clock, sent before the frames they drive, so a
 client can schedule sound and face on one clock. ``engine_audio`` is the same
 speech for the engine, preceded by silence where the request's audio stopped
-short of the speech's start (audio is contiguous from 0); ``phoneme_items``
-are espeak-ng's spans moved to the speech's start, in canonical ARPAbet,
-which ``reading_arpabet`` makes the request read whatever its notation.
+short of the speech's start (audio is contiguous from 0), and ``speech_spans``
+espeak-ng's spans moved to the speech's start, already canonical phonemes: the
+request hands both to the engine in one call (``ActiveRequest.add_speech``), so
+an engine that can hear and read (``hmm``) is driven by both.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
+import numpy as np
 
-from lipstream_client import AudioChunk, PhonemeItem, Text
+from lipstream_client import AudioChunk, Text
 from lipstream_client.errors import TEXT_TOO_LONG
 
+from ..audio import Audio
 from ..errors import LipstreamError
 from ..speech.text_frontend import MAX_TEXT_CHARS, SpokenText, speak_text
+from ..timeline import PhonemeSpan
 from .outgoing import Outgoing
 from .request import ActiveRequest, RequestError
 
@@ -60,26 +62,18 @@ def speech_messages(request: ActiveRequest, speech: SpokenText, start: float) ->
     ]
 
 
-def engine_audio(request: ActiveRequest, speech: SpokenText, start: float) -> AudioChunk:
+def engine_audio(request: ActiveRequest, speech: SpokenText, start: float) -> Audio:
     """The speech as the request's next audio input, with silence before it where the
     request's audio ends before ``start``."""
     gap = max(0, round((start - request.audio_s) * speech.sample_rate))
-    return AudioChunk(request.id, speech.sample_rate, bytes(gap * _PCM16_BYTES) + speech.pcm16)
+    samples = np.asarray(speech.audio.samples, dtype=np.float32)
+    if gap:
+        samples = np.concatenate([np.zeros(gap, dtype=np.float32), samples])
+    return Audio(samples, speech.sample_rate)
 
 
-def phoneme_items(speech: SpokenText, start: float) -> tuple[PhonemeItem, ...]:
-    """espeak-ng's spans, contiguous from ``start``."""
-    return tuple(
-        PhonemeItem(span.phoneme, start + span.start, start + span.end) for span in speech.spans
-    )
-
-
-@contextmanager
-def reading_arpabet(request: ActiveRequest) -> Iterator[None]:
-    """The request reads phoneme labels as ARPAbet inside the block."""
-    source = request.spec.phoneme_source
-    request.spec.phoneme_source = "arpabet"
-    try:
-        yield
-    finally:
-        request.spec.phoneme_source = source
+def speech_spans(speech: SpokenText, start: float) -> list[PhonemeSpan]:
+    """espeak-ng's spans (canonical phonemes), contiguous from ``start``."""
+    return [
+        PhonemeSpan(span.phoneme, start + span.start, start + span.end) for span in speech.spans
+    ]

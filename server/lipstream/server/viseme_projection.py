@@ -31,7 +31,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import nnls
 
-from ..engines.base import Model
+from ..engines.base import Model, SynthesisRequest
+from ..engines.work import WorkGuard
 from ..phonemes import PHONEMES, SILENCE
 from ..timeline import PhonemeSpan
 from ..visemes import OCULUS15, PRESTON_BLAIR, VisemeScheme
@@ -54,9 +55,10 @@ def mouth_channels(channels: tuple[str, ...]) -> np.ndarray:
     return mask if mask.any() else np.ones(len(channels), dtype=bool)
 
 
-def probe_phoneme_poses(model: Model) -> dict[str, np.ndarray]:
+def probe_phoneme_poses(model: Model, guard: WorkGuard | None = None) -> dict[str, np.ndarray]:
     """Each canonical phoneme's pose, float64 (n_channels,): ``model``'s frame at the centre
-    of the phoneme held alone between silences (silence: the centre of the first gap)."""
+    of the phoneme held alone between silences (silence: the centre of the first gap),
+    synthesized under ``guard`` when given."""
     spans: list[PhonemeSpan] = []
     centres: dict[str, float] = {SILENCE: PROBE_GAP_S / 2}
     start = PROBE_GAP_S
@@ -67,7 +69,9 @@ def probe_phoneme_poses(model: Model) -> dict[str, np.ndarray]:
         centres[phoneme] = start + PROBE_HOLD_S / 2
         start += PROBE_HOLD_S + PROBE_GAP_S
     spans.append(PhonemeSpan(SILENCE, start, start + PROBE_GAP_S))
-    frames = np.asarray(model.synthesize(spans, fps=PROBE_FPS).frames, dtype=np.float64)
+    synthesizer = model.start(SynthesisRequest(fps=PROBE_FPS, guard=guard or WorkGuard()))
+    synthesizer.feed(spans)
+    frames = np.asarray(synthesizer.finish(), dtype=np.float64)
     return {phoneme: frames[round(centre * PROBE_FPS)] for phoneme, centre in centres.items()}
 
 

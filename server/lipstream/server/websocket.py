@@ -10,21 +10,24 @@ close code. An admitted connection is one task that takes one message at a
 time: rate limit (token bucket), decode (size-limited, sans I/O), then
 ``Session.handle``, inline when the engine's estimate of its work is below
 ``inline_work_ms``, in the synthesis thread pool up to ``heavy_work_ms``,
-and in the heavy lane (a pool of its own) above (with its frames encoded
-there too), so the event loop never waits on a long synthesis and ordinary
-sessions never queue behind a costly one; answers of more than
+and in the heavy lane (a pool of its own, ``lanes.FairLane``, taking turns
+between connections) above (with its frames encoded there too), and a ``text``
+message in the speech lane, apart from both, so the event loop never waits on
+a long synthesis, ordinary sessions never queue behind a costly one, and
+speech never queues behind a search; answers of more than
 ``JSON_INLINE_VALUES`` JSON numbers are encoded in the pool as well (in the
-heavy lane above ``JSON_HEAVY_VALUES``). While work runs in the pool the connection
-keeps receiving (``read_ahead``): the socket is read and pings answered, a
-``cancel`` stops its request's work at once (``Session.stop_work``), a
-closed socket stops all of it, and the messages read wait, in order, for
-their turn. Then the task stamps and sends the answers itself. Sending from
-the same task, rather than handing each answer to a writer task, saves a
-task switch and a queue round trip per message, the largest cost left once
-the engine is fast. A send waits only when the client's socket buffers are
-full; the connection then reads nothing more from that client
-(backpressure), and a send that misses its deadline
-(``deadline.SendDeadline``) closes the connection with 1008
+heavy lane above ``JSON_HEAVY_VALUES``). While work runs in the pool the
+connection keeps receiving (``read_ahead``): the socket is read and pings
+answered, a ``cancel`` stops its request's work at once
+(``Session.stop_work``), so do phonemes that take their request past its
+engine's cap (``Session.check_queued``), a closed socket stops all of it,
+and the messages read wait, in order, for their turn. Then the task stamps
+and sends the answers itself. Sending from the same task, rather than
+handing each answer to a writer task, saves a task switch and a queue round
+trip per message, the largest cost left once the engine is fast. A send
+waits only when the client's socket buffers are full; the connection then
+reads nothing more from that client (backpressure), and a send that misses
+its deadline (``deadline.SendDeadline``) closes the connection with 1008
 ``slow_consumer``: a client that stops reading would otherwise pin
 ``await send`` forever. Frames are never dropped silently. A connection
 with no message and no active request for ``idle_timeout_s`` closes with
@@ -40,7 +43,7 @@ import asyncio
 import logging
 import time
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Executor
 from typing import Any, TypeAlias, TypeVar
 
 from starlette.websockets import WebSocket, WebSocketDisconnect
@@ -53,8 +56,10 @@ from lipstream_client import (
     Encoding,
     ErrorMessage,
     Frames,
+    Phonemes,
     ProtocolError,
     ServerMessage,
+    Text,
     decode,
     encode,
     encoding_for_subprotocol,
@@ -74,6 +79,7 @@ from .admission import TokenBucket, bearer_token, origin_allowed, token_accepted
 from .deadline import LaterDeadline, SendDeadline
 from .outgoing import Outgoing, Stamped
 from .read_ahead import DISCONNECT, ReadAhead, Received
+from .read_window import ARRIVED_AT
 from .session import InputMessage, Session
 from .state import ServerState
 
@@ -105,7 +111,7 @@ async def stream_endpoint(websocket: WebSocket) -> None:
     connection = Connection(websocket, encoding, state)
     details: dict[str, JsonValue] | None = None
     if refusal is None:
-        busy = state.overload.session_refusal(len(state.lifecycle.connections))
+        busy = state.overload.session_refusal(len(state.lifecycle.connections), connection)
         if busy is None and not state.lifecycle.admit(connection):
             busy = state.overload.policy.sessions_refusal(state.settings.max_sessions)
         if busy is not None:
@@ -124,6 +130,7 @@ async def stream_endpoint(websocket: WebSocket) -> None:
             state.metrics.sessions.dec()
     finally:
         state.lifecycle.release(connection)
+        state.overload.policy.closed(connection)
 
 
 def _refusal(websocket: WebSocket, state: ServerState) -> tuple[str, str] | None:
@@ -176,7 +183,12 @@ class Connection:
         self.state = state
         self.settings = state.settings
         self.metrics = state.metrics
-        self.session = Session(state.catalog, state.session_limits, state.overload.request_refusal)
+        self.session = Session(
+            state.catalog,
+            state.session_limits,
+            lambda engine: state.overload.start_refusal(self, engine),
+            state.input_ledger,
+        )
         self.bucket = TokenBucket(
             self.settings.message_rate, self.settings.message_burst, time.monotonic()
         )
@@ -344,18 +356,29 @@ class Connection:
             self._woken = False
 
     async def _receive(self) -> Received:
+        """The next ASGI event, received when its bytes reached the process (``ARRIVED_AT``,
+        from the transport), with its wait for the app recorded as the receive lag."""
         try:
             event: Mapping[str, Any] = await self.websocket.receive()
         except _PEER_GONE:
             event = DISCONNECT
-        return Received(event, time.monotonic())
+        now = time.monotonic()
+        arrived = event.get(ARRIVED_AT)
+        if not isinstance(arrived, float) or arrived > now:
+            return Received(event, now)
+        self.state.overload.monitor.observe_receive(now - arrived)
+        self.metrics.receive_lag.observe(now - arrived)
+        return Received(event, arrived)
 
     async def _handle(self, decoded: InputMessage, now: float) -> Answers:
         """The answers to ``decoded``, with the payloads encoded in the pool (None: encode
         when sending)."""
         work_ms = self.session.estimated_work_ms(decoded)
         if work_ms > self.settings.inline_work_ms:
-            pool = self._pool(work_ms > self.settings.heavy_work_ms)
+            if isinstance(decoded, Text):
+                pool = self.state.speech.client(self)
+            else:
+                pool = self._pool(work_ms > self.settings.heavy_work_ms)
             return await self._in_pool(
                 lambda: self._encoded(self.session.handle(decoded, now)), pool
             )
@@ -368,8 +391,9 @@ class Connection:
             return await self._in_pool(lambda: self._encoded(outgoing), pool)
         return outgoing, [None] * len(outgoing)
 
-    def _pool(self, heavy: bool) -> ThreadPoolExecutor:
-        return self.state.heavy if heavy else self.state.executor
+    def _pool(self, heavy: bool) -> Executor:
+        """The synthesis pool, or the heavy lane's turn of this connection."""
+        return self.state.heavy.client(self) if heavy else self.state.executor
 
     def _encoded(self, outgoing: list[Outgoing]) -> Answers:
         """``outgoing`` with each frames block encoded (stamping leaves those unchanged);
@@ -385,7 +409,7 @@ class Connection:
             )
         return outgoing, payloads
 
-    async def _in_pool(self, job: Callable[[], T], pool: ThreadPoolExecutor) -> T:
+    async def _in_pool(self, job: Callable[[], T], pool: Executor) -> T:
         """Run ``job`` in ``pool``, reading the client's messages ahead meanwhile."""
         future = self.loop.run_in_executor(pool, job)
         while not future.done() and not self._peer_gone and self.read_ahead.has_room():
@@ -412,11 +436,15 @@ class Connection:
         if isinstance(decoded, Cancel) and not self.read_ahead.starts(decoded.id):
             self.session.stop_work(decoded.id)
         self.read_ahead.push(Received(received.event, received.at, decoded))
+        if isinstance(decoded, Phonemes) and not self.read_ahead.starts(decoded.id):
+            self.session.check_queued(decoded.id, self.read_ahead.phonemes(decoded.id))
 
     def _track_active(self) -> None:
         active = self.session.active_requests
         if active != self._active:
             self.metrics.requests_active.inc(active - self._active)
+            if (active > 0) != (self._active > 0):
+                self.state.overload.policy.set_streaming(self, active > 0)
             self._active = active
         stopped = self.session.stopped_work
         if stopped != self._stopped:
@@ -433,7 +461,8 @@ class Connection:
         was closed as a slow consumer)."""
         for index, item in enumerate(items):
             self._observe(item)
-            stamped = item.stamp(time.monotonic())
+            stamped_at = time.monotonic()
+            stamped = item.stamp(stamped_at)
             encoded = payloads[index] if index < len(payloads) else None
             payload = encoded or encode(stamped.message, self.encoding, validate=False)
             try:
@@ -444,7 +473,7 @@ class Connection:
             except _PEER_GONE:
                 self.finished = True
                 return False
-            self._record(stamped)
+            self._record(stamped, time.monotonic() - stamped_at)
         return True
 
     async def _send_payload(self, payload: bytes | str) -> None:
@@ -485,14 +514,16 @@ class Connection:
         self.metrics.errors.labels(SLOW_CONSUMER).inc()
         await self._close_now(CloseCode.POLICY_VIOLATION, SLOW_CONSUMER)
 
-    def _record(self, stamped: Stamped) -> None:
+    def _record(self, stamped: Stamped, sending_s: float) -> None:
+        """Count a sent frames block; its lag runs until its send returned (``sending_s``
+        after it was stamped): from socket to socket, as far as the process sees."""
         message: ServerMessage = stamped.message
         if not isinstance(message, Frames) or stamped.engine is None:
             return
         frames, lag, first_frame = self._frame_metrics(stamped.engine)
         frames.inc(message.n_frames)
         if stamped.lag_s is not None:
-            lag.observe(stamped.lag_s)
+            lag.observe(stamped.lag_s + sending_s)
         if stamped.first_frame_latency_s is not None:
             first_frame.observe(stamped.first_frame_latency_s)
 

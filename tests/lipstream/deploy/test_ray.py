@@ -44,7 +44,7 @@ from lipstream_client import (
     StreamResult,
 )
 from lipstream_client.errors import SHUTTING_DOWN
-from tests.helpers import free_port
+from tests.helpers import free_port, return_frames
 
 FPS = 60.0
 SPANS = [("sil", 0.0, 0.1), ("HH", 0.1, 0.18), ("AY", 0.18, 0.45), ("M", 0.45, 0.55)]
@@ -99,7 +99,9 @@ def test_streams_through_the_ray_proxy_get_the_offline_frames(
     assert len(results) == CONNECTIONS
     for result in results:
         assert result.done.reason == "end" and result.ready.fidelity == "lerp"
-        np.testing.assert_array_equal(np.asarray(result.rows(), dtype="<f4"), offline)
+        rows = np.asarray(result.rows(), dtype="<f4")
+        assert len(rows) == len(offline) + return_frames(FPS)  # then the return to rest
+        np.testing.assert_array_equal(rows[: len(offline)], offline)
     ready = httpx.get(f"{proxy}/readyz", timeout=TIMEOUT_S)
     assert ready.status_code == 200 and ready.json()["ready"] is True
 
@@ -171,6 +173,7 @@ def test_a_stopping_replica_drains_like_lipstream_serve(
     assert refusal.id is not None and refusal.id.startswith("probe-")
     assert [b.seq for b in blocks] == list(range(len(blocks)))
     rows = np.concatenate([np.frombuffer(b.data, "<f4").reshape(-1, b.n_channels) for b in blocks])
-    np.testing.assert_array_equal(rows, offline)
+    assert len(rows) == len(offline) + return_frames(FPS)  # then the return to rest
+    np.testing.assert_array_equal(rows[: len(offline)], offline)
     assert (finished_closed.code, cut.code) == (1001, 1001)
     assert APPLICATION_NAME not in serve.status().applications

@@ -251,3 +251,21 @@ def test_a_lead_rung_emits_the_frame_at_t_once_the_input_covers_t_plus_the_lead(
     pieces.append(synthesizer.finish())
     offline = model.synthesize(spans, fps=60.0, **rung.options).frames
     np.testing.assert_array_equal(np.concatenate(pieces), offline)
+
+
+EMPTY_REQUEST_FPS = [*range(1, int(MAX_FPS) + 1), MIN_FPS, 119.5, 120.25, 999.9]
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_a_request_with_no_input_finishes_with_no_frames_at_every_fps_and_rung(
+    engine: str, trained_models: dict[str, Model]
+) -> None:
+    # anime-graph once raised ValueError (negative dimensions) at every fps from its model's
+    # 120 up: an empty smoothing block was filtered.
+    model = trained_models[engine]
+    for rung in model.fidelity_ladder():
+        for fps in EMPTY_REQUEST_FPS:
+            synthesizer = model.start(fps=fps, **rung.options)
+            assert len(synthesizer.frames()) == 0
+            frames = synthesizer.finish()
+            assert frames.shape == (0, len(model.channels)), (rung.name, fps)

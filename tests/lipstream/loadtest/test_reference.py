@@ -20,6 +20,7 @@ FPS = 60.0
 CAUSAL_BUDGET_MS = 20.0
 SPANS = [("sil", 0.0, 0.05), ("B", 0.05, 0.11), ("AA1", 0.11, 0.3), ("M", 0.3, 0.38)]
 WAIT_S = 10.0
+RETURN_FRAMES = 9  # the server's default return to rest after end: 150 ms at 60 fps
 Block = tuple[int, int, int]  # first frame, frames, data bytes
 
 
@@ -68,8 +69,10 @@ def test_the_reference_sends_the_engines_messages_of_the_same_sizes_at_the_same_
     assert traffic.fidelity == "causal" and traffic.lookahead_ms == 0.0
     width = len(traffic.channels)
     # Independently: a causal rung releases frames i / fps <= end as each span arrives, so
-    # nothing is left for end; float32 rows of the channels' width.
-    cuts = [0] + [frame_count(end, FPS) for _, _, end in SPANS] + [frame_count(0.38, FPS)]
+    # end sends only the return to rest (150 ms at 60 fps: 9 frames); float32 rows of the
+    # channels' width.
+    cuts = [0] + [frame_count(end, FPS) for _, _, end in SPANS]
+    cuts.append(cuts[-1] + RETURN_FRAMES)
     expected = [
         [(first, last - first, (last - first) * width * 4)] if last > first else []
         for first, last in zip(cuts, cuts[1:])
@@ -96,6 +99,6 @@ def test_a_load_test_of_the_reference_gets_every_frame_of_every_request() -> Non
         results = loadtest(config)
     clip = results["clips"][0]
     assert clip["successful_requests"] == 2 and clip["errors"] == {}
-    assert clip["frames"] == 2 * frame_count(1.0, FPS)
+    assert clip["frames"] == 2 * (frame_count(1.0, FPS) + RETURN_FRAMES)
     # The reference's processes are found by their port: a supervisor and two workers.
     assert results["summary"]["server_processes"] == 3

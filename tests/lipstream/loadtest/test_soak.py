@@ -30,6 +30,8 @@ SUMMARY_KEYS = {
     "valid_frame_lag_p99_ms",
     "healthz_latency_p99_ms",
     "peak_server_rss_bytes",
+    "memory_ceiling_bytes",
+    "peak_rss_of_ceiling",
     "undocumented_errors",
 }
 
@@ -52,12 +54,12 @@ def test_a_short_soak_reports_every_part_and_the_valid_sessions_complete(
             flood_seconds=2.0,
             flood_fps=100.0,
         )
-        results = soak(config)
+        results = soak(config, command="lipstream loadtest soak --duration 3")
     valid = results["valid"]
     # Each session starts a 1 s clip within its first second, so both run at least one;
-    # a 1 s clip at 60 fps has floor(1.0 * 60) + 1 = 61 frames.
+    # a 1 s clip at 60 fps has floor(1.0 * 60) + 1 = 61 frames, then 9 of return to rest.
     assert valid["requests"] >= 2 and valid["successful_requests"] == valid["requests"]
-    assert valid["errors"] == {} and valid["frames"] == 61 * valid["requests"]
+    assert valid["errors"] == {} and valid["frames"] == (61 + 9) * valid["requests"]
     lag = valid["frame_lag_ms"]
     assert lag["p50"] <= lag["p95"] <= lag["p99"] <= lag["max"]
     assert results["healthz"]["polls"] >= 1
@@ -65,11 +67,19 @@ def test_a_short_soak_reports_every_part_and_the_valid_sessions_complete(
     memory = results["server_memory"]
     assert memory["source"] == f"/proc/{served.pid}" and memory["samples"] >= 1
     assert memory["peak_rss_bytes"] > 0
+    summary = results["summary"]
+    assert memory["ceiling_bytes"] == summary["memory_ceiling_bytes"] > 0
+    assert summary["peak_rss_of_ceiling"] == memory["peak_rss_bytes"] / memory["ceiling_bytes"]
+    assert results["command"] == "lipstream loadtest soak --duration 3"
+    assert results["date"].endswith("+00:00")
     assert set(results["hostile"]) == set(HOSTILE_KINDS)
     for kind, tally in results["hostile"].items():
         assert tally["attempts"] >= 1, kind
         assert set(tally) == {"attempts", "error_codes", "closes", "client_failures", "skipped"}
     assert results["hostile"]["pq_search"]["skipped"] is None  # the demo has anime-graph
+    assert results["hostile"]["pq_connections"]["skipped"] is None
+    assert results["hostile"]["client_flood"]["skipped"] is None  # the server is on 127.0.0.1
+    assert results["hostile"]["big_heads"]["closes"].get("http_431", 0) >= 1
     assert isinstance(results["undocumented_errors"], dict)
     assert set(results["summary"]) == SUMMARY_KEYS
     assert results["summary"]["valid_frame_lag_p99_ms"] == lag["p99"]

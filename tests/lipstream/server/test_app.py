@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -13,7 +12,15 @@ import pytest
 
 from lipstream.corpus import Corpus
 from lipstream.training import train_engine
-from tests.helpers import free_port, serve_command
+from tests.helpers import eventually, free_port, serve_command
+from tests.live_server import READY_POLLS
+
+
+def readyz(base: str) -> int:
+    try:
+        return httpx.get(f"{base}/readyz", timeout=1.0).status_code
+    except httpx.TransportError:
+        return 0
 
 
 @pytest.fixture(scope="module")
@@ -28,14 +35,7 @@ def served(small_demo_corpus: Corpus, tmp_path_factory: pytest.TempPathFactory) 
     )
     base = f"http://127.0.0.1:{port}"
     try:
-        for _ in range(200):
-            try:
-                if httpx.get(f"{base}/readyz", timeout=1.0).status_code == 200:
-                    break
-            except httpx.TransportError:
-                time.sleep(0.1)
-        else:
-            pytest.fail("server did not become ready within 20 s")
+        eventually(lambda: readyz(base) == 200, "lipstream serve ready", READY_POLLS)
         yield base
     finally:
         process.terminate()

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from lipstream.engines.base import CallCost, Lookahead, Rung, SynthesisRequest
+from lipstream.errors import ModelStoreError
 from lipstream.phonemes import SILENCE
 from lipstream.server.budget import BudgetInfeasible, choose_rung, estimate, lookahead_ms
 from lipstream.server.calibration import CALIBRATION_PHONEMES, calibration_spans, measure
@@ -193,6 +194,9 @@ def test_rest_pose_of_viseme_lerp_is_its_silence_key_pose(catalog: Catalog) -> N
         np.testing.assert_allclose(catalog.rest_pose(model, emotion), expected, atol=1e-7)
 
 
+NO_FRAMES = np.zeros((0, 1), dtype=np.float32)
+
+
 class _RecordingSynthesizer:
     def __init__(self, fed: list) -> None:  # type: ignore[type-arg]
         self.fed = fed
@@ -200,11 +204,11 @@ class _RecordingSynthesizer:
     def feed(self, spans: list, audio: object = None) -> None:  # type: ignore[type-arg]
         self.fed.append((spans[0], audio))
 
-    def frames(self) -> None:
-        return None
+    def frames(self) -> np.ndarray:
+        return NO_FRAMES
 
-    def finish(self) -> None:
-        return None
+    def finish(self) -> np.ndarray:
+        return NO_FRAMES
 
 
 class _AudioEngineModel:
@@ -254,11 +258,11 @@ class _TimedSynthesizer:
         self.clock.now += 0.010 if self.calls == self.slow_call else 0.001
         self.calls += 1
 
-    def frames(self) -> None:
-        return None
+    def frames(self) -> np.ndarray:
+        return NO_FRAMES
 
-    def finish(self) -> None:
-        return None
+    def finish(self) -> np.ndarray:
+        return NO_FRAMES
 
 
 class _PreemptedModel:
@@ -285,3 +289,31 @@ def test_compute_time_is_the_slowest_call_at_its_fastest_over_the_passes(
     assert cost.max_call_ms == pytest.approx(1.0)
     # 48 calls at their fastest, 1 ms each, over 48 phonemes.
     assert cost.per_phoneme_ms == pytest.approx(1.0)
+
+
+class _NanAtCall(_RecordingSynthesizer):
+    """Frames at every call, the third call's holding a NaN."""
+
+    def frames(self) -> np.ndarray:
+        values = np.zeros((2, 3), dtype=np.float32)
+        if len(self.fed) == 3:
+            values[1, 2] = np.nan
+        return values
+
+
+class _NanModel(_AudioEngineModel):
+    uses_audio = False
+
+    def start(self, request: object) -> _RecordingSynthesizer:
+        self.passes.append([])
+        return _NanAtCall(self.passes[-1])
+
+
+def test_a_non_finite_frame_in_calibration_refuses_the_model_naming_the_rung() -> None:
+    with pytest.raises(ModelStoreError) as caught:
+        measure(_NanModel(), Rung("lag-2", Lookahead(phonemes=1)), where="/m/x")  # type: ignore[arg-type]
+    assert (caught.value.code, caught.value.where) == ("model_invalid", "/m/x: probe on rung lag-2")
+    assert caught.value.message.startswith(
+        "synthesized 1 NaN or infinite values from the calibration utterance "
+        "(first at frame 1, channel 2)"
+    )

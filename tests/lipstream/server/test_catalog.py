@@ -114,3 +114,25 @@ def test_an_unexpected_fault_in_a_probe_sets_only_that_model_aside(
     (failure,) = registry.failure_report()
     assert failure["model"] == "broken" and failure["code"] == "model_invalid"
     assert "ZeroDivisionError: a fault inside the engine" in failure["message"]
+
+
+def test_a_model_whose_rung_synthesizes_non_finite_frames_is_refused_by_the_probe(
+    trained_models: dict[str, Model],
+) -> None:
+    """Issue 29, defect 7: κ = 1e300 (built in memory, past the load-time range checks) is
+    finite, and its damped rungs' frames are NaN; the lerp rung and silence are not."""
+    lerp = trained_models["viseme-lerp"]
+    assert isinstance(lerp, VisemeLerpModel)
+    manifest = replace(lerp.manifest, name="broken")
+    absurd = VisemeLerpModel(
+        manifest, lerp.poses, lerp.durations, lerp.leads_ms, np.full_like(lerp.kappas, 1e300)
+    )
+    spans = [("AA", 0.0, 0.2), ("M", 0.2, 0.3)]
+    assert np.isfinite(absurd.synthesize(spans, mode="lerp").frames).all()
+    assert not np.isfinite(absurd.synthesize(spans, mode="damped", lead_ms=0).frames).all()
+    registry = _registry(lerp, absurd)
+    Catalog.build(registry, ServerSettings())
+    assert list(registry.models) == ["good"]
+    error = registry.failures["broken"].error
+    assert (error.code, error.where) == ("model_invalid", "/m/broken: probe on rung damped_lead")
+    assert "NaN or infinite values from the calibration utterance" in error.message

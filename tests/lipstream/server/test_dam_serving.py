@@ -12,6 +12,7 @@ import pytest
 from lipstream.config import ServerSettings
 from lipstream.server.catalog import Catalog
 from lipstream_client import End, PhonemeItem, Phonemes, Ready, Start
+from tests.helpers import return_frames
 from tests.lipstream.server.harness import Served, client, frame_rows, serving
 
 SPANS = [("sil", 0.0, 0.05), ("HH", 0.05, 0.12), ("AY1", 0.12, 0.31), ("M", 0.31, 0.4)]
@@ -37,7 +38,7 @@ def test_streamed_frames_are_the_offline_frames_of_the_reported_rung(
     model = catalog.model(engine, "demo")
     rung = next(r for r in model.fidelity_ladder() if r.name == ready.fidelity)
     rows = frame_rows([m for m in messages if getattr(m, "id", None) == "r"])
-    streamed = np.array([rows[i] for i in sorted(rows)], dtype=np.float32)
+    assert sorted(rows) == list(range(int(0.4 * 60) + 1 + return_frames(60.0)))
+    streamed = np.array([rows[i] for i in range(int(0.4 * 60) + 1)], dtype=np.float32)
     offline = model.synthesize(SPANS, fps=60.0, emotion=emotion, **rung.options).frames
     assert streamed.tobytes() == offline.tobytes()
-    assert len(streamed) == int(0.4 * 60) + 1

@@ -12,6 +12,7 @@ the full demo character (engine ``anime-graph``).
 from __future__ import annotations
 
 import os
+import re
 import shutil
 from collections.abc import Iterator
 from pathlib import Path
@@ -19,8 +20,10 @@ from typing import Any
 
 import pytest
 
+from lipstream.engines import engine_names
 from lipstream.engines.base import Model
-from tests.live_server import LiveServer, live_server, save_models
+from tests.helpers import rest_pose
+from tests.live_server import LiveServer, live_server
 
 CHROMIUM = Path("/usr/bin/chromium")
 LAUNCH_ARGS = [
@@ -37,6 +40,7 @@ LAUNCH_ARGS = [
 WAIT_MS = 30_000  # a bound on a busy machine, not a speed claim
 SENTENCE = "Hello there, my name is Mia."
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+SETTLE_FRAMES = 9  # after `end`, the face returns to rest over 150 ms: 9 frames at 60 fps
 
 pytestmark = pytest.mark.skipif(
     not CHROMIUM.exists() or shutil.which("espeak-ng") is None,
@@ -45,11 +49,8 @@ pytestmark = pytest.mark.skipif(
 
 
 @pytest.fixture(scope="module")
-def served(
-    trained_models: dict[str, Model], tmp_path_factory: pytest.TempPathFactory
-) -> Iterator[LiveServer]:
-    models = {name: trained_models[name] for name in ("viseme-lerp", "dam")}
-    with live_server(save_models(models, tmp_path_factory.mktemp("models"))) as server:
+def served(all_models_dir: Path) -> Iterator[LiveServer]:
+    with live_server(all_models_dir) as server:
         yield server
 
 
@@ -102,7 +103,8 @@ def test_page_loads_offline_with_every_engine_the_server_holds(
         "#engine option", "options => options.filter(o => !o.disabled).map(o => o.value)"
     )
     assert offered == [engine["name"] for engine in engines if engine["loaded"]]
-    assert sorted(offered) == ["dam", "viseme-lerp"]
+    assert sorted(offered) == sorted(engine_names())
+    assert page.input_value("#engine") == "anime-graph"  # the README's screenshot shows it
     assert page.eval_on_selector_all("#character option", "o => o.map(x => x.value)") == ["demo"]
     assert page.requested and all(url.startswith(served.http) for url in page.requested)
 
@@ -240,6 +242,79 @@ def test_a_textgrid_with_its_wav_plays_the_file(page: Any, tmp_path: Path) -> No
     page.wait_for_function("window.lipstreamDemo.log.done.length === 1", timeout=WAIT_MS)
     done = page.evaluate("window.lipstreamDemo.log.done[0]")
     assert done["reason"] == "end"
-    assert done["stats"]["frames"] == math.floor(0.7 * 60) + 1  # the TextGrid's 0.7 s
+    # The TextGrid's 0.7 s, then the return to rest (150 ms at 60 fps).
+    assert done["stats"]["frames"] == math.floor(0.7 * 60) + 1 + SETTLE_FRAMES
     assert page.evaluate("window.lipstreamDemo.request().sources.length") == 1  # the WAV
     assert page.text_content("#errors") == ""
+
+
+def wait_until_played(page: Any) -> None:
+    page.wait_for_function(
+        "document.getElementById('status').textContent === 'done'", timeout=WAIT_MS
+    )
+
+
+@pytest.mark.parametrize("engine", engine_names())
+def test_text_plays_on_every_engine_and_the_face_ends_at_rest(
+    page: Any, trained_models: dict[str, Model], engine: str
+) -> None:
+    record = speak(page, SENTENCE, engine)
+    wait_until_played(page)
+    assert page.text_content("#errors") == ""
+    assert record["done"]["reason"] == "end"
+    assert len(record["frames"]) == record["done"]["stats"]["frames"] > 100
+    assert all(row is not None for row in record["frames"])
+    model = trained_models[engine]
+    assert record["channels"] == list(model.channels)
+    shown = page.evaluate("window.lipstreamDemo.faceValues()")
+    rest = rest_pose(model, "neutral")  # the demo character's default emotion
+    assert [shown[name] for name in model.channels] == pytest.approx(rest.tolist(), abs=1e-6)
+
+
+def test_an_error_mid_request_returns_the_face_to_neutral(page: Any) -> None:
+    # 300 phonemes: the page sends 256 in a first message, whose frames play, then the rest,
+    # which the server refuses (an unknown phoneme) with a fatal error.
+    lines = [f"{0.05 * i:.2f} {0.05 * (i + 1):.2f} {'AA' if i % 2 else 'M'}" for i in range(299)]
+    lines.append("14.95 15.00 NOT_A_PHONEME")
+    lab = {"name": "long.lab", "mimeType": "text/plain", "buffer": "\n".join(lines).encode()}
+    page.select_option("#engine", "viseme-lerp")
+    page.set_input_files("#phones-file", files=[lab])
+    page.evaluate("window.lipstreamDemo.face.apply({jawOpen: 1.0})")
+    page.click("#play-file")
+    page.wait_for_selector("#errors .error", timeout=WAIT_MS)
+    assert page.text_content("#errors .error").startswith("unknown_phoneme:")
+    page.wait_for_function(
+        "Object.values(window.lipstreamDemo.faceValues()).every((v) => v === 0)",
+        timeout=WAIT_MS,
+    )
+    page.wait_for_timeout(300)  # and it stays there while the request's frames would play
+    assert set(page.evaluate("Object.values(window.lipstreamDemo.faceValues())")) <= {0}
+
+
+def test_readouts_round_their_numbers_and_stay_in_their_box(page: Any) -> None:
+    speak(page, SENTENCE, "expressive-dp")
+    stats = page.text_content("#stats")
+    assert '"nodes"' in stats
+    long_decimals = re.findall(r"\d+\.\d{3,}", stats + page.text_content("#rung"))
+    assert long_decimals == []
+    overflow = page.evaluate(
+        "[...document.querySelectorAll('#readouts *')]"
+        ".filter((e) => e.scrollWidth > e.clientWidth + 1 && getComputedStyle(e).overflowX !== 'visible')"
+        ".map((e) => e.id || e.tagName)"
+    )
+    assert overflow == []
+    box = page.evaluate(
+        "(() => { const r = document.getElementById('readouts').getBoundingClientRect();"
+        " const s = document.getElementById('stats').getBoundingClientRect();"
+        " return [r.right, s.right, s.left, r.left]; })()"
+    )
+    assert box[3] <= box[2] and box[1] <= box[0] <= page.viewport_size["width"]
+
+
+def test_the_page_asks_for_its_icon_and_gets_it(page: Any, served: LiveServer) -> None:
+    import httpx
+
+    icon = httpx.get(served.http + "/favicon.ico", trust_env=False)
+    assert icon.status_code == 200 and icon.headers["content-type"] == "image/svg+xml"
+    href = page.evaluate("document.querySelector('link[rel=icon]').href")
+    assert httpx.get(href, trust_env=False).content == icon.content

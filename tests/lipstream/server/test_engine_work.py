@@ -9,14 +9,20 @@ is ended by the mechanism under test, never by finishing.
 
 from __future__ import annotations
 
+import functools
 import re
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import ExitStack
 from pathlib import Path
 
 import httpx
+import pytest
 
 from lipstream.config import ServerSettings
+from lipstream.engines.base import Model
+from lipstream.server.lanes import FairLane
 from lipstream_client import (
     Cancel,
     Done,
@@ -28,16 +34,29 @@ from lipstream_client import (
     Phonemes,
     Ready,
     Start,
+    Text,
 )
 from tests.helpers import eventually
 from tests.lipstream.server.harness import Client, Served, client, serving
+from tests.live_server import save_models
 
 ANSWER_BOUND_S = 5.0  # whether the server answers at all, not how fast
 WORK_BOUND_S = 60.0  # a budget of CPU seconds takes longer on a busy machine
 # The whole corpus: a request naming no emotion searches only its default emotion's recordings.
 PQ = {"search": "pq", "pq_window": 6, "match_emotion": False}
 PQ_PHONEMES = 42  # 6 × 42 = 252, within the cap of 256
+SEARCHES = 5
+FLOOD = 8
 ITEMS = tuple(PhonemeItem("AA1", 0.08 * i, 0.08 * (i + 1)) for i in range(PQ_PHONEMES))
+REST_BODY = {
+    "engine": "viseme-lerp",
+    "character": "demo",
+    "fps": 50,
+    "items": [
+        {"phoneme": "HH", "start": 0.0, "end": 0.1},
+        {"phoneme": "AY1", "start": 0.1, "end": 0.3},
+    ],
+}
 SHORT = tuple(
     PhonemeItem(label, 0.1 * i, 0.1 * (i + 1)) for i, label in enumerate("M AA1 sil".split())
 )
@@ -219,6 +238,122 @@ def test_ordinary_work_does_not_queue_behind_a_costly_request(all_models_dir: Pa
         # The search was still running when the short request finished: it was stopped.
         assert isinstance(done, Done) and done.reason == "cancel"
         assert metric(served, "lipstream_work_stopped_total") == 1.0
+
+
+@pytest.fixture(scope="module")
+def graph_and_lerp_dir(
+    trained_models: dict[str, Model], tmp_path_factory: pytest.TempPathFactory
+) -> Path:
+    """The anime-graph (the search) and viseme-lerp (speech, REST) demo models."""
+    return save_models(
+        {name: trained_models[name] for name in ("anime-graph", "viseme-lerp")},
+        tmp_path_factory.mktemp("graph-and-lerp"),
+    )
+
+
+def test_speech_and_rest_do_not_wait_behind_other_connections_searches(
+    graph_and_lerp_dir: Path,
+) -> None:
+    # Five connections each queue a search in the heavy lane (one thread: one runs, four
+    # wait, each ended only by its CPU budget or a cancel); a sixth connection's text
+    # request and a REST call must be answered while all five are still there, with no job
+    # run ahead of either. In one FIFO pool they waited behind every search (53.6 s), and
+    # each search then ended on its CPU budget first.
+    settings = ServerSettings(request_cpu_s=10.0, heavy_threads=1)
+    with serving(graph_and_lerp_dir, settings) as served, ExitStack() as stack:
+        costly = [stack.enter_context(client(served.ws)) for _ in range(SEARCHES)]
+        for ws in costly:
+            ws.send(Start("pq", "anime-graph", "demo", options=PQ))
+            assert isinstance(ws.recv(timeout=WORK_BOUND_S), Ready)
+        for ws in costly:
+            ws.send(Phonemes("pq", ITEMS))
+        eventually(
+            lambda: (
+                labelled_metric(served, "lipstream_messages_received_total", 'type="phonemes"')
+                == SEARCHES
+            ),
+            "the searches handed to the heavy lane",
+            WORK_BOUND_S,
+        )
+        with client(served.ws) as other:
+            other.send(Start("t", "viseme-lerp", "demo", fps=60.0))
+            other.send(Text("t", "Hello there."), End("t"))
+            spoken = final(other, "t")
+        answer = httpx.post(f"{served.http}/v1/synthesize", json=REST_BODY, timeout=WORK_BOUND_S)
+        for ws in costly:
+            ws.send(Cancel("pq"))
+        ends = [final(ws, "pq")[-1] for ws in costly]
+        speech_waits = {
+            source: jobs_ahead(served, "speech", source, "0.0") for source in ("stream", "rest")
+        }
+    assert isinstance(spoken[-1], Done) and spoken[-1].reason == "end"
+    assert any(isinstance(message, Frames) for message in spoken)
+    assert answer.status_code == 200 and answer.json()["n_frames"] == 16
+    # No search had ended: each was stopped by its cancel, after both answers.
+    assert [(type(end), getattr(end, "reason", None)) for end in ends] == [(Done, "cancel")] * 5
+    # (jobs, of them with no job started ahead): the text request and the REST call.
+    assert speech_waits == {"stream": (1.0, 1.0), "rest": (1.0, 1.0)}
+
+
+def test_a_flood_of_rest_calls_delays_a_text_request_by_one_call(
+    graph_and_lerp_dir: Path,
+) -> None:
+    # The speech lane's one thread is held while one REST client queues FLOOD calls and then
+    # a WebSocket connection its text request: taking turns, the text request starts after
+    # one call of the flood (first come, first served: after all of them).
+    settings = ServerSettings(speech_threads=1)
+    with serving(graph_and_lerp_dir, settings) as served, ThreadPoolExecutor(FLOOD) as callers:
+        lane: FairLane = served.server.lifespan.state["server"].speech
+        gate, started = threading.Event(), threading.Event()
+        try:
+            holder = lane.submit_as(("test",), held, gate, started)
+            assert started.wait(WORK_BOUND_S)
+            post = functools.partial(
+                httpx.post, f"{served.http}/v1/synthesize", json=REST_BODY, timeout=WORK_BOUND_S
+            )
+            calls = [callers.submit(post) for _ in range(FLOOD)]
+            eventually(lambda: lane.queued == FLOOD, "the flood queued", WORK_BOUND_S)
+            with client(served.ws) as other:
+                other.send(Start("t", "viseme-lerp", "demo", fps=60.0))
+                other.send(Text("t", "Hello there."), End("t"))
+                eventually(lambda: lane.queued == FLOOD + 1, "the text queued", WORK_BOUND_S)
+                gate.set()
+                spoken = final(other, "t")
+        finally:
+            gate.set()
+        assert holder.result(timeout=WORK_BOUND_S)
+        answers = [call.result(timeout=WORK_BOUND_S) for call in calls]
+        text_waits = jobs_ahead(served, "speech", "stream", "1.0")
+        rest_waits = jobs_ahead(served, "speech", "rest", "0.0")
+        rest_waits_below = jobs_ahead(served, "speech", "rest", f"{float(FLOOD - 1)}")
+    assert isinstance(spoken[-1], Done) and spoken[-1].reason == "end"
+    assert [answer.status_code for answer in answers] == [200] * FLOOD
+    assert text_waits == (1.0, 1.0)  # one job, with at most one job started ahead of it
+    # The flood's first call had none ahead (the held job had started); the rest one more
+    # each, and one for the text request's turn: 0, 2, 3, ..., FLOOD.
+    assert rest_waits == (FLOOD, 1.0)
+    assert rest_waits_below == (FLOOD, FLOOD - 1)
+
+
+def held(gate: threading.Event, started: threading.Event) -> bool:
+    started.set()
+    return gate.wait(WORK_BOUND_S)
+
+
+def jobs_ahead(served: Served, lane: str, source: str, bound: str) -> tuple[float, float]:
+    """(jobs of ``source`` started in ``lane``, of them with at most ``bound`` jobs started
+    ahead of them): ``lipstream_lane_jobs_ahead``."""
+    name = "lipstream_lane_jobs_ahead_bucket"
+    return (
+        labelled_metric(served, name, f'lane="{lane}",le="+Inf",source="{source}"'),
+        labelled_metric(served, name, f'lane="{lane}",le="{bound}",source="{source}"'),
+    )
+
+
+def labelled_metric(served: Served, name: str, labels: str) -> float:
+    text = httpx.get(f"{served.http}/metrics", timeout=ANSWER_BOUND_S).text
+    found = re.search(rf"^{name}{{{re.escape(labels)}}} ([0-9.e+]+)$", text, flags=re.MULTILINE)
+    return float(found.group(1)) if found else 0.0
 
 
 def _pool_threads() -> set[int]:

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import re
 import socket
-import time
 from contextlib import ExitStack
 from pathlib import Path
 from urllib.parse import urlsplit
@@ -17,6 +16,7 @@ from websockets.exceptions import InvalidStatus
 from lipstream.config import ServerSettings
 from lipstream.server.handshake import PROBE_LANE
 from lipstream_client import Ready, Start
+from tests.helpers import eventually
 from tests.lipstream.server.harness import client, serving
 
 EOF_WAIT_S = 15.0  # far above every head deadline used here
@@ -102,12 +102,10 @@ def test_past_the_connection_cap_only_healthz_is_answered(lerp_dir: Path) -> Non
             with pytest.raises(InvalidStatus) as upgrade, client(served.ws):
                 pass
             assert upgrade.value.response.status_code == 503
-        for _ in range(200):  # the sessions' sockets close a moment after the client's
-            if httpx.get(f"{served.http}/v1/engines").status_code == 200:
-                break
-            time.sleep(0.05)
-        else:
-            raise AssertionError("the cap did not free once the sessions closed")
+        eventually(  # the sessions' sockets close a moment after the client's
+            lambda: httpx.get(f"{served.http}/v1/engines").status_code == 200,
+            "the cap freed once the sessions closed",
+        )
         assert refused_count(served.http, "too_many_connections") >= 2  # request, upgrade
 
 

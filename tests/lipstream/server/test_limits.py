@@ -25,7 +25,7 @@ from lipstream_client import (
     Start,
     encode,
 )
-from tests.helpers import eventually
+from tests.helpers import eventually, return_frames
 from tests.lipstream.server.harness import Client, client, serving
 
 ITEMS = (PhonemeItem("HH", 0.0, 0.1), PhonemeItem("AY1", 0.1, 0.3))
@@ -229,7 +229,7 @@ def test_output_per_request_and_per_connection_is_limited(lerp_dir: Path) -> Non
         ws.send(Start("d", "viseme-lerp", "demo"), Phonemes("d", (PhonemeItem("AA", 0, 1.0),)))
         ws.send(End("d"))
         done = ws.until_done("d")[-1]
-        assert isinstance(done, Done) and done.stats.frames == 61
+        assert isinstance(done, Done) and done.stats.frames == 61 + return_frames(60.0)
 
 
 def pending(ws: Client, wait_s: float) -> list[Message]:
@@ -283,7 +283,8 @@ def test_fps_below_one_is_refused_before_ready(lerp_dir: Path, fps: float, encod
         ws.send(Start("b", "viseme-lerp", "demo", fps=1.0), Phonemes("b", ITEMS), End("b"))
         answers = ws.until_done("b")
     assert isinstance(answers[0], Ready) and answers[0].fps == 1.0
-    assert isinstance(answers[-1], Done) and answers[-1].stats.frames == 1  # frame 0 only
+    # Frame 0, then the return to rest: 150 ms at 1 fps is one frame.
+    assert isinstance(answers[-1], Done) and answers[-1].stats.frames == 1 + 1
 
 
 def test_an_utterance_longer_than_the_limit_is_refused(lerp_dir: Path) -> None:

@@ -7,14 +7,13 @@ import json
 import resource
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import httpx
 
 from lipstream.server.open_files import FILE_RESERVE, OpenFileLimit, connection_cap
-from tests.helpers import free_port
-from tests.live_server import stop_process
+from tests.helpers import eventually, free_port
+from tests.live_server import READY_POLLS, stop_process
 
 RAISE = """
 import json, resource
@@ -77,10 +76,11 @@ def test_lipstream_serve_raises_its_limit_at_start(lerp_dir: Path) -> None:
         preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_NOFILE, (256, hard)),
     )
     try:
-        for _ in range(600):
-            if process.poll() is not None or _answers(f"http://127.0.0.1:{port}/healthz"):
-                break
-            time.sleep(0.1)
+        eventually(
+            lambda: process.poll() is not None or _answers(f"http://127.0.0.1:{port}/healthz"),
+            "lipstream serve answered or exited",
+            READY_POLLS,
+        )
         assert process.poll() is None, "lipstream serve exited"
         limits = Path(f"/proc/{process.pid}/limits").read_text()
         [row] = [line for line in limits.splitlines() if line.startswith("Max open files")]

@@ -11,6 +11,7 @@ import socket
 import threading
 import time
 from contextlib import ExitStack
+from dataclasses import replace
 from pathlib import Path
 from urllib.parse import urlsplit
 
@@ -31,6 +32,7 @@ from lipstream.server.overload import (
     OverloadPolicy,
     Refusal,
     calibrated_session_cost,
+    engine_costs,
 )
 from lipstream.server.request import RequestLimits
 from lipstream.server.session import Session, SessionLimits
@@ -43,10 +45,11 @@ from lipstream_client import (
     Start,
     retry_delay_s,
 )
+from tests.helpers import eventually
 from tests.lipstream.server.harness import client, serving
 
 # Binary fractions, so the hand-computed admission counts are exact.
-LIMITS = LoadLimits(max_memory_mb=1000.0, max_lag_ms=50.0, max_busy=0.75, session_cost=0.125)
+LIMITS = LoadLimits(1000.0, 50.0, 0.75, session_cost=0.125, engine_costs={"viseme-lerp": 0.125})
 QUIET = LoadSample(lag_ms=1.0, loop_busy=0.0, rss_mb=100.0)
 
 
@@ -56,38 +59,111 @@ def policy(limits: LoadLimits = LIMITS) -> OverloadPolicy:
 
 def admitted_in_a_burst(overload: OverloadPolicy, load: LoadSample, now: float) -> int:
     for count in range(1000):
-        if overload.session_refusal(load, 0, now) is not None:
+        if overload.session_refusal(load, 0, now, object()) is not None:
             return count
     raise AssertionError("the burst was never refused")
 
 
-def test_a_burst_is_admitted_up_to_the_busy_limit_then_again_after_the_window() -> None:
+def test_a_burst_is_admitted_up_to_the_busy_limit_and_stays_counted_until_it_streams() -> None:
     overload = policy()
-    assert admitted_in_a_burst(overload, QUIET, now=0.0) == 6  # 6 x 0.125 = 0.75
-    # Half a window later the window has measured half of each: 6 x 0.5 x 0.125 = 0.375 of
-    # the 0.75 is unmeasured, room for 3 more.
-    assert admitted_in_a_burst(overload, QUIET, now=RECENT_S / 2) == 3
-    # A window after the first six only the last three are unmeasured, by half.
-    assert admitted_in_a_burst(overload, QUIET, now=RECENT_S) == 4  # (1.5 + 4) x 0.125
-    refusal = overload.session_refusal(QUIET, 0, now=RECENT_S)
+    keys = [f"s{index}" for index in range(6)]
+    for key in keys:
+        assert overload.session_refusal(QUIET, 0, 0.0, key) is None
+    refusal = overload.session_refusal(QUIET, 0, 0.0, object())  # 7 x 0.125 > 0.75
     assert refusal is not None and refusal.reason == "loop_busy"
+    # Half a window later none of the six has started a request: the window has measured
+    # nothing of them, so they still fill the loop (counting them by their age, as a
+    # measured part of them, admitted 3 more in a storm of connections that had not started).
+    assert admitted_in_a_burst(overload, QUIET, now=RECENT_S / 2) == 0
+    for key in keys:  # each first start fits: the pending one it was is no longer counted
+        assert overload.start_refusal(QUIET, key, "viseme-lerp", RECENT_S / 2) is None
+    # Another half window on, the window has measured half of each start:
+    # 6 x 0.5 x 0.125 = 0.375 of the 0.75 is unmeasured, room for 3 more.
+    assert admitted_in_a_burst(overload, QUIET, now=RECENT_S) == 3
     later = policy()
-    admitted_in_a_burst(later, QUIET, now=0.0)
-    assert admitted_in_a_burst(later, QUIET, now=RECENT_S) == 6
+    for key in keys:
+        later.session_refusal(QUIET, 0, 0.0, key)
+        later.start_refusal(QUIET, key, "viseme-lerp", 0.0)
+    assert admitted_in_a_burst(later, QUIET, now=RECENT_S) == 6  # all measured by now
     busy = LoadSample(lag_ms=1.0, loop_busy=0.5, rss_mb=100.0)
     assert admitted_in_a_burst(policy(), busy, now=0.0) == 2  # 0.5 + 2 x 0.125 = 0.75
 
 
+def test_a_closed_pending_session_frees_its_share() -> None:
+    overload = policy()
+    for key in range(6):
+        assert overload.session_refusal(QUIET, 0, 0.0, key) is None
+    assert (
+        overload.session_refusal(QUIET, 0, 5.0, object()) is not None
+    )  # still pending, still counted
+    overload.closed(0)
+    overload.closed(1)
+    assert admitted_in_a_burst(overload, QUIET, now=5.0) == 2
+
+
+def test_each_engine_is_priced_at_its_own_cost_at_the_first_start() -> None:
+    # One engine costs three cores (a model whose calibration went wrong): its starts are
+    # refused, while sessions of the others are admitted and start (with one cost for all,
+    # the dearest, every session was refused at the handshake).
+    costs = {"viseme-lerp": 0.125, "expressive-dp": 2.988}
+    overload = policy(LoadLimits(1000.0, 50.0, 0.75, session_cost=0.125, engine_costs=costs))
+    assert overload.session_refusal(QUIET, 0, 0.0, "dear") is None
+    dear = overload.start_refusal(QUIET, "dear", "expressive-dp", 0.0)
+    assert dear is not None and dear.reason == "loop_busy" and "expressive-dp" in dear.message
+    for key in ("a", "b", "c"):
+        assert overload.session_refusal(QUIET, 0, 0.0, key) is None
+        assert overload.start_refusal(QUIET, key, "viseme-lerp", 0.0) is None
+    # A priced session's later starts are checked for memory only.
+    assert overload.start_refusal(LoadSample(1.0, 0.74, 100.0), "a", "viseme-lerp", 9.0) is None
+    full = overload.start_refusal(LoadSample(1.0, 0.0, 1000.5), "a", "viseme-lerp", 9.0)
+    assert full is not None and full.reason == "memory"
+    # A start of an engine not loaded prices nothing (it is refused as unknown_engine).
+    assert overload.start_refusal(QUIET, "dear", "no-such-engine", 9.0) is None
+    assert "dear" not in overload.priced
+    # The refused session stays unpriced: a later start that fits is admitted.
+    assert overload.start_refusal(QUIET, "dear", "viseme-lerp", 9.0) is None
+    # With 0.5 of the loop busy, a session of 0.125 fits twice more, and not a third time.
+    busy = LoadSample(1.0, 0.5, 100.0)
+    assert [overload.start_refusal(busy, key, "viseme-lerp", 20.0) is None for key in "xyz"] == [
+        True,
+        True,
+        False,
+    ]
+
+
+def test_engine_costs_are_each_engines_costliest_default_rung(catalog: Catalog) -> None:
+    expected: dict[str, float] = {}
+    for model in catalog.registry.models.values():
+        per_phoneme_ms = catalog.ladder(model)[0].per_phoneme_ms
+        cost = (per_phoneme_ms + 0.13) / 80.0  # ms per 80 ms of speech: share of a core
+        engine = model.manifest.engine
+        expected[engine] = max(expected.get(engine, 0.0), cost)
+    costs = engine_costs(catalog)
+    assert costs.keys() == expected.keys() and len(costs) >= 2
+    assert all(math.isclose(costs[engine], expected[engine]) for engine in costs)
+
+
 def test_lag_and_memory_refuse_at_their_limits() -> None:
     at_limits = LoadSample(lag_ms=50.0, loop_busy=0.0, rss_mb=1000.0)
-    assert policy().session_refusal(at_limits, LAG_FROM_SESSIONS, 0.0) is None
-    lagging = policy().session_refusal(LoadSample(50.5, 0.0, 100.0), LAG_FROM_SESSIONS, 0.0)
+    assert policy().session_refusal(at_limits, LAG_FROM_SESSIONS, 0.0, object()) is None
+    lagging = policy().session_refusal(
+        LoadSample(50.5, 0.0, 100.0), LAG_FROM_SESSIONS, 0.0, object()
+    )
     assert lagging is not None and lagging.reason == "loop_lag"
+    waiting = LoadSample(1.0, 0.0, 100.0, receive_lag_ms=50.5)
+    queued = policy().session_refusal(waiting, LAG_FROM_SESSIONS, 0.0, object())
+    assert queued is not None and queued.reason == "receive_lag"
+    assert "50 ms" in queued.message
     # With fewer sessions open the lag is the machine's, not theirs: no refusal.
-    few = policy().session_refusal(LoadSample(500.0, 0.0, 100.0), LAG_FROM_SESSIONS - 1, 0.0)
+    few = policy().session_refusal(
+        LoadSample(500.0, 0.0, 100.0), LAG_FROM_SESSIONS - 1, 0.0, object()
+    )
     assert few is None
     full = LoadSample(lag_ms=1.0, loop_busy=0.0, rss_mb=1000.5)
-    for refusal in (policy().session_refusal(full, 0, 0.0), policy().request_refusal(full)):
+    for refusal in (
+        policy().session_refusal(full, 0, 0.0, object()),
+        policy().request_refusal(full),
+    ):
         assert refusal is not None and refusal.reason == "memory"
         assert refusal.code == "server_busy"
         assert MEMORY_RETRY_AFTER_MS <= refusal.retry_after_ms < 2 * MEMORY_RETRY_AFTER_MS
@@ -99,7 +175,7 @@ def test_retry_after_is_spread_over_one_more_base() -> None:
     lagging = LoadSample(lag_ms=99.0, loop_busy=0.0, rss_mb=1.0)
     waits = []
     for _ in range(40):
-        refusal = overload.session_refusal(lagging, LAG_FROM_SESSIONS, 0.0)
+        refusal = overload.session_refusal(lagging, LAG_FROM_SESSIONS, 0.0, object())
         assert refusal is not None
         assert refusal.details == {"retry_after_ms": refusal.retry_after_ms, "reason": "loop_lag"}
         assert f"retry in {refusal.retry_after_ms} ms" in refusal.message
@@ -108,17 +184,29 @@ def test_retry_after_is_spread_over_one_more_base() -> None:
     assert len(set(waits)) > 1
 
 
-def test_the_session_cost_is_learned_from_enough_open_sessions() -> None:
+def test_the_session_cost_is_learned_from_the_streaming_sessions_only() -> None:
     overload = policy(LoadLimits(1000.0, 50.0, 0.75, session_cost=0.01))
-    overload.session_refusal(LoadSample(1.0, 0.6, 1.0), LEARN_FROM_SESSIONS - 1, 0.0)
-    assert overload.session_cost == 0.01  # too few sessions to learn from: the calibrated
-    overload.session_refusal(LoadSample(1.0, 0.64, 1.0), 16, 10.0)
-    assert math.isclose(overload.session_cost, 0.04)  # 0.64 / 16
-    overload.session_refusal(LoadSample(1.0, 0.64, 1.0), 32, 20.0)
+    for key in range(LEARN_FROM_SESSIONS - 1):
+        overload.set_streaming(key, True)
+    overload.session_refusal(LoadSample(1.0, 0.6, 1.0), 100, 0.0, object())
+    assert overload.session_cost == 0.01  # too few streaming to learn from: the calibrated
+    overload.set_streaming(LEARN_FROM_SESSIONS - 1, True)
+    # 16 streaming among 116 open (100 admitted, not started): 0.64 / 16, not 0.64 / 116.
+    overload.session_refusal(LoadSample(1.0, 0.64, 1.0), 116, 10.0, object())
+    assert math.isclose(overload.session_cost, 0.04)
+    for key in range(LEARN_FROM_SESSIONS, 2 * LEARN_FROM_SESSIONS):
+        overload.set_streaming(key, True)
+    overload.session_refusal(LoadSample(1.0, 0.64, 1.0), 132, 20.0, object())
     assert math.isclose(overload.session_cost, 0.038)  # 0.04 + 0.1 x (0.02 - 0.04)
+    for key in range(2 * LEARN_FROM_SESSIONS):
+        overload.closed(key)
+    assert not overload.streaming
     dear = policy(LoadLimits(1000.0, 50.0, 0.75, session_cost=0.125))
-    dear.session_refusal(LoadSample(1.0, 0.32, 1.0), 16, 0.0)
-    assert math.isclose(dear.session_cost, 0.02)  # measured beats the calibrated estimate
+    for key in range(16):
+        dear.set_streaming(key, True)
+    dear.session_refusal(LoadSample(1.0, 0.32, 1.0), 16, 0.0, object())
+    # measured below the calibrated estimate: the calibrated one stands
+    assert math.isclose(dear.session_cost, 0.125)
 
 
 def test_the_calibrated_cost_is_the_costliest_default_rung_plus_message_overhead() -> None:
@@ -134,7 +222,7 @@ def test_the_calibrated_cost_is_the_costliest_default_rung_plus_message_overhead
 def test_a_refused_start_ends_only_that_request(catalog: Catalog) -> None:
     refusals: list[Refusal | None] = [Refusal("memory", "the server is full", 5000)]
     limits = SessionLimits(4, RequestLimits(1000, 100_000, 150.0))
-    session = Session(catalog, limits, lambda: refusals[-1])
+    session = Session(catalog, limits, lambda engine: refusals[-1])
     [answer] = session.handle(Start("a", "viseme-lerp", "demo"), 0.0)
     assert answer.message == ErrorMessage(
         "server_busy",
@@ -211,6 +299,7 @@ def test_shedding_needs_a_far_lagging_loop_and_enough_sessions() -> None:
     assert overload.shedding(LoadSample(200.5, 0.0, 1.0), LAG_FROM_SESSIONS)
     assert not overload.shedding(LoadSample(200.0, 0.0, 1.0), LAG_FROM_SESSIONS)
     assert not overload.shedding(LoadSample(9999.0, 0.0, 1.0), LAG_FROM_SESSIONS - 1)
+    assert overload.shedding(LoadSample(1.0, 0.0, 1.0, receive_lag_ms=200.5), LAG_FROM_SESSIONS)
 
 
 UPGRADE = (
@@ -239,10 +328,9 @@ def test_a_loop_held_far_behind_sheds_upgrades_with_http_503(lerp_dir: Path) -> 
         sock = stack.enter_context(socket.create_connection((parts.hostname, parts.port)))
         sock.settimeout(10.0)
         connections = served.server.server_state.connections
-        for _ in range(500):  # accepted by the server before the hold
-            if len(connections) > LAG_FROM_SESSIONS:
-                break
-            time.sleep(0.02)
+        eventually(  # accepted by the server before the hold
+            lambda: len(connections) > LAG_FROM_SESSIONS, "the new connection accepted"
+        )
         assert len(connections) == LAG_FROM_SESSIONS + 1
         served.call_soon(hold_the_loop())
         assert held.wait(10.0)
@@ -253,3 +341,30 @@ def test_a_loop_held_far_behind_sheds_upgrades_with_http_503(lerp_dir: Path) -> 
         assert answer.startswith(b"HTTP/1.1 503 Service Unavailable\r\n")
         metrics = httpx.get(f"{served.http}/metrics").text
         assert 'lipstream_connections_refused_total{code="shedding"} 1.0' in metrics
+
+
+def test_an_engine_priced_out_refuses_its_start_and_not_the_session(lerp_dir: Path) -> None:
+    """On a real server: with viseme-lerp priced at three cores (as a model whose
+    calibration went wrong once priced every engine), the handshake is admitted at the
+    cheapest cost, the ``start`` is refused with ``server_busy`` for that request only, and
+    once the engine fits, a ``start`` on the same connection gets ``ready``."""
+    with serving(lerp_dir) as served:
+        policy = served.server.lifespan.state["server"].overload.policy
+        policy.limits = replace(policy.limits, session_cost=0.0, engine_costs={"viseme-lerp": 3.0})
+        with client(served.ws) as ws:
+            ws.send(Start("a", "viseme-lerp", "demo"))
+            refused = ws.recv()
+            assert isinstance(refused, ErrorMessage)
+            assert (refused.code, refused.id, refused.fatal) == ("server_busy", "a", True)
+            assert refused.details["reason"] == "loop_busy"
+            assert "viseme-lerp" in refused.message
+            assert len(policy.pending) == 0 and len(policy.priced) == 0
+            policy.limits = replace(policy.limits, engine_costs={"viseme-lerp": 0.0})
+            ws.send(Start("b", "viseme-lerp", "demo"))
+            assert isinstance(ws.recv(), Ready)
+            assert len(policy.priced) == 1 and len(policy.streaming) == 1
+        # the server's side of the close runs on its own loop
+        eventually(
+            lambda: not (policy.priced or policy.streaming or policy.pending),
+            "the closed session's admission released",
+        )

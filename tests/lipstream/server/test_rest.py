@@ -22,6 +22,7 @@ from tests.lipstream.server.harness import Served, serving
 
 ITEMS = [{"phoneme": "HH", "start": 0.0, "end": 0.1}, {"phoneme": "AY1", "start": 0.1, "end": 0.3}]
 BODY = {"engine": "viseme-lerp", "character": "demo", "fps": 50, "items": ITEMS}
+FRAMES = 16 + 8  # frames i / 50 <= 0.3 s, then the return to rest: 150 ms at 50 fps
 
 
 @pytest.fixture(scope="module")
@@ -48,11 +49,11 @@ def test_json_in_json_out_equals_the_offline_synthesis(served: Served, catalog: 
     result = answer.json()
     model = catalog.model("viseme-lerp", "demo")
     expected = model.synthesize([("HH", 0.0, 0.1), ("AY1", 0.1, 0.3)], fps=50).frames
-    assert (result["n_frames"], result["n_channels"], result["first_frame"]) == (16, 28, 0)
+    assert (result["n_frames"], result["n_channels"], result["first_frame"]) == (FRAMES, 28, 0)
     assert result["channels"] == list(model.channels)
     assert result["fidelity"] == "lerp" and result["lookahead_ms"] == 200.0
-    assert np.array(result["data"], dtype=np.float32).tobytes() == expected.tobytes()
-    assert result["stats"]["frames"] == 16
+    assert np.array(result["data"][:16], dtype=np.float32).tobytes() == expected.tobytes()
+    assert result["stats"]["frames"] == FRAMES
 
 
 @pytest.mark.parametrize(
@@ -77,7 +78,7 @@ def test_content_negotiation(
         result = msgpack.unpackb(answer.content)
         assert len(result["data"]) == 4 * result["n_frames"] * result["n_channels"]
     else:
-        assert len(answer.json()["data"]) == 16
+        assert len(answer.json()["data"]) == FRAMES
 
 
 def test_audio_rides_along_for_audio_engines(served: Served) -> None:
@@ -90,7 +91,7 @@ def test_audio_rides_along_for_audio_engines(served: Served) -> None:
     }
     answer = post(served, body)
     assert answer.status_code == 200, answer.text
-    assert np.array(answer.json()["data"]).shape == (16, 1)
+    assert np.array(answer.json()["data"]).shape == (FRAMES, 1)
     packed = post(
         served,
         {**body, "audio": {"sample_rate": 16000, "pcm16": pcm}},
@@ -220,9 +221,9 @@ def test_csv_for_accept_text_csv_holds_the_frames_of_the_json_answer(served: Ser
     rows = list(csv.reader(io.StringIO(answer.text)))
     as_json = post(served, BODY).json()
     assert rows[0] == ["time", *as_json["channels"]]
-    assert len(rows) == 1 + 16
+    assert len(rows) == 1 + FRAMES
     times = [float(row[0]) for row in rows[1:]]
-    assert times == [round(index / 50, 6) for index in range(16)]
+    assert times == [round(index / 50, 6) for index in range(FRAMES)]
     values = np.array([[float(cell) for cell in row[1:]] for row in rows[1:]])
     np.testing.assert_allclose(values, np.array(as_json["data"]), atol=5e-7)
     assert all(len(cell.split(".")[1]) == 6 for cell in rows[5])
@@ -294,9 +295,10 @@ def test_fps_below_one_is_refused(served: Served, fps: float) -> None:
     assert error["code"] == "invalid_message" and error["message"].startswith("fps: must be >= 1")
 
 
-@pytest.mark.parametrize(("fps", "frames"), [(1, 3), (1.5, 4)])
+@pytest.mark.parametrize(("fps", "frames"), [(1, 3 + 1), (1.5, 4 + 1)])
 def test_the_lowest_frame_rates_synthesize(served: Served, fps: float, frames: int) -> None:
-    # Frames i with i / fps <= 2 s: 0, 1, 2 at 1 fps; 0 to 3 at 1.5 fps.
+    # Frames i with i / fps <= 2 s: 0, 1, 2 at 1 fps; 0 to 3 at 1.5 fps; then one frame
+    # of return to rest (150 ms is less than a frame at either rate).
     items = [ITEMS[0], {**ITEMS[1], "end": 2.0}]
     answer = post(served, {**BODY, "fps": fps, "items": items})
     assert answer.status_code == 200

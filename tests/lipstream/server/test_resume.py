@@ -38,6 +38,7 @@ from lipstream_client import (
     Text,
 )
 from lipstream_client.errors import RESUME_MISMATCH
+from tests.helpers import return_frames
 
 FPS = 30.0
 SPANS = [
@@ -59,7 +60,10 @@ ITEMS = tuple(PhonemeItem(label, start, end) for label, start, end in SPANS)
 
 
 def new_session(catalog: Catalog) -> Session:
-    return Session(catalog, SessionLimits(2, RequestLimits(100, 10_000, 100.0)))
+    """A session whose speech synthesis takes no time by its clock, so that two runs of a
+    text request report the same ``speech_synthesis_ms``."""
+    limits = SessionLimits(2, RequestLimits(100, 10_000, 100.0))
+    return Session(catalog, limits, timer=lambda: 0.0)
 
 
 def play(session: Session, messages: list[Message]) -> list[ServerMessage]:
@@ -91,7 +95,8 @@ def test_a_resumed_request_sends_exactly_the_frames_the_client_lacks(
     first_blocks = blocks(first)
     [ready] = [m for m in first if isinstance(m, Ready)]
     expected = rows(first_blocks)
-    assert len(first_blocks) >= 3 and len(expected) == int(1.7 * FPS) + 1
+    assert len(first_blocks) >= 3
+    assert len(expected) == int(1.7 * FPS) + 1 + return_frames(FPS, 100.0)
     # The client held the first two blocks when the connection broke.
     held = first_blocks[1].end_frame
     resume = Resume(frames=held, seq=2, fidelity=ready.fidelity)
@@ -176,3 +181,47 @@ def test_a_resumed_text_request_sends_the_speech_and_frames_the_client_lacks(
     answers = play(new_session(catalog), [replace(start, resume=resume), *texts, End("a")])
     assert answers[0] == ready
     assert answers[1:] == first[cut:]
+
+
+MAX_SEQ = 2**31 - 1  # the protocol's bound on a block's seq, stated independently here
+
+
+def test_a_resume_seq_without_room_for_the_requests_blocks_is_refused_before_ready(
+    catalog: Catalog,
+) -> None:
+    # The session's requests may send 10,000 frames; an interrupt's return to rest at most
+    # 10 s x 1000 fps + 1 rows: a resumed request may need that many block numbers from seq.
+    most_blocks = 10_000 + 1 + 10_001
+    last_fitting = MAX_SEQ + 1 - most_blocks
+    for seq in (MAX_SEQ, last_fitting + 1):
+        start = Start("a", "viseme-lerp", "demo", fps=FPS, resume=Resume(0, seq))
+        [error] = play(new_session(catalog), [start])
+        assert isinstance(error, ErrorMessage)
+        assert (error.code, error.id, error.fatal) == (RESUME_MISMATCH, "a", True)
+        assert error.message.startswith("resume.seq: ")
+        assert str(MAX_SEQ) in error.message
+    start = Start("a", "viseme-lerp", "demo", fps=FPS, resume=Resume(0, last_fitting))
+    answers = play(new_session(catalog), [start, Phonemes("a", ITEMS), End("a")])
+    resumed = blocks(answers)
+    assert [b.seq for b in resumed] == list(range(last_fitting, last_fitting + len(resumed)))
+    assert answers[-1].type == "done"
+
+
+def test_the_server_never_numbers_a_block_past_the_bound(catalog: Catalog) -> None:
+    session = new_session(catalog)
+    start = Start("a", "viseme-lerp", "demo", fps=FPS, resume=Resume(0, 0))
+    assert isinstance(play(session, [start])[0], Ready)
+    session.resumes["a"].seq = MAX_SEQ  # as if the request had sent that many blocks
+    answers = play(session, [Phonemes("a", ITEMS[:6]), Phonemes("a", ITEMS[6:])])
+    seqs = [b.seq for b in blocks(answers)]
+    assert seqs == [MAX_SEQ]
+    [error] = [m for m in answers if isinstance(m, ErrorMessage)]
+    assert (error.code, error.id, error.fatal) == (RESUME_MISMATCH, "a", True)
+    assert session.active_requests == 0
+    request = Start("b", "viseme-lerp", "demo", fps=FPS)
+    assert isinstance(play(session, [request])[0], Ready)
+    session.requests["b"].seq = MAX_SEQ
+    answers = play(session, [Phonemes("b", ITEMS[:6]), Phonemes("b", ITEMS[6:])])
+    assert [b.seq for b in blocks(answers)] == [MAX_SEQ]
+    [error] = [m for m in answers if isinstance(m, ErrorMessage)]
+    assert (error.code, error.id, error.fatal) == ("output_too_large", "b", True)

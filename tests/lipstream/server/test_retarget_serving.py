@@ -21,6 +21,7 @@ from lipstream.retarget import KeyPosePairs, fit_map, save_map
 from lipstream.server.catalog import Catalog
 from lipstream_client import AsyncClient, LipstreamServerError, OutputProfile, StreamResult
 from lipstream_client.channels import OCULUS15_VISEMES
+from tests.helpers import return_frames
 from tests.live_server import LiveServer, live_server
 
 FPS = 60.0
@@ -82,7 +83,9 @@ def test_a_stored_map_serves_its_controls_over_the_websocket(
     frames, channels = offline(trained_models["viseme-lerp"])
     columns = [channels.index("jawOpen"), channels.index("mouthClose")]
     expected = np.clip(frames[:, columns], 0.0, 1.0)
-    np.testing.assert_allclose(np.asarray(result.rows()), expected, atol=1e-6)
+    rows = np.asarray(result.rows())
+    assert len(rows) == len(expected) + return_frames(FPS)
+    np.testing.assert_allclose(rows[: len(expected)], expected, atol=1e-6)
 
 
 def test_arkit52_with_a_subset_holds_channels_the_model_lacks_at_rest(
@@ -94,8 +97,9 @@ def test_arkit52_with_a_subset_holds_channels_the_model_lacks_at_rest(
     result = asyncio.run(request(served.ws, profile))
     assert result.ready.channels == ("jawOpen", lacking)
     rows = np.asarray(result.rows())
+    assert len(rows) == len(frames) + return_frames(FPS)
     np.testing.assert_allclose(
-        rows[:, 0], np.clip(frames[:, channels.index("jawOpen")], 0, 1), atol=1e-6
+        rows[: len(frames), 0], np.clip(frames[:, channels.index("jawOpen")], 0, 1), atol=1e-6
     )
     assert not rows[:, 1].any()
 

@@ -67,17 +67,21 @@ def test_workers_get_the_settings_and_the_environment_is_restored(
     )
     seen: dict[str, Any] = {}
 
-    def fake_run(app: str, **options: Any) -> None:
-        seen.update(app=app, options=options, described=os.environ.get(runner.WORKER_APP_ENV))
+    def fake_supervise(host: str, port: int, server: ServerSettings, drain_flag: Path) -> None:
+        described = os.environ.get(runner.WORKER_APP_ENV)
+        seen.update(server=server, flag=drain_flag, described=described)
+        assert drain_flag.parent.is_dir() and not drain_flag.exists()
 
-    monkeypatch.setattr(runner.uvicorn, "run", fake_run)
+    monkeypatch.setattr(runner, "supervise", fake_supervise)
     monkeypatch.setenv(runner.WORKER_APP_ENV, "left by someone else")
     monkeypatch.delenv("LIPSTREAM_MODELS", raising=False)
     environment = dict(os.environ)
     runner.serve(lerp_dir, "127.0.0.1", 0, settings)
     assert dict(os.environ) == environment
-    assert seen["app"] == runner.APP_FACTORY and seen["options"]["workers"] == 2
+    assert seen["server"] == settings
     assert runner.decode_worker_app(seen["described"]) == (lerp_dir, settings)
+    assert runner.worker_drain_flag(seen["described"]) == seen["flag"]
+    assert not seen["flag"].parent.exists()  # the private directory is gone with the server
 
     built: dict[str, Any] = {}
     monkeypatch.setattr(
@@ -87,7 +91,12 @@ def test_workers_get_the_settings_and_the_environment_is_restored(
     )
     monkeypatch.setenv(runner.WORKER_APP_ENV, seen["described"])
     runner.app_from_environment()
-    assert built == {"models": lerp_dir, "server": settings, "serving_process": True}
+    assert built == {
+        "models": lerp_dir,
+        "server": settings,
+        "serving_process": True,
+        "drain_flag": seen["flag"],
+    }
 
 
 def test_a_worker_without_a_description_reads_the_lipstream_environment(

@@ -33,16 +33,23 @@ from lipstream_client import (
     encode,
 )
 from lipstream_client.channels import OCULUS15_VISEMES
+from tests.helpers import rest_pose, return_frames
 
 SPANS = [("HH", 0.0, 0.1), ("AY1", 0.1, 0.4), ("sil", 0.4, 0.6)]
 ITEMS = tuple(PhonemeItem(label, start, end) for label, start, end in SPANS)
+RETURN_MS = 100.0
+
+
+def returning(fps: float) -> int:
+    """The frames after the input's end that return the face to rest (``RETURN_MS``)."""
+    return return_frames(fps, RETURN_MS)
 
 
 def new_session(
     catalog: Catalog, max_requests: int = 3, max_phonemes: int = 20, max_frames: int = 1000
 ) -> Session:
     return Session(
-        catalog, SessionLimits(max_requests, RequestLimits(max_phonemes, max_frames, 100.0))
+        catalog, SessionLimits(max_requests, RequestLimits(max_phonemes, max_frames, RETURN_MS))
     )
 
 
@@ -107,10 +114,10 @@ def test_streamed_frames_equal_the_offline_synthesis(catalog: Catalog) -> None:
         End("a"),
     )
     expected = catalog.model("viseme-lerp", "demo").synthesize(SPANS, fps=60).frames
-    np.testing.assert_array_equal(frames_of(out), expected)
+    np.testing.assert_array_equal(frames_of(out)[: -returning(60)], expected)
     done = out[-1]
     assert isinstance(done, Done) and done.reason == "end"
-    assert done.stats.frames == len(expected) == math.floor(0.6 * 60) + 1
+    assert done.stats.frames == len(expected) + returning(60) == math.floor(0.6 * 60) + 1 + 6
     assert session.active_requests == 0
 
 
@@ -129,8 +136,8 @@ def test_requests_multiplex_independently(catalog: Catalog) -> None:
     )
     lerp = catalog.model("viseme-lerp", "demo").synthesize(SPANS, fps=60).frames
     graph = catalog.model("anime-graph", "demo").synthesize(other, fps=30).frames[:, :2]
-    np.testing.assert_array_equal(frames_of(out, "a"), lerp)
-    np.testing.assert_array_equal(frames_of(out, "b"), graph)
+    np.testing.assert_array_equal(frames_of(out, "a")[: -returning(60)], lerp)
+    np.testing.assert_array_equal(frames_of(out, "b")[: -returning(30)], graph)
     for identifier in "ab":
         mine = [m for m in out if getattr(m, "id", None) == identifier]
         assert isinstance(mine[0], Ready) and isinstance(mine[-1], Done)
@@ -196,6 +203,31 @@ def test_interrupt_after_the_input_cuts_at_its_end_with_the_default_return(
     assert out[-1].stats.frames == 6  # type: ignore[union-attr]
 
 
+@pytest.mark.parametrize(
+    "engine", ["viseme-lerp", "anime-graph", "dam", "cohen-massaro", "hmm", "expressive-dp"]
+)
+def test_a_request_ended_or_interrupted_before_any_input_is_done_with_the_rest_pose(
+    catalog: Catalog, engine: str
+) -> None:
+    # anime-graph once answered internal_error (negative dimensions) at every fps from 120 up.
+    session = new_session(catalog)
+    model = catalog.model(engine, "demo")
+    rest = catalog.rest_pose(model, catalog.default_emotion(model)).astype(np.float32)
+    for fps in (1.0, 60.0, 119.0, 120.0, 121.0, 240.0, 999.5, 1000.0):
+        out = play(session, Start("a", engine, "demo", fps=fps), End("a"))
+        assert isinstance(out[0], Ready)
+        assert out[1:] == [Done("a", out[-1].stats, "end")], (fps, out)  # type: ignore[union-attr]
+        assert out[-1].stats.frames == 0  # type: ignore[union-attr]
+        out = play(
+            session, Start("a", engine, "demo", fps=fps), Interrupt("a", at=0.0, return_ms=0)
+        )
+        assert errors(out) == [], (fps, out)
+        [block] = [m for m in out if isinstance(m, Frames)]
+        assert (block.first_frame, block.n_frames) == (0, 1)
+        np.testing.assert_array_equal(np.frombuffer(block.data, "<f4"), rest)
+        assert out[-1] == Done("a", out[-1].stats, "interrupt")  # type: ignore[union-attr]
+
+
 def test_oculus_visemes_through_the_session_are_distributions(catalog: Catalog) -> None:
     session = new_session(catalog)
     out = play(
@@ -206,7 +238,7 @@ def test_oculus_visemes_through_the_session_are_distributions(catalog: Catalog) 
     )
     assert isinstance(out[0], Ready) and out[0].channels == OCULUS15_VISEMES
     weights = frames_of(out)
-    assert weights.shape == (37, 15) and np.all(weights >= 0)
+    assert weights.shape == (37 + returning(60), 15) and np.all(weights >= 0)
     np.testing.assert_allclose(weights.sum(axis=1), 1.0, atol=1e-5)
 
 
@@ -337,7 +369,7 @@ def test_audio_streamed_before_phonemes_matches_offline_audio_synthesis(catalog:
         End("a"),
     )
     offline = model.synthesize(SPANS, fps=60, audio=Audio.from_pcm16(samples.tobytes(), rate))
-    np.testing.assert_array_equal(frames_of(out), offline.frames)
+    np.testing.assert_array_equal(frames_of(out)[: -returning(60)], offline.frames)
 
 
 def test_draining_refuses_new_requests_but_finishes_running_ones(catalog: Catalog) -> None:
@@ -391,10 +423,10 @@ def test_work_estimate_prices_phonemes_and_frames_at_the_calibrated_cost(
     assert session.estimated_work_ms(Start("b", "viseme-lerp", "demo")) == 0.0
     play(session, Phonemes("a", ITEMS))
     # viseme-lerp waits one phoneme: frames before 0.4 s (24) are out; end decides the last
-    # phoneme and releases frames 24..36.
+    # phoneme and releases frames 24..36, then the 6 frames of the return to rest.
     assert session.requests["a"].next_frame == 24
     assert session.estimated_work_ms(End("a")) == pytest.approx(
-        measured.per_phoneme_ms + 13 * measured.per_frame_ms
+        measured.per_phoneme_ms + (13 + 6) * measured.per_frame_ms
     )
 
 
@@ -428,3 +460,30 @@ def test_stopped_work_answers_nothing_until_its_cancel(catalog: Catalog) -> None
     done = play(session, Cancel("a"))
     assert len(done) == 1 and isinstance(done[0], Done) and done[0].reason == "cancel"
     assert isinstance(play(session, Phonemes("b", ITEMS), End("b"))[-1], Done)
+
+
+@pytest.mark.parametrize("engine", ["viseme-lerp", "anime-graph", "dam", "cohen-massaro"])
+def test_end_returns_the_face_to_the_rest_pose(catalog: Catalog, engine: str) -> None:
+    # The input stops on an open vowel: the face is mid-word at the last frame.
+    spans = [("HH", 0.0, 0.1), ("AA1", 0.1, 0.5)]
+    session = new_session(catalog)
+    out = play(
+        session,
+        Start("a", engine, "demo", fps=60),
+        Phonemes("a", tuple(PhonemeItem(*span) for span in spans)),
+        End("a"),
+    )
+    assert session.active_requests == 0
+    model = catalog.model(engine, "demo")
+    rows = frames_of(out)
+    spoken = math.floor(0.5 * 60) + 1
+    assert rows.shape == (spoken + 6, len(model.channels))  # 100 ms at 60 fps
+    rest = rest_pose(model, "neutral")
+    last = rows[spoken - 1].astype(np.float64)
+    assert np.abs(last - rest).max() > 0.05  # mid-word
+    u = np.arange(1, 7) / 6
+    expected = last + (rest - last) * (u * u * (3 - 2 * u))[:, None]
+    np.testing.assert_allclose(rows[spoken:], expected, atol=1e-6)
+    np.testing.assert_array_equal(rows[-1], rest)
+    done = out[-1]
+    assert isinstance(done, Done) and done.stats.frames == spoken + 6

@@ -21,8 +21,16 @@ import pytest
 from lipstream.config import ServerSettings
 from lipstream.server.catalog import Catalog
 from lipstream.server.lifecycle import Drainable, Lifecycle
+from lipstream.server.runner import DRAIN_MARKED
 from lipstream_client import Done, End, ErrorMessage, PhonemeItem, Phonemes, Ready, Start
-from tests.helpers import VirtualClock, eventually, free_port, run_on_virtual_time, serve_command
+from tests.helpers import (
+    VirtualClock,
+    eventually,
+    free_port,
+    return_frames,
+    run_on_virtual_time,
+    serve_command,
+)
 from tests.lipstream.server.harness import client, frame_rows, serving
 from tests.live_server import READY_POLLS
 
@@ -61,7 +69,8 @@ def test_drain_finishes_in_flight_requests_then_closes_with_1001(
     assert isinstance(answers[-1], Done) and answers[-1].reason == "end"
     rows = frame_rows(answers)
     expected = catalog.model("viseme-lerp", "demo").synthesize(SPANS, fps=60).frames
-    np.testing.assert_array_equal(np.array([rows[i] for i in sorted(rows)]), expected)
+    assert sorted(rows) == list(range(len(expected) + return_frames(60)))
+    np.testing.assert_array_equal(np.array([rows[i] for i in range(len(expected))]), expected)
     assert [(m.code, m.id, m.fatal) for m in messages] == [  # type: ignore[union-attr]
         ("shutting_down", None, True)
     ]
@@ -156,6 +165,44 @@ def test_sigterm_loses_no_in_flight_utterance(
     expected = catalog.model("viseme-lerp", "demo").synthesize(SPANS, fps=60).frames
     for answers, (_, code, reason) in outcomes:
         rows = frame_rows(answers)
-        np.testing.assert_array_equal(np.array([rows[i] for i in sorted(rows)]), expected)
+        assert sorted(rows) == list(range(len(expected) + return_frames(60)))
+        np.testing.assert_array_equal(np.array([rows[i] for i in range(len(expected))]), expected)
         assert isinstance(answers[-1], Done)
         assert (code, reason) == (1001, "shutting_down")
+
+
+def test_readyz_answers_503_once_the_supervisor_of_two_workers_has_the_signal(
+    lerp_dir: Path,
+) -> None:
+    """``lipstream serve --workers 2``: uvicorn's supervisor looks at a signal only every half
+    second before it passes it on, and until then each worker said ready. Now the first
+    /readyz after the supervisor's mark (its log line, the ordering point) is 503, from
+    whichever worker answers: a request left in flight keeps its worker serving."""
+    port = free_port()
+    env = {**os.environ, "LIPSTREAM_DRAIN_TIMEOUT_S": "20", "LIPSTREAM_LOG_LEVEL": "warning"}
+    process = subprocess.Popen(
+        serve_command(lerp_dir, port, "--workers", "2"),
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    base = f"http://127.0.0.1:{port}"
+    try:
+        eventually(lambda: readyz(base) == 200, "ready", polls=READY_POLLS)
+        with client(base.replace("http://", "ws://") + "/v1/stream") as ws:
+            ws.send(Start("a", "viseme-lerp", "demo"), Phonemes("a", ITEMS[:2]))
+            assert isinstance(ws.recv(), Ready)
+            process.send_signal(signal.SIGTERM)
+            assert process.stderr is not None
+            # Bounded: the supervisor's log ends when it exits, at the latest after the drain.
+            marked = any(DRAIN_MARKED in line for line in iter(process.stderr.readline, ""))
+            assert marked, "the supervisor never marked the drain"
+            assert readyz(base) == 503
+            ws.send(Phonemes("a", ITEMS[2:]), End("a"))
+            assert isinstance(ws.until_done("a")[-1], Done)
+        process.wait(timeout=30)
+    finally:
+        if process.poll() is None:
+            process.kill()
+        process.wait(timeout=10)

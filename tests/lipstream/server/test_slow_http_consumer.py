@@ -40,7 +40,7 @@ from lipstream.config import ServerSettings
 from lipstream.engines.base import Model
 from lipstream.server.flush_watch import unsent_bytes
 from lipstream_client import SUBPROTOCOL_MSGPACK, Done, End, PhonemeItem, Phonemes, Start
-from tests.helpers import eventually
+from tests.helpers import eventually, return_frames
 from tests.lipstream.server.harness import Served, client, frame_rows, serving
 from tests.lipstream.server.test_slow_consumer import (
     SPANS,
@@ -187,10 +187,14 @@ def test_a_client_that_never_reads_its_response_is_reset_while_others_are_served
     expected = model.synthesize(SPANS, fps=60).frames
     assert served_meanwhile, "the other clients finished after the stalled one was reset"
     assert answer.status_code == 200
-    assert np.array(answer.json()["data"], np.float32).tobytes() == expected.tobytes()
+    spoken = len(expected)
+    data = answer.json()["data"]
+    assert len(data) == spoken + return_frames(60)
+    assert np.array(data[:spoken], np.float32).tobytes() == expected.tobytes()
     assert isinstance(messages[-1], Done) and messages[-1].reason == "end"
     rows = frame_rows(messages)
-    np.testing.assert_array_equal(np.array([rows[i] for i in sorted(rows)]), expected)
+    assert sorted(rows) == list(range(spoken + return_frames(60)))
+    np.testing.assert_array_equal(np.array([rows[i] for i in range(spoken)]), expected)
 
     # Judged by the send timeout (the checks a reset takes: test_flush_watch, by hand).
     assert connection.flush_watch.timeout_s == SEND_TIMEOUT_S  # type: ignore[attr-defined]
@@ -213,7 +217,9 @@ def test_a_slow_but_steady_reader_gets_the_whole_response(
     assert len(body) > 4_000_000
     assert paused_s(body) > 6 * SEND_TIMEOUT_S  # the read spans many checks of the watch
     expected = trained_models["viseme-lerp"].synthesize(LONG_SPANS, fps=STEADY_FPS).frames
-    np.testing.assert_array_equal(response_frames(body), expected)
+    frames = response_frames(body)
+    assert len(frames) == len(expected) + return_frames(STEADY_FPS)
+    np.testing.assert_array_equal(frames[: len(expected)], expected)
 
 
 def test_an_idle_keep_alive_connection_is_kept(served: Served) -> None:
@@ -300,6 +306,8 @@ def test_a_websocket_upgrade_behind_an_unread_response_is_left_to_the_websocket_
 
     assert status == 200
     expected = trained_models["viseme-lerp"].synthesize(LONG_SPANS, fps=UPGRADE_FPS).frames
-    np.testing.assert_array_equal(response_frames(body), expected)
+    frames = response_frames(body)
+    assert len(frames) == len(expected) + return_frames(UPGRADE_FPS)
+    np.testing.assert_array_equal(frames[: len(expected)], expected)
     assert handshake.startswith(b"HTTP/1.1 101 ")
     assert still_open

@@ -11,7 +11,9 @@ at most one frame period after its recording (what a corpus allows);
 per-recording curves as offsets that give every recording at least one
 sample (a kernel reads the first and last sample of each); audio summaries
 and features as wide as a request's; every view's members whole recordings,
-its stand-ins phonemes the view says, its clusters in range.
+its stand-ins phonemes the view says, its clusters in range; every float
+within ``MAX_MAGNITUDE``, and each smoothing cutoff a frequency from 0 to the
+corpus's Nyquist rate (fps / 2 Hz).
 
 The suffix automaton gets a structural check, since the greedy kernel follows
 its transitions blindly and turns an occurrence into anime ids by arithmetic:
@@ -185,9 +187,7 @@ def _check_animes(
         reader.offsets("feature_offsets", n_recordings, len(features), nonempty=True)
         summary_width = SUMMARY_POINTS * mfcc.n_coefficients
     reader.floats("anime_summary", (n_animes, summary_width))
-    cutoffs = reader.floats("cutoffs", (n_components,))
-    if (np.asarray(cutoffs) < 0.0).any():
-        raise reader.error("cutoffs", "holds a negative frequency")
+    reader.floats("cutoffs", (n_components,), 0.0, fps / 2.0)  # Hz, up to Nyquist
     return _Sizes(n_animes, n_recordings, n_components, summary_width)
 
 

@@ -173,8 +173,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         covered_until = self.covered_until
         new = coerce_spans(spans, after=covered_until, first_index=len(self.spans))
         filled = fill_gaps(new, covered_until)
-        if self.options.search == "pq":
-            self.options.check_size(len(self.spans) + len(filled))
+        self.check_more_phonemes(len(filled))
         causal = self.options.causal
         for span in filled:
             searcher = self._by_emotion.get(span.emotion)
@@ -203,6 +202,20 @@ class AnimeGraphSynthesizer(Synthesizer):
                 self.model.matcher_of(view, self.options.graph),
             )
         return self._by_view[view.name]
+
+    @property
+    def held_input_bytes(self) -> int:
+        return self.audio.held_bytes if self.audio is not None else 0
+
+    def check_more_phonemes(self, count: int) -> None:
+        if self.options.search == "pq":
+            self.options.check_size(len(self.spans) + count)
+
+    def held_input_bytes_after(self, n_samples: int, sample_rate: int) -> int:
+        if self.audio is None and (self.audio_mode is False or not self.model.has_audio):
+            return 0  # audio this request takes is not kept
+        audio = self.audio or RequestAudio(self.model.mfcc)
+        return audio.stream.held_bytes_after(n_samples, sample_rate)
 
     def _take_audio(self, audio: Audio | None) -> None:
         if self.options.causal:
@@ -608,7 +621,9 @@ class AnimeGraphSynthesizer(Synthesizer):
         limit = self._track_final_until()
         fps_model = self.model.fps
         if math.isinf(limit):
-            last = frame_count(self.covered_until, self.fps) - 1 if self.spans else -1
+            if not self.spans:  # finished with no input: no sample, and no frame, to make
+                return
+            last = frame_count(self.covered_until, self.fps) - 1
             needed = math.floor(last * fps_model / self.fps + _SNAP) + 2
             self._extend_raw(needed + self.half_width)
             self._extend_smoothed(needed)

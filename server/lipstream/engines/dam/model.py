@@ -19,6 +19,11 @@ Emotion: a span's emotion (its own, else the request's, else neutral) limits the
 candidates to modes seen with that emotion, falling back to all the phoneme's
 modes when that emotion never said it. A phoneme never trained stands in for
 another (``modes.stand_ins``).
+
+Stored ranges (checked at load, ``check_arrays``): σ in [``SIGMA_MIN``, 100];
+context counts in [0, 2^31 − 1]; κ in [0.1, 100] (``damped_fit.KAPPA_RANGE``);
+durations as in ``durations``; every other float (animeme coefficients, basis
+mean) within ``MAX_MAGNITUDE``, the basis orthonormal.
 """
 
 from __future__ import annotations
@@ -49,6 +54,7 @@ from ..base import (
     final_until,
     resolved_rung,
 )
+from ..damped_fit import KAPPA_RANGE
 from ..durations import DurationModel
 from .causal import CausalSynthesizer
 from .dominance import reach
@@ -344,6 +350,10 @@ class DamModel(Model):
         return cls(manifest, check_arrays(reader, degree, len(manifest.channels)))
 
 
+MAX_COUNT = 2**31 - 1
+"""The most training spans a mode's context count may record (a kernel sums a row of them)."""
+
+
 def check_arrays(reader: ArrayReader, degree: int, n_channels: int) -> dict[str, np.ndarray]:
     """Every array read with kind, shape and range checked; the modes grouped by phoneme."""
     n_phonemes = len(PHONEMES)
@@ -379,11 +389,9 @@ def check_arrays(reader: ArrayReader, degree: int, n_channels: int) -> dict[str,
         ("count_following", n_phonemes),
         ("count_emotion", len(EMOTIONS)),
     ):
-        result[name] = reader.integers(name, (n_modes, width), 0, 2**62)
+        result[name] = reader.integers(name, (n_modes, width), 0, MAX_COUNT + 1)
     result.update(DurationModel.from_arrays(reader).arrays())
-    result["causal_kappa"] = reader.floats("causal_kappa", (1,))
-    if not result["causal_kappa"][0] > 0:
-        raise reader.error("causal_kappa", "must be positive")
+    result["causal_kappa"] = reader.floats("causal_kappa", (1,), *KAPPA_RANGE)
     return result
 
 

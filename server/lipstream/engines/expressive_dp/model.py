@@ -12,6 +12,12 @@ string, to a node id, or a list of [index, node] pairs), ``causal`` and
 ``lead_ms`` (the causal rungs). Emotion modifiers are the spans' own emotions
 (else the request's). Ladder: ``lag-<L>`` for the model's lag, then 2, 1 and
 0 below it (lookahead L + 2 phonemes), ``causal_lead`` and ``causal``.
+
+Stored ranges (checked at load): each α inside the bounds its weight search covers
+(``weights.BOUNDS``: α1 [0.01, 10], α2 [0.001, 10], α3 [0.01, 100], α4 [0.01, 0.99],
+α5 and α6 [0.1, 100]); κ in [0.1, 100] (``damped_fit.KAPPA_RANGE``); durations as in
+``durations``; every other float (node frames, rest pose, map points) within
+``MAX_MAGNITUDE``.
 """
 
 from __future__ import annotations
@@ -39,6 +45,7 @@ from ..base import (
     causal_shift_s,
     resolved_rung,
 )
+from ..damped_fit import KAPPA_RANGE
 from ..durations import DurationModel
 from .contamination import Contamination
 from .costs import ALPHA_NAMES, NodeBounds, Weights
@@ -47,6 +54,7 @@ from .nodes import NodeDatabase, NodeFeatures
 from .postprocess import Renderer
 from .search import SearchSpace
 from .synthesizer import CausalSynthesizer, LagSynthesizer
+from .weights import BOUNDS
 
 MAX_LAG = 64
 LADDER_LAGS = (2, 1, 0)
@@ -248,15 +256,20 @@ class ExpressiveDpModel(Model):
         nodes = NodeDatabase.from_arrays(reader, k, float(manifest.fps))
         checked.update(nodes.arrays())
         alphas = reader.floats("alphas", (len(ALPHA_NAMES),))
-        if (alphas < 0).any() or not 0 < alphas[3] < 1:
-            raise reader.error("alphas", "must not be negative, and alpha4 must lie in (0, 1)")
+        low, high = np.exp(BOUNDS[:, 0]), np.exp(BOUNDS[:, 1])
+        outside = (alphas < low * (1 - 1e-9)) | (alphas > high * (1 + 1e-9))
+        if outside.any():
+            at = int(np.argmax(outside))
+            raise reader.error(
+                "alphas",
+                f"alpha{at + 1} is {alphas[at]:.6g}, outside the [{low[at]:g}, {high[at]:g}] "
+                "its weight search covers",
+            )
         checked["alphas"] = alphas
         checked["rest_pose"] = reader.floats("rest_pose", (k,))
         checked["map_points"] = reader.floats("map_points", (len(nodes.frames), 2))
         checked.update(DurationModel.from_arrays(reader).arrays())
-        checked["causal_kappa"] = reader.floats("causal_kappa", (1,))
-        if not checked["causal_kappa"][0] > 0:
-            raise reader.error("causal_kappa", "must be positive")
+        checked["causal_kappa"] = reader.floats("causal_kappa", (1,), *KAPPA_RANGE)
         return cls(manifest, checked, path, nodes)
 
 

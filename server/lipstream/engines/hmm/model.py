@@ -15,6 +15,10 @@ Options: ``lag_ms`` (the Viterbi lag limit; null: unlimited), ``window_ms``
 ladder (``RUNGS``) runs from a half-second lag with quarter-second blocks down
 to the causal rung (lag 0, a frame at a time), which also hears audio a few
 frames late rather than wait for a feature window (``synthesizer``).
+
+Stored ranges (checked at load, ``check_arrays``): probabilities non-negative and
+summing to 1, log-probabilities summing to 1, covariances symmetric positive
+definite, and every float within ``MAX_MAGNITUDE``.
 """
 
 from __future__ import annotations

@@ -60,7 +60,7 @@ import numpy as np
 
 from ...audio import Audio
 from ...errors import InvalidRequestError
-from ...features import frames_covered, speech_features
+from ...features import speech_features
 from ...numerics.banded import check_block_tridiagonal
 from ...numerics.trellis import FixedLagViterbi
 from ...phonemes import PHONEME_INDEX
@@ -74,6 +74,7 @@ from ..base import (
     frame_count,
 )
 from ..growable import Growable
+from ..streamed_features import StreamedFeatures
 from . import kernels
 
 if TYPE_CHECKING:
@@ -111,53 +112,41 @@ def hmm_frame(k: np.ndarray | int, ratio: float) -> np.ndarray:
 
 
 class AudioFeatures:
-    """A request's audio and its speech features at the HMM rate, computed as they become
-    final."""
+    """A request's speech features at the HMM rate, computed as the audio covers their
+    windows (``StreamedFeatures``: the request holds the features and a window of samples,
+    not its audio)."""
 
     def __init__(self, model: HmmModel) -> None:
         self.config = model.mfcc
-        self.sample_rate: int | None = None
-        self.samples = np.zeros(0, dtype=np.float32)
-        self.length = 0
-        self.features = np.zeros((0, model.vocal.dim if model.vocal else 0))
+        width = model.vocal.dim if model.vocal else 0
+        self.stream = StreamedFeatures(self.config, width, speech_features, lookback=1)
 
     def add(self, audio: Audio) -> None:
-        rate = int(audio.sample_rate)
-        if self.sample_rate is not None and rate != self.sample_rate:
-            raise InvalidRequestError(
-                f"audio at {rate} Hz follows audio at {self.sample_rate} Hz", where="audio"
-            )
-        self.sample_rate = rate
-        chunk = np.asarray(audio.samples, dtype=np.float32).ravel()
-        needed = self.length + len(chunk)
-        if needed > len(self.samples):
-            grown = np.zeros(max(needed, 2 * len(self.samples)), dtype=np.float32)
-            grown[: self.length] = self.samples[: self.length]
-            self.samples = grown
-        self.samples[self.length : needed] = chunk
-        self.length = needed
+        self.stream.add(audio)
+
+    @property
+    def length(self) -> int:
+        return self.stream.length
 
     @property
     def duration(self) -> float:
-        return self.length / self.sample_rate if self.sample_rate else 0.0
+        return self.stream.duration
+
+    @property
+    def held_bytes(self) -> int:
+        return self.stream.held_bytes
 
     def final_frames(self, finished: bool) -> int:
         """Feature frames final now (all of them once the input is finished)."""
-        if self.sample_rate is None:
+        if self.stream.sample_rate is None:
             return 0
         if finished:
             return frame_count(self.duration, self.config.rate)
-        return frames_covered(self.length, self.sample_rate, self.config)
+        return self.stream.covered
 
-    def rows(self, stop: int) -> np.ndarray:
-        """Feature frames 0 .. stop − 1 (computed once each)."""
-        have = len(self.features)
-        if stop > have and self.sample_rate is not None:
-            fresh = speech_features(
-                self.samples[: self.length], self.sample_rate, have, stop, self.config
-            )
-            self.features = np.concatenate([self.features, fresh])
-        return self.features[:stop]
+    def rows(self, first: int, stop: int) -> np.ndarray:
+        """Feature frames ``first`` .. ``stop`` − 1, float64 (computed once each)."""
+        return self.stream.through(stop)[first:stop].astype(np.float64)
 
 
 class HmmSynthesizer(Synthesizer):
@@ -192,6 +181,15 @@ class HmmSynthesizer(Synthesizer):
         self.mood = model.emotion_row(request.emotion or DEFAULT_EMOTION)
         self.finished = False
         self.stats = {"frames": 0, "states": 0}
+
+    @property
+    def held_input_bytes(self) -> int:
+        return self.audio.held_bytes
+
+    def held_input_bytes_after(self, n_samples: int, sample_rate: int) -> int:
+        if self.model.vocal is None or self.mode == PHONEMES:
+            return 0  # audio this request takes is not kept
+        return self.audio.stream.held_bytes_after(n_samples, sample_rate)
 
     # -- input ------------------------------------------------------------------------------
 
@@ -269,8 +267,10 @@ class HmmSynthesizer(Synthesizer):
         heard = (frames < available) & (frames >= 0)  # the first d frames hear nothing yet
         if not heard.any():
             return self.unheard, 0
-        rows = self.audio.rows(int(frames[heard].max()) + 1)
-        vocal = model.vocal.log_density(rows[frames[heard]])
+        wanted = frames[heard]
+        lowest = int(wanted.min())
+        rows = self.audio.rows(lowest, int(wanted.max()) + 1)
+        vocal = model.vocal.log_density(rows[wanted - lowest])
         return model.audio_weight * vocal, first + int(np.argmax(heard))
 
     def _decode(self) -> None:

@@ -5,6 +5,11 @@
 // t0 on the AudioContext's clock (plus a short lead); speech chunks are scheduled at
 // t0 + their `start`, an uploaded WAV at t0, and every animation frame shows the frame for
 // the audio clock's time (currentTime - t0), not the last frame that arrived.
+//
+// A request ends with the face at rest. After `done`, playback reaches the last frame, which
+// the server makes the character's rest pose, and the face stays there. An error leaves no
+// such frame: the face eases at once from what it shows to the page's neutral face (every
+// channel 0, as drawn before any request) over RETURN_S with a smoothstep.
 
 import { Face } from "./face.js";
 import { parseLab, parseTextGrid } from "./phones.js";
@@ -15,6 +20,9 @@ const LEAD_S = 0.15;
 const AUDIO_CHUNK_S = 0.25;
 const PHONEMES_PER_MESSAGE = 256;
 const DEFAULT_PLOTTED = ["jawOpen", "mouthClose", "mouthFunnel", "mouthSmileLeft"];
+const DEFAULT_ENGINE = "anime-graph";
+const RETURN_S = 0.15;
+const DECIMALS = 2;
 
 const $ = (id) => document.getElementById(id);
 const face = new Face($("face"));
@@ -200,13 +208,21 @@ function onDone(message) {
       `${(current.firstFrameMs ?? 0).toFixed(0)} ms at the page, ` +
       `${stats.first_frame_latency_ms.toFixed(0)} ms at the server`;
   }
-  $("stats").textContent = JSON.stringify({ reason: message.reason, ...stats }, null, 2);
+  $("stats").textContent = JSON.stringify({ reason: message.reason, ...stats }, rounded, 2);
   current.frames.length = Math.min(current.frames.length, stats.frames);
   finish("done");
 }
 
+// Numbers with at most DECIMALS decimals, for the readouts.
+function rounded(_key, value) {
+  return typeof value === "number" && !Number.isInteger(value)
+    ? Number(value.toFixed(DECIMALS))
+    : value;
+}
+
 function finish(state) {
   current.state = state;
+  if (state === "error") returnToRest();
   setStatus(state === "done" ? "all frames received" : "ended by an error");
   drawPlot();
 }
@@ -289,15 +305,32 @@ function showFrame(row) {
   face.apply(values);
 }
 
+// Ease the face from what it shows now to the neutral face (once per request).
+function returnToRest() {
+  if (current.returning) return;
+  current.returning = { from: { ...face.values }, at: now() };
+}
+
+function showReturn() {
+  const { from, at } = current.returning;
+  const u = Math.max(0, Math.min(1, (now() - at) / RETURN_S));
+  const keep = 1 - u * u * (3 - 2 * u);
+  const values = {};
+  if (keep > 0) for (const name of Object.keys(from)) values[name] = from[name] * keep;
+  face.apply(values);
+}
+
 function playbackTime() {
   return current === null || current.t0 === null ? null : now() - current.t0;
 }
 
 function tick() {
   const t = playbackTime();
-  if (t !== null && t >= 0 && !current.frozen) {
-    showFrame(frameAt(Math.floor(t * current.fps)));
+  if (current !== null && !current.frozen && current.returning) {
+    showReturn();
+  } else if (t !== null && t >= 0 && !current.frozen) {
     const end = current.frames.length / current.fps;
+    showFrame(frameAt(Math.floor(t * current.fps)));
     if (current.state === "streaming" || current.state === "done") {
       setStatus(t < end ? `speaking: ${t.toFixed(2)} s` : "done");
     }
@@ -364,7 +397,8 @@ async function loadControls() {
     option.disabled = !engine.loaded;
     select.add(option);
   }
-  select.value = engines.engines.find((e) => e.loaded)?.name ?? "";
+  const loaded = engines.engines.filter((e) => e.loaded).map((e) => e.name);
+  select.value = loaded.includes(DEFAULT_ENGINE) ? DEFAULT_ENGINE : (loaded[0] ?? "");
   const fillCharacters = () => {
     const chosen = $("character");
     const previous = chosen.value;
@@ -409,6 +443,7 @@ window.lipstreamDemo = {
     showFrame(frameAt(Math.floor(t * current.fps)));
   },
   mouthOpening: () => face.mouthOpening(),
+  faceValues: () => ({ ...face.values }),
 };
 
 loadControls();

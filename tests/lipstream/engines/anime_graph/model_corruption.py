@@ -327,10 +327,14 @@ def write_variant(corruption: Corruption, arrays: Arrays, manifest: Manifest, ou
     changed = dict(arrays)
     if corruption.arrays is not None:
         corruption.arrays(_ViewAliases(changed, manifest))
-    text = json.dumps(manifest)
+    np.savez(out / ARRAYS_NAME, **changed)
+    declared = {
+        "arrays_file_bytes": (out / ARRAYS_NAME).stat().st_size,
+        "array_data_bytes": {name: int(np.asarray(a).nbytes) for name, a in changed.items()},
+    }
+    text = json.dumps({**manifest, **declared})
     if corruption.manifest is not None:
         text = corruption.manifest(json.loads(text))
-    np.savez(out / ARRAYS_NAME, **changed)
     (out / MANIFEST_NAME).write_text(text, encoding="utf-8")
 
 

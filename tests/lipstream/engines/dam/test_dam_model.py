@@ -20,6 +20,7 @@ from lipstream.engines.dam.modes import PHONEME_INDEX
 from lipstream.engines.dam.selection import path_cost
 from lipstream.errors import InvalidRequestError, ModelStoreError
 from lipstream.phonemes import PHONEMES as PHONEMES_BY_INDEX
+from lipstream.store import read_manifest, save_model_dir
 from lipstream.timeline import PhonemeSpan
 
 
@@ -277,7 +278,7 @@ def _corrupt(directory: Path, name: str, change: object) -> None:
         arrays[name] = change(arrays[name])
     else:
         del arrays[name]
-    np.savez(directory / "arrays.npz", **arrays)
+    save_model_dir(directory, read_manifest(directory), arrays)
 
 
 @pytest.mark.parametrize(

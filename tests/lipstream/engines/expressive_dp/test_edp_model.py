@@ -18,6 +18,7 @@ from lipstream.engines.expressive_dp.search import NO_NODE
 from lipstream.engines.expressive_dp.synthesizer import PathSynthesizer
 from lipstream.errors import InvalidRequestError, ModelStoreError
 from lipstream.phonemes import PHONEME_INDEX, SILENCE
+from lipstream.store import read_manifest, save_model_dir
 from lipstream.timeline import EMOTIONS, PhonemeSpan
 
 
@@ -188,7 +189,7 @@ def test_a_damaged_array_is_refused_at_load_naming_it(
     model.save(tmp_path / "m")
     arrays = dict(np.load(tmp_path / "m" / "arrays.npz"))
     arrays[name] = damage(arrays[name])
-    np.savez(tmp_path / "m" / "arrays.npz", **arrays)
+    save_model_dir(tmp_path / "m", read_manifest(tmp_path / "m"), arrays)
     with pytest.raises(ModelStoreError) as caught:
         load_model(tmp_path / "m")
     assert caught.value.code == "model_invalid" and name in str(caught.value)

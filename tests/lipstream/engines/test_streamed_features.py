@@ -1,0 +1,41 @@
+"""A request's audio reduced to features as it arrives: bounded samples, the offline frames."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lipstream.audio import Audio
+from lipstream.engines.streamed_features import StreamedFeatures
+from lipstream.features import DEFAULT_MFCC, mfcc, speech_features
+
+RATE = 192_000
+SECONDS = 20
+CHUNK = RATE // 2  # 0.5 s, as a client streams it
+
+
+@pytest.mark.parametrize(
+    ("analyse", "width", "lookback"),
+    [(mfcc, DEFAULT_MFCC.n_coefficients, 0), (speech_features, 28, 1)],
+)
+def test_streamed_audio_holds_features_and_a_window_and_gives_the_offline_frames(
+    analyse: object, width: int, lookback: int
+) -> None:
+    samples = np.random.default_rng(1).normal(scale=0.1, size=RATE * SECONDS).astype(np.float32)
+    stream = StreamedFeatures(DEFAULT_MFCC, width, analyse, lookback)  # type: ignore[arg-type]
+    held = []
+    for first in range(0, len(samples), CHUNK):
+        chunk = samples[first : first + CHUNK]
+        bound = stream.held_bytes_after(len(chunk), RATE)  # what the server admits on
+        stream.add(Audio(chunk, RATE))
+        held.append(stream.held_bytes)
+        assert held[-1] <= bound
+    offline = analyse(samples, RATE)  # type: ignore[operator]
+    streamed = stream.through(len(offline))
+    np.testing.assert_array_equal(streamed, offline)
+    # The whole audio is 15 MB as float32; the stream holds its features (a buffer at most
+    # twice their size) and at most two chunks of samples.
+    feature_bytes = offline.nbytes
+    assert max(held) <= 2 * feature_bytes + 2 * 4 * CHUNK + 4096
+    assert max(held) < samples.nbytes / 5
+    assert len(stream.samples.view()) < 4 * CHUNK // 2  # a chunk, not the utterance
