@@ -28,13 +28,19 @@ if TYPE_CHECKING:
     from lipstream_client import OutputProfile
 
     from .audio import Audio
+    from .status import Report
 
 
 def _build_demo(args: argparse.Namespace, settings: Settings) -> None:
+    from .status import Heartbeat, to_stderr
     from .training import build_demo
 
     out = Path(args.out) if args.out else settings.demo_dir
-    written = build_demo(out, progress=True)
+    heartbeat = Heartbeat(to_stderr).start()
+    try:
+        written = build_demo(out, report=heartbeat.report)
+    finally:
+        heartbeat.stop()
     print(f"demo corpus in {out / 'corpus'}; models: {', '.join(map(str, written.values()))}")
 
 
@@ -126,40 +132,88 @@ def _output_profile(args: argparse.Namespace, *, shapes: bool) -> OutputProfile 
 
 
 def _serve(args: argparse.Namespace, settings: Settings) -> None:
-    from .models import ModelRegistry
-    from .server.metrics import multiprocess_directory
-    from .server.runner import serve
-    from .status import phase, to_stderr
-    from .training import build_demo
+    """Serve; with one worker the server listens first and starts up behind it (building the
+    demo character when there are no models), so ``/healthz`` answers throughout and
+    ``/readyz`` names the phase."""
+    from .status import to_stderr
 
-    models = Path(args.models) if args.models else settings.models
-    if args.models is None and not models.exists():
-        print(f"no models in {models}: building the demo character first", file=sys.stderr)
-        build_demo(settings.demo_dir, progress=True)
-        models = settings.demo_models_dir
-    elif args.models is None and models == settings.demo_models_dir and _stale_demo(models):
-        print(
-            f"the demo character in {models} lacks an engine or was built by an older "
-            "lipstream: building it again",
-            file=sys.stderr,
-        )
-        build_demo(settings.demo_dir, progress=True)
+    host = args.host or settings.host
+    port = settings.port if args.port is None else args.port
     server = settings.server.with_changes(
         workers=args.workers or settings.server.workers,
         log_level=args.log_level or settings.server.log_level,
         strict_models=args.strict_models or settings.server.strict_models,
     )
-    # Loaded here, so a model set that cannot be served stops the command with one line;
-    # one worker serves these very models, several load their own.
-    with phase(f"loading the models in {models.resolve()}", to_stderr):
-        registry: ModelRegistry | None = ModelRegistry.load(
-            models.resolve(), strict=server.strict_models
-        )
+    models = Path(args.models) if args.models else settings.models
+    build = args.models is None and not models.exists()
+    check = args.models is None and models == settings.demo_models_dir
+    if build:
+        models = settings.demo_models_dir
+    if args.ray or server.workers > 1:
+        _serve_in_front(args, settings, models, server, build=build, check=check)
+        return
+    to_stderr(
+        f"lipstream serve: listening on http://{host}:{port} and starting up "
+        "(GET /readyz names the phase until it is ready)"
+    )
+    from .server.runner import serve
+
+    def prepare(report: Report) -> None:
+        _demo_ready(settings, report, build=build, check=check)
+
+    serve(models.resolve(), host, port, server, prepare=prepare if build or check else None)
+
+
+def _demo_ready(settings: Settings, report: Report, *, build: bool, check: bool) -> None:
+    """Build the demo character when there are no models, or when its cached models cannot
+    serve every engine (``_stale_demo``)."""
+    from .status import phase
+    from .training import build_demo
+
+    models = settings.demo_models_dir
+    if build:
+        report(f"no models in {models}: building the demo character first")
+    elif check:
+        with phase(f"checking the demo character in {models}", report):
+            build = _stale_demo(models)
+        if build:
+            report(
+                f"the demo character in {models} lacks an engine or was built by an older "
+                "lipstream: building it again"
+            )
+    if build:
+        build_demo(settings.demo_dir, report=report)
+
+
+def _serve_in_front(
+    args: argparse.Namespace,
+    settings: Settings,
+    models: Path,
+    server: ServerSettings,
+    *,
+    build: bool,
+    check: bool,
+) -> None:
+    """Several workers or Ray: build and load before serving, so each worker (or replica)
+    loads a model set known to load; a set that cannot be served stops here with one line."""
+    from .models import ModelRegistry
+    from .server.metrics import multiprocess_directory
+    from .server.runner import serve
+    from .status import Heartbeat, phase, to_stderr
+
+    heartbeat = Heartbeat(to_stderr).start()
+    try:
+        _demo_ready(settings, heartbeat.report, build=build, check=check)
+        with phase(f"loading the models in {models.resolve()}", heartbeat.report):
+            registry: ModelRegistry | None = ModelRegistry.load(
+                models.resolve(), strict=server.strict_models
+            )
+    finally:
+        heartbeat.stop()
     if args.ray:
         _serve_on_ray(args, settings, models.resolve(), server)
         return
-    if server.workers > 1:
-        registry = None
+    registry = None
     with multiprocess_directory(server.workers):
         serve(
             models.resolve(),

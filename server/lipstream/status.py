@@ -5,20 +5,38 @@ a step begins and ``what: done in 1.2 s`` as it ends, so a user watching a first
 start sees which step the time goes to (generating the demo corpus, training each
 engine, warming up and calibrating each model). ``report`` is where lines go:
 stderr for the command line, the server's log at start-up; ``None`` is silent.
+A step can run for tens of seconds without a line of its own (one engine's
+training, one stage of a progress bar), so a ``Heartbeat`` wraps the report: it
+notes when anything was last written (its own lines, and a progress bar's, through
+``touch``) and, whenever ``interval_s`` passes without output while a step is under
+way, repeats the step with its elapsed time (``training dam ...: 12 s``). Its clock
+is injected, and ``beat`` is the single check its thread repeats, so it is tested
+without waiting.
 """
 
 from __future__ import annotations
 
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from typing import TextIO
 
 Report = Callable[[str], None]
+Clock = Callable[[], float]
+
+HEARTBEAT_S = 2.0
+BEGUN = " ..."
+DONE = ": done in "
 
 
 def to_stderr(line: str) -> None:
-    print(line, file=sys.stderr, flush=True)
+    """Print ``line`` on stderr, above any progress bar drawn there (tqdm redraws it below)."""
+    from tqdm import tqdm
+
+    tqdm.write(line, file=sys.stderr)
+    sys.stderr.flush()
 
 
 @contextmanager
@@ -27,7 +45,87 @@ def phase(what: str, report: Report | None) -> Iterator[None]:
     if report is None:
         yield
         return
-    report(f"{what} ...")
+    report(f"{what}{BEGUN}")
     started = time.perf_counter()
     yield
-    report(f"{what}: done in {time.perf_counter() - started:.1f} s")
+    report(f"{what}{DONE}{time.perf_counter() - started:.1f} s")
+
+
+class Heartbeat:
+    """A report that repeats the step under way whenever ``interval_s`` passes silently.
+
+    ``report`` passes a line on and follows the steps ``phase`` opens (``what ...``) and
+    closes (``what: done in``); ``touch`` notes output written elsewhere (a progress bar);
+    ``beat`` reports each open step as ``what ...: N s`` when the last output is
+    ``interval_s`` old. ``start`` runs ``beat`` on a daemon thread until ``stop``."""
+
+    def __init__(
+        self, report: Report, interval_s: float = HEARTBEAT_S, clock: Clock = time.monotonic
+    ) -> None:
+        self.interval_s = interval_s
+        self._report = report
+        self._clock = clock
+        self._lock = threading.Lock()
+        self._steps: list[tuple[str, float]] = []
+        self._last_output = clock()
+        self._stopped = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def report(self, line: str) -> None:
+        now = self._clock()
+        with self._lock:
+            if line.endswith(BEGUN):
+                self._steps.append((line[: -len(BEGUN)], now))
+            elif DONE in line:
+                finished = line.split(DONE, 1)[0]
+                self._steps = [step for step in self._steps if step[0] != finished]
+            self._last_output = now
+        self._report(line)
+
+    def touch(self) -> None:
+        with self._lock:
+            self._last_output = self._clock()
+
+    def beat(self) -> bool:
+        """Report the open steps when output has been silent for ``interval_s``."""
+        now = self._clock()
+        with self._lock:
+            if not self._steps or now - self._last_output < self.interval_s:
+                return False
+            steps = list(self._steps)
+            self._last_output = now
+        self._report("; ".join(f"{what}{BEGUN}: {now - began:.0f} s" for what, began in steps))
+        return True
+
+    def start(self) -> Heartbeat:
+        def run() -> None:
+            while not self._stopped.wait(self.interval_s / 4):
+                self.beat()
+
+        self._thread = threading.Thread(target=run, name="lipstream-heartbeat", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stopped.set()
+        if self._thread is not None:
+            self._thread.join()
+
+
+class TouchingStream:
+    """A text stream that calls ``touch`` on every write (a progress bar's output keeps a
+    ``Heartbeat`` quiet)."""
+
+    def __init__(self, stream: TextIO, touch: Callable[[], None]) -> None:
+        self._stream = stream
+        self._touch = touch
+
+    def write(self, text: str) -> int:
+        self._touch()
+        return self._stream.write(text)
+
+    def flush(self) -> None:
+        self._stream.flush()
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self._stream, name)

@@ -10,6 +10,7 @@ ones show their own progress bar.
 
 from __future__ import annotations
 
+import os
 import shutil
 import time
 from collections.abc import Sequence
@@ -19,7 +20,7 @@ from .config import DEMO_MODELS_DIR
 from .corpus import Corpus, load_corpus, write_corpus
 from .engines import engine_names, get_engine_class
 from .engines.base import Model
-from .status import phase, to_stderr
+from .status import BEGUN, DONE, Report, phase, to_stderr
 
 DEMO_CORPUS_DIR = "corpus"
 
@@ -46,32 +47,113 @@ def resolve_engines(selection: str) -> list[str]:
 
 
 def train_engines(
-    corpus: Corpus, engines: Sequence[str], out: Path, *, progress: bool = False
+    corpus: Corpus,
+    engines: Sequence[str],
+    out: Path,
+    *,
+    progress: bool = False,
+    report: Report | None = None,
 ) -> dict[str, Path]:
-    """Train each engine into ``out/<engine>``; returns the model directories."""
+    """Train each engine into ``out/<engine>``, one after another; returns the model
+    directories. ``report`` (default: stderr with ``progress``) gets a line per engine."""
     written: dict[str, Path] = {}
-    report = to_stderr if progress else None
+    report = report or (to_stderr if progress else None)
     for number, engine in enumerate(engines, 1):
         what = f"training {engine} ({number} of {len(engines)}) on the corpus"
         with phase(what, report):
-            train_engine(corpus, engine, out / engine, progress=progress)
+            train_engine(corpus, engine, out / engine, progress=report is not None)
         written[engine] = out / engine
     return written
 
 
-def build_demo(out: Path, *, progress: bool = False) -> dict[str, Path]:
-    """Generate the demo corpus into ``out/corpus`` and train every engine into ``out/models``."""
+def train_in_parallel(
+    corpus: Corpus, engines: Sequence[str], out: Path, report: Report, jobs: int
+) -> dict[str, Path]:
+    """Train each engine into ``out/<engine>`` in ``jobs`` worker processes, longest first,
+    each then warming its model's kernels into numba's on-disk cache (``warm_kernels``) so
+    the server's own warm-up loads them; returns the model directories. Identical to
+    ``train_engines``'s models: the same code and seeds, another process."""
+    import multiprocessing
+
+    order = sorted(engines, key=lambda name: -TRAINING_WEIGHT.get(name, 0))
+    written = {engine: out / engine for engine in engines}
+    begun: dict[str, float] = {}
+    for engine in order[:jobs]:
+        begun[engine] = time.perf_counter()
+        report(f"training {engine} and compiling its kernels{BEGUN}")
+    context = multiprocessing.get_context("spawn")
+    with context.Pool(jobs, _receive_corpus, (corpus,)) as pool:
+        tasks = [(engine, out / engine) for engine in order]
+        waiting = order[jobs:]
+        for engine in pool.imap_unordered(_train_and_warm, tasks):
+            seconds = time.perf_counter() - begun.pop(engine)
+            report(f"training {engine} and compiling its kernels{DONE}{seconds:.1f} s")
+            if waiting:  # the pool hands out the tasks in order, one per free process
+                following = waiting.pop(0)
+                begun[following] = time.perf_counter()
+                report(f"training {following} and compiling its kernels{BEGUN}")
+    return written
+
+
+# Relative training times of the demo character's engines: the longest go first.
+TRAINING_WEIGHT = {
+    "anime-graph": 6,
+    "dam": 5,
+    "expressive-dp": 4,
+    "cohen-massaro": 3,
+    "hmm": 2,
+    "viseme-lerp": 1,
+}
+_corpus: list[Corpus] = []
+
+
+def _receive_corpus(corpus: Corpus) -> None:
+    _corpus[:] = [corpus]
+
+
+def _train_and_warm(task: tuple[str, Path]) -> str:
+    from .engines import load_model
+    from .server.catalog import warm_kernels
+
+    engine, out = task
+    train_engine(_corpus[0], engine, out)
+    warm_kernels(load_model(out))
+    return engine
+
+
+def training_jobs() -> int:
+    """Worker processes for training: the cores this process may run on."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+def build_demo(
+    out: Path, *, progress: bool = False, report: Report | None = None, jobs: int | None = None
+) -> dict[str, Path]:
+    """Generate the demo corpus into ``out/corpus`` and train every engine into ``out/models``,
+    on ``jobs`` processes (default: one per core; 1 trains in this process). ``report``
+    (default: stderr with ``progress``) gets a line per step."""
     from .demo.generate import generate_demo_corpus
 
-    report = to_stderr if progress else None
+    report = report or (to_stderr if progress else None)
+    bars = report is not None
     corpus_dir = out / DEMO_CORPUS_DIR
     if not corpus_dir.is_dir():
         partial = out / (DEMO_CORPUS_DIR + ".partial")
         shutil.rmtree(partial, ignore_errors=True)
         with phase("generating the demo corpus (espeak-ng speaks every sentence)", report):
-            write_corpus(generate_demo_corpus(progress=progress), partial)
+            write_corpus(generate_demo_corpus(progress=bars), partial)
         partial.rename(corpus_dir)
     with phase(f"loading the corpus {corpus_dir}", report):
-        corpus = load_corpus(corpus_dir, progress=progress)
+        corpus = load_corpus(corpus_dir, progress=bars)
     train, _heldout = corpus.split()
-    return train_engines(train, engine_names(), out / DEMO_MODELS_DIR, progress=progress)
+    engines = engine_names()
+    jobs = min(len(engines), jobs or training_jobs())
+    models = out / DEMO_MODELS_DIR
+    if jobs > 1:
+        with phase(f"training {len(engines)} engines on {jobs} processes", report):
+            return train_in_parallel(train, engines, models, report or _silent, jobs)
+    return train_engines(train, engines, models, report=report)
+
+
+def _silent(line: str) -> None:
+    del line

@@ -45,7 +45,7 @@ from uvicorn.server import ServerState as UvicornState
 
 from .http_flush import BoundedFlushHTTPProtocol
 from .open_files import connection_cap, open_file_limit
-from .state import ServerState
+from .startup import server_of
 
 HANDSHAKE_TIMEOUT = "handshake_timeout"
 TOO_MANY_CONNECTIONS = "too_many_connections"
@@ -77,26 +77,24 @@ _over_cap = weakref.WeakKeyDictionary()
 
 def refused(app_state: Mapping[str, Any], code: str) -> None:
     """Count a connection the protocol turned away (``lipstream_connections_refused``)."""
-    server = app_state.get("server")
-    if isinstance(server, ServerState):
+    server = server_of(app_state)
+    if server is not None:
         server.metrics.labelled(server.metrics.refused, code).inc()
 
 
 def shedding(app_state: Mapping[str, Any]) -> bool:
     """Whether the app's event loop lags too far behind for any WebSocket work
     (``overload.OverloadPolicy.shedding``)."""
-    server = app_state.get("server")
-    return isinstance(server, ServerState) and server.overload.shedding(
-        len(server.lifecycle.connections)
-    )
+    server = server_of(app_state)
+    return server is not None and server.overload.shedding(len(server.lifecycle.connections))
 
 
 def head_limits(app_state: Mapping[str, Any]) -> tuple[float, int]:
     """(handshake timeout in s, connection cap) of the app whose lifespan state is
     ``app_state``."""
-    server = app_state.get("server")
+    server = server_of(app_state)
     timeout, wanted = DEFAULT_HANDSHAKE_TIMEOUT_S, DEFAULT_MAX_CONNECTIONS
-    if isinstance(server, ServerState):
+    if server is not None:
         timeout, wanted = server.settings.handshake_timeout_s, server.settings.max_connections
     return timeout, connection_cap(wanted, open_file_limit())
 

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import asdict
 from pathlib import Path
@@ -40,6 +40,7 @@ from fastapi import FastAPI
 
 from ..config import ServerSettings, load_settings
 from ..models import ModelRegistry
+from ..status import Report
 from .app import create_app
 from .closing import BoundedCloseProtocol
 from .handshake import GuardedHTTPProtocol
@@ -118,9 +119,13 @@ def serve(
     port: int,
     server: ServerSettings,
     registry: ModelRegistry | None = None,
+    *,
+    prepare: Callable[[Report], None] | None = None,
 ) -> None:
     """Serve ``models`` (already loaded as ``registry``, for one worker) until SIGTERM or
-    SIGINT, draining first (see ``lifecycle``)."""
+    SIGINT, draining first (see ``lifecycle``). One worker listens first and starts up in
+    the background (``startup``), after ``prepare`` (e.g. building the demo); a start-up
+    that fails stops the server and is raised here."""
     raise_open_file_limit()
     if server.workers > 1:
         with exported(WORKER_APP_ENV, encode_worker_app(models, server)):
@@ -133,6 +138,23 @@ def serve(
                 **uvicorn_options(server),
             )
         return
-    app = create_app(models, server, registry, serving_process=True)
+    running: list[uvicorn.Server] = []
+
+    def stop() -> None:
+        running[0].should_exit = True
+
+    app = create_app(
+        models,
+        server,
+        registry,
+        serving_process=True,
+        prepare=prepare,
+        background=True,
+        on_failure=stop,
+    )
     config = uvicorn.Config(app, host=host, port=port, **uvicorn_options(server))
-    uvicorn.Server(config).run()
+    running.append(uvicorn.Server(config))
+    running[0].run()
+    failure = app.state.startup.failure
+    if failure is not None:
+        raise failure
