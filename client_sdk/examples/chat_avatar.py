@@ -20,7 +20,7 @@ in the default replies lasts 0.30 s), means no frame waits.
 ``anime-graph``'s best rung waits for up to 10 phonemes (``ready.lookahead_ms``,
 about 2.1 s on the demo), so streamed with no lead its frames arrive most of a
 second late; use it with ``--lead-ms 2200``, or with ``--latency-budget-ms`` to
-pick a faster rung (docs/protocol.md, *Latency budgets*).
+pick a faster rung (docs/reference/protocol.md, *Latency budgets*).
 
     python client_sdk/examples/chat_avatar.py --url ws://127.0.0.1:8000/v1/stream
 """

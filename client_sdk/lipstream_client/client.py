@@ -16,7 +16,7 @@ busy (``RESUMABLE_CLOSE_CODES``) is opened again with backoff; each open
 request that was neither cancelled nor interrupted is started again with
 ``resume`` (the frames and speech chunks it holds) and its whole input, so
 that it receives the frames and speech it lacks and no other
-(docs/protocol.md, *Resuming*). Input sent
+(docs/reference/protocol.md, *Resuming*). Input sent
 while the connection is down waits in the log. Sending validates each
 message with the codec first, so a bad argument raises locally
 (``EncodeError``) and never reaches the wire.

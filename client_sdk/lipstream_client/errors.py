@@ -5,7 +5,7 @@ module, and every server-initiated close uses one ``CloseCode``. The codec
 (``lipstream_client.codec``) produces the *structural* codes as a
 ``ProtocolError`` value; the server adds the *semantic* ones (unknown engine,
 session state, limits). ``ERROR_CODES`` describes each code once, and
-``docs/protocol.md`` lists the same table.
+``docs/reference/protocol.md`` lists the same table.
 
 ``fatal`` in an error means the error's scope is over: with an ``id``, that
 request has ended (no more frames or ``done`` for it, and the id is free);

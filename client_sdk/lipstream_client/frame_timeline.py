@@ -3,7 +3,7 @@
 Sketch: ``frames`` blocks carry rows for consecutive frame indices starting
 at ``first_frame``. Blocks normally follow each other; after an
 ``interrupt`` the return-to-rest block starts earlier and *supersedes* rows
-already received, index by index (docs/protocol.md, Request rules). Such a
+already received, index by index (docs/reference/protocol.md, Request rules). Such a
 block rewrites the timeline from its first frame: the rows the server had
 sent beyond it belonged to the speech that was cut off, and the request's
 final timeline (``done.stats.frames`` long) ends with the return to rest, so

@@ -5,7 +5,7 @@ Sketch: ``message_from_wire`` checks the envelope (an object with ``v`` and
 and builds the typed message. It checks structure only: that names exist
 in the loaded models and that times continue across messages is the
 server's job. A few rules go beyond what JSON Schema can say, and are
-listed in ``docs/protocol.md``: phoneme ``end`` > ``start`` and no overlap
+listed in ``docs/reference/protocol.md``: phoneme ``end`` > ``start`` and no overlap
 within a message, ``clamp`` low <= high, frame rows of ``n_channels``
 finite float32 values, PCM16 of even length, and the depth and 64-bit
 integer limits of free-form maps.

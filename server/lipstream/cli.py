@@ -353,7 +353,9 @@ def _parser() -> argparse.ArgumentParser:
     demo.set_defaults(run=_build_demo)
 
     train = commands.add_parser("train", help="train engines on a corpus directory")
-    train.add_argument("--corpus", required=True, help="corpus directory (docs/corpus-formats.md)")
+    train.add_argument(
+        "--corpus", required=True, help="corpus directory (docs/reference/corpus-formats.md)"
+    )
     train.add_argument("--engine", required=True, help="an engine name, or all")
     train.add_argument(
         "--out",
@@ -490,7 +492,7 @@ def _add_retarget_parser(commands: argparse._SubParsersAction[argparse.ArgumentP
     actions = retarget.add_subparsers(dest="action", required=True)
     fit = actions.add_parser("fit", help="fit a map from a key-pose pairs file")
     fit.add_argument(
-        "--pairs", required=True, help="key-pose pairs, JSON or .csv (docs/retarget.md)"
+        "--pairs", required=True, help="key-pose pairs, JSON or .csv (docs/how-to/retarget.md)"
     )
     fit.add_argument("--name", required=True, help="the map's name (output.retarget)")
     build = actions.add_parser("build", help="store a shipped target fitted on the model")

@@ -3,7 +3,7 @@
 Sketch: every setting is declared once in ``ENV_SETTINGS`` (variable, field,
 parser, description); ``load_settings`` reads them from an environment
 mapping, so the server, the CLI and the tests see one table, and
-``docs/server.md`` documents the same table. A value that does not parse or
+``docs/reference/server.md`` documents the same table. A value that does not parse or
 is out of range is a ``LipstreamError`` (code ``invalid_setting``) naming the
 variable. CLI flags override these.
 """
@@ -33,7 +33,7 @@ def _home(environ: Mapping[str, str]) -> Path:
 
 @dataclass(frozen=True)
 class ServerSettings:
-    """Limits and policies of one server process (a worker); see ``docs/server.md``.
+    """Limits and policies of one server process (a worker); see ``docs/reference/server.md``.
 
     Times are in seconds unless the name ends in ``_ms``; sizes in bytes.
     """

@@ -1,7 +1,7 @@
 """Key-pose pairs as CSV: one row per pose, read into and written from the JSON document.
 
 Sketch: a spreadsheet is the natural place to write key poses, so
-``lipstream retarget`` also takes ``.csv`` pairs files (docs/retarget.md).
+``lipstream retarget`` also takes ``.csv`` pairs files (docs/how-to/retarget.md).
 The header is ``name`` and then one column per value: ``source.<channel>`` for
 a model channel, ``controls.<control>`` for a rig control (the controls are
 these columns, in order). Each row is a key pose named in its first cell;

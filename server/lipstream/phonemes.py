@@ -8,7 +8,7 @@ espeak-ng, diacritics for IPA). Allophones with no ARPAbet symbol go to the
 phoneme whose mouth shape they share (a flap to D, a closure to its stop).
 ``source="auto"`` tries readers in a fixed order and takes the first match.
 The tables, with the reasons for every judgement call, are in
-``docs/phonemes.md``.
+``docs/reference/phonemes.md``.
 """
 
 from __future__ import annotations

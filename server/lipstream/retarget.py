@@ -33,7 +33,7 @@ A map is stored as a directory (``retarget.json`` manifest plus uncompressed
 ``arrays.npz``, never pickle), read with the load-time checks of
 ``model_checks``: a malformed or mismatched file is ``model_invalid`` naming
 the file and the field or array. Key-pose pairs files (JSON, or CSV:
-``pairs_csv``) are read by ``read_pairs``; the formats are in docs/retarget.md.
+``pairs_csv``) are read by ``read_pairs``; the formats are in docs/how-to/retarget.md.
 """
 
 from __future__ import annotations
@@ -374,7 +374,7 @@ def stored_maps(model_directory: Path, channels: Sequence[str]) -> dict[str, Ret
 
 def read_pairs(path: Path, channels: Sequence[str]) -> KeyPosePairs:
     """Key-pose pairs from a JSON file, or a CSV file when its name ends in ``.csv``
-    (docs/retarget.md, ``pairs_csv``), for a model with ``channels``; ``model_invalid``
+    (docs/how-to/retarget.md, ``pairs_csv``), for a model with ``channels``; ``model_invalid``
     naming the file and field."""
     where = str(path)
     data = _read_csv(path) if _is_csv(path) else _read_json(path)

@@ -8,7 +8,7 @@ made canonical and then looked up. Three schemes ship:
 * ``oculus15``: the 15 Oculus/Meta OVR LipSync visemes, in the SDK's index order.
 * ``preston-blair``: the Preston Blair mouth shapes A-H and X used by Rhubarb Lip Sync.
 
-``docs/phonemes.md`` lists every mapping and the reasons for the choices the
+``docs/reference/phonemes.md`` lists every mapping and the reasons for the choices the
 sources leave open.
 """
 

@@ -21,7 +21,7 @@ from lipstream.config import (
 from lipstream.errors import LipstreamError
 from tests.helpers import REPO
 
-SERVER_DOC = (REPO / "docs" / "server.md").read_text(encoding="utf-8")
+SERVER_DOC = (REPO / "docs" / "reference" / "server.md").read_text(encoding="utf-8")
 
 
 def test_an_empty_environment_gives_the_defaults(tmp_path: Path) -> None:
@@ -95,7 +95,7 @@ def test_docs_list_every_variable_with_its_default() -> None:
     defaults = {item.name: item.default for item in fields(ServerSettings)}
     for setting in ENV_SETTINGS:
         row = re.search(rf"^\| `{setting.variable}` \| `([^`]*)` \|", SERVER_DOC, re.MULTILINE)
-        assert row, f"{setting.variable} is not in the settings table of docs/server.md"
+        assert row, f"{setting.variable} is not in the settings table of docs/reference/server.md"
         assert row.group(1) == _shown(defaults[setting.field]), setting.variable
 
 

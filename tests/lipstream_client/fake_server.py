@@ -1,7 +1,7 @@
 """A tiny protocol-v1 server for client tests: deterministic frames, scripted failures.
 
 It runs ``websockets.asyncio.server.serve`` on 127.0.0.1 in its own thread
-and speaks docs/protocol.md with the real codec. Frame ``i`` of a request
+and speaks docs/reference/protocol.md with the real codec. Frame ``i`` of a request
 whose ``start.options`` holds ``{"offset": o}`` is ``[i / 1024 + o, 1 - i /
 1024]`` (exact in float32), so a test knows every value independently.
 Frames ``i`` with ``i / fps < end`` of the latest phoneme go out after each

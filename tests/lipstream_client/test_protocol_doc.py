@@ -1,4 +1,4 @@
-"""docs/protocol.md stays complete: its examples decode, and it names every type, field and code."""
+"""docs/reference/protocol.md stays complete: its examples decode, and it names every type, field and code."""
 
 from __future__ import annotations
 
@@ -10,7 +10,9 @@ import pytest
 from lipstream_client import ERROR_CODES, CloseCode, ProtocolError, decode, load_schema
 from lipstream_client.messages import MESSAGE_TYPES
 
-DOC = (Path(__file__).resolve().parents[2] / "docs" / "protocol.md").read_text(encoding="utf-8")
+DOC = (Path(__file__).resolve().parents[2] / "docs" / "reference" / "protocol.md").read_text(
+    encoding="utf-8"
+)
 EXAMPLES = re.findall(r"```json\n(.*?)```", DOC, flags=re.DOTALL)
 
 

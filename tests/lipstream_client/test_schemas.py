@@ -58,7 +58,7 @@ FIELD_NAMES = (
     "v",
     "type",
 )
-# Rules JSON Schema cannot state, as (code, pattern on "where: message"); docs/protocol.md
+# Rules JSON Schema cannot state, as (code, pattern on "where: message"); docs/reference/protocol.md
 # lists the same rules.
 BEYOND_SCHEMA = (
     (codes.INVALID_TIMES, r"\.end: end .* must be after start"),

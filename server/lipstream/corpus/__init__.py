@@ -4,7 +4,7 @@ Sketch: a corpus is a directory of utterances sharing file stems (frames CSV
 or Live Link Face export, TextGrid or .lab phones, optional WAV and JSON
 metadata, optional ``corpus.json``); ``load_corpus`` validates it strictly
 and resamples every utterance onto one ``i / fps`` grid, ``write_corpus``
-writes one back. See ``docs/corpus-formats.md``.
+writes one back. See ``docs/reference/corpus-formats.md``.
 """
 
 from .frames_csv import read_frames_csv, write_frames_csv

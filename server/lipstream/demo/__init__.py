@@ -3,7 +3,7 @@
 Sketch: espeak-ng speaks the project's own sentences (``espeak``), and an
 articulatory face model (``face``: targets, planning, dynamics, expression,
 blinks) performs them as ARKit-style blendshape curves; ``generate`` puts
-both together into a ``Corpus``. See docs/demo-character.md.
+both together into a ``Corpus``. See docs/explanation/demo-character.md.
 """
 
 from ..speech.espeak import EspeakSynthesizer

@@ -1,6 +1,6 @@
 """The demo character's face: articulatory synthesis of ARKit-style blendshape curves.
 
-Sketch (see docs/demo-character.md):
+Sketch (see docs/explanation/demo-character.md):
 1. ``planning`` turns phoneme spans into per-articulator targets (window model
    for jaw and lip aperture, look-ahead for rounding and spreading, held lip
    contacts) and ``targets`` holds the per-phoneme windows.

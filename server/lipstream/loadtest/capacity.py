@@ -211,7 +211,7 @@ def find_capacity(
 ) -> dict[str, Any]:
     """Run the search, then the reference's unless ``search.reference`` is off (or an
     equal one is in ``references``, which collects them); the document (see
-    docs/loadtest.md, "Capacity")."""
+    docs/how-to/load-testing.md, "Capacity")."""
     check_search(search)
     document = search_sessions(search, run, progress)
     if not search.reference:

@@ -314,7 +314,7 @@ def _plan(
 
 
 def loadtest(config: LoadTestConfig) -> dict[str, Any]:
-    """Run the whole load test and return the results document (see docs/loadtest.md)."""
+    """Run the whole load test and return the results document (see docs/how-to/load-testing.md)."""
     check_config(config)
     engine, character = _target(config)
     generator = random.Random(JITTER_SEED)

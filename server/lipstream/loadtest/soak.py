@@ -360,7 +360,7 @@ def _undocumented(share: ClipShare, hostile: dict[str, dict[str, Any]]) -> dict[
 
 
 def soak(config: SoakConfig) -> dict[str, Any]:
-    """Run the soak and return its results document (see docs/loadtest.md, "Soak")."""
+    """Run the soak and return its results document (see docs/how-to/load-testing.md, "Soak")."""
     check_soak(config)
     engine, character, pq_character = _targets(config)
     parts = urlsplit(config.url)

@@ -1,4 +1,4 @@
-"""The HTTP/WebSocket server (see ``docs/server.md``).
+"""The HTTP/WebSocket server (see ``docs/reference/server.md``).
 
 Sketch: ``app.create_app`` builds the FastAPI app; ``runner.serve`` runs it
 under uvicorn. Streaming is split into a sans-I/O core, ``session`` (the

@@ -198,7 +198,7 @@ def create_app(
         redoc_url=None,
         description="Real-time lip sync: phoneme-aligned speech in, facial control "
         "frames out. Streaming is the WebSocket /v1/stream "
-        "(docs/protocol.md); this document covers the HTTP routes.",
+        "(docs/reference/protocol.md); this document covers the HTTP routes.",
     )
     app.state.lifecycle = lifecycle
     app.state.metrics = metrics

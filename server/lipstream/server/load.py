@@ -100,7 +100,7 @@ class LoadMonitor:
         to the last tick: admission asks for a sample per handshake, and reading the thread's
         CPU clock is a system call, where ``py-spy`` found a quarter of the loop's time in a
         storm of handshakes on a loaded machine (a system call is also where a preempted
-        process is caught, so that share is an upper bound; docs/server.md)."""
+        process is caught, so that share is an upper bound; docs/reports/hostile-clients.md)."""
         ticks = list(self.ticks)
         overdue_s = 0.0
         if self._loop is not None and threading.get_ident() == self._thread:

@@ -22,7 +22,7 @@ measured load (``load.LoadSample``) leaves room:
   (``calibrated_session_cost``: the costliest loaded model's default rung, at one phoneme per
   ``PHONEME_S`` of speech, as start-up calibration measured it, plus
   ``MESSAGE_OVERHEAD_MS`` per message for the work outside the engine, as profiled in
-  docs/server.md's *Throughput*).
+  docs/reports/throughput.md).
 
 A refusal through the WebSocket (accept, ``error``, close) costs the loop about as much as
 a short request; in a storm of connections those refusals alone keep the loop behind. So

@@ -1,4 +1,4 @@
-"""docs/protocol.md's examples are a real exchange with the server.
+"""docs/reference/protocol.md's examples are a real exchange with the server.
 
 Method: the page holds one transcript (the block after ``<!-- exchange -->``):
 ``→`` lines are what a client sends on the JSON subprotocol, each followed by
@@ -36,7 +36,7 @@ from lipstream.engines.base import Model
 from tests.helpers import REPO
 from tests.live_server import LiveServer, live_server
 
-DOC_PATH = REPO / "docs" / "protocol.md"
+DOC_PATH = REPO / "docs" / "reference" / "protocol.md"
 TRANSCRIPT = re.compile(r"<!-- exchange -->\n```text\n(.*?)```", re.DOTALL)
 # A JSON example, unless a comment says why it is not in the transcript.
 JSON_EXAMPLE = re.compile(r"(<!-- not in the transcript: [^>]+ -->\n)?```json\n(.*?)```", re.DOTALL)
@@ -67,7 +67,7 @@ class Step:
 
 def parse_transcript(doc: str) -> list[Step]:
     match = TRANSCRIPT.search(doc)
-    assert match, "docs/protocol.md has no <!-- exchange --> transcript"
+    assert match, "docs/reference/protocol.md has no <!-- exchange --> transcript"
     steps: list[Step] = []
     for line in match.group(1).splitlines():
         if line.startswith(SEND):

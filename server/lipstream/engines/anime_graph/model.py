@@ -49,7 +49,10 @@ damps below its -3 dB point, and at twice the cutoff it keeps 90% of the gain th
 
 
 class AnimeGraphModel(Model):
-    """Anime Graph + GreedyMatching (Cao et al. 2004); see ``docs/engines/anime-graph.md``."""
+    """Anime Graph + GreedyMatching (Cao et al. 2004).
+
+    See ``docs/explanation/engines/anime-graph.md``.
+    """
 
     engine = ENGINE
     option_names = OPTION_NAMES

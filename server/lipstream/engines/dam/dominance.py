@@ -9,7 +9,7 @@ The animeme is a degree-M polynomial A(t) = sum_m a_m t^m. Outside [0, 1] it is
 evaluated at the nearest end (t clamped to [0, 1]): the tail carries the mouth
 shape the phoneme starts or ends with. Evaluating the polynomial at the raw t, as
 Eq. 6 literally reads, lets t^4 grow in the tails, and the fit then relies on
-neighbours cancelling each other's large tails (docs/engines/dam.md has the
+neighbours cancelling each other's large tails (docs/explanation/engines/dam.md has the
 measurement). ``reach`` is how far outside [0, 1]
 (in local time) the dominance stays above a cut-off ``tol``.
 """

@@ -1,7 +1,7 @@
 """The ``dam`` and ``cohen-massaro`` engines: ``fit`` is the paper's training loop.
 
 the motion basis (PCA keeping ``variance`` of every channel's variance, see
-docs/engines/dam.md for why components rather than channels) -> modes
+docs/explanation/engines/dam.md for why components rather than channels) -> modes
 (resample + affinity propagation + contexts) -> EM (E-step, then M-step
 and E-step until converged) -> the tail that bounds streaming's truncation error ->
 phoneme durations and the causal rungs' filter speed κ (``causal``).
@@ -28,7 +28,10 @@ from .tails import choose_tail, truncation_errors
 
 
 class DamEngine(Engine):
-    """Dominated Animeme Models (Lin et al.); hyperparameters as in docs/engines/dam.md."""
+    """Dominated Animeme Models (Lin et al.).
+
+    Hyperparameters as in docs/explanation/engines/dam.md.
+    """
 
     name = "dam"
     model_class = DamModel

@@ -180,7 +180,7 @@ class DamModel(Model):
     def fidelity_ladder(self) -> tuple[Rung, ...]:
         """Mode searches looking ``search_ahead`` phonemes ahead, then fewer, then none; the
         tails stay whole on these rungs (cutting them costs far more than 1 % of a channel's
-        range, see docs/engines/dam.md). Below them the causal rungs (``causal``): one
+        range, see docs/explanation/engines/dam.md). Below them the causal rungs (``causal``): one
         following its curve ``base.CAUSAL_LEAD_MS`` ahead, then the causal floor."""
         rungs = []
         for search in range(self.search_ahead, -1, -1):

@@ -32,7 +32,7 @@ from .weights import DEFAULTS, frame_error, search_weights, total_error, validat
 
 
 class ExpressiveDpEngine(Engine):
-    """Deng & Neumann (2008); hyperparameters as in docs/engines/expressive-dp.md."""
+    """Deng & Neumann (2008); hyperparameters as in docs/explanation/engines/expressive-dp.md."""
 
     name = "expressive-dp"
     model_class = ExpressiveDpModel

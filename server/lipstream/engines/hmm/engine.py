@@ -60,7 +60,7 @@ def phoneme_labels(utterance: Utterance, hmm_fps: float) -> np.ndarray:
 
 
 class HmmEngine(Engine):
-    """Voice puppetry; hyperparameters as in docs/engines/hmm.md."""
+    """Voice puppetry; hyperparameters as in docs/explanation/engines/hmm.md."""
 
     name = "hmm"
     model_class = HmmModel
