@@ -46,6 +46,7 @@ def _build_demo(args: argparse.Namespace, settings: Settings) -> None:
 
 def _train(args: argparse.Namespace, settings: Settings) -> None:
     from .corpus import CorpusWarning, load_corpus
+    from .status import Heartbeat, phase, to_stderr
     from .training import resolve_engines, train_engine, train_engines
 
     engines = resolve_engines(args.engine)
@@ -55,12 +56,17 @@ def _train(args: argparse.Namespace, settings: Settings) -> None:
     for warning in ignored:
         print(f"warning: {warning.message}", file=sys.stderr)
     out = Path(args.out)
-    if args.engine == "all":
-        written = train_engines(corpus, engines, out, progress=True)
-        print("trained " + ", ".join(f"{name} -> {path}" for name, path in written.items()))
-    else:
-        model = train_engine(corpus, engines[0], out)
-        print(f"trained {args.engine} -> {out} in {model.manifest.metrics['train_seconds']} s")
+    heartbeat = Heartbeat(to_stderr).start()  # a stage with no bar of its own still shows
+    try:
+        if args.engine == "all":
+            written = train_engines(corpus, engines, out, report=heartbeat.report)
+            print("trained " + ", ".join(f"{name} -> {path}" for name, path in written.items()))
+            return
+        with phase(f"training {args.engine} on the corpus", heartbeat.report):
+            model = train_engine(corpus, engines[0], out, progress=True)
+    finally:
+        heartbeat.stop()
+    print(f"trained {args.engine} -> {out} in {model.manifest.metrics['train_seconds']} s")
 
 
 def _synth(args: argparse.Namespace, settings: Settings) -> None:
@@ -152,16 +158,40 @@ def _serve(args: argparse.Namespace, settings: Settings) -> None:
     if args.ray or server.workers > 1:
         _serve_in_front(args, settings, models, server, build=build, check=check)
         return
-    to_stderr(
+    from .server.front_door import FrontDoor, bind
+    from .status import Heartbeat, phase
+
+    door = FrontDoor(bind(host, port)).start()
+    heartbeat = Heartbeat(_reporting_to(to_stderr, door.note)).start()
+    heartbeat.report(
         f"lipstream serve: listening on http://{host}:{port} and starting up "
-        "(GET /readyz names the phase until it is ready)"
+        "(GET /healthz answers now; GET /readyz names the phase until it is ready)"
     )
-    from .server.runner import serve
+    try:
+        with phase("importing the server (numpy, scipy, numba, FastAPI, the engines)", heartbeat.report):
+            from .server.runner import serve
+    finally:
+        heartbeat.stop()
 
     def prepare(report: Report) -> None:
         _demo_ready(settings, report, build=build, check=check)
 
-    serve(models.resolve(), host, port, server, prepare=prepare if build or check else None)
+    serve(
+        models.resolve(),
+        host,
+        port,
+        server,
+        prepare=prepare if build or check else None,
+        sock=door.hand_over(),
+    )
+
+
+def _reporting_to(*reports: Report) -> Report:
+    def report(line: str) -> None:
+        for each in reports:
+            each(line)
+
+    return report
 
 
 def _demo_ready(settings: Settings, report: Report, *, build: bool, check: bool) -> None:

@@ -7,9 +7,8 @@ engine, warming up and calibrating each model). ``report`` is where lines go:
 stderr for the command line, the server's log at start-up; ``None`` is silent.
 A step can run for tens of seconds without a line of its own (one engine's
 training, one stage of a progress bar), so a ``Heartbeat`` wraps the report: it
-notes when anything was last written (its own lines, and a progress bar's, through
-``touch``) and, whenever ``interval_s`` passes without output while a step is under
-way, repeats the step with its elapsed time (``training dam ...: 12 s``). Its clock
+notes when it last wrote a line and, whenever ``interval_s`` passes without one
+while a step is under way, repeats the step with its elapsed time (``training dam ...: 12 s``). Its clock
 is injected, and ``beat`` is the single check its thread repeats, so it is tested
 without waiting.
 """
@@ -21,12 +20,11 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from typing import TextIO
 
 Report = Callable[[str], None]
 Clock = Callable[[], float]
 
-HEARTBEAT_S = 2.0
+HEARTBEAT_S = 1.5  # under the 2 s a user should ever wait for a line, with room for a busy machine
 BEGUN = " ..."
 DONE = ": done in "
 
@@ -55,9 +53,9 @@ class Heartbeat:
     """A report that repeats the step under way whenever ``interval_s`` passes silently.
 
     ``report`` passes a line on and follows the steps ``phase`` opens (``what ...``) and
-    closes (``what: done in``); ``touch`` notes output written elsewhere (a progress bar);
-    ``beat`` reports each open step as ``what ...: N s`` when the last output is
-    ``interval_s`` old. ``start`` runs ``beat`` on a daemon thread until ``stop``."""
+    closes (``what: done in``); ``beat`` reports each open step as ``what ...: N s`` when the last output is
+    ``interval_s`` old. ``start`` runs ``beat`` on a daemon thread, waking when the last
+    line turns ``interval_s`` old, until ``stop``."""
 
     def __init__(
         self, report: Report, interval_s: float = HEARTBEAT_S, clock: Clock = time.monotonic
@@ -82,10 +80,6 @@ class Heartbeat:
             self._last_output = now
         self._report(line)
 
-    def touch(self) -> None:
-        with self._lock:
-            self._last_output = self._clock()
-
     def beat(self) -> bool:
         """Report the open steps when output has been silent for ``interval_s``."""
         now = self._clock()
@@ -94,12 +88,16 @@ class Heartbeat:
                 return False
             steps = list(self._steps)
             self._last_output = now
-        self._report("; ".join(f"{what}{BEGUN}: {now - began:.0f} s" for what, began in steps))
+        self._report("; ".join(f"{what}{BEGUN}: {int(now - began)} s" for what, began in steps))
         return True
 
     def start(self) -> Heartbeat:
         def run() -> None:
-            while not self._stopped.wait(self.interval_s / 4):
+            while True:
+                with self._lock:
+                    due = self._last_output + self.interval_s
+                if self._stopped.wait(max(0.0, due - self._clock())):
+                    return
                 self.beat()
 
         self._thread = threading.Thread(target=run, name="lipstream-heartbeat", daemon=True)
@@ -110,22 +108,3 @@ class Heartbeat:
         self._stopped.set()
         if self._thread is not None:
             self._thread.join()
-
-
-class TouchingStream:
-    """A text stream that calls ``touch`` on every write (a progress bar's output keeps a
-    ``Heartbeat`` quiet)."""
-
-    def __init__(self, stream: TextIO, touch: Callable[[], None]) -> None:
-        self._stream = stream
-        self._touch = touch
-
-    def write(self, text: str) -> int:
-        self._touch()
-        return self._stream.write(text)
-
-    def flush(self) -> None:
-        self._stream.flush()
-
-    def __getattr__(self, name: str) -> object:
-        return getattr(self._stream, name)

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import json
 import os
+import socket
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import asdict
@@ -121,11 +122,13 @@ def serve(
     registry: ModelRegistry | None = None,
     *,
     prepare: Callable[[Report], None] | None = None,
+    sock: socket.socket | None = None,
 ) -> None:
     """Serve ``models`` (already loaded as ``registry``, for one worker) until SIGTERM or
     SIGINT, draining first (see ``lifecycle``). One worker listens first and starts up in
     the background (``startup``), after ``prepare`` (e.g. building the demo); a start-up
-    that fails stops the server and is raised here."""
+    that fails stops the server and is raised here. ``sock``: the socket one worker
+    serves on, already listening (``front_door``), in place of binding ``host``:``port``."""
     raise_open_file_limit()
     if server.workers > 1:
         with exported(WORKER_APP_ENV, encode_worker_app(models, server)):
@@ -154,7 +157,7 @@ def serve(
     )
     config = uvicorn.Config(app, host=host, port=port, **uvicorn_options(server))
     running.append(uvicorn.Server(config))
-    running[0].run()
+    running[0].run(sockets=None if sock is None else [sock])
     failure = app.state.startup.failure
     if failure is not None:
         raise failure

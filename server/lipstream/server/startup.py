@@ -24,9 +24,9 @@ from lipstream_client.errors import STARTING
 
 from ..errors import LipstreamError
 from ..status import Report
+from .front_door import STARTING_PHASE
 from .state import ServerState
 
-STARTING_PHASE = "starting"
 BUILDING = "building"
 LOADING = "loading"
 CALIBRATING = "calibrating"
