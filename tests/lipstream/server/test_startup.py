@@ -19,10 +19,13 @@ import httpx
 import uvicorn
 
 from lipstream.config import ServerSettings
+from lipstream.corpus import Corpus
+from lipstream.engines import engine_names
 from lipstream.errors import LipstreamError
 from lipstream.server.app import create_app
 from lipstream.server.runner import uvicorn_options
 from lipstream.status import Report
+from lipstream.training import train_in_parallel
 from lipstream_client import ErrorMessage
 from tests.helpers import free_port
 from tests.lipstream.server.harness import client
@@ -128,3 +131,44 @@ def test_a_failed_start_up_says_why_and_calls_on_failure(lerp_dir: Path) -> None
         assert answer.json()["phase"] == "failed"
         assert answer.json()["status"] == "error [speech_failed]: demo: no espeak-ng"
         assert httpx.get(f"http://{address}/healthz").status_code == 200
+
+
+def test_a_server_training_its_engines_answers_health_then_serves_every_engine(
+    small_demo_corpus: Corpus, tmp_path: Path
+) -> None:
+    """The real parallel training (``train_in_parallel``, two processes) as the start-up's
+    ``prepare``; its report holds at the first engine done, so the probes see the phase
+    ``building`` while training is under way."""
+    models = tmp_path / "models"
+    train, _heldout = small_demo_corpus.split()
+    at_first_done, release = threading.Event(), threading.Event()
+
+    def prepare(report: Report) -> None:
+        def holding(line: str) -> None:
+            report(line)
+            if ": done in " in line and not at_first_done.is_set():
+                at_first_done.set()
+                release.wait(WAIT_S)
+
+        train_in_parallel(train, engine_names(), models, holding, jobs=2)
+
+    failures: list[int] = []
+    with starting(models, prepare, lambda: failures.append(1)) as address:
+        base = f"http://{address}"
+        assert at_first_done.wait(WAIT_S * 5)
+        health = httpx.get(f"{base}/healthz")
+        assert (health.status_code, health.json()) == (200, {"status": "ok"})
+        ready = httpx.get(f"{base}/readyz")
+        assert (ready.status_code, ready.json()["phase"]) == (503, "building")
+        assert ready.json()["status"].startswith("training ")
+        assert " and compiling its kernels: done in " in ready.json()["status"]
+        release.set()
+        wait_for(lambda: httpx.get(f"{base}/readyz").status_code == 200)
+        listed = httpx.get(f"{base}/v1/engines").json()["engines"]
+        assert {row["name"] for row in listed if row["loaded"]} == set(engine_names())
+        for engine in engine_names():
+            body = dict(BODY, engine=engine)
+            answer = httpx.post(f"{base}/v1/synthesize", json=body, timeout=WAIT_S)
+            assert answer.status_code == 200, (engine, answer.text)
+            assert answer.json()["n_frames"] == 6
+    assert failures == []
