@@ -168,7 +168,9 @@ def _serve(args: argparse.Namespace, settings: Settings) -> None:
         "(GET /healthz answers now; GET /readyz names the phase until it is ready)"
     )
     try:
-        with phase("importing the server (numpy, scipy, numba, FastAPI, the engines)", heartbeat.report):
+        with phase(
+            "importing the server (numpy, scipy, numba, FastAPI, the engines)", heartbeat.report
+        ):
             from .server.runner import serve
     finally:
         heartbeat.stop()

@@ -8,9 +8,9 @@ stderr for the command line, the server's log at start-up; ``None`` is silent.
 A step can run for tens of seconds without a line of its own (one engine's
 training, one stage of a progress bar), so a ``Heartbeat`` wraps the report: it
 notes when it last wrote a line and, whenever ``interval_s`` passes without one
-while a step is under way, repeats the step with its elapsed time (``training dam ...: 12 s``). Its clock
-is injected, and ``beat`` is the single check its thread repeats, so it is tested
-without waiting.
+while a step is under way, repeats the step with its elapsed time
+(``training dam ...: 12 s``). Its clock is injected, and ``beat`` is the single
+check its thread repeats, so it is tested without waiting.
 """
 
 from __future__ import annotations
@@ -53,9 +53,9 @@ class Heartbeat:
     """A report that repeats the step under way whenever ``interval_s`` passes silently.
 
     ``report`` passes a line on and follows the steps ``phase`` opens (``what ...``) and
-    closes (``what: done in``); ``beat`` reports each open step as ``what ...: N s`` when the last output is
-    ``interval_s`` old. ``start`` runs ``beat`` on a daemon thread, waking when the last
-    line turns ``interval_s`` old, until ``stop``."""
+    closes (``what: done in``); ``beat`` reports each open step as ``what ...: N s`` when
+    the last output is ``interval_s`` old. ``start`` runs ``beat`` on a daemon thread,
+    waking when the last line turns ``interval_s`` old, until ``stop``."""
 
     def __init__(
         self, report: Report, interval_s: float = HEARTBEAT_S, clock: Clock = time.monotonic

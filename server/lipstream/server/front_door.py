@@ -52,6 +52,7 @@ def answer(head: bytes, status_line: str, elapsed_s: float) -> bytes:
     """The whole HTTP/1.1 response to the request whose head is ``head``."""
     path = _path(head)
     headers = ""
+    body: dict[str, object]
     if path == "/healthz":
         code, body = "200 OK", {"status": "ok"}
     elif path == "/readyz":
@@ -66,8 +67,13 @@ def answer(head: bytes, status_line: str, elapsed_s: float) -> bytes:
         }
     else:
         code, headers = "503 Service Unavailable", f"retry-after: {RETRY_AFTER_S}\r\n"
-        message = f"the server is starting up ({status_line or 'importing'}); retry once GET /readyz answers 200"
-        body = {"error": {"code": STARTING, "message": message, "details": {"phase": STARTING_PHASE}}}
+        message = (
+            f"the server is starting up ({status_line or 'importing'}); "
+            "retry once GET /readyz answers 200"
+        )
+        body = {
+            "error": {"code": STARTING, "message": message, "details": {"phase": STARTING_PHASE}}
+        }
     payload = json.dumps(body).encode()
     return (
         f"HTTP/1.1 {code}\r\ncontent-type: application/json\r\ncontent-length: {len(payload)}"
@@ -132,9 +138,7 @@ class FrontDoor:
                 return  # the peer went away; the next one is answered
 
 
-def _read_head(
-    connection: socket.socket, deadline: float, clock: Callable[[], float]
-) -> bytes:
+def _read_head(connection: socket.socket, deadline: float, clock: Callable[[], float]) -> bytes:
     """Bytes up to the end of the request head, at most ``MAX_HEAD_BYTES``, until
     ``deadline``."""
     head = b""

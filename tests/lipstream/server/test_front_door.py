@@ -65,7 +65,10 @@ def test_a_silent_or_garbled_peer_does_not_shut_the_door() -> None:
     address = sock.getsockname()
     door = FrontDoor(sock).start()
     try:
-        with socket.create_connection(address) as silent, socket.create_connection(address) as garbled:
+        with (
+            socket.create_connection(address) as silent,
+            socket.create_connection(address) as garbled,
+        ):
             garbled.sendall(b"\x16\x03\x01\x00\xff" * 3000)  # a TLS hello, far over the head cap
             health = httpx.get(f"http://127.0.0.1:{address[1]}/healthz", timeout=WAIT_S)
             assert health.status_code == 200

@@ -115,7 +115,9 @@ def test_a_starting_server_answers_health_names_its_phase_and_refuses_synthesis(
             "failed_models": [],
         }
         answer = httpx.post(f"{base}/v1/synthesize", json=BODY)
-        assert answer.status_code == 200 and answer.json()["n_frames"] == 6  # frames 0..5 of 0.1 s at 50 fps
+        assert (
+            answer.status_code == 200 and answer.json()["n_frames"] == 6
+        )  # frames 0..5 of 0.1 s at 50 fps
     assert failures == []
 
 
