@@ -33,6 +33,7 @@ MARKED = re.compile(r"<!-- example: (offline|server) -->\n```(python|bash)\n(.*?
 FENCE = re.compile(r"^```(python|bash)$", re.MULTILINE)
 DEFAULT_SERVER = re.compile(r"(127\.0\.0\.1|localhost):8000")
 RUN_LIMIT_S = 120
+OUT = "out"  # the folder the README's command-line examples write into
 
 
 @dataclass(frozen=True)
@@ -125,8 +126,8 @@ def test_expected_output_patterns_match_only_what_they_show() -> None:
     "example", [e for e in EXAMPLES if e.where == "offline"], ids=lambda e: e.label
 )
 def test_offline_example_runs(example: Example, checkout: Path) -> None:
-    if example.language == "bash" and "lipstream synth" in example.code:
-        (checkout / "hello.csv").unlink(missing_ok=True)
+    shutil.rmtree(checkout / OUT, ignore_errors=True)
+    before = set(checkout.iterdir())
     result = run(example, checkout, None)
     assert result.returncode == 0, result.stderr
     printed = result.stdout.splitlines()
@@ -134,9 +135,13 @@ def test_offline_example_runs(example: Example, checkout: Path) -> None:
     assert len(printed) >= len(patterns)
     for pattern, line in zip(patterns, printed):
         assert pattern.fullmatch(line), (pattern.pattern, line)
-    if "--out hello.csv" in example.code:
-        rows = (checkout / "hello.csv").read_text().splitlines()
+    # an example writes into a folder of its own, never beside the checkout's files
+    assert set(checkout.iterdir()) - before <= {checkout / OUT}
+    if f"--out {OUT}/hello.csv" in example.code:
+        rows = (checkout / OUT / "hello.csv").read_text().splitlines()
         assert rows[0].startswith("time,") and len(rows) == 1 + 43  # 0.7 s at 60 fps
+        assert (checkout / OUT / "hello.tsv").read_text().strip()
+        assert (checkout / OUT / "there.wav").read_bytes()[:4] == b"RIFF"
 
 
 @pytest.mark.parametrize(
@@ -155,6 +160,12 @@ def test_server_example_runs(example: Example, checkout: Path, server: LiveServe
         body = json.loads(result.stdout)
         assert body["fps"] == 30 and body["channels"][:2] == ["viseme_sil", "viseme_PP"]
         assert body["stats"]["frames"] == 11  # 0.35 s at 30 fps
+    elif "lipstream.v1.json" in example.code:
+        printed = result.stdout.splitlines()
+        assert printed[0] == "ready 0" and printed[-1] == "done 11", printed  # 0.35 s at 30 fps
+        blocks = [line.split() for line in printed[1:-1]]
+        assert blocks and all(kind == "frames" for kind, _ in blocks)
+        assert sum(int(count) for _, count in blocks) == 11
     elif "game_loop.py" in example.code:
         assert re.search(r"done: end, \d+ frames", result.stdout), result.stdout
     else:

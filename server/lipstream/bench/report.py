@@ -1,0 +1,718 @@
+"""Render the measurements in ``bench/*.json`` into the README and docs/reports.
+
+Sketch: a Markdown file holds report blocks, each between ``<!-- report: NAME -->``
+and ``<!-- /report -->``; ``BLOCKS[NAME]`` renders that block's body from the bench
+directory, opening with where its figures come from: file, machine, date and command, each
+from the file itself, else from ``bench/provenance.json`` (marked "recovered": what
+the commit that added the file recorded), else "not recorded". ``render_text`` replaces every block
+of a text; ``python -m lipstream.bench.report`` rewrites the README and every page
+under docs/ in place, and ``--check`` only lists the files whose blocks differ from
+a fresh rendering (exit 1), so committed figures cannot drift from the JSON.
+Text outside the blocks is left alone: it explains, the blocks measure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+BLOCK = re.compile(r"(<!-- report: ([\w-]+) -->\n)(.*?)(<!-- /report -->)", re.DOTALL)
+NOT_RECORDED = "not recorded"
+RECOVERED = "recovered"
+PROVENANCE = "provenance.json"
+ENGINE_ORDER = ("viseme-lerp", "anime-graph", "dam", "cohen-massaro", "hmm", "expressive-dp")
+METHODS = {
+    "viseme-lerp": "static viseme key poses, linear between phoneme centres: the baseline",
+    "anime-graph": "recorded motion fragments joined with the fewest jumps (Cao et al. 2004)",
+    "dam": "Dominated Animeme Models: per-phoneme modes under dominance curves (Lin et al.)",
+    "cohen-massaro": "`dam` with constant targets: Cohen-Massaro coarticulation",
+    "hmm": "voice puppetry (Brand 1999): an HMM driven by phonemes, voice or both",
+    "expressive-dp": "constrained DP over captured motion nodes with emotion (Deng, Neumann 2008)",
+}
+
+
+@dataclass(frozen=True)
+class Bench:
+    """The results directory, read file by file."""
+
+    directory: Path
+
+    def load(self, name: str) -> Any:
+        return json.loads((self.directory / name).read_text(encoding="utf-8"))
+
+    def exists(self, name: str) -> bool:
+        return (self.directory / name).is_file()
+
+    def provenance(self, name: str) -> dict[str, Any]:
+        """What ``provenance.json`` recovered for ``name``: machine, date, command, labels."""
+        path = self.directory / PROVENANCE
+        if not path.is_file():
+            return {}
+        files = json.loads(path.read_text(encoding="utf-8")).get("files", {})
+        entry = files.get(name, {})
+        return entry if isinstance(entry, dict) else {}
+
+    def source(self, name: str, doc: Any) -> str:
+        """``source`` of ``name``, with what provenance.json recovered for it."""
+        return source(name, doc, self.provenance(name))
+
+
+def number(value: float, digits: int = 1) -> str:
+    """``value`` rounded to ``digits`` decimals, with a true minus sign kept as ``-``."""
+    return f"{value:.{digits}f}"
+
+
+def percent(share: float) -> str:
+    return f"{100 * share:.1f}%"
+
+
+def table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    return "\n".join(lines) + "\n"
+
+
+def _machine(doc: Any, recovered: dict[str, Any]) -> str:
+    machine = doc.get("machine") if isinstance(doc, dict) else None
+    if isinstance(machine, dict):
+        return ", ".join(f"{key} {value}" for key, value in machine.items())
+    if recovered.get("machine"):
+        return f"{recovered['machine']} ({RECOVERED})"
+    return NOT_RECORDED
+
+
+def _date(doc: Any, recovered: dict[str, Any]) -> str:
+    date = doc.get("date") if isinstance(doc, dict) else None
+    if date:
+        return str(date)
+    if recovered.get("date"):
+        return f"{recovered['date']} ({RECOVERED})"
+    return NOT_RECORDED
+
+
+def _command(doc: Any, recovered: dict[str, Any]) -> str:
+    if isinstance(doc, dict) and doc.get("command"):
+        return f"`{doc['command']}`"
+    if recovered.get("command"):
+        return f"`{recovered['command']}` ({RECOVERED})"
+    if isinstance(doc, dict) and doc.get("tool"):
+        return f"{NOT_RECORDED} (tool `{doc['tool']}`; its options are the file's `config`)"
+    return NOT_RECORDED
+
+
+def _notes(doc: Any) -> list[str]:
+    if not isinstance(doc, dict):
+        return []
+    return [f"{key}: {value}" for key, value in doc.items() if "note" in key and value]
+
+
+def source(name: str, doc: Any, recovered: dict[str, Any] | None = None) -> str:
+    """Where a block's figures come from: file, machine, date, command, recorded notes.
+    ``recovered`` fills in what the file lacks (``Bench.provenance``)."""
+    known = recovered or {}
+    line = (
+        f"Source: `bench/{name}`; machine: {_machine(doc, known)}; "
+        f"date: {_date(doc, known)}; command: {_command(doc, known)}.\n"
+    )
+    notes = _notes(doc) + [f"{note} ({RECOVERED})" for note in _notes(known)]
+    if notes:
+        line += "Notes:\n\n" + "".join(f"- {note}\n" for note in notes)
+    return line + "\n"
+
+
+def _by_engine(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
+    known = {name: index for index, name in enumerate(ENGINE_ORDER)}
+    return sorted(rows, key=lambda row: known.get(row["engine"], len(known)))
+
+
+def _causal_call_us(calls: list[dict[str, Any]], engine: str) -> str:
+    for row in calls:
+        if row["engine"] == engine and row["rung"] == "causal":
+            return f"{row['median_us']:.0f} µs"
+    return "–"
+
+
+def engines_summary(bench: Bench) -> str:
+    """The README's table: one line per engine, quality and speed."""
+    results = bench.load("results.json")
+    calls = bench.load("stream_calls.json")
+    rows = []
+    for row in _by_engine(results["engines"]):
+        rows.append(
+            [
+                f"`{row['engine']}`",
+                METHODS.get(row["engine"], ""),
+                f"{row['rms_error']:.4f} ({row['rms_ratio']:.2f})",
+                percent(row["closure_rate"]),
+                f"{row['ms_per_phoneme']:.4f} ({row['speed_ratio']:.1f}×)",
+                _causal_call_us(calls, row["engine"]),
+            ]
+        )
+    header = [
+        "engine",
+        "method",
+        "RMS to the recording (÷ baseline)",
+        "/p b m/ closed",
+        "offline ms / phoneme (× baseline)",
+        "streamed call, causal rung",
+    ]
+    return (
+        table(header, rows)
+        + "\nQuality on the demo character's held-out lines (recorded lips close on "
+        + f"{percent(results['recorded']['closure_rate'])} of /p b m/); speed ratios are to "
+        + "`viseme-lerp` timed in the same run. Dates, machines and every rung: "
+        + "[docs/reports/engines.md](docs/reports/engines.md).\n"
+    )
+
+
+def engines(bench: Bench) -> str:
+    """Every engine's figures from ``lipstream bench``, each with the run it comes from."""
+    results = bench.load("results.json")
+    corpus = results["corpus"]
+    text = bench.source("results.json", results)
+    text += (
+        f"Corpus `{corpus['name']}` (digest `{corpus['digest'][:12]}`, {corpus['fps']:g} fps): "
+        f"{corpus['train_utterances']} training and {corpus['heldout_utterances']} held-out "
+        "utterances.\n\n"
+    )
+    rows = []
+    for row in _by_engine(results["engines"]):
+        run = row.get("run_date") or results.get("date") or NOT_RECORDED
+        speed_run = row.get("speed_run_date", run)
+        rows.append(
+            [
+                f"`{row['engine']}`",
+                f"{row['train_seconds']:.2f}",
+                f"{row['ms_per_phoneme']:.4f} ({row['speed_ratio']:.1f}×)",
+                f"{row['real_time_factor']:.5f}",
+                f"{row['rms_error']:.4f} ({row['rms_ratio']:.2f})",
+                f"{percent(row['closure_rate'])} ({row['closure_ratio']:.2f})",
+                f"{row['closure_lag_ms']:.0f}" if "closure_lag_ms" in row else "–",
+                f"{run}" + (f"; speed {speed_run}" if speed_run != run else ""),
+            ]
+        )
+    text += table(
+        [
+            "engine",
+            "train s",
+            "ms / phoneme (× baseline)",
+            "real-time factor",
+            "RMS (÷ baseline)",
+            "/p b m/ closed (÷ baseline)",
+            "lip lag ms",
+            "run",
+        ],
+        rows,
+    )
+    recorded = results["recorded"]
+    text += (
+        f"\nThe recordings close the lips on {percent(recorded['closure_rate'])} of /p b m/. "
+        "Ratios are to `viseme-lerp` in the run of each row.\n"
+    )
+    emotions = [row for row in _by_engine(results["engines"]) if row.get("rms_by_emotion")]
+    if emotions:
+        names = sorted(emotions[0]["rms_by_emotion"])
+        text += "\nRMS per emotion:\n\n" + table(
+            ["engine", *names],
+            (
+                [f"`{row['engine']}`"] + [f"{row['rms_by_emotion'][name]:.4f}" for name in names]
+                for row in emotions
+            ),
+        )
+    text += "\nEach fidelity rung, best first (`lookahead_ms` at real-time input):\n\n"
+    text += table(
+        ["engine", "rung", "lookahead ms", "RMS", "/p b m/ closed", "RMS to the best rung"],
+        (
+            [
+                f"`{rung['engine']}`",
+                f"`{rung['rung']}`",
+                f"{rung['lookahead_ms']:.0f}",
+                f"{rung['rms_error']:.4f}",
+                percent(rung["closure_rate"]),
+                f"{rung['rms_vs_best']:.4f}",
+            ]
+            for rung in results["rungs"]
+        ),
+    )
+    return text
+
+
+def stream_calls(bench: Bench) -> str:
+    calls = bench.load("stream_calls.json")
+    return bench.source("stream_calls.json", calls) + table(
+        ["engine", "rung", "calls", "median µs", "p90 µs", "mean µs"],
+        (
+            [
+                f"`{row['engine']}`",
+                f"`{row['rung']}`",
+                str(row["calls"]),
+                number(row["median_us"]),
+                number(row["p90_us"]),
+                number(row["mean_us"]),
+            ]
+            for row in _by_engine(calls)
+        ),
+    )
+
+
+def lead0(bench: Bench) -> str:
+    rows = bench.load("lead0_rungs.json")
+    return bench.source("lead0_rungs.json", rows) + table(
+        [
+            "engine",
+            "rung",
+            "lookahead ms",
+            "frames",
+            "frame lag p50 / p99 ms",
+            "first frame p50 / p99 ms",
+        ],
+        (
+            [
+                f"`{row['engine']}`",
+                f"`{row['rung']}`",
+                f"{row['lookahead_ms']:.0f}",
+                str(row["frames"]),
+                f"{number(row['lag_p50_ms'], 0)} / {number(row['lag_p99_ms'], 0)}",
+                f"{number(row['first_frame_p50_ms'])} / {number(row['first_frame_p99_ms'])}",
+            ]
+            for row in _by_engine(rows)
+        ),
+    )
+
+
+def hmm_first_frame(bench: Bench) -> str:
+    doc = bench.load("hmm_first_frame.json")
+    text = bench.source("hmm_first_frame.json", doc)
+    text += (
+        f"Utterance `{doc['utterance']}` ({doc['audio_s']:.2f} s of audio) sent alone in "
+        f"{doc['chunk_ms']:g} ms chunks at real time, {doc['fps']:g} fps:\n\n"
+    )
+    return text + table(
+        ["rung", "requests", "lookahead ms", "first frame ms (median)", "audio sent by then ms"],
+        (
+            [
+                f"`{rung}`",
+                str(row["requests"]),
+                f"{row['lookahead_ms']:.0f}",
+                f"{row['first_frame_ms']:.0f}",
+                f"{row['audio_sent_ms']:.0f}",
+            ]
+            for rung, row in doc["rungs"].items()
+        ),
+    )
+
+
+def _pair(stats: dict[str, Any] | None, key: str, digits: int = 0) -> str:
+    values = stats.get(key) if stats else None
+    if not values:
+        return "–"
+    return f"{number(values['p50'], digits)} / {number(values['p99'], digits)}"
+
+
+def _failed(search: dict[str, Any]) -> dict[str, Any] | None:
+    failed = [probe for probe in search["probes"] if not probe["passed"]]
+    above = [probe for probe in failed if probe["streams"] > search["capacity_streams"]]
+    return min(above, key=lambda probe: probe["streams"]) if above else None
+
+
+def _capacity_rows(searches: list[dict[str, Any]]) -> list[list[str]]:
+    rows = []
+    for search in _by_engine(searches):
+        held = search.get("at_capacity")
+        failed = _failed(search)
+        reference = search.get("reference") or {}
+        failed_text = "–"
+        if failed:
+            refused = failed["requests"] - failed["successful_requests"]
+            failed_text = (
+                f"{failed['streams']} (p99 lag {failed['frame_lag_ms']['p99']:.0f} ms; "
+                f"{refused} of {failed['requests']} requests failed)"
+            )
+        ratio = search.get("capacity_ratio")
+        rows.append(
+            [
+                f"`{search['engine']}`",
+                str(max(1, search["server_processes"] - 1)),
+                str(search["capacity_streams"]),
+                failed_text,
+                str(reference.get("capacity_streams", "–")),
+                f"{ratio:.2f}" if ratio is not None else "–",
+                _pair(held, "frame_lag_ms"),
+                _pair(held, "probe_first_frame_latency_ms"),
+                (
+                    f"{held['server_cores']:.2f} / {held['client_cores']:.2f}"
+                    if held and "server_cores" in held
+                    else "–"
+                ),
+            ]
+        )
+    return rows
+
+
+CAPACITY_HEADER = [
+    "engine",
+    "workers",
+    "sessions held",
+    "first count failed",
+    "reference held",
+    "ratio",
+    "frame lag p50 / p99 ms, at the count held",
+    "first frame of a whole request p50 / p99 ms",
+    "cores: server / load generator",
+]
+
+
+def _capacity(name: str, key: str = "searches") -> Callable[[Bench], str]:
+    def render(bench: Bench) -> str:
+        doc = bench.load(name)
+        searches = doc[key]
+        first = searches[0]
+        budget = first.get("latency_budget_ms")
+        text = bench.source(name, doc)
+        text += (
+            f"{first['fps']:g} fps, {first['clip_s']:g} s clips, phonemes sent "
+            f"{first['lead_ms']:g} ms early, "
+            + (f"a {budget:g} ms latency budget" if budget else "no latency budget")
+            + f", {first['encoding']}. Criterion: {first['criterion']}.\n\n"
+        )
+        return text + table(CAPACITY_HEADER, _capacity_rows(searches))
+
+    return render
+
+
+def capacity_workers(bench: Bench) -> str:
+    doc = bench.load("capacity_workers.json")
+    text = bench.source("capacity_workers.json", doc)
+    for key in ("two_workers", "ray_serve_two_replicas"):
+        if doc.get(key):
+            text += f"`{key}`:\n\n" + table(CAPACITY_HEADER, _capacity_rows(doc[key])) + "\n"
+    return text
+
+
+def loadtest(bench: Bench) -> str:
+    doc = bench.load("loadtest.json")
+    config = doc["config"]
+    text = bench.source("loadtest.json", doc)
+    text += (
+        f"{config['streams']} sessions, {config['requests']} requests per clip, "
+        f"`{config['engine']}` at {config['fps']:g} fps, phonemes sent {config['lead_ms']:g} ms "
+        "early.\n\n"
+    )
+    return text + table(
+        [
+            "clip s",
+            "requests (ok)",
+            "first frame p50 / p99 ms",
+            "stream fps p1",
+            "frame lag p50 / p99 ms",
+            "frames / s",
+        ],
+        (
+            [
+                f"{clip['clip_s']:g}",
+                f"{clip['requests']} ({clip['successful_requests']})",
+                _pair(clip, "first_frame_latency_ms", 1),
+                f"{clip['fps']['p1']:.1f}",
+                _pair(clip, "frame_lag_ms"),
+                f"{clip['throughput_frames_per_s']:.0f}",
+            ]
+            for clip in doc["clips"]
+        ),
+    )
+
+
+def _measured(doc: dict[str, Any], kind: type) -> list[tuple[str, Any]]:
+    """The entries of a file keyed by what was measured (worker counts, URLs, runs),
+    without its machine, date, command or notes."""
+    skip = {"machine", "date", "command", "tool"}
+    return [
+        (key, value)
+        for key, value in doc.items()
+        if isinstance(value, kind) and key not in skip and "note" not in key
+    ]
+
+
+def scale_out(bench: Bench) -> str:
+    memory = bench.load("workers_memory.json")
+    text = bench.source("workers_memory.json", memory)
+    models = memory.get("models")
+    if isinstance(models, list) and models:
+        engines = ", ".join(f"`{model['engine']}`" for model in models)
+        megabytes = sum(model["bytes"] for model in models) / 1e6
+        text += f"Models loaded: {engines} ({megabytes:.0f} MB of model files).\n\n"
+    rows = []
+    for workers, processes in _measured(memory.get("workers", memory), list):
+        served = [process for process in processes if process["role"] == "worker"]
+        rows.append(
+            [
+                workers,
+                f"{max(p['rss_mib'] for p in served):.0f}",
+                f"{max(p['pss_mib'] for p in served):.0f}",
+                f"{sum(p['pss_mib'] for p in processes):.0f}",
+            ]
+        )
+    text += table(
+        ["workers", "RSS per worker MiB", "PSS per worker MiB", "PSS of all processes MiB"],
+        rows,
+    )
+    resume = bench.load("resume_time.json")
+    text += "\n" + bench.source("resume_time.json", resume)
+    text += table(
+        ["utterances", "resume p50 ms", "resume max ms", "frames lost", "frames duplicated"],
+        [
+            [
+                str(resume["utterances"]),
+                f"{resume['resume_ms_p50']:.0f}",
+                f"{resume['resume_ms_max']:.0f}",
+                str(resume["frames_lost"]),
+                str(resume["frames_duplicated"]),
+            ]
+        ],
+    )
+    proxy = bench.load("proxy_latency.json")
+    text += "\n" + bench.source("proxy_latency.json", proxy)
+    labels = bench.provenance("proxy_latency.json").get("labels", {})
+    return text + table(
+        ["URL", "what serves it", "blocks", "round trip p50 ms", "p99 ms"],
+        (
+            [
+                f"`{url}`",
+                labels.get(url, NOT_RECORDED),
+                str(row["blocks"]),
+                number(row["p50_ms"]),
+                number(row["p99_ms"]),
+            ]
+            for url, row in _measured(proxy, dict)
+        ),
+    )
+
+
+def soak(bench: Bench) -> str:
+    doc = bench.load("soak.json")
+    config = doc["config"]
+    valid = doc["valid"]
+    healthz = doc["healthz"]
+    text = bench.source("soak.json", doc)
+    text += (
+        f"{config['duration_s']:g} s; {config['valid_sessions']} valid `{config['engine']}` "
+        f"sessions at a time ({config['clip_s']:g} s clips, {config['fps']:g} fps, phonemes "
+        f"sent {config['lead_ms']:g} ms early) among {config['hostile_per_kind']} clients of "
+        "each hostile kind.\n\n"
+    )
+    text += table(
+        ["figure", "value"],
+        [
+            [
+                "valid requests that succeeded",
+                f"{valid['successful_requests']} of {valid['requests']}",
+            ],
+            ["valid frame lag p99", f"{valid['frame_lag_ms']['p99']:.0f} ms"],
+            [
+                f"`/healthz` latency ({healthz['polls']} polls, "
+                f"{sum(healthz['failures'].values())} failed)",
+                f"p50 {healthz['latency_ms']['p50']:.0f} ms, p99 "
+                f"{healthz['latency_ms']['p99']:.0f} ms, max {healthz['latency_ms']['max']:.0f} ms",
+            ],
+            [
+                "peak server RSS",
+                f"{doc['server_memory']['peak_rss_bytes'] / 2**20:.0f} MiB",
+            ],
+            ["undocumented errors", str(len(doc["undocumented_errors"]))],
+        ],
+    )
+    return (
+        text
+        + "\n"
+        + table(
+            ["hostile kind", "attempts", "error codes", "closes"],
+            (
+                [
+                    f"`{kind}`",
+                    str(row["attempts"]),
+                    ", ".join(f"`{c}` {n}" for c, n in row["error_codes"].items()) or "–",
+                    ", ".join(f"{c} {n}" for c, n in row["closes"].items()) or "–",
+                ]
+                for kind, row in doc["hostile"].items()
+            ),
+        )
+    )
+
+
+def storm(bench: Bench) -> str:
+    doc = bench.load("storm.json")
+    text = bench.source("storm.json", doc)
+    rows = []
+    for run, row in _measured(doc, dict):
+        rows.append(
+            [
+                f"`{run}`",
+                f"{row['connections']} {row['kind']}",
+                ", ".join(f"{outcome} {n}" for outcome, n in row["outcomes"].items()),
+                f"{row['probes'] - row['probes_failed']} of {row['probes']}",
+                f"{row['slowest_probe_ms']:.0f}",
+                (
+                    f"{1000 * row['lag_p50_s']:g} / {1000 * row['lag_p99_s']:g}"
+                    if "lag_p99_s" in row
+                    else "–"
+                ),
+            ]
+        )
+    return text + table(
+        [
+            "run",
+            "connections",
+            "outcomes",
+            "`/healthz` probes answered",
+            "slowest probe ms",
+            "admitted sessions' lag p50 / p99 ms (histogram bucket)",
+        ],
+        rows,
+    )
+
+
+FIRST_START = "first_start.json"
+
+
+def _seconds(value: float) -> str:
+    return f"{value:.1f} s"
+
+
+def first_start_summary(bench: Bench) -> str:
+    """The README's line on start-up time, from ``first_start.json`` when it exists."""
+    link = "[docs/reports/first-start.md](docs/reports/first-start.md)"
+    if not bench.exists(FIRST_START):
+        return f"Phase times of a first and a later start: {link}.\n"
+    starts = bench.load(FIRST_START)["starts"]
+    told = "; ".join(f"{start['start']} start {_seconds(start['total_s'])}" for start in starts)
+    return f"Measured with `lipstream serve`: {told} (each phase, machine and date: {link}).\n"
+
+
+def first_start(bench: Bench) -> str:
+    """Each phase of a first start (empty ``$LIPSTREAM_HOME``) and of a later one."""
+    if not bench.exists(FIRST_START):
+        return (
+            f"Not measured yet: no `bench/{FIRST_START}`. Its shape: `machine`, `date`, "
+            "`command`, and `starts`, a list of `{start, total_s, phases: {name: seconds}}`.\n"
+        )
+    doc = bench.load(FIRST_START)
+    text = bench.source(FIRST_START, doc)
+    for start in doc["starts"]:
+        text += f"{start['start'].capitalize()} start, {_seconds(start['total_s'])} in all:\n\n"
+        text += table(
+            ["phase", "seconds"],
+            ([f"`{name}`", f"{seconds:.1f}"] for name, seconds in start["phases"].items()),
+        )
+        text += "\n"
+    return text
+
+
+BLOCKS: dict[str, Callable[[Bench], str]] = {
+    "first-start-summary": first_start_summary,
+    "first-start": first_start,
+    "engines-summary": engines_summary,
+    "engines": engines,
+    "stream-calls": stream_calls,
+    "lead0": lead0,
+    "hmm-first-frame": hmm_first_frame,
+    "capacity-floor": _capacity("capacity_floor.json"),
+    "capacity-best": _capacity("capacity_best.json"),
+    "capacity-best-two-workers": _capacity("capacity_best_two_workers.json"),
+    "capacity-workers": capacity_workers,
+    "capacity-earlier": _capacity("capacity.json"),
+    "loadtest": loadtest,
+    "scale-out": scale_out,
+    "soak": soak,
+    "storm": storm,
+}
+
+
+class UnknownBlock(ValueError):
+    """A ``<!-- report: NAME -->`` marker whose NAME no renderer has."""
+
+
+class UnreadableResults(ValueError):
+    """A results file that lacks what its block's renderer reads, or is not JSON."""
+
+
+def render_block(name: str, bench: Bench, where: str) -> str:
+    try:
+        return BLOCKS[name](bench)
+    except (KeyError, TypeError, ValueError, OSError) as error:
+        raise UnreadableResults(
+            f"{where}: report block {name!r} ({BLOCKS[name].__name__} in "
+            f"lipstream/bench/report.py) cannot read {bench.directory}: "
+            f"{type(error).__name__}: {error}"
+        ) from error
+
+
+def render_text(text: str, bench: Bench, where: str = "text") -> str:
+    """``text`` with the body of every report block rendered afresh."""
+
+    def replace(match: re.Match[str]) -> str:
+        name = match.group(2)
+        if name not in BLOCKS:
+            raise UnknownBlock(f"{where}: no report block named {name!r}; known: {sorted(BLOCKS)}")
+        rendered = render_block(name, bench, where)
+        return match.group(1) + "\n" + rendered.strip("\n") + "\n\n" + match.group(4)
+
+    return BLOCK.sub(replace, text)
+
+
+def report_files(repo: Path) -> list[Path]:
+    """The README and every docs page that holds a report block."""
+    candidates = [repo / "README.md", *sorted((repo / "docs").rglob("*.md"))]
+    return [path for path in candidates if BLOCK.search(path.read_text(encoding="utf-8"))]
+
+
+def stale(repo: Path, bench_dir: Path | None = None) -> list[Path]:
+    """The files whose blocks differ from a fresh rendering of ``bench/*.json``."""
+    bench = Bench(bench_dir or repo / "bench")
+    return [
+        path
+        for path in report_files(repo)
+        if render_text(text := path.read_text(encoding="utf-8"), bench, str(path)) != text
+    ]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m lipstream.bench.report",
+        description="Render bench/*.json into the report blocks of README.md and docs/.",
+    )
+    parser.add_argument("--repo", type=Path, default=Path.cwd(), help="checkout (default: .)")
+    parser.add_argument(
+        "--check", action="store_true", help="change nothing; exit 1 if a block is out of date"
+    )
+    args = parser.parse_args(argv)
+    try:
+        return _run(args.repo, args.check)
+    except (UnknownBlock, UnreadableResults) as error:
+        print(error, file=sys.stderr)
+        return 2
+
+
+def _run(repo: Path, check: bool) -> int:
+    if check:
+        out_of_date = stale(repo)
+        for path in out_of_date:
+            print(f"{path}: report blocks differ from bench/*.json", file=sys.stderr)
+        return 1 if out_of_date else 0
+    bench = Bench(repo / "bench")
+    pages = {path: path.read_text(encoding="utf-8") for path in report_files(repo)}
+    # every page rendered before any is written: a file that cannot be read changes nothing
+    rendered = {path: render_text(text, bench, str(path)) for path, text in pages.items()}
+    for path, text in rendered.items():
+        if text != pages[path]:
+            path.write_text(text, encoding="utf-8")
+            print(f"rendered {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,266 @@
+"""``lipstream.bench.report``: the committed README and reports match bench/*.json, and
+the renderer writes what a results file holds, saying what it lacks."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+
+from lipstream.bench.report import (
+    BLOCKS,
+    NOT_RECORDED,
+    Bench,
+    UnknownBlock,
+    main,
+    render_text,
+    report_files,
+    stale,
+)
+from tests.helpers import REPO
+
+README_LIMIT_BYTES = 10_000
+
+
+def engine_row(engine: str, rms: float, ms: float, closure: float) -> dict[str, object]:
+    return {
+        "engine": engine,
+        "train_seconds": 1.0,
+        "ms_per_phoneme": ms,
+        "real_time_factor": ms / 100,
+        "rms_error": rms,
+        "closure_rate": closure,
+        "train_ratio": 1.0,
+        "speed_ratio": ms / 0.01,
+        "rms_ratio": rms / 0.2,
+        "closure_ratio": closure,
+    }
+
+
+@pytest.fixture
+def bench(tmp_path: Path) -> Bench:
+    """A results file with hand-picked figures, and streamed-call timings without
+    machine, date or command."""
+    results = {
+        "date": "2030-01-02T03:04:05+00:00",
+        "machine": {"python": "3.11.7", "system": "Linux"},
+        "corpus": {
+            "name": "toy",
+            "digest": "0123456789abcdef",
+            "fps": 60.0,
+            "train_utterances": 9,
+            "heldout_utterances": 1,
+        },
+        "recorded": {"closure_rate": 0.75},
+        "engines": [
+            engine_row("anime-graph", 0.1, 0.05, 0.5),
+            engine_row("viseme-lerp", 0.2, 0.01, 1.0),
+        ],
+        "rungs": [
+            {
+                "engine": "viseme-lerp",
+                "rung": "causal",
+                "lookahead_ms": 0.0,
+                "rms_error": 0.25,
+                "closure_rate": 1.0,
+                "rms_vs_best": 0.03,
+            }
+        ],
+    }
+    calls = [
+        {
+            "engine": "viseme-lerp",
+            "rung": "causal",
+            "calls": 5,
+            "median_us": 12.4,
+            "p90_us": 20.0,
+            "mean_us": 13.0,
+        }
+    ]
+    (tmp_path / "results.json").write_text(json.dumps(results))
+    (tmp_path / "stream_calls.json").write_text(json.dumps(calls))
+    return Bench(tmp_path)
+
+
+def test_summary_rows_hold_the_results_figures(bench: Bench) -> None:
+    rendered = BLOCKS["engines-summary"](bench)
+    rows = [line for line in rendered.splitlines() if line.startswith("| `")]
+    # the baseline first, whatever the file's order; streamed call only where measured
+    assert rows[0].startswith("| `viseme-lerp` |")
+    assert "| 0.2000 (1.00) | 100.0% | 0.0100 (1.0×) | 12 µs |" in rows[0]
+    assert rows[1].startswith("| `anime-graph` |")
+    assert "| 0.1000 (0.50) | 50.0% | 0.0500 (5.0×) | – |" in rows[1]
+    assert "close on 75.0% of /p b m/" in rendered
+
+
+def test_source_line_names_what_the_file_lacks(bench: Bench) -> None:
+    engines = BLOCKS["engines"](bench)
+    assert engines.startswith(
+        "Source: `bench/results.json`; machine: python 3.11.7, system Linux; "
+        f"date: 2030-01-02T03:04:05+00:00; command: {NOT_RECORDED}."
+    )
+    calls = BLOCKS["stream-calls"](bench)
+    assert calls.startswith(
+        f"Source: `bench/stream_calls.json`; machine: {NOT_RECORDED}; date: {NOT_RECORDED}; "
+        f"command: {NOT_RECORDED}."
+    )
+
+
+def test_render_replaces_only_block_bodies(bench: Bench) -> None:
+    text = "intro 1.5 ms\n<!-- report: stream-calls -->\nold figures\n<!-- /report -->\noutro\n"
+    rendered = render_text(text, bench)
+    assert rendered.startswith("intro 1.5 ms\n<!-- report: stream-calls -->\n")
+    assert rendered.endswith("\n<!-- /report -->\noutro\n")
+    assert "old figures" not in rendered and "| `viseme-lerp` | `causal` | 5 | 12.4 |" in rendered
+    assert render_text(rendered, bench) == rendered
+
+
+def test_an_unknown_block_is_an_error(bench: Bench) -> None:
+    with pytest.raises(UnknownBlock, match="nope"):
+        render_text("<!-- report: nope -->\n<!-- /report -->\n", bench, "page.md")
+
+
+def test_check_finds_a_figure_edited_by_hand(tmp_path: Path) -> None:
+    shutil.copytree(REPO / "bench", tmp_path / "bench")
+    (tmp_path / "docs").mkdir()
+    readme = (REPO / "README.md").read_text(encoding="utf-8")
+    (tmp_path / "README.md").write_text(readme, encoding="utf-8")
+    assert stale(tmp_path) == []
+    block = readme[readme.index("<!-- report: engines-summary -->") :]
+    figure = re.search(r"\| (0\.\d{4}) \(", block)
+    assert figure
+    edited = readme.replace(figure.group(0), "| 0.0001 (", 1)
+    (tmp_path / "README.md").write_text(edited, encoding="utf-8")
+    assert stale(tmp_path) == [tmp_path / "README.md"]
+    assert main(["--repo", str(tmp_path), "--check"]) == 1
+    assert main(["--repo", str(tmp_path)]) == 0
+    assert (tmp_path / "README.md").read_text(encoding="utf-8") == readme
+
+
+def test_committed_readme_and_reports_match_the_bench_files() -> None:
+    """Re-rendering bench/*.json changes nothing: run ``python -m lipstream.bench.report``
+    after changing a results file."""
+    assert stale(REPO) == []
+
+
+def test_readme_figures_are_rendered() -> None:
+    files = report_files(REPO)
+    assert REPO / "README.md" in files
+    readme = (REPO / "README.md").read_text(encoding="utf-8")
+    assert "<!-- report: engines-summary -->" in readme
+
+
+def test_readme_is_a_front_page() -> None:
+    readme = (REPO / "README.md").read_bytes()
+    assert len(readme) <= README_LIMIT_BYTES, len(readme)
+    assert re.search(rb"20\d\d-\d\d-\d\d", readme) is None, "a dated figure belongs in a report"
+
+
+def test_provenance_fills_in_only_what_a_file_lacks(bench: Bench) -> None:
+    recovered = {
+        "results.json": {"date": "1999-01-01", "command": "lipstream bench --results x.json"},
+        "stream_calls.json": {"machine": "a 2-core box", "date": "2030-02-03"},
+    }
+    (bench.directory / "provenance.json").write_text(json.dumps({"files": recovered}))
+    engines = BLOCKS["engines"](bench)
+    # the file's own date wins; the command it lacks is recovered, and says so
+    assert engines.startswith(
+        "Source: `bench/results.json`; machine: python 3.11.7, system Linux; "
+        "date: 2030-01-02T03:04:05+00:00; "
+        "command: `lipstream bench --results x.json` (recovered)."
+    )
+    calls = BLOCKS["stream-calls"](bench)
+    assert calls.startswith(
+        "Source: `bench/stream_calls.json`; machine: a 2-core box (recovered); "
+        f"date: 2030-02-03 (recovered); command: {NOT_RECORDED}."
+    )
+
+
+def test_first_start_renders_each_phase(bench: Bench) -> None:
+    assert "Not measured yet" in BLOCKS["first-start"](bench)
+    doc = {
+        "date": "2030-03-04",
+        "command": "lipstream serve",
+        "starts": [
+            {"start": "first", "total_s": 48.25, "phases": {"speech": 9.04, "train": 30.0}},
+            {"start": "later", "total_s": 3.5, "phases": {"load": 3.5}},
+        ],
+    }
+    (bench.directory / "first_start.json").write_text(json.dumps(doc))
+    assert BLOCKS["first-start-summary"](bench).startswith(
+        "Measured with `lipstream serve`: first start 48.2 s; later start 3.5 s ("
+    )
+    rendered = BLOCKS["first-start"](bench)
+    assert "First start, 48.2 s in all:" in rendered and "Later start, 3.5 s in all:" in rendered
+    assert "| `speech` | 9.0 |" in rendered and "| `train` | 30.0 |" in rendered
+
+
+def test_every_results_file_is_rendered() -> None:
+    """A results file added to bench/ needs a report block: its figures are otherwise
+    unread data or, worse, hand-copied into prose."""
+    rendered = "".join(path.read_text(encoding="utf-8") for path in report_files(REPO))
+    shown = set(re.findall(r"Source: `bench/([\w.-]+\.json)`", rendered))
+    results = {path.name for path in (REPO / "bench").glob("*.json")} - {"provenance.json"}
+    assert results - shown == set()
+
+
+def test_workers_memory_in_either_shape(tmp_path: Path) -> None:
+    """The file as first written (worker counts at the top) and with its machine, date,
+    command and models beside ``workers`` render the same table."""
+    processes = {
+        "1": [{"pid": 1, "role": "worker", "rss_mib": 300.4, "pss_mib": 280.2}],
+        "2": [
+            {"pid": 2, "role": "supervisor", "rss_mib": 265.0, "pss_mib": 181.0},
+            {"pid": 3, "role": "worker", "rss_mib": 297.0, "pss_mib": 202.0},
+            {"pid": 4, "role": "worker", "rss_mib": 298.0, "pss_mib": 203.0},
+        ],
+    }
+    stamped = {
+        "date": "2030-04-05T06:07:08+00:00",
+        "command": "python -m lipstream.bench.workers_memory --models M --workers 1 2",
+        "machine": {"cpus": 2},
+        "models": [{"name": "a", "engine": "dam", "bytes": 3_000_000}],
+        "workers": processes,
+    }
+    tables = []
+    for doc in (processes, stamped):
+        (tmp_path / "workers_memory.json").write_text(json.dumps(doc))
+        (tmp_path / "resume_time.json").write_text(
+            json.dumps(
+                {
+                    "utterances": 2,
+                    "resume_ms_p50": 1.0,
+                    "resume_ms_max": 2.0,
+                    "frames_lost": 0,
+                    "frames_duplicated": 0,
+                }
+            )
+        )
+        (tmp_path / "proxy_latency.json").write_text(json.dumps({}))
+        rendered = BLOCKS["scale-out"](Bench(tmp_path))
+        memory_table = rendered[: rendered.index("bench/resume_time.json")]
+        tables.append([line for line in memory_table.splitlines() if re.match(r"\| \d", line)])
+    assert tables[0] == tables[1] == ["| 1 | 300 | 280 | 280 |", "| 2 | 298 | 203 | 586 |"]
+    assert "date: 2030-04-05T06:07:08+00:00" in rendered
+    assert "Models loaded: `dam` (3 MB of model files)." in rendered
+
+
+def test_a_results_file_it_cannot_read_changes_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    shutil.copytree(REPO / "bench", tmp_path / "bench")
+    reports = tmp_path / "docs" / "reports"
+    reports.mkdir(parents=True)
+    (tmp_path / "README.md").write_text("no blocks\n", encoding="utf-8")
+    # a.md renders (and is out of date); b.md's results file lacks what its block reads
+    stale_page = "<!-- report: storm -->\nold\n<!-- /report -->\n"
+    (reports / "a.md").write_text(stale_page, encoding="utf-8")
+    (reports / "b.md").write_text("<!-- report: soak -->\n<!-- /report -->\n", encoding="utf-8")
+    (tmp_path / "bench" / "soak.json").write_text('{"config": {}}')
+    assert main(["--repo", str(tmp_path)]) == 2
+    error = capsys.readouterr().err
+    assert "b.md: report block 'soak' (soak in" in error and "KeyError" in error
+    assert (reports / "a.md").read_text(encoding="utf-8") == stale_page
