@@ -28,6 +28,7 @@ if TYPE_CHECKING:
     from lipstream_client import OutputProfile
 
     from .audio import Audio
+    from .models import ModelRegistry
     from .status import Report
 
 
@@ -175,8 +176,8 @@ def _serve(args: argparse.Namespace, settings: Settings) -> None:
     finally:
         heartbeat.stop()
 
-    def prepare(report: Report) -> None:
-        _demo_ready(settings, report, build=build, check=check)
+    def prepare(report: Report) -> ModelRegistry | None:
+        return _demo_ready(settings, report, build=build, check=check)
 
     serve(
         models.resolve(),
@@ -196,9 +197,12 @@ def _reporting_to(*reports: Report) -> Report:
     return report
 
 
-def _demo_ready(settings: Settings, report: Report, *, build: bool, check: bool) -> None:
+def _demo_ready(
+    settings: Settings, report: Report, *, build: bool, check: bool
+) -> ModelRegistry | None:
     """Build the demo character when there are no models, or when its cached models cannot
-    serve every engine (``_stale_demo``)."""
+    serve every engine (``_cached_demo``); the cached models when the check loaded them
+    (so the server does not load them twice)."""
     from .status import phase
     from .training import build_demo
 
@@ -207,14 +211,17 @@ def _demo_ready(settings: Settings, report: Report, *, build: bool, check: bool)
         report(f"no models in {models}: building the demo character first")
     elif check:
         with phase(f"checking the demo character in {models}", report):
-            build = _stale_demo(models)
-        if build:
-            report(
-                f"the demo character in {models} lacks an engine or was built by an older "
-                "lipstream: building it again"
-            )
-    if build:
-        build_demo(settings.demo_dir, report=report)
+            cached = _cached_demo(models)
+        if cached is not None:
+            return cached
+        report(
+            f"the demo character in {models} lacks an engine or was built by an older "
+            "lipstream: building it again"
+        )
+    else:
+        return None
+    build_demo(settings.demo_dir, report=report)
+    return None
 
 
 def _serve_in_front(
@@ -235,11 +242,10 @@ def _serve_in_front(
 
     heartbeat = Heartbeat(to_stderr).start()
     try:
-        _demo_ready(settings, heartbeat.report, build=build, check=check)
-        with phase(f"loading the models in {models.resolve()}", heartbeat.report):
-            registry: ModelRegistry | None = ModelRegistry.load(
-                models.resolve(), strict=server.strict_models
-            )
+        registry = _demo_ready(settings, heartbeat.report, build=build, check=check)
+        if registry is None:
+            with phase(f"loading the models in {models.resolve()}", heartbeat.report):
+                registry = ModelRegistry.load(models.resolve(), strict=server.strict_models)
     finally:
         heartbeat.stop()
     if args.ray:
@@ -275,15 +281,22 @@ def _serve_on_ray(
 def _stale_demo(models: Path) -> bool:
     """Whether the cached demo character cannot serve every registered engine (a model
     that no longer loads, or an engine added since it was built)."""
+    return _cached_demo(models) is None
+
+
+def _cached_demo(models: Path) -> ModelRegistry | None:
+    """The cached demo character, loaded, when it serves every registered engine."""
     from .engines import engine_names
     from .models import ModelRegistry
 
     try:
         registry = ModelRegistry.load(models)
     except LipstreamError:
-        return True
+        return None
     served = {model.manifest.engine for model in registry.models.values()}
-    return bool(registry.failures) or not set(engine_names()) <= served
+    if registry.failures or not set(engine_names()) <= served:
+        return None
+    return registry
 
 
 def _inspect(args: argparse.Namespace, settings: Settings) -> None:

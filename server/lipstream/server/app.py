@@ -100,7 +100,7 @@ def create_app(
     loaded: ModelRegistry | None = None,
     *,
     serving_process: bool = False,
-    prepare: Callable[[Report], None] | None = None,
+    prepare: Callable[[Report], ModelRegistry | None] | None = None,
     background: bool = False,
     on_failure: Callable[[], None] | None = None,
 ) -> FastAPI:
@@ -108,7 +108,8 @@ def create_app(
     ``loaded`` from there) with ``settings`` (default: the ``LIPSTREAM_*`` environment).
     ``serving_process``: this process exists to serve the app, so its lifespan may change
     process-wide state (``freeze_long_lived_objects``). ``prepare`` runs first, in the
-    phase ``building`` (``lipstream serve`` builds the demo character there). With
+    phase ``building`` (``lipstream serve`` builds the demo character there, or checks the
+    cached one), and returns the models under ``models_path`` when it loaded them. With
     ``background`` the lifespan returns at once, so the server listens while it starts up
     on a thread (``startup``); a failure then calls ``on_failure`` (the app's
     ``state.startup.failure`` says what failed). Without it the lifespan does the start-up
@@ -127,11 +128,11 @@ def create_app(
         running: list[Callable[[], None]] = []
 
         def start_up() -> ServerState:
+            registry = loaded
             if prepare is not None:
                 startup.enter(BUILDING)
-                prepare(report)
+                registry = prepare(report) or registry
             startup.enter(LOADING)
-            registry = loaded
             if registry is None:
                 with phase(f"loading the models in {models_path}", report):
                     registry = ModelRegistry.load(models_path, strict=settings.strict_models)
@@ -158,6 +159,13 @@ def create_app(
             if serving_process:
                 freeze_long_lived_objects()
             startup.ready(server)
+            engines = sorted(server.catalog.engines)
+            startup_log.info(
+                "ready in %.1f s: %d model(s) of %s; GET /readyz answers 200",
+                startup.clock() - startup.began,
+                len(server.registry.models),
+                ", ".join(engines),
+            )
 
         def in_background() -> None:
             server = start_up()

@@ -121,7 +121,7 @@ def serve(
     server: ServerSettings,
     registry: ModelRegistry | None = None,
     *,
-    prepare: Callable[[Report], None] | None = None,
+    prepare: Callable[[Report], ModelRegistry | None] | None = None,
     sock: socket.socket | None = None,
 ) -> None:
     """Serve ``models`` (already loaded as ``registry``, for one worker) until SIGTERM or
