@@ -15,7 +15,7 @@ OUTPUT = [
     (
         5.9,
         "INFO:     training dam and compiling its kernels: done in 3.7 s "
-        "(training 2.5 s, compiling 1.2 s)",
+        "(training 2.5 s, compiling 1.2 s, CPU 3.1 s)",
     ),
     (6.0, "demo corpus:  50%|#####     | 166/332"),
 ]
@@ -24,7 +24,12 @@ OUTPUT = [
 def test_the_steps_are_the_done_lines() -> None:
     assert steps_from(OUTPUT) == [
         Step("importing the server (numpy, scipy, numba, FastAPI, the engines)", 1.8, 2.1),
-        Step("training dam and compiling its kernels", 3.7, 5.9, "training 2.5 s, compiling 1.2 s"),
+        Step(
+            "training dam and compiling its kernels",
+            3.7,
+            5.9,
+            "training 2.5 s, compiling 1.2 s, CPU 3.1 s",
+        ),
     ]
 
 
