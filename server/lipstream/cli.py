@@ -138,6 +138,9 @@ def _output_profile(args: argparse.Namespace, *, shapes: bool) -> OutputProfile 
     return parse_profile(fields, args.profile or "command line") if fields else None
 
 
+IMPORTING_THE_SERVER = "importing the server (numpy, scipy, numba, FastAPI, the engines)"
+
+
 def _serve(args: argparse.Namespace, settings: Settings) -> None:
     """Serve; with one worker the server listens first and starts up behind it (building the
     demo character when there are no models), so ``/healthz`` answers throughout and
@@ -169,9 +172,7 @@ def _serve(args: argparse.Namespace, settings: Settings) -> None:
         "(GET /healthz answers now; GET /readyz names the phase until it is ready)"
     )
     try:
-        with phase(
-            "importing the server (numpy, scipy, numba, FastAPI, the engines)", heartbeat.report
-        ):
+        with phase(IMPORTING_THE_SERVER, heartbeat.report):
             from .server.runner import serve
     finally:
         heartbeat.stop()
@@ -235,13 +236,14 @@ def _serve_in_front(
 ) -> None:
     """Several workers or Ray: build and load before serving, so each worker (or replica)
     loads a model set known to load; a set that cannot be served stops here with one line."""
-    from .models import ModelRegistry
-    from .server.metrics import multiprocess_directory
-    from .server.runner import serve
     from .status import Heartbeat, phase, to_stderr
 
     heartbeat = Heartbeat(to_stderr).start()
     try:
+        with phase(IMPORTING_THE_SERVER, heartbeat.report):
+            from .models import ModelRegistry
+            from .server.metrics import multiprocess_directory
+            from .server.runner import serve
         registry = _demo_ready(settings, heartbeat.report, build=build, check=check)
         if registry is None:
             with phase(f"loading the models in {models.resolve()}", heartbeat.report):
