@@ -111,6 +111,7 @@ def _read_output(stream: BinaryIO, began: float, into: list[tuple[float, str]]) 
 def start_once(home: Path, port: int, log: Path) -> Run:
     """Launch ``lipstream serve`` with ``home`` until ready, then stop it."""
     environment = dict(os.environ, LIPSTREAM_HOME=str(home), NUMBA_CACHE_DIR=str(home / "numba"))
+    environment.pop("LIPSTREAM_MODELS", None)  # serve the demo character, built in ``home``
     command = [sys.executable, "-m", "lipstream.cli", "serve", "--host", "127.0.0.1"]
     command += ["--port", str(port)]
     run = Run(load_average_before=os.getloadavg())
