@@ -86,12 +86,16 @@ class Startup:
         """The server state, or ``NotReady`` naming the phase."""
         server = self.server
         if server is None:
-            raise NotReady(
-                f"the server is starting up ({self.phase}: {self.line or 'under way'}); "
-                "retry once GET /readyz answers 200",
-                where=self.phase,
-            )
+            raise self.not_ready()
         return server
+
+    def not_ready(self) -> NotReady:
+        """The error that refuses a request now, naming the phase as ``where``."""
+        return NotReady(
+            f"the server is starting up ({self.phase}: {self.line or 'under way'}); "
+            "retry once GET /readyz answers 200",
+            where=self.phase,
+        )
 
     def report(self) -> dict[str, object]:
         """``/readyz``'s body before the server is ready."""

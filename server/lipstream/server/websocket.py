@@ -76,7 +76,7 @@ from .deadline import LaterDeadline, SendDeadline
 from .outgoing import Outgoing, Stamped
 from .read_ahead import DISCONNECT, ReadAhead, Received
 from .session import InputMessage, Session
-from .startup import NotReady, Startup
+from .startup import Startup
 from .state import ServerState
 
 logger = logging.getLogger("lipstream.server")
@@ -156,12 +156,10 @@ async def _refuse_while_starting(
     if encoding is None:
         await websocket.close(code=CloseCode.POLICY_VIOLATION)
         return
-    try:
-        startup.serving()
-    except NotReady as error:
-        await websocket.accept(subprotocol=subprotocol)
-        details: dict[str, JsonValue] = {"phase": startup.phase}
-        await _refuse(websocket, encoding, STARTING, error.message, STARTING_SEND_S, details)
+    error = startup.not_ready()
+    await websocket.accept(subprotocol=subprotocol)
+    details: dict[str, JsonValue] = {"phase": error.where}
+    await _refuse(websocket, encoding, STARTING, error.message, STARTING_SEND_S, details)
 
 
 async def _refuse(
