@@ -32,7 +32,7 @@ import tempfile
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -148,7 +148,10 @@ def start_once(home: Path, port: int, log: Path) -> Run:
     run.first_output_s = round(spoken[0][0], 2) if spoken else None
     silence = longest_silence(output, run.ready_s or 0.0)
     run.longest_silence_s = None if silence is None else round(silence, 2)
-    run.steps = steps_from(output)
+    run.steps = [
+        replace(step, step=step.step.replace(str(home), "$LIPSTREAM_HOME"))
+        for step in steps_from(output)
+    ]
     return run
 
 
