@@ -20,12 +20,13 @@ import uvicorn
 
 from lipstream.config import ServerSettings
 from lipstream.corpus import Corpus
+from lipstream.corpus.writer import write_corpus
 from lipstream.engines import engine_names
 from lipstream.errors import LipstreamError
 from lipstream.server.app import create_app
 from lipstream.server.runner import uvicorn_options
 from lipstream.status import Report
-from lipstream.training import train_in_parallel
+from lipstream.training import train_in_parallel, training_pool
 from lipstream_client import ErrorMessage
 from tests.helpers import free_port
 from tests.lipstream.server.harness import client
@@ -141,8 +142,8 @@ def test_a_server_training_its_engines_answers_health_then_serves_every_engine(
     """The real parallel training (``train_in_parallel``, two processes) as the start-up's
     ``prepare``; its report holds at the first engine done, so the probes see the phase
     ``building`` while training is under way."""
-    models = tmp_path / "models"
-    train, _heldout = small_demo_corpus.split()
+    models, corpus_dir = tmp_path / "models", tmp_path / "corpus"
+    write_corpus(small_demo_corpus, corpus_dir)
     at_first_done, release = threading.Event(), threading.Event()
 
     def prepare(report: Report) -> None:
@@ -152,7 +153,8 @@ def test_a_server_training_its_engines_answers_health_then_serves_every_engine(
                 at_first_done.set()
                 release.wait(WAIT_S)
 
-        train_in_parallel(train, engine_names(), models, holding, jobs=2)
+        with training_pool(2) as pool:
+            train_in_parallel(pool, 2, corpus_dir, engine_names(), models, holding)
 
     failures: list[int] = []
     with starting(models, prepare, lambda: failures.append(1)) as address:
