@@ -158,9 +158,10 @@ def _train_and_warm(task: tuple[str, Path, Path]) -> tuple[str, WorkerTimes]:
 
     engine, out, corpus_dir = task
     cpu_started, started = time.process_time(), time.perf_counter()
+    read = started  # this process read the corpus for an earlier engine
     if corpus_dir not in _train_splits:
         _train_splits[corpus_dir] = load_corpus(corpus_dir).split()[0]
-    read = time.perf_counter()
+        read = time.perf_counter()
     train_engine(_train_splits[corpus_dir], engine, out)
     trained = time.perf_counter()
     warm_kernels(load_model(out))
