@@ -163,8 +163,10 @@ def _serve(args: argparse.Namespace, settings: Settings) -> None:
         _serve_in_front(args, settings, models, server, build=build, check=check)
         return
     from .server.front_door import FrontDoor, bind
+    from .server.open_files import raise_open_file_limit
     from .status import Heartbeat, phase
 
+    raise_open_file_limit()  # before the first connection is accepted, as serve() would
     door = FrontDoor(bind(host, port)).start()
     heartbeat = Heartbeat(_reporting_to(to_stderr, door.note)).start()
     heartbeat.report(
