@@ -91,13 +91,18 @@ class Heartbeat:
         self._report("; ".join(f"{what}{BEGUN}: {int(now - began)} s" for what, began in steps))
         return True
 
+    def until_due(self) -> float:
+        """Seconds until ``beat`` may next report: when the last line turns ``interval_s``
+        old, or, with no step open, an interval from now (a step opened meanwhile is due
+        no sooner than that)."""
+        now = self._clock()
+        with self._lock:
+            since = self._last_output if self._steps else now
+        return max(0.0, since + self.interval_s - now)
+
     def start(self) -> Heartbeat:
         def run() -> None:
-            while True:
-                with self._lock:
-                    due = self._last_output + self.interval_s
-                if self._stopped.wait(max(0.0, due - self._clock())):
-                    return
+            while not self._stopped.wait(self.until_due()):
                 self.beat()
 
         self._thread = threading.Thread(target=run, name="lipstream-heartbeat", daemon=True)

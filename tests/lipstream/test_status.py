@@ -107,3 +107,16 @@ def test_the_heartbeat_thread_beats_until_stopped() -> None:
     clock.now += 3.0
     assert heartbeat._thread is not None and not heartbeat._thread.is_alive()
     assert len(lines) == count
+
+
+def test_the_thread_waits_for_the_next_due_beat_and_idles_with_no_step_open() -> None:
+    clock = Clock()
+    heartbeat = Heartbeat(lambda line: None, interval_s=2.0, clock=clock)
+    heartbeat.report("training dam ...")
+    clock.now += 0.5
+    assert heartbeat.until_due() == 1.5
+    clock.now += 5.0
+    assert heartbeat.until_due() == 0.0  # overdue: beat now
+    heartbeat.report("training dam: done in 5.5 s")
+    clock.now += 100.0  # long silent, but nothing is under way
+    assert heartbeat.until_due() == 2.0
