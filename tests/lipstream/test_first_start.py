@@ -42,22 +42,40 @@ def test_first_start_builds_the_demo_then_serves_every_engine(
     try:
         deadline = time.monotonic() + BUILD_LIMIT_S
         ready = False
+        phases: dict[str, str] = {}  # each phase /readyz named before ready: its first status
+        healthy_while_building = False
         while not ready and time.monotonic() < deadline and process.poll() is None:
             try:
-                ready = httpx.get(f"{base}/readyz", timeout=1.0).status_code == 200
+                answer = httpx.get(f"{base}/readyz", timeout=1.0)
+                ready = answer.status_code == 200
+                if not ready:
+                    phases.setdefault(answer.json()["phase"], answer.json()["status"])
+                if answer.json()["phase"] == "building" and not healthy_while_building:
+                    healthy_while_building = httpx.get(f"{base}/healthz").status_code == 200
             except httpx.TransportError:
                 pass
             if not ready:
                 time.sleep(0.5)
         assert process.poll() is None, log.read_text()[-2000:]
         assert ready, f"not ready within {BUILD_LIMIT_S} s: {log.read_text()[-2000:]}"
-        assert httpx.get(f"{base}/readyz").json() == {"ready": True, "failed_models": []}
+        assert httpx.get(f"{base}/readyz").json() == {
+            "ready": True,
+            "phase": "ready",
+            "failed_models": [],
+        }
+        # training six engines takes far longer than a probe's half second
+        assert "building" in phases and healthy_while_building
+        assert set(phases) <= {"starting", "building", "loading", "calibrating"}
         assert httpx.get(f"{base}/healthz").json() == {"status": "ok"}
         characters = httpx.get(f"{base}/v1/characters").json()["characters"]
         assert characters == [{"name": "demo", "engines": sorted(engine_names())}]
     finally:
         process.terminate()
         process.wait(timeout=30)
+    output = log.read_text()
+    for engine in engine_names():
+        assert f"training {engine} and compiling its kernels: done in " in output
+    assert "ready in " in output
     models = tmp_path / "home" / "demo" / "models"
     assert sorted(p.name for p in models.iterdir()) == sorted(engine_names())
     assert (tmp_path / "home" / "demo" / "corpus" / "corpus.json").is_file()
