@@ -255,7 +255,8 @@ def _rest_poses(model: Model, guard: WorkGuard | None = None) -> dict[str | None
     poses: dict[str | None, np.ndarray] = {}
     for emotion in (None, *EMOTIONS):
         fps = float(model.manifest.fps)
-        synthesizer = model.start(SynthesisRequest(fps=fps, emotion=emotion, guard=guard))
+        request = SynthesisRequest(fps=fps, emotion=emotion, guard=guard or WorkGuard())
+        synthesizer = model.start(request)
         synthesizer.feed(silence)
         frames = synthesizer.finish()
         if not np.isfinite(frames).all():
