@@ -65,6 +65,7 @@ IDLE_TIMEOUT = "idle_timeout"
 SERVER_BUSY = "server_busy"
 TOO_MANY_CLIENT_CONNECTIONS = "too_many_client_connections"
 SHUTTING_DOWN = "shutting_down"
+STARTING = "starting"
 UNAUTHORIZED = "unauthorized"
 ORIGIN_NOT_ALLOWED = "origin_not_allowed"
 SLOW_CONSUMER = "slow_consumer"
@@ -304,6 +305,13 @@ ERROR_CODES: dict[str, ErrorCodeInfo] = {
         "server",
         "connection",
         CloseCode.GOING_AWAY,
+    ),
+    STARTING: ErrorCodeInfo(
+        "the server is starting up (building, loading or calibrating its models; GET /readyz "
+        "names the phase): it serves no synthesis until /readyz answers 200. Retry then",
+        "server",
+        "connection",
+        CloseCode.TRY_AGAIN_LATER,
     ),
     UNAUTHORIZED: ErrorCodeInfo(
         "missing or wrong bearer token", "server", "connection", CloseCode.POLICY_VIOLATION

@@ -29,19 +29,27 @@ if TYPE_CHECKING:
 
     from .audio import Audio
     from .engines.base import Model
+    from .models import ModelRegistry
     from .retarget import RetargetMap
+    from .status import Report
 
 
 def _build_demo(args: argparse.Namespace, settings: Settings) -> None:
+    from .status import Heartbeat, to_stderr
     from .training import build_demo
 
     out = Path(args.out) if args.out else settings.demo_dir
-    written = build_demo(out, progress=True)
+    heartbeat = Heartbeat(to_stderr).start()
+    try:
+        written = build_demo(out, report=heartbeat.report)
+    finally:
+        heartbeat.stop()
     print(f"demo corpus in {out / 'corpus'}; models: {', '.join(map(str, written.values()))}")
 
 
 def _train(args: argparse.Namespace, settings: Settings) -> None:
     from .corpus import CorpusWarning, load_corpus
+    from .status import Heartbeat, phase, to_stderr
     from .training import resolve_engines, train_engine, train_engines
 
     engines = resolve_engines(args.engine)
@@ -51,12 +59,17 @@ def _train(args: argparse.Namespace, settings: Settings) -> None:
     for warning in ignored:
         print(f"warning: {warning.message}", file=sys.stderr)
     out = Path(args.out)
-    if args.engine == "all":
-        written = train_engines(corpus, engines, out, progress=True)
-        print("trained " + ", ".join(f"{name} -> {path}" for name, path in written.items()))
-    else:
-        model = train_engine(corpus, engines[0], out)
-        print(f"trained {args.engine} -> {out} in {model.manifest.metrics['train_seconds']} s")
+    heartbeat = Heartbeat(to_stderr).start()  # a stage with no bar of its own still shows
+    try:
+        if args.engine == "all":
+            written = train_engines(corpus, engines, out, report=heartbeat.report)
+            print("trained " + ", ".join(f"{name} -> {path}" for name, path in written.items()))
+            return
+        with phase(f"training {args.engine} on the corpus", heartbeat.report):
+            model = train_engine(corpus, engines[0], out, progress=True)
+    finally:
+        heartbeat.stop()
+    print(f"trained {args.engine} -> {out} in {model.manifest.metrics['train_seconds']} s")
 
 
 def _synth(args: argparse.Namespace, settings: Settings) -> None:
@@ -127,41 +140,124 @@ def _output_profile(args: argparse.Namespace, *, shapes: bool) -> OutputProfile 
     return parse_profile(fields, args.profile or "command line") if fields else None
 
 
-def _serve(args: argparse.Namespace, settings: Settings) -> None:
-    from .models import ModelRegistry
-    from .server.metrics import multiprocess_directory
-    from .server.runner import serve
-    from .status import phase, to_stderr
-    from .training import build_demo
+IMPORTING_THE_SERVER = "importing the server (numpy, scipy, numba, FastAPI, the engines)"
 
-    models = Path(args.models) if args.models else settings.models
-    if args.models is None and not models.exists():
-        print(f"no models in {models}: building the demo character first", file=sys.stderr)
-        build_demo(settings.demo_dir, progress=True)
-        models = settings.demo_models_dir
-    elif args.models is None and models == settings.demo_models_dir and _stale_demo(models):
-        print(
-            f"the demo character in {models} lacks an engine or was built by an older "
-            "lipstream: building it again",
-            file=sys.stderr,
-        )
-        build_demo(settings.demo_dir, progress=True)
+
+def _serve(args: argparse.Namespace, settings: Settings) -> None:
+    """Serve; with one worker the server listens first and starts up behind it (building the
+    demo character when there are no models), so ``/healthz`` answers throughout and
+    ``/readyz`` names the phase."""
+    from .status import to_stderr
+
+    host = args.host or settings.host
+    port = settings.port if args.port is None else args.port
     server = settings.server.with_changes(
         workers=args.workers or settings.server.workers,
         log_level=args.log_level or settings.server.log_level,
         strict_models=args.strict_models or settings.server.strict_models,
     )
-    # Loaded here, so a model set that cannot be served stops the command with one line;
-    # one worker serves these very models, several load their own.
-    with phase(f"loading the models in {models.resolve()}", to_stderr):
-        registry: ModelRegistry | None = ModelRegistry.load(
-            models.resolve(), strict=server.strict_models
+    models = Path(args.models) if args.models else settings.models
+    build = args.models is None and not models.exists()
+    check = args.models is None and models == settings.demo_models_dir
+    if build:
+        models = settings.demo_models_dir
+    if args.ray or server.workers > 1:
+        _serve_in_front(args, settings, models, server, build=build, check=check)
+        return
+    from .server.front_door import FrontDoor, bind
+    from .server.open_files import raise_open_file_limit
+    from .status import Heartbeat, phase
+
+    raise_open_file_limit()  # before the first connection is accepted, as serve() would
+    door = FrontDoor(bind(host, port)).start()
+    heartbeat = Heartbeat(_reporting_to(to_stderr, door.note)).start()
+    heartbeat.report(
+        f"lipstream serve: listening on http://{host}:{port} and starting up "
+        "(GET /healthz answers now; GET /readyz names the phase until it is ready)"
+    )
+    try:
+        with phase(IMPORTING_THE_SERVER, heartbeat.report):
+            from .server.runner import serve
+    finally:
+        heartbeat.stop()
+
+    def prepare(report: Report) -> ModelRegistry | None:
+        return _demo_ready(settings, report, build=build, check=check)
+
+    serve(
+        models.resolve(),
+        host,
+        port,
+        server,
+        prepare=prepare if build or check else None,
+        sock=door.hand_over(),
+    )
+
+
+def _reporting_to(*reports: Report) -> Report:
+    def report(line: str) -> None:
+        for each in reports:
+            each(line)
+
+    return report
+
+
+def _demo_ready(
+    settings: Settings, report: Report, *, build: bool, check: bool
+) -> ModelRegistry | None:
+    """Build the demo character when there are no models, or when its cached models cannot
+    serve every engine (``_cached_demo``); the cached models when the check loaded them
+    (so the server does not load them twice)."""
+    from .status import phase
+    from .training import build_demo
+
+    models = settings.demo_models_dir
+    if build:
+        report(f"no models in {models}: building the demo character first")
+    elif check:
+        with phase(f"checking the demo character in {models}", report):
+            cached = _cached_demo(models)
+        if cached is not None:
+            return cached
+        report(
+            f"the demo character in {models} lacks an engine or was built by an older "
+            "lipstream: building it again"
         )
+    else:
+        return None
+    build_demo(settings.demo_dir, report=report)
+    return None
+
+
+def _serve_in_front(
+    args: argparse.Namespace,
+    settings: Settings,
+    models: Path,
+    server: ServerSettings,
+    *,
+    build: bool,
+    check: bool,
+) -> None:
+    """Several workers or Ray: build and load before serving, so each worker (or replica)
+    loads a model set known to load; a set that cannot be served stops here with one line."""
+    from .status import Heartbeat, phase, to_stderr
+
+    heartbeat = Heartbeat(to_stderr).start()
+    try:
+        with phase(IMPORTING_THE_SERVER, heartbeat.report):
+            from .models import ModelRegistry
+            from .server.metrics import multiprocess_directory
+            from .server.runner import serve
+        registry = _demo_ready(settings, heartbeat.report, build=build, check=check)
+        if registry is None:
+            with phase(f"loading the models in {models.resolve()}", heartbeat.report):
+                registry = ModelRegistry.load(models.resolve(), strict=server.strict_models)
+    finally:
+        heartbeat.stop()
     if args.ray:
         _serve_on_ray(args, settings, models.resolve(), server)
         return
-    if server.workers > 1:
-        registry = None
+    registry = None
     with multiprocess_directory(server.workers):
         serve(
             models.resolve(),
@@ -191,15 +287,22 @@ def _serve_on_ray(
 def _stale_demo(models: Path) -> bool:
     """Whether the cached demo character cannot serve every registered engine (a model
     that no longer loads, or an engine added since it was built)."""
+    return _cached_demo(models) is None
+
+
+def _cached_demo(models: Path) -> ModelRegistry | None:
+    """The cached demo character, loaded, when it serves every registered engine."""
     from .engines import engine_names
     from .models import ModelRegistry
 
     try:
         registry = ModelRegistry.load(models)
     except LipstreamError:
-        return True
+        return None
     served = {model.manifest.engine for model in registry.models.values()}
-    return bool(registry.failures) or not set(engine_names()) <= served
+    if registry.failures or not set(engine_names()) <= served:
+        return None
+    return registry
 
 
 def _inspect(args: argparse.Namespace, settings: Settings) -> None:

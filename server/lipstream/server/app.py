@@ -18,6 +18,7 @@ and ``/openapi.json``), and the demo page ``/`` (``demo_page``).
 
 from __future__ import annotations
 
+import asyncio
 import gc
 import logging
 import sys
@@ -35,7 +36,7 @@ from ..config import ServerSettings, load_server_settings
 from ..engines import ENGINES
 from ..errors import LipstreamError
 from ..models import ModelRegistry
-from ..status import phase
+from ..status import Heartbeat, Report, phase
 from . import demo_page, docs_page, openapi, phoneme_maps
 from .catalog import Catalog
 from .client_limits import ClientLimits
@@ -50,6 +51,7 @@ from .metrics import Metrics, forget_this_process
 from .open_files import open_file_limit
 from .overload import overload_for
 from .rest import synthesize
+from .startup import BUILDING, CALIBRATING, LOADING, READY, NotReady, Startup, run_in_background
 from .state import ServerState
 from .websocket import stream_endpoint
 
@@ -59,14 +61,21 @@ startup_log = logging.getLogger("uvicorn.error")
 
 
 class LifespanState(TypedDict):
-    server: ServerState
+    startup: Startup
 
 
 def _server(request: Request) -> ServerState:
-    state: ServerState = request.state.server
-    return state
+    """The server state, or ``NotReady`` while the server starts up."""
+    startup: Startup = request.state.startup
+    return startup.serving()
 
 
+async def _call(function: Callable[[ServerState], None], server: ServerState) -> None:
+    function(server)
+
+
+DRAINING = "draining"
+NOT_READY_RETRY_S = 2
 _frozen = False
 GIL_SWITCH_INTERVAL_S = 0.0005
 
@@ -96,68 +105,125 @@ def create_app(
     *,
     serving_process: bool = False,
     drain_flag: Path | None = None,
+    prepare: Callable[[Report], ModelRegistry | None] | None = None,
+    background: bool = False,
+    on_failure: Callable[[], None] | None = None,
 ) -> FastAPI:
     """An app serving every model found under ``models_path`` (or the models already
     ``loaded`` from there) with ``settings`` (default: the ``LIPSTREAM_*`` environment).
     ``serving_process``: this process exists to serve the app, so its lifespan may change
-    process-wide state (``freeze_long_lived_objects``). ``drain_flag``: the file whose
-    existence says the workers' supervisor drains (``runner.DrainingSupervisor``)."""
+    process-wide state (``freeze_long_lived_objects``). ``prepare`` runs first, in the
+    phase ``building`` (``lipstream serve`` builds the demo character there, or checks the
+    cached one), and returns the models under ``models_path`` when it loaded them. With
+    ``background`` the lifespan returns at once, so the server listens while it starts up
+    on a thread (``startup``); a failure then calls ``on_failure`` (the app's
+    ``state.startup.failure`` says what failed). Without it the lifespan does the start-up
+    itself and raises what fails. ``drain_flag``: the file whose existence says the
+    workers' supervisor drains (``runner.DrainingSupervisor``)."""
     settings = settings or load_server_settings()
     metrics = Metrics()
     lifecycle = Lifecycle(settings.max_sessions, on_drain=lambda: metrics.draining.set(1))
+    startup = Startup()
 
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[LifespanState]:
         throttle_repeated_log_lines()
-        report = startup_log.info  # start-up steps, beside uvicorn's own start-up lines
-        registry = loaded
-        if registry is None:
-            with phase(f"loading the models in {models_path}", report):
-                registry = ModelRegistry.load(models_path, strict=settings.strict_models)
-        executor = ThreadPoolExecutor(settings.synth_threads, thread_name_prefix="lipstream-synth")
-        heavy = FairLane(settings.heavy_threads, "lipstream-heavy", _lane_waits(metrics, "heavy"))
-        speech = FairLane(
-            settings.speech_threads, "lipstream-speech", _lane_waits(metrics, "speech")
-        )
-        catalog = Catalog.build(registry, settings, report)
-        overload = overload_for(settings, catalog, metrics.observe_load)
-        metrics.memory_ceiling.set(overload.policy.limits.max_memory_mb * MIB)
-        clients = ClientLimits.from_settings(settings)
-        ledger = InputLedger(
-            input_budget_bytes(settings, overload.policy.limits.max_memory_mb),
-            metrics.observe_input,
-        )
-        server = ServerState(
-            registry,
-            catalog,
-            settings,
-            metrics,
-            lifecycle,
-            executor,
-            heavy,
-            speech,
-            overload,
-            clients,
-            drain_flag=drain_flag,
-            input_ledger=ledger,
-        )
-        _log_limits(server)
-        overload.monitor.start()
-        liveness = _liveness(settings, overload.monitor.last_tick)
-        if serving_process:
-            freeze_long_lived_objects()
-        restore_signals = install_drain_on_signals(lifecycle, settings.drain_timeout_s)
-        try:
-            yield {"server": server}
-        finally:
-            overload.monitor.stop()
+        heartbeat = Heartbeat(startup.reporting(startup_log.info))
+        report = heartbeat.report  # start-up steps, beside uvicorn's own start-up lines
+        loop = asyncio.get_running_loop()
+        running: list[Callable[[], None]] = []
+
+        def start_up() -> ServerState:
+            registry = loaded
+            if prepare is not None:
+                startup.enter(BUILDING)
+                registry = prepare(report) or registry
+            startup.enter(LOADING)
+            if registry is None:
+                with phase(f"loading the models in {models_path}", report):
+                    registry = ModelRegistry.load(models_path, strict=settings.strict_models)
+            startup.enter(CALIBRATING)
+            catalog = Catalog.build(registry, settings, report)
+            executor = ThreadPoolExecutor(
+                settings.synth_threads, thread_name_prefix="lipstream-synth"
+            )
+            heavy = FairLane(
+                settings.heavy_threads, "lipstream-heavy", _lane_waits(metrics, "heavy")
+            )
+            speech = FairLane(
+                settings.speech_threads, "lipstream-speech", _lane_waits(metrics, "speech")
+            )
+            overload = overload_for(settings, catalog, metrics.observe_load)
+            metrics.memory_ceiling.set(overload.policy.limits.max_memory_mb * MIB)
+            ledger = InputLedger(
+                input_budget_bytes(settings, overload.policy.limits.max_memory_mb),
+                metrics.observe_input,
+            )
+            return ServerState(
+                registry,
+                catalog,
+                settings,
+                metrics,
+                lifecycle,
+                executor,
+                heavy,
+                speech,
+                overload,
+                ClientLimits.from_settings(settings),
+                drain_flag=drain_flag,
+                input_ledger=ledger,
+            )
+
+        def go_live(server: ServerState) -> None:
+            """On the event loop: start what samples it, then turn ready."""
+            heartbeat.stop()
+            _log_limits(server)
+            server.overload.monitor.start()
+            running.append(server.overload.monitor.stop)
+            liveness = _liveness(settings, server.overload.monitor.last_tick)
             if liveness is not None:
-                liveness.stop()
+                running.append(liveness.stop)
+            if serving_process:
+                freeze_long_lived_objects()
+            startup.ready(server)
+            engines = sorted(server.catalog.engines)
+            startup_log.info(
+                "ready in %.1f s: %d model(s) of %s; GET /readyz answers 200",
+                startup.clock() - startup.began,
+                len(server.registry.models),
+                ", ".join(engines),
+            )
+
+        def in_background() -> None:
+            server = start_up()
+            future = asyncio.run_coroutine_threadsafe(_call(go_live, server), loop)
+            future.result()
+
+        def failed() -> None:
+            heartbeat.stop()
+            startup_log.error("%s", startup.line)
+            if on_failure is not None:
+                loop.call_soon_threadsafe(on_failure)
+
+        restore_signals = install_drain_on_signals(lifecycle, settings.drain_timeout_s)
+        heartbeat.start()
+        try:
+            if background:
+                run_in_background(in_background, startup, failed)
+            else:
+                go_live(start_up())
+            yield {"startup": startup}
+        finally:
+            heartbeat.stop()
+            for stop in reversed(running):
+                stop()
             restore_signals()
-            server.loaded = False
-            executor.shutdown(wait=False, cancel_futures=True)
-            heavy.shutdown(wait=False, cancel_futures=True)
-            speech.shutdown(wait=False, cancel_futures=True)
+            server = startup.server
+            if server is not None:
+                server.loaded = False
+                server.executor.shutdown(wait=False, cancel_futures=True)
+                server.heavy.shutdown(wait=False, cancel_futures=True)
+                server.speech.shutdown(wait=False, cancel_futures=True)
             forget_this_process()
 
     app = FastAPI(
@@ -172,6 +238,8 @@ def create_app(
     )
     app.state.lifecycle = lifecycle
     app.state.metrics = metrics
+    app.state.startup = startup
+    app.add_exception_handler(NotReady, _not_ready)
     openapi.install(app)
     docs_page.install(app, app.title)
     demo_page.install(app)
@@ -182,10 +250,18 @@ def create_app(
 
     @app.get("/readyz", summary="Readiness: the models are loaded", operation_id="readyz")
     async def readyz(request: Request) -> JSONResponse:
-        """Ready or not, with the model directories that are not served and why."""
-        server = _server(request)
+        """Ready or not: while starting up, the phase and its latest status line; then the
+        model directories that are not served and why."""
+        starting: Startup = request.state.startup
+        server = starting.server
+        if server is None:
+            return JSONResponse(starting.report(), status_code=503)
         ready = server.ready
-        detail = {"ready": ready, "failed_models": server.registry.failure_report()}
+        detail = {
+            "ready": ready,
+            "phase": READY if ready else DRAINING,
+            "failed_models": server.registry.failure_report(),
+        }
         return JSONResponse(detail, status_code=200 if ready else 503)
 
     @app.get("/v1/engines", summary="List the engines", operation_id="list_engines")
@@ -246,9 +322,18 @@ def _lane_waits(metrics: Metrics, lane: str) -> Callable[[Hashable, int], None]:
     return observe
 
 
+async def _not_ready(request: Request, error: Exception) -> Response:
+    """503 ``starting`` with the phase, for a route called while the server starts up."""
+    assert isinstance(error, NotReady)
+    content = {"code": error.code, "message": error.message, "details": {"phase": error.where}}
+    return JSONResponse(
+        {"error": content}, status_code=503, headers={"Retry-After": str(NOT_READY_RETRY_S)}
+    )
+
+
 def _log_limits(server: ServerState) -> None:
     files = open_file_limit()
-    _, connections = head_limits({"server": server})
+    _, connections = head_limits({"startup": Startup(server=server)})
     limits = server.overload.policy.limits
     startup_log.info(
         "limits: %d open files (hard limit %d), %d connections, %d sessions, "

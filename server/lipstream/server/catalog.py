@@ -238,14 +238,25 @@ class Catalog:
                     ) from None
 
 
-def _rest_poses(model: Model, guard: WorkGuard) -> dict[str | None, np.ndarray]:
+def warm_kernels(model: Model) -> None:
+    """Make the calls that compile ``model``'s kernels at start-up (its rest poses, the viseme
+    probe, every rung's calibration stream), timing nothing: run in another process, they
+    leave the compiled kernels in numba's on-disk cache for the server to load."""
+    _rest_poses(model)
+    probe_phoneme_poses(model)
+    for rung in model.fidelity_ladder():
+        warm_up(model, rung)
+
+
+def _rest_poses(model: Model, guard: WorkGuard | None = None) -> dict[str | None, np.ndarray]:
     """The rest pose per emotion, synthesized under ``guard``; a model whose silence is not
     finite is refused."""
     silence = [PhonemeSpan(SILENCE, 0.0, REST_PROBE_S)]
     poses: dict[str | None, np.ndarray] = {}
     for emotion in (None, *EMOTIONS):
         fps = float(model.manifest.fps)
-        synthesizer = model.start(SynthesisRequest(fps=fps, emotion=emotion, guard=guard))
+        request = SynthesisRequest(fps=fps, emotion=emotion, guard=guard or WorkGuard())
+        synthesizer = model.start(request)
         synthesizer.feed(silence)
         frames = synthesizer.finish()
         if not np.isfinite(frames).all():

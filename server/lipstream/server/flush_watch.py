@@ -33,7 +33,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from .state import ServerState
+from .startup import server_of
 
 if sys.platform == "linux":
     import fcntl
@@ -47,8 +47,8 @@ RESET_ON_CLOSE = struct.pack("ii", 1, 0)  # struct linger {l_onoff = 1, l_linger
 
 def flush_timeout_s(app_state: Mapping[str, Any]) -> float:
     """``LIPSTREAM_SEND_TIMEOUT_S`` of the app whose lifespan state is ``app_state``."""
-    server = app_state.get("server")
-    if isinstance(server, ServerState):
+    server = server_of(app_state)
+    if server is not None:
         return server.settings.send_timeout_s
     return DEFAULT_FLUSH_TIMEOUT_S
 

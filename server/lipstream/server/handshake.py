@@ -68,7 +68,7 @@ from uvicorn.server import ServerState as UvicornState
 from .client_limits import CONNECTIONS, UPGRADE_RATE, ClientLimits, refusal_body, refusal_headers
 from .http_flush import BoundedFlushHTTPProtocol
 from .open_files import connection_cap, open_file_limit
-from .state import ServerState
+from .startup import server_of
 
 HANDSHAKE_TIMEOUT = "handshake_timeout"
 TOO_MANY_CONNECTIONS = "too_many_connections"
@@ -127,40 +127,38 @@ _over_cap = weakref.WeakKeyDictionary()
 
 def refused(app_state: Mapping[str, Any], code: str) -> None:
     """Count a connection the protocol turned away (``lipstream_connections_refused``)."""
-    server = app_state.get("server")
-    if isinstance(server, ServerState):
+    server = server_of(app_state)
+    if server is not None:
         server.metrics.labelled(server.metrics.refused, code).inc()
 
 
 def shedding(app_state: Mapping[str, Any]) -> bool:
     """Whether the app's event loop lags too far behind for any WebSocket work
     (``overload.OverloadPolicy.shedding``)."""
-    server = app_state.get("server")
-    return isinstance(server, ServerState) and server.overload.shedding(
-        len(server.lifecycle.connections)
-    )
+    server = server_of(app_state)
+    return server is not None and server.overload.shedding(len(server.lifecycle.connections))
 
 
 def client_limits(app_state: Mapping[str, Any]) -> ClientLimits | None:
     """The per-client limits of the app whose lifespan state is ``app_state``."""
-    server = app_state.get("server")
-    return server.clients if isinstance(server, ServerState) else None
+    server = server_of(app_state)
+    return None if server is None else server.clients
 
 
 def refused_client(app_state: Mapping[str, Any], reason: str) -> None:
     """Count a connection refused with ``too_many_client_connections``."""
     refused(app_state, TOO_MANY_CLIENT_CONNECTIONS)
-    server = app_state.get("server")
-    if isinstance(server, ServerState):
+    server = server_of(app_state)
+    if server is not None:
         server.metrics.labelled(server.metrics.client_refusals, reason).inc()
 
 
 def head_limits(app_state: Mapping[str, Any]) -> tuple[float, int]:
     """(handshake timeout in s, connection cap) of the app whose lifespan state is
     ``app_state``."""
-    server = app_state.get("server")
+    server = server_of(app_state)
     timeout, wanted = DEFAULT_HANDSHAKE_TIMEOUT_S, DEFAULT_MAX_CONNECTIONS
-    if isinstance(server, ServerState):
+    if server is not None:
         timeout, wanted = server.settings.handshake_timeout_s, server.settings.max_connections
     return timeout, connection_cap(wanted, open_file_limit())
 

@@ -37,6 +37,7 @@ from ..errors import LipstreamError
 from ..phonemes import PHONEME_INDEX, PHONEMES, SILENCE, normalize_phoneme
 from ..timeline import EMOTIONS, coerce_spans
 from .rest import HttpError, authorize, error_response, rest_client
+from .startup import Startup
 from .state import ServerState
 
 if TYPE_CHECKING:
@@ -49,8 +50,8 @@ NOT_FOUND = {"unknown_model": 404, "unknown_phoneme": 404}
 
 
 def _state(request: Request) -> ServerState:
-    state: ServerState = request.state.server
-    return state
+    startup: Startup = request.state.startup
+    return startup.serving()
 
 
 async def _answer(

@@ -41,7 +41,7 @@ import shutil
 import signal
 import socket
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import asdict
 from pathlib import Path
@@ -54,6 +54,7 @@ from uvicorn.supervisors import Multiprocess
 
 from ..config import ServerSettings, load_settings
 from ..models import ModelRegistry
+from ..status import Report
 from .app import create_app
 from .closing import BoundedCloseProtocol
 from .handshake import GuardedHTTPProtocol
@@ -163,18 +164,41 @@ def serve(
     port: int,
     server: ServerSettings,
     registry: ModelRegistry | None = None,
+    *,
+    prepare: Callable[[Report], ModelRegistry | None] | None = None,
+    sock: socket.socket | None = None,
 ) -> None:
     """Serve ``models`` (already loaded as ``registry``, for one worker) until SIGTERM or
-    SIGINT, draining first (see ``lifecycle``)."""
+    SIGINT, draining first (see ``lifecycle``). One worker listens first and starts up in
+    the background (``startup``), after ``prepare`` (e.g. building the demo); a start-up
+    that fails stops the server and is raised here. ``sock``: the socket one worker
+    serves on, already listening (``front_door``), in place of binding ``host``:``port``."""
     raise_open_file_limit()
     if server.workers > 1:
         with drain_flag_path() as flag:
             with exported(WORKER_APP_ENV, encode_worker_app(models, server, flag)):
                 supervise(host, port, server, flag)
         return
-    app = create_app(models, server, registry, serving_process=True)
+    running: list[uvicorn.Server] = []
+
+    def stop() -> None:
+        running[0].should_exit = True
+
+    app = create_app(
+        models,
+        server,
+        registry,
+        serving_process=True,
+        prepare=prepare,
+        background=True,
+        on_failure=stop,
+    )
     config = uvicorn.Config(app, host=host, port=port, **uvicorn_options(server))
-    uvicorn.Server(config).run()
+    running.append(uvicorn.Server(config))
+    running[0].run(sockets=None if sock is None else [sock])
+    failure = app.state.startup.failure
+    if failure is not None:
+        raise failure
 
 
 @contextmanager

@@ -388,17 +388,18 @@ class Session:
             holding = self.holdings[request.id] = self.input_ledger.holding()
         holding.update(request.synthesizer.held_input_bytes)
 
-    def _admit_input(self, request: ActiveRequest, chunk: AudioChunk) -> None:
+    def _admit_input(self, request: ActiveRequest, n_samples: int, sample_rate: int) -> None:
         """``input_too_large`` unless the process may hold what ``request`` holds while it
-        takes in ``chunk`` (its engine's bound, and the chunk as float32 samples); that much
-        is counted until the request reports what it holds after."""
+        takes in ``n_samples`` more at ``sample_rate`` Hz (its engine's bound, and the new
+        samples as float32); that much is counted until the request reports what it holds
+        after."""
         if not request.spec.uses_audio:
             return
         holding = self.holdings.get(request.id)
         if holding is None:
             holding = self.holdings[request.id] = self.input_ledger.holding()
-        bound = request.synthesizer.held_input_bytes_after(chunk.n_samples, chunk.sample_rate)
-        holding.admit(bound + chunk.n_samples * FLOAT32_BYTES)
+        bound = request.synthesizer.held_input_bytes_after(n_samples, sample_rate)
+        holding.admit(bound + n_samples * FLOAT32_BYTES)
 
     def _metered(
         self,
@@ -426,7 +427,7 @@ class Session:
                 self.output_values += request.output_values - before
         if isinstance(received, AudioChunk):
             _check_audio_start(request, received)
-            self._admit_input(request, received)
+            self._admit_input(request, received.n_samples, received.sample_rate)
             return request.add_audio(received, now)
         if isinstance(received, Text):
             return self._speak(request, received, now)
@@ -449,7 +450,7 @@ class Session:
         start = speech_start(request)
         outgoing = speech_messages(request, speech, start)
         chunk = engine_audio(request, speech, start)
-        self._admit_input(request, chunk)
+        self._admit_input(request, len(chunk.samples), chunk.sample_rate)
         before = request.output_values
         try:
             outgoing += request.add_speech(

@@ -71,6 +71,7 @@ from lipstream_client.errors import (
     RATE_LIMITED,
     SHUTTING_DOWN,
     SLOW_CONSUMER,
+    STARTING,
     UNAUTHORIZED,
 )
 from lipstream_client.messages import JsonValue
@@ -81,12 +82,14 @@ from .outgoing import Outgoing, Stamped
 from .read_ahead import DISCONNECT, ReadAhead, Received
 from .read_window import ARRIVED_AT
 from .session import InputMessage, Session
+from .startup import Startup
 from .state import ServerState
 
 logger = logging.getLogger("lipstream.server")
 
 UNSUPPORTED_SUBPROTOCOL = "unsupported_subprotocol"
 CLOSE_DEADLINE_S = 1.0
+STARTING_SEND_S = 10.0
 _IDLE = object()
 _WAKE = object()
 _PEER_GONE = (WebSocketDisconnect, RuntimeError, OSError)
@@ -99,10 +102,14 @@ T = TypeVar("T")
 
 async def stream_endpoint(websocket: WebSocket) -> None:
     """Serve one WebSocket connection of the lipstream protocol."""
-    state: ServerState = websocket.state.server
+    startup: Startup = websocket.state.startup
     offered: list[str] = list(websocket.scope.get("subprotocols") or [])
     subprotocol = select_subprotocol(offered)
     encoding = encoding_for_subprotocol(subprotocol)
+    state = startup.server
+    if state is None:
+        await _refuse_while_starting(websocket, encoding, subprotocol, startup)
+        return
     if encoding is None or (offered and subprotocol is None):
         state.metrics.refused.labels(UNSUPPORTED_SUBPROTOCOL).inc()
         await websocket.close(code=CloseCode.POLICY_VIOLATION)
@@ -148,19 +155,35 @@ def _refusal(websocket: WebSocket, state: ServerState) -> tuple[str, str] | None
     return None
 
 
+async def _refuse_while_starting(
+    websocket: WebSocket, encoding: Encoding | None, subprotocol: str | None, startup: Startup
+) -> None:
+    """Accept, send ``starting`` (naming the phase) and close with 1013; a connection that
+    offered no protocol this server speaks is closed with 1008 as when ready."""
+    if encoding is None:
+        await websocket.close(code=CloseCode.POLICY_VIOLATION)
+        return
+    error = startup.not_ready()
+    await websocket.accept(subprotocol=subprotocol)
+    details: dict[str, JsonValue] = {"phase": error.where}
+    await _refuse(websocket, encoding, STARTING, error.message, STARTING_SEND_S, details)
+
+
 async def _refuse(
     websocket: WebSocket,
     encoding: Encoding,
     code: str,
     message: str,
-    state: ServerState,
+    state: ServerState | float,
     details: dict[str, JsonValue] | None = None,
 ) -> None:
+    """Send ``code`` and close; ``state`` gives the send timeout (or is it, in seconds)."""
     error = ErrorMessage(code, message, None, True, details or {})
     payload = encode(error, encoding, validate=False)
     close_code = ERROR_CODES[code].close_code or CloseCode.POLICY_VIOLATION
+    timeout_s = state if isinstance(state, float) else state.settings.send_timeout_s
     try:
-        async with asyncio.timeout(state.settings.send_timeout_s):
+        async with asyncio.timeout(timeout_s):
             await _send(websocket, payload)
             await websocket.close(code=close_code, reason=code)
     except (TimeoutError, *_PEER_GONE):

@@ -44,7 +44,11 @@ def served(small_demo_corpus: Corpus, tmp_path_factory: pytest.TempPathFactory) 
 
 def test_health_and_readiness(served: str) -> None:
     assert httpx.get(f"{served}/healthz").json() == {"status": "ok"}
-    assert httpx.get(f"{served}/readyz").json() == {"ready": True, "failed_models": []}
+    assert httpx.get(f"{served}/readyz").json() == {
+        "ready": True,
+        "phase": "ready",
+        "failed_models": [],
+    }
 
 
 def test_lists_loaded_engines_and_characters(served: str) -> None:

@@ -345,6 +345,10 @@ def test_openapi_documents_the_routes_and_every_reference_resolves(served: Serve
 
 def test_health_readiness_and_listings(served: Served) -> None:
     assert httpx.get(f"{served.http}/healthz").json() == {"status": "ok"}
-    assert httpx.get(f"{served.http}/readyz").json() == {"ready": True, "failed_models": []}
+    assert httpx.get(f"{served.http}/readyz").json() == {
+        "ready": True,
+        "phase": "ready",
+        "failed_models": [],
+    }
     characters = httpx.get(f"{served.http}/v1/characters").json()["characters"]
     assert characters == [{"name": "demo", "engines": sorted(engine_names())}]
