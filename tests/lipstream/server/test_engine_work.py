@@ -36,7 +36,7 @@ from lipstream_client import (
     Start,
     Text,
 )
-from tests.helpers import eventually
+from tests.helpers import eventually, return_frames
 from tests.lipstream.server.harness import Client, Served, client, serving
 from tests.live_server import save_models
 
@@ -273,7 +273,6 @@ def test_speech_and_rest_do_not_wait_behind_other_connections_searches(
                 == SEARCHES
             ),
             "the searches handed to the heavy lane",
-            WORK_BOUND_S,
         )
         with client(served.ws) as other:
             other.send(Start("t", "viseme-lerp", "demo", fps=60.0))
@@ -288,7 +287,7 @@ def test_speech_and_rest_do_not_wait_behind_other_connections_searches(
         }
     assert isinstance(spoken[-1], Done) and spoken[-1].reason == "end"
     assert any(isinstance(message, Frames) for message in spoken)
-    assert answer.status_code == 200 and answer.json()["n_frames"] == 16
+    assert answer.status_code == 200 and answer.json()["n_frames"] == 16 + return_frames(50)
     # No search had ended: each was stopped by its cancel, after both answers.
     assert [(type(end), getattr(end, "reason", None)) for end in ends] == [(Done, "cancel")] * 5
     # (jobs, of them with no job started ahead): the text request and the REST call.
@@ -312,11 +311,11 @@ def test_a_flood_of_rest_calls_delays_a_text_request_by_one_call(
                 httpx.post, f"{served.http}/v1/synthesize", json=REST_BODY, timeout=WORK_BOUND_S
             )
             calls = [callers.submit(post) for _ in range(FLOOD)]
-            eventually(lambda: lane.queued == FLOOD, "the flood queued", WORK_BOUND_S)
+            eventually(lambda: lane.queued == FLOOD, "the flood queued")
             with client(served.ws) as other:
                 other.send(Start("t", "viseme-lerp", "demo", fps=60.0))
                 other.send(Text("t", "Hello there."), End("t"))
-                eventually(lambda: lane.queued == FLOOD + 1, "the text queued", WORK_BOUND_S)
+                eventually(lambda: lane.queued == FLOOD + 1, "the text queued")
                 gate.set()
                 spoken = final(other, "t")
         finally:

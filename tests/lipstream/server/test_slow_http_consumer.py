@@ -95,29 +95,55 @@ def send_request(sock: socket.socket, method: str, path: str, body: bytes = b"")
     sock.sendall(head.encode() + body)
 
 
+class PacedReader:
+    """A socket read ``chunk`` bytes at most at a time, ``pause_s`` before every read but
+    the first."""
+
+    def __init__(self, sock: socket.socket, pause_s: float, chunk: int) -> None:
+        self.sock, self.pause_s, self.chunk = sock, pause_s, chunk
+        self.buffer = b""
+        self.reads = 0
+
+    def _read(self, most: int) -> None:
+        if self.reads:
+            time.sleep(self.pause_s)
+        self.reads += 1
+        received = self.sock.recv(min(self.chunk, most))
+        assert received, f"the server closed after {len(self.buffer)} buffered bytes"
+        self.buffer += received
+
+    def until(self, marker: bytes) -> bytes:
+        """The bytes before ``marker``; both are consumed."""
+        while marker not in self.buffer:
+            self._read(self.chunk)
+        found, _, self.buffer = self.buffer.partition(marker)
+        return found
+
+    def exactly(self, size: int) -> bytes:
+        while len(self.buffer) < size:
+            self._read(size - len(self.buffer))
+        found, self.buffer = self.buffer[:size], self.buffer[size:]
+        return found
+
+
 def read_response(
     sock: socket.socket, pause_s: float = 0.0, chunk: int = 1 << 16
 ) -> tuple[int, bytes]:
-    """Status and body of one Content-Length response, read ``chunk`` bytes at a time with
-    ``pause_s`` after each read."""
-    data = b""
-    while b"\r\n\r\n" not in data:
-        received = sock.recv(chunk)
-        assert received, "the server closed before the headers"
-        data += received
-    head, _, body = data.partition(b"\r\n\r\n")
-    lines = head.decode("latin-1").split("\r\n")
+    """Status and body of one response (Content-Length or chunked), read ``chunk`` bytes at
+    a time with ``pause_s`` before each read but the first."""
+    reader = PacedReader(sock, pause_s, chunk)
+    lines = reader.until(b"\r\n\r\n").decode("latin-1").split("\r\n")
     headers = dict(line.lower().split(": ", 1) for line in lines[1:])
-    length = int(headers["content-length"])
-    parts = [body]
-    size = len(body)
-    while size < length:
-        time.sleep(pause_s)
-        received = sock.recv(min(chunk, length - size))
-        assert received, f"the server closed after {size} of {length} body bytes"
-        parts.append(received)
-        size += len(received)
-    return int(lines[0].split()[1]), b"".join(parts)
+    status = int(lines[0].split()[1])
+    if "content-length" in headers:
+        return status, reader.exactly(int(headers["content-length"]))
+    assert headers.get("transfer-encoding") == "chunked", headers
+    parts = []
+    while size := int(reader.until(b"\r\n").split(b";")[0], 16):
+        parts.append(reader.exactly(size))
+        assert reader.exactly(2) == b"\r\n"
+    assert reader.until(b"\r\n") == b"", "no trailers are sent"
+    return status, b"".join(parts)
 
 
 def paused_s(body: bytes) -> float:
