@@ -594,7 +594,7 @@ def first_start_summary(bench: Bench) -> str:
         return f"Phase times of a first and a later start: {link}.\n"
     doc = bench.load(FIRST_START)
     told = "; ".join(
-        f"{start['start']} start {_seconds(start['total_s'])} ({_phase_groups(start['phases'])})"
+        f"{start['start']} start {_seconds(start['total_s'])}{_phase_groups(start['phases'])}"
         for start in doc["starts"]
     )
     cores = doc.get("machine", {}).get("cores")
@@ -627,7 +627,8 @@ def _phase_groups(phases: dict[str, float]) -> str:
         group = next((label for prefix, label in PHASE_GROUPS if name.startswith(prefix)), None)
         if group is not None:
             groups[group] = groups.get(group, 0.0) + seconds
-    return ", ".join(f"{label} {_seconds(seconds)}" for label, seconds in groups.items())
+    told = ", ".join(f"{label} {_seconds(seconds)}" for label, seconds in groups.items())
+    return f" ({told})" if told else ""
 
 
 def first_start(bench: Bench) -> str:
