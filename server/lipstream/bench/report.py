@@ -592,9 +592,43 @@ def first_start_summary(bench: Bench) -> str:
     link = "[docs/reports/first-start.md](docs/reports/first-start.md)"
     if not bench.exists(FIRST_START):
         return f"Phase times of a first and a later start: {link}.\n"
-    starts = bench.load(FIRST_START)["starts"]
-    told = "; ".join(f"{start['start']} start {_seconds(start['total_s'])}" for start in starts)
-    return f"Measured with `lipstream serve`: {told} (each phase, machine and date: {link}).\n"
+    doc = bench.load(FIRST_START)
+    told = "; ".join(
+        f"{start['start']} start {_seconds(start['total_s'])}{_phase_groups(start['phases'])}"
+        for start in doc["starts"]
+    )
+    cores = doc.get("machine", {}).get("cores")
+    machine = f" on {cores} cores" if cores else ""
+    return (
+        f"Measured with `lipstream serve`{machine}: {told} "
+        f"(each phase, machine and date: {link}).\n"
+    )
+
+
+PHASE_GROUPS = (
+    ("importing", "imports"),
+    ("generating", "corpus"),
+    ("training ", "training"),
+    ("checking", "loading"),
+    ("loading", "loading"),
+    ("warming up", "calibration"),
+    ("calibrating", "calibration"),
+)
+
+
+def _phase_groups(phases: dict[str, float]) -> str:
+    """A start's phases summed into a few groups, in order. Each engine's own training step
+    runs inside the parallel step (``training N engines on P processes``), so only that
+    one counts toward training."""
+    groups: dict[str, float] = {}
+    for name, seconds in phases.items():
+        if name.startswith("training ") and " engines on " not in name:
+            continue
+        group = next((label for prefix, label in PHASE_GROUPS if name.startswith(prefix)), None)
+        if group is not None:
+            groups[group] = groups.get(group, 0.0) + seconds
+    told = ", ".join(f"{label} {_seconds(seconds)}" for label, seconds in groups.items())
+    return f" ({told})" if told else ""
 
 
 def first_start(bench: Bench) -> str:

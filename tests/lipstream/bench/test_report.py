@@ -198,6 +198,27 @@ def test_first_start_renders_each_phase(bench: Bench) -> None:
     assert "| `speech` | 9.0 |" in rendered and "| `train` | 30.0 |" in rendered
 
 
+def test_the_first_start_summary_groups_the_phases(bench: Bench) -> None:
+    phases = {
+        "importing the server": 0.8,
+        "generating the demo corpus": 3.6,
+        "training hmm and compiling its kernels": 25.8,  # inside the parallel step
+        "training 6 engines on 2 processes": 48.5,
+        "loading the models": 0.8,
+        "warming up dam (demo)": 0.25,
+        "calibrating dam (demo): timing 5 fidelity rung(s)": 0.5,
+    }
+    doc = {
+        "machine": {"cores": 2},
+        "starts": [{"start": "first", "total_s": 54.5, "phases": phases}],
+    }
+    (bench.directory / "first_start.json").write_text(json.dumps(doc))
+    assert BLOCKS["first-start-summary"](bench).startswith(
+        "Measured with `lipstream serve` on 2 cores: first start 54.5 s (imports 0.8 s, "
+        "corpus 3.6 s, training 48.5 s, loading 0.8 s, calibration 0.8 s) ("
+    )
+
+
 def test_every_results_file_is_rendered() -> None:
     """A results file added to bench/ needs a report block: its figures are otherwise
     unread data or, worse, hand-copied into prose."""

@@ -29,6 +29,8 @@ from lipstream.engines.base import Model, Rung
 from lipstream.server.app import create_app
 from lipstream.server.calibration import ComputeCost
 from lipstream.server.runner import uvicorn_options
+from lipstream.server.startup import server_of
+from lipstream.server.state import ServerState
 from lipstream_client import (
     Done,
     Encoding,
@@ -59,6 +61,13 @@ class Served:
     def call_soon(self, coroutine: Coroutine[Any, Any, T]) -> Future[T]:
         """Start ``coroutine`` on the server's event loop; its result arrives in the future."""
         return asyncio.run_coroutine_threadsafe(coroutine, self.loop)
+
+    @property
+    def state(self) -> ServerState:
+        """The app's server state, once it has started up."""
+        state = server_of(self.server.lifespan.state)
+        assert state is not None, "the server has not started up"
+        return state
 
 
 @contextmanager

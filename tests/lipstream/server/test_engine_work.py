@@ -302,7 +302,7 @@ def test_a_flood_of_rest_calls_delays_a_text_request_by_one_call(
     # one call of the flood (first come, first served: after all of them).
     settings = ServerSettings(speech_threads=1)
     with serving(graph_and_lerp_dir, settings) as served, ThreadPoolExecutor(FLOOD) as callers:
-        lane: FairLane = served.server.lifespan.state["server"].speech
+        lane: FairLane = served.state.speech
         gate, started = threading.Event(), threading.Event()
         try:
             holder = lane.submit_as(("test",), held, gate, started)

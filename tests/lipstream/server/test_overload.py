@@ -349,7 +349,7 @@ def test_an_engine_priced_out_refuses_its_start_and_not_the_session(lerp_dir: Pa
     cheapest cost, the ``start`` is refused with ``server_busy`` for that request only, and
     once the engine fits, a ``start`` on the same connection gets ``ready``."""
     with serving(lerp_dir) as served:
-        policy = served.server.lifespan.state["server"].overload.policy
+        policy = served.state.overload.policy
         policy.limits = replace(policy.limits, session_cost=0.0, engine_costs={"viseme-lerp": 3.0})
         with client(served.ws) as ws:
             ws.send(Start("a", "viseme-lerp", "demo"))

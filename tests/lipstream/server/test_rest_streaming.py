@@ -24,12 +24,12 @@ from lipstream.server.overload import LoadLimits, Overload, OverloadPolicy
 from lipstream.server.rest import JSON_CHUNK_VALUES
 from lipstream.server.state import ServerState
 from lipstream_client import Done, End, PhonemeItem, Phonemes, Start
-from tests.helpers import eventually
+from tests.helpers import eventually, return_frames
 from tests.lipstream.server.harness import Served, client, serving
 
 PHONEMES = 999  # 99.9 s of 0.1 s phonemes
 FPS = 1000  # about 25 MB of JSON: far more than the kernel's buffers hold
-FRAMES = 99_901  # both ends included
+FRAMES = 99_901 + return_frames(FPS)  # both ends included, then the return to rest
 CHANNELS = 28  # the demo viseme-lerp model's
 ITEMS = [
     {"phoneme": "AA1" if index % 2 else "M", "start": index / 10, "end": (index + 1) / 10}
@@ -199,7 +199,7 @@ async def _resident_figure_frozen_at(state: ServerState, rss_mb: float) -> None:
 
 def test_answers_left_unread_are_refused_beyond_the_memory_ceiling(lerp_dir: Path) -> None:
     with serving(lerp_dir, ServerSettings(max_memory_mb=CEILING_MB)) as served:
-        state: ServerState = served.server.lifespan.state["server"]
+        state: ServerState = served.state
         # Room for one and a half answers: the second is admitted with one held, the third
         # would hold two.
         rss_mb = CEILING_MB - 1.5 * ANSWER_BYTES / MIB
