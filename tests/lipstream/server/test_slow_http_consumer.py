@@ -125,25 +125,29 @@ class PacedReader:
         found, self.buffer = self.buffer[:size], self.buffer[size:]
         return found
 
+    def response(self) -> tuple[int, bytes]:
+        """Status and body of one response (Content-Length or chunked); what follows it
+        stays in ``buffer``."""
+        lines = self.until(b"\r\n\r\n").decode("latin-1").split("\r\n")
+        headers = dict(line.lower().split(": ", 1) for line in lines[1:])
+        status = int(lines[0].split()[1])
+        if "content-length" in headers:
+            return status, self.exactly(int(headers["content-length"]))
+        assert headers.get("transfer-encoding") == "chunked", headers
+        parts = []
+        while size := int(self.until(b"\r\n").split(b";")[0], 16):
+            parts.append(self.exactly(size))
+            assert self.exactly(2) == b"\r\n"
+        assert self.until(b"\r\n") == b"", "no trailers are sent"
+        return status, b"".join(parts)
+
 
 def read_response(
     sock: socket.socket, pause_s: float = 0.0, chunk: int = 1 << 16
 ) -> tuple[int, bytes]:
-    """Status and body of one response (Content-Length or chunked), read ``chunk`` bytes at
-    a time with ``pause_s`` before each read but the first."""
-    reader = PacedReader(sock, pause_s, chunk)
-    lines = reader.until(b"\r\n\r\n").decode("latin-1").split("\r\n")
-    headers = dict(line.lower().split(": ", 1) for line in lines[1:])
-    status = int(lines[0].split()[1])
-    if "content-length" in headers:
-        return status, reader.exactly(int(headers["content-length"]))
-    assert headers.get("transfer-encoding") == "chunked", headers
-    parts = []
-    while size := int(reader.until(b"\r\n").split(b";")[0], 16):
-        parts.append(reader.exactly(size))
-        assert reader.exactly(2) == b"\r\n"
-    assert reader.until(b"\r\n") == b"", "no trailers are sent"
-    return status, b"".join(parts)
+    """Status and body of one response, read ``chunk`` bytes at a time with ``pause_s``
+    before each read but the first."""
+    return PacedReader(sock, pause_s, chunk).response()
 
 
 def paused_s(body: bytes) -> float:
@@ -323,10 +327,9 @@ def test_a_websocket_upgrade_behind_an_unread_response_is_left_to_the_websocket_
     # only its app's sends and what is left once its app is done, and the app has sent
     # nothing but the handshake.
     time.sleep(2 * SEND_TIMEOUT_S + 0.2)
-    status, body = read_response(sock)
-    handshake = b""
-    while not handshake.endswith(b"\r\n\r\n"):
-        handshake += sock.recv(1)
+    reader = PacedReader(sock, 0.0, 1 << 16)
+    status, body = reader.response()
+    handshake = reader.until(b"\r\n\r\n")  # read on with the response's reader
     still_open = server_connection(served, client_port) is not None
     sock.close()
 
