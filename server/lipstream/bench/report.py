@@ -523,10 +523,7 @@ def soak(bench: Bench) -> str:
                 f"p50 {healthz['latency_ms']['p50']:.0f} ms, p99 "
                 f"{healthz['latency_ms']['p99']:.0f} ms, max {healthz['latency_ms']['max']:.0f} ms",
             ],
-            [
-                "peak server RSS",
-                f"{doc['server_memory']['peak_rss_bytes'] / 2**20:.0f} MiB",
-            ],
+            ["peak server RSS", _peak_of_ceiling(doc["server_memory"])],
             ["undocumented errors", str(len(doc["undocumented_errors"]))],
         ],
     )
@@ -548,36 +545,64 @@ def soak(bench: Bench) -> str:
     )
 
 
+def _peak_of_ceiling(memory: dict[str, Any]) -> str:
+    peak = f"{memory['peak_rss_bytes'] / 2**20:.0f} MiB"
+    ceiling = memory.get("ceiling_bytes")
+    return f"{peak} of a {ceiling / 2**20:.0f} MiB ceiling" if ceiling else peak
+
+
 def storm(bench: Bench) -> str:
+    """One row per run of ``lipstream loadtest storm``: lags on the client's clock, each run
+    with its own machine, date and command."""
     doc = bench.load("storm.json")
-    text = bench.source("storm.json", doc)
-    rows = []
-    for run, row in _measured(doc, dict):
+    text = (
+        "Source: `bench/storm.json`, one entry per run, each with its machine, date and "
+        "command.\n\n"
+    )
+    rows, runs = [], []
+    for name, run in _measured(doc, dict):
+        report = run["report"]
+        health = report["healthz"]
         rows.append(
             [
-                f"`{run}`",
-                f"{row['connections']} {row['kind']}",
-                ", ".join(f"{outcome} {n}" for outcome, n in row["outcomes"].items()),
-                f"{row['probes'] - row['probes_failed']} of {row['probes']}",
-                f"{row['slowest_probe_ms']:.0f}",
-                (
-                    f"{1000 * row['lag_p50_s']:g} / {1000 * row['lag_p99_s']:g}"
-                    if "lag_p99_s" in row
+                f"`{name}`",
+                f"{report['connections']} {report['kind']} + {report['baseline']} baseline",
+                ", ".join(f"{outcome} {n}" for outcome, n in report["outcomes"].items()),
+                _lag(report.get("lag_ms")),
+                _lag(report.get("baseline_lag_ms")),
+                " / ".join(
+                    f"{number(health[port]['latency_ms']['p99'], 0)} ({health[port]['failed']} "
+                    "failed)"
+                    if port in health
                     else "–"
+                    for port in ("serving", "health_port")
                 ),
+                f"{number(report['peak_rss_mb'], 0)} of {number(report['memory_ceiling_mb'], 0)}",
+                number(report["client_loop_lag_ms"]["p99"], 1),
             ]
         )
-    return text + table(
+        machine = ", ".join(f"{key} {value}" for key, value in run["machine"].items())
+        runs.append(f"- `{name}`: {run['date']}; {machine}; `{run['command']}`\n")
+    text += table(
         [
             "run",
-            "connections",
+            "sessions opened",
             "outcomes",
-            "`/healthz` probes answered",
-            "slowest probe ms",
-            "admitted sessions' lag p50 / p99 ms (histogram bucket)",
+            "admitted sessions' lag p50 / p99 ms",
+            "baseline sessions' lag p50 / p99 ms",
+            "`/healthz` p99 ms: serving port / liveness port",
+            "peak RSS of ceiling MiB",
+            "load generator's loop lag p99 ms",
         ],
         rows,
     )
+    return text + "\nRuns:\n\n" + "".join(runs)
+
+
+def _lag(lag: dict[str, float] | None) -> str:
+    if not lag:
+        return "–"
+    return f"{number(lag['p50'], 1)} / {number(lag['p99'], 1)}"
 
 
 FIRST_START = "first_start.json"
