@@ -131,6 +131,7 @@ class Target:
     encoding: Encoding
     token: str | None
     pq_character: str | None
+    audio_character: str | None  # one with an hmm model, which audio alone drives
     pq_phonemes: int
     flood_seconds: float
     flood_fps: float
@@ -354,9 +355,10 @@ async def big_heads(target: Target, tally: KindTally) -> None:
 
 
 async def audio_flood(target: Target, tally: KindTally) -> None:
-    engine, character = target.engine, target.character
-    if target.pq_character is not None:
-        engine, character = "anime-graph", target.pq_character
+    if target.audio_character is None:
+        tally.skipped = "no character has an hmm model (the engine audio alone drives)"
+        return
+    engine, character = "hmm", target.audio_character
     second = random.Random(target.seed).randbytes(2 * AUDIO_RATE)
     async with _client(target) as client:
         streams = [await client.start(engine, character) for _ in range(AUDIO_REQUESTS)]

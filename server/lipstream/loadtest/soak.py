@@ -252,8 +252,9 @@ async def _sample_memory(config: SoakConfig, host: str, port: int, memory: _Memo
         await asyncio.sleep(RSS_INTERVAL_S)
 
 
-def _targets(config: SoakConfig) -> tuple[str, str, str | None]:
-    """(engine, character) of the valid sessions, and a character with anime-graph."""
+def _targets(config: SoakConfig) -> tuple[str, str, str | None, str | None]:
+    """(engine, character) of the valid sessions, a character with anime-graph (PQ search)
+    and one with hmm (driven by audio alone)."""
     try:
         characters = RestClient(config.url, config.token, timeout=HTTP_TIMEOUT_S).characters()
     except (OSError, ValueError, KeyError, TypeError, LipstreamClientError) as error:
@@ -267,7 +268,8 @@ def _targets(config: SoakConfig) -> tuple[str, str, str | None]:
     engine = config.engine or served[0].engines[0]
     character = config.character or served[0].name
     pq = next((c.name for c in served if "anime-graph" in c.engines), None)
-    return engine, character, pq
+    audio = next((c.name for c in served if "hmm" in c.engines), None)
+    return engine, character, pq, audio
 
 
 def _plan(config: SoakConfig, engine: str, character: str, deadline: float) -> ClipPlan:
@@ -387,7 +389,7 @@ def soak(config: SoakConfig, command: str | None = None) -> dict[str, Any]:
     """Run the soak and return its results document (see docs/how-to/load-testing.md, "Soak");
     ``command``: the command line that ran it, for the record."""
     check_soak(config)
-    engine, character, pq_character = _targets(config)
+    engine, character, pq_character, audio_character = _targets(config)
     parts = urlsplit(config.url)
     target = Target(
         url=config.url,
@@ -398,6 +400,7 @@ def soak(config: SoakConfig, command: str | None = None) -> dict[str, Any]:
         encoding=config.encoding,
         token=config.token,
         pq_character=pq_character,
+        audio_character=audio_character,
         pq_phonemes=config.pq_phonemes,
         flood_seconds=config.flood_seconds,
         flood_fps=config.flood_fps,
