@@ -42,11 +42,7 @@ A refusal through the WebSocket (accept, ``error``, close) costs the loop about 
 a short request; in a storm of connections those refusals alone keep the loop behind. So
 while the lag exceeds ``SHED_FACTOR`` times its limit (``shedding``), the HTTP protocol
 answers new upgrades with 503 and ``Retry-After`` before any WebSocket work
-(``handshake``). The lag is a median over a second, so it crosses that line only after a
-burst has cost the loop a second of refusals; the refusals themselves are the earlier sign.
-Once ``SHED_AFTER_REFUSALS`` sessions were refused through the WebSocket within
-``REFUSAL_WINDOW_S`` (``refusing_lately``), the upgrades after them are shed as well until
-the window has passed: refused either way, at a tenth of the loop's time.
+(``handshake``).
 
 Left at 0, the memory ceiling is ``AUTO_MEMORY_SHARE`` of the memory the process may use
 (the machine's, or a smaller container limit) divided among the workers. A refusal is
@@ -80,8 +76,6 @@ MEMORY_RETRY_AFTER_MS = 5000
 LEARN_FROM_SESSIONS = 16
 LAG_FROM_SESSIONS = 16
 SHED_FACTOR = 4.0
-SHED_AFTER_REFUSALS = 16
-REFUSAL_WINDOW_S = 0.5
 LEARN_WEIGHT = 0.1
 AUTO_MEMORY_SHARE = 0.8
 MESSAGE_OVERHEAD_MS = 0.13  # uvicorn, websockets, codec and session per message in and out
@@ -135,7 +129,6 @@ class OverloadPolicy:
     priced: set[Hashable] = field(default_factory=set)
     streaming: set[Hashable] = field(default_factory=set)
     recent: deque[tuple[float, float]] = field(default_factory=deque)
-    refused_at: deque[float] = field(default_factory=deque)
     lock: threading.Lock = field(default_factory=threading.Lock)
 
     @property
@@ -173,17 +166,7 @@ class OverloadPolicy:
                 refusal = self._busy_refusal(load, now, self.session_cost, "another session")
             if refusal is None:
                 self.pending[key] = now
-            else:
-                self.refused_at.append(now)
             return refusal
-
-    def refusing_lately(self, now: float) -> bool:
-        """Whether ``SHED_AFTER_REFUSALS`` sessions were refused (``session_refusal``) within
-        the last ``REFUSAL_WINDOW_S``."""
-        with self.lock:
-            while self.refused_at and now - self.refused_at[0] >= REFUSAL_WINDOW_S:
-                self.refused_at.popleft()
-            return len(self.refused_at) >= SHED_AFTER_REFUSALS
 
     def start_refusal(
         self, load: LoadSample, key: Hashable, engine: str, now: float
@@ -302,9 +285,7 @@ class Overload:
         return self.policy.start_refusal(self.monitor.sample(), key, engine, time.monotonic())
 
     def shedding(self, sessions: int) -> bool:
-        return self.policy.shedding(self.monitor.sample(), sessions) or self.policy.refusing_lately(
-            time.monotonic()
-        )
+        return self.policy.shedding(self.monitor.sample(), sessions)
 
     def request_refusal(self, held_mb: float = 0.0) -> Refusal | None:
         """Memory only, from the monitor's latest figure plus ``held_mb`` the caller knows the

@@ -27,9 +27,7 @@ from lipstream.server.overload import (
     LEARN_FROM_SESSIONS,
     MEMORY_RETRY_AFTER_MS,
     RECENT_S,
-    REFUSAL_WINDOW_S,
     RETRY_AFTER_MS,
-    SHED_AFTER_REFUSALS,
     LoadLimits,
     OverloadPolicy,
     Refusal,
@@ -302,24 +300,6 @@ def test_shedding_needs_a_far_lagging_loop_and_enough_sessions() -> None:
     assert not overload.shedding(LoadSample(200.0, 0.0, 1.0), LAG_FROM_SESSIONS)
     assert not overload.shedding(LoadSample(9999.0, 0.0, 1.0), LAG_FROM_SESSIONS - 1)
     assert overload.shedding(LoadSample(1.0, 0.0, 1.0, receive_lag_ms=200.5), LAG_FROM_SESSIONS)
-
-
-def test_a_burst_of_refusals_sheds_the_upgrades_after_it_for_the_window() -> None:
-    overload = policy()  # max_lag_ms 50: refuses on a lag of 60 ms with 16 sessions open
-    lagging = LoadSample(60.0, 0.0, 1.0)
-    for index in range(SHED_AFTER_REFUSALS - 1):
-        assert overload.session_refusal(lagging, LAG_FROM_SESSIONS, 10.0, index) is not None
-    assert not overload.refusing_lately(10.0)
-    assert overload.session_refusal(lagging, LAG_FROM_SESSIONS, 10.2, "last") is not None
-    assert overload.refusing_lately(10.2)
-    assert overload.refusing_lately(10.0 + REFUSAL_WINDOW_S - 0.01)
-    # The first fifteen leave the window; the sixteenth alone does not shed.
-    assert not overload.refusing_lately(10.0 + REFUSAL_WINDOW_S)
-    # Admitted sessions are not refusals.
-    calm = policy(LoadLimits(1000.0, 50.0, 0.75, session_cost=0.001))
-    for index in range(2 * SHED_AFTER_REFUSALS):
-        assert calm.session_refusal(QUIET, 1, 10.0, index) is None
-    assert not calm.refusing_lately(10.0)
 
 
 UPGRADE = (
