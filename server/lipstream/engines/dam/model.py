@@ -1,10 +1,10 @@
 """The trained DAM model: modes, their dominance and animemes, synthesis by Eq. 2.
 
 Synthesis of a frame at time t inside span i: each phoneme k from i - behind to
-i + ahead picks a mode (``select_mode``: the exact search of ``selection`` over
+i + ahead picks a mode (``choose_modes``: the exact search of ``selection`` over
 the window of spans k - search_behind .. k + search_ahead, taking its choice at
-k), and the frame is the sum of D·A over those phonemes (Eq. 2), each cut where
-its dominance falls below ``tol`` (see ``tails``), summed over motion-basis
+k, compiled in ``kernels``), and the frame is the sum of D·A over those phonemes
+(Eq. 2), each cut where its dominance falls below ``tol`` (see ``tails``), summed over motion-basis
 components and mapped back to channels. Everything a frame reads lies
 within ``tail_ahead + search_ahead`` spans after its own, which is the
 lookahead. The frames are a pure function of the spans, so streaming is the
@@ -61,7 +61,7 @@ from .dominance import reach
 from .em import SIGMA_MIN
 from .kernels import choose_modes, render_run, search_tables
 from .modes import PHONEME_INDEX, SILENCE_INDEX, emotion_index
-from .selection import Costs, Layer, cheapest_path, context_cost, end_derivatives, smooth_cost
+from .selection import Costs, Layer, end_derivatives
 from .spans import DamSpans
 
 OPTION_LIMIT = 16
@@ -226,26 +226,6 @@ class DamModel(Model):
             following = SILENCE_INDEX
         return Layer(candidates, span.end - span.start, previous, following, emotion)
 
-    def select_mode(
-        self,
-        spans: Sequence[PhonemeSpan],
-        index: int,
-        ahead: int,
-        request: SynthesisRequest,
-        memo: ModeMemo | None = None,
-    ) -> int:
-        """The mode of span ``index``: the exact search over spans index - search_behind ..
-        index + ``ahead`` (those that exist), its choice at ``index``. ``memo`` keeps the
-        layers and costs of one call's overlapping windows."""
-        memo = ModeMemo(self, spans, request) if memo is None else memo
-        first = max(0, index - self.search_behind)
-        last = index + ahead
-        indices = range(first, min(last, len(spans) - 1) + 1)
-        nodes = [memo.node(k, k + 1 > last) for k in indices]
-        edges = [memo.edge(k) for k in indices[:-1]]
-        path = cheapest_path(self.costs, nodes, edges)
-        return int(memo.layer(index, False).candidates[path[index - first]])
-
     def choose_modes(
         self,
         spans: Sequence[PhonemeSpan],
@@ -254,7 +234,9 @@ class DamModel(Model):
         ahead: int,
         request: SynthesisRequest,
     ) -> np.ndarray:
-        """``select_mode`` of spans ``first`` .. ``last``, by the compiled search (``kernels``)."""
+        """The modes of spans ``first`` .. ``last``, by the compiled search (``kernels``): each
+        the choice at its span of the exact search over spans k - search_behind .. k + ``ahead``
+        (those that exist); ``tests/lipstream/engines/dam/reference.py`` runs it in numpy."""
         low = max(0, first - self.search_behind)
         high = min(len(spans) - 1, last + ahead)
         window = spans[low : high + 1]
@@ -393,44 +375,6 @@ def check_arrays(reader: ArrayReader, degree: int, n_channels: int) -> dict[str,
     result.update(DurationModel.from_arrays(reader).arrays())
     result["causal_kappa"] = reader.floats("causal_kappa", (1,), *KAPPA_RANGE)
     return result
-
-
-class ModeMemo:
-    """Layers, E_c and E_s of one synthesis call, shared by its overlapping search windows.
-
-    A layer depends on its span, its neighbours and whether the next span lies beyond the
-    window (``cut``): then the next phoneme counts as unknown."""
-
-    def __init__(
-        self, model: DamModel, spans: Sequence[PhonemeSpan], request: SynthesisRequest
-    ) -> None:
-        self.model = model
-        self.spans = spans
-        self.request = request
-        self.layers: dict[tuple[int, bool], Layer] = {}
-        self.nodes: dict[tuple[int, bool], np.ndarray] = {}
-        self.edges: dict[int, np.ndarray] = {}
-
-    def layer(self, index: int, cut: bool) -> Layer:
-        key = (index, cut)
-        if key not in self.layers:
-            last = index if cut else index + 1
-            self.layers[key] = self.model.layer(self.spans, index, last, self.request)
-        return self.layers[key]
-
-    def node(self, index: int, cut: bool) -> np.ndarray:
-        key = (index, cut)
-        if key not in self.nodes:
-            self.nodes[key] = context_cost(self.model.costs, self.layer(index, cut))
-        return self.nodes[key]
-
-    def edge(self, index: int) -> np.ndarray:
-        """E_s between span ``index`` and the next (candidates do not depend on the window)."""
-        if index not in self.edges:
-            self.edges[index] = smooth_cost(
-                self.model.costs, self.layer(index, False), self.layer(index + 1, False)
-            )
-        return self.edges[index]
 
 
 class DamSynthesizer(RenderingSynthesizer):

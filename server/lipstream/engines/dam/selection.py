@@ -110,14 +110,3 @@ def cheapest_path(
     for choice in reversed(back):
         path.append(int(choice[path[-1]]))
     return np.asarray(path[::-1], dtype=np.int64)
-
-
-def path_cost(costs: Costs, layers: Sequence[Layer], path: Sequence[int]) -> float:
-    """E of one path (candidate positions), summed term by term."""
-    total = 0.0
-    for index, layer in enumerate(layers):
-        total += costs.w_context * float(context_cost(costs, layer)[path[index]])
-        if index:
-            joins = smooth_cost(costs, layers[index - 1], layer)
-            total += costs.w_smooth * float(joins[path[index - 1], path[index]])
-    return total

@@ -393,22 +393,3 @@ def _segment(
         if index > 0:
             position = int(backs[index - 1][position])
     return SearchResult(path, cost, priced)
-
-
-def path_cost(
-    space: SearchSpace, layers: Sequence[LayerSpec], path: Sequence[int], before: int = -1
-) -> float:
-    """Eq. 4 of ``path`` (infinite when it breaks a constraint); silences cost nothing and
-    no TC crosses them."""
-    excluded = np.zeros(space.nodes.size, dtype=bool)
-    total = 0.0
-    previous = before
-    for layer, node in zip(layers, path):
-        if layer.silent:
-            previous = NO_NODE
-            continue
-        total += float(space.unary(layer, excluded)[node])
-        if previous >= 0:
-            total += space.tc(int(previous), int(node))
-        previous = node
-    return total

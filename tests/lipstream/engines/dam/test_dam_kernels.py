@@ -13,10 +13,10 @@ from lipstream.engines.base import Model, SynthesisRequest, fill_gaps, frame_cou
 from lipstream.engines.dam import DamModel
 from lipstream.engines.dam.causal import CausalCurve
 from lipstream.engines.dam.dominance import dominance, powers
-from lipstream.engines.dam.model import ModeMemo
 from lipstream.engines.dam.selection import context_cost, smooth_cost
 from lipstream.phonemes import PHONEMES
 from lipstream.timeline import EMOTIONS, PhonemeSpan
+from tests.lipstream.engines.dam.reference import ModeMemo, select_mode
 
 FPS = 60.0
 CASES = 12
@@ -50,7 +50,7 @@ def _reference_render(
     memo = ModeMemo(model, spans, request)
     for k in range(first, last + 1):
         span = spans[k]
-        mode = model.select_mode(spans, k, search, request, memo)
+        mode = select_mode(model, spans, k, search, request, memo)
         local = (times - span.start) / (span.end - span.start)
         near = (owner - model.tail <= k) & (k <= owner + ahead)
         near &= (local >= -model.reach[mode]) & (local <= 1.0 + model.reach[mode])
@@ -80,7 +80,7 @@ def test_the_compiled_search_and_sum_match_the_straightforward_ones(
             options={"search_ahead": search, "tail_ahead": tail},
         )
         memo = ModeMemo(model, spans, request)
-        expected = [model.select_mode(spans, k, search, request, memo) for k in range(len(spans))]
+        expected = [select_mode(model, spans, k, search, request, memo) for k in range(len(spans))]
         low = generator.randint(0, len(spans) - 1)
         high = generator.randint(low, len(spans) - 1)
         chosen = model.choose_modes(spans, low, high, search, request)

@@ -17,11 +17,11 @@ from lipstream.engines import load_model
 from lipstream.engines.base import Model, SynthesisRequest, frame_count, frames_before
 from lipstream.engines.dam import CohenMassaroEngine, DamEngine, DamModel
 from lipstream.engines.dam.modes import PHONEME_INDEX
-from lipstream.engines.dam.selection import path_cost
 from lipstream.errors import InvalidRequestError, ModelStoreError
 from lipstream.phonemes import PHONEMES as PHONEMES_BY_INDEX
 from lipstream.store import read_manifest, save_model_dir
 from lipstream.timeline import PhonemeSpan
+from tests.lipstream.engines.dam.reference import path_cost, select_mode
 
 
 def _spans(corpus: Corpus) -> list[PhonemeSpan]:
@@ -38,7 +38,7 @@ def _by_loops(model: DamModel, spans: list[PhonemeSpan], fps: float) -> np.ndarr
     """Eq. 2 with constant targets, frame by frame: sum over phonemes k with
     owner - tail <= k <= owner + tail of D_k(t) * T_k where D_k >= tol."""
     request = SynthesisRequest(fps=fps)
-    modes = [model.select_mode(spans, k, model.search_ahead, request) for k in range(len(spans))]
+    modes = [select_mode(model, spans, k, model.search_ahead, request) for k in range(len(spans))]
     tol = float(model.manifest.hyperparameters["tol"])
     eps = float(model.manifest.hyperparameters["eps"])
     out = np.zeros((frame_count(spans[-1].end, fps), model.coefficients.shape[2]))
@@ -142,7 +142,7 @@ def test_mode_choice_on_short_inputs_is_the_exhaustive_optimum(
         best = min(every, key=lambda path: path_cost(model.costs, layers, path))
         for k in range(len(spans)):
             if k + model.search_ahead >= len(spans) - 1 and k - model.search_behind <= 0:
-                chosen = model.select_mode(spans, k, model.search_ahead, request)
+                chosen = select_mode(model, spans, k, model.search_ahead, request)
                 assert chosen == layers[k].candidates[best[k]]
 
 

@@ -15,10 +15,10 @@ from lipstream.engines.expressive_dp.search import (
     LayerSpec,
     _fast_step,
     one_layer,
-    path_cost,
     search,
 )
 from lipstream.phonemes import PHONEME_INDEX
+from tests.lipstream.engines.expressive_dp.reference import path_cost
 
 from .edp_synthetic import PHONEMES, brute_force, loop_tc, loop_unary, random_space
 
