@@ -55,7 +55,9 @@ class Match:
     continuation: int = -1
 
 
-class Matcher(Protocol):
+class StepMatcher(Protocol):
+    """A matcher that takes one tile at a time, for ``tiles_by_matches``."""
+
     def match(
         self, query: Labels, start: int, stop: int, cap: int | None, previous: int | None = None
     ) -> Match:
@@ -67,6 +69,8 @@ class Matcher(Protocol):
     ) -> np.ndarray:
         """The best path spelling the run, as node ids (match.length,)."""
 
+
+class Matcher(Protocol):
     def tiles(
         self,
         query: Labels,
@@ -87,11 +91,11 @@ class Matcher(Protocol):
 
 @dataclass
 class SuffixMatcher:
-    """Longest runs from the suffix automaton; ``limit`` caps the occurrences ranked.
-    ``match``/``choose`` take one tile at a time with numpy costs: the reference that the
-    compiled ``tiles`` is tested against. The occurrences ranked for a one-phoneme run
+    """Longest runs from the suffix automaton, the whole loop compiled (``suffix_search``);
+    ``limit`` caps the occurrences ranked. The occurrences ranked for a one-phoneme run
     (``suffix_search.single_occurrences``) are listed once, since a short tile asks for
-    them on most calls."""
+    them on most calls. The tile-by-tile numpy reference it is tested against lives in
+    ``tests/lipstream/engines/anime_graph/reference.py``."""
 
     index: SuffixIndex
     graph: AnimeGraph
@@ -108,32 +112,6 @@ class SuffixMatcher:
             self.index.ends,
             self.index.text_anime,
         )
-
-    def match(
-        self, query: Labels, start: int, stop: int, cap: int | None, previous: int | None = None
-    ) -> Match:
-        if previous is not None:
-            following = int(self.graph.successor[previous])
-            length = _spelled(self.graph, following, query, start, stop, cap)
-            if length:
-                return Match(start, length, continuation=following)
-        length, state = self.index.match(query, start, stop, cap)
-        return Match(start, length, state)
-
-    def choose(
-        self, match: Match, query: Labels, previous: int | None, ranking: Ranking
-    ) -> np.ndarray:
-        steps = np.arange(match.length)
-        if match.continuation >= 0:
-            return match.continuation + steps
-        starts = self.index.occurrences(match.state, match.length, self.limit)
-        costs = np.zeros(len(starts))
-        for offset in range(match.length):
-            position = match.start + offset
-            costs += ranking.node_costs(starts + offset, position, int(query[position]))
-        if previous is not None:
-            costs += ranking.join_costs(np.full(len(starts), previous), starts)
-        return int(starts[int(np.argmin(costs))]) + steps
 
     def tiles(
         self,
@@ -188,18 +166,6 @@ class SuffixMatcher:
 def missing(query: Labels, position: int) -> None:
     """Raise the error for a query phoneme no tile can spell."""
     raise ValueError(f"phoneme {query[position]} at query position {position} is not in the graph")
-
-
-def _spelled(
-    graph: AnimeGraph, anime: int, query: Labels, start: int, stop: int, cap: int | None
-) -> int:
-    """How far the recording from ``anime`` on reads ``query[start:stop]`` (at most ``cap``)."""
-    length = 0
-    while anime >= 0 and start + length < stop and (cap is None or length < cap):
-        if int(graph.labels[anime]) != int(query[start + length]):
-            break
-        anime, length = int(graph.successor[anime]), length + 1
-    return length
 
 
 class LayeredMatcher:
@@ -306,7 +272,7 @@ class LayeredMatcher:
 
 
 def tiles_by_matches(
-    matcher: Matcher,
+    matcher: StepMatcher,
     query: Labels,
     start: int,
     stop: int,
@@ -316,7 +282,7 @@ def tiles_by_matches(
     ranked_from: int | None = None,
     final_only: bool = False,
 ) -> list[np.ndarray]:
-    """Algorithm 2's loop, one ``match`` and ``choose`` per tile (``Matcher.tiles``)."""
+    """Algorithm 2's loop, one ``match`` and ``choose`` per tile (``LayeredMatcher.tiles``)."""
     tiles: list[np.ndarray] = []
     position = start
     joined = previous if ranked_from is None else ranked_from

@@ -19,6 +19,7 @@ from lipstream.engines.anime_graph.search import (
     greedy_matching,
     tiles_by_matches,
 )
+from tests.lipstream.engines.anime_graph.reference import SuffixReference
 
 ALPHABET = 4
 
@@ -368,8 +369,9 @@ def test_compiled_tiles_equal_the_match_and_choose_loop(
     previous = data.draw(st.none() | st.integers(0, len(labels) - 1))
     ranked_from = data.draw(st.none() | st.integers(0, len(labels) - 1))
     compiled = matcher.tiles(query, 0, len(query), cap or None, previous, ranking, ranked_from)
+    stepwise = SuffixReference(matcher)
     reference = tiles_by_matches(
-        matcher, query, 0, len(query), cap or None, previous, ranking, ranked_from
+        stepwise, query, 0, len(query), cap or None, previous, ranking, ranked_from
     )
     assert [t.tolist() for t in compiled] == [t.tolist() for t in reference]
     # final_only: the same tiles less a last one that reaches the end below the cap
@@ -378,7 +380,7 @@ def test_compiled_tiles_equal_the_match_and_choose_loop(
         final.pop()
     args = (query, 0, len(query), cap or None, previous, ranking, ranked_from, True)
     assert [t.tolist() for t in matcher.tiles(*args)] == final
-    assert [t.tolist() for t in tiles_by_matches(matcher, *args)] == final
+    assert [t.tolist() for t in tiles_by_matches(stepwise, *args)] == final
 
 
 def test_a_phoneme_missing_from_the_corpus_is_reported_by_position() -> None:
