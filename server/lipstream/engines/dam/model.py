@@ -4,8 +4,8 @@ Synthesis of a frame at time t inside span i: each phoneme k from i - behind to
 i + ahead picks a mode (``choose_modes``: the exact search of ``selection`` over
 the window of spans k - search_behind .. k + search_ahead, taking its choice at
 k, compiled in ``kernels``), and the frame is the sum of D·A over those phonemes
-(Eq. 2), each cut where its dominance falls below ``tol`` (see ``tails``), summed over motion-basis
-components and mapped back to channels. Everything a frame reads lies
+(Eq. 2), each cut where its dominance falls below ``tol`` (see ``tails``), summed
+over motion-basis components and mapped back to channels. Everything a frame reads lies
 within ``tail_ahead + search_ahead`` spans after its own, which is the
 lookahead. The frames are a pure function of the spans, so streaming is the
 generic ``RenderingSynthesizer`` waiting for the lookahead of the request's
