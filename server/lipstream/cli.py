@@ -377,9 +377,10 @@ def _shown_maps(model: Model, directory: Path, name: str | None) -> dict[str, Re
 
 
 def _bench(args: argparse.Namespace, settings: Settings) -> None:
-    from .bench.harness import format_engine_benches, format_table, run_bench, write_results
+    from .bench.harness import format_engine_benches, format_table, run_bench
     from .bench.rungs import format_rungs
     from .corpus import load_corpus
+    from .results_file import write_results
     from .training import DEMO_CORPUS_DIR, build_demo
 
     corpus_dir = Path(args.corpus) if args.corpus else settings.demo_dir / DEMO_CORPUS_DIR
@@ -390,6 +391,7 @@ def _bench(args: argparse.Namespace, settings: Settings) -> None:
         load_corpus(corpus_dir, progress=True), engine_benches=not args.no_engine_benches
     )
     write_results(results, path)
+    print(f"wrote {path}", file=sys.stderr)
     if args.json:
         print(json.dumps(results, indent=2))
     else:

@@ -20,7 +20,6 @@ general, so each run records the load average before and after it.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import re
@@ -40,6 +39,7 @@ from typing import Any, BinaryIO
 import httpx
 
 from .._version import __version__
+from ..results_file import write_results
 
 COMMAND = "python -m lipstream.bench.first_start"
 PROBE_S = 0.2
@@ -246,8 +246,7 @@ def main(argv: list[str] | None = None) -> int:
     home.mkdir(parents=True, exist_ok=True)
     results = bench(home, args.port)
     out = Path(args.json)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(results, indent=2) + "\n", encoding="utf-8")
+    write_results(results, out)
     print(_summary(results))
     print(f"wrote {out}; each server's output, time-stamped, is in {home}/*.log", file=sys.stderr)
     return 0

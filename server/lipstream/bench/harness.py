@@ -21,13 +21,10 @@ anime-graph search comparison of Cao et al.'s Tables 1 and 2.
 from __future__ import annotations
 
 import importlib
-import json
 import platform
-import sys
 import time
 from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -218,9 +215,3 @@ def format_table(results: dict[str, Any]) -> str:
     recorded = results["recorded"]
     lines.append(f"{'recorded':<16}{'':>45}{_fmt(recorded['closure_rate'], '.1%'):>9}")
     return "\n".join(lines)
-
-
-def write_results(results: dict[str, Any], path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(results, indent=2) + "\n", encoding="utf-8")
-    print(f"wrote {path}", file=sys.stderr)

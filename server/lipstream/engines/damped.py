@@ -12,6 +12,9 @@ same targets. ω sets the speed: a step in u is 1 - (1 + ω t) e^{-ω t}
 complete after t, and the filter's gain is 1 / (1 + (f / f0)²) with
 f0 = ω / 2π, so its -3 dB frequency is ``HALF_POWER_RATIO`` f0.
 
+The compiled steps are public for the kernels that inline them: ``pull_toward``
+(one value), ``step_toward`` (every column, one target), ``follow_frame_rates``
+(a raw curve, one rate per frame) and ``follow_rates`` (one rate per column).
 ``run`` steps a sequence of (target, ω, dt) pieces and records the value
 after the pieces marked as frames; both causal engines build those pieces
 from what the input has made final. ``filter_raw`` runs the filter over a raw curve
@@ -36,7 +39,7 @@ def omega_for_cutoff(cutoff_hz: np.ndarray | float) -> np.ndarray:
 
 
 @njit(cache=True)
-def _pull(x: float, v: float, target: float, w: float, dt: float) -> tuple[float, float]:
+def pull_toward(x: float, v: float, target: float, w: float, dt: float) -> tuple[float, float]:
     """x and v after ``dt`` s toward ``target`` at rate ``w``."""
     error = x - target
     pull = v + w * error
@@ -45,13 +48,17 @@ def _pull(x: float, v: float, target: float, w: float, dt: float) -> tuple[float
 
 
 @njit(cache=True)
-def _step(x: np.ndarray, v: np.ndarray, target: np.ndarray, omega: np.ndarray, dt: float) -> None:
+def step_toward(
+    x: np.ndarray, v: np.ndarray, target: np.ndarray, omega: np.ndarray, dt: float
+) -> None:
+    """Every column of ``x`` and ``v`` (n,) in place after ``dt`` s toward ``target`` (n,)
+    at rates ``omega`` (n,)."""
     for column in range(len(x)):
-        x[column], v[column] = _pull(x[column], v[column], target[column], omega[column], dt)
+        x[column], v[column] = pull_toward(x[column], v[column], target[column], omega[column], dt)
 
 
 @njit(cache=True)
-def _follow(
+def follow_frame_rates(
     x: np.ndarray, v: np.ndarray, t: float, raw: np.ndarray, omegas: np.ndarray,
     times: np.ndarray, out: np.ndarray,
 ) -> None:  # fmt: skip
@@ -60,7 +67,9 @@ def _follow(
     for row in range(len(times)):
         dt = times[row] - (t if row == 0 else times[row - 1])
         for column in range(len(x)):
-            x[column], v[column] = _pull(x[column], v[column], raw[row, column], omegas[row], dt)
+            x[column], v[column] = pull_toward(
+                x[column], v[column], raw[row, column], omegas[row], dt
+            )
         out[row] = x
 
 
@@ -76,7 +85,7 @@ def _run(
 ) -> None:
     row = 0
     for piece in range(len(dts)):
-        _step(x, v, targets[piece], omegas[piece], dts[piece])
+        step_toward(x, v, targets[piece], omegas[piece], dts[piece])
         if record[piece]:
             out[row] = x
             row += 1
@@ -92,9 +101,11 @@ def follow_rates(
     times: np.ndarray,
     out: np.ndarray,
 ) -> None:
+    """Step from time ``t`` to each of ``times`` (m,) toward that time's row of ``targets``
+    (m, n) at rates ``omega`` (n,), recording the value in ``out`` (m, n)."""
     previous = t
     for row in range(len(times)):
-        _step(x, v, targets[row], omega, times[row] - previous)
+        step_toward(x, v, targets[row], omega, times[row] - previous)
         previous = times[row]
         out[row] = x
 
@@ -114,7 +125,7 @@ class DampedState:
 
     def step(self, target: np.ndarray, omega: np.ndarray, dt: float) -> None:
         """Advance by ``dt`` seconds toward ``target`` held constant, at rates ``omega``."""
-        _step(
+        step_toward(
             self.x,
             self.v,
             np.asarray(target, dtype=np.float64),
@@ -164,7 +175,7 @@ def filter_raw(
         state = DampedState.at_rest(raw[0], float(times[0]))
         values[0], first = state.x, 1
     if len(times) > first:
-        _follow(
+        follow_frame_rates(
             state.x,
             state.v,
             state.t,

@@ -23,7 +23,7 @@ from numba import njit
 from ..phonemes import PHONEME_INDEX
 from ..timeline import PhonemeSpan
 from .base import SpanSynthesizer, SynthesisRequest, frame_count, shifted_frame_stop
-from .damped import DampedState, _step
+from .damped import DampedState, step_toward
 from .growable import Growable
 
 
@@ -127,12 +127,12 @@ def _advance(
         frame_t = (first + row) / fps
         while following < count and shifted[following] < frame_t:
             owner = rows[max(following - 1, 0)]
-            _step(x, v, poses[owner], omega_rows[owner], shifted[following] - now)
+            step_toward(x, v, poses[owner], omega_rows[owner], shifted[following] - now)
             now = shifted[following]
             while following < count and shifted[following] <= now:
                 following += 1
         owner = rows[max(following - 1, 0)]
-        _step(x, v, poses[owner], omega_rows[owner], frame_t - now)
+        step_toward(x, v, poses[owner], omega_rows[owner], frame_t - now)
         now = frame_t
         while following < count and shifted[following] <= now:
             following += 1

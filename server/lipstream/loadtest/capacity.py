@@ -53,6 +53,7 @@ from typing import Any
 
 from .._version import __version__
 from ..errors import InvalidRequestError, LipstreamError
+from ..results_file import write_results
 from .load import LoadTestConfig, check_config, loadtest
 from .reference import ReferenceTraffic, engine_traffic, reference_server
 from .sessions import event_loop_name
@@ -344,6 +345,4 @@ def merge_results(path: Path, search: dict[str, Any]) -> dict[str, Any]:
 
 def record_search(path: Path, search: dict[str, Any]) -> None:
     """Merge ``search`` into the results file at ``path`` (see ``merge_results``)."""
-    document = merge_results(path, search)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(document, indent=2) + "\n", encoding="utf-8")
+    write_results(merge_results(path, search), path)

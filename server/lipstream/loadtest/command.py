@@ -21,6 +21,7 @@ from dataclasses import replace
 from typing import Any
 
 from ..config import Settings
+from ..results_file import write_results
 
 
 def default_url(settings: Settings) -> str:
@@ -104,7 +105,7 @@ def _config(args: argparse.Namespace, settings: Settings, **fields: Any) -> Any:
 
 
 def _loadtest(args: argparse.Namespace, settings: Settings) -> None:
-    from .load import format_table, loadtest, write_results
+    from .load import format_table, loadtest
 
     config = _config(
         args,
@@ -220,7 +221,7 @@ def _add_capacity_parser(runs: Any) -> None:
 
 
 def _soak(args: argparse.Namespace, settings: Settings) -> None:
-    from .soak import SoakConfig, format_report, soak, write_results
+    from .soak import SoakConfig, format_report, soak
 
     config = SoakConfig(
         url=args.url or default_url(settings),

@@ -37,7 +37,6 @@ run that overruns anyway stops starting requests at the deadline.
 from __future__ import annotations
 
 import ipaddress
-import json
 import math
 import os
 import platform
@@ -46,7 +45,6 @@ import time
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
-from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit, urlunsplit
 
@@ -78,7 +76,6 @@ __all__ = [
     "format_table",
     "loadtest",
     "planned_duration_s",
-    "write_results",
 ]
 
 A2F_CLIPS_S: tuple[float, ...] = (5.0, 10.0, 20.0)
@@ -356,11 +353,6 @@ def loadtest(config: LoadTestConfig) -> dict[str, Any]:
             "server_processes": len(server_cpu.pids),
         },
     }
-
-
-def write_results(results: dict[str, Any], path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(results, indent=2) + "\n", encoding="utf-8")
 
 
 def _cell(value: float | None, digits: int = 1) -> str:

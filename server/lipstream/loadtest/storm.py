@@ -67,6 +67,7 @@ from lipstream_client import (
 from lipstream_client.client import Stream
 
 from .._version import __version__
+from ..results_file import write_results
 from .stats import LAG_STATISTICS, Summary, summarize
 
 PHONEME_S = 0.08
@@ -559,5 +560,4 @@ def write_storm_results(results: dict[str, Any], path: Path, name: str) -> None:
         if isinstance(loaded, dict):
             runs = loaded
     runs[name] = results
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(runs, indent=2) + "\n", encoding="utf-8")
+    write_results(runs, path)

@@ -22,10 +22,10 @@ from lipstream.loadtest.load import (
     http_base,
     loadtest,
     planned_duration_s,
-    write_results,
 )
 from lipstream.loadtest.stats import overall_summary, percentile, summarize
 from lipstream.phonemes import PHONEMES
+from lipstream.results_file import write_results
 from tests.helpers import run_cli
 from tests.lipstream_client.fake_server import FakeServer
 

@@ -21,8 +21,8 @@ from lipstream.loadtest.soak import (
     metrics_rss,
     process_tree_rss,
     soak,
-    write_results,
 )
+from lipstream.results_file import write_results
 from tests.helpers import run_cli
 from tests.live_server import live_server
 

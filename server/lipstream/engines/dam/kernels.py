@@ -32,7 +32,7 @@ before it; ``commit_modes`` runs it over the spans not yet committed), and
 ``causal_sum``, Eq. 2 at each time over the latest span begun and the ``tail``
 before it; both sums share ``_dam_frame``. A streamed call is one call of
 ``causal_run``: the new modes, the raw curve, the damped filter
-(``damped._follow``) and ``channels``.
+(``damped.follow_frame_rates``) and ``channels``.
 
 Sums of squares and polynomial products run in plain loops, so E_s and the
 frames may differ from numpy's (pairwise, BLAS) summation in the last bits;
@@ -50,7 +50,7 @@ from numba import njit
 
 from ...phonemes import PHONEMES
 from ...timeline import EMOTIONS
-from ..damped import _follow
+from ..damped import follow_frame_rates
 
 
 @dataclass(frozen=True)
@@ -576,9 +576,9 @@ def causal_run(
     modes of the spans from ``committed`` on committed (``commit_modes``), the raw curve at
     each frame's time + ``shift`` (``causal_sum``), the filter (value ``x``, velocity
     ``v``, at time ``t``; ``fresh``: none yet, it starts at rest on the first raw value)
-    stepped toward it at ω = ``kappa`` times the rates (``damped._follow``), and the basis
-    (``channels``). ``x`` and ``v`` are updated in place; returns the frames and the
-    filter's time."""
+    stepped toward it at ω = ``kappa`` times the rates (``damped.follow_frame_rates``), and
+    the basis (``channels``). ``x`` and ``v`` are updated in place; returns the frames and
+    the filter's time."""
     n = n_spans
     span_start, span_end, span_mode = span_start[:n], span_end[:n], span_mode[:n]
     span_phoneme, span_emotion, span_rate = span_phoneme[:n], span_emotion[:n], span_rate[:n]
@@ -598,5 +598,5 @@ def causal_run(
         first = 1
     if len(times) > first:
         omegas = kappa * rates
-        _follow(x, v, t, raw[first:], omegas[first:], times[first:], values[first:])
+        follow_frame_rates(x, v, t, raw[first:], omegas[first:], times[first:], values[first:])
     return channels(values, components, mean), times[-1]

@@ -6,7 +6,7 @@ the latest span begun by τ (the last with start < τ − 10⁻⁹, else the fir
 bisection; a node span gives its node's frames time-warped over the span (``nodes.warp_node``
 written per row: the same products and sums), a silence the last frame of the node before
 it, or the rest pose when there is none. The filter then steps to t toward that row at the
-span's ω (``damped._pull``, as ``damped.filter_raw`` steps it), the first frame of a
+span's ω (``damped.pull_toward``, as ``damped.filter_raw`` steps it), the first frame of a
 request resting on its raw row. The work is that of the frames emitted, whatever the
 request's length.
 """
@@ -18,7 +18,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ..damped import _pull
+from ..damped import pull_toward
 
 _STARTED = 1e-9
 START, END, OMEGA = 0, 1, 2
@@ -101,6 +101,6 @@ def follow_raw(
             dt = time - previous
             w = rows[k, OMEGA]
             for column in range(len(x)):
-                x[column], v[column] = _pull(x[column], v[column], raw[column], w, dt)
+                x[column], v[column] = pull_toward(x[column], v[column], raw[column], w, dt)
         out[row] = x
         previous = time
