@@ -160,10 +160,9 @@ def check_finite(where: str, array: np.ndarray) -> None:
     """No NaN or infinity."""
     finite = np.isfinite(array)
     if not finite.all():
-        first = np.unravel_index(int(np.argmin(finite)), array.shape)
         raise ModelStoreError(
             f"holds {array.size - int(finite.sum())} NaN or infinite values (first at "
-            f"{tuple(int(i) for i in first)})",
+            f"{_first_false(finite)})",
             where=where,
         )
 
@@ -174,12 +173,15 @@ def check_range(where: str, array: np.ndarray, low: float, high: float) -> None:
         return
     inside = (array >= low) & (array <= high)
     if not inside.all():
-        first = np.unravel_index(int(np.argmin(inside)), array.shape)
+        first = _first_false(inside)
         raise ModelStoreError(
-            f"value {array[first]:.6g} at {tuple(int(i) for i in first)} is outside "
-            f"[{low:g}, {high:g}]",
-            where=where,
+            f"value {array[first]:.6g} at {first} is outside [{low:g}, {high:g}]", where=where
         )
+
+
+def _first_false(mask: np.ndarray) -> tuple[int, ...]:
+    """The index of ``mask``'s first False, in C order."""
+    return tuple(int(i) for i in np.unravel_index(int(np.argmin(mask)), mask.shape))
 
 
 def check_indices(where: str, array: np.ndarray, low: int, high: int) -> None:

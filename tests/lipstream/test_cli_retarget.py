@@ -49,15 +49,20 @@ def synth_json(model: Path, tmp_path: Path, *extra: str) -> dict[str, list[objec
     return data
 
 
-def test_a_fitted_map_is_stored_beside_the_model_and_synth_serves_its_controls(
-    lerp_model: Path, tmp_path: Path
-) -> None:
+def fit_jaw(model: Path, tmp_path: Path) -> None:
+    """``retarget fit`` of the map ``jaw`` from ``PAIRS``, stored beside ``model``."""
     pairs = tmp_path / "pairs.json"
     pairs.write_text(json.dumps(PAIRS))
     fitted = run_cli(
-        "retarget", "fit", "--model", str(lerp_model), "--pairs", str(pairs), "--name", "jaw"
+        "retarget", "fit", "--model", str(model), "--pairs", str(pairs), "--name", "jaw"
     )
     assert fitted.returncode == 0, fitted.stderr
+
+
+def test_a_fitted_map_is_stored_beside_the_model_and_synth_serves_its_controls(
+    lerp_model: Path, tmp_path: Path
+) -> None:
+    fit_jaw(lerp_model, tmp_path)
     assert (lerp_model / "retarget" / "jaw" / "retarget.json").is_file()
     plain = synth_json(lerp_model, tmp_path)
     mapped = synth_json(lerp_model, tmp_path, "--retarget", "jaw")
@@ -108,12 +113,7 @@ def test_a_malformed_pairs_file_exits_with_the_code_file_and_field(
 def test_show_with_a_name_shows_only_that_map_and_refuses_an_unknown_one(
     lerp_model: Path, tmp_path: Path
 ) -> None:
-    pairs = tmp_path / "pairs.json"
-    pairs.write_text(json.dumps(PAIRS))
-    fitted = run_cli(
-        "retarget", "fit", "--model", str(lerp_model), "--pairs", str(pairs), "--name", "jaw"
-    )
-    assert fitted.returncode == 0, fitted.stderr
+    fit_jaw(lerp_model, tmp_path)
     for name, controls in (("jaw", "open, shut"), ("oculus15", "viseme_sil")):
         shown = run_cli("retarget", "show", "--model", str(lerp_model), name)
         assert shown.returncode == 0, shown.stderr

@@ -14,7 +14,11 @@ tree (its training workers included) is read from ``RUSAGE_CHILDREN``. The steps
 come from the status lines (``what: done in N s``). The machine is shared in
 general, so each run records the load average before and after it.
 
-    python -m lipstream.bench.first_start [--json bench/first_start.json] [--port 8765]
+    python -m lipstream.bench.first_start [--json FILE] [--port 8765]
+
+The results go to ``--json``, by default ``$LIPSTREAM_HOME/bench/first_start.json``
+(never into the current directory unasked: a checkout's ``bench/`` holds the committed
+measurements); ``--json bench/first_start.json`` in a checkout replaces the committed one.
 """
 
 from __future__ import annotations
@@ -39,6 +43,7 @@ from typing import Any, BinaryIO
 import httpx
 
 from .._version import __version__
+from ..config import load_settings
 from ..results_file import write_results
 
 COMMAND = "python -m lipstream.bench.first_start"
@@ -233,7 +238,9 @@ def _summary(results: dict[str, Any]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--json", default="bench/first_start.json", help="where to write")
+    parser.add_argument(
+        "--json", help="where to write (default $LIPSTREAM_HOME/bench/first_start.json)"
+    )
     parser.add_argument("--port", type=int, default=8765, help="loopback port to serve on")
     parser.add_argument(
         "--home", help="an empty directory for $LIPSTREAM_HOME (default: a fresh temporary one)"
@@ -245,7 +252,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     home.mkdir(parents=True, exist_ok=True)
     results = bench(home, args.port)
-    out = Path(args.json)
+    out = load_settings().results_file(args.json, "first_start.json")
     write_results(results, out)
     print(_summary(results))
     print(f"wrote {out}; each server's output, time-stamped, is in {home}/*.log", file=sys.stderr)

@@ -71,10 +71,13 @@ class Served:
 
 
 @contextmanager
-def serving(models: Path, settings: ServerSettings | None = None) -> Iterator[Served]:
-    """Serve ``models`` on a free loopback port until the block ends."""
+def serving(
+    models: Path, settings: ServerSettings | None = None, app: FastAPI | None = None
+) -> Iterator[Served]:
+    """Serve ``models`` (or ``app``, built from them) on a free loopback port until the
+    block ends."""
     settings = (settings or ServerSettings()).with_changes(log_level="warning")
-    app = create_app(models, settings)
+    app = app or create_app(models, settings)
     port = free_port()
     config = uvicorn.Config(app, host="127.0.0.1", port=port, **uvicorn_options(settings))
     server = uvicorn.Server(config)

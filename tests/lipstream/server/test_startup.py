@@ -8,14 +8,12 @@ lets it go and sees it turn ready; a start-up that fails reports ``failed`` and 
 
 from __future__ import annotations
 
-import asyncio
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 import httpx
-import uvicorn
 
 from lipstream.config import ServerSettings
 from lipstream.corpus import Corpus
@@ -23,12 +21,11 @@ from lipstream.corpus.writer import write_corpus
 from lipstream.engines import engine_names
 from lipstream.errors import LipstreamError
 from lipstream.server.app import create_app
-from lipstream.server.runner import uvicorn_options
 from lipstream.status import Report
 from lipstream.training import train_in_parallel, training_pool
 from lipstream_client import ErrorMessage
-from tests.helpers import eventually, free_port, return_frames
-from tests.lipstream.server.harness import client
+from tests.helpers import eventually, return_frames
+from tests.lipstream.server.harness import client, serving
 from tests.live_server import READY_POLLS
 
 WAIT_S = 120.0
@@ -47,22 +44,8 @@ def starting(
     """Serve ``models`` with a background start-up that runs ``prepare`` first."""
     settings = ServerSettings(log_level="warning")
     app = create_app(models, settings, prepare=prepare, background=True, on_failure=on_failure)
-    port = free_port()
-    config = uvicorn.Config(app, host="127.0.0.1", port=port, **uvicorn_options(settings))
-    server = uvicorn.Server(config)
-    loop = asyncio.new_event_loop()
-    thread = threading.Thread(target=loop.run_until_complete, args=(server.serve(),), daemon=True)
-    thread.start()
-    eventually(
-        lambda: server.started or not thread.is_alive(), "the test server started", READY_POLLS
-    )
-    assert server.started, "the test server did not start"
-    try:
-        yield f"127.0.0.1:{port}"
-    finally:
-        server.should_exit = True
-        thread.join(timeout=15)
-        loop.close()
+    with serving(models, settings, app) as served:
+        yield served.http.removeprefix("http://")
 
 
 def test_a_starting_server_answers_health_names_its_phase_and_refuses_synthesis(
