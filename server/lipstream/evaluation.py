@@ -78,6 +78,27 @@ LAG_WINDOW_S = 0.1
 acoustic onset, and a model that does not anticipate closes after it."""
 
 
+PLATEAU_FRACTION = 0.05
+"""A closure's plateau: the frames around the window's minimum within this share of the
+window's range above it. Recorded lips rest shut for several frames while a smooth
+prediction dips once, so both are timed at their plateau's centre, never at its first
+frame."""
+
+
+def closure_centre(window: np.ndarray) -> float:
+    """The centre (in frames from the window's start) of the plateau around the window's
+    minimum (the first minimum on ties): the run of consecutive frames within
+    ``PLATEAU_FRACTION`` of the window's range above the minimum."""
+    lowest = int(np.argmin(window))
+    level = window[lowest] + PLATEAU_FRACTION * (float(np.max(window)) - window[lowest])
+    first = last = lowest
+    while first > 0 and window[first - 1] <= level:
+        first -= 1
+    while last < len(window) - 1 and window[last + 1] <= level:
+        last += 1
+    return (first + last) / 2.0
+
+
 def closure_lags(
     recorded: np.ndarray,
     predicted: np.ndarray,
@@ -85,9 +106,10 @@ def closure_lags(
     fps: float,
     window_s: float = LAG_WINDOW_S,
 ) -> list[float]:
-    """Per /p b m/ span, the time (s) of the predicted aperture's minimum less the recorded
-    aperture's, both within the span widened by ``window_s`` each side (the first minimum
-    on ties); positive when the prediction closes late."""
+    """Per /p b m/ span, the time (s) of the predicted aperture's closure less the recorded
+    aperture's, both within the span widened by ``window_s`` each side and both timed at
+    the centre of their plateau (``closure_centre``); positive when the prediction closes
+    late."""
     n_frames = min(len(recorded), len(predicted))
     lags = []
     for span in spans:
@@ -97,6 +119,6 @@ def closure_lags(
         stop = min(int(np.ceil((span.end + window_s) * fps)), n_frames)
         if stop <= first:
             continue
-        shift = int(np.argmin(predicted[first:stop])) - int(np.argmin(recorded[first:stop]))
+        shift = closure_centre(predicted[first:stop]) - closure_centre(recorded[first:stop])
         lags.append(shift / fps)
     return lags

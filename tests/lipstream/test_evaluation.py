@@ -3,6 +3,7 @@ import pytest
 
 from lipstream.evaluation import (
     CLOSURE_FRACTION,
+    closure_centre,
     closure_counts,
     closure_lags,
     closure_threshold,
@@ -61,3 +62,23 @@ def test_closure_lags_are_the_shift_of_the_aperture_minimum_at_each_bilabial() -
     # closures fall at 0.39 s and 0.89 s, each 90 ms after the recorded one nearest it
     mirrored = recorded[::-1].copy()
     assert closure_lags(recorded, mirrored, spans, fps) == pytest.approx([0.09, 0.09])
+
+
+def test_closure_lags_time_a_held_closure_at_its_centre_not_its_first_frame() -> None:
+    fps = 100.0
+    times = np.arange(100) / fps
+    # recorded lips rest shut from 0.40 to 0.48 s (centre 0.44 s); the prediction dips once,
+    # to its lowest at 0.44 s: the same closure, so no lag
+    recorded = np.clip(np.abs(times - 0.44) - 0.04, 0.0, None)
+    predicted = np.abs(times - 0.44) + 0.01
+    spans = [PhonemeSpan("AA", 0.0, 0.4), PhonemeSpan("M", 0.4, 0.48), PhonemeSpan("AA", 0.48, 1.0)]
+    assert closure_lags(recorded, predicted, spans, fps) == pytest.approx([0.0])
+    # the same prediction 30 ms later is 30 ms late, whatever the recorded plateau's length
+    assert closure_lags(recorded, np.roll(predicted, 3), spans, fps) == pytest.approx([0.03])
+
+
+def test_a_plateau_is_the_run_within_five_percent_of_the_range_above_the_minimum() -> None:
+    # range 1.0: frames at or below 0.05 around the minimum (indices 3..6) form the plateau;
+    # the low frame at index 9 is not joined to it
+    window = np.array([1.0, 0.6, 0.2, 0.05, 0.0, 0.01, 0.04, 0.3, 0.5, 0.02, 0.9])
+    assert closure_centre(window) == pytest.approx(4.5)
