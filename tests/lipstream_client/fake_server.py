@@ -11,6 +11,8 @@ Scripted behaviour: engine ``missing`` gets a fatal ``unknown_engine``;
 character ``close-1001`` / ``close-1011`` makes the server close the
 connection with that code (1011 after a connection-level ``internal_error``);
 ``busy=True`` refuses every connection with ``server_busy`` and 1013;
+``busy_starts=n`` answers the first n ``start`` messages with a request-scope
+``server_busy`` (``retry_after_ms`` 50), the connection kept;
 ``token`` requires ``Authorization: Bearer <token>``; ``refuse_upgrade``
 answers the upgrade with HTTP 403.
 """
@@ -70,9 +72,15 @@ class FakeServer:
     """Start with ``with FakeServer(...) as server:``; connect to ``server.url``."""
 
     def __init__(
-        self, *, busy: bool = False, token: str | None = None, refuse_upgrade: bool = False
+        self,
+        *,
+        busy: bool = False,
+        busy_starts: int = 0,
+        token: str | None = None,
+        refuse_upgrade: bool = False,
     ) -> None:
         self.busy = busy
+        self.busy_starts = busy_starts
         self.token = token
         self.refuse_upgrade = refuse_upgrade
         self.received: list[Message | ProtocolError] = []
@@ -192,6 +200,11 @@ class _Session:
                     "unknown_engine", f"engine: no engine {start.engine!r}", start.id, True
                 )
             )
+            return
+        if self.server.busy_starts > 0:
+            self.server.busy_starts -= 1
+            details = {"reason": "loop_busy", "retry_after_ms": 50}
+            await self.send(ErrorMessage("server_busy", "busy", start.id, True, details))
             return
         offset = start.options.get("offset", 0.0)
         self.requests[start.id] = _Request(start, float(offset))  # type: ignore[arg-type]

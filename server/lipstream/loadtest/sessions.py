@@ -22,7 +22,8 @@ a TTS that has synthesized a sentence sends it) on one extra connection,
 one request after another, for as long as the load runs.
 
 A session the server refuses for load (``server_busy``, 1013, or HTTP 503 to its
-upgrade while the server sheds load or holds its cap of connections) waits the
+upgrade while the server sheds load or holds its cap of connections), or whose request
+alone it refuses (``server_busy`` answering a ``start``), waits the
 ``retry_after_ms`` or ``Retry-After`` it was given and tries again, as a client
 following the protocol does, up to ``BUSY_RETRIES`` times while its clip still fits
 before the deadline; ``RequestRecord.busy_retries`` counts them. Without this, a capacity
@@ -212,20 +213,26 @@ class _Session:
                 return record
             record.error = None
             record.busy_retries += 1
-            await self._drop_connection()
+            if not isinstance(busy, LipstreamServerError):
+                await self._drop_connection()
             await asyncio.sleep(delay)
         return record
 
     def _fits(self, delay_s: float) -> bool:
         return time.perf_counter() + delay_s + self.plan.clip_s <= self.plan.deadline
 
-    async def _attempt(self, record: RequestRecord) -> ServerBusy | HandshakeRejected | None:
-        """One try of the request into ``record``; the refusal, when the server was busy."""
+    async def _attempt(self, record: RequestRecord) -> LipstreamClientError | None:
+        """One try of the request into ``record``; the refusal, when the server was busy: of
+        the connection (``ServerBusy``, a retryable ``HandshakeRejected``) or of the request
+        alone (a retryable ``LipstreamServerError``, such as ``server_busy`` at a ``start``
+        whose engine costs more than the load leaves room for; the connection stays)."""
         try:
             client = await self._connected()
             await asyncio.wait_for(self._stream(client, record), self.plan.clip_s + REQUEST_SLACK_S)
         except LipstreamServerError as error:
             record.error = error.code
+            if error.retryable and error.id is not None:
+                return error
         except ServerBusy as busy:
             record.error = refusal_code(busy)
             return busy

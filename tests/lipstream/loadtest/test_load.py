@@ -204,3 +204,26 @@ def test_cli_refuses_a_remote_target_with_one_line(tmp_path: Path) -> None:
     assert result.returncode == 2
     assert result.stderr.startswith("error [not_loopback]: --url: ")
     assert not (tmp_path / "out.json").exists()
+
+
+def test_a_start_refused_for_load_is_retried_on_the_same_connection() -> None:
+    # The server turns the first two starts away with a request-scope server_busy (its
+    # engine costs more than the load leaves room for); the session waits retry_after_ms
+    # and starts again without reconnecting.
+    with FakeServer(busy_starts=2) as server:
+        config = LoadTestConfig(
+            url=server.url,
+            streams=1,
+            requests=2,
+            clips_s=(1.0,),
+            fps=50.0,
+            engine="viseme-lerp",
+            character="demo",
+            pause_s=0.0,
+            max_duration_s=30.0,
+        )
+        clip = loadtest(config)["clips"][0]
+        connections = len(server.headers)
+    assert clip["successful_requests"] == 2 and clip["errors"] == {}
+    assert clip["busy_retries"] == 2
+    assert connections == 1
