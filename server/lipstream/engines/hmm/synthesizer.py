@@ -280,16 +280,24 @@ class HmmSynthesizer(Synthesizer):
         if target > first:
             self.request.guard.check()
             decoder, model = self.decoder, self.model
-            decoder.reserve(target - first)
+            decoding = decoder.reserve(target - first)
             out = states.reserve(decoder.most_committed(target - first))
             terms, heard_from = self._audio_terms(first, target)
+            spans = self.span_rows
             fresh = kernels.decode(
-                self.span_rows.data, self.span_rows.count if self.reading else 0, first,
-                target, model.hmm_fps, model.categories, self.mood, terms, heard_from,
-                decoder.log_start, decoder.log_transition, decoder.into_offsets,
-                decoder.into_states, decoder.delta, decoder.ring, decoder.position,
-                decoder.lag_limit, out, states.count,
-            )  # fmt: skip
+                spans.data,
+                spans.count if self.reading else 0,
+                first,
+                target,
+                model.hmm_fps,
+                model.categories,
+                self.mood,
+                terms,
+                heard_from,
+                decoding,
+                out,
+                states.count,
+            )
             self.observed = target
             states.grow(fresh)
         if self.finished:
