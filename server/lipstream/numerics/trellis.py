@@ -362,9 +362,8 @@ class FixedLagViterbi:
         """Make room for ``extra`` more frames and return the arrays that ``advance``
         decodes them on in place (with no lag limit the ring grows, so the uncommitted
         frames never wrap); valid until the next ``reserve``."""
-        ring = self._state.ring
         if self.lag is None:
-            frames, oldest = self.frames, self.oldest
+            frames, oldest, ring = self.frames, self.oldest, self._state.ring
             needed = frames + extra - oldest + 2
             if needed > len(ring):
                 size = max(needed, 2 * len(ring))
@@ -382,7 +381,8 @@ class FixedLagViterbi:
 
     def most_committed(self, frames: int) -> int:
         """The most states that pushing ``frames`` more frames can commit."""
-        return frames + self.frames - self.oldest + 1
+        position = self._state.position
+        return frames + int(position[0] - position[1]) + 1
 
     def push_into(self, log_emission: np.ndarray, out: np.ndarray) -> int:
         """``push`` for C-contiguous float64 rows (m, N), writing the committed states into
