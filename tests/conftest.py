@@ -14,6 +14,12 @@ if TYPE_CHECKING:
 SMALL_DEMO_SENTENCES = 24
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    from lipstream.numerics.direct_call import check_types
+
+    check_types(True)  # a kernel called with other argument types than it was bound to fails
+
+
 @pytest.fixture(scope="session")
 def small_demo_corpus() -> Corpus:
     from lipstream.demo.generate import generate_demo_corpus

@@ -1,2 +1,9 @@
-"""Numerical kernels shared by engines (numpy/scipy, no engine imports): ``basis``, the
-motion basis (PCA)."""
+"""Numerical kernels shared by engines (numpy/scipy/numba, no engine imports).
+
+- ``basis``: the motion basis (PCA) and its reconstruction;
+- ``banded``: banded and block-tridiagonal solves;
+- ``trellis``: the Viterbi trellis and the fixed-lag decoder (``FixedLagViterbi``,
+  ``ViterbiState``);
+- ``direct_call``: calling a compiled kernel without numba's per-call typing
+  (``DirectCall``), for kernels that take named groups of arrays.
+"""

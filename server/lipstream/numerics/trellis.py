@@ -34,6 +34,7 @@ one, so the three kernels live here together.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -199,22 +200,38 @@ def _trace(ring: np.ndarray, frame: int, state: int, until: int, out: np.ndarray
         out[u - 1 - until] = state
 
 
+class ViterbiState(NamedTuple):
+    """A ``FixedLagViterbi``'s arrays, which ``advance`` decodes on in place (N states).
+
+    log_start (N,) and log_transition (N, N) are the model's; into_offsets (N + 1,) and
+    into_states are ``predecessors(log_transition)``; delta (N,) holds each survivor's
+    log-score at the last frame decoded (−inf: dropped); ring (size, N) the back-pointer
+    of each state at frame u in row u mod size; position = [frames decoded, oldest
+    uncommitted frame]; lag the most frames left uncommitted (no limit: int64 max)."""
+
+    log_start: np.ndarray
+    log_transition: np.ndarray
+    into_offsets: np.ndarray
+    into_states: np.ndarray
+    delta: np.ndarray
+    ring: np.ndarray
+    position: np.ndarray
+    lag: int
+
+
 @njit(cache=True)
 def _advance(
-    log_start: np.ndarray,
-    log_transition: np.ndarray,
-    into_offsets: np.ndarray,
-    into_states: np.ndarray,
-    delta: np.ndarray,
-    ring: np.ndarray,
+    decoder: ViterbiState,
     log_emission: np.ndarray,
     first_frame: int,
     oldest: int,
-    lag: int,
     committed: np.ndarray,
 ) -> tuple[int, int]:
     """Decode frames first_frame.. of ``log_emission``; returns (frames committed into
     ``committed``, the new oldest uncommitted frame)."""
+    log_start, log_transition = decoder.log_start, decoder.log_transition
+    into_offsets, into_states = decoder.into_offsets, decoder.into_states
+    delta, ring, lag = decoder.delta, decoder.ring, decoder.lag
     states = delta.shape[0]
     size = ring.shape[0]
     count = 0
@@ -280,27 +297,13 @@ def _advance(
 
 
 @njit(cache=True)
-def advance(
-    log_start: np.ndarray,
-    log_transition: np.ndarray,
-    into_offsets: np.ndarray,
-    into_states: np.ndarray,
-    delta: np.ndarray,
-    ring: np.ndarray,
-    position: np.ndarray,
-    lag: int,
-    log_emission: np.ndarray,
-    committed: np.ndarray,
-    at: int,
-) -> int:
-    """``FixedLagViterbi.push_into`` on the decoder's arrays (after its ``reserve``), for
-    compiled callers: decodes the rows of ``log_emission`` as the frames after position[0]
-    (``position`` = [frames decoded, oldest uncommitted], updated), writes the states they
-    commit into committed[at:] and returns how many."""
-    count, oldest = _advance(
-        log_start, log_transition, into_offsets, into_states, delta, ring, log_emission,
-        position[0], position[1], lag, committed[at:],
-    )  # fmt: skip
+def advance(decoder: ViterbiState, log_emission: np.ndarray, committed: np.ndarray, at: int) -> int:
+    """``FixedLagViterbi.push_into`` for compiled callers, on the arrays its ``reserve``
+    returned: decodes the rows of ``log_emission`` as the frames after the ones decoded
+    (``decoder.position`` updated), writes the states they commit into committed[at:] and
+    returns how many."""
+    position = decoder.position
+    count, oldest = _advance(decoder, log_emission, position[0], position[1], committed[at:])
     position[0] += log_emission.shape[0]
     position[1] = oldest
     return count
@@ -318,7 +321,8 @@ def predecessors(log_transition: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 class FixedLagViterbi:
     """Streaming Viterbi decoding: ``push`` emission rows, get the states committed so far;
     ``finish`` commits the rest along the best survivor. ``lag`` None never forces a
-    commit (states commit only where survivors merge, and at the end)."""
+    commit (states commit only where survivors merge, and at the end). Compiled callers
+    decode on the arrays ``reserve`` returns, with ``advance``."""
 
     def __init__(
         self,
@@ -328,39 +332,46 @@ class FixedLagViterbi:
         into: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> None:
         """``into``: ``predecessors(log_transition)``, if the caller keeps it."""
-        self.log_start = np.ascontiguousarray(log_start, dtype=np.float64)
-        self.log_transition = np.ascontiguousarray(log_transition, dtype=np.float64)
         self.lag = lag
-        self.lag_limit = _NO_LAG if lag is None else lag
-        self.position = np.zeros(2, dtype=np.int64)  # frames decoded, oldest uncommitted
-        self.into_offsets, self.into_states = into or predecessors(self.log_transition)
-        self.delta = np.full(len(self.log_start), NEG_INF)
-        self.ring = np.zeros((2 if lag is None else lag + 2, len(self.log_start)), np.int64)
+        log_start = np.ascontiguousarray(log_start, dtype=np.float64)
+        log_transition = np.ascontiguousarray(log_transition, dtype=np.float64)
+        into_offsets, into_states = into or predecessors(log_transition)
+        states = len(log_start)
+        self._state = ViterbiState(
+            log_start=log_start,
+            log_transition=log_transition,
+            into_offsets=into_offsets,
+            into_states=into_states,
+            delta=np.full(states, NEG_INF),
+            ring=np.zeros((2 if lag is None else lag + 2, states), np.int64),
+            position=np.zeros(2, dtype=np.int64),
+            lag=_NO_LAG if lag is None else lag,
+        )
 
     @property
     def frames(self) -> int:
         """Frames decoded so far."""
-        return int(self.position[0])
+        return int(self._state.position[0])
 
     @property
     def oldest(self) -> int:
         """The oldest frame not yet committed."""
-        return int(self.position[1])
+        return int(self._state.position[1])
 
-    def reserve(self, extra: int) -> None:
-        """Make room for ``extra`` more frames before ``advance`` decodes them on this
-        decoder's arrays (``push_into`` does it): with no lag limit, grow the ring so the
-        uncommitted frames never wrap."""
-        if self.lag is not None:
-            return
-        frames, oldest = self.frames, self.oldest
-        needed = frames + extra - oldest + 2
-        if needed > len(self.ring):
-            size = max(needed, 2 * len(self.ring))
-            grown = np.zeros((size, self.ring.shape[1]), np.int64)
-            for u in range(oldest, frames):
-                grown[u % size] = self.ring[u % len(self.ring)]
-            self.ring = grown
+    def reserve(self, extra: int) -> ViterbiState:
+        """Make room for ``extra`` more frames and return the arrays that ``advance``
+        decodes them on in place (with no lag limit the ring grows, so the uncommitted
+        frames never wrap); valid until the next ``reserve``."""
+        if self.lag is None:
+            frames, oldest, ring = self.frames, self.oldest, self._state.ring
+            needed = frames + extra - oldest + 2
+            if needed > len(ring):
+                size = max(needed, 2 * len(ring))
+                grown = np.zeros((size, ring.shape[1]), np.int64)
+                for u in range(oldest, frames):
+                    grown[u % size] = ring[u % len(ring)]
+                self._state = self._state._replace(ring=grown)
+        return self._state
 
     def push(self, log_emission: np.ndarray) -> np.ndarray:
         """Decode the next frames (m, N); the states committed by them, in frame order."""
@@ -370,29 +381,15 @@ class FixedLagViterbi:
 
     def most_committed(self, frames: int) -> int:
         """The most states that pushing ``frames`` more frames can commit."""
-        return frames + int(self.position[0] - self.position[1]) + 1
+        position = self._state.position
+        return frames + int(position[0] - position[1]) + 1
 
     def push_into(self, log_emission: np.ndarray, out: np.ndarray) -> int:
         """``push`` for C-contiguous float64 rows (m, N), writing the committed states into
         ``out`` (room for ``most_committed(m)``); returns how many."""
         if len(log_emission) == 0:
             return 0
-        self.reserve(len(log_emission))
-        return int(
-            advance(
-                self.log_start,
-                self.log_transition,
-                self.into_offsets,
-                self.into_states,
-                self.delta,
-                self.ring,
-                self.position,
-                self.lag_limit,
-                log_emission,
-                out,
-                0,
-            )  # fmt: skip
-        )
+        return int(advance(self.reserve(len(log_emission)), log_emission, out, 0))
 
     def finish(self) -> np.ndarray:
         """Commit every remaining frame along the best survivor."""
@@ -400,6 +397,7 @@ class FixedLagViterbi:
         if oldest >= frames:
             return np.zeros(0, dtype=np.int64)
         out = np.empty(frames - oldest, dtype=np.int64)
-        _trace(self.ring, frames - 1, int(np.argmax(self.delta)), oldest, out)
-        self.position[1] = frames
+        state = self._state
+        _trace(state.ring, frames - 1, int(np.argmax(state.delta)), oldest, out)
+        state.position[1] = frames
         return out

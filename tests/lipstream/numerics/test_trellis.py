@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.special import logsumexp
 
-from lipstream.numerics.trellis import FixedLagViterbi, forward_backward, viterbi
+from lipstream.numerics.trellis import FixedLagViterbi, advance, forward_backward, viterbi
 
 
 def _tiny_model(seed: int, states: int = 3, frames: int = 6) -> tuple[np.ndarray, ...]:
@@ -157,3 +157,26 @@ def test_fixed_lag_viterbi_on_a_sparse_chain_is_the_dense_viterbi() -> None:
     for cuts in ([], [1, 9, 30], list(range(1, 50, 3))):
         decoded = _decode(FixedLagViterbi(log_start, log_transition, None), emission, cuts)
         np.testing.assert_array_equal(decoded, full)
+
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("cuts", [[], [1, 2, 3, 4, 5, 6], [5]])
+def test_advance_on_the_reserved_state_decodes_the_best_enumerated_path(
+    seed: int, cuts: list[int]
+) -> None:
+    """Compiled callers: ``reserve`` then ``advance`` per chunk, states written at an offset."""
+    start, transition, emission = _tiny_model(seed, frames=7)
+    best_path, _ = max(_paths(start, transition, emission), key=lambda item: item[1])
+    with np.errstate(divide="ignore"):
+        log_start, log_transition = np.log(start), np.log(transition)
+    for lag, expected in ((None, best_path), (0, _greedy(start, transition, emission))):
+        decoder = FixedLagViterbi(log_start, log_transition, lag)
+        committed, count = np.full(len(emission) + 1, -1, dtype=np.int64), 0
+        bounds = [0, *cuts, len(emission)]
+        for first, stop in itertools.pairwise(bounds):
+            decoding = decoder.reserve(stop - first)
+            count += advance(decoding, emission[first:stop], committed, count)
+            assert (decoder.frames, decoding.position[0]) == (stop, stop)
+        tail = decoder.finish()
+        np.testing.assert_array_equal(np.concatenate([committed[:count], tail]), expected)
+        assert committed[len(emission)] == -1  # nothing written past the frames

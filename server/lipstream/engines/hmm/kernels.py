@@ -33,7 +33,7 @@ import numpy as np
 from numba import njit
 
 from ...numerics.banded import SOLVED, solve_block_tridiagonal_into
-from ...numerics.trellis import advance
+from ...numerics.trellis import ViterbiState, advance
 from .trajectory import assemble
 
 EPS = 1e-9
@@ -100,26 +100,16 @@ def decode(
     mood: int,
     audio_terms: np.ndarray,
     heard_from: int,
-    log_start: np.ndarray,
-    log_transition: np.ndarray,
-    into_offsets: np.ndarray,
-    into_states: np.ndarray,
-    delta: np.ndarray,
-    ring: np.ndarray,
-    position: np.ndarray,
-    lag: int,
+    decoder: ViterbiState,
     committed: np.ndarray,
     at: int,
 ) -> int:
     """``emissions`` of HMM frames first .. stop − 1 pushed through a
-    ``numerics.trellis.FixedLagViterbi`` (its arrays, after its ``reserve``); the states
-    committed go to committed[at:], and their count is returned."""
-    log_emission = np.empty((stop - first, log_start.shape[0]))
+    ``numerics.trellis.FixedLagViterbi`` (``decoder``: what its ``reserve`` returned); the
+    states committed go to committed[at:], and their count is returned."""
+    log_emission = np.empty((stop - first, decoder.log_start.shape[0]))
     emissions(spans, count, first, hmm_fps, categories, mood, audio_terms, heard_from, log_emission)
-    return advance(
-        log_start, log_transition, into_offsets, into_states, delta, ring, position, lag,
-        log_emission, committed, at,
-    )  # fmt: skip
+    return advance(decoder, log_emission, committed, at)
 
 
 @njit(cache=True)

@@ -62,6 +62,7 @@ from ...audio import Audio
 from ...errors import InvalidRequestError
 from ...features import speech_features
 from ...numerics.banded import check_block_tridiagonal
+from ...numerics.direct_call import DirectCall
 from ...numerics.trellis import FixedLagViterbi
 from ...phonemes import PHONEME_INDEX
 from ...timeline import PhonemeSpan, SpanLike, coerce_spans
@@ -172,6 +173,7 @@ class HmmSynthesizer(Synthesizer):
         self.decoder = FixedLagViterbi(
             model.log_start, model.log_transition, plan.lag, model.predecessors
         )
+        self.decode_step = DirectCall(kernels.decode)
         self.observed = 0
         self.unheard = np.zeros((0, len(model.log_start)))
         self.states = Growable(np.int64)
@@ -280,16 +282,24 @@ class HmmSynthesizer(Synthesizer):
         if target > first:
             self.request.guard.check()
             decoder, model = self.decoder, self.model
-            decoder.reserve(target - first)
+            decoding = decoder.reserve(target - first)
             out = states.reserve(decoder.most_committed(target - first))
             terms, heard_from = self._audio_terms(first, target)
-            fresh = kernels.decode(
-                self.span_rows.data, self.span_rows.count if self.reading else 0, first,
-                target, model.hmm_fps, model.categories, self.mood, terms, heard_from,
-                decoder.log_start, decoder.log_transition, decoder.into_offsets,
-                decoder.into_states, decoder.delta, decoder.ring, decoder.position,
-                decoder.lag_limit, out, states.count,
-            )  # fmt: skip
+            spans = self.span_rows
+            fresh = self.decode_step(
+                spans.data,
+                spans.count if self.reading else 0,
+                first,
+                target,
+                model.hmm_fps,
+                model.categories,
+                self.mood,
+                terms,
+                heard_from,
+                decoding,
+                out,
+                states.count,
+            )
             self.observed = target
             states.grow(fresh)
         if self.finished:

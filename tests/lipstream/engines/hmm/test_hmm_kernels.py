@@ -56,13 +56,21 @@ def test_decode_equals_emissions_pushed_through_the_decoder() -> None:
         decoder = FixedLagViterbi(log_start, log_transition, lag)
         out, count = np.zeros(200, dtype=np.int64), 0
         for first, stop in ((0, 25), (25, 60)):
-            decoder.reserve(stop - first)
+            decoding = decoder.reserve(stop - first)
             count += kernels.decode(
-                spans, len(spans), first, stop, 40.0, categories, 7, emissions[:0], 0,
-                decoder.log_start, decoder.log_transition, decoder.into_offsets,
-                decoder.into_states, decoder.delta, decoder.ring, decoder.position,
-                decoder.lag_limit, out, count,
-            )  # fmt: skip
+                spans,
+                len(spans),
+                first,
+                stop,
+                40.0,
+                categories,
+                7,
+                emissions[:0],
+                0,
+                decoding,
+                out,
+                count,
+            )
         np.testing.assert_array_equal(out[:count], expected)
         assert (decoder.frames, decoder.oldest) == (reference.frames, reference.oldest)
 
