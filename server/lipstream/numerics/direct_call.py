@@ -22,8 +22,6 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from numba.core.dispatcher import Dispatcher
-
 _checking = False
 
 
@@ -38,8 +36,8 @@ class DirectCall:
 
     __slots__ = ("kernel", "_entry", "_signature")
 
-    def __init__(self, kernel: Dispatcher) -> None:
-        self.kernel = kernel
+    def __init__(self, kernel: Any) -> None:
+        self.kernel: Any = kernel  # a numba Dispatcher; its stubs lack overloads' entry points
         self._entry: Callable[..., Any] | None = None
         self._signature: tuple[Any, ...] = ()
 
