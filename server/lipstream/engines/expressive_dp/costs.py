@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -84,31 +85,37 @@ def direct_smoothing(leaving: np.ndarray, a: int, arriving: np.ndarray, p: int) 
     return float(total * (interior + 1))
 
 
+class TableOne(NamedTuple):
+    """What Table I's TC reads, over the N nodes: ``pre`` (N,), ``viseme`` (N,), first and
+    last positions and velocities (N, K), the blend's halves ``leaving`` and ``arriving``
+    (N, SHAPE_POINTS − 2, K) (``nodes.NodeFeatures``) and ``packed`` (``Weights.packed``).
+    Built once per search space (``search.SearchSpace.table_one``)."""
+
+    pre: np.ndarray
+    viseme: np.ndarray
+    first_position: np.ndarray
+    last_position: np.ndarray
+    first_velocity: np.ndarray
+    last_velocity: np.ndarray
+    leaving: np.ndarray
+    arriving: np.ndarray
+    packed: np.ndarray
+
+
 @njit(cache=True, fastmath=False)
-def transition_cost(
-    a: int,
-    b: int,
-    pre: np.ndarray,
-    viseme: np.ndarray,
-    first_position: np.ndarray,
-    last_position: np.ndarray,
-    first_velocity: np.ndarray,
-    last_velocity: np.ndarray,
-    leaving: np.ndarray,
-    arriving: np.ndarray,
-    packed: np.ndarray,
-) -> float:
+def transition_cost(a: int, b: int, table: TableOne) -> float:
     """TC(a, b) by Table I."""
-    p = pre[b]
+    p = table.pre[b]
     if p == a:
         return 0.0
+    packed = table.packed
     if p < 0:
         return float(packed[0])
-    cost = packed[2] * gap(first_position, b, last_position, a)
-    cost += gap(first_velocity, b, last_velocity, a)
-    if viseme[a] != viseme[p]:
+    cost = packed[2] * gap(table.first_position, b, table.last_position, a)
+    cost += gap(table.first_velocity, b, table.last_velocity, a)
+    if table.viseme[a] != table.viseme[p]:
         cost += packed[3]
-    return float(cost + packed[1] * direct_smoothing(leaving, a, arriving, p))
+    return float(cost + packed[1] * direct_smoothing(table.leaving, a, table.arriving, p))
 
 
 def unary_costs(

@@ -46,6 +46,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -93,6 +94,55 @@ class JoinRecords:
             [features.first_velocity[:, order], features.first_position, predecessor.reshape(n, -1)]
         )
         return cls(np.ascontiguousarray(leaving), np.ascontiguousarray(arriving), order)
+
+
+class Joins(NamedTuple):
+    """What pricing a join TC(a, b) reads, over the N nodes: ``pre`` (N,) each node's
+    captured predecessor (−1: none), ``viseme`` (N,) its viseme, ``leaving`` and
+    ``arriving`` (``JoinRecords``' rows), ``natural`` (K,) the records' column of each
+    velocity coordinate, ``packed`` the weights (``costs.Weights.packed``). Built once per
+    search space (``search.SearchSpace.joins``)."""
+
+    pre: np.ndarray
+    viseme: np.ndarray
+    leaving: np.ndarray
+    arriving: np.ndarray
+    natural: np.ndarray
+    packed: np.ndarray
+
+
+class Layer(NamedTuple):
+    """A layer's ``nodes`` (k,) and their ``costs`` (k,): φ, ascending, for a layer searched;
+    U for the candidates of the next one."""
+
+    nodes: np.ndarray
+    costs: np.ndarray
+
+
+class Ranked(NamedTuple):
+    """A layer of a fixed-lag window's search (``lag_step``), in ascending φ: ``nodes``,
+    ``costs`` (φ), ``back`` (each one's best predecessor's position in the layer before),
+    ``sure`` (it won by the margin), ``kind`` (``PRICED``, ``NATURAL``, ``UNCAPTURED``),
+    ``terms`` (k, 4) the best pair's cost terms (see ``_scan``) and ``root`` (each one's
+    node in the window's first layer). The first layer's ``back``, ``sure``, ``kind`` and
+    ``terms`` are empty."""
+
+    nodes: np.ndarray
+    costs: np.ndarray
+    back: np.ndarray
+    sure: np.ndarray
+    kind: np.ndarray
+    terms: np.ndarray
+    root: np.ndarray
+
+
+class Best(NamedTuple):
+    """A scan's best so far: its ``cost``, its position ``arg`` in the layer before, and the
+    least other cost seen (``second``)."""
+
+    cost: float
+    arg: int
+    second: float
 
 
 @njit(cache=True)
@@ -178,19 +228,28 @@ def _margin(best: float) -> float:
 
 @njit(cache=True, inline="always")
 def _scan(
-    members: np.ndarray, start: int, stop: int, penalty: float, best: float, arg: int,
-    second: float, terms: np.ndarray, b: int, p: int, prev_nodes: np.ndarray,
-    prev_f: np.ndarray, viseme: np.ndarray, leaving: np.ndarray, arriving: np.ndarray,
-    dims: int, packed: np.ndarray,
-) -> tuple[float, int, float]:  # fmt: skip
-    """One viseme group (``members[start:stop]``, ascending φ), every pair adding
-    ``penalty``, priced up to a bar of the best + ``_margin``: the same pairs replace the
-    best, in the same order, as with the bar at the best, and ``second`` (the least other
-    cost seen) is exact below the bar, so the best wins by the margin iff ``second`` ≥ the
-    bar at the end. The best pair's terms of the cost, (α3·PGap, VGap, PNT or 0, α2·DSC),
-    go to ``terms``."""
-    bar = best + _margin(best)
-    for k in range(start, stop):
+    previous: Layer | Ranked,
+    joins: Joins,
+    members: np.ndarray,
+    group: tuple[int, int],
+    penalty: float,
+    b: int,
+    p: int,
+    best: Best,
+    terms: np.ndarray,
+) -> Best:
+    """One viseme group of ``previous`` (``members[group[0]:group[1]]``, ascending φ), every
+    pair into b (p = pre(b)) adding ``penalty``, priced up to a bar of the best +
+    ``_margin``: the same pairs replace the best, in the same order, as with the bar at the
+    best, and ``second`` (the least other cost seen) is exact below the bar, so the best
+    wins by the margin iff ``second`` ≥ the bar at the end. The best pair's terms of the
+    cost, (α3·PGap, VGap, PNT or 0, α2·DSC), go to ``terms``."""
+    prev_nodes, prev_f = previous.nodes, previous.costs
+    viseme, leaving, arriving, packed = joins.viseme, joins.leaving, joins.arriving, joins.packed
+    dims = joins.natural.shape[0]
+    cost_best, arg, second = best.cost, best.arg, best.second
+    bar = cost_best + _margin(cost_best)
+    for k in range(group[0], group[1]):
         i = members[k]
         floor = prev_f[i] + penalty
         if floor >= bar:
@@ -213,64 +272,74 @@ def _scan(
             continue
         smooth = packed[1] * _dsc(leaving, a, arriving, b, dims)
         cost += smooth
-        if cost < best:
-            second = min(second, best)
-            best = cost
+        if cost < cost_best:
+            second = min(second, cost_best)
+            cost_best = cost
             arg = i
-            bar = best + _margin(best)
+            bar = cost_best + _margin(cost_best)
             terms[0] = gaps
             terms[1] = speed
             terms[2] = packed[3] if penalised else 0.0
             terms[3] = smooth
         elif cost < second:
             second = cost
-    return best, arg, second
+    return Best(cost_best, arg, second)
+
+
+@njit(cache=True, inline="always")
+def _scan_all(
+    previous: Layer | Ranked,
+    joins: Joins,
+    members: np.ndarray,
+    starts: np.ndarray,
+    b: int,
+    p: int,
+    best: Best,
+    terms: np.ndarray,
+) -> Best:
+    """``_scan`` over the group of p's viseme first, then every other group (with PNT)."""
+    own = joins.viseme[p]
+    classes = len(starts) - 1
+    if own < classes:
+        best = _scan(
+            previous, joins, members, (starts[own], starts[own + 1]), 0.0, b, p, best, terms
+        )
+    penalty = joins.packed[3]
+    for v in range(classes):
+        if v != own and starts[v + 1] > starts[v]:
+            group = (starts[v], starts[v + 1])
+            best = _scan(previous, joins, members, group, penalty, b, p, best, terms)
+    return best
 
 
 @njit(cache=True)
 def fast_step(
-    prev_nodes: np.ndarray, prev_f: np.ndarray, next_nodes: np.ndarray, next_u: np.ndarray,
-    pre: np.ndarray, viseme: np.ndarray, leaving: np.ndarray, arriving: np.ndarray,
-    dims: int, packed: np.ndarray, position: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
-    """``next_nodes`` in ascending φ, their φ, and the position of each one's best
-    predecessor in ``prev_nodes`` (``prev_f`` ascending); ``leaving`` and ``arriving`` are
-    ``JoinRecords``' rows, ``dims`` the motion basis's size; ``position`` (N) is scratch,
-    all -1, and left so."""
+    previous: Layer, candidates: Layer, joins: Joins, position: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``candidates``' nodes in ascending φ, their φ, and the position of each one's best
+    predecessor in ``previous`` (φ ascending); ``position`` (N) is scratch, all -1, and
+    left so."""
+    prev_nodes, prev_f = previous.nodes, previous.costs
+    next_nodes, next_u = candidates.nodes, candidates.costs
     for i in range(len(prev_nodes)):
         position[prev_nodes[i]] = i
-    members, starts = _groups(prev_nodes, viseme)
-    classes = len(starts) - 1
+    members, starts = _groups(prev_nodes, joins.viseme)
     f = np.empty(len(next_nodes))
     back = np.empty(len(next_nodes), dtype=np.int64)
     terms = np.empty(4)  # the best pair's terms, which this step does not keep
     for j in range(len(next_nodes)):
         b = next_nodes[j]
-        p = pre[b]
+        p = joins.pre[b]
         if p < 0:
-            f[j] = prev_f[0] + packed[0] + next_u[j]
+            f[j] = prev_f[0] + joins.packed[0] + next_u[j]
             back[j] = 0
             continue
-        best = np.inf
-        arg = 0
-        second = np.inf
+        best = Best(np.inf, 0, np.inf)
         if position[p] >= 0:
-            best = prev_f[position[p]]
-            arg = position[p]
-        own = viseme[p]
-        if own < classes:
-            best, arg, second = _scan(
-                members, starts[own], starts[own + 1], 0.0, best, arg, second, terms, b, p,
-                prev_nodes, prev_f, viseme, leaving, arriving, dims, packed,
-            )  # fmt: skip
-        for v in range(classes):
-            if v != own and starts[v + 1] > starts[v]:
-                best, arg, second = _scan(
-                    members, starts[v], starts[v + 1], packed[3], best, arg, second, terms, b,
-                    p, prev_nodes, prev_f, viseme, leaving, arriving, dims, packed,
-                )  # fmt: skip
-        f[j] = best + next_u[j]
-        back[j] = arg
+            best = Best(prev_f[position[p]], position[p], np.inf)
+        best = _scan_all(previous, joins, members, starts, b, p, best, terms)
+        f[j] = best.cost + next_u[j]
+        back[j] = best.arg
     for i in range(len(prev_nodes)):
         position[prev_nodes[i]] = -1
     order = np.argsort(f, kind="mergesort")
@@ -281,24 +350,22 @@ ENTRY_VELOCITY = 4
 """Leading velocity coordinates (descending variance) an entry table holds per candidate."""
 
 
-def entry_table(
-    nodes: np.ndarray, unary: np.ndarray, pre: np.ndarray, viseme: np.ndarray,
-    records: JoinRecords,
-) -> np.ndarray:  # fmt: skip
-    """Per candidate of a layer (``nodes``, their U in ``unary``), what ``best_entry`` reads
-    for every one of them, contiguous, in ascending U (then position): [U, its position in
-    ``nodes``, pre(b), viseme of pre(b) (−1 without one), the first ``ENTRY_VELOCITY``
-    coordinates of its first velocity in ``records``' order]."""
+def entry_table(candidates: Layer, joins: Joins) -> np.ndarray:
+    """Per candidate of a layer (their U in ``costs``), what ``best_entry`` reads for every
+    one of them, contiguous, in ascending U (then position): [U, its position in
+    ``candidates.nodes``, pre(b), viseme of pre(b) (−1 without one), the first
+    ``ENTRY_VELOCITY`` coordinates of its first velocity in ``JoinRecords``' order]."""
+    nodes, unary = candidates
     order = np.argsort(unary, kind="stable")
     chosen = nodes[order]
-    before = pre[chosen]
-    kept = min(ENTRY_VELOCITY, records.dims)
+    before = joins.pre[chosen]
+    kept = min(ENTRY_VELOCITY, len(joins.natural))
     table = np.empty((len(nodes), 4 + kept))
     table[:, 0] = unary[order]
     table[:, 1] = order
     table[:, 2] = before
-    table[:, 3] = np.where(before >= 0, viseme[np.maximum(before, 0)], -1)
-    table[:, 4:] = records.arriving[chosen, :kept]
+    table[:, 3] = np.where(before >= 0, joins.viseme[np.maximum(before, 0)], -1)
+    table[:, 4:] = joins.arriving[chosen, :kept]
     table.setflags(write=False)
     return table
 
@@ -326,13 +393,12 @@ def _entry_floor(
 
 
 @njit(cache=True, inline="always")
-def _exact_tc(
-    a: int, b: int, p: int, viseme: np.ndarray, leaving: np.ndarray, arriving: np.ndarray,
-    natural: np.ndarray, dims: int, packed: np.ndarray,
-) -> float:  # fmt: skip
+def _exact_tc(a: int, b: int, p: int, joins: Joins) -> float:
     """``costs.transition_cost(a, b)`` for p = pre(b) ≥ 0, p ≠ a, from ``JoinRecords``' rows:
     every sum in ``transition_cost``'s order (velocity coordinates read at ``natural``, the
     records' column of each coordinate), so the same value to the last bit."""
+    leaving, arriving, natural, packed = joins.leaving, joins.arriving, joins.natural, joins.packed
+    dims = natural.shape[0]
     position = 0.0
     for k in range(dims):
         difference = arriving[b, dims + k] - leaving[a, dims + k]
@@ -343,16 +409,15 @@ def _exact_tc(
         velocity += difference * difference
     cost = packed[2] * math.sqrt(position)
     cost += math.sqrt(velocity)
-    if viseme[a] != viseme[p]:
+    if joins.viseme[a] != joins.viseme[p]:
         cost += packed[3]
     return float(cost + packed[1] * _dsc(leaving, a, arriving, b, dims))
 
 
 @njit(cache=True)
 def best_entry(
-    a: int, nodes: np.ndarray, table: np.ndarray, viseme: np.ndarray, leaving: np.ndarray,
-    arriving: np.ndarray, natural: np.ndarray, packed: np.ndarray,
-) -> tuple[int, float, float]:  # fmt: skip
+    a: int, nodes: np.ndarray, table: np.ndarray, joins: Joins
+) -> tuple[int, float, float]:
     """The position j in ``nodes`` (``table`` = their ``entry_table``) of the least
     (0 + TC(a, b)) + U(b), b = nodes[j], the lowest j among equal costs, that cost and its
     TC: the exact step from the one node ``a`` (``search._exact_kernel``) and its argmin.
@@ -362,7 +427,8 @@ def best_entry(
     b = suc(a), has floor U(b) and its cost); the second stops at the first U above the
     best (TC ≥ 0), drops a pair whose floor exceeds the best (with ``SLACK``, as in
     ``_scan``) and prices the rest exactly (``_exact_tc``)."""
-    own = viseme[a]
+    leaving, packed = joins.leaving, joins.packed
+    own = joins.viseme[a]
     seed = 0
     lowest = np.inf
     for row in range(len(table)):
@@ -391,7 +457,7 @@ def best_entry(
         else:
             if _entry_floor(table, row, a, own, leaving, packed) > best + SLACK * (abs(best) + 1.0):
                 continue
-            tc = _exact_tc(a, nodes[j], p, viseme, leaving, arriving, natural, len(natural), packed)
+            tc = _exact_tc(a, nodes[j], p, joins)
         cost = (0.0 + tc) + u
         if cost < best or (cost == best and j < arg):
             best = cost
@@ -401,73 +467,69 @@ def best_entry(
 
 
 @njit(cache=True)
-def entry_costs(
-    a: int, nodes: np.ndarray, unary: np.ndarray, pre: np.ndarray, viseme: np.ndarray,
-    leaving: np.ndarray, arriving: np.ndarray, natural: np.ndarray, packed: np.ndarray,
-) -> np.ndarray:  # fmt: skip
-    """(0 + TC(a, b)) + U(b) for every b of ``nodes`` (their U in ``unary``): the exact step
-    from the one node ``a`` (``search._exact_kernel``) to the last bit, each pair read from
-    two ``JoinRecords`` rows instead of six arrays."""
+def entry_costs(a: int, candidates: Layer, joins: Joins) -> np.ndarray:
+    """(0 + TC(a, b)) + U(b) for every b of ``candidates`` (their U in ``costs``): the exact
+    step from the one node ``a`` (``search._exact_kernel``) to the last bit, each pair read
+    from two ``JoinRecords`` rows instead of six arrays."""
+    nodes, unary = candidates.nodes, candidates.costs
     f = np.empty(len(nodes))
     for j in range(len(nodes)):
         b = nodes[j]
-        p = pre[b]
+        p = joins.pre[b]
         if p == a:
             tc = 0.0
         elif p < 0:
-            tc = packed[0]
+            tc = joins.packed[0]
         else:
-            tc = _exact_tc(a, b, p, viseme, leaving, arriving, natural, len(natural), packed)
+            tc = _exact_tc(a, b, p, joins)
         f[j] = (0.0 + tc) + unary[j]
     return f
 
 
 @njit(cache=True, inline="always")
 def _given(
-    b: int, root: int, position: np.ndarray, old_position: np.ndarray, old_back: np.ndarray,
-    old_sure: np.ndarray, old_kind: np.ndarray, old_prev_nodes: np.ndarray,
-    old_prev_root: np.ndarray,
-) -> tuple[int, int]:  # fmt: skip
-    """Node b's best predecessor in the last window (its position now, and its row there)
-    when it won by the margin and descends from ``root``; else (−1, −1)."""
+    b: int, root: int, position: np.ndarray, old_position: np.ndarray, known: Ranked, then: Ranked
+) -> tuple[int, int]:
+    """Node b's best predecessor in the last window (its position now, and its row in
+    ``known``) when it won by the margin and descends from ``root``; else (−1, −1)."""
     o = old_position[b]
-    if o < 0 or not old_sure[o] or old_kind[o] == UNCAPTURED:
+    if o < 0 or not known.sure[o] or known.kind[o] == UNCAPTURED:
         return -1, -1
-    if old_prev_root[old_back[o]] != root:
+    if then.root[known.back[o]] != root:
         return -1, -1
-    return position[old_prev_nodes[old_back[o]]], o
+    return position[then.nodes[known.back[o]]], o
 
 
 @njit(cache=True)
 def lag_step(
-    prev_nodes: np.ndarray, prev_f: np.ndarray, prev_root: np.ndarray, next_nodes: np.ndarray,
-    next_u: np.ndarray, pre: np.ndarray, viseme: np.ndarray, leaving: np.ndarray,
-    arriving: np.ndarray, dims: int, packed: np.ndarray, position: np.ndarray,
-    old_position: np.ndarray, old_nodes: np.ndarray, old_back: np.ndarray,
-    old_sure: np.ndarray, old_kind: np.ndarray, old_terms: np.ndarray,
-    old_prev_nodes: np.ndarray, old_prev_root: np.ndarray, root: int,
-) -> tuple[
-    np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int
-]:  # fmt: skip
+    previous: Ranked,
+    candidates: Layer,
+    joins: Joins,
+    known: Ranked,
+    then: Ranked,
+    root: int,
+    position: np.ndarray,
+    old_position: np.ndarray,
+) -> tuple[Ranked, int]:
     """``fast_step`` (the same nodes, φ, order and predecessors, bit for bit), taking some
-    best predecessors from the last window's step into the same layer (``old_*``, in its
-    ascending φ; empty when there is none) instead of scanning: next_nodes[j]'s, when there
-    it won by the margin (``old_sure``) and descended from ``root``, the node that window
-    committed (``old_prev_root``: each predecessor's node in that window's first layer). The
-    layer before must hold the nodes it held there. A given pair's cost is summed from its
-    terms in ``_scan``'s order, so it is the value the scan computes.
+    best predecessors from the last window's step into the same layer (``known``, in its
+    ascending φ; empty when there is none) instead of scanning: a candidate's, when there
+    it won by the margin (``known.sure``) and descended from ``root``, the node that window
+    committed (through ``then``, that window's layer before ``known``, whose ``root`` is
+    each node's node in that window's first layer). The layer before (``previous``) must
+    hold the nodes it held there. A given pair's cost is summed from its terms in
+    ``_scan``'s order, so it is the value the scan computes.
 
-    ``prev_root``: each of ``prev_nodes``' node in this window's first layer. ``position``
-    and ``old_position`` (N) are scratch, all −1, and left so. Returns, in ascending φ:
-    nodes, φ, predecessor positions, sure (a scanned node's best predecessor won by the
-    margin; a given one keeps the flag), kinds (``PRICED``, ``NATURAL``, ``UNCAPTURED``),
-    the best pair's cost terms (see ``_scan``) and roots; and the nodes scanned."""
+    ``position`` and ``old_position`` (N) are scratch, all −1, and left so. Returns the
+    layer ranked (a scanned node is ``sure`` when its best predecessor won by the margin;
+    a given one keeps the flag) and the number of nodes scanned."""
+    prev_nodes, prev_f = previous.nodes, previous.costs
+    next_nodes, next_u = candidates.nodes, candidates.costs
     for i in range(len(prev_nodes)):
         position[prev_nodes[i]] = i
-    for i in range(len(old_nodes)):
-        old_position[old_nodes[i]] = i
-    members, starts = _groups(prev_nodes, viseme)
-    classes = len(starts) - 1
+    for i in range(len(known.nodes)):
+        old_position[known.nodes[i]] = i
+    members, starts = _groups(prev_nodes, joins.viseme)
     n = len(next_nodes)
     f = np.empty(n)
     back = np.empty(n, dtype=np.int64)
@@ -477,64 +539,53 @@ def lag_step(
     scanned = 0
     for j in range(n):
         b = next_nodes[j]
-        p = pre[b]
+        p = joins.pre[b]
         if p < 0:
-            f[j] = prev_f[0] + packed[0] + next_u[j]
+            f[j] = prev_f[0] + joins.packed[0] + next_u[j]
             back[j] = 0
             kind[j] = UNCAPTURED
             continue
-        i, o = _given(
-            b, root, position, old_position, old_back, old_sure, old_kind, old_prev_nodes,
-            old_prev_root,
-        )  # fmt: skip
+        i, o = _given(b, root, position, old_position, known, then)
         if i >= 0:
-            if old_kind[o] == NATURAL:
-                best = prev_f[i]
+            old_terms = known.terms
+            if known.kind[o] == NATURAL:
+                cost = prev_f[i]
             else:
-                best = prev_f[i] + old_terms[o, 0] + old_terms[o, 1]
+                cost = prev_f[i] + old_terms[o, 0] + old_terms[o, 1]
                 if old_terms[o, 2] != 0.0:
-                    best += old_terms[o, 2]
-                best += old_terms[o, 3]
-            f[j] = best + next_u[j]
+                    cost += old_terms[o, 2]
+                cost += old_terms[o, 3]
+            f[j] = cost + next_u[j]
             back[j] = i
-            kind[j] = old_kind[o]
+            kind[j] = known.kind[o]
             for k in range(4):
                 terms[j, k] = old_terms[o, k]
             continue
         scanned += 1
-        best = np.inf
-        arg = 0
-        second = np.inf
+        best = Best(np.inf, 0, np.inf)
         if position[p] >= 0:
-            best = prev_f[position[p]]
-            arg = position[p]
+            best = Best(prev_f[position[p]], position[p], np.inf)
             kind[j] = NATURAL
-        own = viseme[p]
-        row = terms[j]
-        start = arg
-        if own < classes:
-            best, arg, second = _scan(
-                members, starts[own], starts[own + 1], 0.0, best, arg, second, row, b, p,
-                prev_nodes, prev_f, viseme, leaving, arriving, dims, packed,
-            )  # fmt: skip
-        for v in range(classes):
-            if v != own and starts[v + 1] > starts[v]:
-                best, arg, second = _scan(
-                    members, starts[v], starts[v + 1], packed[3], best, arg, second, row, b,
-                    p, prev_nodes, prev_f, viseme, leaving, arriving, dims, packed,
-                )  # fmt: skip
-        if kind[j] == NATURAL and arg != start:
+        start = best.arg
+        best = _scan_all(previous, joins, members, starts, b, p, best, terms[j])
+        if kind[j] == NATURAL and best.arg != start:
             kind[j] = PRICED
-        f[j] = best + next_u[j]
-        back[j] = arg
-        sure[j] = second >= best + _margin(best)
+        f[j] = best.cost + next_u[j]
+        back[j] = best.arg
+        sure[j] = best.second >= best.cost + _margin(best.cost)
     for i in range(len(prev_nodes)):
         position[prev_nodes[i]] = -1
-    for i in range(len(old_nodes)):
-        old_position[old_nodes[i]] = -1
+    for i in range(len(known.nodes)):
+        old_position[known.nodes[i]] = -1
     order = np.argsort(f, kind="mergesort")
     ordered_back = back[order]
-    return (
-        next_nodes[order], f[order], ordered_back, sure[order], kind[order], terms[order],
-        prev_root[ordered_back], scanned,
-    )  # fmt: skip
+    ranked = Ranked(
+        next_nodes[order],
+        f[order],
+        ordered_back,
+        sure[order],
+        kind[order],
+        terms[order],
+        previous.root[ordered_back],
+    )
+    return ranked, scanned

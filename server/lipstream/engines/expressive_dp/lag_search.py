@@ -41,25 +41,16 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .fast_step import entry_costs, lag_step
+from .fast_step import Ranked
 from .search import LayerSpec, SearchResult, SearchSpace, _candidates
 
 
 class PassLayer(NamedTuple):
-    """One layer of a window's search: ``candidates`` as ``search._candidates`` gives them
-    (node order); in ascending φ: ``nodes``, ``f`` (φ), ``back`` (each one's best
-    predecessor's position in the layer before), ``sure``, ``kind`` and ``terms``
-    (``fast_step.lag_step``; the three and ``back`` empty in the first layer), ``root``
-    (each one's node in the first layer)."""
+    """One layer of a window's search: its ``candidates`` (node order, as
+    ``search._candidates`` gives them) and the layer ``ranked`` (``fast_step.Ranked``)."""
 
     candidates: np.ndarray
-    nodes: np.ndarray
-    f: np.ndarray
-    back: np.ndarray
-    sure: np.ndarray
-    kind: np.ndarray
-    terms: np.ndarray
-    root: np.ndarray
+    ranked: Ranked
 
 
 class LagMemory:
@@ -83,65 +74,56 @@ class LagMemory:
         more, none silent), the spans from index ``start`` on: the same path; the nodes
         priced are those whose way in was searched."""
         old = self.layers if self.start == start - 1 and before >= 0 else []
-        scratch = _scratch(self.size)
-        nodes, unary = _candidates(space, layers, excluded, 0, before >= 0, True, 0)
-        f = unary
+        position, old_position = _scratch(self.size)
+        calls, joins = space.calls, space.joins
+        candidates = _candidates(space, layers, excluded, 0, before >= 0, True, 0)
+        f = candidates.costs
         if before >= 0:
-            records = space.records
-            f = entry_costs(
-                before, nodes, unary, space.nodes.pre, space.features.viseme,
-                records.leaving, records.arriving, records.natural, space.packed,
-            )  # fmt: skip
+            f = calls.entry_costs(before, candidates, joins)
         order = np.argsort(f, kind="stable")
-        first = nodes[order]
+        first = candidates.nodes[order]
         empty = _EMPTY  # the first layer's nodes have no predecessor in the window
-        passed = [
-            PassLayer(
-                nodes, first, f[order], empty.back, empty.sure, empty.kind, empty.terms, first
-            )
-        ]
-        count = len(nodes)
-        priced = count
+        ranked = Ranked(first, f[order], empty.back, empty.sure, empty.kind, empty.terms, first)
+        passed = [PassLayer(candidates.nodes, ranked)]
+        priced = len(first)
         aligned = True
         for index in range(1, len(layers)):
             if guard is not None:
                 guard.check()  # type: ignore[attr-defined]
             previous = passed[-1]
-            candidates, unary = _candidates(space, layers, excluded, index, True, True, 0)
+            candidates = _candidates(space, layers, excluded, index, True, True, 0)
             # the bound φ' ≥ φ − φ(c') holds when every layer before held the same nodes
             aligned = (
                 aligned and index < len(old) and _same(old[index].candidates, previous.candidates)
             )
             known, then = (
-                (old[index + 1], old[index])
+                (old[index + 1].ranked, old[index].ranked)
                 if aligned and index + 1 < len(old)
                 else (_EMPTY, _EMPTY)
             )
-            *made, scanned = lag_step(
-                previous.nodes, previous.f, previous.root, candidates, unary, space.nodes.pre,
-                space.features.viseme, space.records.leaving, space.records.arriving,
-                space.records.dims, space.packed, *scratch, known.nodes, known.back,
-                known.sure, known.kind, known.terms, then.nodes, then.root, before,
-            )  # fmt: skip
-            passed.append(PassLayer(candidates, *made))
+            ranked, scanned = calls.lag_step(
+                previous.ranked, candidates, joins, known, then, before, position, old_position
+            )
+            passed.append(PassLayer(candidates.nodes, ranked))
             priced += scanned
         self.start, self.layers = start, passed
-        position = int(np.argmin(passed[-1].f))
-        cost = float(passed[-1].f[position])
+        last = passed[-1].ranked
+        position_in_layer = int(np.argmin(last.costs))
+        cost = float(last.costs[position_in_layer])
         path = np.empty(len(layers), dtype=np.int64)
         for index in range(len(layers) - 1, 0, -1):
-            path[index] = passed[index].nodes[position]
-            position = int(passed[index].back[position])
-        path[0] = first[position]
+            path[index] = passed[index].ranked.nodes[position_in_layer]
+            position_in_layer = int(passed[index].ranked.back[position_in_layer])
+        path[0] = first[position_in_layer]
         return SearchResult(path, cost, priced)
 
 
-def _empty_layer() -> PassLayer:
+def _empty_layer() -> Ranked:
     none = np.zeros(0, dtype=np.int64)
-    return PassLayer(
-        none, none, np.zeros(0), none, np.zeros(0, dtype=bool), np.zeros(0, dtype=np.int8),
-        np.zeros((0, 4)), none,
-    )  # fmt: skip
+    no_terms = np.zeros((0, 4))
+    return Ranked(
+        none, np.zeros(0), none, np.zeros(0, dtype=bool), np.zeros(0, dtype=np.int8), no_terms, none
+    )
 
 
 _EMPTY = _empty_layer()

@@ -58,13 +58,24 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 from ...errors import InvalidRequestError
-from .costs import NodeBounds, transition_cost, unary_costs
-from .fast_step import JoinRecords, best_entry, entry_costs, entry_table, fast_step
+from ...numerics.direct_call import DirectCall
+from .costs import NodeBounds, TableOne, transition_cost, unary_costs
+from .fast_step import (
+    JoinRecords,
+    Joins,
+    Layer,
+    best_entry,
+    entry_costs,
+    entry_table,
+    fast_step,
+    lag_step,
+)
 from .nodes import SILENCE_INDEX, NodeDatabase, NodeFeatures
 
 INF = np.inf
@@ -83,6 +94,16 @@ class LayerSpec:
     @property
     def silent(self) -> bool:
         return self.phoneme == SILENCE_INDEX
+
+
+class SpaceCalls(NamedTuple):
+    """A search space's compiled steps, each called through a ``DirectCall`` of its own:
+    the arguments a space hands them keep one type per step."""
+
+    best_entry: DirectCall
+    entry_costs: DirectCall
+    fast_step: DirectCall
+    lag_step: DirectCall
 
 
 @dataclass(frozen=True)
@@ -118,6 +139,40 @@ class SearchSpace:
         """Each node's join features in one row per side, for the fast step (at first use)."""
         return JoinRecords.of(self.nodes, self.features)
 
+    @cached_property
+    def calls(self) -> SpaceCalls:
+        return SpaceCalls(
+            DirectCall(best_entry),
+            DirectCall(entry_costs),
+            DirectCall(fast_step),
+            DirectCall(lag_step),
+        )
+
+    @cached_property
+    def joins(self) -> Joins:
+        """What the fast step prices a join from (at first use)."""
+        records = self.records
+        viseme = self.features.viseme
+        return Joins(
+            self.nodes.pre, viseme, records.leaving, records.arriving, records.natural, self.packed
+        )
+
+    @cached_property
+    def table_one(self) -> TableOne:
+        """What Table I's TC reads, for the exact search and ``tc``."""
+        f = self.features
+        return TableOne(
+            self.nodes.pre,
+            f.viseme,
+            f.first_position,
+            f.last_position,
+            f.first_velocity,
+            f.last_velocity,
+            f.leaving,
+            f.arriving,
+            self.packed,
+        )
+
     def observation(self, layer: LayerSpec) -> np.ndarray:
         """OC + EMP of every node for ``layer`` (read-only)."""
         key = (layer.phoneme, layer.emotion)
@@ -145,13 +200,7 @@ class SearchSpace:
         return float(self.observation(layer)[node])
 
     def tc(self, a: int, b: int) -> float:
-        f = self.features
-        return float(
-            transition_cost(
-                a, b, self.nodes.pre, f.viseme, f.first_position, f.last_position,
-                f.first_velocity, f.last_velocity, f.leaving, f.arriving, self.packed,
-            )
-        )  # fmt: skip
+        return float(transition_cost(a, b, self.table_one))
 
 
 @dataclass(frozen=True)
@@ -164,10 +213,10 @@ class SearchResult:
 
 @njit(cache=True)
 def _exact_kernel(
-    prev_nodes: np.ndarray, prev_f: np.ndarray, next_nodes: np.ndarray, next_u: np.ndarray,
-    pre: np.ndarray, viseme: np.ndarray, fp: np.ndarray, lp: np.ndarray, fv: np.ndarray,
-    lv: np.ndarray, leaving: np.ndarray, arriving: np.ndarray, packed: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    previous: Layer, candidates: Layer, table: TableOne
+) -> tuple[np.ndarray, np.ndarray]:
+    prev_nodes, prev_f = previous.nodes, previous.costs
+    next_nodes, next_u = candidates.nodes, candidates.costs
     f = np.empty(len(next_nodes))
     back = np.empty(len(next_nodes), dtype=np.int64)
     for j in range(len(next_nodes)):
@@ -175,9 +224,7 @@ def _exact_kernel(
         best = np.inf
         arg = 0
         for i in range(len(prev_nodes)):
-            cost = prev_f[i] + transition_cost(
-                prev_nodes[i], b, pre, viseme, fp, lp, fv, lv, leaving, arriving, packed
-            )
+            cost = prev_f[i] + transition_cost(prev_nodes[i], b, table)
             if cost < best:
                 best = cost
                 arg = i
@@ -187,57 +234,34 @@ def _exact_kernel(
 
 
 def _exact_step(
-    space: SearchSpace,
-    prev_nodes: np.ndarray,
-    prev_f: np.ndarray,
-    next_nodes: np.ndarray,
-    next_u: np.ndarray,
+    space: SearchSpace, previous: Layer, candidates: Layer
 ) -> tuple[np.ndarray, np.ndarray]:
-    f = space.features
-    return _exact_kernel(
-        prev_nodes, prev_f, next_nodes, next_u, space.nodes.pre, f.viseme, f.first_position,
-        f.last_position, f.first_velocity, f.last_velocity, f.leaving, f.arriving, space.packed,
-    )  # fmt: skip
-
-
-def _fast_step(
-    space: SearchSpace,
-    prev_nodes: np.ndarray,
-    prev_f: np.ndarray,
-    next_nodes: np.ndarray,
-    next_u: np.ndarray,
-    position: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    records = space.records
-    return fast_step(
-        prev_nodes, prev_f, next_nodes, next_u, space.nodes.pre, space.features.viseme,
-        records.leaving, records.arriving, records.dims, space.packed, position,
-    )  # fmt: skip
+    return _exact_kernel(previous, candidates, space.table_one)  # type: ignore[no-any-return]
 
 
 def _best_entry(
-    space: SearchSpace, before: int, nodes: np.ndarray, unary: np.ndarray,
-    table: np.ndarray | None = None,
-) -> tuple[int, float, float]:  # fmt: skip
-    records = space.records
+    space: SearchSpace, before: int, candidates: Layer, table: np.ndarray | None = None
+) -> tuple[int, float, float]:
     if table is None:
-        table = entry_table(nodes, unary, space.nodes.pre, space.features.viseme, records)
-    return best_entry(
-        before, nodes, table, space.features.viseme, records.leaving, records.arriving,
-        records.natural, space.packed,
-    )  # fmt: skip
+        table = entry_table(candidates, space.joins)
+    return space.calls.best_entry(before, candidates.nodes, table, space.joins)  # type: ignore[no-any-return]
 
 
 def _candidates(
-    space: SearchSpace, layers: Sequence[LayerSpec], excluded: np.ndarray, index: int,
-    has_before: bool, fast: bool, offset: int,
-) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    space: SearchSpace,
+    layers: Sequence[LayerSpec],
+    excluded: np.ndarray,
+    index: int,
+    has_before: bool,
+    fast: bool,
+    offset: int,
+) -> Layer:
     layer = layers[index]
     sides = (index > 0 or has_before, index + 1 < len(layers))
     if fast and layer.constrained < 0:
         kept, threshold, kept_unary = _survivors(space, layer, *sides)
         if excluded is space.no_exclusion or not excluded.any():
-            return kept, kept_unary
+            return Layer(kept, kept_unary)
         if not excluded[threshold]:  # the threshold stands: drop only contaminated survivors
             return _read_only(kept[~excluded[kept]], space.observation(layer))
     unary = space.unary(layer, excluded)
@@ -277,13 +301,13 @@ def _survivors(
     return kept
 
 
-def _read_only(nodes: np.ndarray, unary: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _read_only(nodes: np.ndarray, unary: np.ndarray) -> Layer:
     """A layer's nodes and their U (of ``unary``, every node's), frozen: cached layers are
     shared, and the kernels are compiled for one kind of array."""
     kept_unary = unary[nodes]
     nodes.setflags(write=False)
     kept_unary.setflags(write=False)
-    return nodes, kept_unary
+    return Layer(nodes, kept_unary)
 
 
 def search(
@@ -315,7 +339,8 @@ def one_layer(
 ) -> tuple[int, int, float]:
     """``search`` over the one non-silent ``layer`` (fast): its node, the nodes priced, and
     TC(``before``, node) (0 without ``before``), without the segment bookkeeping."""
-    nodes, unary = _candidates(space, (layer,), excluded, 0, before >= 0, True, 0)
+    candidates = _candidates(space, (layer,), excluded, 0, before >= 0, True, 0)
+    nodes, unary = candidates
     if before < 0:
         return int(nodes[int(np.argmin(unary))]), len(nodes), 0.0
     key = (layer.phoneme, layer.emotion, True, False)
@@ -323,10 +348,10 @@ def one_layer(
     shared = survivors is not None and nodes is survivors[0]  # not narrowed by contamination
     table = space.entries.get(key) if shared else None
     if table is None:
-        table = entry_table(nodes, unary, space.nodes.pre, space.features.viseme, space.records)
+        table = entry_table(candidates, space.joins)
         if shared:
             space.entries[key] = table
-    position, _, tc = _best_entry(space, before, nodes, unary, table)
+    position, _, tc = _best_entry(space, before, candidates, table)
     return int(nodes[position]), len(nodes), tc
 
 
@@ -354,19 +379,16 @@ def _segment(
     """Viterbi over ``layers`` (none silent; the first is layer ``offset`` of the search)."""
     backs: list[np.ndarray] = []
     members: list[np.ndarray] = []
-    nodes, f = _candidates(space, layers, excluded, 0, before >= 0, fast, offset)
+    first = _candidates(space, layers, excluded, 0, before >= 0, fast, offset)
+    nodes, f = first
     if fast and before >= 0 and len(layers) == 1:
-        position, cost, _ = _best_entry(space, before, nodes, f)
+        position, cost, _ = _best_entry(space, before, first)
         return SearchResult(nodes[position : position + 1], cost, len(nodes))
     if before >= 0 and fast:
-        records = space.records
-        f = entry_costs(
-            before, nodes, f, space.nodes.pre, space.features.viseme, records.leaving,
-            records.arriving, records.natural, space.packed,
-        )  # fmt: skip
+        f = space.calls.entry_costs(before, first, space.joins)
     elif before >= 0:
-        start = np.array([before], dtype=np.int64)
-        f, _ = _exact_step(space, start, np.zeros(1), nodes, f)
+        start = Layer(np.array([before], dtype=np.int64), np.zeros(1))
+        f, _ = _exact_step(space, start, first)
     priced = len(nodes)
     if fast:
         order = np.argsort(f, kind="stable")
@@ -376,12 +398,15 @@ def _segment(
     for index in range(1, len(layers)):
         if guard is not None:
             guard.check()  # type: ignore[attr-defined]
-        next_nodes, next_u = _candidates(space, layers, excluded, index, True, fast, offset)
+        candidates = _candidates(space, layers, excluded, index, True, fast, offset)
+        next_nodes = candidates.nodes
         priced += len(next_nodes)
         if fast:
-            next_nodes, f, back = _fast_step(space, nodes, f, next_nodes, next_u, scratch)
+            next_nodes, f, back = space.calls.fast_step(
+                Layer(nodes, f), candidates, space.joins, scratch
+            )
         else:
-            f, back = _exact_step(space, nodes, f, next_nodes, next_u)
+            f, back = _exact_step(space, Layer(nodes, f), candidates)
         backs.append(back)
         members.append(next_nodes)
         nodes = next_nodes

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from lipstream.engines.base import Model
 from lipstream.engines.expressive_dp import ExpressiveDpModel
 from lipstream.engines.expressive_dp.contamination import Contamination
-from lipstream.engines.expressive_dp.fast_step import SURE, lag_step
+from lipstream.engines.expressive_dp.fast_step import SURE, Layer, Ranked, lag_step
 from lipstream.engines.expressive_dp.lag_search import LagMemory
 from lipstream.engines.expressive_dp.search import LayerSpec, SearchSpace, search
 from lipstream.engines.expressive_dp.synthesizer import extend_path
@@ -199,23 +199,29 @@ def test_a_best_predecessor_is_sure_only_when_it_wins_by_the_margin(gap: float) 
     order = np.argsort(prev_f, kind="stable")
     prev_nodes, prev_f = np.array([a1, a2])[order], prev_f[order]
     roots = np.full(2, 7)
-    records = space.records
     scratch = (np.full(n, -1, dtype=np.int64), np.full(n, -1, dtype=np.int64))
     none = np.zeros(0, dtype=np.int64)
-    empty = (none, none, np.zeros(0, dtype=bool), np.zeros(0, dtype=np.int8), np.zeros((0, 4)))
+    empty = Ranked(
+        none,
+        np.zeros(0),
+        none,
+        np.zeros(0, dtype=bool),
+        np.zeros(0, dtype=np.int8),
+        np.zeros((0, 4)),
+        none,
+    )
+    previous = Ranked(prev_nodes, prev_f, none, empty.sure, empty.kind, empty.terms, roots)
+    candidates = Layer(np.array([b]), np.zeros(1))
 
-    def step(*old: np.ndarray) -> tuple[Any, ...]:
-        return lag_step(  # type: ignore[no-any-return]
-            prev_nodes, prev_f, roots, np.array([b]), np.zeros(1), pre,
-            space.features.viseme, records.leaving, records.arriving, records.dims,
-            space.packed, *scratch, *old, 7,
-        )  # fmt: skip
+    def step(known: Ranked, then: Ranked) -> tuple[Ranked, int]:
+        return lag_step(previous, candidates, space.joins, known, then, 7, *scratch)  # type: ignore[no-any-return]
 
-    nodes, f, back, sure, kind, terms, root, scanned = step(*empty, none, none)
+    made, scanned = step(empty, empty)
+    nodes, f, back, sure, kind, terms, root = made
     assert scanned == 1 and root[0] == 7
     assert prev_nodes[back[0]] == (a1 if gap > 0 or order[0] == 0 else a2)
     assert bool(sure[0]) == (gap > SURE)
-    again = step(nodes, back, sure, kind, terms, prev_nodes, roots)
-    assert again[-1] == (0 if gap > SURE else 1)
-    assert again[1].tobytes() == f.tobytes()
-    assert again[2].tolist() == back.tolist()
+    again, rescanned = step(made, previous)
+    assert rescanned == (0 if gap > SURE else 1)
+    assert again.costs.tobytes() == f.tobytes()
+    assert again.back.tolist() == back.tolist()

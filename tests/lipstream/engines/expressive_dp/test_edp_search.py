@@ -10,10 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from lipstream.engines.expressive_dp.fast_step import Layer, fast_step
 from lipstream.engines.expressive_dp.search import (
     NO_NODE,
     LayerSpec,
-    _fast_step,
     one_layer,
     search,
 )
@@ -145,7 +145,7 @@ def test_the_fast_step_finds_every_nodes_best_predecessor(seed: int, dims: int) 
     unary = np.zeros(n)
     for frozen in (nodes, unary):  # as the search hands layers over (one compiled kernel)
         frozen.setflags(write=False)
-    order, found, back = _fast_step(space, prev, prev_f, nodes, unary, scratch)
+    order, found, back = fast_step(Layer(prev, prev_f), Layer(nodes, unary), space.joins, scratch)
     assert sorted(order.tolist()) == nodes.tolist() and (scratch == -1).all()
     assert list(found) == sorted(found)
     for node, cost, a in zip(order, found, back):
