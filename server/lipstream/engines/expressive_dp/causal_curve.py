@@ -14,6 +14,7 @@ request's length.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -23,6 +24,15 @@ from ..damped import pull_toward
 _STARTED = 1e-9
 START, END, OMEGA = 0, 1, 2
 """Columns of a span row."""
+
+
+class NodeCurves(NamedTuple):
+    """What the raw curve reads of a model: the nodes' ``frames`` (F, K) and ``offsets``
+    (N + 1,) (``nodes.NodeDatabase``) and the ``rest`` pose (K,). Built once per model."""
+
+    frames: np.ndarray
+    offsets: np.ndarray
+    rest: np.ndarray
 
 
 @njit(cache=True)
@@ -41,17 +51,17 @@ def _begun(rows: np.ndarray, count: int, at: float) -> int:
 
 @njit(cache=True)
 def _raw_row(
-    at: float, k: int, rows: np.ndarray, nodes: np.ndarray, frames: np.ndarray,
-    offsets: np.ndarray, rest: np.ndarray, out: np.ndarray,
-) -> None:  # fmt: skip
+    at: float, k: int, rows: np.ndarray, nodes: np.ndarray, curves: NodeCurves, out: np.ndarray
+) -> None:
     """r(at) into ``out``, span k being the latest begun by ``at``."""
+    frames, offsets = curves.frames, curves.offsets
     node = nodes[k]
     if node < 0:
         held = nodes[k - 1] if k > 0 else -1
         if held >= 0:
             out[:] = frames[offsets[held + 1] - 1]
         else:
-            out[:] = rest
+            out[:] = curves.rest
         return
     first = offsets[node]
     last = offsets[node + 1] - 1
@@ -68,32 +78,45 @@ def _raw_row(
 
 @njit(cache=True)
 def raw_rows(
-    at: np.ndarray, rows: np.ndarray, nodes: np.ndarray, frames: np.ndarray,
-    offsets: np.ndarray, rest: np.ndarray, raw: np.ndarray, begun: np.ndarray,
-) -> None:  # fmt: skip
+    at: np.ndarray,
+    rows: np.ndarray,
+    nodes: np.ndarray,
+    curves: NodeCurves,
+    raw: np.ndarray,
+    begun: np.ndarray,
+) -> None:
     """r at each of ``at`` into ``raw``, and the latest span begun at each into ``begun``."""
     for index in range(len(at)):
         k = _begun(rows, len(nodes), at[index])
         begun[index] = k
-        _raw_row(at[index], k, rows, nodes, frames, offsets, rest, raw[index])
+        _raw_row(at[index], k, rows, nodes, curves, raw[index])
 
 
 @njit(cache=True)
 def follow_raw(
-    first: int, stop: int, fps: float, shift: float, rows: np.ndarray, nodes: np.ndarray,
-    frames: np.ndarray, offsets: np.ndarray, rest: np.ndarray, x: np.ndarray, v: np.ndarray,
-    t: float, at_rest: bool, out: np.ndarray,
-) -> None:  # fmt: skip
+    first: int,
+    stop: int,
+    fps: float,
+    shift: float,
+    rows: np.ndarray,
+    nodes: np.ndarray,
+    curves: NodeCurves,
+    x: np.ndarray,
+    v: np.ndarray,
+    t: float,
+    at_rest: bool,
+    out: np.ndarray,
+) -> None:
     """The filter's values at frames ``first`` .. ``stop`` − 1 (time i / fps) into ``out``,
     following r(t + ``shift``) from its value ``x`` and velocity ``v`` at time ``t`` (both
     updated); ``at_rest``: frame ``first`` starts the request, resting on its raw row."""
-    raw = np.empty(frames.shape[1])
+    raw = np.empty(curves.frames.shape[1])
     previous = t
     for row in range(stop - first):
         time = (first + row) / fps
         at = time + shift
         k = _begun(rows, len(nodes), at)
-        _raw_row(at, k, rows, nodes, frames, offsets, rest, raw)
+        _raw_row(at, k, rows, nodes, curves, raw)
         if row == 0 and at_rest:
             x[:] = raw
             v[:] = 0.0

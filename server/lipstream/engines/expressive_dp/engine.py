@@ -117,9 +117,12 @@ class ExpressiveDpEngine(Engine):
         features = NodeFeatures.of(nodes)
         pnt = unit_penalty(features)
         renderer = Renderer(
-            nodes, np.zeros(basis.n_components), float(part.fps), self.smoothing_half,
+            nodes,
+            np.zeros(basis.n_components),
+            float(part.fps),
+            self.smoothing_half,
             self.smoothness,
-        )  # fmt: skip
+        )
 
         def score(alphas: np.ndarray) -> float:
             packed = Weights(alphas, pnt).packed()

@@ -47,6 +47,7 @@ from ..base import (
 )
 from ..damped_fit import KAPPA_RANGE
 from ..durations import DurationModel
+from .causal_curve import NodeCurves
 from .contamination import Contamination
 from .costs import ALPHA_NAMES, NodeBounds, Weights
 from .isomap import PhonemeMaps
@@ -95,6 +96,7 @@ class ExpressiveDpModel(Model):
         bounds = NodeBounds.of(self.nodes, self.features, packed)
         self.space = SearchSpace(self.nodes, self.features, bounds, packed)
         self.rest_pose = self.stored["rest_pose"]
+        self.curves = NodeCurves(self.nodes.frames, self.nodes.offsets, self.rest_pose)
         self.lag = int(hyper["lag"])
         self.renderer = Renderer(
             self.nodes,
@@ -239,12 +241,16 @@ class ExpressiveDpModel(Model):
         )
         fields.integer(
             fields.member(hyper, "smoothing_half", "hyperparameters.smoothing_half"),
-            "hyperparameters.smoothing_half", 1, 32,
-        )  # fmt: skip
+            "hyperparameters.smoothing_half",
+            1,
+            32,
+        )
         fields.number(
             fields.member(hyper, "smoothness", "hyperparameters.smoothness"),
-            "hyperparameters.smoothness", 0.0, 1e6,
-        )  # fmt: skip
+            "hyperparameters.smoothness",
+            0.0,
+            1e6,
+        )
         fields.number(fields.member(extra, "pnt", "extra.pnt"), "extra.pnt", 0.0, 1e9, above=True)
         reader = ArrayReader(arrays, str(path / ARRAYS_NAME))
         n_channels = len(manifest.channels)

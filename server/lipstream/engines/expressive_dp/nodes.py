@@ -36,9 +36,15 @@ SILENCE_INDEX = PHONEME_INDEX[SILENCE]
 EMOTION_INDEX = {name: index for index, name in enumerate(EMOTIONS)}
 VISEME_OF_PHONEME = np.array([DENG15.index_of(phoneme) for phoneme in PHONEMES], dtype=np.int64)
 STORED = (
-    "node_phoneme", "node_emotion", "node_previous", "node_next", "node_pre", "node_suc",
-    "node_offsets", "node_frames",
-)  # fmt: skip
+    "node_phoneme",
+    "node_emotion",
+    "node_previous",
+    "node_next",
+    "node_pre",
+    "node_suc",
+    "node_offsets",
+    "node_frames",
+)
 
 
 @dataclass(frozen=True)
@@ -77,9 +83,15 @@ class NodeDatabase:
 
     def arrays(self) -> dict[str, np.ndarray]:
         values = (
-            self.phoneme, self.emotion, self.previous, self.next, self.pre, self.suc,
-            self.offsets, self.frames,
-        )  # fmt: skip
+            self.phoneme,
+            self.emotion,
+            self.previous,
+            self.next,
+            self.pre,
+            self.suc,
+            self.offsets,
+            self.frames,
+        )
         return dict(zip(STORED, values))
 
     @classmethod

@@ -50,8 +50,12 @@ from ...timeline import PhonemeSpan
 from .nodes import NodeDatabase
 
 VISIBILITY = {"P": 2.0, "B": 2.0, "M": 2.0, "F": 2.0, "V": 2.0, "W": 2.0} | {
-    "K": 0.5, "G": 0.5, "CH": 0.5, "NG": 0.5, "R": 0.5,
-}  # fmt: skip
+    "K": 0.5,
+    "G": 0.5,
+    "CH": 0.5,
+    "NG": 0.5,
+    "R": 0.5,
+}
 CURVATURE = np.array([1.0, -2.0, 1.0])
 _EPS = 1e-9
 _end = attrgetter("end")
@@ -100,9 +104,15 @@ class Renderer:
         if span.phoneme != SILENCE:
             nodes = self.nodes
             return warped_points(
-                nodes.frames, nodes.offsets, int(path[k]), low, high, self.rate, span.start,
+                nodes.frames,
+                nodes.offsets,
+                int(path[k]),
+                low,
+                high,
+                self.rate,
+                span.start,
                 span.end,
-            )  # fmt: skip
+            )
         return self._silence(spans, path, k, np.arange(low, high) / self.rate)
 
     def _silence(
@@ -142,9 +152,14 @@ class Renderer:
         return base
 
     def _kept_join(
-        self, spans: Sequence[PhonemeSpan], path: Sequence[int], k: int, left: np.ndarray,
-        right: np.ndarray, kept: RenderCache | None,
-    ) -> np.ndarray:  # fmt: skip
+        self,
+        spans: Sequence[PhonemeSpan],
+        path: Sequence[int],
+        k: int,
+        left: np.ndarray,
+        right: np.ndarray,
+        kept: RenderCache | None,
+    ) -> np.ndarray:
         """``_join`` of spans k and k + 1, read from or left in ``kept``: both spans' points
         read it, with the same ``left`` and ``right``."""
         if kept is None:
@@ -308,9 +323,15 @@ def _normal_factor(weights: tuple[float, ...], smoothness: float) -> np.ndarray 
 
 @njit(cache=True)
 def warped_points(
-    frames: np.ndarray, offsets: np.ndarray, node: int, low: int, high: int, rate: float,
-    start: float, end: float,
-) -> np.ndarray:  # fmt: skip
+    frames: np.ndarray,
+    offsets: np.ndarray,
+    node: int,
+    low: int,
+    high: int,
+    rate: float,
+    start: float,
+    end: float,
+) -> np.ndarray:
     """``nodes.warp_node`` of ``node``'s frames at the grid points low .. high − 1 (times
     g / ``rate``) of a span [``start``, ``end``), (high − low, K): the same operations on
     each element as the array expression, in one compiled loop."""

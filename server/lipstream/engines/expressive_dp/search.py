@@ -236,7 +236,7 @@ def _exact_kernel(
 def _exact_step(
     space: SearchSpace, previous: Layer, candidates: Layer
 ) -> tuple[np.ndarray, np.ndarray]:
-    return _exact_kernel(previous, candidates, space.table_one)  # type: ignore[no-any-return]
+    return _exact_kernel(previous, candidates, space.table_one)
 
 
 def _best_entry(

@@ -50,6 +50,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ...errors import InvalidRequestError
+from ...numerics.direct_call import DirectCall
 from ...phonemes import PHONEME_INDEX, SILENCE
 from ...timeline import PhonemeSpan
 from ..base import (
@@ -126,9 +127,15 @@ class PathSynthesizer(RenderingSynthesizer):
         decided = len(self.path)
         layers = [self.layer(k) for k in range(decided, len(self.spans))]
         priced, cost = extend_path(
-            self.model.space, layers, self.excluded, self.lag, self.path, self.finished,
-            self.request.guard, self.memory,
-        )  # fmt: skip
+            self.model.space,
+            layers,
+            self.excluded,
+            self.lag,
+            self.path,
+            self.finished,
+            self.request.guard,
+            self.memory,
+        )
         self.stats["candidates"] += priced
         self.stats["path_cost"] += cost
         # appended, not rebuilt: rebuilding the whole path each call grew with the request
@@ -197,6 +204,7 @@ class CausalSynthesizer(PathSynthesizer, ShiftedSynthesizer):
         self.omegas = model.causal_omegas
         self.rows = Growable(np.float64, (3,))
         self.nodes = Growable(np.int64)
+        self.follow = DirectCall(follow_raw)
 
     def _emit(self, stop: int) -> np.ndarray:
         if stop <= self.emitted:
@@ -208,12 +216,21 @@ class CausalSynthesizer(PathSynthesizer, ShiftedSynthesizer):
         if self.state is None:
             self.state = DampedState.at_rest(self.model.rest_pose)
         values = np.empty((stop - self.emitted, len(self.state.x)))
-        nodes = self.model.nodes
-        follow_raw(
-            self.emitted, stop, self.request.fps, self.shift_s, self.rows.view(),
-            self.nodes.view(), nodes.frames, nodes.offsets, self.model.rest_pose, self.state.x,
-            self.state.v, self.state.t, at_rest, values,
-        )  # fmt: skip
+        state = self.state
+        self.follow(
+            self.emitted,
+            stop,
+            self.request.fps,
+            self.shift_s,
+            self.rows.view(),
+            self.nodes.view(),
+            self.model.curves,
+            state.x,
+            state.v,
+            state.t,
+            at_rest,
+            values,
+        )
         self.state.t = (stop - 1) / self.request.fps
         self.emitted = stop
         self.stats["frames"] = stop
@@ -275,9 +292,8 @@ def extend_path(
 
 
 def _keep_rows(
-    omegas: np.ndarray, spans: list[PhonemeSpan], path: list[int], rows: Growable,
-    nodes: Growable,
-) -> None:  # fmt: skip
+    omegas: np.ndarray, spans: list[PhonemeSpan], path: list[int], rows: Growable, nodes: Growable
+) -> None:
     """Append the rows (start, end, ω of its phoneme in ``omegas``) and nodes of the
     committed spans not yet kept. A silence merged into a kept one changes only its end,
     which a silence's row never reads."""
@@ -295,10 +311,8 @@ def raw_curve(
     _keep_rows(model.causal_omegas, spans, path, rows, nodes)
     raw = np.empty((len(at), model.nodes.frames.shape[1]))
     begun = np.empty(len(at), dtype=np.int64)
-    raw_rows(
-        np.ascontiguousarray(at, dtype=np.float64), rows.view(), nodes.view(),
-        model.nodes.frames, model.nodes.offsets, model.rest_pose, raw, begun,
-    )  # fmt: skip
+    times = np.ascontiguousarray(at, dtype=np.float64)
+    raw_rows(times, rows.view(), nodes.view(), model.curves, raw, begun)
     return raw, begun
 
 
