@@ -175,9 +175,16 @@ def e_step(parameters: HmmParameters, sequences: Sequence[np.ndarray]) -> Statis
     log_density = parameters.gaussians().log_density(data)
     log_start = parameters.log_start()
     stats = Statistics(
-        0.0, 0.0, len(data), np.zeros(n), np.zeros((n, n)), np.zeros(n), np.zeros(0),
-        np.zeros(0), [],
-    )  # fmt: skip
+        0.0,
+        0.0,
+        len(data),
+        np.zeros(n),
+        np.zeros((n, n)),
+        np.zeros(n),
+        np.zeros(0),
+        np.zeros(0),
+        [],
+    )
     offset = 0
     for sequence in sequences:
         rows = log_density[offset : offset + len(sequence)]

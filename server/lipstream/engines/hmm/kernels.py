@@ -34,7 +34,7 @@ from numba import njit
 
 from ...numerics.banded import SOLVED, solve_block_tridiagonal_into
 from ...numerics.trellis import ViterbiState, advance
-from .trajectory import assemble
+from .trajectory import Blocks, assemble
 
 EPS = 1e-9
 """Tolerance of the frame-time comparisons (``synthesizer``)."""
@@ -139,21 +139,13 @@ def solve_block(
     start: int,
     stop: int,
     end: int,
-    pose_precision: np.ndarray,
-    pose_rhs: np.ndarray,
-    g_current: np.ndarray,
-    g_previous: np.ndarray,
-    g_cross: np.ndarray,
-    r_current: np.ndarray,
-    r_previous: np.ndarray,
+    blocks: Blocks,
 ) -> int:
     """curve[start .. stop − 1] from Eq. 6 over frames first .. end − 1 with frames
     first .. start − 1 pinned to the curve, as ``trajectory.solve``; returns the solve's
     code (``numerics.banded.solve_block_tridiagonal_into``)."""
-    diagonal, below, rhs = assemble(
-        frame_states(states, committed, ratio, first, end), curve[first:start],
-        pose_precision, pose_rhs, g_current, g_previous, g_cross, r_current, r_previous,
-    )  # fmt: skip
+    solved_states = frame_states(states, committed, ratio, first, end)
+    diagonal, below, rhs = assemble(solved_states, curve[first:start], blocks)
     solution = np.empty(rhs.shape)
     code = solve_block_tridiagonal_into(diagonal, below, rhs, solution)
     if code == SOLVED:

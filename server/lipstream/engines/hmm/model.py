@@ -248,15 +248,25 @@ class HmmModel(Model):
         fields = FieldReader(str(path / MANIFEST_NAME))
         hyper = fields.mapping(manifest.hyperparameters, "hyperparameters")
         extra = fields.mapping(manifest.extra, "extra")
-        fields.number(fields.member(hyper, "audio_weight", "hyperparameters.audio_weight"),
-                      "hyperparameters.audio_weight", 0.0, 100.0)  # fmt: skip
+        fields.number(
+            fields.member(hyper, "audio_weight", "hyperparameters.audio_weight"),
+            "hyperparameters.audio_weight",
+            0.0,
+            100.0,
+        )
         for name in ("lag_ms", "window_ms"):
-            fields.number(fields.member(hyper, name, f"hyperparameters.{name}"),
-                          f"hyperparameters.{name}", 0.0, MAX_OPTION_MS)  # fmt: skip
-        fields.number(fields.member(extra, "hmm_fps", "extra.hmm_fps"), "extra.hmm_fps",
-                      1.0, 1000.0)  # fmt: skip
-        has_audio = fields.flag(fields.member(extra, "has_audio", "extra.has_audio"),
-                                "extra.has_audio")  # fmt: skip
+            fields.number(
+                fields.member(hyper, name, f"hyperparameters.{name}"),
+                f"hyperparameters.{name}",
+                0.0,
+                MAX_OPTION_MS,
+            )
+        fields.number(
+            fields.member(extra, "hmm_fps", "extra.hmm_fps"), "extra.hmm_fps", 1.0, 1000.0
+        )
+        has_audio = fields.flag(
+            fields.member(extra, "has_audio", "extra.has_audio"), "extra.has_audio"
+        )
         mfcc = fields.mapping(fields.member(extra, "mfcc", "extra.mfcc"), "extra.mfcc")
         for name in MFCC_FIELDS:
             value = fields.member(mfcc, name, f"extra.mfcc.{name}")

@@ -174,6 +174,7 @@ class HmmSynthesizer(Synthesizer):
             model.log_start, model.log_transition, plan.lag, model.predecessors
         )
         self.decode_step = DirectCall(kernels.decode)
+        self.solve_step = DirectCall(kernels.solve_block)
         self.observed = 0
         self.unheard = np.zeros((0, len(model.log_start)))
         self.states = Growable(np.int64)
@@ -347,7 +348,7 @@ class HmmSynthesizer(Synthesizer):
             self.request.guard.check()
             terms, curve = self.dynamics, self.curve
             check_block_tridiagonal(
-                kernels.solve_block(
+                self.solve_step(
                     self.states.data,
                     self.states.count,
                     self.ratio,
@@ -356,14 +357,8 @@ class HmmSynthesizer(Synthesizer):
                     start,
                     stop,
                     end,
-                    terms.pose_precision,
-                    terms.pose_rhs,
-                    terms.g_current,
-                    terms.g_previous,
-                    terms.g_cross,
-                    terms.r_current,
-                    terms.r_previous,
-                )  # fmt: skip
+                    terms.blocks,
+                )
             )
             curve.grow(stop - start)
 
@@ -371,9 +366,17 @@ class HmmSynthesizer(Synthesizer):
         """Frames start .. stop − 1 a frame at a time (``trajectory.recurse``)."""
         terms = self.stepwise_dynamics
         kernels.recurse(
-            self.states.data, self.states.count, self.ratio, self.curve.reserve(stop - start),
-            start, stop, terms.current_inverse, terms.g_cross, terms.r_current, terms.pose_mean,
-        )  # fmt: skip
+            self.states.data,
+            self.states.count,
+            self.ratio,
+            self.curve.reserve(stop - start),
+            start,
+            stop,
+            terms.current_inverse,
+            terms.g_cross,
+            terms.r_current,
+            terms.pose_mean,
+        )
         self.curve.grow(stop - start)
 
     # -- output -----------------------------------------------------------------------------

@@ -38,6 +38,8 @@ continuous across the join; those frames carry no state term.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -45,6 +47,20 @@ from numba import njit
 from ...numerics.banded import solve_spd_block_tridiagonal
 
 PIN_PRECISION = 1e8
+
+
+class Blocks(NamedTuple):
+    """The per-state terms Eq. 6's blocks are assembled from (``assemble``), D = pose
+    dimensions: Π (N, D, D), Π μ (N, D), G_cur, G_prev, G_cross (N, D, D), r_cur, r_prev
+    (N, D)."""
+
+    pose_precision: np.ndarray
+    pose_rhs: np.ndarray
+    g_current: np.ndarray
+    g_previous: np.ndarray
+    g_cross: np.ndarray
+    r_current: np.ndarray
+    r_previous: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -64,6 +80,19 @@ class Dynamics:
     @property
     def dim(self) -> int:
         return int(self.pose_rhs.shape[1])
+
+    @cached_property
+    def blocks(self) -> Blocks:
+        """The terms ``assemble`` reads, as one group."""
+        return Blocks(
+            self.pose_precision,
+            self.pose_rhs,
+            self.g_current,
+            self.g_previous,
+            self.g_cross,
+            self.r_current,
+            self.r_previous,
+        )
 
 
 def dynamics(
@@ -138,7 +167,7 @@ def recurse(terms: Dynamics, states: np.ndarray, previous: np.ndarray | None) ->
             terms.g_cross,
             terms.r_current,
             terms.pose_mean,
-        )  # fmt: skip
+        )
     )
 
 
@@ -147,28 +176,20 @@ def solve(terms: Dynamics, states: np.ndarray, pins: np.ndarray | None = None) -
     frames (their states are ignored)."""
     dim = terms.dim
     held = np.zeros((0, dim)) if pins is None else np.asarray(pins, dtype=np.float64)
-    diagonal, below, rhs = assemble(
-        np.asarray(states, dtype=np.int64), held, terms.pose_precision, terms.pose_rhs,
-        terms.g_current, terms.g_previous, terms.g_cross, terms.r_current, terms.r_previous,
-    )  # fmt: skip
+    diagonal, below, rhs = assemble(np.asarray(states, dtype=np.int64), held, terms.blocks)
     return solve_spd_block_tridiagonal(diagonal, below, rhs)
 
 
 @njit(cache=True)
 def assemble(
-    states: np.ndarray,
-    pins: np.ndarray,
-    pose_precision: np.ndarray,
-    pose_rhs: np.ndarray,
-    g_current: np.ndarray,
-    g_previous: np.ndarray,
-    g_cross: np.ndarray,
-    r_current: np.ndarray,
-    r_previous: np.ndarray,
+    states: np.ndarray, pins: np.ndarray, blocks: Blocks
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The blocks of Eq. 6 (module docstring): frame t ≥ 1 adds its state's terms to the
     blocks (t, t), (t − 1, t − 1) and (t, t − 1); pinned frames (or frame 0's pose marginal)
     instead hold their pose. Compiled; ``kernels.solve_block`` calls it too."""
+    pose_precision, pose_rhs = blocks.pose_precision, blocks.pose_rhs
+    g_current, g_previous, g_cross = blocks.g_current, blocks.g_previous, blocks.g_cross
+    r_current, r_previous = blocks.r_current, blocks.r_previous
     frames, dim, n_pins = states.shape[0], pose_rhs.shape[1], pins.shape[0]
     diagonal = np.zeros((frames, dim, dim))
     below = np.zeros((max(frames - 1, 0), dim, dim))

@@ -92,11 +92,7 @@ def test_a_solved_block_is_the_trajectory_solve_of_its_frames_with_the_pins() ->
     ratio = 40.0 / 60.0
     curve = np.zeros((40, DIM))
     curve[:6] = rng.normal(size=(6, DIM))
-    code = kernels.solve_block(
-        states, len(states), ratio, curve, 4, 6, 14, 20,
-        terms.pose_precision, terms.pose_rhs, terms.g_current, terms.g_previous,
-        terms.g_cross, terms.r_current, terms.r_previous,
-    )  # fmt: skip
+    code = kernels.solve_block(states, len(states), ratio, curve, 4, 6, 14, 20, terms.blocks)
     assert code == -1
     frame_states = states[np.minimum(np.floor(np.arange(4, 20) * ratio + EPS).astype(int), 29)]
     expected = trajectory.solve(terms, frame_states, curve[4:6])
