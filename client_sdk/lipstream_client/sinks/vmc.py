@@ -46,14 +46,15 @@ def frame_messages(names: Sequence[str], time_s: float, row: Sequence[float]) ->
         _message(TIME_ADDRESS, (float(time_s), "f")),
     ]
     messages += [
-        _message(VALUE_ADDRESS, (name, "s"), (float(value), "f"))
-        for name, value in zip(names, row)
+        _message(VALUE_ADDRESS, (name, "s"), (float(value), "f")) for name, value in zip(names, row)
     ]
     messages.append(_message(APPLY_ADDRESS))
     return messages
 
 
-def bundle_datagrams(messages: Sequence[OscMessage], max_datagram: int = MAX_DATAGRAM) -> list[bytes]:
+def bundle_datagrams(
+    messages: Sequence[OscMessage], max_datagram: int = MAX_DATAGRAM
+) -> list[bytes]:
     """``messages`` in order, packed into as few bundles of at most ``max_datagram`` bytes as
     they fit (a message larger than that alone goes in a bundle of its own)."""
     datagrams: list[bytes] = []
@@ -90,7 +91,9 @@ class VmcSink:
         self.names = tuple(channels)
 
     def send(self, index: int, time_s: float, row: Sequence[float]) -> None:
-        for datagram in bundle_datagrams(frame_messages(self.names, time_s, row), self.max_datagram):
+        for datagram in bundle_datagrams(
+            frame_messages(self.names, time_s, row), self.max_datagram
+        ):
             self.sender.send(datagram)
 
     def delivery(self) -> Delivery:

@@ -1,4 +1,4 @@
-"""Live Link Face packets, read back by a decoder written here from the published layout
+"""Live Link Face packets, read back by a decoder written from the published layout
 (PyLiveLinkFace's, which was written from the app's own packets), and compared byte for
 byte with a packet PyLiveLinkFace's own encoder made (data/README.md)."""
 
@@ -8,7 +8,6 @@ import socket
 import struct
 from datetime import datetime
 from pathlib import Path
-from typing import NamedTuple
 
 import pytest
 
@@ -22,52 +21,9 @@ from lipstream_client.sinks.livelink import (
     frame_rate,
     frames_since_midnight,
 )
+from tests.lipstream_client.sinks.livelink_decoder import APP_CURVES, app_slot, decode
 
 GOLDEN = Path(__file__).parent / "data" / "pylivelinkface-0.1-packet.bin"
-# PyLiveLinkFace's FaceBlendShape enum (and Unreal's EARFaceBlendShape): the packet's slots.
-APP_CURVES = (
-    "EyeBlinkLeft EyeLookDownLeft EyeLookInLeft EyeLookOutLeft EyeLookUpLeft EyeSquintLeft "
-    "EyeWideLeft EyeBlinkRight EyeLookDownRight EyeLookInRight EyeLookOutRight EyeLookUpRight "
-    "EyeSquintRight EyeWideRight JawForward JawLeft JawRight JawOpen MouthClose MouthFunnel "
-    "MouthPucker MouthLeft MouthRight MouthSmileLeft MouthSmileRight MouthFrownLeft "
-    "MouthFrownRight MouthDimpleLeft MouthDimpleRight MouthStretchLeft MouthStretchRight "
-    "MouthRollLower MouthRollUpper MouthShrugLower MouthShrugUpper MouthPressLeft "
-    "MouthPressRight MouthLowerDownLeft MouthLowerDownRight MouthUpperUpLeft MouthUpperUpRight "
-    "BrowDownLeft BrowDownRight BrowInnerUp BrowOuterUpLeft BrowOuterUpRight CheekPuff "
-    "CheekSquintLeft CheekSquintRight NoseSneerLeft NoseSneerRight TongueOut HeadYaw HeadPitch "
-    "HeadRoll LeftEyeYaw LeftEyePitch LeftEyeRoll RightEyeYaw RightEyePitch RightEyeRoll"
-).split()
-
-
-class Packet(NamedTuple):
-    version: int
-    device_id: str
-    subject: str
-    frame_number: int
-    sub_frame: float
-    fps: int
-    denominator: int
-    count: int
-    curves: tuple[float, ...]
-
-
-def decode(data: bytes) -> Packet:
-    """The published layout: uint32 LE version, '$' + 36-char UUID, BE int32 name length and
-    name, BE int32 frame, float32 sub-frame, int32 fps and denominator, uint8 count, floats."""
-    (version,) = struct.unpack_from("<I", data, 0)
-    device_id = data[4:41].decode("ascii")
-    (name_length,) = struct.unpack_from(">i", data, 41)
-    subject = data[45 : 45 + name_length].decode("utf-8")
-    at = 45 + name_length
-    frame, sub_frame, fps, denominator, count = struct.unpack_from(">ifiiB", data, at)
-    at += 17
-    assert len(data) == at + 4 * count, "the packet ends after its curves"
-    curves = struct.unpack_from(f">{count}f", data, at)
-    return Packet(version, device_id, subject, frame, sub_frame, fps, denominator, count, curves)
-
-
-def app_slot(channel: str) -> int:
-    return APP_CURVES.index(channel[:1].upper() + channel[1:])
 
 
 def test_the_encoder_makes_pylivelinkface_s_packet_byte_for_byte() -> None:
@@ -76,7 +32,9 @@ def test_the_encoder_makes_pylivelinkface_s_packet_byte_for_byte() -> None:
     assert read.version == 6 and read.count == 61 and read.subject == "lipstream"
     assert read.device_id == "$12345678-9abc-4def-8123-456789abcdef"
     assert (read.fps, read.denominator) == (60, 1)
-    assert read.curves == tuple([(i + 1) / 64 for i in range(52)] + [-(i + 1) / 16 for i in range(9)])
+    assert read.curves == tuple(
+        [(i + 1) / 64 for i in range(52)] + [-(i + 1) / 16 for i in range(9)]
+    )
     ours = encode_packet(
         read.device_id, read.subject, read.frame_number, read.sub_frame, (60, 1), read.curves
     )

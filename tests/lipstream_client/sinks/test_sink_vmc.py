@@ -19,7 +19,9 @@ def float32(value: float) -> float:
     return float(struct.unpack("<f", struct.pack("<f", value))[0])
 
 
-def expected_frame(names: list[str], index: int, row: list[float]) -> list[tuple[str, tuple[object, ...]]]:
+def expected_frame(
+    names: list[str], index: int, row: list[float]
+) -> list[tuple[str, tuple[object, ...]]]:
     return [
         ("/VMC/Ext/OK", (1,)),
         ("/VMC/Ext/T", (float32(index / FPS),)),

@@ -10,8 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from lipstream_client.sinks import BridgeError, SoundPlayer, SpeechTrack, write_wav
-from lipstream_client.sinks import sound
+from lipstream_client.sinks import BridgeError, SoundPlayer, SpeechTrack, sound, write_wav
 
 
 def test_chunks_land_at_their_start_sample_with_silence_between(tmp_path: Path) -> None:
@@ -25,7 +24,11 @@ def test_chunks_land_at_their_start_sample_with_silence_between(tmp_path: Path) 
     assert pcm[2 * 8000 :] == b"\x01\x00" * 160
     write_wav(tmp_path / "speech.wav", track)
     with wave.open(str(tmp_path / "speech.wav"), "rb") as written:
-        assert (written.getnchannels(), written.getsampwidth(), written.getframerate()) == (1, 2, 16000)
+        assert (written.getnchannels(), written.getsampwidth(), written.getframerate()) == (
+            1,
+            2,
+            16000,
+        )
         assert written.readframes(written.getnframes()) == pcm
 
 
