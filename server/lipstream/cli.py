@@ -19,10 +19,10 @@ from typing import TYPE_CHECKING
 from lipstream_client.messages import NAMINGS, VISEME_SETS
 
 from ._version import __version__
+from .bridge_command import add_bridge_parser
 from .config import ServerSettings, Settings, demo_model_path, load_settings
 from .errors import LipstreamError
 from .exports import FORMATS, MOHO_FPS
-from .bridge_command import add_bridge_parser
 from .loadtest.command import add_loadtest_parser
 
 if TYPE_CHECKING:

@@ -32,7 +32,7 @@ _BUNDLE_HEAD = 16  # "#bundle\0" and the time tag
 _ELEMENT_SIZE = 4  # each bundle element is prefixed by its length
 
 
-def _message(address: str, *args: tuple[object, str]) -> OscMessage:
+def _message(address: str, *args: tuple[str | int | float, str]) -> OscMessage:
     builder = OscMessageBuilder(address)
     for value, kind in args:
         builder.add_arg(value, kind)
@@ -75,7 +75,7 @@ def bundle_datagrams(
 def _bundle(messages: Sequence[OscMessage]) -> bytes:
     builder = OscBundleBuilder(IMMEDIATELY)
     for message in messages:
-        builder.add_content(message)  # type: ignore[arg-type]
+        builder.add_content(message)
     return builder.build().dgram
 
 
