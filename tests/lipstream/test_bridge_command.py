@@ -3,6 +3,7 @@ stdout out, on the real clock), and its coded one-line errors for bad input."""
 
 from __future__ import annotations
 
+import asyncio
 import json
 import re
 import socket
@@ -15,6 +16,7 @@ import pytest
 
 from lipstream.cli import main
 from lipstream.corpus import Corpus
+from lipstream_client import AsyncClient
 from lipstream_client.sinks.sound import has_sound_device
 from tests.bridge_server import TEXT, bridge_server, served
 from tests.helpers import run_cli
@@ -88,6 +90,20 @@ def test_bridge_to_stdout_json_lines(server: LiveServer) -> None:
         assert list(line["values"]) == list(channels)
         row = expected[line["frame"]]
         assert [float32(value) for value in line["values"].values()] == row
+
+
+def served_phonemes(
+    url: str, phones: list[tuple[str, float, float]], pcm16: bytes, rate: int
+) -> list[list[float]]:
+    async def request() -> list[list[float]]:
+        async with AsyncClient(url) as client:
+            stream = await client.start("viseme-lerp", "demo", fps=60.0)
+            await stream.send_phonemes(phones)
+            await stream.send_audio(pcm16, rate)
+            await stream.end()
+            return (await asyncio.wait_for(stream.collect(), 60)).rows()
+
+    return asyncio.run(request())
 
 
 def error_line(capsys: pytest.CaptureFixture[str], *argv: str) -> str:
@@ -177,3 +193,39 @@ def test_play_without_a_sound_device(capsys: pytest.CaptureFixture[str]) -> None
         capsys, "--server", "ws://127.0.0.1:1/v1/stream", "--to", "stdout", "--text", "hi", "--play"
     )
     assert line.startswith("error [no_sound_device]: --play: ")
+
+
+def test_bridge_phonemes_with_their_recording_written_back_in_step(
+    server: LiveServer, tmp_path: Path
+) -> None:
+    phones = [
+        ("sil", 0.0, 0.1),
+        ("M", 0.1, 0.2),
+        ("AA", 0.2, 0.45),
+        ("P", 0.45, 0.55),
+        ("sil", 0.55, 0.7),
+    ]
+    (tmp_path / "line.json").write_text(
+        json.dumps([{"phoneme": p, "start": s, "end": e} for p, s, e in phones])
+    )
+    rate = 16000
+    samples = [round(8000 * ((i * 7919) % 200 - 100) / 100) for i in range(int(0.7 * rate))]
+    recording = struct.pack(f"<{len(samples)}h", *samples)
+    with wave.open(str(tmp_path / "line.wav"), "wb") as output:
+        output.setnchannels(1)
+        output.setsampwidth(2)
+        output.setframerate(rate)
+        output.writeframes(recording)
+    done = run_cli(
+        "bridge", "--server", server.ws, "--to", "stdout", "--format", "csv",
+        "--phones", str(tmp_path / "line.json"), "--audio", str(tmp_path / "line.wav"),
+        "--wav", str(tmp_path / "back.wav"),
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    frames, sent, dropped = summary(done.stderr)
+    assert frames == len(served_phonemes(server.ws, phones, recording, rate))
+    rows = done.stdout.splitlines()
+    assert rows[0].startswith("frame,time,") and len(rows) == 1 + sent
+    with wave.open(str(tmp_path / "back.wav"), "rb") as written:
+        assert written.getframerate() == rate
+        assert written.readframes(written.getnframes()) == recording
