@@ -246,10 +246,9 @@ class Bridge:
             elapsed_samples = max(0, round((self.clock.now() - first_at) * self.track.sample_rate))
             self._progress.played = elapsed_samples * PCM16_BYTES
             await self.player.start(self.track.sample_rate)
-        pcm = self.track.pcm16()
-        if len(pcm) > self._progress.played:
-            await self.player.feed(pcm[self._progress.played :])
-            self._progress.played = len(pcm)
+        if self.track.n_bytes > self._progress.played:
+            await self.player.feed(self.track.pcm16(self._progress.played))
+            self._progress.played = self.track.n_bytes
 
 
 async def _send_input(stream: Stream, source: BridgeInput) -> None:

@@ -132,3 +132,23 @@ def test_the_speech_is_written_on_the_frames_clock(tmp_path: Path) -> None:
     assert pcm[2 * 800 : 2 * 1200] == bytes(800)  # 0.10 s to 0.15 s: silence
     assert pcm[2 * 1200 :] == b"\x20\x00" * 400
     assert report.speech_s == pytest.approx(0.2)  # type: ignore[attr-defined]
+
+
+def test_the_player_hears_the_speech_from_the_first_frame(tmp_path: Path) -> None:
+    import sys
+
+    from lipstream_client.sinks import SoundPlayer
+
+    heard = tmp_path / "heard.raw"
+    copy = f"import sys; open({str(heard)!r}, 'wb').write(sys.stdin.buffer.read())"
+    clock = SteppedClock()
+    chunks = [
+        AudioChunk("r1", 8000, b"\x10\x00" * 800, start=0.0),
+        AudioChunk("r1", 8000, b"\x20\x00" * 400, start=0.15),
+    ]
+    player = SoundPlayer([sys.executable, "-c", copy, "{rate}"])
+    run(
+        Bridge(RecordingSink(clock), clock, player=player),
+        KnownStream([block(0, ROWS)], chunks, 10),
+    )
+    assert heard.read_bytes() == b"\x10\x00" * 800 + bytes(800) + b"\x20\x00" * 400

@@ -69,6 +69,7 @@ LIVELINK_CURVES: tuple[str, ...] = LIVELINK_BLENDSHAPES + LIVELINK_ROTATIONS
 _CURVES = struct.Struct(f">B{len(LIVELINK_CURVES)}f")
 _FRAME_TIME = struct.Struct(">ifii")
 _SIDES = (("_L", "Left"), ("_R", "Right"))
+_DEVICE_NAMESPACE = uuid.uuid5(uuid.NAMESPACE_URL, "https://lipstream/livelink-face")
 
 
 def curve_name(channel: str) -> str:
@@ -96,9 +97,10 @@ def frames_since_midnight(now: datetime, rate: tuple[int, int]) -> int:
     return int(elapsed * rate[0] / rate[1])
 
 
-def new_device_id() -> str:
-    """A fresh device id: ``$`` and a 36-character UUID, as the app sends."""
-    return f"${uuid.uuid4()}"
+def device_id_for(subject: str) -> str:
+    """The device id of a subject: ``$`` and a 36-character UUID derived from its name, so
+    that a bridge run again for the same subject is the same device to Unreal."""
+    return f"${uuid.uuid5(_DEVICE_NAMESPACE, subject)}"
 
 
 def encode_packet(
@@ -170,8 +172,8 @@ class LiveLinkLayout:
 class LiveLinkEncoder:
     """Packets for one subject: ``packet(frame_number, row)`` after ``open(channels, fps)``.
 
-    ``subject`` is the name Unreal lists the face under; ``device_id`` defaults to a
-    fresh one per encoder."""
+    ``subject`` is the name Unreal lists the face under; ``device_id`` defaults to the
+    subject's own (``device_id_for``)."""
 
     def __init__(self, subject: str = "lipstream", device_id: str | None = None) -> None:
         encoded = subject.encode("utf-8")
@@ -182,7 +184,7 @@ class LiveLinkEncoder:
                 "--subject",
             )
         self.subject = subject
-        self.device_id = device_id or new_device_id()
+        self.device_id = device_id or device_id_for(subject)
         self.layout: LiveLinkLayout | None = None
         self.rate = (60, 1)
 

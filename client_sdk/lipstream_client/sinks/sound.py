@@ -46,8 +46,13 @@ class SpeechTrack:
         self._pcm[offset:end] = data
         return offset, end
 
-    def pcm16(self) -> bytes:
-        return bytes(self._pcm)
+    def pcm16(self, from_byte: int = 0) -> bytes:
+        """The track's bytes from ``from_byte`` on."""
+        return bytes(self._pcm[from_byte:])
+
+    @property
+    def n_bytes(self) -> int:
+        return len(self._pcm)
 
     @property
     def duration(self) -> float:

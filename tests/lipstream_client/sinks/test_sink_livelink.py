@@ -117,3 +117,9 @@ def test_the_sink_sends_one_packet_per_frame_numbered_in_order() -> None:
         assert packet.curves[app_slot("mouthClose")] == row[1]
         assert sum(1 for value in packet.curves if value != 0.0) <= 2
     assert sink.delivery().sent == 6
+
+
+def test_a_subject_is_the_same_device_run_after_run() -> None:
+    first, again, other = LiveLinkEncoder("Ada"), LiveLinkEncoder("Ada"), LiveLinkEncoder("Bo")
+    assert first.device_id == again.device_id != other.device_id
+    assert first.device_id.startswith("$") and len(first.device_id) == 37
