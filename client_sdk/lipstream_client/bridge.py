@@ -16,7 +16,8 @@ through ``player`` from the moment the first frame goes out. The clock is inject
 Usage::
 
     sink = LiveLinkSink(UdpSender("127.0.0.1", 11111), LiveLinkEncoder("lipstream"))
-    report = asyncio.run(run_bridge("ws://127.0.0.1:8000/v1/stream", sink,
+    bridge = Bridge(sink)
+    report = asyncio.run(bridge.run("ws://127.0.0.1:8000/v1/stream",
                                     BridgeInput(text="Hello there."), preset="arkit52"))
 """
 
@@ -270,24 +271,3 @@ async def _default_target(url: str, token: str | None) -> tuple[str, str]:
         raise BridgeError(
             SERVER_UNREACHABLE, f"cannot ask {url} what it serves: {error}", "--server"
         ) from None
-
-
-async def run_bridge(
-    url: str,
-    sink: Sink,
-    source: BridgeInput,
-    *,
-    engine: str | None = None,
-    character: str | None = None,
-    preset: str | None = None,
-    fps: float = DEFAULT_FPS,
-    clock: BridgeClock | None = None,
-    wav: Path | None = None,
-    player: SoundPlayer | None = None,
-    token: str | None = None,
-) -> BridgeReport:
-    """Bridge one request from ``source`` to ``sink``; see ``Bridge``."""
-    bridge = Bridge(sink, clock, wav, player)
-    return await bridge.run(
-        url, source, engine=engine, character=character, preset=preset, fps=fps, token=token
-    )
