@@ -23,8 +23,24 @@ if TYPE_CHECKING:
     from lipstream_client.sinks.sound import SoundPlayer
 
 
+OPTION_OF_FIELD = {
+    "engine": "--engine",
+    "character": "--character",
+    "fps": "--fps",
+    "output.retarget": "--preset",
+    "output": "--preset",
+    "text": "--text",
+    "voice": "--voice",
+    "rate": "--rate",
+    "items": "--phones",
+    "sample_rate": "--audio",
+    "pcm16": "--audio",
+}
+"""The option behind a request field a server error (or the codec) names."""
+
+
 def _bridge(args: argparse.Namespace, settings: Settings) -> None:
-    from lipstream_client import LipstreamClientError, LipstreamServerError
+    from lipstream_client import EncodeError, LipstreamClientError, LipstreamServerError
     from lipstream_client.bridge import Bridge
     from lipstream_client.sinks import BridgeError, parse_target
 
@@ -48,8 +64,14 @@ def _bridge(args: argparse.Namespace, settings: Settings) -> None:
         )
     except BridgeError as error:
         raise LipstreamError(error.message, where=error.where, code=error.code) from None
+    except EncodeError as error:
+        field = error.error.where or ""
+        where = OPTION_OF_FIELD.get(field.split(".")[0].split("[")[0], "--server")
+        message = f"{field}: {error.error.message}" if field else error.error.message
+        raise LipstreamError(message, where=where, code=error.error.code) from None
     except LipstreamServerError as error:
-        where = "--preset" if args.preset and "retarget" in error.message else "--server"
+        field = error.message.split(":", 1)[0] if ":" in error.message else ""
+        where = OPTION_OF_FIELD.get(field.split("[")[0], "--server")
         raise LipstreamError(error.message, where=where, code=error.code) from None
     except LipstreamClientError as error:
         raise LipstreamError(str(error), where="--server", code="stream_failed") from None
@@ -78,6 +100,10 @@ def _check_options(args: argparse.Namespace, target: Target) -> None:
     if target.kind != "livelink" and args.subject is not None:
         raise LipstreamError(
             "--subject names a Live Link subject", where="--subject", code="invalid_request"
+        )
+    if target.kind != "stdout" and args.format is not None:
+        raise LipstreamError(
+            "--format is the format of stdout", where="--format", code="invalid_request"
         )
     if target.kind == "stdout" and args.bind is not None:
         raise LipstreamError(
@@ -126,7 +152,7 @@ def _sink(args: argparse.Namespace, target: Target) -> Sink:
     )
 
     if target.kind == "stdout":
-        return LinesSink(sys.stdout, args.format)
+        return LinesSink(sys.stdout, args.format or "jsonl")
     bind = parse_local_address(args.bind) if args.bind else None
     if target.kind == "livelink":
         encoder = LiveLinkEncoder(args.subject or "lipstream")
@@ -200,7 +226,7 @@ def add_bridge_parser(commands: Any) -> None:
         help="livelink: the subject name Unreal lists the face under (default lipstream)",
     )
     bridge.add_argument(
-        "--format", choices=LINE_FORMATS, default="jsonl", help="stdout: jsonl or csv"
+        "--format", choices=LINE_FORMATS, help="stdout: jsonl (default) or csv"
     )
     bridge.add_argument(
         "--bind",

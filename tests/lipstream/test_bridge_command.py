@@ -124,6 +124,21 @@ def test_an_unknown_preset_surfaces_the_server_s_error(
 
 
 @pytest.mark.parametrize(
+    ("argv", "line"),
+    [
+        (["--fps", "-5"], "error [invalid_message]: --fps: fps: must be >= 1, got -5.0"),
+        (["--engine", "nope"], "error [unknown_engine]: --engine: engine: no engine 'nope'"),
+        (["--voice", "xx-nope"], "error [invalid_request]: --voice: voice: espeak-ng has no voice"),
+    ],
+)
+def test_request_errors_name_the_option(
+    server: LiveServer, capsys: pytest.CaptureFixture[str], argv: list[str], line: str
+) -> None:
+    said = error_line(capsys, "--server", server.ws, "--to", "stdout", "--text", "hi", *argv)
+    assert said.startswith(line)
+
+
+@pytest.mark.parametrize(
     ("to", "code"),
     [
         ("livelink://127.0.0.1:99999", "invalid_target"),
@@ -178,6 +193,8 @@ def test_a_server_that_is_not_there(capsys: pytest.CaptureFixture[str]) -> None:
         (["--to", "stdout", "--text", "hi", "--audio", "x.wav"], "--audio"),
         (["--to", "vmc://127.0.0.1", "--text", "hi", "--subject", "Ada"], "--subject"),
         (["--to", "stdout"], "--text"),
+        (["--to", "vmc://127.0.0.1", "--text", "hi", "--format", "csv"], "--format"),
+        (["--to", "stdout", "--text", "hi", "--bind", "127.0.0.1:0"], "--bind"),
     ],
 )
 def test_options_that_do_not_go_together(
