@@ -165,7 +165,7 @@ def _sink(args: argparse.Namespace, target: Target) -> Sink:
 def _summary(report: BridgeReport, target: Target) -> str:
     line = (
         f"bridged {report.frames} frames ({len(report.channels)} channels at {report.fps:g} fps) "
-        f"to {target}: {report.sent} sent, {report.dropped} dropped late"
+        f"to {target}: {report.sent} on time, {report.dropped} dropped late"
     )
     delivery = report.delivery
     attempts = delivery.sent + delivery.refused + delivery.failed

@@ -29,7 +29,7 @@ def float32(value: float) -> float:
 
 
 SUMMARY = re.compile(
-    r"bridged (\d+) frames \((\d+) channels at 60 fps\) to (\S+): (\d+) sent, (\d+) dropped late"
+    r"bridged (\d+) frames \((\d+) channels at 60 fps\) to (\S+): (\d+) on time, (\d+) dropped late"
 )
 
 
