@@ -37,7 +37,7 @@ from .items import PhonemeLike, phoneme_items
 from .messages import DEFAULT_FPS, PCM16_BYTES, Encoding, OutputProfile, PhonemeItem
 from .rest import RestClient
 from .sinks.base import Delivery, Sink
-from .sinks.errors import SERVER_UNREACHABLE, BridgeError
+from .sinks.errors import INVALID_AUDIO, SERVER_UNREACHABLE, BridgeError
 from .sinks.sound import SoundPlayer, SpeechTrack, write_wav
 
 AUDIO_CHUNK_S = 1.0
@@ -115,7 +115,10 @@ class _Progress:
 
 
 class Bridge:
-    """Forwards one request's frames to ``sink`` (see the module sketch)."""
+    """Forwards a request's frames to ``sink`` (see the module sketch); ``on_frame`` is
+    called with each frame's index once the sink has it. ``run`` again for another
+    request: the sink is opened anew with its channels. The sink stays the caller's to
+    ``close``."""
 
     def __init__(
         self,
@@ -155,22 +158,20 @@ class Bridge:
         output = OutputProfile(retarget=preset) if preset is not None else None
         client = AsyncClient(url, encoding=encoding, token=token)
         try:
-            try:
-                await client.connect()
-            except (OSError, TimeoutError, HandshakeRejected) as error:
-                raise BridgeError(
-                    SERVER_UNREACHABLE, f"cannot stream from {url}: {error}", "--server"
-                ) from None
-            try:
-                stream = await client.start(engine, character, fps=fps, output=output)
-                await _send_input(stream, source)
-                return await self._forward(stream, source)
-            finally:
-                await client.close()
+            await client.connect()
+        except (OSError, TimeoutError, HandshakeRejected) as error:
+            raise BridgeError(
+                SERVER_UNREACHABLE, f"cannot stream from {url}: {error}", "--server"
+            ) from None
+        try:
+            stream = await client.start(engine, character, fps=fps, output=output)
+            await _send_input(stream, source)
+            return await self._forward(stream, source)
         finally:
-            self.sink.close()
+            await client.close()
 
     async def _forward(self, stream: Stream, source: BridgeInput) -> BridgeReport:
+        self._progress, self.track = _Progress(), None
         ready = await stream.ready()
         self.sink.open(ready.channels, ready.fps)
         if source.audio is not None:
@@ -232,7 +233,7 @@ class Bridge:
             self.track = SpeechTrack(sample_rate)
         if sample_rate != self.track.sample_rate:
             raise BridgeError(
-                "invalid_audio",
+                INVALID_AUDIO,
                 f"speech at {sample_rate} Hz after speech at {self.track.sample_rate} Hz",
             )
         self.track.place(pcm16, start_s)

@@ -51,17 +51,20 @@ def _bridge(args: argparse.Namespace, settings: Settings) -> None:
         player = _player() if args.play else None
         sink = _sink(args, target)
         bridge = Bridge(sink, wav=Path(args.wav) if args.wav else None, player=player)
-        report = asyncio.run(
-            bridge.run(
-                args.server or default_url(settings),
-                source,
-                engine=args.engine,
-                character=args.character,
-                preset=args.preset,
-                fps=args.fps,
-                token=args.token,
+        try:
+            report = asyncio.run(
+                bridge.run(
+                    args.server or default_url(settings),
+                    source,
+                    engine=args.engine,
+                    character=args.character,
+                    preset=args.preset,
+                    fps=args.fps,
+                    token=args.token,
+                )
             )
-        )
+        finally:
+            sink.close()
     except BridgeError as error:
         raise LipstreamError(error.message, where=error.where, code=error.code) from None
     except EncodeError as error:
@@ -225,9 +228,7 @@ def add_bridge_parser(commands: Any) -> None:
         "--subject",
         help="livelink: the subject name Unreal lists the face under (default lipstream)",
     )
-    bridge.add_argument(
-        "--format", choices=LINE_FORMATS, help="stdout: jsonl (default) or csv"
-    )
+    bridge.add_argument("--format", choices=LINE_FORMATS, help="stdout: jsonl (default) or csv")
     bridge.add_argument(
         "--bind",
         metavar="HOST:PORT",

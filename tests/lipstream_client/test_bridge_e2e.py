@@ -39,18 +39,35 @@ def server(
 
 
 def bridge(server: LiveServer, sink: object, preset: str | None, **options: object) -> object:
-    clock = SteppedClock()
-    runner = Bridge(sink, clock, **options)  # type: ignore[arg-type]
-    return asyncio.run(
-        runner.run(
-            server.ws,
-            BridgeInput(text=TEXT),
-            engine="viseme-lerp",
-            character="demo",
-            preset=preset,
-            fps=FPS,
-        )
+    runner = Bridge(sink, SteppedClock(), **options)  # type: ignore[arg-type]
+    request = runner.run(
+        server.ws,
+        BridgeInput(text=TEXT),
+        engine="viseme-lerp",
+        character="demo",
+        preset=preset,
+        fps=FPS,
     )
+    try:
+        return asyncio.run(request)
+    finally:
+        sink.close()  # type: ignore[attr-defined]
+
+
+def test_a_sink_serves_one_request_after_another(server: LiveServer) -> None:
+    expected = served(server.ws, None).rows()
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as receiver:
+        receiver.bind(("127.0.0.1", 0))
+        receiver.settimeout(RECEIVE_TIMEOUT_S)
+        sink = LiveLinkSink(UdpSender("127.0.0.1", receiver.getsockname()[1]), LiveLinkEncoder(), 0)
+        runner = Bridge(sink, SteppedClock())
+        reports = [
+            asyncio.run(runner.run(server.ws, BridgeInput(text=TEXT), fps=FPS)) for _ in range(2)
+        ]
+        packets = [decode(receiver.recv(4096)) for _ in range(2 * len(expected))]
+        sink.close()
+    assert [report.sent for report in reports] == [len(expected)] * 2
+    assert [p.frame_number for p in packets] == list(range(len(expected))) * 2
 
 
 def test_text_in_live_link_packets_out(server: LiveServer, tmp_path: Path) -> None:

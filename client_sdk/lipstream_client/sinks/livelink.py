@@ -202,9 +202,9 @@ class LiveLinkEncoder:
 class LiveLinkSink:
     """Frames to a Live Link Face receiver (Unreal's Live Link, port 11111) over ``sender``.
 
-    A frame's number is ``first_frame_number`` plus its index, so the numbers run in
-    order; the bridge starts them at the time of day in frames, as the app's timecode
-    does."""
+    A frame's number is the request's first frame number plus its index, so the numbers
+    run in order: ``first_frame_number`` when given, else the time of day in frames when
+    the request opens (``wall_clock``), as the app's timecode runs."""
 
     def __init__(
         self,
@@ -215,17 +215,19 @@ class LiveLinkSink:
     ) -> None:
         self.sender = sender
         self.encoder = encoder
-        self.first_frame_number = first_frame_number
+        self.given_first_frame = first_frame_number
+        self.first_frame_number = first_frame_number or 0
         self.wall_clock = wall_clock
 
     def open(self, channels: Sequence[str], fps: float) -> None:
         self.encoder.open(channels, fps)
-        if self.first_frame_number is None:
+        if self.given_first_frame is None:
             self.first_frame_number = frames_since_midnight(self.wall_clock(), self.encoder.rate)
+        else:
+            self.first_frame_number = self.given_first_frame
 
     def send(self, index: int, time_s: float, row: Sequence[float]) -> None:
-        first = self.first_frame_number or 0
-        self.sender.send(self.encoder.packet(first + index, row))
+        self.sender.send(self.encoder.packet(self.first_frame_number + index, row))
 
     def delivery(self) -> Delivery:
         return Delivery(self.sender.sent, self.sender.refused, self.sender.failed)

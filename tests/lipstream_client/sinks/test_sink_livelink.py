@@ -123,3 +123,20 @@ def test_a_subject_is_the_same_device_run_after_run() -> None:
     first, again, other = LiveLinkEncoder("Ada"), LiveLinkEncoder("Ada"), LiveLinkEncoder("Bo")
     assert first.device_id == again.device_id != other.device_id
     assert first.device_id.startswith("$") and len(first.device_id) == 37
+
+
+def test_each_request_numbers_from_the_time_of_day_it_opens() -> None:
+    times = iter([datetime(2026, 1, 2, 0, 0, 1), datetime(2026, 1, 2, 0, 0, 3)])
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as receiver:
+        receiver.bind(("127.0.0.1", 0))
+        receiver.settimeout(10)
+        sender = UdpSender("127.0.0.1", receiver.getsockname()[1])
+        sink = LiveLinkSink(sender, LiveLinkEncoder(), wall_clock=lambda: next(times))
+        numbers = []
+        for _ in range(2):
+            sink.open(["jawOpen"], 60.0)
+            sink.send(0, 0.0, [0.5])
+            sink.send(1, 1 / 60, [0.5])
+            numbers += [decode(receiver.recv(2048)).frame_number for _ in range(2)]
+        sink.close()
+    assert numbers == [60, 61, 180, 181]
