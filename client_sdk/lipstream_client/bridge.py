@@ -91,7 +91,8 @@ class BridgeInput:
 class BridgeReport:
     """How a bridged request went: its ``channels`` at ``fps``, the ``frames`` the server
     made, those ``sent`` to the sink and those ``dropped`` late, what the sink's transport
-    reported since it was made (``delivery``), the request's ``done`` reason, and the seconds of speech."""
+    reported since it was made (``delivery``), the request's ``done`` reason, and the
+    seconds of speech."""
 
     channels: tuple[str, ...]
     fps: float
