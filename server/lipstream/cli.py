@@ -1,8 +1,8 @@
 """The ``lipstream`` command line.
 
-Subcommands: build-demo, train, synth, serve, inspect, bench, loadtest, path, retarget. Every
-option has a help line (``lipstream <command> --help``); ``--version`` prints the
-version. A user-facing failure prints one line (``error [code]: where: message``) and
+Subcommands: build-demo, train, synth, serve, inspect, bench, loadtest, bridge, path,
+retarget. Every option has a help line (``lipstream <command> --help``); ``--version``
+prints the version. A user-facing failure prints one line (``error [code]: where: message``) and
 exits 2.
 """
 
@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING
 from lipstream_client.messages import NAMINGS, VISEME_SETS
 
 from ._version import __version__
+from .bridge_command import add_bridge_parser
 from .config import ServerSettings, Settings, demo_model_path, load_settings
 from .errors import LipstreamError
 from .exports import FORMATS, MOHO_FPS
@@ -545,6 +546,7 @@ def _parser() -> argparse.ArgumentParser:
     bench.set_defaults(run=_bench)
 
     add_loadtest_parser(commands)
+    add_bridge_parser(commands)
 
     path = commands.add_parser(
         "path", help="print where the demo character's models are (or will be built)"

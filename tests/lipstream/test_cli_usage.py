@@ -35,7 +35,17 @@ def _undocumented(parser: argparse.ArgumentParser) -> list[str]:
 
 def test_every_option_of_every_subcommand_has_help() -> None:
     commands = _subcommands(_parser())
-    expected = ("build-demo", "train", "synth", "serve", "inspect", "bench", "loadtest", "path")
+    expected = (
+        "build-demo",
+        "train",
+        "synth",
+        "serve",
+        "inspect",
+        "bench",
+        "loadtest",
+        "bridge",
+        "path",
+    )
     assert {f"lipstream {name}" for name in expected} <= set(commands)
     assert {"lipstream loadtest capacity", "lipstream loadtest soak"} <= set(commands)
     missing = {name: _undocumented(sub) for name, sub in commands.items()}

@@ -17,6 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from lipstream_client.sinks.livelink import LIVELINK_ROTATIONS
+
 from ..errors import CorpusError
 from .frames_csv import check_increasing, require_rows
 from .table import CsvTable, FrameTable, read_csv_table
@@ -25,6 +27,8 @@ TIMECODE_COLUMN = "Timecode"
 COUNT_COLUMN = "BlendshapeCount"
 TIMECODE_RATE = 60.0
 
+# The CSV's column order; the app's UDP packets order the jaw and mouth sides the other
+# way round (lipstream_client.sinks.livelink.LIVELINK_BLENDSHAPES).
 ARKIT_BLENDSHAPES: tuple[str, ...] = (
     "eyeBlinkLeft", "eyeLookDownLeft", "eyeLookInLeft", "eyeLookOutLeft", "eyeLookUpLeft",
     "eyeSquintLeft", "eyeWideLeft", "eyeBlinkRight", "eyeLookDownRight", "eyeLookInRight",
@@ -40,11 +44,7 @@ ARKIT_BLENDSHAPES: tuple[str, ...] = (
     "cheekPuff", "cheekSquintLeft", "cheekSquintRight", "noseSneerLeft", "noseSneerRight",
     "tongueOut",
 )  # fmt: skip
-ROTATIONS: tuple[str, ...] = (
-    "headYaw", "headPitch", "headRoll",
-    "leftEyeYaw", "leftEyePitch", "leftEyeRoll",
-    "rightEyeYaw", "rightEyePitch", "rightEyeRoll",
-)  # fmt: skip
+ROTATIONS: tuple[str, ...] = LIVELINK_ROTATIONS
 LIVELINK_CHANNELS = frozenset(ARKIT_BLENDSHAPES + ROTATIONS)
 
 _TIMECODE = re.compile(r"^(\d{1,2}):(\d{2}):(\d{2}):(\d{1,3}(?:\.\d*)?)$")
