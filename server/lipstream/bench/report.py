@@ -261,6 +261,41 @@ def stream_calls(bench: Bench) -> str:
     )
 
 
+def call_pairs(bench: Bench) -> str:
+    doc = bench.load("call_pairs.json")
+    header = (
+        f"Before: `{doc['before']}`; after: `{doc['after']}`; "
+        f"{doc['rows'][0]['rounds']} alternating rounds.\n\n"
+    )
+    return (
+        bench.source("call_pairs.json", doc)
+        + header
+        + table(
+            [
+                "engine",
+                "rung",
+                "median µs before → after",
+                "×",
+                "mean µs before → after",
+                "×",
+                "rounds after lower",
+            ],
+            (
+                [
+                    f"`{row['engine']}`",
+                    f"`{row['rung']}`",
+                    f"{number(row['before_median_us'])} → {number(row['after_median_us'])}",
+                    f"{row['median_ratio']:.3f}",
+                    f"{number(row['before_mean_us'])} → {number(row['after_mean_us'])}",
+                    f"{row['mean_ratio']:.3f}",
+                    f"{row['rounds_after_lower']} of {row['rounds']}",
+                ]
+                for row in _by_engine(doc["rows"])
+            ),
+        )
+    )
+
+
 def lead0(bench: Bench) -> str:
     rows = bench.load("lead0_rungs.json")
     return bench.source("lead0_rungs.json", rows) + table(
@@ -681,6 +716,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "engines-summary": engines_summary,
     "engines": engines,
     "stream-calls": stream_calls,
+    "call-pairs": call_pairs,
     "lead0": lead0,
     "hmm-first-frame": hmm_first_frame,
     "capacity-floor": _capacity("capacity_floor.json"),
