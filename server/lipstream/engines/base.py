@@ -263,7 +263,9 @@ class Synthesizer(ABC):
 
 
 class Model(ABC):
-    """A trained, read-only model. Subclasses define ``render`` and the array round trip."""
+    """A trained, read-only model. Subclasses define how a request streams
+    (``synthesizer``) and the array round trip; a model that renders frames at given times
+    from the spans is a ``RenderingModel``."""
 
     engine: ClassVar[str]
     uses_audio: bool = False
@@ -280,21 +282,6 @@ class Model(ABC):
     @property
     def name(self) -> str:
         return self.manifest.name
-
-    @abstractmethod
-    def render(
-        self,
-        spans: Sequence[PhonemeSpan],
-        times: np.ndarray,
-        request: SynthesisRequest,
-        audio: Audio | None,
-    ) -> np.ndarray:
-        """Frames at ``times`` (s, shape (n,)) as float32 (n, n_channels).
-
-        ``spans`` is contiguous from 0. Every time passed is final under the
-        model's ``lookahead``, so the result may only depend on spans that
-        end before ``t`` plus that lookahead.
-        """
 
     @abstractmethod
     def arrays(self) -> dict[str, np.ndarray]:
@@ -366,10 +353,9 @@ class Model(ABC):
         check_options(self.engine, self.option_names, request.options)
         return self.synthesizer(request)
 
+    @abstractmethod
     def synthesizer(self, request: SynthesisRequest) -> Synthesizer:
-        """The synthesizer of a request whose option names are checked; engines whose
-        streaming is not ``render`` by lookahead override this."""
-        return RenderingSynthesizer(self, request)
+        """The synthesizer of a request whose option names are checked."""
 
     def synthesize(
         self,
@@ -515,6 +501,30 @@ def make_request(fps: float = 60.0, emotion: str | None = None, **options: Any) 
     return SynthesisRequest(fps=fps, emotion=emotion, options=options)
 
 
+class RenderingModel(Model):
+    """A model whose frames are a function of the spans (and audio) at given times, final
+    once the input covers each time plus the ``lookahead``: it streams through
+    ``RenderingSynthesizer``."""
+
+    @abstractmethod
+    def render(
+        self,
+        spans: Sequence[PhonemeSpan],
+        times: np.ndarray,
+        request: SynthesisRequest,
+        audio: Audio | None,
+    ) -> np.ndarray:
+        """Frames at ``times`` (s, shape (n,)) as float32 (n, n_channels).
+
+        ``spans`` is contiguous from 0. Every time passed is final under the
+        model's ``lookahead``, so the result may only depend on spans that
+        end before ``t`` plus that lookahead.
+        """
+
+    def synthesizer(self, request: SynthesisRequest) -> Synthesizer:
+        return RenderingSynthesizer(self, request)
+
+
 class Engine(ABC):
     """A trainer: hyperparameters in ``__init__``, ``fit`` returns a ``Model``.
 
@@ -599,8 +609,9 @@ class SpanSynthesizer(Synthesizer):
         """Called with each span as it joins ``spans``; ``sent`` is its client index."""
 
 
-class RenderingSynthesizer(SpanSynthesizer):
-    """Streams a model's ``render`` by its declared ``Lookahead``."""
+class LookaheadSynthesizer(SpanSynthesizer):
+    """Streams a model's frames by its declared ``Lookahead``: a frame is emitted once it is
+    final; subclasses make the frames (``_emit``)."""
 
     def __init__(self, model: Model, request: SynthesisRequest) -> None:
         super().__init__()
@@ -617,6 +628,28 @@ class RenderingSynthesizer(SpanSynthesizer):
             limit = min(limit, self.audio.duration - lookahead.seconds)
         return limit
 
+    @abstractmethod
+    def _emit(self, stop: int) -> np.ndarray:
+        """Frames ``emitted`` .. ``stop`` − 1 as float32 (n, n_channels); advances
+        ``emitted``."""
+
+    def frames(self) -> np.ndarray:
+        return self._emit(frames_before(self.final_until(), self.request.fps))
+
+    def finish(self) -> np.ndarray:
+        self.finished = True
+        total = frame_count(self.covered_until, self.request.fps) if self.spans else 0
+        return self._emit(total)
+
+
+class RenderingSynthesizer(LookaheadSynthesizer):
+    """Streams a ``RenderingModel``'s ``render``."""
+
+    model: RenderingModel
+
+    def __init__(self, model: RenderingModel, request: SynthesisRequest) -> None:
+        super().__init__(model, request)
+
     def _emit(self, stop: int) -> np.ndarray:
         if stop <= self.emitted:
             return np.zeros((0, len(self.model.channels)), dtype=np.float32)
@@ -629,14 +662,6 @@ class RenderingSynthesizer(SpanSynthesizer):
         self.stats["frames"] = stop
         return frames
 
-    def frames(self) -> np.ndarray:
-        return self._emit(frames_before(self.final_until(), self.request.fps))
-
-    def finish(self) -> np.ndarray:
-        self.finished = True
-        total = frame_count(self.covered_until, self.request.fps) if self.spans else 0
-        return self._emit(total)
-
 
 def shifted_frame_stop(synthesizer: SpanSynthesizer, shift_s: float, fps: float) -> int:
     """The frames final when the frame at t waits for the input to cover t + ``shift_s``: those
@@ -648,7 +673,7 @@ def shifted_frame_stop(synthesizer: SpanSynthesizer, shift_s: float, fps: float)
     return frame_count(reach, fps)
 
 
-class ShiftedSynthesizer(RenderingSynthesizer):
+class ShiftedSynthesizer(LookaheadSynthesizer):
     """A causal or lead rung's synthesizer: the frame at t is final once the input covers
     t + ``shift_s`` (which subclasses set); their ``_emit`` carries the filter's state."""
 

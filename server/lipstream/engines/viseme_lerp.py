@@ -44,7 +44,7 @@ from .base import (
     MAX_LEAD_MS,
     Engine,
     Lookahead,
-    Model,
+    RenderingModel,
     RenderingSynthesizer,
     Rung,
     SynthesisRequest,
@@ -61,7 +61,7 @@ MODES = ("lerp", "damped")
 LEADS_MS = (120.0, 0.0)
 
 
-class VisemeLerpModel(Model):
+class VisemeLerpModel(RenderingModel):
     """Key poses ``poses`` float32 (n_visemes, n_channels), rows in ``scheme.classes`` order;
     phoneme ``durations``; the damped rungs' ``leads_ms`` and their fitted ``kappas``."""
 

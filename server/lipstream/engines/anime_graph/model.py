@@ -23,7 +23,7 @@ from ...features import MfccConfig
 from ...numerics.basis import MotionBasis
 from ...store import ModelManifest, require_arrays
 from ...timeline import PhonemeSpan
-from ..base import Lookahead, Model, Rung, SynthesisRequest, causal_rungs, resolved_rung
+from ..base import Lookahead, RenderingModel, Rung, SynthesisRequest, causal_rungs, resolved_rung
 from ..damped import omega_for_cutoff
 from .animes import AnimeTable, Curves
 from .checks import check_stored_model
@@ -48,7 +48,7 @@ CAUSAL_CUTOFF_FACTOR = 2.0
 damps below its -3 dB point, and at twice the cutoff it keeps 90% of the gain there."""
 
 
-class AnimeGraphModel(Model):
+class AnimeGraphModel(RenderingModel):
     """Anime Graph + GreedyMatching (Cao et al. 2004).
 
     See ``docs/explanation/engines/anime-graph.md``.

@@ -43,7 +43,7 @@ from ...store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
 from ...timeline import EMOTIONS, PhonemeSpan
 from ..base import (
     Lookahead,
-    Model,
+    RenderingModel,
     RenderingSynthesizer,
     Rung,
     SynthesisRequest,
@@ -74,7 +74,7 @@ NUMBER_FIELDS = (  # name, low, high, low excluded
 )
 
 
-class DamModel(Model):
+class DamModel(RenderingModel):
     """The motion basis (``basis_mean``, ``basis_components``), modes grouped by phoneme
     (``mode_offsets``), ``sigma`` (modes,), ``coefficients`` (modes, M+1, components),
     context counts and ``stand_in``; ``tail`` phonemes each side and ``reference_duration``

@@ -22,18 +22,16 @@ Stored ranges (checked at load): each α inside the bounds its weight search cov
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ...audio import Audio
 from ...errors import InvalidRequestError
 from ...model_checks import ArrayReader, FieldReader
 from ...numerics.basis import MotionBasis, read_components
 from ...store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
-from ...timeline import PhonemeSpan
 from ..base import (
     Lookahead,
     Model,
@@ -207,15 +205,6 @@ class ExpressiveDpModel(Model):
         if kind == "causal":
             return CausalSynthesizer(self, request, self.shift_s(float(value or 0.0)), constraints)
         return LagSynthesizer(self, request, None if value is None else int(value), constraints)
-
-    def render(
-        self,
-        spans: Sequence[PhonemeSpan],
-        times: np.ndarray,
-        request: SynthesisRequest,
-        audio: Audio | None,
-    ) -> np.ndarray:
-        raise NotImplementedError("expressive-dp streams through its own synthesizers")
 
     # -- store ----------------------------------------------------------------------------
 

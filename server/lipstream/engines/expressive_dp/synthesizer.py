@@ -55,7 +55,7 @@ from ...phonemes import PHONEME_INDEX, SILENCE
 from ...timeline import PhonemeSpan
 from ..base import (
     Lookahead,
-    RenderingSynthesizer,
+    LookaheadSynthesizer,
     ShiftedSynthesizer,
     SynthesisRequest,
     final_until,
@@ -75,7 +75,7 @@ if TYPE_CHECKING:
     from .model import ExpressiveDpModel
 
 
-class PathSynthesizer(RenderingSynthesizer):
+class PathSynthesizer(LookaheadSynthesizer):
     """Committed nodes of one request, and the spans they belong to."""
 
     model: ExpressiveDpModel

@@ -24,13 +24,12 @@ definite, and every float within ``MAX_MAGNITUDE``.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ...audio import Audio
 from ...errors import InvalidRequestError
 from ...features import DEFAULT_MFCC, MfccConfig
 from ...model_checks import ArrayReader, FieldReader
@@ -38,7 +37,7 @@ from ...numerics.basis import MotionBasis, read_components
 from ...numerics.trellis import predecessors
 from ...phonemes import PHONEMES
 from ...store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
-from ...timeline import EMOTIONS, PhonemeSpan
+from ...timeline import EMOTIONS
 from ..base import (
     AUDIO_ONLY_UNSUPPORTED,
     Lookahead,
@@ -226,15 +225,6 @@ class HmmModel(Model):
 
     def synthesizer(self, request: SynthesisRequest) -> Synthesizer:
         return HmmSynthesizer(self, request, self.plan(request.options, request.fps))
-
-    def render(
-        self,
-        spans: Sequence[PhonemeSpan],
-        times: np.ndarray,
-        request: SynthesisRequest,
-        audio: Audio | None,
-    ) -> np.ndarray:
-        raise NotImplementedError("the hmm engine streams through HmmSynthesizer")
 
     # -- store ------------------------------------------------------------------------------
 
