@@ -30,7 +30,7 @@ if TYPE_CHECKING:
     from .audio import Audio
     from .engines.base import Model
     from .models import ModelRegistry
-    from .retarget import RetargetMap
+    from .output.retarget import RetargetMap
     from .status import Report
 
 
@@ -323,7 +323,7 @@ def _inspect(args: argparse.Namespace, settings: Settings) -> None:
 
 def _retarget(args: argparse.Namespace, settings: Settings) -> None:
     from .engines import load_model
-    from .retarget import (
+    from .output.retarget import (
         RETARGET_DIR,
         fit_map,
         read_pairs,
@@ -361,7 +361,7 @@ def _retarget(args: argparse.Namespace, settings: Settings) -> None:
 def _shown_maps(model: Model, directory: Path, name: str | None) -> dict[str, RetargetMap]:
     """Every map the model is served through, or only the one named (``unknown_retarget``
     when it has none of that name)."""
-    from .retarget import model_maps, offered_targets
+    from .output.retarget import model_maps, offered_targets
 
     maps = model_maps(model, directory, only=name)
     if name is None:

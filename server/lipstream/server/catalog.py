@@ -37,12 +37,12 @@ from ..engines.base import CallCost, Model, Rung, SynthesisRequest
 from ..engines.work import WorkGuard
 from ..errors import LipstreamError, ModelStoreError
 from ..models import ModelRegistry
+from ..output.retarget import RetargetMap, model_maps
+from ..output.visemes import OCULUS15
 from ..phonemes import SILENCE
-from ..retarget import RetargetMap, model_maps
 from ..status import Report, phase
 from ..store import MANIFEST_NAME
 from ..timeline import EMOTIONS, PhonemeSpan
-from ..visemes import OCULUS15
 from .budget import RungEstimate, estimate
 from .calibration import calibration_guard, measure, warm_up
 from .profiles import (

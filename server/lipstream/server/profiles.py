@@ -3,7 +3,7 @@
 Sketch: a profile (``lipstream_client.OutputProfile``) is resolved once per
 request against the model's ARKit channel names, into a column gather (or a
 viseme projection: Oculus 15 or Preston Blair) and per-column multiplier, offset and clamp
-vectors, or, when it names a ``retarget`` map (``lipstream.retarget``), into
+vectors, or, when it names a ``retarget`` map (``lipstream.output.retarget``), into
 that map's rig controls. Applying it to a float32 block (n_frames,
 n_model_channels) is then one gather, one multiply-add and one clip in numpy
 (after the projection or the map, when there is one). The profile comes from
@@ -33,7 +33,7 @@ from lipstream_client.messages import VisemeSet
 
 from ..engines.base import DEFAULT_EMOTION_KEY, Model, SynthesisResult
 from ..errors import LipstreamError
-from ..retarget import RetargetMap, model_maps
+from ..output.retarget import RetargetMap, model_maps
 from ..timeline import EMOTIONS
 from .viseme_projection import VISEME_SCHEMES, VisemeProjector, mouth_channels, probe_key_poses
 

@@ -17,7 +17,7 @@ channel.
 Key poses are probed from a model: every canonical phoneme is synthesized
 held for 200 ms between silences, the frame at its centre is taken, and the
 frames are averaged over the phonemes of each class of the set's scheme
-(``lipstream.visemes.OCULUS15``, ``PRESTON_BLAIR``); silence's pose is the
+(``lipstream.output.visemes.OCULUS15``, ``PRESTON_BLAIR``); silence's pose is the
 frame at the centre of a silence. One probe serves every set. The server
 probes the character's ``viseme-lerp`` model when one with the same channels
 is loaded: its frame at a span centre is exactly its trained key pose (the
@@ -33,9 +33,9 @@ from scipy.optimize import nnls
 
 from ..engines.base import Model, SynthesisRequest
 from ..engines.work import WorkGuard
+from ..output.visemes import OCULUS15, PRESTON_BLAIR, VisemeScheme
 from ..phonemes import PHONEMES, SILENCE
 from ..timeline import PhonemeSpan
-from ..visemes import OCULUS15, PRESTON_BLAIR, VisemeScheme
 
 # Output viseme sets (``output.visemes``) and their schemes; each scheme's class order is the
 # set's channel order (lipstream_client.channels.VISEME_CHANNELS).

@@ -17,7 +17,7 @@ from lipstream.corpus.livelink import ARKIT_BLENDSHAPES
 from lipstream.engines.base import Model
 from lipstream.errors import LipstreamError
 from lipstream.models import ModelRegistry
-from lipstream.retarget import KeyPosePairs, fit_map, save_map
+from lipstream.output.retarget import KeyPosePairs, fit_map, save_map
 from lipstream.server.catalog import Catalog
 from lipstream_client import AsyncClient, LipstreamServerError, OutputProfile, StreamResult
 from lipstream_client.channels import OCULUS15_VISEMES

@@ -13,7 +13,7 @@ import pytest
 
 from lipstream.corpus.livelink import ARKIT_BLENDSHAPES
 from lipstream.errors import ModelStoreError
-from lipstream.retarget import (
+from lipstream.output.retarget import (
     KeyPosePairs,
     fit_controls,
     fit_map,

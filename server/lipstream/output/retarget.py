@@ -52,12 +52,12 @@ from scipy.optimize import lsq_linear, nnls
 
 from lipstream_client.channels import OCULUS15_VISEMES
 
-from .corpus.livelink import ARKIT_BLENDSHAPES
-from .engines.base import Model
-from .errors import ModelStoreError
-from .model_checks import ArrayReader, FieldReader
+from ..corpus.livelink import ARKIT_BLENDSHAPES
+from ..engines.base import Model
+from ..errors import ModelStoreError
+from ..model_checks import ArrayReader, FieldReader
+from ..store import load_arrays
 from .pairs_csv import csv_document, document_csv
-from .store import load_arrays
 from .visemes import OCULUS15
 
 SCHEMA_VERSION = 1
@@ -234,7 +234,7 @@ def offered_targets(channels: Sequence[str]) -> tuple[str, ...]:
 def _oculus15_pairs(model: Model, viseme_poses: np.ndarray | None) -> KeyPosePairs:
     """Key poses: the viseme key poses probed from the model (mouth channels fitted); the rig:
     one control per viseme showing its key pose, rest at silence (``viseme_sil`` = 1)."""
-    from .server.viseme_projection import mouth_channels, probe_key_poses
+    from ..server.viseme_projection import mouth_channels, probe_key_poses
 
     poses = probe_key_poses(model, OCULUS15) if viseme_poses is None else viseme_poses
     if not np.isfinite(poses).all():
