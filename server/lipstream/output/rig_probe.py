@@ -60,7 +60,10 @@ class RigProbe:
 
     def emotion_delta(self, emotion: str) -> np.ndarray:
         """How ``emotion`` changes the rest pose from neutral, float64 (n_channels,)."""
-        return np.asarray(self.rest_poses[emotion], np.float64) - self.rest_poses[NEUTRAL]
+        delta: np.ndarray = np.subtract(
+            self.rest_poses[emotion], self.rest_poses[NEUTRAL], dtype=np.float64
+        )
+        return delta
 
 
 def probe_rig(
