@@ -12,7 +12,7 @@ import pytest
 from lipstream.engines.base import SynthesisRequest
 from lipstream.errors import LipstreamError
 from lipstream.output.probes import probe_rig
-from lipstream.output.rig_presets import model_maps, offered_presets, preset_pairs
+from lipstream.output.rig_presets import PRESETS, model_maps, offered_presets, preset_pairs
 from lipstream.timeline import PhonemeSpan
 from lipstream_client.channels import RETARGET_PRESETS
 
@@ -255,6 +255,7 @@ def test_the_presets_are_named_as_clients_name_them() -> None:
     assert RETARGET_PRESETS == (
         "oculus15", "arkit52", "vrm1", "vrm0", "vroid", "rpm", "unified", "metahuman", "a2f68",
     )  # fmt: skip
+    assert tuple(PRESETS) == RETARGET_PRESETS
     without_arkit = offered_presets(("lipsOpen", "lipsRound"))
     assert without_arkit == ("oculus15", "vrm1", "vrm0", "vroid", "rpm")
 
