@@ -12,6 +12,7 @@ import pytest
 from lipstream.engines.base import SynthesisRequest
 from lipstream.errors import LipstreamError
 from lipstream.output.probes import probe_rig
+from lipstream.output.retarget import fit_map
 from lipstream.output.rig_presets import PRESETS, model_maps, offered_presets, preset_pairs
 from lipstream.timeline import PhonemeSpan
 from lipstream_client.channels import RETARGET_PRESETS
@@ -148,6 +149,25 @@ def test_metahuman_and_a2f68_name_the_arkit_curves_in_pascal_case_with_the_tongu
         for column, control in enumerate(names):
             if control not in driven:
                 assert not controls[:, column].any(), control
+
+
+def test_a2f68_passes_a_models_own_tongue_shapes_through() -> None:
+    channels = ("jawOpen", "tongueTipUp", "tongueIn", "lipsWide")
+    pairs = PRESETS["a2f68"].build(channels, lambda: pytest.fail("a2f68 needs no probe"))
+    frames = np.random.default_rng(2).uniform(-0.2, 1.2, (20, len(channels)))
+    controls = fit_map("a2f68", pairs).apply(frames)
+    for channel, control in (
+        ("jawOpen", "JawOpen"),
+        ("tongueTipUp", "TongueTipUp"),
+        ("tongueIn", "TongueIn"),
+    ):
+        np.testing.assert_allclose(
+            controls[:, pairs.controls.index(control)],
+            np.clip(frames[:, channels.index(channel)], 0.0, 1.0),
+            atol=1e-9,
+        )
+    driven = {"JawOpen", "TongueTipUp", "TongueIn"}
+    assert not controls[:, [i for i, c in enumerate(pairs.controls) if c not in driven]].any()
 
 
 def test_unified_drives_each_part_of_an_arkit_mouth_shape(trained_models: dict[str, Model]) -> None:
