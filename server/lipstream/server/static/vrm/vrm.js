@@ -241,12 +241,17 @@ function pcm16ToFloat(base64) {
 
 // ---- expressions -----------------------------------------------------------------------
 
-// The latest frame at or before `index` that has arrived.
-function frameAt(index) {
+// The index of the latest frame at or before `index` that has arrived (-1: none yet).
+function arrivedAt(index) {
   for (let i = Math.min(index, current.frames.length - 1); i >= 0; i--) {
-    if (current.frames[i]) return current.frames[i];
+    if (current.frames[i]) return i;
   }
-  return null;
+  return -1;
+}
+
+function frameAt(index) {
+  const i = arrivedAt(index);
+  return i < 0 ? null : current.frames[i];
 }
 
 function applyFrame(row) {
@@ -283,7 +288,9 @@ function tick(timestamp) {
   if (current !== null && current.t0 !== null && !current.frozen) {
     const t = now() - current.t0;
     if (t >= 0) {
-      applyFrame(frameAt(Math.floor(t * current.fps)));
+      const index = Math.floor(t * current.fps);
+      applyFrame(frameAt(index));
+      current.shown = { t, index, frame: arrivedAt(index) };
       const end = current.frames.length / current.fps;
       if (current.state === "streaming" || current.state === "done") {
         setStatus(t < end ? `speaking: ${t.toFixed(2)} s` : "done");
