@@ -76,8 +76,7 @@ func _start(text: String) -> void:
 	_started_usec = -1
 	if speaker:
 		speaker.stop()
-	var output := {"retarget": retarget}
-	_send({"type": "start", "id": _id, "engine": engine, "character": character, "fps": fps, "output": output})
+	_send({"type": "start", "id": _id, "engine": engine, "character": character, "fps": fps, "output": {"retarget": retarget}})
 	_send({"type": "text", "id": _id, "text": text, "voice": voice})
 	_send({"type": "end", "id": _id})
 
