@@ -115,7 +115,9 @@ function now() {
 function connect() {
   if (socket !== null && socket.readyState <= WebSocket.OPEN) return socket.opened;
   const scheme = location.protocol === "https:" ? "wss:" : "ws:";
-  const ws = new WebSocket(`${scheme}//${location.host}/v1/stream${location.search}`, [SUBPROTOCOL]);
+  const token = new URLSearchParams(location.search).get("access_token");
+  const query = token === null ? "" : `?access_token=${encodeURIComponent(token)}`;
+  const ws = new WebSocket(`${scheme}//${location.host}/v1/stream${query}`, [SUBPROTOCOL]);
   socket = ws;
   ws.opened = new Promise((resolve, reject) => {
     ws.onopen = () => resolve(ws);
