@@ -31,10 +31,24 @@ from tests.live_server import LiveServer, live_server
 GODOT = REPO / "examples" / "godot" / "lipstream_client.gd"
 UNITY = REPO / "examples" / "unity" / "LipstreamClient.cs"
 UNITY_STUBS = Path(__file__).with_name("unity_stubs.cs")
-NEWTONSOFT = Path("/usr/lib/cli/Newtonsoft.Json-5.0/Newtonsoft.Json.dll")  # Debian's libnewtonsoft-json5.0-cil
+NEWTONSOFT = Path(
+    "/usr/lib/cli/Newtonsoft.Json-5.0/Newtonsoft.Json.dll"
+)  # Debian's libnewtonsoft-json5.0-cil
 MAX_LINES = 150
 WAIT_S = 60.0  # a bound on a busy machine, not a speed claim
-VRM1_EXPRESSIONS = ("aa", "ih", "ou", "ee", "oh", "blink", "happy", "angry", "sad", "relaxed", "surprised")
+VRM1_EXPRESSIONS = (
+    "aa",
+    "ih",
+    "ou",
+    "ee",
+    "oh",
+    "blink",
+    "happy",
+    "angry",
+    "sad",
+    "relaxed",
+    "surprised",
+)
 TEXT = "Hello from the game engine."
 
 
@@ -86,7 +100,11 @@ def exchange(served: LiveServer, sent: list[dict[str, Any]]) -> list[dict[str, A
             frame = ws.recv(timeout=WAIT_S)
             assert isinstance(frame, str)  # a text frame, as the clients read
             received.append(json.loads(frame))
-            if received[-1]["type"] == "done" or received[-1]["type"] == "error" and received[-1]["fatal"]:
+            if (
+                received[-1]["type"] == "done"
+                or received[-1]["type"] == "error"
+                and received[-1]["fatal"]
+            ):
                 return received
     raise AssertionError("no done")
 
@@ -125,7 +143,9 @@ def test_text_request_exchange_as_the_clients_do_it(served: LiveServer) -> None:
             assert all(len(row) == len(channels) for row in message["data"])
             rows += message["data"]
     assert received[-1]["stats"]["frames"] == len(rows)
-    assert rate is not None and len(rows) >= samples / rate * ready["fps"]  # frames cover the speech
+    assert (
+        rate is not None and len(rows) >= samples / rate * ready["fps"]
+    )  # frames cover the speech
     assert max(row[channels.index("aa")] for row in rows) > 0.1  # the mouth opens
 
 
@@ -143,7 +163,10 @@ def gdscript_sent(source: str) -> list[set[str]]:
 
 def csharp_sent(source: str) -> list[set[str]]:
     calls = re.findall(r"Send\(new (\{.*\})\);", source)
-    return [set(re.findall(r"\b([a-z]\w*)\b", re.sub(r'"[^"]*"|\bnew\b|\d+', "", call))) for call in calls]
+    return [
+        set(re.findall(r"\b([a-z]\w*)\b", re.sub(r'"[^"]*"|\bnew\b|\d+', "", call)))
+        for call in calls
+    ]
 
 
 def keys(message: dict[str, Any]) -> set[str]:
@@ -174,8 +197,18 @@ def test_the_clients_send_and_read_what_the_exchange_covers(client: Path) -> Non
 )
 def test_the_unity_client_compiles(tmp_path: Path) -> None:
     compiled = subprocess.run(
-        ["mcs", "-target:library", f"-out:{tmp_path / 'client.dll'}", f"-r:{NEWTONSOFT}", "-warnaserror",
-         str(UNITY), str(UNITY_STUBS)],
-        capture_output=True, text=True, timeout=120, check=False,
+        [
+            "mcs",
+            "-target:library",
+            f"-out:{tmp_path / 'client.dll'}",
+            f"-r:{NEWTONSOFT}",
+            "-warnaserror",
+            str(UNITY),
+            str(UNITY_STUBS),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
     )
     assert compiled.returncode == 0, compiled.stdout + compiled.stderr

@@ -25,7 +25,19 @@ from tests.lipstream.server.vrm_model import FACE_MESH, UNBOUND_TARGET, build_vr
 from tests.live_server import LiveServer, live_server
 
 # VRM 1.0's preset expressions that the `vrm1` rig preset drives (VRMC_vrm expressions.md).
-VRM1_EXPRESSIONS = ("aa", "ih", "ou", "ee", "oh", "blink", "happy", "angry", "sad", "relaxed", "surprised")
+VRM1_EXPRESSIONS = (
+    "aa",
+    "ih",
+    "ou",
+    "ee",
+    "oh",
+    "blink",
+    "happy",
+    "angry",
+    "sad",
+    "relaxed",
+    "surprised",
+)
 RIGS = {"vrm1": VRM1_EXPRESSIONS, "arkit52": tuple(ARKIT_BLENDSHAPES)}
 MOUTH_OPENING = {"vrm1": "aa", "arkit52": "jawOpen"}
 SENTENCE = "Hello there, how are you?"
@@ -83,7 +95,14 @@ def served_frames(served: LiveServer, rig: str) -> tuple[list[str], np.ndarray]:
     rows: dict[int, list[float]] = {}
     with connect(served.ws, subprotocols=["lipstream.v1.json"], proxy=None) as ws:  # type: ignore[arg-type]
         for message in (
-            {"type": "start", "id": "t", "engine": ENGINE, "character": "demo", "fps": FPS, "output": {"retarget": rig}},
+            {
+                "type": "start",
+                "id": "t",
+                "engine": ENGINE,
+                "character": "demo",
+                "fps": FPS,
+                "output": {"retarget": rig},
+            },
             {"type": "text", "id": "t", "text": SENTENCE, "voice": "en-us", "rate": 160},
             {"type": "end", "id": "t"},
         ):
@@ -154,14 +173,21 @@ def test_morph_targets_follow_the_served_frames(page: Any, served: LiveServer, r
     speak(page, rig)
     page.wait_for_function("window.lipstreamVrm.log.done.length === 1", timeout=WAIT_MS)
     channels, frames = served_frames(served, rig)
-    page.wait_for_function("document.getElementById('status').textContent === 'done'", timeout=WAIT_MS)
+    page.wait_for_function(
+        "document.getElementById('status').textContent === 'done'", timeout=WAIT_MS
+    )
     samples = page.evaluate("window.samples")
 
     assert page.evaluate("window.lipstreamVrm.channels()") == channels
     if rig == "vrm1":
         assert sorted(channels) == sorted(VRM1_EXPRESSIONS)
-    assert page.text_content("#coverage") == f"{len(channels)} of {len(channels)} channels drive an expression"
-    np.testing.assert_array_equal(np.array(page.evaluate("window.lipstreamVrm.frames()"), np.float32), frames)
+    assert (
+        page.text_content("#coverage")
+        == f"{len(channels)} of {len(channels)} channels drive an expression"
+    )
+    np.testing.assert_array_equal(
+        np.array(page.evaluate("window.lipstreamVrm.frames()"), np.float32), frames
+    )
     assert frames[:, channels.index(MOUTH_OPENING[rig])].max() > 0.1  # the mouth opens
 
     shown = influences(page, channels)
@@ -192,7 +218,9 @@ def test_a_gltf_without_vrm_is_refused_and_the_page_keeps_working(page: Any) -> 
     assert page.text_content("#status") == "loaded lipstream test avatar: 11 expressions"
 
 
-def test_the_page_loads_only_from_the_server_and_serves_the_licences(page: Any, served: LiveServer) -> None:
+def test_the_page_loads_only_from_the_server_and_serves_the_licences(
+    page: Any, served: LiveServer
+) -> None:
     import httpx
 
     assert page.requested and all(url.startswith(served.http) for url in page.requested)

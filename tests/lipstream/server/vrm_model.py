@@ -80,7 +80,11 @@ def build_vrm(expressions: Sequence[str], name: str = "lipstream test avatar") -
 
     def vec3(array: np.ndarray) -> int:
         bounds = {"min": array.min(axis=0).tolist(), "max": array.max(axis=0).tolist()}
-        return add(array, {"componentType": FLOAT, "count": len(array), "type": "VEC3", **bounds}, ARRAY_BUFFER)
+        return add(
+            array,
+            {"componentType": FLOAT, "count": len(array), "type": "VEC3", **bounds},
+            ARRAY_BUFFER,
+        )
 
     indices = add(
         triangles.reshape(-1),
@@ -130,7 +134,9 @@ def build_vrm(expressions: Sequence[str], name: str = "lipstream test avatar") -
         "meshes": [
             {
                 "name": FACE_MESH,
-                "primitives": [{"attributes": {"POSITION": position}, "indices": indices, "targets": morphs}],
+                "primitives": [
+                    {"attributes": {"POSITION": position}, "indices": indices, "targets": morphs}
+                ],
                 "weights": [0.0] * len(targets),
                 "extras": {"targetNames": targets},
             }
@@ -141,7 +147,11 @@ def build_vrm(expressions: Sequence[str], name: str = "lipstream test avatar") -
         "extensions": {
             "VRMC_vrm": {
                 "specVersion": "1.0",
-                "meta": {"name": name, "authors": ["lipstream tests"], "licenseUrl": VRM_LICENCE_URL},
+                "meta": {
+                    "name": name,
+                    "authors": ["lipstream tests"],
+                    "licenseUrl": VRM_LICENCE_URL,
+                },
                 "humanoid": {"humanBones": {bone: {"node": i} for i, bone in enumerate(bones)}},
                 "expressions": {
                     "preset": {e: binds[e] for e in expressions if e in VRM1_PRESETS},
