@@ -23,21 +23,9 @@ import pytest
 from lipstream.engines import engine_names
 from lipstream.engines.base import Model
 from tests.helpers import rest_pose
+from tests.lipstream.server.browser import CHROMIUM, WAIT_MS
 from tests.live_server import LiveServer, live_server
 
-CHROMIUM = Path("/usr/bin/chromium")
-LAUNCH_ARGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--autoplay-policy=no-user-gesture-required",
-]
-WAIT_MS = 30_000  # a bound on a busy machine, not a speed claim
 SENTENCE = "Hello there, my name is Mia."
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 SETTLE_FRAMES = 9  # after `end`, the face returns to rest over 150 ms: 9 frames at 60 fps
@@ -52,16 +40,6 @@ pytestmark = pytest.mark.skipif(
 def served(all_models_dir: Path) -> Iterator[LiveServer]:
     with live_server(all_models_dir) as server:
         yield server
-
-
-@pytest.fixture(scope="module")
-def browser() -> Iterator[Any]:
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as playwright:
-        chromium = playwright.chromium.launch(executable_path=str(CHROMIUM), args=LAUNCH_ARGS)
-        yield chromium
-        chromium.close()
 
 
 @pytest.fixture()

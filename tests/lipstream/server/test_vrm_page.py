@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from lipstream.corpus.livelink import ARKIT_BLENDSHAPES
-from tests.lipstream.server.test_demo_page import CHROMIUM, LAUNCH_ARGS, WAIT_MS
+from tests.lipstream.server.browser import CHROMIUM, WAIT_MS
 from tests.lipstream.server.vrm_model import FACE_MESH, UNBOUND_TARGET, build_vrm, glb
 from tests.live_server import LiveServer, live_server
 
@@ -54,16 +54,6 @@ pytestmark = pytest.mark.skipif(
 def served(lerp_dir: Path) -> Iterator[LiveServer]:
     with live_server(lerp_dir) as server:
         yield server
-
-
-@pytest.fixture(scope="module")
-def browser() -> Iterator[Any]:
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as playwright:
-        chromium = playwright.chromium.launch(executable_path=str(CHROMIUM), args=LAUNCH_ARGS)
-        yield chromium
-        chromium.close()
 
 
 @pytest.fixture()
