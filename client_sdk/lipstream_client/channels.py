@@ -23,6 +23,12 @@ VISEME_CHANNELS: dict[VisemeSet, tuple[str, ...]] = {
     "oculus15": OCULUS15_VISEMES,
     "preston-blair": PRESTON_BLAIR_SHAPES,
 }
+RETARGET_PRESETS: tuple[str, ...] = (
+    "oculus15", "arkit52", "vrm1", "vrm0", "vroid", "rpm", "unified", "metahuman", "a2f68",
+)  # fmt: skip
+"""The rig presets every server offers by name in ``output.retarget`` (``arkit52``,
+``unified``, ``metahuman`` and ``a2f68`` only for a model with ARKit channel names);
+docs/how-to/retarget.md lists each one's controls and key poses."""
 _VISEME_PREFIX = "viseme_"
 _OVR_SPELLINGS = {"ih": "viseme_I", "oh": "viseme_O", "ou": "viseme_U"}
 _SIDE_SUFFIXES = (("Left", "_L"), ("Right", "_R"))

@@ -39,6 +39,7 @@ UNKNOWN_PHONEME = "unknown_phoneme"
 UNKNOWN_PHONEME_SOURCE = "unknown_phoneme_source"
 UNKNOWN_EMOTION = "unknown_emotion"
 UNKNOWN_CHANNEL = "unknown_channel"
+UNKNOWN_RETARGET = "unknown_retarget"
 INVALID_REQUEST = "invalid_request"
 UNKNOWN_REQUEST = "unknown_request"
 DUPLICATE_REQUEST = "duplicate_request"
@@ -176,6 +177,11 @@ ERROR_CODES: dict[str, ErrorCodeInfo] = {
     UNKNOWN_EMOTION: ErrorCodeInfo("an emotion the engine does not know", "server", "request"),
     UNKNOWN_CHANNEL: ErrorCodeInfo(
         "an output channel, subset or transform names a channel the rig lacks", "server", "request"
+    ),
+    UNKNOWN_RETARGET: ErrorCodeInfo(
+        "output.retarget names no rig preset or stored map the model has; the message lists them",
+        "server",
+        "request",
     ),
     INVALID_REQUEST: ErrorCodeInfo(
         "the request is well formed but its values are not acceptable to the engine "

@@ -15,6 +15,10 @@ from tests.helpers import run_cli
 if TYPE_CHECKING:
     from lipstream.engines.base import Model
 
+# The preset names the issue and the other helpers use, in the order `show` lists them.
+PRESET_NAMES = (
+    "oculus15", "arkit52", "vrm1", "vrm0", "vroid", "rpm", "unified", "metahuman", "a2f68",
+)  # fmt: skip
 PHONES = [
     {"phoneme": "sil", "start": 0.0, "end": 0.3},
     {"phoneme": "M", "start": 0.3, "end": 0.5},
@@ -88,7 +92,7 @@ def test_build_writes_a_shipped_target_and_its_pairs_and_show_lists_the_maps(
     shown = run_cli("retarget", "show", "--model", str(lerp_model))
     assert shown.returncode == 0, shown.stderr
     headers = [line.split(":")[0] for line in shown.stdout.splitlines() if not line[0].isspace()]
-    assert headers == ["oculus15", "arkit52"]
+    assert headers == list(PRESET_NAMES)
     assert "52 controls" in shown.stdout and "15 controls" in shown.stdout
 
 
@@ -107,7 +111,11 @@ def test_a_malformed_pairs_file_exits_with_the_code_file_and_field(
         f"error [model_invalid]: {pairs}: keys[1].source.noSuchChannel:"
     )
     unknown = run_cli("retarget", "build", "--model", str(lerp_model), "--target", "rig9")
-    assert unknown.returncode == 2 and "target: no shipped retarget target" in unknown.stderr
+    assert unknown.returncode == 2
+    assert unknown.stderr == (
+        f"error [unknown_retarget]: target: no rig preset 'rig9'; the presets: "
+        f"{', '.join(PRESET_NAMES)}\n"
+    )
 
 
 def test_show_with_a_name_shows_only_that_map_and_refuses_an_unknown_one(
@@ -125,5 +133,28 @@ def test_show_with_a_name_shows_only_that_map_and_refuses_an_unknown_one(
     assert unknown.stdout == ""
     assert unknown.stderr == (
         f"error [unknown_retarget]: {lerp_model}: the model has no retarget map 'nope'; "
-        "its maps: oculus15, arkit52, jaw\n"
+        f"its maps: {', '.join(PRESET_NAMES)}, jaw\n"
     )
+
+
+def test_show_without_a_model_lists_every_preset_and_its_controls() -> None:
+    shown = run_cli("retarget", "show")
+    assert shown.returncode == 0, shown.stderr
+    headers = [line for line in shown.stdout.splitlines() if not line[0].isspace()]
+    assert [header.split(":")[0] for header in headers] == list(PRESET_NAMES)
+    assert (
+        "  controls: aa, ih, ou, ee, oh, blink, happy, angry, sad, relaxed, surprised, neutral"
+        in (shown.stdout)
+    )
+    assert "  controls: A, I, U, E, O, Blink, Joy, Angry, Sorrow, Fun, Neutral" in shown.stdout
+    one = run_cli("retarget", "show", "metahuman")
+    assert one.returncode == 0 and one.stdout.startswith("metahuman: ")
+    assert "  controls: EyeBlinkLeft, " in one.stdout and ", JawOpen, " in one.stdout
+    unknown = run_cli("retarget", "show", "vrm2")
+    assert unknown.returncode == 2
+    assert unknown.stderr == (
+        f"error [unknown_retarget]: name: no rig preset 'vrm2'; the presets: "
+        f"{', '.join(PRESET_NAMES)}\n"
+    )
+    refused = run_cli("retarget", "build", "--target", "vrm1")
+    assert refused.returncode == 2 and "--model" in refused.stderr

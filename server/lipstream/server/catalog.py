@@ -3,12 +3,13 @@
 Sketch: the ``Catalog`` wraps the ``ModelRegistry`` and precomputes, per
 model, the latency estimate of every fidelity rung (``budget``,
 ``calibration``), the rest pose for each emotion (the frame in the middle of
-one second of silence), the retarget maps it can be served through (the
-shipped ``oculus15`` and ``arkit52`` fitted on the same viseme probe, and those
-stored in its directory), and, per character, the viseme projectors (one per
-output viseme set), the preset output profile and the default emotion. Each
-model is warmed up first (its first calls compile or load its kernels) and
-then calibrated; ``build`` reports both steps through ``report`` when given.
+one second of silence), the retarget maps it can be served through (every
+rig preset it is offered, ``lipstream.output.rig_presets``, fitted on its
+phoneme and rest probes, and the maps stored in its directory), and, per
+character, the viseme projectors (one per output viseme set), the preset
+output profile and the default emotion. Each model is warmed up first (its
+first calls compile or load its kernels) and then calibrated; ``build``
+reports both steps through ``report`` when given.
 Start-up is bounded per model (``calibration``): a model whose probes, warm-up and
 calibration use more than ``calibration_cpu_s`` of the injectable ``clock``, or whose rung
 would need more than ``max_model_session_cost`` of a core per session, is
@@ -33,16 +34,16 @@ from lipstream_client import OutputProfile
 from lipstream_client.errors import UNKNOWN_CHARACTER, UNKNOWN_ENGINE
 
 from ..config import ServerSettings
-from ..engines.base import CallCost, Model, Rung, SynthesisRequest
+from ..engines.base import CallCost, Model, Rung
 from ..engines.work import WorkGuard
 from ..errors import LipstreamError, ModelStoreError
 from ..models import ModelRegistry
-from ..phonemes import SILENCE
-from ..retarget import RetargetMap, model_maps
+from ..output.retarget import RetargetMap
+from ..output.rig_presets import model_maps
+from ..output.rig_probe import RigProbe, probe_closures
 from ..status import Report, phase
 from ..store import MANIFEST_NAME
-from ..timeline import EMOTIONS, PhonemeSpan
-from ..visemes import OCULUS15
+from ..timeline import EMOTIONS
 from .budget import RungEstimate, estimate
 from .calibration import calibration_guard, measure, warm_up
 from .profiles import (
@@ -53,11 +54,15 @@ from .profiles import (
     parse_profile,
     resolve_profile,
 )
-from .viseme_projection import VisemeProjector, key_poses, probe_phoneme_poses, projectors_from
+from .viseme_projection import (
+    VisemeProjector,
+    probe_phoneme_poses,
+    probe_rest_poses,
+    projectors_from,
+)
 
 logger = logging.getLogger("lipstream.server")
 
-REST_PROBE_S = 1.0
 PRESET_KEY = "output_profile"
 _VISEME_SOURCE_ENGINE = "viseme-lerp"
 
@@ -102,7 +107,7 @@ class Catalog:
         ``ModelRegistry.require_models`` for when that raises); LipstreamError for a preset
         from ``settings`` that does not fit."""
         catalog = cls(registry, settings)
-        probed: dict[int, tuple[dict[str, VisemeProjector], np.ndarray]] = {}
+        probed: dict[int, tuple[dict[str, VisemeProjector], dict[str, np.ndarray]]] = {}
         for name, model in list(registry.models.items()):
             where = str(registry.directories.get(name, Path(name)))
             guard = calibration_guard(settings.calibration_cpu_s, f"{where}: calibration", clock)
@@ -111,15 +116,13 @@ class Catalog:
                     source = _viseme_source(registry, model)
                     if id(source) not in probed:
                         poses = probe_phoneme_poses(source, guard)
-                        probed[id(source)] = (
-                            projectors_from(poses, source.channels),
-                            key_poses(poses, OCULUS15),
-                        )
-                    projectors, viseme_poses = probed[id(source)]
-                    rest = _rest_poses(model, guard)
-                    retargets = model_maps(
-                        model, registry.directories.get(name), viseme_poses=viseme_poses
-                    )
+                        probed[id(source)] = (projectors_from(poses, source.channels), poses)
+                    projectors, phoneme_poses = probed[id(source)]
+                    rest = probe_rest_poses(model, guard)
+                    emotion_rests = {emotion: rest[emotion] for emotion in EMOTIONS}
+                    closures = probe_closures(model, guard)
+                    probe = RigProbe(model.channels, phoneme_poses, emotion_rests, closures)
+                    retargets = model_maps(model, registry.directories.get(name), probe=probe)
                     ladder = catalog._ladder(where, model, guard, report)
                 catalog.facts[id(model)] = ModelFacts(ladder, rest, projectors, retargets)
             except LipstreamError as error:
@@ -242,30 +245,11 @@ def warm_kernels(model: Model) -> None:
     """Make the calls that compile ``model``'s kernels at start-up (its rest poses, the viseme
     probe, every rung's calibration stream), timing nothing: run in another process, they
     leave the compiled kernels in numba's on-disk cache for the server to load."""
-    _rest_poses(model)
+    probe_rest_poses(model)
     probe_phoneme_poses(model)
+    probe_closures(model)
     for rung in model.fidelity_ladder():
         warm_up(model, rung)
-
-
-def _rest_poses(model: Model, guard: WorkGuard | None = None) -> dict[str | None, np.ndarray]:
-    """The rest pose per emotion, synthesized under ``guard``; a model whose silence is not
-    finite is refused."""
-    silence = [PhonemeSpan(SILENCE, 0.0, REST_PROBE_S)]
-    poses: dict[str | None, np.ndarray] = {}
-    for emotion in (None, *EMOTIONS):
-        fps = float(model.manifest.fps)
-        request = SynthesisRequest(fps=fps, emotion=emotion, guard=guard or WorkGuard())
-        synthesizer = model.start(request)
-        synthesizer.feed(silence)
-        frames = synthesizer.finish()
-        if not np.isfinite(frames).all():
-            raise ModelStoreError(
-                f"synthesizes NaN or infinite frames for silence (emotion {emotion})",
-                where=f"model {model.manifest.engine}/{model.name}",
-            )
-        poses[emotion] = np.asarray(frames[len(frames) // 2], dtype=np.float32)
-    return poses
 
 
 def _viseme_source(registry: ModelRegistry, model: Model) -> Model:

@@ -3,7 +3,7 @@
 Sketch: a profile (``lipstream_client.OutputProfile``) is resolved once per
 request against the model's ARKit channel names, into a column gather (or a
 viseme projection: Oculus 15 or Preston Blair) and per-column multiplier, offset and clamp
-vectors, or, when it names a ``retarget`` map (``lipstream.retarget``), into
+vectors, or, when it names a ``retarget`` map (``lipstream.output.retarget``), into
 that map's rig controls. Applying it to a float32 block (n_frames,
 n_model_channels) is then one gather, one multiply-add and one clip in numpy
 (after the projection or the map, when there is one). The profile comes from
@@ -28,12 +28,13 @@ import numpy as np
 
 from lipstream_client import OutputProfile, ProtocolError, Start, decode
 from lipstream_client.channels import VISEME_CHANNELS, canonical_viseme, rename_channel
-from lipstream_client.errors import INVALID_REQUEST, UNKNOWN_CHANNEL
+from lipstream_client.errors import INVALID_REQUEST, UNKNOWN_CHANNEL, UNKNOWN_RETARGET
 from lipstream_client.messages import VisemeSet
 
 from ..engines.base import DEFAULT_EMOTION_KEY, Model, SynthesisResult
 from ..errors import LipstreamError
-from ..retarget import RetargetMap, model_maps
+from ..output.retarget import RetargetMap
+from ..output.rig_presets import model_maps
 from ..timeline import EMOTIONS
 from .viseme_projection import VISEME_SCHEMES, VisemeProjector, mouth_channels, probe_key_poses
 
@@ -150,6 +151,7 @@ def resolve_profile(
     viseme set, only for visemes; ``retargets`` holds the maps ``retarget`` may name.
 
     ProfileError: ``unknown_channel`` naming the field and name the rig lacks,
+    ``unknown_retarget`` for a ``retarget`` the model has no map of (listing its maps),
     ``invalid_request`` for names that collide after renaming or canonicalising.
     """
     profile = request.profile or OutputProfile()
@@ -186,10 +188,11 @@ def _retarget(
 ) -> RetargetMap:
     found = retargets.get(name)
     if found is None:
-        known = ", ".join(sorted(retargets)) or "none"
+        known = ", ".join(retargets) or "none"
         raise ProfileError(
-            f"no retarget map {name!r} for this model; its maps: {known}",
+            f"no rig preset or retarget map {name!r} for this model; its maps: {known}",
             where=request.where("retarget"),
+            code=UNKNOWN_RETARGET,
         )
     if found.channels != model_channels:
         raise ProfileError(

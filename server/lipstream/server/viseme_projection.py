@@ -17,7 +17,7 @@ channel.
 Key poses are probed from a model: every canonical phoneme is synthesized
 held for 200 ms between silences, the frame at its centre is taken, and the
 frames are averaged over the phonemes of each class of the set's scheme
-(``lipstream.visemes.OCULUS15``, ``PRESTON_BLAIR``); silence's pose is the
+(``lipstream.output.visemes.OCULUS15``, ``PRESTON_BLAIR``); silence's pose is the
 frame at the centre of a silence. One probe serves every set. The server
 probes the character's ``viseme-lerp`` model when one with the same channels
 is loaded: its frame at a span centre is exactly its trained key pose (the
@@ -33,9 +33,10 @@ from scipy.optimize import nnls
 
 from ..engines.base import Model, SynthesisRequest
 from ..engines.work import WorkGuard
+from ..errors import ModelStoreError
+from ..output.visemes import OCULUS15, PRESTON_BLAIR, VisemeScheme
 from ..phonemes import PHONEMES, SILENCE
-from ..timeline import PhonemeSpan
-from ..visemes import OCULUS15, PRESTON_BLAIR, VisemeScheme
+from ..timeline import EMOTIONS, PhonemeSpan
 
 # Output viseme sets (``output.visemes``) and their schemes; each scheme's class order is the
 # set's channel order (lipstream_client.channels.VISEME_CHANNELS).
@@ -44,6 +45,7 @@ VISEME_SCHEMES: dict[str, VisemeScheme] = {"oculus15": OCULUS15, "preston-blair"
 PROBE_FPS = 100.0
 PROBE_HOLD_S = 0.2
 PROBE_GAP_S = 0.3
+REST_PROBE_S = 1.0
 MOUTH_PREFIXES = ("jaw", "mouth", "cheek", "tongue")
 _SUM_WEIGHT = 100.0
 _NEGLIGIBLE = 1e-9  # rounding residue of the solver, not a viseme
@@ -73,6 +75,26 @@ def probe_phoneme_poses(model: Model, guard: WorkGuard | None = None) -> dict[st
     synthesizer.feed(spans)
     frames = np.asarray(synthesizer.finish(), dtype=np.float64)
     return {phoneme: frames[round(centre * PROBE_FPS)] for phoneme, centre in centres.items()}
+
+
+def probe_rest_poses(model: Model, guard: WorkGuard | None = None) -> dict[str | None, np.ndarray]:
+    """The rest pose per emotion, synthesized under ``guard``; a model whose silence is not
+    finite is refused."""
+    silence = [PhonemeSpan(SILENCE, 0.0, REST_PROBE_S)]
+    poses: dict[str | None, np.ndarray] = {}
+    for emotion in (None, *EMOTIONS):
+        fps = float(model.manifest.fps)
+        request = SynthesisRequest(fps=fps, emotion=emotion, guard=guard or WorkGuard())
+        synthesizer = model.start(request)
+        synthesizer.feed(silence)
+        frames = synthesizer.finish()
+        if not np.isfinite(frames).all():
+            raise ModelStoreError(
+                f"synthesizes NaN or infinite frames for silence (emotion {emotion})",
+                where=f"model {model.manifest.engine}/{model.name}",
+            )
+        poses[emotion] = np.asarray(frames[len(frames) // 2], dtype=np.float32)
+    return poses
 
 
 def key_poses(phoneme_poses: dict[str, np.ndarray], scheme: VisemeScheme) -> np.ndarray:

@@ -14,9 +14,9 @@ from lipstream.corpus import Corpus, Utterance
 from lipstream.engines import load_model
 from lipstream.engines.viseme_lerp import KAPPAS, VisemeLerpEngine
 from lipstream.errors import InvalidRequestError, ModelStoreError
+from lipstream.output.visemes import get_scheme
 from lipstream.store import save_model_dir
 from lipstream.timeline import PhonemeSpan
-from lipstream.visemes import get_scheme
 
 FPS = 100.0
 

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from lipstream.errors import LipstreamError
+from lipstream.output.visemes import OCULUS15, PRESTON_BLAIR
 from lipstream.server.catalog import Catalog
 from lipstream.server.profiles import (
     ProfileError,
@@ -25,7 +26,6 @@ from lipstream.server.viseme_projection import (
     mouth_channels,
     probe_key_poses,
 )
-from lipstream.visemes import OCULUS15, PRESTON_BLAIR
 from lipstream_client import ChannelTransform, OutputProfile, Start
 from lipstream_client.channels import OCULUS15_VISEMES, PRESTON_BLAIR_SHAPES
 

@@ -17,7 +17,7 @@ from lipstream.corpus.livelink import ARKIT_BLENDSHAPES
 from lipstream.engines.base import Model
 from lipstream.errors import LipstreamError
 from lipstream.models import ModelRegistry
-from lipstream.retarget import KeyPosePairs, fit_map, save_map
+from lipstream.output.retarget import KeyPosePairs, fit_map, save_map
 from lipstream.server.catalog import Catalog
 from lipstream_client import AsyncClient, LipstreamServerError, OutputProfile, StreamResult
 from lipstream_client.channels import OCULUS15_VISEMES
@@ -114,11 +114,31 @@ def test_the_characters_preset_names_a_shipped_target(served: LiveServer) -> Non
     assert rows[round(0.35 * FPS)].argmax() == OCULUS15_VISEMES.index("viseme_aa")
 
 
-def test_an_unknown_map_is_an_invalid_request_naming_the_field(served: LiveServer) -> None:
+def test_an_unknown_map_is_unknown_retarget_listing_the_presets_and_maps(
+    served: LiveServer,
+) -> None:
     with pytest.raises(LipstreamServerError) as caught:
         asyncio.run(request(served.ws, OutputProfile(retarget="nope")))
-    assert caught.value.code == "invalid_request"
-    assert "output.retarget" in caught.value.message and "jaw" in caught.value.message
+    assert caught.value.code == "unknown_retarget"
+    assert "output.retarget" in caught.value.message
+    for name in ("jaw", "oculus15", "arkit52", "vrm1", "vrm0", "vroid", "rpm", "unified"):
+        assert name in caught.value.message
+    assert "metahuman" in caught.value.message and "a2f68" in caught.value.message
+
+
+def test_a_request_picks_the_vrm1_preset_by_name(served: LiveServer) -> None:
+    result = asyncio.run(request(served.ws, OutputProfile(retarget="vrm1")))
+    assert result.ready.channels == (
+        "aa", "ih", "ou", "ee", "oh", "blink",
+        "happy", "angry", "sad", "relaxed", "surprised", "neutral",
+    )  # fmt: skip
+    rows = np.asarray(result.rows())
+    mouth = rows[:, :5]
+    # LINE: AA over 0.2-0.5 s opens the mouth in aa; M (0.1-0.2) and P (0.5-0.6) close it.
+    assert mouth[round(0.35 * FPS)].argmax() == 0 and mouth[round(0.35 * FPS), 0] > 0.8
+    for closed in (0.15, 0.55):
+        assert mouth[round(closed * FPS)].max() < 0.15
+    assert rows.min() >= 0.0 and rows.max() <= 1.0
 
 
 def test_a_malformed_stored_map_sets_its_model_aside_naming_file_and_field(

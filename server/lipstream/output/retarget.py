@@ -22,12 +22,8 @@ The key controls c_k themselves come from the appendix's second fit: given
 the rig's transfer function as control shapes (what each control alone
 does to the model's channels), ``fit_controls`` solves min ||T c − s_k||²
 over c ∈ [0,1] by bounded least squares (``scipy.optimize.lsq_linear``).
-The shipped targets are built this way from the model itself
-(``target_pairs``): ``oculus15`` (the 15 Oculus visemes, key poses probed
-from the model as ``viseme_projection`` does; rest is silence) and
-``arkit52`` (the 52 ARKit blendshapes; one key per model channel that has
-an ARKit name, at full activation over the ARKit neutral face, so the
-channels the model lacks stay at rest, 0).
+The shipped rig presets (``rig_presets``) build their key-pose pairs from
+the model itself; ``oculus15`` fits its key controls this way.
 
 A map is stored as a directory (``retarget.json`` manifest plus uncompressed
 ``arrays.npz``, never pickle), read with the load-time checks of
@@ -50,15 +46,10 @@ from typing import Any
 import numpy as np
 from scipy.optimize import lsq_linear, nnls
 
-from lipstream_client.channels import OCULUS15_VISEMES
-
-from .corpus.livelink import ARKIT_BLENDSHAPES
-from .engines.base import Model
-from .errors import ModelStoreError
-from .model_checks import ArrayReader, FieldReader
+from ..errors import ModelStoreError
+from ..model_checks import ArrayReader, FieldReader
+from ..store import load_arrays
 from .pairs_csv import csv_document, document_csv
-from .store import load_arrays
-from .visemes import OCULUS15
 
 SCHEMA_VERSION = 1
 MANIFEST_NAME = "retarget.json"
@@ -68,8 +59,6 @@ RETARGET_DIR = "retarget"
 MAX_KEYS = 256
 MAX_CONTROLS = 1024
 MAX_PAIRS_BYTES = 4 << 20
-TARGETS = ("oculus15", "arkit52")
-"""The shipped targets, built from any model by ``target_pairs``."""
 _MAP_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
 _ARRAYS = ("source_rest", "control_rest", "source_keys", "control_keys", "channel_weights")
 
@@ -191,99 +180,6 @@ def fit_map(name: str, pairs: KeyPosePairs) -> RetargetMap:
         )
     _check_pairs(pairs, f"retarget map {name}")
     return RetargetMap(name, pairs)
-
-
-def target_pairs(model: Model, target: str, viseme_poses: np.ndarray | None = None) -> KeyPosePairs:
-    """The key-pose pairs of a shipped target (``TARGETS``) for ``model``; ``viseme_poses``
-    (15, n_channels) are its Oculus key poses when already probed."""
-    if target == "oculus15":
-        return _oculus15_pairs(model, viseme_poses)
-    if target == "arkit52":
-        return _arkit52_pairs(model.channels)
-    raise ModelStoreError(
-        f"no shipped retarget target {target!r}; shipped: {', '.join(TARGETS)}", where="target"
-    )
-
-
-def model_maps(
-    model: Model,
-    directory: Path | None,
-    *,
-    viseme_poses: np.ndarray | None = None,
-    only: str | None = None,
-) -> dict[str, RetargetMap]:
-    """The maps ``model`` is served through, by name: the shipped targets (``arkit52`` only
-    for a model with ARKit channel names; with ``only``, just that one), then those stored
-    in ``directory/retarget/``, which replace a shipped one of the same name."""
-    stored = stored_maps(directory, model.channels) if directory is not None else {}
-    maps: dict[str, RetargetMap] = {}
-    for target in offered_targets(model.channels):
-        if target not in stored and only in (None, target):
-            maps[target] = fit_map(target, target_pairs(model, target, viseme_poses))
-    maps.update(stored)
-    return maps
-
-
-def offered_targets(channels: Sequence[str]) -> tuple[str, ...]:
-    """The shipped targets a model with ``channels`` is served through: ``arkit52`` only
-    when some channel has an ARKit name."""
-    arkit = any(name in ARKIT_BLENDSHAPES for name in channels)
-    return tuple(target for target in TARGETS if target != "arkit52" or arkit)
-
-
-def _oculus15_pairs(model: Model, viseme_poses: np.ndarray | None) -> KeyPosePairs:
-    """Key poses: the viseme key poses probed from the model (mouth channels fitted); the rig:
-    one control per viseme showing its key pose, rest at silence (``viseme_sil`` = 1)."""
-    from .server.viseme_projection import mouth_channels, probe_key_poses
-
-    poses = probe_key_poses(model, OCULUS15) if viseme_poses is None else viseme_poses
-    if not np.isfinite(poses).all():
-        raise ModelStoreError(
-            "synthesizes NaN or infinite viseme key poses", where=f"model {model.name}"
-        )
-    silence = OCULUS15.classes.index("sil")
-    weights = mouth_channels(model.channels).astype(np.float64)
-    control_rest = np.eye(len(poses))[silence]
-    keys = [index for index in range(len(poses)) if index != silence]
-    control_keys = np.stack(
-        [fit_controls(poses, poses[silence], poses[index], weights) for index in keys]
-    )
-    return KeyPosePairs(
-        channels=tuple(model.channels),
-        controls=OCULUS15_VISEMES,
-        key_names=tuple(OCULUS15_VISEMES[index] for index in keys),
-        source_rest=poses[silence],
-        control_rest=control_rest,
-        source_keys=poses[keys],
-        control_keys=control_keys,
-        channel_weights=weights,
-    )
-
-
-def _arkit52_pairs(channels: Sequence[str]) -> KeyPosePairs:
-    """One key per model channel with an ARKit name: that channel at 1 over the neutral face
-    (all 0); the rig: the 52 ARKit controls, whose transfer to the model's channels is the
-    identity on shared names (so a control the model lacks stays at 0)."""
-    shared = [index for index, name in enumerate(channels) if name in ARKIT_BLENDSHAPES]
-    if not shared:
-        raise ModelStoreError(
-            "the model has no channel with an ARKit name to map onto arkit52", where="channels"
-        )
-    shapes = np.zeros((len(ARKIT_BLENDSHAPES), len(channels)))
-    for index in shared:
-        shapes[ARKIT_BLENDSHAPES.index(channels[index]), index] = 1.0
-    source_keys = np.eye(len(channels))[shared]
-    rest = np.zeros(len(channels))
-    return KeyPosePairs(
-        channels=tuple(channels),
-        controls=ARKIT_BLENDSHAPES,
-        key_names=tuple(channels[index] for index in shared),
-        source_rest=rest,
-        control_rest=np.zeros(len(ARKIT_BLENDSHAPES)),
-        source_keys=source_keys,
-        control_keys=np.stack([fit_controls(shapes, rest, key) for key in source_keys]),
-        channel_weights=np.ones(len(channels)),
-    )
 
 
 def _check_pairs(pairs: KeyPosePairs, source: str) -> None:

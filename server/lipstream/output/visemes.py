@@ -18,8 +18,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
 
-from .errors import LipstreamError
-from .phonemes import PHONEMES, normalize_phoneme
+from ..errors import LipstreamError
+from ..phonemes import PHONEMES, normalize_phoneme
 
 
 @dataclass(frozen=True, eq=False)

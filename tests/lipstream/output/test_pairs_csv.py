@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from lipstream.errors import ModelStoreError
-from lipstream.retarget import KeyPosePairs, read_pairs, write_pairs
-from tests.lipstream.test_retarget import CHANNELS, VALID_PAIRS, generated_rig, pairs_file
+from lipstream.output.retarget import KeyPosePairs, read_pairs, write_pairs
+from tests.lipstream.output.test_retarget import CHANNELS, VALID_PAIRS, generated_rig, pairs_file
 
 # VALID_PAIRS of test_retarget, as a spreadsheet would hold it
 VALID_CSV = """name,source.jawOpen,source.mouthClose,source.eyeBlinkLeft,controls.open,controls.close

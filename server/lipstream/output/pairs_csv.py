@@ -21,7 +21,7 @@ import io
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from .model_checks import FieldReader
+from ..model_checks import FieldReader
 
 NAME_COLUMN = "name"
 SOURCE_PREFIX = "source."
