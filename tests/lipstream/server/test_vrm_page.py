@@ -26,18 +26,8 @@ from tests.live_server import LiveServer, live_server
 
 # VRM 1.0's preset expressions that the `vrm1` rig preset drives (VRMC_vrm expressions.md).
 VRM1_EXPRESSIONS = (
-    "aa",
-    "ih",
-    "ou",
-    "ee",
-    "oh",
-    "blink",
-    "happy",
-    "angry",
-    "sad",
-    "relaxed",
-    "surprised",
-)
+    "aa", "ih", "ou", "ee", "oh", "blink", "happy", "angry", "sad", "relaxed", "surprised", "neutral",
+)  # fmt: skip
 RIGS = {"vrm1": VRM1_EXPRESSIONS, "arkit52": tuple(ARKIT_BLENDSHAPES)}
 MOUTH_OPENING = {"vrm1": "aa", "arkit52": "jawOpen"}
 SENTENCE = "Hello there, how are you?"
@@ -205,7 +195,7 @@ def test_a_gltf_without_vrm_is_refused_and_the_page_keeps_working(page: Any) -> 
     assert page.is_disabled("#speak")
     load_model(page, build_vrm(VRM1_EXPRESSIONS))
     assert page.is_enabled("#speak")
-    assert page.text_content("#status") == "loaded lipstream test avatar: 11 expressions"
+    assert page.text_content("#status") == "loaded lipstream test avatar: 12 expressions"
 
 
 def test_the_page_loads_only_from_the_server_and_serves_the_licences(
