@@ -32,6 +32,7 @@ var _speech := PackedByteArray()
 var _sample_rate := 22050
 var _fps := 60.0
 var _started_usec := -1
+var _close_reported := false
 
 
 func _ready() -> void:
@@ -49,9 +50,9 @@ func say(text: String) -> void:
 func _process(_delta: float) -> void:
 	_socket.poll()
 	var state := _socket.get_ready_state()
-	if state == WebSocketPeer.STATE_CLOSED and _started_usec != -2:
+	if state == WebSocketPeer.STATE_CLOSED and not _close_reported:
 		push_error("lipstream: connection closed (%d %s)" % [_socket.get_close_code(), _socket.get_close_reason()])
-		_started_usec = -2
+		_close_reported = true
 	if state != WebSocketPeer.STATE_OPEN:
 		return
 	while not _pending.is_empty():
