@@ -17,6 +17,8 @@ from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 
+import numpy as np
+
 from lipstream_client.channels import OCULUS15_VISEMES, RETARGET_PRESETS
 from lipstream_client.errors import UNKNOWN_RETARGET
 
@@ -24,12 +26,15 @@ from ..corpus.livelink import ARKIT_BLENDSHAPES
 from ..engines.base import Model
 from ..errors import LipstreamError
 from .blendshape_rigs import BLENDSHAPE_RIGS, blendshape_rig_pairs
+from .probes import RigProbe, mouth_channels, probe_rig
 from .retarget import KeyPosePairs, RetargetMap, fit_map, stored_maps
-from .rig_probe import RigProbe, probe_rig
 from .viseme_rigs import RPM_CONTROLS, oculus15_pairs, rpm_pairs
 from .vowel_rigs import VOWEL_RIGS, vowel_rig_pairs
 
 ProbeSource = Callable[[], RigProbe]
+Builder = Callable[[tuple[str, ...], ProbeSource], KeyPosePairs]
+"""Key-pose pairs for a model's channels; the probe is called only when the key poses are
+the model's own."""
 
 
 @dataclass(frozen=True)
@@ -41,40 +46,45 @@ class RigPreset:
     rig: str
     controls: tuple[str, ...]
     needs_arkit: bool
+    build: Builder
 
-    def pairs(self, channels: tuple[str, ...], probe: ProbeSource) -> KeyPosePairs:
-        """The key-pose pairs of this preset for a model with ``channels``; ``probe`` is called
-        only by presets whose key poses come from the model's own poses."""
-        if self.name in BLENDSHAPE_RIGS:
-            controls, drives = BLENDSHAPE_RIGS[self.name]
-            return blendshape_rig_pairs(self.name, controls, drives, channels)
-        from ..server.viseme_projection import mouth_channels
 
-        mouth = mouth_channels(channels)
-        if self.name in VOWEL_RIGS:
-            return vowel_rig_pairs(VOWEL_RIGS[self.name], probe(), mouth)
-        if self.name == "rpm":
-            return rpm_pairs(probe(), mouth)
-        return oculus15_pairs(probe(), mouth)
+def _blendshape(name: str) -> Builder:
+    controls, drives = BLENDSHAPE_RIGS[name]
+    return lambda channels, _: blendshape_rig_pairs(name, controls, drives, channels)
+
+
+def _vowel(name: str) -> Builder:
+    return lambda channels, probe: vowel_rig_pairs(
+        VOWEL_RIGS[name], probe(), mouth_channels(channels)
+    )
+
+
+def _probed(pairs: Callable[[RigProbe, np.ndarray], KeyPosePairs]) -> Builder:
+    return lambda channels, probe: pairs(probe(), mouth_channels(channels))
 
 
 PRESETS: Mapping[str, RigPreset] = {
     preset.name: preset
     for preset in (
         RigPreset("oculus15", "the 15 Oculus visemes (OVR LipSync, XR_META_face_tracking_visemes)",
-                  OCULUS15_VISEMES, False),
-        RigPreset("arkit52", "Apple's 52 ARKit blendshapes", ARKIT_BLENDSHAPES, True),
-        RigPreset("vrm1", "VRM 1.0 expression presets", VOWEL_RIGS["vrm1"].controls, False),
-        RigPreset("vrm0", "VRM 0.x blend shape presets", VOWEL_RIGS["vrm0"].controls, False),
-        RigPreset("vroid", "VRoid Studio Fcl_* face morphs", VOWEL_RIGS["vroid"].controls, False),
+                  OCULUS15_VISEMES, False, _probed(oculus15_pairs)),
+        RigPreset("arkit52", "Apple's 52 ARKit blendshapes", ARKIT_BLENDSHAPES, True,
+                  _blendshape("arkit52")),
+        RigPreset("vrm1", "VRM 1.0 expression presets", VOWEL_RIGS["vrm1"].controls, False,
+                  _vowel("vrm1")),
+        RigPreset("vrm0", "VRM 0.x blend shape presets", VOWEL_RIGS["vrm0"].controls, False,
+                  _vowel("vrm0")),
+        RigPreset("vroid", "VRoid Studio Fcl_* face morphs", VOWEL_RIGS["vroid"].controls, False,
+                  _vowel("vroid")),
         RigPreset("rpm", "Ready Player Me / Avaturn: viseme_* and ARKit morphs", RPM_CONTROLS,
-                  False),
+                  False, _probed(rpm_pairs)),
         RigPreset("unified", "Unified Expressions (VRCFaceTracking) jaw, lip and mouth shapes",
-                  BLENDSHAPE_RIGS["unified"][0], True),
+                  BLENDSHAPE_RIGS["unified"][0], True, _blendshape("unified")),
         RigPreset("metahuman", "MetaHuman through Live Link Face's ARKit curves (PascalCase)",
-                  BLENDSHAPE_RIGS["metahuman"][0], True),
+                  BLENDSHAPE_RIGS["metahuman"][0], True, _blendshape("metahuman")),
         RigPreset("a2f68", "Audio2Face-3D's 52 face and 16 tongue blendshapes",
-                  BLENDSHAPE_RIGS["a2f68"][0], True),
+                  BLENDSHAPE_RIGS["a2f68"][0], True, _blendshape("a2f68")),
     )
 }  # fmt: skip
 assert tuple(PRESETS) == RETARGET_PRESETS
@@ -101,7 +111,7 @@ def preset(name: str, where: str = "preset") -> RigPreset:
 
 def preset_pairs(model: Model, name: str, probe: RigProbe | None = None) -> KeyPosePairs:
     """The key-pose pairs of preset ``name`` for ``model``, probing it if ``probe`` is None."""
-    return preset(name, "target").pairs(tuple(model.channels), _probe_source(model, probe))
+    return preset(name, "target").build(tuple(model.channels), _probe_source(model, probe))
 
 
 def model_maps(
@@ -121,7 +131,7 @@ def model_maps(
         if name in stored:
             maps[name] = stored[name]
         elif only in (None, name):
-            maps[name] = fit_map(name, PRESETS[name].pairs(tuple(model.channels), source))
+            maps[name] = fit_map(name, PRESETS[name].build(tuple(model.channels), source))
     return maps | stored
 
 

@@ -7,7 +7,7 @@ key pose and its controls are ``viseme_sil`` = 1. The 14 other visemes are
 the keys; their controls are fitted on the rig's transfer (each viseme
 control drives its key pose; ``fit_controls``) and come out one-hot when
 the key poses are independent. Each bilabial probed between two of a vowel
-(``rig_probe.CLOSURE_CONTEXTS``: lips closed, but rounded or spread as the
+(``probes.CLOSURE_CONTEXTS``: lips closed, but rounded or spread as the
 vowels around them) is one more key with ``viseme_PP``'s controls, so a
 coarticulated closure reads as ``viseme_PP``. Only the mouth channels are
 fitted.
@@ -28,8 +28,8 @@ from lipstream_client.channels import OCULUS15_VISEMES
 
 from ..corpus.livelink import ARKIT_BLENDSHAPES
 from ..errors import ModelStoreError
+from .probes import CLOSURE_CONTEXTS, RigProbe
 from .retarget import KeyPosePairs, fit_controls
-from .rig_probe import CLOSURE_CONTEXTS, RigProbe
 from .visemes import OCULUS15
 
 RPM_CONTROLS: tuple[str, ...] = OCULUS15_VISEMES + ARKIT_BLENDSHAPES

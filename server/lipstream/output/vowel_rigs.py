@@ -12,7 +12,7 @@ of its phonemes' poses, as ``oculus15`` probes them) on the mouth channels
 only; rest is silence, every control 0 but the rig's neutral face. An engine
 that coarticulates closes its lips in the shape of the vowels around them
 (rounded in /uw b uw/), which the vowel keys would read as a vowel; so each
-bilabial probed between two of a vowel (``rig_probe.CLOSURE_CONTEXTS``) is
+bilabial probed between two of a vowel (``probes.CLOSURE_CONTEXTS``) is
 one more closed-mouth key, every vowel 0.
 
 Off the mouth: a blink key (``eyeBlinkLeft`` and ``eyeBlinkRight`` at 1, for
@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ModelStoreError
+from .probes import CLOSURE_CONTEXTS, RigProbe
 from .retarget import KeyPosePairs
 from .rig_names import (
     VRM0_CONTROLS,
@@ -45,7 +46,6 @@ from .rig_names import (
     VROID_CONTROLS,
     VROID_MOUTH,
 )
-from .rig_probe import CLOSURE_CONTEXTS, RigProbe
 from .visemes import OCULUS15
 
 VOWELS = ("A", "I", "U", "E", "O")

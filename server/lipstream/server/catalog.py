@@ -38,9 +38,9 @@ from ..engines.base import CallCost, Model, Rung
 from ..engines.work import WorkGuard
 from ..errors import LipstreamError, ModelStoreError
 from ..models import ModelRegistry
+from ..output.probes import RigProbe, probe_closures, probe_phoneme_poses, probe_rest_poses
 from ..output.retarget import RetargetMap
 from ..output.rig_presets import model_maps
-from ..output.rig_probe import RigProbe, probe_closures
 from ..status import Report, phase
 from ..store import MANIFEST_NAME
 from ..timeline import EMOTIONS
@@ -54,12 +54,7 @@ from .profiles import (
     parse_profile,
     resolve_profile,
 )
-from .viseme_projection import (
-    VisemeProjector,
-    probe_phoneme_poses,
-    probe_rest_poses,
-    projectors_from,
-)
+from .viseme_projection import VisemeProjector, projectors_from
 
 logger = logging.getLogger("lipstream.server")
 

@@ -14,11 +14,12 @@ to silence (``viseme_sil``, shape ``X``) = 1. Only mouth channels
 brows do not leak into the visemes; a rig with none of them uses every
 channel.
 
-Key poses are probed from a model: every canonical phoneme is synthesized
-held for 200 ms between silences, the frame at its centre is taken, and the
-frames are averaged over the phonemes of each class of the set's scheme
-(``lipstream.output.visemes.OCULUS15``, ``PRESTON_BLAIR``); silence's pose is the
-frame at the centre of a silence. One probe serves every set. The server
+Key poses are probed from a model (``lipstream.output.probes``): every
+canonical phoneme is synthesized held for 200 ms between silences, the frame
+at its centre is taken, and the frames are averaged over the phonemes of each
+class of the set's scheme (``lipstream.output.visemes.OCULUS15``,
+``PRESTON_BLAIR``); silence's pose is the frame at the centre of a silence.
+One probe serves every set. The server
 probes the character's ``viseme-lerp`` model when one with the same channels
 is loaded: its frame at a span centre is exactly its trained key pose (the
 mean of the corpus frames of that viseme class), so the projection inverts
@@ -31,86 +32,15 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import nnls
 
-from ..engines.base import Model, SynthesisRequest
-from ..engines.work import WorkGuard
-from ..errors import ModelStoreError
+from ..output.probes import key_poses, mouth_channels
 from ..output.visemes import OCULUS15, PRESTON_BLAIR, VisemeScheme
-from ..phonemes import PHONEMES, SILENCE
-from ..timeline import EMOTIONS, PhonemeSpan
 
 # Output viseme sets (``output.visemes``) and their schemes; each scheme's class order is the
 # set's channel order (lipstream_client.channels.VISEME_CHANNELS).
 VISEME_SCHEMES: dict[str, VisemeScheme] = {"oculus15": OCULUS15, "preston-blair": PRESTON_BLAIR}
 
-PROBE_FPS = 100.0
-PROBE_HOLD_S = 0.2
-PROBE_GAP_S = 0.3
-REST_PROBE_S = 1.0
-MOUTH_PREFIXES = ("jaw", "mouth", "cheek", "tongue")
 _SUM_WEIGHT = 100.0
 _NEGLIGIBLE = 1e-9  # rounding residue of the solver, not a viseme
-
-
-def mouth_channels(channels: tuple[str, ...]) -> np.ndarray:
-    """Boolean mask (n_channels,) of the mouth channels; all True if the rig names none."""
-    mask = np.array([name.lower().startswith(MOUTH_PREFIXES) for name in channels], dtype=bool)
-    return mask if mask.any() else np.ones(len(channels), dtype=bool)
-
-
-def probe_phoneme_poses(model: Model, guard: WorkGuard | None = None) -> dict[str, np.ndarray]:
-    """Each canonical phoneme's pose, float64 (n_channels,): ``model``'s frame at the centre
-    of the phoneme held alone between silences (silence: the centre of the first gap),
-    synthesized under ``guard`` when given."""
-    spans: list[PhonemeSpan] = []
-    centres: dict[str, float] = {SILENCE: PROBE_GAP_S / 2}
-    start = PROBE_GAP_S
-    for phoneme in PHONEMES:
-        if phoneme == SILENCE:
-            continue
-        spans.append(PhonemeSpan(phoneme, start, start + PROBE_HOLD_S))
-        centres[phoneme] = start + PROBE_HOLD_S / 2
-        start += PROBE_HOLD_S + PROBE_GAP_S
-    spans.append(PhonemeSpan(SILENCE, start, start + PROBE_GAP_S))
-    synthesizer = model.start(SynthesisRequest(fps=PROBE_FPS, guard=guard or WorkGuard()))
-    synthesizer.feed(spans)
-    frames = np.asarray(synthesizer.finish(), dtype=np.float64)
-    return {phoneme: frames[round(centre * PROBE_FPS)] for phoneme, centre in centres.items()}
-
-
-def probe_rest_poses(model: Model, guard: WorkGuard | None = None) -> dict[str | None, np.ndarray]:
-    """The rest pose per emotion, synthesized under ``guard``; a model whose silence is not
-    finite is refused."""
-    silence = [PhonemeSpan(SILENCE, 0.0, REST_PROBE_S)]
-    poses: dict[str | None, np.ndarray] = {}
-    for emotion in (None, *EMOTIONS):
-        fps = float(model.manifest.fps)
-        request = SynthesisRequest(fps=fps, emotion=emotion, guard=guard or WorkGuard())
-        synthesizer = model.start(request)
-        synthesizer.feed(silence)
-        frames = synthesizer.finish()
-        if not np.isfinite(frames).all():
-            raise ModelStoreError(
-                f"synthesizes NaN or infinite frames for silence (emotion {emotion})",
-                where=f"model {model.manifest.engine}/{model.name}",
-            )
-        poses[emotion] = np.asarray(frames[len(frames) // 2], dtype=np.float32)
-    return poses
-
-
-def key_poses(phoneme_poses: dict[str, np.ndarray], scheme: VisemeScheme) -> np.ndarray:
-    """Key poses float64 (n_classes, n_channels), rows in ``scheme.classes`` order: the mean
-    pose of each class's phonemes."""
-    return np.stack(
-        [
-            np.mean([phoneme_poses[phoneme] for phoneme in scheme.members(viseme)], axis=0)
-            for viseme in scheme.classes
-        ]
-    )
-
-
-def probe_key_poses(model: Model, scheme: VisemeScheme = OCULUS15) -> np.ndarray:
-    """Key poses float64 (n_classes, n_channels) of ``scheme``, probed from ``model``."""
-    return key_poses(probe_phoneme_poses(model), scheme)
 
 
 def projectors_from(

@@ -145,7 +145,7 @@ def test_arkit52_passes_shared_channels_and_holds_the_rest_at_zero(
 def test_oculus15_maps_silence_to_sil_and_keeps_controls_in_bounds(
     trained_models: dict[str, Model],
 ) -> None:
-    from lipstream.server.viseme_projection import probe_key_poses
+    from lipstream.output.probes import probe_key_poses
 
     model = trained_models["viseme-lerp"]
     retarget = model_maps(model, None, only="oculus15")["oculus15"]

@@ -11,8 +11,8 @@ import pytest
 
 from lipstream.engines.base import SynthesisRequest
 from lipstream.errors import LipstreamError
+from lipstream.output.probes import probe_rig
 from lipstream.output.rig_presets import model_maps, offered_presets, preset_pairs
-from lipstream.output.rig_probe import probe_rig
 from lipstream.timeline import PhonemeSpan
 from lipstream_client.channels import RETARGET_PRESETS
 

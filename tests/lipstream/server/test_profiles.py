@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from lipstream.errors import LipstreamError
+from lipstream.output.probes import mouth_channels, probe_key_poses
 from lipstream.output.visemes import OCULUS15, PRESTON_BLAIR
 from lipstream.server.catalog import Catalog
 from lipstream.server.profiles import (
@@ -21,11 +22,7 @@ from lipstream.server.profiles import (
     requested_profile,
     resolve_profile,
 )
-from lipstream.server.viseme_projection import (
-    VisemeProjector,
-    mouth_channels,
-    probe_key_poses,
-)
+from lipstream.server.viseme_projection import VisemeProjector
 from lipstream_client import ChannelTransform, OutputProfile, Start
 from lipstream_client.channels import OCULUS15_VISEMES, PRESTON_BLAIR_SHAPES
 
