@@ -6,9 +6,10 @@ the ES modules of ``three`` and ``@pixiv/three-vrm`` copied unchanged from npm w
 their licences (``vendor/NOTICE.txt``); the page's import map points the bare names
 ``three`` and ``@pixiv/three-vrm`` at them. ``/vrm/<path>`` serves only the files the
 package ships under ``static/vrm/``, listed once at import, so no other path can be
-reached. The page talks to the server through the public protocol only: ``GET
-/v1/engines`` and ``/v1/characters``, and ``/v1/stream`` (JSON subprotocol, ``text``
-requests with ``output.retarget``).
+reached. The page shares the demo page's stylesheet and its ``stream.js`` (the protocol,
+the clock, the controls) from ``/demo/``, and talks to the server through the public
+protocol only: ``GET /v1/engines`` and ``/v1/characters``, and ``/v1/stream`` (JSON
+subprotocol, ``text`` requests with ``output.retarget``).
 """
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ import pytest
 from lipstream.engines import engine_names
 from lipstream.engines.base import Model
 from tests.helpers import rest_pose
-from tests.lipstream.server.browser import CHROMIUM, WAIT_MS
+from tests.lipstream.server.browser import CHROMIUM, WAIT_MS, opened_page
 from tests.live_server import LiveServer, live_server
 
 SENTENCE = "Hello there, my name is Mia."
@@ -44,14 +44,8 @@ def served(all_models_dir: Path) -> Iterator[LiveServer]:
 
 @pytest.fixture()
 def page(browser: Any, served: LiveServer) -> Iterator[Any]:
-    context = browser.new_context(viewport={"width": 1360, "height": 820})
-    page = context.new_page()
-    page.requested = []  # type: ignore[attr-defined]
-    page.on("request", lambda request: page.requested.append(request.url))  # type: ignore[attr-defined]
-    page.goto(served.http + "/")
-    page.wait_for_selector("body[data-ready=true]", timeout=WAIT_MS)
-    yield page
-    context.close()
+    with opened_page(browser, served.http + "/", 1360, 820) as page:
+        yield page
 
 
 def speak(page: Any, text: str, engine: str | None = None) -> dict[str, Any]:

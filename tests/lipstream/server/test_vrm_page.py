@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from lipstream.corpus.livelink import ARKIT_BLENDSHAPES
-from tests.lipstream.server.browser import CHROMIUM, WAIT_MS
+from tests.lipstream.server.browser import CHROMIUM, WAIT_MS, opened_page
 from tests.lipstream.server.vrm_model import FACE_MESH, UNBOUND_TARGET, build_vrm, glb
 from tests.live_server import LiveServer, live_server
 
@@ -48,14 +48,8 @@ def served(lerp_dir: Path) -> Iterator[LiveServer]:
 
 @pytest.fixture()
 def page(browser: Any, served: LiveServer) -> Iterator[Any]:
-    context = browser.new_context(viewport={"width": 1280, "height": 800})
-    page = context.new_page()
-    page.requested = []  # type: ignore[attr-defined]
-    page.on("request", lambda request: page.requested.append(request.url))  # type: ignore[attr-defined]
-    page.goto(served.http + "/vrm")
-    page.wait_for_selector("body[data-ready=true]", timeout=WAIT_MS)
-    yield page
-    context.close()
+    with opened_page(browser, served.http + "/vrm") as page:
+        yield page
 
 
 def load_model(page: Any, data: bytes) -> None:

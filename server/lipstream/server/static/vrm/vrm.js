@@ -6,24 +6,33 @@
 // (case aside, so ARKit-named "perfect sync" custom expressions match `arkit52`) sets that
 // expression's weight; three-vrm turns weights into morph target influences in `vrm.update`.
 //
-// Sound and expressions share one clock, as on the demo page: the first `audio` or `frames`
-// message fixes t0 on the AudioContext's clock (plus a short lead), speech chunks play at
-// t0 + their `start`, and every animation frame shows the frame for the audio clock's time.
-// The page is self-contained on purpose, so that it can be copied as a starting point.
+// Sound and expressions share one clock, as on the demo page (the protocol, the clock and the
+// controls come from its stream.js): the first `audio` or `frames` message fixes t0 on the
+// audio clock (plus a short lead), speech chunks play at t0 + their `start`, and every
+// animation frame shows the frame for now() - t0.
 
 import * as THREE from "three";
 import { GLTFLoader } from "three/addons/loaders/GLTFLoader.js";
 import { VRMLoaderPlugin, VRMUtils } from "@pixiv/three-vrm";
+import {
+  clearErrors,
+  connect,
+  connected,
+  ensureAudio,
+  errors,
+  loadControls,
+  now,
+  playSpeech,
+  send,
+  showError,
+} from "/demo/stream.js";
 
-const SUBPROTOCOL = "lipstream.v1.json";
 const LEAD_S = 0.15;
 const DEFAULT_ENGINE = "anime-graph";
 const DECIMALS = 2;
 
 const $ = (id) => document.getElementById(id);
-const log = { errors: [], done: [], models: 0 };
-let audioContext = null;
-let socket = null;
+const log = { errors, done: [], models: 0 };
 let requestNumber = 0;
 let current = null;
 let vrm = null;
@@ -96,46 +105,7 @@ async function loadFromFile(file) {
   useModel(gltf, file.name);
 }
 
-// ---- clock -----------------------------------------------------------------------------
-
-function ensureAudio() {
-  if (audioContext === null) audioContext = new AudioContext();
-  if (audioContext.state === "suspended") audioContext.resume();
-  return audioContext;
-}
-
-// The audio clock when it runs; the page's monotonic clock when there is no sound device.
-function now() {
-  if (audioContext !== null && audioContext.state === "running") return audioContext.currentTime;
-  return performance.now() / 1000;
-}
-
 // ---- protocol --------------------------------------------------------------------------
-
-function connect() {
-  if (socket !== null && socket.readyState <= WebSocket.OPEN) return socket.opened;
-  const scheme = location.protocol === "https:" ? "wss:" : "ws:";
-  const token = new URLSearchParams(location.search).get("access_token");
-  const query = token === null ? "" : `?access_token=${encodeURIComponent(token)}`;
-  const ws = new WebSocket(`${scheme}//${location.host}/v1/stream${query}`, [SUBPROTOCOL]);
-  socket = ws;
-  ws.opened = new Promise((resolve, reject) => {
-    ws.onopen = () => resolve(ws);
-    ws.onerror = () => reject(new Error("cannot open the WebSocket /v1/stream"));
-  });
-  ws.onmessage = (event) => receive(JSON.parse(event.data));
-  ws.onclose = (event) => {
-    if (socket === ws) socket = null;
-    if (event.code !== 1000 && event.code !== 1001) {
-      showError(`connection closed (${event.code}${event.reason ? ": " + event.reason : ""})`);
-    }
-  };
-  return ws.opened;
-}
-
-function send(message) {
-  socket.send(JSON.stringify({ v: 1, ...message }));
-}
 
 function receive(message) {
   if (message.type === "error") {
@@ -155,7 +125,7 @@ async function speak() {
   ensureAudio();
   stopCurrent();
   try {
-    await connect();
+    await connect(receive);
   } catch (error) {
     showError(error.message);
     return;
@@ -182,7 +152,7 @@ async function speak() {
 function stopCurrent() {
   if (current === null) return;
   for (const source of current.sources) source.stop();
-  if (current.state !== "done" && current.state !== "error" && socket !== null) {
+  if (current.state !== "done" && current.state !== "error" && connected()) {
     send({ type: "cancel", id: current.id });
   }
   current = null;
@@ -209,16 +179,8 @@ function onFrames(message) {
 
 function onAudio(message) {
   fixClock();
-  if (audioContext.state !== "running") return;
-  const samples = pcm16ToFloat(message.pcm16);
-  const buffer = audioContext.createBuffer(1, samples.length, message.sample_rate);
-  buffer.copyToChannel(samples, 0);
-  const source = audioContext.createBufferSource();
-  source.buffer = buffer;
-  source.connect(audioContext.destination);
-  const at = current.t0 + (message.start ?? 0);
-  source.start(Math.max(at, now()), Math.max(0, now() - at));
-  current.sources.push(source);
+  const source = playSpeech(message, current.t0);
+  if (source !== null) current.sources.push(source);
 }
 
 function onDone(message) {
@@ -231,14 +193,6 @@ function finish(state) {
   current.state = state;
   if (state === "error") vrm?.expressionManager?.resetValues();
   setStatus(state === "done" ? "all frames received" : "ended by an error");
-}
-
-function pcm16ToFloat(base64) {
-  const bytes = Uint8Array.from(atob(base64), (c) => c.charCodeAt(0));
-  const view = new DataView(bytes.buffer);
-  const samples = new Float32Array(bytes.length >> 1);
-  for (let i = 0; i < samples.length; i++) samples[i] = view.getInt16(2 * i, true) / 32768;
-  return samples;
 }
 
 // ---- expressions -----------------------------------------------------------------------
@@ -305,53 +259,10 @@ function tick(timestamp) {
   requestAnimationFrame(tick);
 }
 
-// ---- status, errors, controls ------------------------------------------------------------
+// ---- status and controls -----------------------------------------------------------------
 
 function setStatus(text) {
   $("status").textContent = text;
-}
-
-function showError(text) {
-  log.errors.push(text);
-  const line = document.createElement("div");
-  line.className = "error";
-  line.textContent = text;
-  $("errors").appendChild(line);
-}
-
-function clearErrors() {
-  $("errors").replaceChildren();
-}
-
-async function getJson(path) {
-  const answer = await fetch(path);
-  if (!answer.ok) throw new Error(`${path}: HTTP ${answer.status}`);
-  return answer.json();
-}
-
-async function loadControls() {
-  let engines;
-  let characters;
-  try {
-    [engines, characters] = await Promise.all([getJson("/v1/engines"), getJson("/v1/characters")]);
-  } catch (error) {
-    showError(`cannot list the engines: ${error.message}`);
-    return;
-  }
-  const select = $("engine");
-  const loaded = engines.engines.filter((e) => e.loaded).map((e) => e.name);
-  for (const name of loaded) select.add(new Option(name));
-  select.value = loaded.includes(DEFAULT_ENGINE) ? DEFAULT_ENGINE : (loaded[0] ?? "");
-  const fillCharacters = () => {
-    const chosen = $("character");
-    chosen.replaceChildren();
-    for (const character of characters.characters) {
-      if (character.engines.includes(select.value)) chosen.add(new Option(character.name));
-    }
-  };
-  select.addEventListener("change", fillCharacters);
-  fillCharacters();
-  document.body.dataset.ready = "true";
 }
 
 async function loading(action) {
@@ -417,5 +328,5 @@ window.lipstreamVrm = {
   webgl: () => renderer !== null,
 };
 
-loadControls();
+loadControls(DEFAULT_ENGINE);
 requestAnimationFrame(tick);
