@@ -158,3 +158,18 @@ def test_show_without_a_model_lists_every_preset_and_its_controls() -> None:
     )
     refused = run_cli("retarget", "build", "--target", "vrm1")
     assert refused.returncode == 2 and "--model" in refused.stderr
+
+
+def test_synth_through_the_vrm1_preset_closes_on_m_and_opens_in_aa_on_aa(
+    trained_models: dict[str, Model], tmp_path: Path
+) -> None:
+    model = tmp_path / "dam"
+    trained_models["dam"].save(model)
+    data = synth_json(model, tmp_path, "--retarget", "vrm1")
+    assert data["channels"][:6] == ["aa", "ih", "ou", "ee", "oh", "blink"]
+    frames = np.array(data["frames"], dtype=np.float64)
+    fps = float(data["fps"])  # type: ignore[arg-type]
+    mouth = frames[:, :5]
+    # PHONES: M over 0.3-0.5 s, AA over 0.5-0.9 s.
+    assert mouth[round(0.4 * fps)].max() <= 0.15
+    assert mouth[round(0.7 * fps)].argmax() == 0 and mouth[round(0.7 * fps), 0] >= 0.8

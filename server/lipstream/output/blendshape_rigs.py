@@ -14,7 +14,9 @@ held at rest, 0.
 * ``metahuman``: the same 52 as Unreal Live Link Face names its curves
   (``JawOpen``), which a MetaHuman's ARKit pose asset reads.
 * ``a2f68``: Audio2Face-3D's 68: its 52 face blendshapes in its own order and
-  its 16 tongue blendshapes.
+  its 16 tongue blendshapes, each driven by the model channel of the same name
+  with the first letter lower case (``tongueTipUp``), at rest for a model
+  without it.
 * ``unified``: the Unified Expressions (VRCFaceTracking) jaw, lip and mouth
   shapes, each ARKit mouth shape driving its parts (``UNIFIED_FROM_ARKIT``).
 """
@@ -25,8 +27,6 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from lipstream_client.channels import rename_channel
-
 from ..corpus.livelink import ARKIT_BLENDSHAPES
 from ..errors import ModelStoreError
 from .retarget import KeyPosePairs
@@ -34,14 +34,10 @@ from .rig_names import A2F68, LIVELINK_BLENDSHAPES, UNIFIED_FROM_ARKIT, UNIFIED_
 
 
 def _renamed(controls: Sequence[str]) -> dict[str, tuple[str, ...]]:
-    """ARKit name -> the one control of the same shape, matched ignoring the first letter's
-    case (``jawOpen`` -> ``JawOpen``)."""
-    by_livelink = {name: name for name in controls}
-    return {
-        name: (by_livelink[rename_channel(name, "livelink")],)
-        for name in ARKIT_BLENDSHAPES
-        if rename_channel(name, "livelink") in by_livelink
-    }
+    """Model channel -> the one control of the same shape: each control under its ARKit-style
+    name, the first letter lower case (``JawOpen`` is driven by ``jawOpen``, ``TongueTipUp``
+    by ``tongueTipUp``)."""
+    return {control[:1].lower() + control[1:]: (control,) for control in controls}
 
 
 BLENDSHAPE_RIGS: Mapping[str, tuple[tuple[str, ...], Mapping[str, tuple[str, ...]]]] = {

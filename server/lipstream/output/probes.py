@@ -5,7 +5,7 @@ model's own frames. Each canonical phoneme is held 200 ms alone between
 silences and the frame at its centre is taken (``probe_phoneme_poses``;
 ``key_poses`` averages them per viseme class); each emotion's rest pose is
 the frame in the middle of a second of silence in that emotion
-(``probe_rest_poses``); each bilabial is said between two of a vowel and the
+(``probe_rest_poses``); each bilabial is said between other sounds and the
 frame at its centre taken (``probe_closures``). The server probes once per
 model at start-up and hands the probes (``RigProbe``) to every preset; the
 command line probes only when a preset it builds needs it. Only mouth
@@ -30,11 +30,15 @@ from .visemes import OCULUS15, VisemeScheme
 NEUTRAL = "neutral"
 BILABIALS = ("P", "B", "M")
 CLOSURE_VOWELS = ("AA", "IY", "UW", "OW")
-CLOSURE_CONTEXTS: tuple[tuple[str, str], ...] = tuple(
-    (vowel, bilabial) for vowel in CLOSURE_VOWELS for bilabial in BILABIALS
+CLOSURE_CONTEXTS: tuple[tuple[str, str, str], ...] = tuple(
+    (before, bilabial, after)
+    for before in (SILENCE, *CLOSURE_VOWELS)
+    for after in CLOSURE_VOWELS
+    for bilabial in BILABIALS
 )
-"""Each bilabial between two of a vowel: an engine that coarticulates closes the lips in the
-vowel's shape (rounded before /uw/, spread in /iy/)."""
+"""(before, bilabial, after): each bilabial after a silence or a vowel and before a vowel. An
+engine that coarticulates closes the lips in the shape of the sounds around them (rounded
+before /uw/, spread in /iy/), so a closure looks different in each of the 60 contexts."""
 PROBE_FPS = 100.0
 PROBE_HOLD_S = 0.2
 PROBE_GAP_S = 0.3
@@ -151,20 +155,21 @@ def probe_rig(
 
 
 def probe_closures(model: Model, guard: WorkGuard | None = None) -> np.ndarray:
-    """``model``'s frame at the centre of each bilabial of ``CLOSURE_CONTEXTS``, said as
-    vowel-bilabial-vowel between silences; float64 (len(CLOSURE_CONTEXTS), n_channels)."""
+    """``model``'s frame at the centre of each bilabial of ``CLOSURE_CONTEXTS``, each context
+    said between silences (a vowel 200 ms, the bilabial 100 ms); float64
+    (len(CLOSURE_CONTEXTS), n_channels)."""
     spans: list[PhonemeSpan] = []
     centres: list[float] = []
     start = _GAP_S
-    for vowel, bilabial in CLOSURE_CONTEXTS:
-        middle = start + _VOWEL_S
-        spans += [
-            PhonemeSpan(vowel, start, middle),
-            PhonemeSpan(bilabial, middle, middle + _BILABIAL_S),
-            PhonemeSpan(vowel, middle + _BILABIAL_S, middle + _BILABIAL_S + _VOWEL_S),
-        ]
-        centres.append(middle + _BILABIAL_S / 2)
-        start = middle + _BILABIAL_S + _VOWEL_S + _GAP_S
+    for before, bilabial, after in CLOSURE_CONTEXTS:
+        if before != SILENCE:
+            spans.append(PhonemeSpan(before, start, start + _VOWEL_S))
+            start += _VOWEL_S
+        spans.append(PhonemeSpan(bilabial, start, start + _BILABIAL_S))
+        centres.append(start + _BILABIAL_S / 2)
+        start += _BILABIAL_S
+        spans.append(PhonemeSpan(after, start, start + _VOWEL_S))
+        start += _VOWEL_S + _GAP_S
     spans.append(PhonemeSpan(SILENCE, start, start + _GAP_S))
     synthesizer = model.start(SynthesisRequest(fps=PROBE_FPS, guard=guard or WorkGuard()))
     synthesizer.feed(spans)

@@ -7,7 +7,7 @@ fitted into a ``RetargetMap`` like any stored map. The server builds every
 preset a model is offered at start-up, from one probe of the model
 (``RigProbe``); the command line builds the one it is asked for. A preset
 built on ARKit names is offered only to a model with some ARKit channel name.
-The names are also ``lipstream_client.channels.RETARGET_PRESETS``, for clients.
+Clients find the names in ``lipstream_client.channels.RETARGET_PRESETS``.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lipstream_client.channels import OCULUS15_VISEMES, RETARGET_PRESETS
+from lipstream_client.channels import OCULUS15_VISEMES
 from lipstream_client.errors import UNKNOWN_RETARGET
 
 from ..corpus.livelink import ARKIT_BLENDSHAPES
@@ -87,7 +87,6 @@ PRESETS: Mapping[str, RigPreset] = {
                   BLENDSHAPE_RIGS["a2f68"][0], True, _blendshape("a2f68")),
     )
 }  # fmt: skip
-assert tuple(PRESETS) == RETARGET_PRESETS
 
 
 def offered_presets(channels: Sequence[str]) -> tuple[str, ...]:

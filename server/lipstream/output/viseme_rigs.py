@@ -6,7 +6,7 @@ model (``RigProbe.viseme_poses``). Rest is silence: its pose is the silence
 key pose and its controls are ``viseme_sil`` = 1. The 14 other visemes are
 the keys; their controls are fitted on the rig's transfer (each viseme
 control drives its key pose; ``fit_controls``) and come out one-hot when
-the key poses are independent. Each bilabial probed between two of a vowel
+the key poses are independent. Each bilabial probed in context
 (``probes.CLOSURE_CONTEXTS``: lips closed, but rounded or spread as the
 vowels around them) is one more key with ``viseme_PP``'s controls, so a
 coarticulated closure reads as ``viseme_PP``. Only the mouth channels are
@@ -53,7 +53,7 @@ def oculus15_pairs(probe: RigProbe, mouth: np.ndarray) -> KeyPosePairs:
         channels=probe.channels,
         controls=OCULUS15_VISEMES,
         key_names=tuple(OCULUS15_VISEMES[index] for index in keys)
-        + tuple(f"{bilabial} in {vowel}" for vowel, bilabial in CLOSURE_CONTEXTS),
+        + tuple(" ".join(context) for context in CLOSURE_CONTEXTS),
         source_rest=poses[silence],
         control_rest=np.eye(len(poses))[silence],
         source_keys=np.vstack([poses[keys], closures]),

@@ -12,8 +12,8 @@ of its phonemes' poses, as ``oculus15`` probes them) on the mouth channels
 only; rest is silence, every control 0 but the rig's neutral face. An engine
 that coarticulates closes its lips in the shape of the vowels around them
 (rounded in /uw b uw/), which the vowel keys would read as a vowel; so each
-bilabial probed between two of a vowel (``probes.CLOSURE_CONTEXTS``) is
-one more closed-mouth key, every vowel 0.
+bilabial probed in context (``probes.CLOSURE_CONTEXTS``: after a silence or
+a vowel, before a vowel) is one more closed-mouth key, every vowel 0.
 
 Off the mouth: a blink key (``eyeBlinkLeft`` and ``eyeBlinkRight`` at 1, for
 a model that has them) drives the rig's blink, and each emotion the model
@@ -144,8 +144,8 @@ def _mouth_keys(rig: VowelRig, probe: RigProbe, mouth: np.ndarray) -> Keys:
         controls = _controls(rig, {rig.neutral: 1.0} | named)
         keys.append((viseme, np.where(mouth, pose, rest), controls))
     closed = _controls(rig, {rig.neutral: 1.0})
-    for (vowel, bilabial), pose in zip(CLOSURE_CONTEXTS, probe.closure_poses):
-        keys.append((f"{bilabial} in {vowel}", np.where(mouth, pose, rest), closed))
+    for context, pose in zip(CLOSURE_CONTEXTS, probe.closure_poses):
+        keys.append((" ".join(context), np.where(mouth, pose, rest), closed))
     return keys
 
 

@@ -12,7 +12,8 @@ import pytest
 from lipstream.engines.base import SynthesisRequest
 from lipstream.errors import LipstreamError
 from lipstream.output.probes import probe_rig
-from lipstream.output.rig_presets import model_maps, offered_presets, preset_pairs
+from lipstream.output.retarget import fit_map
+from lipstream.output.rig_presets import PRESETS, model_maps, offered_presets, preset_pairs
 from lipstream.timeline import PhonemeSpan
 from lipstream_client.channels import RETARGET_PRESETS
 
@@ -150,6 +151,25 @@ def test_metahuman_and_a2f68_name_the_arkit_curves_in_pascal_case_with_the_tongu
                 assert not controls[:, column].any(), control
 
 
+def test_a2f68_passes_a_models_own_tongue_shapes_through() -> None:
+    channels = ("jawOpen", "tongueTipUp", "tongueIn", "lipsWide")
+    pairs = PRESETS["a2f68"].build(channels, lambda: pytest.fail("a2f68 needs no probe"))
+    frames = np.random.default_rng(2).uniform(-0.2, 1.2, (20, len(channels)))
+    controls = fit_map("a2f68", pairs).apply(frames)
+    for channel, control in (
+        ("jawOpen", "JawOpen"),
+        ("tongueTipUp", "TongueTipUp"),
+        ("tongueIn", "TongueIn"),
+    ):
+        np.testing.assert_allclose(
+            controls[:, pairs.controls.index(control)],
+            np.clip(frames[:, channels.index(channel)], 0.0, 1.0),
+            atol=1e-9,
+        )
+    driven = {"JawOpen", "TongueTipUp", "TongueIn"}
+    assert not controls[:, [i for i, c in enumerate(pairs.controls) if c not in driven]].any()
+
+
 def test_unified_drives_each_part_of_an_arkit_mouth_shape(trained_models: dict[str, Model]) -> None:
     model = trained_models["viseme-lerp"]
     retarget = model_maps(model, None, only="unified")["unified"]
@@ -255,6 +275,7 @@ def test_the_presets_are_named_as_clients_name_them() -> None:
     assert RETARGET_PRESETS == (
         "oculus15", "arkit52", "vrm1", "vrm0", "vroid", "rpm", "unified", "metahuman", "a2f68",
     )  # fmt: skip
+    assert tuple(PRESETS) == RETARGET_PRESETS
     without_arkit = offered_presets(("lipsOpen", "lipsRound"))
     assert without_arkit == ("oculus15", "vrm1", "vrm0", "vroid", "rpm")
 
