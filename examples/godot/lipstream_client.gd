@@ -1,11 +1,6 @@
-# lipstream client for Godot 4: speaks text through a lipstream server and drives a mesh's
-# blend shapes with the frames, in step with the speech.
-#
-# Protocol: docs/reference/protocol.md, JSON subprotocol (one message per text frame).
-# For each say(): start (with output.retarget, the rig preset), text, end; the server answers
-# ready (the channel names), audio (the speech, in order, all before the frames it drives),
-# frames (rows of channel values, from first_frame on) and done. The speech plays from the
-# first frames message on, and each frame shows at its time on the audio clock.
+# lipstream client for Godot 4 (docs/how-to/godot.md), JSON subprotocol: say(text) sends start
+# (output.retarget: the rig preset), text and end; the server's ready, audio (all before the
+# frames it drives), frames and done play the speech and move blend shapes on the audio clock.
 class_name LipstreamClient
 extends Node
 
@@ -51,7 +46,8 @@ func _process(_delta: float) -> void:
 	_socket.poll()
 	var state := _socket.get_ready_state()
 	if state == WebSocketPeer.STATE_CLOSED and not _close_reported:
-		push_error("lipstream: connection closed (%d %s)" % [_socket.get_close_code(), _socket.get_close_reason()])
+		var code := _socket.get_close_code()
+		push_error("lipstream: connection closed (%d %s)" % [code, _socket.get_close_reason()])
 		_close_reported = true
 	if state != WebSocketPeer.STATE_OPEN:
 		return
@@ -77,7 +73,10 @@ func _start(text: String) -> void:
 	_started_usec = -1
 	if speaker:
 		speaker.stop()
-	_send({"type": "start", "id": _id, "engine": engine, "character": character, "fps": fps, "output": {"retarget": retarget}})
+	_send({
+		"type": "start", "id": _id, "engine": engine, "character": character, "fps": fps,
+		"output": {"retarget": retarget},
+	})
 	_send({"type": "text", "id": _id, "text": text, "voice": voice})
 	_send({"type": "end", "id": _id})
 
@@ -129,7 +128,8 @@ func _playback_time() -> float:
 	if _started_usec < 0:
 		return -1.0
 	if speaker and speaker.playing:
-		return speaker.get_playback_position() + AudioServer.get_time_since_last_mix() - AudioServer.get_output_latency()
+		var mixed := AudioServer.get_time_since_last_mix() - AudioServer.get_output_latency()
+		return speaker.get_playback_position() + mixed
 	return (Time.get_ticks_usec() - _started_usec) / 1e6
 
 

@@ -9,7 +9,8 @@ build the speech clip there; frames contiguous from 0; ``done`` last). It also r
 the clients' sources, so a client that sends or reads a field the exchange here does
 not is a failure. The C# is compiled by Mono's ``mcs``, when installed, against
 Newtonsoft.Json and ``unity_stubs.cs`` (the Unity API it calls, declared with Unity's
-signatures); the GDScript is not checked by any tool.
+signatures); the GDScript is parsed and linted by gdtoolkit (GDScript 2.0's grammar and
+its default style rules), which checks its syntax, not what Godot makes of it.
 """
 
 from __future__ import annotations
@@ -148,7 +149,8 @@ def test_a_refused_request_ends_with_the_fields_the_clients_read(served: LiveSer
 
 
 def gdscript_sent(source: str) -> list[set[str]]:
-    return [set(re.findall(r'"(\w+)":', call)) for call in re.findall(r"_send\((\{.*\})\)", source)]
+    calls = re.findall(r"_send\((\{.*?\})\)\n", source, re.DOTALL)
+    return [set(re.findall(r'"(\w+)":', call)) for call in calls]
 
 
 def csharp_sent(source: str) -> list[set[str]]:
@@ -202,3 +204,12 @@ def test_the_unity_client_compiles(tmp_path: Path) -> None:
         check=False,
     )
     assert compiled.returncode == 0, compiled.stdout + compiled.stderr
+
+
+def test_the_godot_client_parses_and_lints() -> None:
+    from gdtoolkit.linter import DEFAULT_CONFIG, lint_code
+    from gdtoolkit.parser import parser
+
+    source = GODOT.read_text()
+    parser.parse(source)  # raises on a syntax error
+    assert lint_code(source, DEFAULT_CONFIG) == []
