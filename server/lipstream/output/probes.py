@@ -44,9 +44,7 @@ PROBE_HOLD_S = 0.2
 PROBE_GAP_S = 0.3
 REST_PROBE_S = 1.0
 MOUTH_PREFIXES = ("jaw", "mouth", "cheek", "tongue")
-_VOWEL_S = 0.2
 _BILABIAL_S = 0.1
-_GAP_S = 0.3
 
 
 def mouth_channels(channels: tuple[str, ...]) -> np.ndarray:
@@ -160,17 +158,17 @@ def probe_closures(model: Model, guard: WorkGuard | None = None) -> np.ndarray:
     (len(CLOSURE_CONTEXTS), n_channels)."""
     spans: list[PhonemeSpan] = []
     centres: list[float] = []
-    start = _GAP_S
+    start = PROBE_GAP_S
     for before, bilabial, after in CLOSURE_CONTEXTS:
         if before != SILENCE:
-            spans.append(PhonemeSpan(before, start, start + _VOWEL_S))
-            start += _VOWEL_S
+            spans.append(PhonemeSpan(before, start, start + PROBE_HOLD_S))
+            start += PROBE_HOLD_S
         spans.append(PhonemeSpan(bilabial, start, start + _BILABIAL_S))
         centres.append(start + _BILABIAL_S / 2)
         start += _BILABIAL_S
-        spans.append(PhonemeSpan(after, start, start + _VOWEL_S))
-        start += _VOWEL_S + _GAP_S
-    spans.append(PhonemeSpan(SILENCE, start, start + _GAP_S))
+        spans.append(PhonemeSpan(after, start, start + PROBE_HOLD_S))
+        start += PROBE_HOLD_S + PROBE_GAP_S
+    spans.append(PhonemeSpan(SILENCE, start, start + PROBE_GAP_S))
     synthesizer = model.start(SynthesisRequest(fps=PROBE_FPS, guard=guard or WorkGuard()))
     synthesizer.feed(spans)
     frames = np.asarray(synthesizer.finish(), dtype=np.float64)
