@@ -13,7 +13,8 @@ the limits in force. Routes:
 ``POST /v1/synthesize``, ``GET /metrics``, the WebSocket ``/v1/stream``, the
 ``expressive-dp`` phoneme-map and contamination routes (``phoneme_maps``) and
 the OpenAPI docs (``/docs``, served with its assets so it works offline,
-and ``/openapi.json``), and the demo page ``/`` (``demo_page``).
+and ``/openapi.json``), the demo page ``/`` (``demo_page``) and the VRM page
+``/vrm`` (``vrm_page``).
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ from ..engines import ENGINES
 from ..errors import LipstreamError
 from ..models import ModelRegistry
 from ..status import Heartbeat, Report, phase
-from . import demo_page, docs_page, openapi, phoneme_maps
+from . import demo_page, docs_page, openapi, phoneme_maps, vrm_page
 from .catalog import Catalog
 from .client_limits import ClientLimits
 from .handshake import head_limits
@@ -243,6 +244,7 @@ def create_app(
     openapi.install(app)
     docs_page.install(app, app.title)
     demo_page.install(app)
+    vrm_page.install(app)
 
     @app.get("/healthz", summary="Liveness: the server answers", operation_id="healthz")
     async def healthz() -> dict[str, str]:

@@ -23,21 +23,9 @@ import pytest
 from lipstream.engines import engine_names
 from lipstream.engines.base import Model
 from tests.helpers import rest_pose
+from tests.lipstream.server.browser import CHROMIUM, WAIT_MS, opened_page
 from tests.live_server import LiveServer, live_server
 
-CHROMIUM = Path("/usr/bin/chromium")
-LAUNCH_ARGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--autoplay-policy=no-user-gesture-required",
-]
-WAIT_MS = 30_000  # a bound on a busy machine, not a speed claim
 SENTENCE = "Hello there, my name is Mia."
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 SETTLE_FRAMES = 9  # after `end`, the face returns to rest over 150 ms: 9 frames at 60 fps
@@ -54,26 +42,10 @@ def served(all_models_dir: Path) -> Iterator[LiveServer]:
         yield server
 
 
-@pytest.fixture(scope="module")
-def browser() -> Iterator[Any]:
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as playwright:
-        chromium = playwright.chromium.launch(executable_path=str(CHROMIUM), args=LAUNCH_ARGS)
-        yield chromium
-        chromium.close()
-
-
 @pytest.fixture()
 def page(browser: Any, served: LiveServer) -> Iterator[Any]:
-    context = browser.new_context(viewport={"width": 1360, "height": 820})
-    page = context.new_page()
-    page.requested = []  # type: ignore[attr-defined]
-    page.on("request", lambda request: page.requested.append(request.url))  # type: ignore[attr-defined]
-    page.goto(served.http + "/")
-    page.wait_for_selector("body[data-ready=true]", timeout=WAIT_MS)
-    yield page
-    context.close()
+    with opened_page(browser, served.http + "/", 1360, 820) as page:
+        yield page
 
 
 def speak(page: Any, text: str, engine: str | None = None) -> dict[str, Any]:

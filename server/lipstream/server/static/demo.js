@@ -1,10 +1,8 @@
-// The demo page: controls, the lipstream protocol over a WebSocket (JSON subprotocol),
-// Web Audio scheduling, the face and the readouts.
+// The demo page: controls, requests over the lipstream protocol, the face and the readouts.
 //
-// Sound and face share one clock: the first `audio` or `frames` message of a request fixes
-// t0 on the AudioContext's clock (plus a short lead); speech chunks are scheduled at
-// t0 + their `start`, an uploaded WAV at t0, and every animation frame shows the frame for
-// the audio clock's time (currentTime - t0), not the last frame that arrived.
+// Sound and face share one clock (stream.js): the first `audio` or `frames` message of a
+// request fixes t0 on it (plus a short lead); speech chunks are scheduled at t0 + their
+// `start`, an uploaded WAV at t0, and every animation frame shows the frame for now() - t0.
 //
 // A request ends with the face at rest. After `done`, playback reaches the last frame, which
 // the server makes the character's rest pose, and the face stays there. An error leaves no
@@ -14,8 +12,22 @@
 import { Face } from "./face.js";
 import { parseLab, parseTextGrid } from "./phones.js";
 import { Plot } from "./plot.js";
+import {
+  audioRunning,
+  clearErrors,
+  clockName,
+  connect,
+  connected,
+  ensureAudio,
+  errors,
+  loadControls,
+  now,
+  playAt,
+  playSpeech,
+  send,
+  showError,
+} from "./stream.js";
 
-const SUBPROTOCOL = "lipstream.v1.json";
 const LEAD_S = 0.15;
 const AUDIO_CHUNK_S = 0.25;
 const PHONEMES_PER_MESSAGE = 256;
@@ -27,60 +39,11 @@ const DECIMALS = 2;
 const $ = (id) => document.getElementById(id);
 const face = new Face($("face"));
 const plot = new Plot($("plot"));
-let audioContext = null;
-let socket = null;
 let requestNumber = 0;
 let current = null;
-const log = { errors: [], done: [] };
-
-// ---- clock ---------------------------------------------------------------------------
-
-function ensureAudio() {
-  if (audioContext === null) audioContext = new AudioContext();
-  if (audioContext.state === "suspended") audioContext.resume();
-  return audioContext;
-}
-
-// The audio clock when it runs; the page's monotonic clock when there is no sound device.
-function now() {
-  if (audioContext !== null && audioContext.state === "running") return audioContext.currentTime;
-  return performance.now() / 1000;
-}
-
-function clockName() {
-  return audioContext !== null && audioContext.state === "running"
-    ? `audio (${audioContext.sampleRate} Hz)`
-    : "page (audio not running)";
-}
+const log = { errors, done: [] };
 
 // ---- protocol ------------------------------------------------------------------------
-
-function socketUrl() {
-  const scheme = location.protocol === "https:" ? "wss:" : "ws:";
-  return `${scheme}//${location.host}/v1/stream${location.search}`;
-}
-
-function connect() {
-  if (socket !== null && socket.readyState <= WebSocket.OPEN) return socket.opened;
-  const ws = new WebSocket(socketUrl(), [SUBPROTOCOL]);
-  socket = ws;
-  ws.opened = new Promise((resolve, reject) => {
-    ws.onopen = () => resolve(ws);
-    ws.onerror = () => reject(new Error("cannot open the WebSocket /v1/stream"));
-  });
-  ws.onmessage = (event) => receive(JSON.parse(event.data));
-  ws.onclose = (event) => {
-    if (socket === ws) socket = null;
-    if (event.code !== 1000 && event.code !== 1001) {
-      showError(`connection closed (${event.code}${event.reason ? ": " + event.reason : ""})`);
-    }
-  };
-  return ws.opened;
-}
-
-function send(message) {
-  socket.send(JSON.stringify({ v: 1, ...message }));
-}
 
 function receive(message) {
   if (message.type === "error") {
@@ -105,7 +68,7 @@ async function startRequest(input) {
   ensureAudio();
   stopCurrent();
   try {
-    await connect();
+    await connect(receive);
   } catch (error) {
     showError(error.message);
     return;
@@ -146,7 +109,7 @@ function stopCurrent() {
       // not started yet
     }
   }
-  if (current.state !== "done" && current.state !== "error" && socket !== null) {
+  if (current.state !== "done" && current.state !== "error" && connected()) {
     send({ type: "cancel", id: current.id });
   }
   current = null;
@@ -164,12 +127,8 @@ function fixClock() {
   if (current.t0 !== null) return;
   current.t0 = now() + LEAD_S;
   $("clock").textContent = clockName();
-  if (current.localAudio !== null && audioContext.state === "running") {
-    const source = audioContext.createBufferSource();
-    source.buffer = current.localAudio;
-    source.connect(audioContext.destination);
-    source.start(current.t0);
-    current.sources.push(source);
+  if (current.localAudio !== null && audioRunning()) {
+    current.sources.push(playAt(current.localAudio, current.t0));
   }
 }
 
@@ -187,17 +146,8 @@ function onFrames(message) {
 
 function onAudio(message) {
   fixClock();
-  if (audioContext.state !== "running") return;
-  const samples = pcm16ToFloat(message.pcm16);
-  const buffer = audioContext.createBuffer(1, samples.length, message.sample_rate);
-  buffer.copyToChannel(samples, 0);
-  const source = audioContext.createBufferSource();
-  source.buffer = buffer;
-  source.connect(audioContext.destination);
-  const at = current.t0 + (message.start ?? 0);
-  const late = now() - at;
-  source.start(Math.max(at, now()), Math.max(0, late));
-  current.sources.push(source);
+  const source = playSpeech(message, current.t0);
+  if (source !== null) current.sources.push(source);
 }
 
 function onDone(message) {
@@ -262,14 +212,6 @@ function sendAudio(id, buffer) {
     const chunk = samples.subarray(offset, offset + step);
     send({ type: "audio", id, sample_rate: buffer.sampleRate, pcm16: floatToPcm16(chunk) });
   }
-}
-
-function pcm16ToFloat(base64) {
-  const bytes = Uint8Array.from(atob(base64), (c) => c.charCodeAt(0));
-  const view = new DataView(bytes.buffer);
-  const samples = new Float32Array(bytes.length >> 1);
-  for (let i = 0; i < samples.length; i++) samples[i] = view.getInt16(2 * i, true) / 32768;
-  return samples;
 }
 
 function floatToPcm16(samples) {
@@ -356,61 +298,10 @@ function fillPlotChannels(channels) {
   }
 }
 
-// ---- status and errors ----------------------------------------------------------------
+// ---- status and controls --------------------------------------------------------------
 
 function setStatus(text) {
   $("status").textContent = text;
-}
-
-function showError(text) {
-  log.errors.push(text);
-  const line = document.createElement("div");
-  line.className = "error";
-  line.textContent = text;
-  $("errors").appendChild(line);
-}
-
-function clearErrors() {
-  $("errors").replaceChildren();
-}
-
-// ---- controls -------------------------------------------------------------------------
-
-async function getJson(path) {
-  const answer = await fetch(path);
-  if (!answer.ok) throw new Error(`${path}: HTTP ${answer.status}`);
-  return answer.json();
-}
-
-async function loadControls() {
-  let engines;
-  let characters;
-  try {
-    [engines, characters] = await Promise.all([getJson("/v1/engines"), getJson("/v1/characters")]);
-  } catch (error) {
-    showError(`cannot list the engines: ${error.message}`);
-    return;
-  }
-  const select = $("engine");
-  for (const engine of engines.engines) {
-    const option = new Option(engine.loaded ? engine.name : `${engine.name} (not loaded)`, engine.name);
-    option.disabled = !engine.loaded;
-    select.add(option);
-  }
-  const loaded = engines.engines.filter((e) => e.loaded).map((e) => e.name);
-  select.value = loaded.includes(DEFAULT_ENGINE) ? DEFAULT_ENGINE : (loaded[0] ?? "");
-  const fillCharacters = () => {
-    const chosen = $("character");
-    const previous = chosen.value;
-    chosen.replaceChildren();
-    for (const character of characters.characters) {
-      if (character.engines.includes(select.value)) chosen.add(new Option(character.name));
-    }
-    if ([...chosen.options].some((o) => o.value === previous)) chosen.value = previous;
-  };
-  select.addEventListener("change", fillCharacters);
-  fillCharacters();
-  document.body.dataset.ready = "true";
 }
 
 $("text-form").addEventListener("submit", (event) => {
@@ -446,5 +337,5 @@ window.lipstreamDemo = {
   faceValues: () => ({ ...face.values }),
 };
 
-loadControls();
+loadControls(DEFAULT_ENGINE);
 requestAnimationFrame(tick);
