@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from lipstream_client.errors import EMPTY_TIMINGS, UNKNOWN_TIMING_FORMAT
@@ -99,3 +100,34 @@ def parse_timings(data: Any, format: str = "auto") -> SpeechTimings:
             code=UNKNOWN_TIMING_FORMAT,
         )
     return PARSERS[format](data)
+
+
+MAX_TIMING_FILE_BYTES = 16 << 20
+
+
+def read_timing_file(path: Path, format: str = "auto") -> SpeechTimings:
+    """The timings in the file ``path`` (UTF-8 JSON or JSON lines, at most 16 MiB)."""
+    try:
+        with open(path, "rb") as handle:
+            raw = handle.read(MAX_TIMING_FILE_BYTES + 1)
+    except OSError as error:
+        raise LipstreamError(
+            f"cannot read the timings: {error.strerror}", where=str(path), code="invalid_request"
+        ) from None
+    if len(raw) > MAX_TIMING_FILE_BYTES:
+        raise LipstreamError(
+            f"larger than {MAX_TIMING_FILE_BYTES} bytes", where=str(path), code="invalid_request"
+        )
+    try:
+        content = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as error:
+        raise LipstreamError(
+            f"not UTF-8 text (byte {error.start})", where=str(path), code=UNKNOWN_TIMING_FORMAT
+        ) from None
+    try:
+        return parse_timings(read_timing_text(content, str(path)), format)
+    except LipstreamError as error:
+        where = error.where or "input"
+        if not where.startswith(str(path)):
+            error.where = f"{path}: {where}"
+        raise LipstreamError(error.message, where=error.where, code=error.code) from None
