@@ -44,11 +44,12 @@ def spread_words(model: WordDurationModel, words: Sequence[PronouncedWord]) -> l
     first_pass: list[float] = []
     clock = 0.0
     for phonemes, start, end in timed:
-        start = max(start, clock)
         if start - clock > MIN_GAP_S:
             layout.append((SILENCE, clock, start, None))
             ids.append(PHONEME_INDEX[SILENCE])
             first_pass.append(start - clock)
+        else:
+            start = clock
         if end - start <= 0 or not phonemes:
             if end > start:
                 layout.append((SILENCE, start, end, None))

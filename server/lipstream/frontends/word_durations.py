@@ -104,11 +104,9 @@ class WordDurationModel:
         neighbours within ``window`` over their phonemes' means (0 with none)."""
         excess = log_durations - self.log_mean_[ids]
         speech = (ids != PHONEME_INDEX[SILENCE]).astype(np.float64)
-        width = 2 * self.window + 1
-        kernel = np.ones(width)
-        sums = np.convolve(excess * speech, kernel, mode="same") - excess * speech
-        counts = np.convolve(speech, kernel, mode="same") - speech
-        return np.where(counts > 0, sums / np.maximum(counts, 1.0), 0.0)
+        sums = _window_sums(excess * speech, self.window) - excess * speech
+        counts = _window_sums(speech, self.window) - speech
+        return np.where(counts > 0.5, sums / np.maximum(counts, 1.0), 0.0)
 
     @staticmethod
     def features(ids: np.ndarray, rates: np.ndarray) -> np.ndarray:
@@ -169,6 +167,15 @@ class WordDurationModel:
         metrics = fields.mapping(manifest.get("metrics", {}), "metrics")
         model.metrics_ = {str(key): float(value) for key, value in metrics.items()}
         return model
+
+
+def _window_sums(values: np.ndarray, half_width: int) -> np.ndarray:
+    """Sum of ``values[i - half_width : i + half_width + 1]`` for every i, (n,)."""
+    cumulative = np.concatenate([[0.0], np.cumsum(values)])
+    every = np.arange(len(values))
+    high = np.minimum(every + half_width + 1, len(values))
+    low = np.maximum(every - half_width, 0)
+    return np.asarray(cumulative[high] - cumulative[low])
 
 
 def has_word_durations(directory: Path) -> bool:

@@ -27,6 +27,8 @@ VISEMES = ("p", "t", "S", "T", "f", "k", "i", "r", "s", "u", "@", "a", "e", "E",
 
 
 def parse_polly(data: Any) -> SpeechTimings:
+    if _is_mark(data):  # one line of JSON lines is one JSON document
+        data = [data]
     starts: list[tuple[str, float, str]] = []
     visemes: list[TimedViseme] = []
     for index, mark in enumerate(array(data, "marks")):
@@ -77,7 +79,9 @@ def _words(starts: list[tuple[str, float, str]], visemes: list[TimedViseme]) -> 
     return words
 
 
+def _is_mark(data: Any) -> bool:
+    return isinstance(data, Mapping) and "time" in data and data.get("type") in MARK_TYPES
+
+
 def looks_like_polly(data: Any) -> bool:
-    if not isinstance(data, list) or not data or not isinstance(data[0], Mapping):
-        return False
-    return "time" in data[0] and data[0].get("type") in MARK_TYPES
+    return _is_mark(data) or (isinstance(data, list) and bool(data) and _is_mark(data[0]))
