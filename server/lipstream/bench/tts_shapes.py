@@ -147,15 +147,19 @@ def ipa_input(utterance: SpokenUtterance) -> dict[str, Any]:
     }
 
 
-def onset_errors(words: Sequence[SpokenWord], derived: Sequence[PhonemeSpan]) -> list[float]:
-    """|derived onset - true onset| (s) of every phoneme pair matched within each word."""
+def onset_errors(
+    words: Sequence[SpokenWord], derived: Sequence[PhonemeSpan], *, inner: bool = False
+) -> list[float]:
+    """|derived onset - true onset| (s) of every phoneme pair matched within each word;
+    ``inner``: only phonemes after a word's first (whose onset word timings give)."""
     errors: list[float] = []
     spoken = [span for span in derived if span.phoneme != SILENCE]
     for index, word in enumerate(words):
         until = words[index + 1].start if index + 1 < len(words) else float("inf")
         mine = [span for span in spoken if word.start - 1e-6 <= span.start < until - 1e-6]
         for true, guess in _matched(list(word.phonemes), mine):
-            errors.append(abs(true.start - guess.start))
+            if not inner or true is not word.phonemes[0]:
+                errors.append(abs(true.start - guess.start))
     return errors
 
 
