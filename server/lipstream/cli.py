@@ -125,9 +125,7 @@ def _word_timing_spans(args: argparse.Namespace, model_dir: Path) -> list[Phonem
         if value is not None:
             raise LipstreamError(f"{option} goes with --text", where=option, code="invalid_request")
     timings = read_timing_file(Path(args.words), args.words_format)
-    return timings_to_spans(
-        timings, WordDurationModel.load(model_dir), args.voice or DEFAULT_VOICE
-    )
+    return timings_to_spans(timings, WordDurationModel.load(model_dir), args.voice or DEFAULT_VOICE)
 
 
 def _check_text_options(args: argparse.Namespace) -> None:
@@ -495,9 +493,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     synth.add_argument("--audio", help="mono WAV of the speech, for engines that use audio")
     synth.add_argument("--wav", help="with --text: write espeak-ng's speech to this WAV file")
-    synth.add_argument(
-        "--voice", help="with --text or --words: espeak-ng voice (default en-us)"
-    )
+    synth.add_argument("--voice", help="with --text or --words: espeak-ng voice (default en-us)")
     synth.add_argument(
         "--rate", type=int, help="with --text: words per minute, 80-450 (default 175)"
     )

@@ -59,8 +59,7 @@ def spread_words(model: WordDurationModel, words: Sequence[PronouncedWord]) -> l
             continue
         word_ids = [PHONEME_INDEX[phoneme] for phoneme in phonemes]
         means = np.exp(model.log_mean_[word_ids])
-        where = slice(len(ids), len(ids) + len(word_ids))
-        layout.append(("", start, end, where))
+        layout.append(("", start, end, slice(len(ids), len(ids) + len(word_ids))))
         ids += word_ids
         first_pass += list(means * (end - start) / means.sum())
         clock = end
@@ -68,14 +67,15 @@ def spread_words(model: WordDurationModel, words: Sequence[PronouncedWord]) -> l
     log_first = np.log(np.maximum(np.array(first_pass), 1e-6))
     predicted = model.predict_log(id_array, model.local_rates(id_array, log_first))
     spans: list[PhonemeSpan] = []
-    for label, start, end, where in layout:
-        if where is None:
+    for label, start, end, phonemes_at in layout:
+        if phonemes_at is None:
             _append(spans, PhonemeSpan(label, start, end))
             continue
-        durations = share(predicted[where], model.spread_[id_array[where]] ** 2, end - start)
+        at = id_array[phonemes_at]
+        durations = share(predicted[phonemes_at], model.spread_[at] ** 2, end - start)
         edges = start + np.concatenate([[0.0], np.cumsum(durations)])
         edges[-1] = end
-        for phoneme_id, left, right in zip(id_array[where], edges[:-1], edges[1:]):
+        for phoneme_id, left, right in zip(at, edges[:-1], edges[1:]):
             if right > left:
                 _append(spans, PhonemeSpan(PHONEMES[phoneme_id], float(left), float(right)))
     return spans

@@ -3,8 +3,9 @@
 Sketch: libespeak-ng runs in synchronous mode with phoneme events switched on.
 One callback collects the PCM16 chunks, the ``espeakEVENT_PHONEME`` events
 (name, ``audio_position`` in ms) and the ``espeakEVENT_WORD`` events (the word's
-first character, 1-based, its length in characters, and ``audio_position``). The library keeps global state and is not
-reentrant, so a process holds one ``Library`` behind one lock.
+first character, 1-based, its length in characters, and ``audio_position``). The
+library keeps global state and is not reentrant, so a process holds one ``Library``
+behind one lock.
 
 This module imports nothing beyond the standard library, so that
 ``python -I libespeak.py`` starts in tens of milliseconds: that is the worker

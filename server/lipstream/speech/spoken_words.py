@@ -49,7 +49,9 @@ class SpokenUtterance:
     words: list[SpokenWord]
 
 
-def speak_words(texts: Sequence[str], voice: str = "en-us", rate: int = 175) -> list[SpokenUtterance]:
+def speak_words(
+    texts: Sequence[str], voice: str = "en-us", rate: int = 175
+) -> list[SpokenUtterance]:
     """Each text spoken (one worker process for all) with its words."""
     spoken = speak_words_in_worker([SpeechRequest(text, voice, rate) for text in texts])
     return [_utterance(text, result) for text, result in zip(texts, spoken)]

@@ -73,5 +73,18 @@ def test_a_model_without_a_duration_model_says_to_retrain(
     (model / "word_durations.json").unlink()
     timings = tmp_path / "words.json"
     timings.write_text('[{"word": "hi", "start": 0.1, "end": 0.4}]', encoding="utf-8")
-    assert main(["synth", "--model", str(model), "--words", str(timings), "--out", str(tmp_path / "f.json")]) == 2
+    assert (
+        main(
+            [
+                "synth",
+                "--model",
+                str(model),
+                "--words",
+                str(timings),
+                "--out",
+                str(tmp_path / "f.json"),
+            ]
+        )
+        == 2
+    )
     assert "retrain" in capsys.readouterr().err

@@ -102,7 +102,9 @@ def test_azure_word_boundaries_in_ticks_skip_punctuation_and_keep_words() -> Non
 
 
 def test_azure_visemes_alone_are_read_by_id() -> None:
-    timings = parse_timings([{"audioOffset": 0, "visemeId": 0}, {"audioOffset": 1250000, "visemeId": 21}])
+    timings = parse_timings(
+        [{"audioOffset": 0, "visemeId": 0}, {"audioOffset": 1250000, "visemeId": 21}]
+    )
     assert [(v.viseme, v.start) for v in timings.visemes] == [("0", 0.0), ("21", 0.125)]
 
 

@@ -21,7 +21,9 @@ def _cmudict_first(word: str) -> tuple[str, ...]:
 
 def _espeak_alone(text: str) -> tuple[str, ...]:
     _, _, events = speak_in_worker([SpeechRequest(text)])[0]
-    return tuple(normalize_phoneme(name, "espeak") for name, _ in events if not name.startswith("_"))
+    return tuple(
+        normalize_phoneme(name, "espeak") for name, _ in events if not name.startswith("_")
+    )
 
 
 def test_dictionary_words_take_cmudicts_first_pronunciation() -> None:

@@ -56,7 +56,9 @@ def test_ipa_phoneme_timestamps_keep_espeaks_onsets(
     espeak_durations: WordDurationModel,
 ) -> None:
     for utterance in espeak_spoken[1][:5]:
-        spans = timings_to_spans(parse_timings(json.dumps(tts_shapes.ipa_input(utterance))), espeak_durations)
+        spans = timings_to_spans(
+            parse_timings(json.dumps(tts_shapes.ipa_input(utterance))), espeak_durations
+        )
         derived = [(s.phoneme, s.start) for s in spans if s.phoneme != "sil"]
         truth = [(s.phoneme, round(s.start, 3)) for s in utterance.spans if s.phoneme != "sil"]
         assert derived == truth
@@ -77,7 +79,9 @@ def test_visemes_alone_become_spans_starting_at_each_viseme(
 ) -> None:
     utterance = espeak_spoken[1][0]
     sent = build(utterance)
-    spans = timings_to_spans(parse_timings(sent if isinstance(sent, str) else json.dumps(sent)), espeak_durations)
+    spans = timings_to_spans(
+        parse_timings(sent if isinstance(sent, str) else json.dumps(sent)), espeak_durations
+    )
     # Where the viseme changes, a span starts, and it belongs to that viseme's class.
     changes = [
         (span.start, table[span.phoneme])

@@ -70,4 +70,3 @@ def looks_like_words(data: Any) -> bool:
         keys = set(data[0])
         return bool(keys & set(WORD_KEYS)) and {"start", "end"} <= keys
     return False
-
