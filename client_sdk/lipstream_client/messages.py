@@ -2,8 +2,8 @@
 
 Sketch: one frozen dataclass per message ``type``. A client opens requests
 with ``Start``, feeds ``Phonemes`` (and optionally ``AudioChunk``), ``Text``
-for the server to speak, or ``Words``, a TTS's word or character timings, and closes them with ``End``, ``Cancel`` or
-``Interrupt``; the server answers with ``Ready``, a stream of ``Frames`` (and,
+for the server to speak, or ``Words``, a TTS's word or character timings, and
+closes them with ``End``, ``Cancel`` or ``Interrupt``; the server answers with ``Ready``, a stream of ``Frames`` (and,
 for ``Text``, the speech as ``AudioChunk``s with their ``start``) and one
 ``Done``, or an ``ErrorMessage``.
 Requests are multiplexed on one connection by their ``id``.

@@ -36,13 +36,15 @@ class PronouncedWord:
     end: float | None
 
 
-def spread_words(model: WordDurationModel, words: Sequence[PronouncedWord]) -> list[PhonemeSpan]:
-    """Contiguous spans from 0 to the last word's end."""
+def spread_words(
+    model: WordDurationModel, words: Sequence[PronouncedWord], after: float = 0.0
+) -> list[PhonemeSpan]:
+    """Contiguous spans from ``after`` (the end of earlier input) to the last word's end."""
     timed = _closed(model, words)
     layout: list[tuple[str, float, float, slice | None]] = []
     ids: list[int] = []
     first_pass: list[float] = []
-    clock = 0.0
+    clock = after
     for phonemes, start, end in timed:
         if start - clock > MIN_GAP_S:
             layout.append((SILENCE, clock, start, None))

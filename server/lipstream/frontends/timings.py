@@ -11,7 +11,7 @@ error points back into the user's file.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ..timeline import PhonemeSpan
 
@@ -59,6 +59,33 @@ class SpeechTimings:
     words: tuple[TimedWord, ...] = ()
     visemes: tuple[TimedViseme, ...] = ()
     phonemes: tuple[PhonemeSpan, ...] = ()
+    continues_word: bool = False
+    """The first word may be the rest of a word cut at the previous chunk's end (a
+    character chunk that starts without white space)."""
+    last_word_open: bool = False
+    """The last word may go on in the next chunk (a character chunk that ends without white
+    space), or its end is not known yet (a Polly word mark)."""
+
+    @property
+    def start_s(self) -> float | None:
+        """The earliest time the input states (None when it states none)."""
+        times = [word.start for word in self.words[:1]] + [v.start for v in self.visemes[:1]]
+        times += [span.start for span in self.phonemes[:1]]
+        return min(times, default=None)
+
+    def shifted(self, offset_s: float) -> SpeechTimings:
+        """The same timings ``offset_s`` seconds later."""
+        if not offset_s:
+            return self
+        return replace(
+            self,
+            words=tuple(_shifted_word(word, offset_s) for word in self.words),
+            visemes=tuple(replace(v, start=v.start + offset_s) for v in self.visemes),
+            phonemes=tuple(
+                PhonemeSpan(s.phoneme, s.start + offset_s, s.end + offset_s, s.emotion)
+                for s in self.phonemes
+            ),
+        )
 
     @property
     def end_s(self) -> float:
@@ -68,3 +95,14 @@ class SpeechTimings:
         times += [viseme.start for viseme in self.visemes]
         times += [span.end for span in self.phonemes]
         return max(times)
+
+
+def _shifted_word(word: TimedWord, offset_s: float) -> TimedWord:
+    return replace(
+        word,
+        start=word.start + offset_s,
+        end=None if word.end is None else word.end + offset_s,
+        characters=tuple(
+            TimedCharacter(c.char, c.start + offset_s, c.end + offset_s) for c in word.characters
+        ),
+    )

@@ -37,8 +37,11 @@ POLLY_VISEMES = MappingProxyType({
 TABLES = {"azure": AZURE_VISEMES, "polly": POLLY_VISEMES}
 
 
-def viseme_spans(model: WordDurationModel, visemes: Sequence[TimedViseme]) -> list[PhonemeSpan]:
-    """Contiguous spans from 0 to the end of the last viseme."""
+def viseme_spans(
+    model: WordDurationModel, visemes: Sequence[TimedViseme], after: float = 0.0
+) -> list[PhonemeSpan]:
+    """Contiguous spans from ``after`` (the end of earlier input) to the end of the last
+    viseme."""
     spans: list[PhonemeSpan] = []
     for index, viseme in enumerate(visemes):
         phoneme = TABLES[viseme.scheme][viseme.viseme]
@@ -46,9 +49,9 @@ def viseme_spans(model: WordDurationModel, visemes: Sequence[TimedViseme]) -> li
             end = visemes[index + 1].start
         else:
             end = viseme.start + float(np.exp(model.log_mean_[PHONEME_INDEX[phoneme]]))
-        start = viseme.start if spans else 0.0
+        start = viseme.start if spans else after
         if start < viseme.start:
-            spans.append(PhonemeSpan(SILENCE, 0.0, viseme.start))
+            spans.append(PhonemeSpan(SILENCE, after, viseme.start))
             start = viseme.start
         if end <= start:
             continue

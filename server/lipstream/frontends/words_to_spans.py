@@ -4,18 +4,20 @@ Sketch: phoneme timings are used as they are, with silence where nothing is said
 viseme-only timings become representative phonemes (``viseme_spans``); word and
 character timings get each word's phonemes from the lexicon (``lexicon``, all words of
 the input at once, so espeak-ng reads them in context) and the duration model spreads
-them over the word (``spreading``). The result runs contiguously from 0 s.
+them over the word (``spreading``). The result runs contiguously from 0 s, or from
+where earlier input ended (a stream of timings, ``word_stream``).
 """
 
 from __future__ import annotations
 
-from lipstream_client.errors import EMPTY_TIMINGS
+from lipstream_client.errors import EMPTY_TIMINGS, NON_MONOTONIC_TIMES
 
 from ..errors import LipstreamError
 from ..phonemes import SILENCE
 from ..timeline import PhonemeSpan
 from .lexicon import pronounce
 from .spreading import PronouncedWord, spread_words
+from .timing_checks import OVERLAP_TOLERANCE_S
 from .timings import SpeechTimings
 from .viseme_spans import viseme_spans
 from .word_durations import WordDurationModel
@@ -24,13 +26,28 @@ DEFAULT_VOICE = "en-us"
 
 
 def timings_to_spans(
-    timings: SpeechTimings, durations: WordDurationModel, voice: str = DEFAULT_VOICE
+    timings: SpeechTimings,
+    durations: WordDurationModel,
+    voice: str = DEFAULT_VOICE,
+    after: float = 0.0,
+    *,
+    require_speech: bool = True,
 ) -> list[PhonemeSpan]:
-    """Contiguous spans for ``timings``; ``voice``: the espeak-ng voice of the words."""
+    """Contiguous spans for ``timings`` from ``after`` (the end of earlier input; a time
+    before it is ``non_monotonic_times``); ``voice``: the espeak-ng voice of the words.
+    ``require_speech``: timings with nothing spoken are ``empty_timings`` (a chunk of a
+    stream may be only a pause)."""
+    first = timings.start_s
+    if first is not None and first < after - OVERLAP_TOLERANCE_S:
+        raise LipstreamError(
+            f"the timings start at {first:.6g} s, before the input so far ends at {after:.6g} s",
+            where="input",
+            code=NON_MONOTONIC_TIMES,
+        )
     if timings.phonemes:
-        spans = _with_silences(list(timings.phonemes))
+        spans = _with_silences(list(timings.phonemes), after)
     elif timings.visemes:
-        spans = viseme_spans(durations, timings.visemes)
+        spans = viseme_spans(durations, timings.visemes, after)
     else:
         texts = [word.text for word in timings.words]
         pronunciations = pronounce(texts, voice) if texts else []
@@ -38,8 +55,8 @@ def timings_to_spans(
             PronouncedWord(pronunciation, word.start, word.end)
             for word, pronunciation in zip(timings.words, pronunciations)
         ]
-        spans = spread_words(durations, words) if words else []
-    if not any(span.phoneme != SILENCE for span in spans):
+        spans = spread_words(durations, words, after) if words else []
+    if require_speech and not any(span.phoneme != SILENCE for span in spans):
         raise LipstreamError(
             "the timings hold no word, viseme or phoneme that is spoken",
             where="input",
@@ -48,9 +65,9 @@ def timings_to_spans(
     return spans
 
 
-def _with_silences(phonemes: list[PhonemeSpan]) -> list[PhonemeSpan]:
+def _with_silences(phonemes: list[PhonemeSpan], after: float) -> list[PhonemeSpan]:
     spans: list[PhonemeSpan] = []
-    clock = 0.0
+    clock = after
     for span in phonemes:
         if span.start > clock:
             if spans and spans[-1].phoneme == SILENCE:

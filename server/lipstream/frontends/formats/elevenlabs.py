@@ -35,7 +35,12 @@ def parse_elevenlabs(data: Any) -> SpeechTimings:
         where = f"[{index}]" if isinstance(data, list) else ""
         characters += _characters(mapping(chunk, where or "input"), where)
     check_order([(c.start, c.end, where) for c, where in characters], "characters")
-    return SpeechTimings("elevenlabs", words=tuple(_words(characters)))
+    return SpeechTimings(
+        "elevenlabs",
+        words=tuple(_words(characters)),
+        continues_word=bool(characters) and not characters[0][0].char.isspace(),
+        last_word_open=bool(characters) and not characters[-1][0].char.isspace(),
+    )
 
 
 def _alignment(chunk: Mapping[str, Any], where: str) -> tuple[Mapping[str, Any], str]:

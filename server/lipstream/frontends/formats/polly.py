@@ -50,7 +50,8 @@ def parse_polly(data: Any) -> SpeechTimings:
         check_order([(v.start, None, v.where) for v in visemes], "words or visemes")
         return SpeechTimings("polly", visemes=tuple(visemes))
     check_order([(start, None, where) for _, start, where in starts], "words")
-    return SpeechTimings("polly", words=tuple(_words(starts, visemes)))
+    words = _words(starts, visemes)
+    return SpeechTimings("polly", words=tuple(words), last_word_open=words[-1].end is None)
 
 
 def _check_offsets(mark: Mapping[str, Any], where: str) -> None:
