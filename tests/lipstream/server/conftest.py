@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pytest
 
@@ -10,6 +11,9 @@ from lipstream.config import ServerSettings
 from lipstream.models import ModelRegistry
 from lipstream.server.catalog import Catalog
 from tests.lipstream.server.harness import fixed_calibration
+
+if TYPE_CHECKING:
+    from lipstream.corpus import Corpus
 
 
 @pytest.fixture(scope="session")
@@ -23,3 +27,14 @@ def fixed_cost_catalog(all_models_dir: Path) -> Catalog:
 def catalog(all_models_dir: Path) -> Catalog:
     """A catalog of every model with default settings."""
     return Catalog.build(ModelRegistry.load(all_models_dir), ServerSettings())
+
+
+@pytest.fixture(scope="session")
+def words_models(small_demo_corpus: Corpus, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A viseme-lerp model trained by ``train_engine`` (its duration model beside it), quick
+    to train and serve, for the word-timing requests."""
+    from lipstream.training import train_engine
+
+    directory = tmp_path_factory.mktemp("words-models")
+    train_engine(small_demo_corpus.split()[0], "viseme-lerp", directory / "viseme-lerp")
+    return directory

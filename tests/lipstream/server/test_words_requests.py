@@ -5,7 +5,7 @@ end; frames of the words before it follow at once; bad timings end only that req
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import pytest
@@ -32,19 +32,7 @@ from lipstream_client import (
     Words,
 )
 
-if TYPE_CHECKING:
-    from lipstream.corpus import Corpus
-
 FPS = 50.0
-
-
-@pytest.fixture(scope="module")
-def words_models(small_demo_corpus: Corpus, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from lipstream.training import train_engine
-
-    directory = tmp_path_factory.mktemp("words-models")
-    train_engine(small_demo_corpus.split()[0], "viseme-lerp", directory / "viseme-lerp")
-    return directory
 
 
 @pytest.fixture(scope="module")
@@ -88,7 +76,10 @@ def test_words_drive_a_request_as_their_spans_sent_as_phonemes_would(
     words_catalog: Catalog, words_models: Path
 ) -> None:
     session = _session(words_catalog)
-    timings = [{"word": "Map", "start": 0.1, "end": 0.42}, {"word": "the", "start": 0.6, "end": 0.75}]
+    timings = [
+        {"word": "Map", "start": 0.1, "end": 0.42},
+        {"word": "the", "start": 0.6, "end": 0.75},
+    ]
     _start(session, "w")
     via_words = _play(session, Words("w", timings), End("w"))
     durations = WordDurationModel.load(words_models / "viseme-lerp")
