@@ -3,9 +3,9 @@
 Sketch: one frozen dataclass per message ``type``. A client opens requests
 with ``Start``, feeds ``Phonemes`` (and optionally ``AudioChunk``), ``Text``
 for the server to speak, or ``Words``, a TTS's word or character timings, and
-closes them with ``End``, ``Cancel`` or ``Interrupt``; the server answers with ``Ready``, a stream of ``Frames`` (and,
-for ``Text``, the speech as ``AudioChunk``s with their ``start``) and one
-``Done``, or an ``ErrorMessage``.
+closes them with ``End``, ``Cancel`` or ``Interrupt``; the server answers with
+``Ready``, a stream of ``Frames`` (and, for ``Text``, the speech as
+``AudioChunk``s with their ``start``) and one ``Done``, or an ``ErrorMessage``.
 Requests are multiplexed on one connection by their ``id``.
 
 Times are seconds on the utterance clock (frame i is at i / fps seconds),
