@@ -5,8 +5,8 @@ Sketch: the request body's schema is the ``start`` message's properties
 ``items`` or a ``words`` object with the ``words`` message's fields, and an
 ``audio`` object with the ``audio`` message's ``sample_rate`` and ``pcm16``.
 Their ``#/$defs/X`` references move to ``#/components/schemas/lipstream_X``, so
-the schemas shipped with the client SDK stay the single source. The response and error bodies are described by
-hand here, as they are not protocol messages.
+the schemas shipped with the client SDK stay the single source. The response and
+error bodies are described by hand here, as they are not protocol messages.
 """
 
 from __future__ import annotations
