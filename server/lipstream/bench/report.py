@@ -331,7 +331,7 @@ def word_timings(bench: Bench) -> str:
                 "" if rtf is None else f"{rtf:.4f}",
             ]
         )
-    return text + table(
+    text += table(
         [
             "input",
             "onset error median / p90 ms",
@@ -340,6 +340,26 @@ def word_timings(bench: Bench) -> str:
             "real-time factor",
         ],
         rows,
+    )
+    frames = doc.get("frames")
+    if not frames:
+        return text
+    text += (
+        f"\nFrames of the derived spans against the frames of espeak-ng's own spans, by "
+        f"{frames['model']} at {frames['fps']:g} fps, the held-out sentences at "
+        f"{frames['rate_wpm']} words per minute:\n\n"
+    )
+    return text + table(
+        ["input", "RMS", "/p b m/ closures", "closure lag, abs. median / p90 ms"],
+        (
+            [
+                name,
+                f"{row['rms']:.4f}",
+                str(row["closures"]),
+                f"{row['closure_lag_median_abs_ms']:.1f} / {row['closure_lag_p90_abs_ms']:.1f}",
+            ]
+            for name, row in frames["formats"].items()
+        ),
     )
 
 

@@ -9,7 +9,10 @@ shape (``tts_shapes``), read back as a file would be, turned into spans
 one (``tts_shapes.onset_errors``): median and 90th percentile in ms, of every phoneme and of
 those after each word's first (which word timings give outright), with even spreading
 within each given word as the baseline. The real-time factor is the time from the
-timing text to spans over the seconds of speech. Writes ``bench/word_timings.json``
+timing text to spans over the seconds of speech. The frames a model (``--model``, default a
+``viseme-lerp`` trained on a small demo corpus) gives for the derived spans are compared
+with its frames for espeak-ng's own spans: RMS over every frame and channel, and the lag of
+each /p b m/ closure (``evaluation.closure_lags``). Writes ``bench/word_timings.json``
 (``--json``) with machine, date and command; ``python -m lipstream.bench.report``
 renders it.
 
@@ -32,6 +35,9 @@ import numpy as np
 
 from .._version import __version__
 from ..demo.sentences import load_sentences
+from ..engines import load_model
+from ..engines.base import Model
+from ..evaluation import closure_lags, lip_aperture
 from ..frontends.formats import parse_timings
 from ..frontends.word_durations import WordDurationModel
 from ..frontends.words_to_spans import timings_to_spans
@@ -46,6 +52,10 @@ RATES_WPM = (140, 175, 220)
 TRAINING_SENTENCES = 240
 HELDOUT_SENTENCES = 60
 TARGETS_MS = {"word timings median": 20.0, "character timings median": 10.0}
+FRAMES_FPS = 60.0
+FRAMES_RATE_WPM = 175
+SMALL_CORPUS_SENTENCES = 40
+FRAME_FORMATS = ("words", "elevenlabs", "polly", "azure visemes only")
 FORMATS: dict[str, Callable[[SpokenUtterance], Any]] = {
     "words": tts_shapes.words_input,
     "elevenlabs": tts_shapes.elevenlabs_input,
@@ -85,9 +95,9 @@ def _stats(
     return row
 
 
-def bench(training: list[SpokenUtterance], heldout: list[SpokenUtterance]) -> dict[str, Any]:
-    """Onset errors and speed per format (and the even-spreading baseline)."""
-    model = WordDurationModel().fit(utterance.spans for utterance in training)
+def bench(model: WordDurationModel, heldout: list[SpokenUtterance]) -> dict[str, Any]:
+    """Onset errors and speed per format (and the even-spreading baseline), spread by
+    ``model``."""
     speech_s = sum(utterance.audio.duration for utterance in heldout)
     results: dict[str, Any] = {}
     for name, build in FORMATS.items():
@@ -106,12 +116,58 @@ def bench(training: list[SpokenUtterance], heldout: list[SpokenUtterance]) -> di
     return results
 
 
-def run(argv: Sequence[str]) -> dict[str, Any]:
+def frames_against_truth(
+    model: Model, heldout: list[SpokenUtterance], durations: WordDurationModel
+) -> dict[str, dict[str, float]]:
+    """Per format: RMS of the frames of the derived spans against those of the true spans,
+    and the /p b m/ closure lags (ms) of the first against the second."""
+    results: dict[str, dict[str, float]] = {}
+    for name in FRAME_FORMATS:
+        squares: list[np.ndarray] = []
+        lags: list[float] = []
+        for utterance in heldout:
+            sent = FORMATS[name](utterance)
+            text = sent if isinstance(sent, str) else json.dumps(sent)
+            derived = timings_to_spans(parse_timings(text), durations)
+            guess = model.synthesize(derived, fps=FRAMES_FPS).frames
+            truth = model.synthesize(utterance.spans, fps=FRAMES_FPS).frames
+            n = min(len(guess), len(truth))
+            squares.append(((guess[:n] - truth[:n]).astype(np.float64) ** 2).ravel())
+            true_aperture = lip_aperture(truth[:n], model.channels)
+            guess_aperture = lip_aperture(guess[:n], model.channels)
+            if true_aperture is not None and guess_aperture is not None:
+                lags += closure_lags(true_aperture, guess_aperture, utterance.spans, FRAMES_FPS)
+        lags_ms = np.array(lags) * 1000
+        results[name] = {
+            "rms": round(float(np.sqrt(np.mean(np.concatenate(squares)))), 5),
+            "closures": len(lags_ms),
+            "closure_lag_median_abs_ms": round(float(np.median(np.abs(lags_ms))), 2),
+            "closure_lag_p90_abs_ms": round(float(np.percentile(np.abs(lags_ms), 90)), 2),
+        }
+    return results
+
+
+def _model(path: Path | None) -> tuple[Model, str]:
+    """The model of ``--model``, or a viseme-lerp trained on a small demo corpus."""
+    if path is not None:
+        return load_model(path), str(path)
+    from ..demo.generate import generate_demo_corpus
+    from ..training import train_engine
+
+    corpus = generate_demo_corpus(n_sentences=SMALL_CORPUS_SENTENCES)
+    model = train_engine(corpus, "viseme-lerp")
+    return model, f"viseme-lerp trained on {SMALL_CORPUS_SENTENCES} demo sentences"
+
+
+def run(argv: Sequence[str], model_path: Path | None = None) -> dict[str, Any]:
     sentences = load_sentences()
     train_text = sentences[:TRAINING_SENTENCES]
     heldout_text = sentences[-HELDOUT_SENTENCES:]
     training = [u for rate in RATES_WPM for u in speak_words(train_text, rate=rate)]
     heldout = [u for rate in RATES_WPM for u in speak_words(heldout_text, rate=rate)]
+    durations = WordDurationModel().fit(utterance.spans for utterance in training)
+    model, described = _model(model_path)
+    at_rate = speak_words(heldout_text, rate=FRAMES_RATE_WPM)
     return {
         "command": shlex.join([*TOOL.split(), *argv]),
         "lipstream_version": __version__,
@@ -122,17 +178,27 @@ def run(argv: Sequence[str]) -> dict[str, Any]:
         "heldout_sentences": len(heldout_text),
         "heldout_speech_s": round(sum(u.audio.duration for u in heldout), 2),
         "targets_ms": TARGETS_MS,
-        "formats": bench(training, heldout),
+        "formats": bench(durations, heldout),
+        "frames": {"model": described, "fps": FRAMES_FPS, "rate_wpm": FRAMES_RATE_WPM}
+        | {"formats": frames_against_truth(model, at_rate, durations)},
     }
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--json", type=Path, help="write the results here")
+    parser.add_argument(
+        "--model", type=Path, help="model for the frame comparison (default: a quick viseme-lerp)"
+    )
     args = parser.parse_args(argv)
-    results = run(list(sys.argv[1:] if argv is None else argv))
+    results = run(list(sys.argv[1:] if argv is None else argv), args.model)
     if args.json is not None:
         write_results(results, args.json)
+    for name, row in results["frames"]["formats"].items():
+        print(
+            f"frames from {name:22s} RMS {row['rms']:.4f} against the true phonemes'; "
+            f"/p b m/ closure lag |median| {row['closure_lag_median_abs_ms']:.1f} ms"
+        )
     for name, row in results["formats"].items():
         rtf = row.get("real_time_factor")
         print(
