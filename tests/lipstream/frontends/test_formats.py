@@ -226,3 +226,24 @@ def test_a_named_format_that_does_not_fit_says_where() -> None:
 def test_an_unknown_ipa_phoneme_names_it() -> None:
     error = _error({"phonemes": ["h", "☃"], "start": [0.0, 0.1], "end": [0.1, 0.2]})
     assert (error.code, error.where) == ("unknown_phoneme", "phonemes[1]")
+
+
+def test_elevenlabs_websocket_chunks_in_ms_with_durations() -> None:
+    chunk = {
+        "audio": "",
+        "isFinal": None,
+        "normalizedAlignment": {
+            "chars": ["H", "i", " ", "y", "o", "u"],
+            "charStartTimesMs": [0, 116, 186, 232, 279, 325],
+            "charDurationsMs": [116, 70, 46, 47, 46, 93],
+        },
+    }
+    timings = parse_timings(chunk)
+    assert timings.format == "elevenlabs"
+    assert [(w.text, w.start, w.end) for w in timings.words] == [
+        ("Hi", 0.0, 0.186),
+        ("you", 0.232, pytest.approx(0.418)),
+    ]
+    chunk["normalizedAlignment"]["charDurationsMs"][1] = -5  # type: ignore[index]
+    error = _error(chunk)
+    assert (error.code, error.where) == ("invalid_times", "normalizedAlignment.charDurationsMs[1]")

@@ -1,6 +1,10 @@
 """ElevenLabs' character alignment: ``{"characters": [...],
 "character_start_times_seconds": [...], "character_end_times_seconds": [...]}``, as the
-``alignment`` and ``normalized_alignment`` of its with-timestamps responses.
+``alignment`` and ``normalized_alignment`` of its with-timestamps responses; and its
+WebSocket API's ``{"chars": [...], "charStartTimesMs": [...], "charDurationsMs": [...]}``
+(``alignment``, ``normalizedAlignment``), whose times count from the start of the audio
+chunk that carries them (a ``words`` message's ``offset`` puts them on the utterance
+clock).
 
 Sketch: a response (or a list of streamed chunks, each with its own alignment, times on
 the utterance clock) is read as one run of characters; ``normalized_alignment`` is
@@ -26,6 +30,10 @@ ALIGNMENT_KEYS = ("normalized_alignment", "normalizedAlignment", "alignment")
 CHARACTERS = "characters"
 STARTS = ("character_start_times_seconds", "characterStartTimesSeconds")
 ENDS = ("character_end_times_seconds", "characterEndTimesSeconds")
+WEBSOCKET_CHARACTERS = "chars"
+WEBSOCKET_STARTS_MS = ("charStartTimesMs", "char_start_times_ms")
+WEBSOCKET_DURATIONS_MS = ("charDurationsMs", "char_durations_ms")
+MS = 1e-3
 
 
 def parse_elevenlabs(data: Any) -> SpeechTimings:
@@ -52,27 +60,35 @@ def _alignment(chunk: Mapping[str, Any], where: str) -> tuple[Mapping[str, Any],
 
 def _characters(chunk: Mapping[str, Any], where: str) -> list[tuple[TimedCharacter, str]]:
     alignment, where = _alignment(chunk, where)
-    chars = array(member(alignment, (CHARACTERS,), where)[0], f"{where}.{CHARACTERS}")
-    starts = array(member(alignment, STARTS, where)[0], f"{where}.{STARTS[0]}")
-    ends = array(member(alignment, ENDS, where)[0], f"{where}.{ENDS[0]}")
-    if not len(chars) == len(starts) == len(ends):
+    websocket = WEBSOCKET_CHARACTERS in alignment
+    key = WEBSOCKET_CHARACTERS if websocket else CHARACTERS
+    chars = array(member(alignment, (key,), where)[0], f"{where}.{key}")
+    first_keys, second_keys = (
+        (WEBSOCKET_STARTS_MS, WEBSOCKET_DURATIONS_MS) if websocket else (STARTS, ENDS)
+    )
+    firsts = array(member(alignment, first_keys, where)[0], f"{where}.{first_keys[0]}")
+    seconds_ = array(member(alignment, second_keys, where)[0], f"{where}.{second_keys[0]}")
+    if not len(chars) == len(firsts) == len(seconds_):
         raise LipstreamError(
-            f"{len(chars)} characters but {len(starts)} start times and {len(ends)} end times",
+            f"{len(chars)} characters but {len(firsts)} {first_keys[0]} and "
+            f"{len(seconds_)} {second_keys[0]}",
             where=where,
             code=MISMATCHED_WORDS,
         )
+    unit = MS if websocket else 1.0
     result = []
-    for index, (char, start, end) in enumerate(zip(chars, starts, ends)):
-        place = f"{where}.{CHARACTERS}[{index}]"
+    for index, (char, first, second) in enumerate(zip(chars, firsts, seconds_)):
+        place = f"{where}.{key}[{index}]"
         char = text(char, place)
         if len(char) != 1:
             raise LipstreamError(
-                f"an entry of characters must be one character, got {char!r}",
+                f"an entry of {key} must be one character, got {char!r}",
                 where=place,
                 code=MISMATCHED_WORDS,
             )
-        start_s = seconds(start, f"{where}.{STARTS[0]}[{index}]")
-        end_s = seconds(end, f"{where}.{ENDS[0]}[{index}]")
+        start_s = seconds(first, f"{where}.{first_keys[0]}[{index}]", unit)
+        second_s = seconds(second, f"{where}.{second_keys[0]}[{index}]", unit)
+        end_s = start_s + second_s if websocket else second_s
         check_span(start_s, end_s, place)
         result.append((TimedCharacter(char, start_s, end_s), place))
     return result
@@ -97,4 +113,8 @@ def looks_like_elevenlabs(data: Any) -> bool:
     first = data[0] if isinstance(data, list) and data else data
     if not isinstance(first, Mapping):
         return False
-    return CHARACTERS in first or any(isinstance(first.get(key), Mapping) for key in ALIGNMENT_KEYS)
+    return (
+        CHARACTERS in first
+        or WEBSOCKET_CHARACTERS in first
+        or any(isinstance(first.get(key), Mapping) for key in ALIGNMENT_KEYS)
+    )
