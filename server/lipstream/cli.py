@@ -401,6 +401,9 @@ def _shown_maps(model: Model, directory: Path, name: str | None) -> dict[str, Re
 
 
 def _bench(args: argparse.Namespace, settings: Settings) -> None:
+    if args.word_timings:
+        _bench_word_timings(args, settings)
+        return
     from .bench.harness import format_engine_benches, format_table, run_bench
     from .bench.rungs import format_rungs
     from .corpus import load_corpus
@@ -423,6 +426,28 @@ def _bench(args: argparse.Namespace, settings: Settings) -> None:
         print()
         print(format_rungs(results["rungs"]))
         print(format_engine_benches(results))
+
+
+def _bench_word_timings(args: argparse.Namespace, settings: Settings) -> None:
+    """``lipstream bench --word-timings``: ``lipstream.bench.word_timings``."""
+    from .bench.word_timings import print_summary, run
+    from .results_file import write_results
+
+    if args.corpus is not None or args.no_engine_benches:
+        raise LipstreamError(
+            "--word-timings measures on espeak-ng's own speech of the demo sentences; it takes "
+            "no --corpus or --no-engine-benches",
+            where="--word-timings",
+            code="invalid_request",
+        )
+    path = settings.results_file(args.results, "word_timings.json")
+    results = run(["lipstream", *sys.argv[1:]])
+    write_results(results, path)
+    print(f"wrote {path}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(results, indent=2))
+    else:
+        print_summary(results)
 
 
 def _path(args: argparse.Namespace, settings: Settings) -> None:
@@ -573,6 +598,12 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument(
         "--results",
         help="JSON file to write the results to (default $LIPSTREAM_HOME/bench/results.json)",
+    )
+    bench.add_argument(
+        "--word-timings",
+        action="store_true",
+        help="instead: phoneme onset error of each TTS timing format against espeak-ng's own, "
+        "and the real-time factor of words to spans (default file word_timings.json)",
     )
     bench.add_argument(
         "--no-engine-benches",

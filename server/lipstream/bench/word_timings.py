@@ -17,6 +17,7 @@ each /p b m/ closure (``evaluation.closure_lags``). Writes ``bench/word_timings.
 renders it.
 
     python -m lipstream.bench.word_timings --json bench/word_timings.json
+    lipstream bench --word-timings --results bench/word_timings.json
 """
 
 from __future__ import annotations
@@ -159,7 +160,8 @@ def _model(path: Path | None) -> tuple[Model, str]:
     return model, f"viseme-lerp trained on {SMALL_CORPUS_SENTENCES} demo sentences"
 
 
-def run(argv: Sequence[str], model_path: Path | None = None) -> dict[str, Any]:
+def run(command: Sequence[str], model_path: Path | None = None) -> dict[str, Any]:
+    """The results, recording ``command`` (the command line that asked for them)."""
     sentences = load_sentences()
     train_text = sentences[:TRAINING_SENTENCES]
     heldout_text = sentences[-HELDOUT_SENTENCES:]
@@ -169,7 +171,7 @@ def run(argv: Sequence[str], model_path: Path | None = None) -> dict[str, Any]:
     model, described = _model(model_path)
     at_rate = speak_words(heldout_text, rate=FRAMES_RATE_WPM)
     return {
-        "command": shlex.join([*TOOL.split(), *argv]),
+        "command": shlex.join(command),
         "lipstream_version": __version__,
         "date": datetime.now(UTC).isoformat(timespec="seconds"),
         "machine": machine(),
@@ -184,20 +186,11 @@ def run(argv: Sequence[str], model_path: Path | None = None) -> dict[str, Any]:
     }
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--json", type=Path, help="write the results here")
-    parser.add_argument(
-        "--model", type=Path, help="model for the frame comparison (default: a quick viseme-lerp)"
-    )
-    args = parser.parse_args(argv)
-    results = run(list(sys.argv[1:] if argv is None else argv), args.model)
-    if args.json is not None:
-        write_results(results, args.json)
-    for name, row in results["frames"]["formats"].items():
+def print_summary(results: dict[str, Any]) -> None:
+    for name, frames in results["frames"]["formats"].items():
         print(
-            f"frames from {name:22s} RMS {row['rms']:.4f} against the true phonemes'; "
-            f"/p b m/ closure lag |median| {row['closure_lag_median_abs_ms']:.1f} ms"
+            f"frames from {name:22s} RMS {frames['rms']:.4f} against the true phonemes'; "
+            f"/p b m/ closure lag |median| {frames['closure_lag_median_abs_ms']:.1f} ms"
         )
     for name, row in results["formats"].items():
         rtf = row.get("real_time_factor")
@@ -206,6 +199,19 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"ms; after a word's first: {row['inner_median_ms']:5.1f}, {row['inner_p90_ms']:5.1f}"
             + (f", real-time factor {rtf:.5f}" if rtf is not None else "")
         )
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--json", type=Path, help="write the results here")
+    parser.add_argument(
+        "--model", type=Path, help="model for the frame comparison (default: a quick viseme-lerp)"
+    )
+    args = parser.parse_args(argv)
+    results = run([*TOOL.split(), *(sys.argv[1:] if argv is None else argv)], args.model)
+    if args.json is not None:
+        write_results(results, args.json)
+    print_summary(results)
     return 0
 
 
