@@ -247,3 +247,13 @@ def test_elevenlabs_websocket_chunks_in_ms_with_durations() -> None:
     chunk["normalizedAlignment"]["charDurationsMs"][1] = -5  # type: ignore[index]
     error = _error(chunk)
     assert (error.code, error.where) == ("invalid_times", "normalizedAlignment.charDurationsMs[1]")
+
+
+def test_azure_words_without_duration_end_at_the_next_word_and_the_last_stays_open() -> None:
+    events = [
+        {"audioOffset": 1_000_000, "text": "one"},
+        {"audioOffset": 4_000_000, "text": "two"},
+    ]
+    timings = parse_timings(events)
+    assert [(w.text, w.end) for w in timings.words] == [("one", 0.4), ("two", None)]
+    assert timings.last_word_open

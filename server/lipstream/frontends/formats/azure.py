@@ -4,7 +4,8 @@ Sketch: the input is the list of events the Speech SDK raised, each serialized w
 fields (camelCase as the JavaScript SDK names them, ``audioOffset``, ``duration``,
 ``text``, ``textOffset``, ``wordLength``, ``boundaryType``, ``visemeId``; PascalCase and
 snake_case spellings read too), in JSON or one event per line. A word boundary becomes a
-word over [audioOffset, audioOffset + duration]; punctuation and sentence boundaries are
+word over [audioOffset, audioOffset + duration] (without ``duration``, until the next
+word starts; the last such word is left open for the next chunk or the duration model); punctuation and sentence boundaries are
 skipped; a ``wordLength`` other than the text's length is ``mismatched_words``. A viseme
 event (ID 0-21) starts that viseme; visemes are used only when no word boundary is
 given (``viseme_spans``).
@@ -13,6 +14,7 @@ given (``viseme_spans``).
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
 from typing import Any
 
 from lipstream_client.errors import MISMATCHED_WORDS
@@ -47,7 +49,12 @@ def parse_azure(data: Any) -> SpeechTimings:
             raise misfit("is neither a word boundary (text) nor a viseme (visemeId)", where)
     if words:
         check_order([(word.start, word.end, word.where) for word in words], "words")
-        return SpeechTimings("azure", words=tuple(words))
+        closed = [
+            replace(word, end=following.start) if word.end is None else word
+            for word, following in zip(words, words[1:])
+        ]
+        words = closed + words[-1:]
+        return SpeechTimings("azure", words=tuple(words), last_word_open=words[-1].end is None)
     check_order([(v.start, None, v.where) for v in visemes], "words or visemes")
     return SpeechTimings("azure", visemes=tuple(visemes))
 
