@@ -6,9 +6,9 @@ fields (camelCase as the JavaScript SDK names them, ``audioOffset``, ``duration`
 snake_case spellings read too), in JSON or one event per line. A word boundary becomes a
 word over [audioOffset, audioOffset + duration] (without ``duration``, until the next
 word starts; the last such word is left open for the next chunk or the duration model);
-punctuation and sentence boundaries are skipped; a ``wordLength`` other than the text's length is ``mismatched_words``. A viseme
-event (ID 0-21) starts that viseme; visemes are used only when no word boundary is
-given (``viseme_spans``).
+punctuation and sentence boundaries are skipped; a ``wordLength`` other than the text's
+length is ``mismatched_words``. A viseme event (ID 0-21) starts that viseme; visemes are
+used only when no word boundary is given (``viseme_spans``).
 """
 
 from __future__ import annotations
