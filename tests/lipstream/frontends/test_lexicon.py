@@ -49,3 +49,9 @@ def test_numbers_abbreviations_and_new_words_are_what_espeak_says() -> None:
 
 def test_bare_punctuation_has_no_phonemes() -> None:
     assert pronounce(["wait", "—", "what"])[1] == ()
+
+
+def test_words_with_accents_find_their_own_phonemes_in_espeaks_events() -> None:
+    got = pronounce(["Zoë", "paid", "€42"])
+    assert got[0] == _espeak_alone("Zoë")
+    assert got[2] == _espeak_alone("€42")
