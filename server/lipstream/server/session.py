@@ -6,9 +6,10 @@ returned instead, with the monotonic time it arrived, and returns the
 ``Outgoing`` messages to send, in order. Requests are multiplexed by id;
 each active one is an ``ActiveRequest``. A ``words`` message (a TTS's timings) goes
 through the front ends (``frontends``): each request keeps a ``WordStream`` that holds a
-word cut at a chunk's edge, and the spans of the words completed are fed like phonemes. ``start`` is validated against the
-``Catalog`` (engine, character, phoneme notation, emotion, output profile,
-latency budget, engine options) and answered with ``ready``, unless the
+word cut at a chunk's edge, and the spans of the words completed are fed like phonemes.
+``start`` is validated against the ``Catalog`` (engine, character, phoneme notation,
+emotion, output profile, latency budget, engine options) and answered with ``ready``,
+unless the
 injected ``refuse_start`` refuses new work (the server's memory ceiling,
 ``overload``); every later message goes to its request, and any
 ``LipstreamError`` it raises ends that request with a fatal ``error`` of the
