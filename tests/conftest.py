@@ -10,6 +10,7 @@ import pytest
 if TYPE_CHECKING:
     from lipstream.corpus import Corpus
     from lipstream.engines.base import Model
+    from lipstream.frontends.word_durations import WordDurationModel
 
 SMALL_DEMO_SENTENCES = 24
 
@@ -37,19 +38,36 @@ def trained_models(small_demo_corpus: Corpus) -> dict[str, Model]:
 
 
 @pytest.fixture(scope="session")
+def word_durations(small_demo_corpus: Corpus) -> WordDurationModel:
+    """The duration model ``train_engine`` saves beside each model of the small corpus."""
+    from lipstream.frontends.word_durations import WordDurationModel
+
+    train, _ = small_demo_corpus.split()
+    return WordDurationModel().fit(utterance.phones for utterance in train.utterances)
+
+
+@pytest.fixture(scope="session")
 def all_models_dir(
-    trained_models: dict[str, Model], tmp_path_factory: pytest.TempPathFactory
+    trained_models: dict[str, Model],
+    word_durations: WordDurationModel,
+    tmp_path_factory: pytest.TempPathFactory,
 ) -> Path:
     """Every registered engine's model of the demo character."""
     directory = tmp_path_factory.mktemp("models-all")
     for name, model in trained_models.items():
         model.save(directory / name)
+        word_durations.save(directory / name)
     return directory
 
 
 @pytest.fixture(scope="session")
-def lerp_dir(trained_models: dict[str, Model], tmp_path_factory: pytest.TempPathFactory) -> Path:
+def lerp_dir(
+    trained_models: dict[str, Model],
+    word_durations: WordDurationModel,
+    tmp_path_factory: pytest.TempPathFactory,
+) -> Path:
     """Only the viseme-lerp model: fast to load, for servers testing limits."""
     directory = tmp_path_factory.mktemp("server-models-lerp")
     trained_models["viseme-lerp"].save(directory / "viseme-lerp")
+    word_durations.save(directory / "viseme-lerp")
     return directory

@@ -79,6 +79,7 @@ from .messages import (
     ServerMessage,
     Start,
     Text,
+    Words,
 )
 from .resume import ResumePolicy
 from .schema import load_schema
@@ -161,6 +162,7 @@ __all__ = [
     "StreamResult",
     "SyncStream",
     "Text",
+    "Words",
     "canonical_viseme",
     "decode",
     "encode",

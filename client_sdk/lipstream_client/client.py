@@ -74,12 +74,14 @@ from .messages import (
     Frames,
     Interrupt,
     JsonMap,
+    JsonValue,
     OutputProfile,
     Phonemes,
     Ready,
     ServerMessage,
     Start,
     Text,
+    Words,
 )
 from .resume import RequestLog, ResumePolicy
 
@@ -201,6 +203,20 @@ class Stream:
         None: its defaults) as the next input: it sends the speech back as ``audio``
         chunks with their start times (``audio``) and the frames as usual."""
         await self._send(Text(self.id, text, voice, rate))
+
+    async def send_words(
+        self,
+        timings: JsonValue,
+        format: str = "auto",
+        offset: float = 0.0,
+        voice: str | None = None,
+    ) -> None:
+        """Send a TTS's timings (one chunk of them) as the next input: ``timings`` is the
+        provider's JSON value (ElevenLabs ``alignment``, Azure events, Polly marks, Cartesia
+        or Hume phoneme timestamps, a word list) or JSON lines text, in ``format`` (one of
+        ``TIMING_FORMATS``; ``auto``: detected), its times plus ``offset`` seconds on the
+        utterance clock; ``voice``: the espeak-ng voice for words CMUdict lacks."""
+        await self._send(Words(self.id, timings, format, offset, voice))
 
     async def end(self) -> None:
         """No more input: the server sends the remaining frames, then ``done``."""
@@ -608,7 +624,7 @@ class AsyncClient:
                     )
                 )
             return
-        assert not isinstance(message, (Start, Phonemes, Text, End, Cancel, Interrupt))
+        assert not isinstance(message, (Start, Phonemes, Text, Words, End, Cancel, Interrupt))
         if stream._on_message(message):
             del self._streams[stream.id]
 

@@ -58,6 +58,9 @@ EMPTY_TEXT = "empty_text"
 TEXT_TOO_LONG = "text_too_long"
 UNSPEAKABLE_TEXT = "unspeakable_text"
 SPEECH_FAILED = "speech_failed"
+EMPTY_TIMINGS = "empty_timings"
+UNKNOWN_TIMING_FORMAT = "unknown_timing_format"
+MISMATCHED_WORDS = "mismatched_words"
 RESUME_MISMATCH = "resume_mismatch"
 
 # Connection-level errors: the server closes the connection after sending them.
@@ -229,6 +232,20 @@ ERROR_CODES: dict[str, ErrorCodeInfo] = {
     SPEECH_FAILED: ErrorCodeInfo(
         "espeak-ng failed (crashed, timed out, or is missing) speaking a `text` message; "
         "the server keeps serving",
+        "server",
+        "request",
+    ),
+    EMPTY_TIMINGS: ErrorCodeInfo(
+        "word, character, viseme or phoneme timings hold nothing to speak", "server", "request"
+    ),
+    UNKNOWN_TIMING_FORMAT: ErrorCodeInfo(
+        "timings are in no format the server reads, or the named format does not fit them",
+        "server",
+        "request",
+    ),
+    MISMATCHED_WORDS: ErrorCodeInfo(
+        "timed words do not match their characters or text (parallel arrays of different "
+        "lengths, an entry that is not one character, a text offset that names other text)",
         "server",
         "request",
     ),

@@ -1,11 +1,11 @@
 """Typed messages of the lipstream wire protocol, version 1.
 
 Sketch: one frozen dataclass per message ``type``. A client opens requests
-with ``Start``, feeds ``Phonemes`` (and optionally ``AudioChunk``), or ``Text``
-for the server to speak, and closes them with ``End``, ``Cancel`` or
-``Interrupt``; the server answers with ``Ready``, a stream of ``Frames`` (and,
-for ``Text``, the speech as ``AudioChunk``s with their ``start``) and one
-``Done``, or an ``ErrorMessage``.
+with ``Start``, feeds ``Phonemes`` (and optionally ``AudioChunk``), ``Text``
+for the server to speak, or ``Words``, a TTS's word or character timings, and
+closes them with ``End``, ``Cancel`` or ``Interrupt``; the server answers with
+``Ready``, a stream of ``Frames`` (and, for ``Text``, the speech as
+``AudioChunk``s with their ``start``) and one ``Done``, or an ``ErrorMessage``.
 Requests are multiplexed on one connection by their ``id``.
 
 Times are seconds on the utterance clock (frame i is at i / fps seconds),
@@ -242,6 +242,32 @@ class Text:
     rate: int | None = None
 
 
+TIMING_FORMATS: tuple[str, ...] = ("auto", "words", "elevenlabs", "azure", "polly", "ipa")
+
+
+@dataclass(frozen=True, slots=True)
+class Words:
+    """A TTS's timings for request ``id``'s next input, instead of phonemes: words,
+    characters, visemes or phonemes in one of ``TIMING_FORMATS`` (``auto``: detected).
+
+    ``timings`` is the provider's own JSON value (or JSON lines as a string, as Polly
+    writes them); ``offset`` (seconds) is added to every time in it, for providers whose
+    chunks count from the chunk's start. The server gives the words their phonemes
+    (CMUdict, else espeak-ng ``voice``) and spreads them with the character's duration
+    model; a word that may continue in the next message is held until it comes or the
+    request ends.
+    """
+
+    type: ClassVar[str] = "words"
+    v: ClassVar[int] = PROTOCOL_VERSION
+
+    id: str
+    timings: JsonValue
+    format: str = "auto"
+    offset: float = 0.0
+    voice: str | None = None
+
+
 @dataclass(frozen=True, slots=True)
 class End:
     """No more input for request ``id``: finish its frames, then send ``done``."""
@@ -404,12 +430,12 @@ class ErrorMessage:
     details: JsonMap = field(default_factory=_empty_map)
 
 
-ClientMessage: TypeAlias = Start | Phonemes | AudioChunk | Text | End | Cancel | Interrupt
+ClientMessage: TypeAlias = Start | Phonemes | AudioChunk | Text | Words | End | Cancel | Interrupt
 ServerMessage: TypeAlias = Ready | Frames | AudioChunk | Done | ErrorMessage
 Message: TypeAlias = ClientMessage | ServerMessage
 
 CLIENT_MESSAGE_TYPES: dict[str, type[ClientMessage]] = {
-    cls.type: cls for cls in (Start, Phonemes, AudioChunk, Text, End, Cancel, Interrupt)
+    cls.type: cls for cls in (Start, Phonemes, AudioChunk, Text, Words, End, Cancel, Interrupt)
 }
 SERVER_MESSAGE_TYPES: dict[str, type[ServerMessage]] = {
     cls.type: cls for cls in (Ready, Frames, AudioChunk, Done, ErrorMessage)

@@ -1,7 +1,7 @@
 """What a client keeps of each request so that it can resume it on a new connection (sans I/O).
 
 Method: a ``RequestLog`` records the request's ``start``, every input message
-the caller gave it (``phonemes``, ``audio``, ``text``, ``end``) in order, the
+the caller gave it (``phonemes``, ``audio``, ``text``, ``words``, ``end``) in order, the
 rung its ``ready`` named, the frames received so far (one past the highest
 frame index, and the next block ``seq``) and how many ``audio`` messages of
 the server's speech arrived. While the connection lives, ``unsent``
@@ -10,7 +10,8 @@ hands out each input once, as it is recorded. When the connection is lost,
 connection needs: the ``start`` with ``resume`` (the frames, blocks and speech
 chunks held, the rung), then the whole input: a ``text`` is sent again, and
 the server, whose espeak-ng speaks it the same way, sends only the speech
-chunks and frames the client lacks. Consecutive ``phonemes`` (and ``audio``)
+chunks and frames the client lacks; ``words`` are sent again as they were, and give
+the same spans. Consecutive ``phonemes`` (and ``audio``)
 messages are merged into a few large ones, since a server answers the same
 frames however its input is chunked and a burst of many small messages could
 meet its message-rate limit. A request that was cancelled or interrupted is
@@ -37,9 +38,10 @@ from .messages import (
     Resume,
     Start,
     Text,
+    Words,
 )
 
-RequestInput: TypeAlias = Phonemes | AudioChunk | Text | End | Cancel | Interrupt
+RequestInput: TypeAlias = Phonemes | AudioChunk | Text | Words | End | Cancel | Interrupt
 
 MAX_REPLAY_ITEMS = 512
 """Phonemes per replayed ``phonemes`` message (about 20 KB of msgpack, far below 1 MiB)."""

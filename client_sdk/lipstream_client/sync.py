@@ -46,6 +46,7 @@ from .messages import (
     Encoding,
     Frames,
     JsonMap,
+    JsonValue,
     OutputProfile,
     Ready,
     Start,
@@ -114,6 +115,16 @@ class SyncStream:
     def send_text(self, text: str, voice: str | None = None, rate: int | None = None) -> None:
         """Have the server speak ``text`` as the next input (see ``Stream.send_text``)."""
         self._client._run(self._stream.send_text(text, voice, rate))
+
+    def send_words(
+        self,
+        timings: JsonValue,
+        format: str = "auto",
+        offset: float = 0.0,
+        voice: str | None = None,
+    ) -> None:
+        """Send a TTS's timings as the next input (see ``Stream.send_words``)."""
+        self._client._run(self._stream.send_words(timings, format, offset, voice))
 
     def end(self) -> None:
         self._client._run(self._stream.end())

@@ -72,6 +72,7 @@ from .messages import (
     PCM16_BYTES,
     PROTOCOL_VERSION,
     SERVER_MESSAGE_TYPES,
+    TIMING_FORMATS,
     VISEME_SETS,
     AudioChunk,
     Cancel,
@@ -95,6 +96,7 @@ from .messages import (
     Start,
     Text,
     VisemeSet,
+    Words,
 )
 
 ENVELOPE = ("v", "type")
@@ -360,6 +362,30 @@ def _text(payload: Mapping[str, Any], encoding: Encoding) -> Text:
     return Text(identifier, text, voice, rate)
 
 
+def _words(payload: Mapping[str, Any], encoding: Encoding) -> Words:
+    obj = _object(payload, ("id", "timings"), ("format", "offset", "voice"))
+    identifier = _id(obj)
+    timings = obj["timings"]
+    if isinstance(timings, str):
+        require_utf8(timings, "timings")
+    elif isinstance(timings, (list, dict)):
+        read_json_map({"timings": timings}, "")
+    else:
+        raise InvalidField(
+            INVALID_MESSAGE, "timings", "must be a JSON object, a list or JSON lines text"
+        )
+    format = (
+        read_choice(obj["format"], "format", TIMING_FORMATS) if present(obj, "format") else "auto"
+    )
+    offset = _optional_number(obj, "offset", minimum=0.0, maximum=MAX_TIME_S, code=INVALID_TIMES)
+    voice = (
+        read_text(obj["voice"], "voice", MAX_VOICE_LENGTH, pattern=_VOICE)
+        if present(obj, "voice")
+        else None
+    )
+    return Words(identifier, timings, format, offset or 0.0, voice)
+
+
 def _end(payload: Mapping[str, Any], encoding: Encoding) -> End:
     return End(_id(_object(payload, ("id",))))
 
@@ -506,6 +532,7 @@ _PARSERS: dict[str, Callable[[Mapping[str, Any], Encoding], Message]] = {
     "phonemes": _phonemes,
     "audio": _audio,
     "text": _text,
+    "words": _words,
     "end": _end,
     "cancel": _cancel,
     "interrupt": _interrupt,

@@ -37,6 +37,7 @@ from .messages import (
     Resume,
     Start,
     Text,
+    Words,
 )
 
 Payload = dict[str, Any]
@@ -125,6 +126,18 @@ def _text(message: Text, encoding: Encoding) -> Payload:
     )
 
 
+def _words(message: Words, encoding: Encoding) -> Payload:
+    return _compact(
+        {
+            "id": message.id,
+            "timings": message.timings,
+            "format": None if message.format == "auto" else message.format,
+            "offset": message.offset or None,
+            "voice": message.voice,
+        }
+    )
+
+
 def _end(message: End, encoding: Encoding) -> Payload:
     return {"id": message.id}
 
@@ -208,6 +221,7 @@ _ENCODERS: dict[str, Callable[[Any, Encoding], Payload]] = {
     "phonemes": _phonemes,
     "audio": _audio,
     "text": _text,
+    "words": _words,
     "end": _end,
     "cancel": _cancel,
     "interrupt": _interrupt,

@@ -24,6 +24,7 @@ from .bridge_command import add_bridge_parser
 from .config import ServerSettings, Settings, demo_model_path, load_settings
 from .errors import LipstreamError
 from .exports import FORMATS, MOHO_FPS
+from .frontends.timings import TIMING_FORMATS
 from .loadtest.command import add_loadtest_parser
 
 if TYPE_CHECKING:
@@ -34,6 +35,7 @@ if TYPE_CHECKING:
     from .models import ModelRegistry
     from .output.retarget import RetargetMap
     from .status import Report
+    from .timeline import PhonemeSpan
 
 
 def _build_demo(args: argparse.Namespace, settings: Settings) -> None:
@@ -89,7 +91,10 @@ def _synth(args: argparse.Namespace, settings: Settings) -> None:
     model = load_model(model_dir)
     sound_file = args.audio or ""
     audio: Audio | None
-    if args.text is not None:
+    if args.words is not None:
+        spans = _word_timing_spans(args, model_dir)
+        audio = read_wav(Path(args.audio)) if args.audio else None
+    elif args.text is not None:
         from .speech.text_frontend import speak_text
 
         _check_text_options(args)
@@ -109,6 +114,20 @@ def _synth(args: argparse.Namespace, settings: Settings) -> None:
     print(f"wrote {len(result.frames)} frames at {result.fps:g} fps to {args.out} ({format_name})")
     if args.text is not None and args.wav:
         print(f"wrote the speech to {args.wav}")
+
+
+def _word_timing_spans(args: argparse.Namespace, model_dir: Path) -> list[PhonemeSpan]:
+    """The spans of ``--words`` (in ``--words-format``), spread by the model's duration
+    model, the words read with ``--voice``."""
+    from .frontends.formats import read_timing_file
+    from .frontends.word_durations import WordDurationModel
+    from .frontends.words_to_spans import DEFAULT_VOICE, timings_to_spans
+
+    for option, value in (("--wav", args.wav), ("--rate", args.rate)):
+        if value is not None:
+            raise LipstreamError(f"{option} goes with --text", where=option, code="invalid_request")
+    timings = read_timing_file(Path(args.words), args.words_format)
+    return timings_to_spans(timings, WordDurationModel.load(model_dir), args.voice or DEFAULT_VOICE)
 
 
 def _check_text_options(args: argparse.Namespace) -> None:
@@ -288,21 +307,26 @@ def _serve_on_ray(
 
 def _stale_demo(models: Path) -> bool:
     """Whether the cached demo character cannot serve every registered engine (a model
-    that no longer loads, or an engine added since it was built)."""
+    that no longer loads, or an engine added since it was built) or word timings (a model
+    without its duration model, built before they were)."""
     return _cached_demo(models) is None
 
 
 def _cached_demo(models: Path) -> ModelRegistry | None:
     """The cached demo character, loaded, when it serves every registered engine."""
     from .engines import engine_names
-    from .models import ModelRegistry
+    from .frontends.word_durations import has_word_durations
+    from .models import ModelRegistry, model_dirs
 
     try:
         registry = ModelRegistry.load(models)
+        directories = model_dirs(models)
     except LipstreamError:
         return None
     served = {model.manifest.engine for model in registry.models.values()}
     if registry.failures or not set(engine_names()) <= served:
+        return None
+    if not all(has_word_durations(directory) for directory in directories):
         return None
     return registry
 
@@ -389,6 +413,9 @@ def _shown_maps(model: Model, directory: Path, name: str | None) -> dict[str, Re
 
 
 def _bench(args: argparse.Namespace, settings: Settings) -> None:
+    if args.word_timings:
+        _bench_word_timings(args, settings)
+        return
     from .bench.harness import format_engine_benches, format_table, run_bench
     from .bench.rungs import format_rungs
     from .corpus import load_corpus
@@ -411,6 +438,28 @@ def _bench(args: argparse.Namespace, settings: Settings) -> None:
         print()
         print(format_rungs(results["rungs"]))
         print(format_engine_benches(results))
+
+
+def _bench_word_timings(args: argparse.Namespace, settings: Settings) -> None:
+    """``lipstream bench --word-timings``: ``lipstream.bench.word_timings``."""
+    from .bench.word_timings import print_summary, run
+    from .results_file import write_results
+
+    if args.corpus is not None or args.no_engine_benches:
+        raise LipstreamError(
+            "--word-timings measures on espeak-ng's own speech of the demo sentences; it takes "
+            "no --corpus or --no-engine-benches",
+            where="--word-timings",
+            code="invalid_request",
+        )
+    path = settings.results_file(args.results, "word_timings.json")
+    results = run(["lipstream", *sys.argv[1:]])
+    write_results(results, path)
+    print(f"wrote {path}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(results, indent=2))
+    else:
+        print_summary(results)
 
 
 def _path(args: argparse.Namespace, settings: Settings) -> None:
@@ -450,7 +499,9 @@ def _parser() -> argparse.ArgumentParser:
     )
     train.set_defaults(run=_train)
 
-    synth = commands.add_parser("synth", help="synthesize frames for a phones file or a text")
+    synth = commands.add_parser(
+        "synth", help="synthesize frames for a phones file, a text or a TTS timing file"
+    )
     synth.add_argument(
         "--model",
         help="a model directory (default: the demo character's model of --engine; "
@@ -466,9 +517,20 @@ def _parser() -> argparse.ArgumentParser:
     given.add_argument(
         "--text", help="text to speak with espeak-ng (at most 1000 characters), instead of phones"
     )
+    given.add_argument(
+        "--words",
+        metavar="FILE",
+        help="word, character, viseme or phoneme timings from a TTS (JSON or JSON lines)",
+    )
+    synth.add_argument(
+        "--words-format",
+        choices=("auto", *TIMING_FORMATS),
+        default="auto",
+        help="format of --words (default: detected from the content)",
+    )
     synth.add_argument("--audio", help="mono WAV of the speech, for engines that use audio")
     synth.add_argument("--wav", help="with --text: write espeak-ng's speech to this WAV file")
-    synth.add_argument("--voice", help="with --text: espeak-ng voice (default en-us)")
+    synth.add_argument("--voice", help="with --text or --words: espeak-ng voice (default en-us)")
     synth.add_argument(
         "--rate", type=int, help="with --text: words per minute, 80-450 (default 175)"
     )
@@ -548,6 +610,12 @@ def _parser() -> argparse.ArgumentParser:
     bench.add_argument(
         "--results",
         help="JSON file to write the results to (default $LIPSTREAM_HOME/bench/results.json)",
+    )
+    bench.add_argument(
+        "--word-timings",
+        action="store_true",
+        help="instead: phoneme onset error of each TTS timing format against espeak-ng's own, "
+        "and the real-time factor of words to spans (default file word_timings.json)",
     )
     bench.add_argument(
         "--no-engine-benches",

@@ -1,6 +1,7 @@
 """Training orchestration: corpus in, model directories out.
 
-``train_engine`` fits one registered engine and records how long it took;
+``train_engine`` fits one registered engine and records how long it took, and beside
+it the corpus's duration model for word timings (``frontends.word_durations``);
 ``train_engines`` does several into one directory of model directories;
 ``build_demo`` generates the demo corpus, splits it, and trains every
 registered engine on the train split. With ``progress``, each step prints a
@@ -31,13 +32,17 @@ DEMO_CORPUS_DIR = "corpus"
 def train_engine(
     corpus: Corpus, engine: str, out: Path | None = None, *, progress: bool = False
 ) -> Model:
-    """Fit ``engine`` on ``corpus``; save it to ``out`` when given."""
+    """Fit ``engine`` on ``corpus``; save it to ``out`` when given, with the corpus's duration
+    model for word timings beside it."""
+    from .frontends.word_durations import WordDurationModel
+
     started = time.perf_counter()
     model = get_engine_class(engine)().fit(corpus, progress=progress)
     model.manifest.metrics["train_seconds"] = round(time.perf_counter() - started, 3)
     model.manifest.metrics["train_utterances"] = len(corpus.utterances)
     if out is not None:
         model.save(out)
+        WordDurationModel().fit(utterance.phones for utterance in corpus.utterances).save(out)
     return model
 
 

@@ -27,6 +27,7 @@ from lipstream_client.messages import (
     MIN_RATE_WPM,
     MIN_SAMPLE_RATE,
     NAMINGS,
+    TIMING_FORMATS,
     VISEME_SETS,
     AudioChunk,
     Cancel,
@@ -48,6 +49,7 @@ from lipstream_client.messages import (
     ServerMessage,
     Start,
     Text,
+    Words,
 )
 
 _PRINTABLE = st.characters(exclude_categories=("Cc", "Cs"))
@@ -162,6 +164,16 @@ texts = st.builds(
     voice=st.none() | st.from_regex(r"[A-Za-z0-9_.+-]{1,64}", fullmatch=True),
     rate=st.none() | st.integers(MIN_RATE_WPM, MAX_RATE_WPM),
 )
+words_messages = st.builds(
+    Words,
+    id=ids,
+    timings=st.lists(json_values, max_size=3)
+    | st.dictionaries(names, json_values, max_size=3)
+    | st.text(_UNICODE, max_size=40),
+    format=st.sampled_from(TIMING_FORMATS),
+    offset=st.just(0.0) | st.floats(1e-6, 3600.0),
+    voice=st.none() | st.from_regex(r"[A-Za-z0-9_.+-]{1,64}", fullmatch=True),
+)
 ends = st.builds(End, id=ids)
 cancels = st.builds(Cancel, id=ids)
 interrupts = st.builds(
@@ -224,7 +236,9 @@ error_messages = st.builds(
 
 
 def client_messages() -> st.SearchStrategy[ClientMessage]:
-    return st.one_of(starts(), phonemes_messages, audio_chunks, texts, ends, cancels, interrupts)
+    return st.one_of(
+        starts(), phonemes_messages, audio_chunks, texts, words_messages, ends, cancels, interrupts
+    )
 
 
 def server_messages() -> st.SearchStrategy[ServerMessage]:

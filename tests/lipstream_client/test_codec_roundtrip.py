@@ -53,6 +53,7 @@ from tests.lipstream_client.strategies import (
     readies,
     starts,
     texts,
+    words_messages,
 )
 
 ENCODINGS: tuple[Encoding, ...] = ("msgpack", "json")
@@ -61,6 +62,7 @@ PER_TYPE: dict[str, st.SearchStrategy[Message]] = {
     "phonemes": phonemes_messages,
     "audio": audio_chunks,
     "text": texts,
+    "words": words_messages,
     "end": ends,
     "cancel": cancels,
     "interrupt": interrupts,
@@ -78,6 +80,7 @@ def test_every_message_type_has_a_strategy() -> None:
         "phonemes",
         "audio",
         "text",
+        "words",
         "end",
         "cancel",
         "interrupt",

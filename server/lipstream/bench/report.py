@@ -343,6 +343,61 @@ def hmm_first_frame(bench: Bench) -> str:
     )
 
 
+def word_timings(bench: Bench) -> str:
+    """Phoneme onset error per TTS timing format (``lipstream.bench.word_timings``)."""
+    doc = bench.load("word_timings.json")
+    text = bench.source("word_timings.json", doc)
+    text += (
+        f"{doc['heldout_sentences']} held-out demo sentences spoken by espeak-ng at "
+        f"{', '.join(str(rate) for rate in doc['rates_wpm'])} words per minute "
+        f"({doc['heldout_speech_s']:.0f} s of speech); the duration model trained on "
+        f"{doc['training_sentences']} other sentences at the same rates. Onset error of every "
+        "phoneme matched with espeak-ng's own, and of those after each word's first:\n\n"
+    )
+    rows = []
+    for name, row in doc["formats"].items():
+        rtf = row.get("real_time_factor")
+        rows.append(
+            [
+                name,
+                f"{row['median_ms']:.1f} / {row['p90_ms']:.1f}",
+                f"{row['inner_median_ms']:.1f} / {row['inner_p90_ms']:.1f}",
+                str(row["pairs"]),
+                "" if rtf is None else f"{rtf:.4f}",
+            ]
+        )
+    text += table(
+        [
+            "input",
+            "onset error median / p90 ms",
+            "after a word's first: median / p90 ms",
+            "phonemes matched",
+            "real-time factor",
+        ],
+        rows,
+    )
+    frames = doc.get("frames")
+    if not frames:
+        return text
+    text += (
+        f"\nFrames of the derived spans against the frames of espeak-ng's own spans, by "
+        f"{frames['model']} at {frames['fps']:g} fps, the held-out sentences at "
+        f"{frames['rate_wpm']} words per minute:\n\n"
+    )
+    return text + table(
+        ["input", "RMS", "/p b m/ closures", "closure lag, abs. median / p90 ms"],
+        (
+            [
+                name,
+                f"{row['rms']:.4f}",
+                str(row["closures"]),
+                f"{row['closure_lag_median_abs_ms']:.1f} / {row['closure_lag_p90_abs_ms']:.1f}",
+            ]
+            for name, row in frames["formats"].items()
+        ),
+    )
+
+
 def _pair(stats: dict[str, Any] | None, key: str, digits: int = 0) -> str:
     values = stats.get(key) if stats else None
     if not values:
@@ -719,6 +774,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "call-pairs": call_pairs,
     "lead0": lead0,
     "hmm-first-frame": hmm_first_frame,
+    "word-timings": word_timings,
     "capacity-floor": _capacity("capacity_floor.json"),
     "capacity-best": _capacity("capacity_best.json"),
     "capacity-best-two-workers": _capacity("capacity_best_two_workers.json"),

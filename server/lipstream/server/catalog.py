@@ -31,12 +31,13 @@ from typing import Any
 import numpy as np
 
 from lipstream_client import OutputProfile
-from lipstream_client.errors import UNKNOWN_CHARACTER, UNKNOWN_ENGINE
+from lipstream_client.errors import INVALID_REQUEST, UNKNOWN_CHARACTER, UNKNOWN_ENGINE
 
 from ..config import ServerSettings
 from ..engines.base import CallCost, Model, Rung
 from ..engines.work import WorkGuard
 from ..errors import LipstreamError, ModelStoreError
+from ..frontends.word_durations import WordDurationModel
 from ..models import ModelRegistry
 from ..output.probes import RigProbe, probe_closures, probe_phoneme_poses, probe_rest_poses
 from ..output.retarget import RetargetMap
@@ -87,6 +88,7 @@ class Catalog:
     facts: dict[int, ModelFacts] = field(default_factory=dict)
     presets: dict[str, OutputProfile] = field(default_factory=dict)
     default_emotions: dict[str, str] = field(default_factory=dict)
+    durations: dict[int, WordDurationModel] = field(default_factory=dict)
 
     @classmethod
     def build(
@@ -155,6 +157,29 @@ class Catalog:
             where="character",
             code=UNKNOWN_CHARACTER,
         )
+
+    def word_durations(self, engine: str, character: str) -> WordDurationModel:
+        """The duration model stored beside the model of ``engine`` and ``character``
+        (read once); ``invalid_request`` naming the model when it has none or it is
+        damaged."""
+        model = self.model(engine, character)
+        found = self.durations.get(id(model))
+        if found is not None:
+            return found
+        name = next(name for name, served in self.registry.models.items() if served is model)
+        directory = self.registry.directories.get(name)
+        try:
+            if directory is None:
+                raise ModelStoreError("the model has no directory", where=name)
+            found = WordDurationModel.load(directory)
+        except ModelStoreError as error:
+            raise LipstreamError(
+                f"model {name!r} cannot read word timings: {error.message}",
+                where=error.where,
+                code=INVALID_REQUEST,
+            ) from None
+        self.durations[id(model)] = found
+        return found
 
     def ladder(self, model: Model) -> tuple[RungEstimate, ...]:
         return self.facts[id(model)].ladder

@@ -2,11 +2,11 @@
 
 Sketch: the request body's schema is the ``start`` message's properties
 (without ``v``, ``type`` and ``id``), plus the ``phonemes`` message's
-``items`` and an ``audio`` object with the ``audio`` message's
-``sample_rate`` and ``pcm16``. Their ``#/$defs/X`` references move to
-``#/components/schemas/lipstream_X``, so the schemas shipped with the client
-SDK stay the single source. The response and error bodies are described by
-hand here, as they are not protocol messages.
+``items`` or a ``words`` object with the ``words`` message's fields, and an
+``audio`` object with the ``audio`` message's ``sample_rate`` and ``pcm16``.
+Their ``#/$defs/X`` references move to ``#/components/schemas/lipstream_X``, so
+the schemas shipped with the client SDK stay the single source. The response and
+error bodies are described by hand here, as they are not protocol messages.
 """
 
 from __future__ import annotations
@@ -41,9 +41,11 @@ def _moved(node: Any) -> Any:
 
 def components() -> dict[str, Any]:
     """``components.schemas`` entries: every protocol definition and the three bodies."""
-    start, phonemes, audio = (load_schema(kind) for kind in ("start", "phonemes", "audio"))
+    start, phonemes, audio, words = (
+        load_schema(kind) for kind in ("start", "phonemes", "audio", "words")
+    )
     schemas: dict[str, Any] = {}
-    for schema in (start, phonemes, audio):
+    for schema in (start, phonemes, audio, words):
         schemas.update(
             {PREFIX + name: _moved(value) for name, value in schema.get("$defs", {}).items()}
         )
@@ -51,6 +53,16 @@ def components() -> dict[str, Any]:
         key: _moved(value) for key, value in start["properties"].items() if key not in ENVELOPE
     }
     properties["items"] = _moved(phonemes["properties"]["items"])
+    properties["words"] = {
+        "type": "object",
+        "additionalProperties": False,
+        "required": ["timings"],
+        "properties": {
+            key: _moved(value) for key, value in words["properties"].items() if key not in ENVELOPE
+        },
+        "description": "Instead of items: a TTS's word, character, viseme or phoneme "
+        "timings, the fields of a words message.",
+    }
     properties["audio"] = {
         "type": "object",
         "additionalProperties": False,
@@ -62,9 +74,11 @@ def components() -> dict[str, Any]:
     schemas[PREFIX + "SynthesizeRequest"] = {
         "type": "object",
         "additionalProperties": False,
-        "required": ["engine", "character", "items"],
+        "required": ["engine", "character"],
+        "oneOf": [{"required": ["items"]}, {"required": ["words"]}],
         "properties": properties,
-        "description": "A start message's fields, the utterance's phonemes and optional audio.",
+        "description": "A start message's fields, the utterance's phonemes (or a TTS's "
+        "timings) and optional audio.",
     }
     schemas[PREFIX + "SynthesizeResponse"] = _response_schema()
     schemas[PREFIX + "Error"] = _error_schema()

@@ -194,6 +194,8 @@ class RequestSpec:
     clock: RequestClock
     audio_only: bool = False
     """The model can be driven by audio alone (``Model.accepts_audio_only``)."""
+    character: str = ""
+    """The character the model serves (its duration model reads word timings)."""
 
 
 class ActiveRequest:
@@ -268,6 +270,24 @@ class ActiveRequest:
         self._feed(list(spans), speech if self.spec.uses_audio else None, INVALID_REQUEST)
         self.audio_rate = speech.sample_rate
         self.audio_s += speech.duration
+        return self._took(spans, now)
+
+    def add_spans(
+        self,
+        spans: Sequence[PhonemeSpan],
+        now: float,
+        session_max_values: int | None = None,
+        others: int = 0,
+    ) -> list[Outgoing]:
+        """Take canonical ``spans`` derived from word timings, contiguous from the end of the
+        input so far; the limits as ``add_phonemes``."""
+        if not spans:
+            return []
+        self._check_count(len(spans), "timings")
+        for span in spans:
+            self._check_end(span.end, "timings")
+        self._check_output(spans[-1].end, session_max_values, others)
+        self._feed(list(spans), None, INVALID_REQUEST)
         return self._took(spans, now)
 
     def _took(self, spans: Sequence[PhonemeSpan], now: float) -> list[Outgoing]:

@@ -1,8 +1,9 @@
 """``POST /v1/synthesize``: a whole utterance in, all its frames out, through the stream's code.
 
 Sketch: the body, JSON or msgpack by ``Content-Type``, holds the fields of a
-``start`` message plus ``items`` (its phonemes, as in ``phonemes``) and an
-optional ``audio`` (``{sample_rate, pcm16}`` as in ``audio``). The protocol
+``start`` message plus ``items`` (its phonemes, as in ``phonemes``) or ``words`` (a
+TTS's timings: the fields of a ``words`` message, ``{timings, format, offset, voice}``)
+and an optional ``audio`` (``{sample_rate, pcm16}`` as in ``audio``). The protocol
 codec parses it, it is split into those protocol messages, each validated by
 the codec as parsed (never re-encoded, so a number that overflows to infinity
 is the codec's error, not a fault), and played
@@ -91,7 +92,7 @@ START_FIELDS = (
     "options",
     "phoneme_source",
 )
-BODY_FIELDS = (*START_FIELDS, "items", "audio")
+BODY_FIELDS = (*START_FIELDS, "items", "words", "audio")
 MEDIA_TYPES: dict[str, Encoding] = {
     "application/json": "json",
     "application/msgpack": "msgpack",
@@ -106,6 +107,9 @@ STATUS = {
     INVALID_MESSAGE: 400,
     "invalid_times": 400,
     "non_monotonic_times": 400,
+    "unknown_timing_format": 400,
+    "mismatched_words": 400,
+    "empty_timings": 400,
     "invalid_audio": 400,
     "unsupported_version": 400,
     "unknown_type": 400,
@@ -279,8 +283,11 @@ def _parse(body: bytes, encoding: Encoding) -> dict[str, Any]:
             INVALID_MESSAGE,
             f"unknown field(s) {', '.join(unknown)}; expected {', '.join(BODY_FIELDS)}",
         )
-    if "items" not in parsed:
-        raise HttpError(INVALID_MESSAGE, "items: missing (the utterance's phonemes)")
+    if ("items" in parsed) == ("words" in parsed):
+        raise HttpError(
+            INVALID_MESSAGE,
+            "items or words: give exactly one (the utterance's phonemes, or a TTS's timings)",
+        )
     return parsed
 
 
@@ -293,7 +300,13 @@ def _messages(body: dict[str, Any], encoding: Encoding) -> list[Message]:
         if not isinstance(audio, dict):
             raise HttpError(INVALID_MESSAGE, "audio: must be an object {sample_rate, pcm16}")
         parts.append(("audio", audio))
-    parts.append(("phonemes", {"items": body["items"]}))
+    if "words" in body:
+        words = body["words"]
+        if not isinstance(words, dict):
+            raise HttpError(INVALID_MESSAGE, "words: must be an object {timings, format, ...}")
+        parts.append(("words", words))
+    else:
+        parts.append(("phonemes", {"items": body["items"]}))
     return [_decoded(kind, fields, encoding) for kind, fields in parts] + [End(REQUEST_ID)]
 
 
@@ -303,7 +316,7 @@ def _decoded(kind: str, fields: dict[str, Any], encoding: Encoding) -> Message:
     payload = {"v": 1, "type": kind, "id": REQUEST_ID, **fields}
     decoded = payload_message(payload, encoding, sender="client")
     if isinstance(decoded, ProtocolError):
-        prefix = "audio." if kind == "audio" else ""
+        prefix = f"{kind}." if kind in ("audio", "words") else ""
         located = f"{prefix}{decoded.where}: " if decoded.where else ""
         raise HttpError(decoded.code, f"{located}{decoded.message}")
     return decoded

@@ -4,9 +4,12 @@ Sketch (in the manner of h11's and websockets' sans-I/O cores): ``handle``
 takes one decoded client message, or the ``ProtocolError`` the codec
 returned instead, with the monotonic time it arrived, and returns the
 ``Outgoing`` messages to send, in order. Requests are multiplexed by id;
-each active one is an ``ActiveRequest``. ``start`` is validated against the
-``Catalog`` (engine, character, phoneme notation, emotion, output profile,
-latency budget, engine options) and answered with ``ready``, unless the
+each active one is an ``ActiveRequest``. A ``words`` message (a TTS's timings) goes
+through the front ends (``frontends``): each request keeps a ``WordStream`` that holds a
+word cut at a chunk's edge, and the spans of the words completed are fed like phonemes.
+``start`` is validated against the ``Catalog`` (engine, character, phoneme notation,
+emotion, output profile, latency budget, engine options) and answered with ``ready``,
+unless the
 injected ``refuse_start`` refuses new work (the server's memory ceiling,
 ``overload``); every later message goes to its request, and any
 ``LipstreamError`` it raises ends that request with a fatal ``error`` of the
@@ -56,6 +59,7 @@ from lipstream_client import (
     Ready,
     Start,
     Text,
+    Words,
 )
 from lipstream_client.errors import (
     DUPLICATE_REQUEST,
@@ -77,6 +81,10 @@ from lipstream_client.messages import DoneReason, JsonValue
 from ..engines.base import CallCost, Model, Rung, SynthesisRequest, frame_count
 from ..engines.work import WorkGuard
 from ..errors import LipstreamError
+from ..frontends.formats import parse_timings
+from ..frontends.timings import SpeechTimings
+from ..frontends.word_stream import WordStream
+from ..frontends.words_to_spans import timings_to_spans
 from ..phonemes import SOURCES
 from ..timeline import EMOTIONS
 from .budget import (
@@ -119,7 +127,7 @@ _MAX_TEXT = 4096
 _CLIPPED = "..."
 
 InputMessage: TypeAlias = Message | ProtocolError
-RequestInput: TypeAlias = Phonemes | AudioChunk | Text | End | Cancel | Interrupt
+RequestInput: TypeAlias = Phonemes | AudioChunk | Text | Words | End | Cancel | Interrupt
 
 
 @dataclass(frozen=True)
@@ -164,6 +172,7 @@ class Session:
         self.costs: dict[str, CallCost] = {}
         self.guards: dict[str, WorkGuard] = {}
         self.resumes: dict[str, ResumeCursor] = {}
+        self.word_streams: dict[str, WordStream] = {}
         self.ended: OrderedDict[str, DoneReason] = OrderedDict()
         self.draining = False
         self.stopped_work = 0
@@ -186,6 +195,7 @@ class Session:
         self.costs.clear()
         self.guards.clear()
         self.resumes.clear()
+        self.word_streams.clear()
         for holding in self.holdings.values():
             holding.release()
         self.holdings.clear()
@@ -197,13 +207,13 @@ class Session:
         """How long ``handle(received)`` may keep the engine busy, in milliseconds: the engine's
         call cost for the request's options (``Model.call_cost``) for the phonemes the message
         decides and the frames it may release (``math.inf`` when the engine knows no bound)."""
-        if not isinstance(received, (Phonemes, AudioChunk, Text, End, Interrupt)):
+        if not isinstance(received, (Phonemes, AudioChunk, Text, Words, End, Interrupt)):
             return 0.0
         request = self.requests.get(received.id)
         if request is None:
             return 0.0
-        if isinstance(received, Text):
-            return math.inf  # speech synthesis in a worker process: the heavy lane's
+        if isinstance(received, (Text, Words)):
+            return math.inf  # espeak-ng in a worker process (words CMUdict lacks): heavy lane
         fps = request.spec.fps
         until = request.phonemes_end
         extra_frames = 0
@@ -329,7 +339,7 @@ class Session:
     ) -> list[Outgoing]:
         if isinstance(received, Start):
             return self._start(received, now)
-        if not isinstance(received, (Phonemes, AudioChunk, Text, End, Cancel, Interrupt)):
+        if not isinstance(received, (Phonemes, AudioChunk, Text, Words, End, Cancel, Interrupt)):
             return [_error(UNKNOWN_TYPE, f"a client may not send {received.type!r}", None)]
         request = self.requests.get(received.id)
         if request is None:
@@ -431,8 +441,12 @@ class Session:
             return request.add_audio(received, now)
         if isinstance(received, Text):
             return self._speak(request, received, now)
+        if isinstance(received, Words):
+            return self._take_words(request, received, now)
         if isinstance(received, End):
-            return request.end(now)
+            stream = self.word_streams.get(request.id)
+            held = self._feed_timings(request, stream, stream.finish(), now) if stream else []
+            return held + request.end(now)
         if isinstance(received, Cancel):
             return request.cancel()
         return request.interrupt(received.at, received.return_ms, now)
@@ -464,6 +478,50 @@ class Session:
             self.output_values += request.output_values - before
         return outgoing
 
+    def _take_words(self, request: ActiveRequest, received: Words, now: float) -> list[Outgoing]:
+        """A TTS's timings (``frontends``): the words they complete become spans, from the
+        end of the input so far; a word that may go on in the next message is held."""
+        stream = self.word_streams.setdefault(request.id, WordStream())
+        if received.voice is not None:
+            stream.voice = received.voice
+        try:
+            timings = parse_timings(received.timings, received.format).shifted(received.offset)
+            completed = stream.take(timings)
+        except LipstreamError as error:
+            raise RequestError(
+                error.message, code=error.code, where=f"timings: {error.where or 'input'}"
+            ) from None
+        return self._feed_timings(request, stream, completed, now)
+
+    def _feed_timings(
+        self,
+        request: ActiveRequest,
+        stream: WordStream,
+        completed: list[SpeechTimings],
+        now: float,
+    ) -> list[Outgoing]:
+        outgoing: list[Outgoing] = []
+        if not completed:
+            return outgoing
+        durations = self.catalog.word_durations(request.spec.engine, request.spec.character)
+        for timings in completed:
+            try:
+                spans = timings_to_spans(
+                    timings, durations, stream.voice, request.phonemes_end, require_speech=False
+                )
+            except LipstreamError as error:
+                raise RequestError(
+                    error.message, code=error.code, where=f"timings: {error.where or 'input'}"
+                ) from None
+            before = request.output_values
+            try:
+                outgoing += request.add_spans(
+                    spans, now, self.limits.max_values, self.output_values - before
+                )
+            finally:
+                self.output_values += request.output_values - before
+        return outgoing
+
     def _orphan(self, received: RequestInput) -> list[Outgoing]:
         reason = self.ended.get(received.id)
         if reason == "interrupt":
@@ -491,6 +549,7 @@ class Session:
         self.costs.pop(identifier, None)
         self.guards.pop(identifier, None)
         self.resumes.pop(identifier, None)
+        self.word_streams.pop(identifier, None)
         holding = self.holdings.pop(identifier, None)
         if holding is not None:
             holding.release()
@@ -604,6 +663,7 @@ class Session:
             rest,
             clock,
             audio_only=model.accepts_audio_only,
+            character=model.name,
         )
         fidelity, lookahead = self._fidelity(model, estimate, options)
         ready = Ready(

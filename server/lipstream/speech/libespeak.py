@@ -1,16 +1,19 @@
 """libespeak-ng through ctypes, standard library only, and a worker that runs it.
 
 Sketch: libespeak-ng runs in synchronous mode with phoneme events switched on.
-One callback collects the PCM16 chunks and the ``espeakEVENT_PHONEME`` events
-(name, ``audio_position`` in ms). The library keeps global state and is not
-reentrant, so a process holds one ``Library`` behind one lock.
+One callback collects the PCM16 chunks, the ``espeakEVENT_PHONEME`` events
+(name, ``audio_position`` in ms) and the ``espeakEVENT_WORD`` events (the word's
+first character, 1-based, its length in characters, and ``audio_position``). The
+library keeps global state and is not reentrant, so a process holds one ``Library``
+behind one lock.
 
 This module imports nothing beyond the standard library, so that
 ``python -I libespeak.py`` starts in tens of milliseconds: that is the worker
 (``main``) the text front end and the demo corpus run, one process per batch,
 so that a crash or a hang of libespeak-ng ends that batch only. It reads a JSON
 list of requests (voice, rate, pitch, pitch_range, text) on stdin and writes one
-JSON line (per request: sample rate, PCM byte count, events; or an error) and
+JSON line (per request: sample rate, PCM byte count, phoneme and word events; or an
+error) and
 then every request's PCM16 bytes, in order, on stdout.
 """
 
@@ -30,6 +33,7 @@ _INITIALIZE_PHONEME_EVENTS = 0x0001
 _CHARS_UTF8 = 1
 _POS_CHARACTER = 1
 _EVENT_LIST_TERMINATED = 0
+_EVENT_WORD = 1
 _EVENT_PHONEME = 7
 _PARAM_RATE = 1
 _PARAM_PITCH = 3
@@ -39,6 +43,9 @@ _BUFFER_MS = 200
 
 RawSpeech = tuple[bytes, int, list[tuple[str, int]]]
 """PCM16 little-endian mono bytes, sample rate in Hz, (espeak phoneme name, start ms) events."""
+WordEvent = tuple[int, int, int]
+"""One word espeak-ng spoke: (first character, 1-based, in the text; length in characters;
+start ms). A token espeak-ng expands ("$42") gives several words at the same position."""
 
 
 class EspeakFailure(Exception):
@@ -80,6 +87,7 @@ class _Capture:
 
     pcm: list[bytes] = field(default_factory=list)
     events: list[tuple[str, int]] = field(default_factory=list)
+    words: list[WordEvent] = field(default_factory=list)
 
 
 class Library:
@@ -137,6 +145,9 @@ class Library:
             if event.type == _EVENT_PHONEME:
                 name = bytes(event.id.string).split(b"\0", 1)[0].decode("utf-8", "replace")
                 self._capture.events.append((name, int(event.audio_position)))
+            elif event.type == _EVENT_WORD:
+                word = (int(event.text_position), int(event.length), int(event.audio_position))
+                self._capture.words.append(word)
             index += 1
         return 0
 
@@ -163,10 +174,18 @@ class Library:
 
     def speak(self, voice: str, rate: int, pitch: int, pitch_range: int, text: str) -> RawSpeech:
         """espeak-ng's own output for ``text`` with these settings."""
+        pcm, sample_rate, events, _ = self.speak_words(voice, rate, pitch, pitch_range, text)
+        return pcm, sample_rate, events
+
+    def speak_words(
+        self, voice: str, rate: int, pitch: int, pitch_range: int, text: str
+    ) -> tuple[bytes, int, list[tuple[str, int]], list[WordEvent]]:
+        """``speak``'s output and the word events of the same utterance."""
         with LOCK:
             self._configure(voice, rate, pitch, pitch_range)
             capture = self._synthesize(text)
-            return b"".join(capture.pcm), self.sample_rate, list(capture.events)
+            pcm = b"".join(capture.pcm)
+            return pcm, self.sample_rate, list(capture.events), list(capture.words)
 
 
 LOCK = threading.Lock()
@@ -189,14 +208,16 @@ def serve(requests: list[dict[str, Any]]) -> tuple[dict[str, Any], list[bytes]]:
     try:
         library = shared_library()
         for request in requests:
-            audio, rate, events = library.speak(
+            audio, rate, events, words = library.speak_words(
                 str(request["voice"]),
                 int(request["rate"]),
                 int(request["pitch"]),
                 int(request["pitch_range"]),
                 str(request["text"]),
             )
-            header.append({"sample_rate": rate, "n_bytes": len(audio), "events": events})
+            header.append(
+                {"sample_rate": rate, "n_bytes": len(audio), "events": events, "words": words}
+            )
             pcm.append(audio)
     except EspeakFailure as exc:
         return {"error": {"message": exc.message, "where": exc.where}}, []

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from ..errors import SpeechError
 from . import libespeak
-from .libespeak import RawSpeech
+from .libespeak import RawSpeech, WordEvent
 
 WORKER_SCRIPT = Path(libespeak.__file__).resolve()
 STARTUP_TIMEOUT_S = 10.0
@@ -39,11 +39,26 @@ class SpeechRequest:
     pitch_range: int = 50
 
 
+@dataclass(frozen=True)
+class WordedSpeech:
+    """espeak-ng's raw output for one request and the words it spoke (``WordEvent``s)."""
+
+    raw: RawSpeech
+    words: list[WordEvent]
+
+
 def speak_in_worker(
     requests: Sequence[SpeechRequest], timeout_s: float | None = None
 ) -> list[RawSpeech]:
     """espeak-ng's raw output for each request, spoken in order by one fresh worker process
     (``timeout_s``: default 10 s plus 5 s per request)."""
+    return [spoken.raw for spoken in speak_words_in_worker(requests, timeout_s)]
+
+
+def speak_words_in_worker(
+    requests: Sequence[SpeechRequest], timeout_s: float | None = None
+) -> list[WordedSpeech]:
+    """``speak_in_worker`` with the word events of each request."""
     if not requests:
         return []
     payload = json.dumps([request.__dict__ for request in requests]).encode("utf-8")
@@ -70,7 +85,7 @@ def speak_in_worker(
     return _reply(finished.stdout, len(requests))
 
 
-def _reply(output: bytes, n_requests: int) -> list[RawSpeech]:
+def _reply(output: bytes, n_requests: int) -> list[WordedSpeech]:
     line, _, pcm = output.partition(b"\n")
     try:
         header = json.loads(line.decode("utf-8"))
@@ -78,12 +93,14 @@ def _reply(output: bytes, n_requests: int) -> list[RawSpeech]:
             error = header["error"]
             raise SpeechError(str(error["message"]), where=str(error["where"]))
         results = header["results"]
-        raws: list[RawSpeech] = []
+        raws: list[WordedSpeech] = []
         offset = 0
         for result in results:
             size = int(result["n_bytes"])
             events = [(str(name), int(ms)) for name, ms in result["events"]]
-            raws.append((pcm[offset : offset + size], int(result["sample_rate"]), events))
+            words = [(int(first), int(length), int(ms)) for first, length, ms in result["words"]]
+            raw = (pcm[offset : offset + size], int(result["sample_rate"]), events)
+            raws.append(WordedSpeech(raw, words))
             offset += size
     except (ValueError, KeyError, TypeError, UnicodeDecodeError) as exc:
         raise SpeechError(

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pytest
 
@@ -13,6 +13,9 @@ from lipstream.models import ModelRegistry
 from lipstream.server.catalog import Catalog
 from tests.lipstream.server.browser import CHROMIUM, LAUNCH_ARGS
 from tests.lipstream.server.harness import fixed_calibration
+
+if TYPE_CHECKING:
+    from lipstream.corpus import Corpus
 
 
 @pytest.fixture(scope="session")
@@ -37,3 +40,14 @@ def browser() -> Iterator[Any]:
         chromium = playwright.chromium.launch(executable_path=str(CHROMIUM), args=LAUNCH_ARGS)
         yield chromium
         chromium.close()
+
+
+@pytest.fixture(scope="session")
+def words_models(small_demo_corpus: Corpus, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A viseme-lerp model trained by ``train_engine`` (its duration model beside it), quick
+    to train and serve, for the word-timing requests."""
+    from lipstream.training import train_engine
+
+    directory = tmp_path_factory.mktemp("words-models")
+    train_engine(small_demo_corpus.split()[0], "viseme-lerp", directory / "viseme-lerp")
+    return directory

