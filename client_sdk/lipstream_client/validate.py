@@ -341,7 +341,7 @@ def _audio(payload: Mapping[str, Any], encoding: Encoding) -> AudioChunk:
 
 
 def _text(payload: Mapping[str, Any], encoding: Encoding) -> Text:
-    obj = _object(payload, ("id", "text"), ("voice", "rate"))
+    obj = _object(payload, ("id", "text"), ("voice", "rate", "lang"))
     identifier = _id(obj)
     text = obj["text"]
     if not isinstance(text, str):
@@ -357,7 +357,12 @@ def _text(payload: Mapping[str, Any], encoding: Encoding) -> Text:
         if present(obj, "rate")
         else None
     )
-    return Text(identifier, text, voice, rate)
+    lang = (
+        read_text(obj["lang"], "lang", MAX_VOICE_LENGTH, pattern=_VOICE)
+        if present(obj, "lang")
+        else None
+    )
+    return Text(identifier, text, voice, rate, lang)
 
 
 def _end(payload: Mapping[str, Any], encoding: Encoding) -> End:

@@ -17,6 +17,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from types import MappingProxyType
 
+from ..errors import UnknownPhonemeError, UnmappedPhonemeError
+from ..phonemes import SILENCE, ipa_phonemes
+
 _RETROFLEX: Mapping[str, str] = MappingProxyType(
     {"s": "ʂ", "z": "ʐ", "t": "ʈ", "d": "ɖ", "n": "ɳ", "l": "ɭ", "r": "ɽ", "i": "ɨ"}
 )
@@ -54,3 +57,27 @@ def as_ipa(name: str) -> str:
         else:
             out.append(_KIRSHENBAUM.get(char, char))
     return "".join(out)
+
+
+def is_language_switch(name: str) -> bool:
+    """espeak-ng marks a switch of language inside a text (a foreign word) as ``(en)``."""
+    return name.startswith("(") and name.endswith(")")
+
+
+def ipa_event_phonemes(name: str, lang: str, where: str | None = None) -> tuple[str, ...]:
+    """The phonemes of one espeak-ng IPA phoneme event of language ``lang``: silence for a
+    pause, ``()`` for a language switch or a bare mark (the phoneme before goes on);
+    ``UnmappedPhonemeError`` naming the phoneme and the language if no table reads it."""
+    if not name or name.startswith("_"):
+        return (SILENCE,)
+    if is_language_switch(name):
+        return ()
+    try:
+        return ipa_phonemes(as_ipa(name), where)
+    except UnknownPhonemeError as exc:
+        raise UnmappedPhonemeError(
+            f"espeak-ng's phoneme {name!r} in language {lang!r} maps to no phoneme: {exc.message}",
+            phoneme=name,
+            lang=lang,
+            where=where,
+        ) from None

@@ -2,7 +2,9 @@
 
 Sketch: libespeak-ng runs in synchronous mode with phoneme events switched on.
 One callback collects the PCM16 chunks and the ``espeakEVENT_PHONEME`` events
-(name, ``audio_position`` in ms). The library keeps global state and is not
+(name, ``audio_position`` in ms). The names are espeak-ng's mnemonics, or,
+for a library made with ``ipa_names`` (``espeakINITIALIZE_PHONEME_IPA``, an
+option of initialization only), their IPA: the notation every language shares. The library keeps global state and is not
 reentrant, so a process holds one ``Library`` behind one lock.
 
 This module imports nothing beyond the standard library, so that
@@ -27,6 +29,7 @@ LIBRARY_NAME = "libespeak-ng.so.1"
 
 _AUDIO_OUTPUT_SYNCHRONOUS = 2
 _INITIALIZE_PHONEME_EVENTS = 0x0001
+_INITIALIZE_PHONEME_IPA = 0x0002
 _CHARS_UTF8 = 1
 _POS_CHARACTER = 1
 _EVENT_LIST_TERMINATED = 0
@@ -83,9 +86,10 @@ class _Capture:
 
 
 class Library:
-    """The process-wide libespeak-ng handle; use it through ``speak`` (which locks)."""
+    """A libespeak-ng handle (one per process; phoneme names in IPA with ``ipa_names``);
+    use it through ``speak`` (which locks)."""
 
-    def __init__(self) -> None:
+    def __init__(self, ipa_names: bool = False) -> None:
         try:
             self._lib = ctypes.CDLL(LIBRARY_NAME)
         except OSError as exc:
@@ -93,8 +97,9 @@ class Library:
                 f"cannot load {LIBRARY_NAME} ({exc}); install the Debian package espeak-ng"
             ) from None
         self._declare_signatures()
+        options = _INITIALIZE_PHONEME_EVENTS | (_INITIALIZE_PHONEME_IPA if ipa_names else 0)
         sample_rate = self._lib.espeak_Initialize(
-            _AUDIO_OUTPUT_SYNCHRONOUS, _BUFFER_MS, None, _INITIALIZE_PHONEME_EVENTS
+            _AUDIO_OUTPUT_SYNCHRONOUS, _BUFFER_MS, None, options
         )
         if sample_rate <= 0:
             raise EspeakFailure(
@@ -187,7 +192,10 @@ def serve(requests: list[dict[str, Any]]) -> tuple[dict[str, Any], list[bytes]]:
     header: list[dict[str, Any]] = []
     pcm: list[bytes] = []
     try:
-        library = shared_library()
+        naming = {bool(request.get("ipa_names", False)) for request in requests}
+        if len(naming) > 1:
+            raise EspeakFailure("a batch must ask for one kind of phoneme names", "ipa_names")
+        library = Library(ipa_names=True) if naming == {True} else shared_library()
         for request in requests:
             audio, rate, events = library.speak(
                 str(request["voice"]),
