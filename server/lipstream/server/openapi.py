@@ -3,7 +3,8 @@
 Sketch: the request body's schema is the ``start`` message's properties
 (without ``v``, ``type`` and ``id``), plus the ``phonemes`` message's
 ``items`` and an ``audio`` object with the ``audio`` message's
-``sample_rate`` and ``pcm16``. Their ``#/$defs/X`` references move to
+``sample_rate`` and ``pcm16``, or instead the ``text`` message's ``text``,
+``lang``, ``voice`` and ``rate``. Their ``#/$defs/X`` references move to
 ``#/components/schemas/lipstream_X``, so the schemas shipped with the client
 SDK stay the single source. The response and error bodies are described by
 hand here, as they are not protocol messages.
@@ -41,9 +42,11 @@ def _moved(node: Any) -> Any:
 
 def components() -> dict[str, Any]:
     """``components.schemas`` entries: every protocol definition and the three bodies."""
-    start, phonemes, audio = (load_schema(kind) for kind in ("start", "phonemes", "audio"))
+    start, phonemes, audio, text = (
+        load_schema(kind) for kind in ("start", "phonemes", "audio", "text")
+    )
     schemas: dict[str, Any] = {}
-    for schema in (start, phonemes, audio):
+    for schema in (start, phonemes, audio, text):
         schemas.update(
             {PREFIX + name: _moved(value) for name, value in schema.get("$defs", {}).items()}
         )
@@ -59,12 +62,19 @@ def components() -> dict[str, Any]:
         "description": "Optional speech audio for engines that use it (PCM16 mono; bin in "
         "msgpack, base64 in JSON).",
     }
+    for key in ("text", "lang", "voice", "rate"):
+        properties[key] = _moved(text["properties"][key])
     schemas[PREFIX + "SynthesizeRequest"] = {
         "type": "object",
         "additionalProperties": False,
-        "required": ["engine", "character", "items"],
+        "required": ["engine", "character"],
+        "oneOf": [
+            {"required": ["items"], "not": {"required": ["text"]}},
+            {"required": ["text"], "not": {"anyOf": [{"required": ["items"]}, {"required": ["audio"]}]}},
+        ],
         "properties": properties,
-        "description": "A start message's fields, the utterance's phonemes and optional audio.",
+        "description": "A start message's fields, then the utterance's phonemes and optional "
+        "audio, or a text for espeak-ng to speak (in lang, with voice and rate).",
     }
     schemas[PREFIX + "SynthesizeResponse"] = _response_schema()
     schemas[PREFIX + "Error"] = _error_schema()
@@ -112,6 +122,13 @@ def _response_schema() -> dict[str, Any]:
             "stats": {
                 "type": "object",
                 "properties": {"frames": {"type": "integer"}, "engine": {"type": "object"}},
+            },
+            "speech": {
+                "type": "object",
+                "required": ["sample_rate", "pcm16"],
+                "properties": {"sample_rate": {"type": "integer"}, "pcm16": {}},
+                "description": "a text request's speech, whole: PCM16 mono (bin in msgpack, "
+                "base64 in JSON), frame i at i / fps on its clock",
             },
         },
         "description": "ready's resolved parameters, every frame, and done's stats.",
