@@ -31,7 +31,7 @@ from .phoneme_prototypes import (
 )
 
 CONSONANT_WEIGHTS: Mapping[str, float] = MappingProxyType({
-    "place": 1.0, "stricture": 1.0, "voiced": 0.5, "nasal": 3.0, "lateral": 2.0,
+    "place": 1.0, "stricture": 1.0, "voiced": 0.3, "nasal": 3.0, "lateral": 2.0,
     "rhotic": 2.0, "rounded": 1.5,
 })  # fmt: skip
 VOWEL_WEIGHTS: Mapping[str, float] = MappingProxyType({
