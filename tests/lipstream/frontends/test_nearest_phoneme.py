@@ -162,7 +162,7 @@ def test_a_symbol_no_table_knows_is_named_with_its_language() -> None:
 TABLE_OVER_FEATURES = {
     "ç": ("HH", "SH"), "x": ("K", "HH"), "ɣ": ("G", "HH"), "ʔ": ("T", "K"), "ɲ": ("N", "NG"),
     "ɒ": ("AA", "AO"), "ɨ": ("IH", "IY"), "ɜ": ("ER", "EH"), "ɘ": ("AH", "EY"),
-    "ʝ": ("Y", "ZH"),
+    "ʝ": ("Y", "ZH"), "ɹ̩": ("ER", "R"),
 }  # fmt: skip
 
 
