@@ -35,7 +35,7 @@ CONSONANT_WEIGHTS: Mapping[str, float] = MappingProxyType({
     "rhotic": 2.0, "rounded": 1.5,
 })  # fmt: skip
 VOWEL_WEIGHTS: Mapping[str, float] = MappingProxyType({
-    "height": 2.0, "backness": 0.6, "rounded": 1.5, "rhotic": 2.0, "nasal": 1.0,
+    "height": 2.0, "backness": 0.6, "rounded": 1.5, "rhotic": 2.0, "nasal": 0.0,
 })  # fmt: skip
 DIPHTHONG_TOLERANCE = 1.2
 
