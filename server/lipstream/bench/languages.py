@@ -1,4 +1,4 @@
-"""Which of espeak-ng's languages map fully to the phoneme set: the survey behind the languages table.
+"""Which of espeak-ng's languages map fully to the phoneme set: the languages table's survey.
 
 Method: for every language ``espeak-ng --voices`` lists, espeak-ng speaks a
 sample through the text front end's own worker, reading the phoneme names

@@ -686,12 +686,16 @@ def languages(bench: Bench) -> str:
     """Each espeak-ng language: its voice, the phonemes its sample holds, whether all map."""
     doc = _languages_doc(bench)
     if doc is None:
-        return f"Not measured yet: no `bench/{LANGUAGES}` (`python -m lipstream.bench.languages`).\n"
+        return (
+            f"Not measured yet: no `bench/{LANGUAGES}` (`python -m lipstream.bench.languages`).\n"
+        )
     served = set(doc.get("served", []))
     rows = []
     for row in doc["languages"]:
         if "error" in row:
-            rows.append([f"`{row['code']}`", row["title"], "", "", f"not spoken: {row['error']}", ""])
+            rows.append(
+                [f"`{row['code']}`", row["title"], "", "", f"not spoken: {row['error']}", ""]
+            )
             continue
         unmapped = ", ".join(f"`{name}`" for name in row["unmapped"])
         rows.append([
@@ -707,8 +711,12 @@ def languages(bench: Bench) -> str:
         f"{doc.get('espeak_ng', 'espeak-ng')}: {fully} of {len(doc['languages'])} languages "
         f"map fully. Sample: the numbers `{doc['numbers']}`, plus a sentence where marked.\n\n"
     )
-    return bench.source(LANGUAGES, doc) + header + table(
-        ["lang", "language", "espeak-ng voice", "phonemes", "maps fully", "end to end"], rows
+    return (
+        bench.source(LANGUAGES, doc)
+        + header
+        + table(
+            ["lang", "language", "espeak-ng voice", "phonemes", "maps fully", "end to end"], rows
+        )
     )
 
 

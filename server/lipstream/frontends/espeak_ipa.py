@@ -7,9 +7,11 @@ Kyrgyz ``tS``; Icelandic ``l#``). Those parts follow espeak-ng's mnemonic
 conventions (docs/phonemes.md of espeak-ng): ``.`` after a letter makes it
 retroflex, ``^`` palatal, ``[`` dental, ``h`` after a stop is aspiration,
 ``#``, ``-`` and a backquote mark variants (dropped), and capitals and
-digits are Kirshenbaum letters; ``ng`` (Mandarin ``ong``, ``ing``) is [ŋ], and a doubled letter (Italian ``ss``, Cantonese ``aa``) is long. ``as_ipa`` rewrites them; IPA passes through
-unchanged. Mandarin ``i.`` (the vowel of zhi, shi, ri) is written [ɨ], the
-usual broad transcription of that apical vowel.
+digits are Kirshenbaum letters; ``ng`` (Mandarin ``ong``, ``ing``) is [ŋ],
+and a doubled letter (Italian ``ss``, Cantonese ``aa``) is long. ``as_ipa``
+rewrites them; IPA passes through unchanged. Mandarin ``i.`` (the vowel of
+zhi, shi, ri) is written [ɨ], the usual broad transcription of that apical
+vowel.
 """
 
 from __future__ import annotations

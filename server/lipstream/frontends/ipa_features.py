@@ -42,7 +42,15 @@ FRICATIVE = 2.0
 TRILL = 2.2
 APPROXIMANT = 3.0
 
-CLOSE, NEAR_CLOSE, CLOSE_MID, MID, OPEN_MID, NEAR_OPEN, OPEN = (1.0, 5 / 6, 4 / 6, 0.5, 2 / 6, 1 / 6, 0.0)
+CLOSE, NEAR_CLOSE, CLOSE_MID, MID, OPEN_MID, NEAR_OPEN, OPEN = (
+    1.0,
+    5 / 6,
+    4 / 6,
+    0.5,
+    2 / 6,
+    1 / 6,
+    0.0,
+)
 FRONT, NEAR_FRONT, CENTRAL, NEAR_BACK, BACK = (0.0, 0.25, 0.5, 0.75, 1.0)
 
 
@@ -130,9 +138,12 @@ CONSONANTS: Mapping[str, Consonant] = MappingProxyType({
     "ʋ": _c(LABIODENTAL, APPROXIMANT, True), "ɹ": _c(POSTALVEOLAR, APPROXIMANT, True, **_RHOTIC),
     "ɻ": _c(RETROFLEX, APPROXIMANT, True, **_RHOTIC), "j": _c(PALATAL, APPROXIMANT, True),
     "ɰ": _c(VELAR, APPROXIMANT, True), "w": _c(VELAR, APPROXIMANT, True, rounded=1.0),
-    "ʍ": _c(VELAR, APPROXIMANT, False, rounded=1.0), "ɥ": _c(PALATAL, APPROXIMANT, True, rounded=1.0),
-    "l": _c(ALVEOLAR, APPROXIMANT, True, **_LATERAL), "ɫ": _c(ALVEOLAR, APPROXIMANT, True, **_LATERAL),
-    "ɭ": _c(RETROFLEX, APPROXIMANT, True, **_LATERAL), "ʎ": _c(PALATAL, APPROXIMANT, True, **_LATERAL),
+    "ʍ": _c(VELAR, APPROXIMANT, False, rounded=1.0),
+    "ɥ": _c(PALATAL, APPROXIMANT, True, rounded=1.0),
+    "l": _c(ALVEOLAR, APPROXIMANT, True, **_LATERAL),
+    "ɫ": _c(ALVEOLAR, APPROXIMANT, True, **_LATERAL),
+    "ɭ": _c(RETROFLEX, APPROXIMANT, True, **_LATERAL),
+    "ʎ": _c(PALATAL, APPROXIMANT, True, **_LATERAL),
     "ʟ": _c(VELAR, APPROXIMANT, True, **_LATERAL),
     # precomposed affricates
     "ʦ": _c(ALVEOLAR, AFFRICATE, False), "ʣ": _c(ALVEOLAR, AFFRICATE, True),

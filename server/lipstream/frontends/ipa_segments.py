@@ -63,7 +63,9 @@ def _joined(first: Segment, second: Segment) -> Segment:
         assert isinstance(first, Consonant) and isinstance(second, Consonant)
         return _affricate(first, second)
     if isinstance(first, Consonant) and isinstance(second, Consonant):
-        return replace(first, place=min(first.place, second.place), nasal=first.nasal or second.nasal)
+        return replace(
+            first, place=min(first.place, second.place), nasal=first.nasal or second.nasal
+        )
     return first
 
 

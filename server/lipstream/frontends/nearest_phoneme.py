@@ -136,8 +136,10 @@ def phonemes_by_features(label: str) -> tuple[str, ...]:
     """The phonemes for ``label``, one per segment (a diphthong one for two vowels),
     repeats merged; ``()`` for a label of marks alone. Raises ``UnreadableSymbol``."""
     segments = _visible(ipa_segments(label))
-    if len(segments) == 2 and segments[0] != segments[1] and all(
-        isinstance(s, Vowel) for s in segments
+    if (
+        len(segments) == 2
+        and segments[0] != segments[1]
+        and all(isinstance(s, Vowel) for s in segments)
     ):
         onset, offset = segments
         assert isinstance(onset, Vowel) and isinstance(offset, Vowel)

@@ -70,7 +70,10 @@ def components() -> dict[str, Any]:
         "required": ["engine", "character"],
         "oneOf": [
             {"required": ["items"], "not": {"required": ["text"]}},
-            {"required": ["text"], "not": {"anyOf": [{"required": ["items"]}, {"required": ["audio"]}]}},
+            {
+                "required": ["text"],
+                "not": {"anyOf": [{"required": ["items"]}, {"required": ["audio"]}]},
+            },
         ],
         "properties": properties,
         "description": "A start message's fields, then the utterance's phonemes and optional "

@@ -407,7 +407,9 @@ async def _json_pieces(result: Synthesis, state: ServerState) -> AsyncIterator[b
     ``JSON_CHUNK_VALUES`` numbers at a time (each encoded in the pool), then ``]}``."""
     loop = asyncio.get_running_loop()
     frames = result.frames
-    head = json.dumps({**_fields(result, "json"), "data": []}, allow_nan=False, separators=JSON_SEPARATORS)
+    head = json.dumps(
+        {**_fields(result, "json"), "data": []}, allow_nan=False, separators=JSON_SEPARATORS
+    )
     yield head[: -len("]}")].encode()
     rows = max(1, JSON_CHUNK_VALUES // max(1, frames.shape[1]))
     for start in range(0, len(frames), rows):

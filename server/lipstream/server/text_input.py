@@ -20,6 +20,7 @@ import numpy as np
 
 from lipstream_client import AudioChunk, Text
 from lipstream_client.errors import TEXT_TOO_LONG
+from lipstream_client.messages import JsonValue
 
 from ..audio import Audio
 from ..errors import LipstreamError, UnmappedPhonemeError
@@ -37,7 +38,7 @@ def speak(message: Text) -> SpokenText:
     try:
         return speak_text(message.text, message.voice, message.rate, lang=message.lang)
     except LipstreamError as error:
-        details: dict[str, object] | None = None
+        details: dict[str, JsonValue] | None = None
         if error.code == TEXT_TOO_LONG:
             details = {"max_text_chars": MAX_TEXT_CHARS}
         elif isinstance(error, UnmappedPhonemeError):

@@ -4,8 +4,9 @@ Sketch: libespeak-ng runs in synchronous mode with phoneme events switched on.
 One callback collects the PCM16 chunks and the ``espeakEVENT_PHONEME`` events
 (name, ``audio_position`` in ms). The names are espeak-ng's mnemonics, or,
 for a library made with ``ipa_names`` (``espeakINITIALIZE_PHONEME_IPA``, an
-option of initialization only), their IPA: the notation every language shares. The library keeps global state and is not
-reentrant, so a process holds one ``Library`` behind one lock.
+option of initialization only), their IPA: the notation every language shares.
+The library keeps global state and is not reentrant, so a process holds one
+``Library`` behind one lock.
 
 This module imports nothing beyond the standard library, so that
 ``python -I libespeak.py`` starts in tens of milliseconds: that is the worker

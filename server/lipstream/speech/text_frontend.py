@@ -22,7 +22,6 @@ from espeak-ng's IPA names, mapped by articulatory features
 from __future__ import annotations
 
 from dataclasses import dataclass
-
 from functools import partial
 
 from lipstream_client.errors import (
@@ -77,10 +76,10 @@ def choose_voice(voice: str | None, lang: str | None) -> VoiceChoice:
         variant = None if voice is None else resolve_variant(voice)
         return VoiceChoice(language.voice(variant), language.code, not language.english)
     name = voice or DEFAULT_VOICE
-    language = find_language(name.split("+", 1)[0])
-    if language is None or language.english:
-        return VoiceChoice(name, None if language is None else language.code, False)
-    return VoiceChoice(name, language.code, True)
+    listed = find_language(name.split("+", 1)[0])
+    if listed is None or listed.english:
+        return VoiceChoice(name, None if listed is None else listed.code, False)
+    return VoiceChoice(name, listed.code, True)
 
 
 def check_text(text: str) -> str:

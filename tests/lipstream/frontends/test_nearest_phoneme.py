@@ -19,7 +19,7 @@ from lipstream.frontends.ipa_features import (
 )
 from lipstream.frontends.ipa_segments import UnreadableSymbol, ipa_segments
 from lipstream.frontends.nearest_phoneme import nearest_phoneme, phonemes_by_features
-from lipstream.phonemes import ARPABET, _IPA_TABLE, ipa_phonemes, normalize_phoneme
+from lipstream.phonemes import _IPA_TABLE, ARPABET, ipa_phonemes, normalize_phoneme
 
 
 @pytest.mark.parametrize(

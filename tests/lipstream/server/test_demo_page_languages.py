@@ -20,8 +20,8 @@ from lipstream.engines.base import Model, frame_count
 from lipstream.speech.text_frontend import speak_text
 from lipstream.training import train_engine
 from tests.helpers import return_frames
-from tests.live_server import LiveServer, live_server
 from tests.lipstream.server.test_demo_page import CHROMIUM, LAUNCH_ARGS, WAIT_MS
+from tests.live_server import LiveServer, live_server
 
 pytestmark = pytest.mark.skipif(
     not CHROMIUM.exists() or shutil.which("espeak-ng") is None,
@@ -82,9 +82,7 @@ def test_the_pickers_offer_espeak_ngs_languages_and_variants(page: Any) -> None:
     assert variants[0] == "" and variants[1:] == list(dict.fromkeys(listed))
 
 
-def test_a_german_sentence_in_a_chosen_voice_is_spoken_and_voiced(
-    page: Any, lerp: Model
-) -> None:
+def test_a_german_sentence_in_a_chosen_voice_is_spoken_and_voiced(page: Any, lerp: Model) -> None:
     page.select_option("#engine", "viseme-lerp")
     page.fill("#fps", str(int(FPS)))
     page.select_option("#lang", "de")
