@@ -26,7 +26,10 @@ from lipstream_client.rest import RestClient, RestServerError
 from tests.helpers import return_frames, run_cli
 from tests.lipstream.server.harness import Served, serving
 
-pytestmark = pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng missing")
+pytestmark = [
+    pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng missing"),
+    pytest.mark.slow,  # trains viseme-lerp on the small demo corpus
+]
 
 FPS = 30.0
 GERMAN = "Grüße aus München."

@@ -30,7 +30,10 @@ from lipstream_client import Client
 from tests.helpers import return_frames
 from tests.lipstream.server.harness import Served, serving
 
-pytestmark = pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng missing")
+pytestmark = [
+    pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng missing"),
+    pytest.mark.slow,  # trains viseme-lerp on the small demo corpus
+]
 
 FPS = 30.0
 

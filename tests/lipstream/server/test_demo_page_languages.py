@@ -23,10 +23,13 @@ from tests.helpers import return_frames
 from tests.lipstream.server.test_demo_page import CHROMIUM, LAUNCH_ARGS, WAIT_MS
 from tests.live_server import LiveServer, live_server
 
-pytestmark = pytest.mark.skipif(
-    not CHROMIUM.exists() or shutil.which("espeak-ng") is None,
-    reason="needs Debian's chromium and espeak-ng (README command (b) installs both)",
-)
+pytestmark = [
+    pytest.mark.skipif(
+        not CHROMIUM.exists() or shutil.which("espeak-ng") is None,
+        reason="needs Debian's chromium and espeak-ng (README command (b) installs both)",
+    ),
+    pytest.mark.slow,  # trains viseme-lerp on the small demo corpus
+]
 GERMAN = "Schöne Grüße aus München!"
 FPS = 60.0
 
