@@ -131,21 +131,24 @@ def _visible(segments: list[Segment]) -> list[Segment]:
     ]
 
 
+def _as_diphthong(segments: list[Segment]) -> str | None:
+    """The diphthong two different vowels make, if they lie near one of the set's."""
+    if len(segments) != 2 or segments[0] == segments[1]:
+        return None
+    onset, offset = segments
+    if not (isinstance(onset, Vowel) and isinstance(offset, Vowel)):
+        return None
+    return _diphthong(onset, offset)
+
+
 @lru_cache(maxsize=4096)
 def phonemes_by_features(label: str) -> tuple[str, ...]:
     """The phonemes for ``label``, one per segment (a diphthong one for two vowels),
     repeats merged; ``()`` for a label of marks alone. Raises ``UnreadableSymbol``."""
     segments = _visible(ipa_segments(label))
-    if (
-        len(segments) == 2
-        and segments[0] != segments[1]
-        and all(isinstance(s, Vowel) for s in segments)
-    ):
-        onset, offset = segments
-        assert isinstance(onset, Vowel) and isinstance(offset, Vowel)
-        diphthong = _diphthong(onset, offset)
-        if diphthong is not None:
-            return (diphthong,)
+    diphthong = _as_diphthong(segments)
+    if diphthong is not None:
+        return (diphthong,)
     phonemes: list[str] = []
     for segment in segments:
         phoneme = nearest_to_segment(segment)
@@ -155,10 +158,9 @@ def phonemes_by_features(label: str) -> tuple[str, ...]:
 
 
 def nearest_phoneme(label: str) -> str | None:
-    """The phoneme for ``label`` if it is one segment (or a diphthong), else None: a
-    label that holds several segments is no single phoneme."""
-    phonemes = phonemes_by_features(label)
-    if len(phonemes) != 1 or len(_visible(ipa_segments(label))) > 2:
-        return None
+    """The phoneme for ``label`` if it is one segment or a diphthong, else None: a label
+    that holds several segments is no single phoneme. Raises ``UnreadableSymbol``."""
     segments = _visible(ipa_segments(label))
-    return phonemes[0] if len(segments) == 1 or phonemes[0] in DIPHTHONG_PROTOTYPES else None
+    if len(segments) == 1:
+        return nearest_to_segment(segments[0])
+    return _as_diphthong(segments)

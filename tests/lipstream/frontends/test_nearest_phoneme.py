@@ -153,6 +153,7 @@ def test_a_symbol_no_table_knows_is_named_with_its_language() -> None:
     assert raised.value.code == "unmapped_phoneme" and raised.value.where == "text"
     assert "'aʬ'" in raised.value.message and "'xx-test'" in raised.value.message
     assert nearest_phoneme("hello") is None  # several segments are no single phoneme
+    assert nearest_phoneme("ee") is None and phonemes_by_features("ee") == ("EY",)
     with pytest.raises(UnknownPhonemeError):
         normalize_phoneme("hello", "ipa")
 
