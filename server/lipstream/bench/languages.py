@@ -66,7 +66,8 @@ def _read(name: str, language: EspeakLanguage) -> tuple[str, ...] | str:
 
 
 def survey_language(language: EspeakLanguage, events: Sequence[tuple[str, int]]) -> dict[str, Any]:
-    """One language's row: its distinct phoneme names, how each maps, and those that do not."""
+    """One language's row: its distinct phoneme names, how each maps (``phonemes``: name ->
+    its IPA and phonemes), and those that do not (``unmapped``: name -> why)."""
     names = [name for name, _ in events if name and not name.startswith("_")]
     names = [name for name in dict.fromkeys(names) if not is_language_switch(name)]
     mapping: dict[str, list[str]] = {}
@@ -124,7 +125,7 @@ def survey() -> dict[str, Any]:
     english = [language for language in languages if language.english]
     others = [language for language in languages if not language.english]
     rows = {row["code"]: row for row in _speak_all(english, False) + _speak_all(others, True)}
-    return {
+    return _factored({
         "command": COMMAND,
         "lipstream_version": __version__,
         "date": datetime.now(UTC).isoformat(timespec="seconds"),
@@ -133,7 +134,19 @@ def survey() -> dict[str, Any]:
         "numbers": NUMBERS,
         "served": list(SERVED),
         "languages": [rows[language.code] for language in languages],
-    }
+    })
+
+
+def _factored(results: dict[str, Any]) -> dict[str, Any]:
+    """The survey with each phoneme name's mapping listed once (``phonemes``: kind of name ->
+    name -> its IPA and phonemes), each language keeping the list of its names."""
+    mappings: dict[str, dict[str, Any]] = {"ipa": {}, "mnemonic": {}}
+    for row in results["languages"]:
+        if "phonemes" in row:
+            mappings[row["names"]].update(row["phonemes"])
+            row["phonemes"] = list(row["phonemes"])
+    results["phonemes"] = {kind: dict(sorted(names.items())) for kind, names in mappings.items()}
+    return results
 
 
 def main(argv: Sequence[str] | None = None) -> None:

@@ -729,13 +729,14 @@ def language_phonemes(bench: Bench) -> str:
     doc = _languages_doc(bench)
     if doc is None:
         return f"Not measured yet: no `bench/{LANGUAGES}`.\n"
-    seen: dict[tuple[str, str], tuple[str, str, list[str]]] = {}
+    speakers: dict[tuple[str, str], list[str]] = {}
     for row in doc["languages"]:
-        for name, entry in row.get("phonemes", {}).items():
-            mapped = " ".join(entry["maps_to"]) or "(lengthens the phoneme before)"
-            seen.setdefault((row["names"], name), (entry["ipa"], mapped, []))[2].append(row["code"])
+        for name in row.get("phonemes", []):
+            speakers.setdefault((row["names"], name), []).append(row["code"])
     rows = []
-    for (names, name), (ipa, mapped, codes) in sorted(seen.items()):
+    for (names, name), codes in sorted(speakers.items()):
+        entry = doc["phonemes"][names][name]
+        ipa, mapped = entry["ipa"], " ".join(entry["maps_to"]) or "(lengthens the phoneme before)"
         shown = ", ".join(codes[:8]) + (f" and {len(codes) - 8} more" if len(codes) > 8 else "")
         rows.append([_code(name), names, _code(ipa), mapped, shown])
     return table(["espeak-ng name", "names", "as IPA", "phonemes", "languages"], rows)
