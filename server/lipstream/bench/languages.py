@@ -125,16 +125,18 @@ def survey() -> dict[str, Any]:
     english = [language for language in languages if language.english]
     others = [language for language in languages if not language.english]
     rows = {row["code"]: row for row in _speak_all(english, False) + _speak_all(others, True)}
-    return _factored({
-        "command": COMMAND,
-        "lipstream_version": __version__,
-        "date": datetime.now(UTC).isoformat(timespec="seconds"),
-        "machine": machine(),
-        "espeak_ng": espeak_version(),
-        "numbers": NUMBERS,
-        "served": list(SERVED),
-        "languages": [rows[language.code] for language in languages],
-    })
+    return _factored(
+        {
+            "command": COMMAND,
+            "lipstream_version": __version__,
+            "date": datetime.now(UTC).isoformat(timespec="seconds"),
+            "machine": machine(),
+            "espeak_ng": espeak_version(),
+            "numbers": NUMBERS,
+            "served": list(SERVED),
+            "languages": [rows[language.code] for language in languages],
+        }
+    )
 
 
 def _factored(results: dict[str, Any]) -> dict[str, Any]:
