@@ -198,11 +198,18 @@ class Stream:
         """Send the next chunk of mono signed 16-bit little-endian audio at ``sample_rate`` Hz."""
         await self._send(AudioChunk(self.id, sample_rate, bytes(pcm16)))
 
-    async def send_text(self, text: str, voice: str | None = None, rate: int | None = None) -> None:
-        """Have the server speak ``text`` (espeak-ng ``voice``, ``rate`` in words per minute;
-        None: its defaults) as the next input: it sends the speech back as ``audio``
-        chunks with their start times (``audio``) and the frames as usual."""
-        await self._send(Text(self.id, text, voice, rate))
+    async def send_text(
+        self,
+        text: str,
+        voice: str | None = None,
+        rate: int | None = None,
+        lang: str | None = None,
+    ) -> None:
+        """Have the server speak ``text`` (espeak-ng language ``lang``, e.g. ``de``, and
+        ``voice``: with ``lang`` a variant such as ``f3``, else a whole voice name; ``rate``
+        in words per minute; None: its defaults) as the next input: it sends the speech
+        back as ``audio`` chunks with their start times (``audio``) and the frames as usual."""
+        await self._send(Text(self.id, text, voice, rate, lang))
 
     async def send_words(
         self,

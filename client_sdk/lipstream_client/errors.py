@@ -61,6 +61,8 @@ SPEECH_FAILED = "speech_failed"
 EMPTY_TIMINGS = "empty_timings"
 UNKNOWN_TIMING_FORMAT = "unknown_timing_format"
 MISMATCHED_WORDS = "mismatched_words"
+UNKNOWN_LANGUAGE = "unknown_language"
+UNMAPPED_PHONEME = "unmapped_phoneme"
 RESUME_MISMATCH = "resume_mismatch"
 
 # Connection-level errors: the server closes the connection after sending them.
@@ -226,6 +228,15 @@ ERROR_CODES: dict[str, ErrorCodeInfo] = {
     ),
     UNSPEAKABLE_TEXT: ErrorCodeInfo(
         "espeak-ng said nothing for a `text` message, or a sound the phoneme set lacks",
+        "server",
+        "request",
+    ),
+    UNKNOWN_LANGUAGE: ErrorCodeInfo(
+        "a `text` message's `lang` is no language espeak-ng speaks", "server", "request"
+    ),
+    UNMAPPED_PHONEME: ErrorCodeInfo(
+        "espeak-ng spoke a phoneme (details.phoneme, in details.lang) that the articulatory "
+        "feature table cannot read",
         "server",
         "request",
     ),

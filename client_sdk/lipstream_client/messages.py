@@ -227,7 +227,9 @@ class AudioChunk:
 class Text:
     """Text for the server to speak as request ``id``'s next input, instead of phonemes.
 
-    The server speaks it with espeak-ng (``voice``, ``rate`` in words per minute;
+    The server speaks it with espeak-ng (``lang``: an espeak-ng language such as
+    ``de`` or ``cmn``, and then ``voice`` a voice variant such as ``f3``; without
+    ``lang``, ``voice`` is a whole espeak-ng voice name; ``rate`` in words per minute;
     None: the server's defaults) from the end of the request's input so far, sends
     the speech back as ``AudioChunk``s with their ``start``, and feeds the engine
     the phonemes espeak-ng spoke.
@@ -240,6 +242,7 @@ class Text:
     text: str
     voice: str | None = None
     rate: int | None = None
+    lang: str | None = None
 
 
 TIMING_FORMATS: tuple[str, ...] = ("auto", "words", "elevenlabs", "azure", "polly", "ipa")

@@ -15,6 +15,7 @@ stay ``OSError``. Loopback addresses bypass any configured proxy.
 
 from __future__ import annotations
 
+import base64
 import json
 import urllib.error
 import urllib.request
@@ -41,6 +42,7 @@ from .messages import (
     Phonemes,
     Ready,
     Start,
+    Text,
 )
 from .wire import message_to_wire
 
@@ -93,6 +95,8 @@ class Synthesis:
     ready: Ready
     frames: Frames
     stats: DoneStats
+    speech: tuple[bytes, int] | None = None
+    """A text request's speech: (PCM16 little-endian mono bytes, sample rate Hz)."""
 
     @property
     def channels(self) -> tuple[str, ...]:
@@ -197,7 +201,43 @@ class RestClient:
         parts: list[Message] = [start, Phonemes(SYNTHESIZE_ID, phoneme_items(items))]
         if audio is not None:
             parts.append(AudioChunk(SYNTHESIZE_ID, audio[1], bytes(audio[0])))
-        body = _synthesize_body(parts, encoding)
+        return self._post_synthesize(_synthesize_body(parts, encoding), encoding)
+
+    def synthesize_text(
+        self,
+        engine: str,
+        character: str,
+        text: str,
+        *,
+        lang: str | None = None,
+        voice: str | None = None,
+        rate: int | None = None,
+        fps: float = DEFAULT_FPS,
+        channels: Sequence[str] | None = None,
+        output: OutputProfile | None = None,
+        emotion: str | None = None,
+        latency_budget_ms: float | None = None,
+        options: JsonMap | None = None,
+        encoding: Encoding = "msgpack",
+    ) -> Synthesis:
+        """``POST /v1/synthesize`` with ``text`` for the server to speak (espeak-ng language
+        ``lang``, ``voice``, ``rate`` as for ``Stream.send_text``): the frames and the
+        speech (``Synthesis.speech``). Errors as for ``synthesize``."""
+        start = Start(
+            SYNTHESIZE_ID,
+            engine,
+            character,
+            fps,
+            tuple(channels) if channels is not None else None,
+            output,
+            emotion,
+            latency_budget_ms,
+            dict(options or {}),
+        )
+        parts: list[Message] = [start, Text(SYNTHESIZE_ID, text, voice, rate, lang)]
+        return self._post_synthesize(_synthesize_body(parts, encoding), encoding)
+
+    def _post_synthesize(self, body: bytes, encoding: Encoding) -> Synthesis:
         media = _MEDIA_TYPES[encoding]
         request = urllib.request.Request(
             self.root + "/v1/synthesize",
@@ -247,7 +287,8 @@ class RestClient:
 
 
 def _synthesize_body(parts: list[Message], encoding: Encoding) -> bytes:
-    """One map: the start's fields, ``items`` and ``audio``, each validated by the codec."""
+    """One map: the start's fields, ``items`` and ``audio`` or the text's fields, each
+    validated by the codec."""
     body: dict[str, Any] = {}
     for message in parts:
         encode(message, encoding)  # EncodeError for what the protocol refuses
@@ -298,6 +339,7 @@ def _synthesis(answer: Any) -> Synthesis:
         stats = answer["stats"]
         done = DoneStats(int(stats["frames"]), engine=stats.get("engine") or {})
         frames = Frames(SYNTHESIZE_ID, 0, int(answer.get("first_frame", 0)), fps, width, data)
+        speech = _speech(answer.get("speech"))
     except (KeyError, TypeError, ValueError, OverflowError) as error:
         raise LipstreamClientError(f"unexpected /v1/synthesize answer: {error!r}") from None
     if len(data) != frames.n_frames * width * 4 or frames.n_frames != answer.get("n_frames"):
@@ -305,7 +347,16 @@ def _synthesis(answer: Any) -> Synthesis:
             "the /v1/synthesize answer's data does not hold "
             f"{answer.get('n_frames')} rows of {width} float32"
         )
-    return Synthesis(ready, frames, done)
+    return Synthesis(ready, frames, done, speech)
+
+
+def _speech(field: Any) -> tuple[bytes, int] | None:
+    if field is None:
+        return None
+    pcm = field["pcm16"]
+    if not isinstance(pcm, bytes):
+        pcm = base64.b64decode(pcm, validate=True)
+    return pcm, int(field["sample_rate"])
 
 
 def _server_error(error: HttpError, encoding: Encoding) -> LipstreamClientError:

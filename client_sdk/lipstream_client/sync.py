@@ -112,9 +112,15 @@ class SyncStream:
     def send_audio(self, pcm16: bytes | bytearray | memoryview, sample_rate: int) -> None:
         self._client._run(self._stream.send_audio(bytes(pcm16), sample_rate))
 
-    def send_text(self, text: str, voice: str | None = None, rate: int | None = None) -> None:
+    def send_text(
+        self,
+        text: str,
+        voice: str | None = None,
+        rate: int | None = None,
+        lang: str | None = None,
+    ) -> None:
         """Have the server speak ``text`` as the next input (see ``Stream.send_text``)."""
-        self._client._run(self._stream.send_text(text, voice, rate))
+        self._client._run(self._stream.send_text(text, voice, rate, lang))
 
     def send_words(
         self,

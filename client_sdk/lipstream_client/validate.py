@@ -343,7 +343,7 @@ def _audio(payload: Mapping[str, Any], encoding: Encoding) -> AudioChunk:
 
 
 def _text(payload: Mapping[str, Any], encoding: Encoding) -> Text:
-    obj = _object(payload, ("id", "text"), ("voice", "rate"))
+    obj = _object(payload, ("id", "text"), ("voice", "rate", "lang"))
     identifier = _id(obj)
     text = obj["text"]
     if not isinstance(text, str):
@@ -359,7 +359,12 @@ def _text(payload: Mapping[str, Any], encoding: Encoding) -> Text:
         if present(obj, "rate")
         else None
     )
-    return Text(identifier, text, voice, rate)
+    lang = (
+        read_text(obj["lang"], "lang", MAX_VOICE_LENGTH, pattern=_VOICE)
+        if present(obj, "lang")
+        else None
+    )
+    return Text(identifier, text, voice, rate, lang)
 
 
 def _words(payload: Mapping[str, Any], encoding: Encoding) -> Words:

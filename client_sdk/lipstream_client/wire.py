@@ -122,7 +122,13 @@ def _audio(message: AudioChunk, encoding: Encoding) -> Payload:
 
 def _text(message: Text, encoding: Encoding) -> Payload:
     return _compact(
-        {"id": message.id, "text": message.text, "voice": message.voice, "rate": message.rate}
+        {
+            "id": message.id,
+            "text": message.text,
+            "voice": message.voice,
+            "rate": message.rate,
+            "lang": message.lang,
+        }
     )
 
 

@@ -98,7 +98,7 @@ def _synth(args: argparse.Namespace, settings: Settings) -> None:
         from .speech.text_frontend import speak_text
 
         _check_text_options(args)
-        spoken = speak_text(args.text, args.voice, args.rate)
+        spoken = speak_text(args.text, args.voice, args.rate, lang=args.lang)
         spans, audio = spoken.spans, spoken.audio
         if args.wav:
             write_wav(Path(args.wav), spoken.audio)
@@ -140,7 +140,8 @@ def _check_text_options(args: argparse.Namespace) -> None:
 
 
 def _check_phones_options(args: argparse.Namespace) -> None:
-    for option, value in (("--wav", args.wav), ("--voice", args.voice), ("--rate", args.rate)):
+    options = (("--wav", args.wav), ("--voice", args.voice), ("--rate", args.rate))
+    for option, value in (*options, ("--lang", args.lang)):
         if value is not None:
             raise LipstreamError(f"{option} goes with --text", where=option, code="invalid_request")
 
@@ -530,7 +531,15 @@ def _parser() -> argparse.ArgumentParser:
     )
     synth.add_argument("--audio", help="mono WAV of the speech, for engines that use audio")
     synth.add_argument("--wav", help="with --text: write espeak-ng's speech to this WAV file")
-    synth.add_argument("--voice", help="with --text or --words: espeak-ng voice (default en-us)")
+    synth.add_argument(
+        "--lang",
+        help="with --text: espeak-ng language (de, fr-fr, cmn, ...; docs/reference/languages.md)",
+    )
+    synth.add_argument(
+        "--voice",
+        help="with --text or --words: espeak-ng voice (default en-us); with --lang, a variant"
+        " (f3, m1)",
+    )
     synth.add_argument(
         "--rate", type=int, help="with --text: words per minute, 80-450 (default 175)"
     )

@@ -31,6 +31,17 @@ class UnknownPhonemeError(LipstreamError):
     code = "unknown_phoneme"
 
 
+class UnmappedPhonemeError(UnknownPhonemeError):
+    """A phoneme of language ``lang`` that no table of the phoneme set reads."""
+
+    code = "unmapped_phoneme"
+
+    def __init__(self, message: str, *, phoneme: str, lang: str, where: str | None = None) -> None:
+        self.phoneme = phoneme
+        self.lang = lang
+        super().__init__(message, where=where)
+
+
 class CorpusError(LipstreamError):
     code = "corpus_invalid"
 

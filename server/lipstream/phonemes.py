@@ -6,6 +6,8 @@ Each supported notation ("source") is a reader: a table lookup after the
 notation's own clean-up (stress digits for ARPAbet, glued stress marks for
 espeak-ng, diacritics for IPA). Allophones with no ARPAbet symbol go to the
 phoneme whose mouth shape they share (a flap to D, a closure to its stop).
+IPA the English table lacks (any language's) goes to the phoneme nearest by
+articulatory features (``frontends.nearest_phoneme``).
 ``source="auto"`` tries readers in a fixed order and takes the first match.
 The tables, with the reasons for every judgement call, are in
 ``docs/reference/phonemes.md``.
@@ -20,6 +22,8 @@ from functools import cache, lru_cache
 from types import MappingProxyType
 
 from .errors import LipstreamError, UnknownPhonemeError
+from .frontends.ipa_segments import UnreadableSymbol
+from .frontends.nearest_phoneme import nearest_phoneme, phonemes_by_features
 
 ARPABET: tuple[str, ...] = (
     "AA", "AE", "AH", "AO", "AW", "AY", "B", "CH", "D", "DH", "EH", "ER", "EY", "F", "G",
@@ -221,13 +225,38 @@ def _ipa_base(text: str) -> str:
     return "".join(c for c in text if c not in _IPA_MODIFIERS and not unicodedata.combining(c))
 
 
-def _read_ipa(label: str) -> str | None:
+def _read_ipa_table(label: str) -> str | None:
+    """The English IPA table's judgement for ``label``, if it has one."""
     if label == SILENCE:
         return SILENCE
     text = "".join(c for c in _nfd(label) if c not in _IPA_IGNORED)
     if not text:
         return None
     return _IPA_LOOKUP.get(text) or _IPA_LOOKUP.get(_ipa_base(text))
+
+
+def _read_ipa(label: str) -> str | None:
+    table = _read_ipa_table(label)
+    if table is not None:
+        return table
+    try:
+        return nearest_phoneme(label)
+    except UnreadableSymbol:
+        return None
+
+
+def ipa_phonemes(label: str, where: str | None = None) -> tuple[str, ...]:
+    """The phonemes an IPA ``label`` of any language holds, in order: the English table's
+    one, else one per segment by articulatory features (a diphthong one for two vowels);
+    ``()`` for a label of marks alone (a bare length mark). Raises ``UnknownPhonemeError``
+    naming the symbol no table knows."""
+    table = _read_ipa_table(label)
+    if table is not None:
+        return (table,)
+    try:
+        return phonemes_by_features(label)
+    except UnreadableSymbol as exc:
+        raise UnknownPhonemeError(str(exc), where=where) from None
 
 
 # In "auto", ARPAbet is read first and case-insensitively, so espeak's

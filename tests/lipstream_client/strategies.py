@@ -163,6 +163,7 @@ texts = st.builds(
     text=st.text(_UNICODE, max_size=80),
     voice=st.none() | st.from_regex(r"[A-Za-z0-9_.+-]{1,64}", fullmatch=True),
     rate=st.none() | st.integers(MIN_RATE_WPM, MAX_RATE_WPM),
+    lang=st.none() | st.from_regex(r"[A-Za-z0-9_.+-]{1,64}", fullmatch=True),
 )
 words_messages = st.builds(
     Words,

@@ -765,7 +765,76 @@ def first_start(bench: Bench) -> str:
     return text
 
 
+LANGUAGES = "languages.json"
+
+
+def _languages_doc(bench: Bench) -> Any | None:
+    return bench.load(LANGUAGES) if bench.exists(LANGUAGES) else None
+
+
+def languages(bench: Bench) -> str:
+    """Each espeak-ng language: its voice, the phonemes its sample holds, whether all map."""
+    doc = _languages_doc(bench)
+    if doc is None:
+        return (
+            f"Not measured yet: no `bench/{LANGUAGES}` (`python -m lipstream.bench.languages`).\n"
+        )
+    served = set(doc.get("served", []))
+    rows = []
+    for row in doc["languages"]:
+        if "error" in row:
+            rows.append(
+                [f"`{row['code']}`", row["title"], "", "", f"not spoken: {row['error']}", ""]
+            )
+            continue
+        unmapped = ", ".join(f"`{name}`" for name in row["unmapped"])
+        rows.append([
+            f"`{row['code']}`",
+            row["title"] + (" (sentence)" if row["sample"] else ""),
+            f"`{row['file']}`",
+            str(len(row["phonemes"]) + len(row["unmapped"])),
+            "yes" if row["maps_fully"] else f"no: {unmapped}",
+            "tested" if row["code"] in served else "",
+        ])  # fmt: skip
+    fully = sum(1 for row in doc["languages"] if row.get("maps_fully"))
+    header = (
+        f"{doc.get('espeak_ng', 'espeak-ng')}: {fully} of {len(doc['languages'])} languages "
+        f"map fully. Sample: the numbers `{doc['numbers']}`, plus a sentence where marked.\n\n"
+    )
+    return (
+        bench.source(LANGUAGES, doc)
+        + header
+        + table(
+            ["lang", "language", "espeak-ng voice", "phonemes", "maps fully", "end to end"], rows
+        )
+    )
+
+
+def _code(text: str) -> str:
+    return f"`` {text} ``" if "`" in text else f"`{text}`"
+
+
+def language_phonemes(bench: Bench) -> str:
+    """Every phoneme name the survey met, its IPA, the phonemes it maps to, its languages."""
+    doc = _languages_doc(bench)
+    if doc is None:
+        return f"Not measured yet: no `bench/{LANGUAGES}`.\n"
+    speakers: dict[tuple[str, str], list[str]] = {}
+    for row in doc["languages"]:
+        for name in row.get("phonemes", []):
+            speakers.setdefault((row["names"], name), []).append(row["code"])
+    rows = []
+    for (names, name), codes in sorted(speakers.items()):
+        entry = doc["phonemes"][names][name]
+        ipa, mapped = entry["ipa"], " ".join(entry["maps_to"]) or "(lengthens the phoneme before)"
+        shown = ", ".join(codes[:8]) + (f" and {len(codes) - 8} more" if len(codes) > 8 else "")
+        rows.append([_code(name), names, _code(ipa), mapped, shown])
+    return table(["espeak-ng name", "names", "as IPA", "phonemes", "languages"], rows)
+
+
 BLOCKS: dict[str, Callable[[Bench], str]] = {
+    "languages": languages,
+    "language-phonemes": language_phonemes,
     "first-start-summary": first_start_summary,
     "first-start": first_start,
     "engines-summary": engines_summary,

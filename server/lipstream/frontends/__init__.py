@@ -1,11 +1,17 @@
-"""Front ends: what speech engines give (word, character, viseme or phoneme timings) to
-phoneme spans.
+"""Front ends: what speech engines give (text, word, character, viseme or phoneme timings,
+IPA in any language) as phoneme spans.
 
-Sketch: a timing file or message is parsed by its format (``formats``) into one common
-type, ``timings.SpeechTimings``, whose times are checked once (``timing_checks``). Words
-get their phonemes from a lexicon (``lexicon``: CMUdict, espeak-ng for the rest), a
-duration model trained on a corpus's phone alignments (``word_durations``) spreads them
-over each word's time (``spreading``), pauses between words become silence, and viseme-
-only input becomes spans of a representative phoneme (``viseme_spans``).
-``words_to_spans.timings_to_spans`` runs the steps.
+Sketch: each module is one step. Timings: a timing file or message is parsed by its format
+(``formats``) into one common type, ``timings.SpeechTimings``, whose times are checked
+once (``timing_checks``). Words get their phonemes from a lexicon (``lexicon``: CMUdict,
+espeak-ng for the rest), a duration model trained on a corpus's phone alignments
+(``word_durations``) spreads them over each word's time (``spreading``), pauses between
+words become silence, and viseme-only input becomes spans of a representative phoneme
+(``viseme_spans``); ``words_to_spans.timings_to_spans`` runs the steps. Languages:
+``ipa_features`` describes IPA symbols by their articulation, ``phoneme_prototypes``
+describes the phoneme set the same way, ``ipa_segments`` reads a label into segments,
+``nearest_phoneme`` maps each segment to the phoneme nearest by features, ``espeak_ipa``
+reads espeak-ng's phoneme names as IPA, and ``espeak_languages`` names the languages and
+voice variants espeak-ng speaks (``lipstream.bench.languages`` surveys which of them map
+fully).
 """

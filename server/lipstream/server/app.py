@@ -9,7 +9,7 @@ protocol answers ``GET /healthz`` itself, before the app: ``handshake``).
 The lifespan also starts the load monitor that admission follows
 (``overload``), throttles repeated log lines (``log_throttle``) and logs
 the limits in force. Routes:
-``/healthz``, ``/readyz``, ``/v1/engines``, ``/v1/characters``,
+``/healthz``, ``/readyz``, ``/v1/engines``, ``/v1/characters``, ``/v1/languages``,
 ``POST /v1/synthesize``, ``GET /metrics``, the WebSocket ``/v1/stream``, the
 ``expressive-dp`` phoneme-map and contamination routes (``phoneme_maps``) and
 the OpenAPI docs (``/docs``, served with its assets so it works offline,
@@ -36,6 +36,7 @@ from .._version import __version__
 from ..config import ServerSettings, load_server_settings
 from ..engines import ENGINES
 from ..errors import LipstreamError
+from ..frontends.espeak_languages import espeak_languages, espeak_variants
 from ..models import ModelRegistry
 from ..status import Heartbeat, Report, phase
 from . import demo_page, docs_page, openapi, phoneme_maps, vrm_page
@@ -282,6 +283,16 @@ def create_app(
             "failed_models": registry.failure_report(),
         }
 
+    @app.get("/v1/languages", summary="List espeak-ng's languages", operation_id="list_languages")
+    async def languages() -> JSONResponse:
+        """The languages a ``text`` may name (``lang``) and the voice variants (``voice``)."""
+        try:
+            listed = await asyncio.get_running_loop().run_in_executor(None, _languages)
+        except LipstreamError as error:
+            content = {"code": error.code, "message": error.message}
+            return JSONResponse({"error": content}, status_code=503)
+        return JSONResponse(listed)
+
     @app.post(
         "/v1/synthesize",
         summary="Synthesize a whole utterance",
@@ -311,6 +322,16 @@ def create_app(
     phoneme_maps.install(app)
 
     return app
+
+
+def _languages() -> dict[str, Any]:
+    """espeak-ng's languages and voice variants (read once per process)."""
+    return {
+        "languages": [
+            {"lang": language.code, "name": language.title} for language in espeak_languages()
+        ],
+        "variants": list(espeak_variants()),
+    }
 
 
 def _lane_waits(metrics: Metrics, lane: str) -> Callable[[Hashable, int], None]:

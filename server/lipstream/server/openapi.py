@@ -2,11 +2,12 @@
 
 Sketch: the request body's schema is the ``start`` message's properties
 (without ``v``, ``type`` and ``id``), plus the ``phonemes`` message's
-``items`` or a ``words`` object with the ``words`` message's fields, and an
-``audio`` object with the ``audio`` message's ``sample_rate`` and ``pcm16``.
-Their ``#/$defs/X`` references move to ``#/components/schemas/lipstream_X``, so
-the schemas shipped with the client SDK stay the single source. The response and
-error bodies are described by hand here, as they are not protocol messages.
+``items`` or a ``words`` object with the ``words`` message's fields, each with an
+``audio`` object with the ``audio`` message's ``sample_rate`` and ``pcm16``, or instead
+the ``text`` message's ``text``, ``lang``, ``voice`` and ``rate``. Their ``#/$defs/X``
+references move to ``#/components/schemas/lipstream_X``, so the schemas shipped with the
+client SDK stay the single source. The response and error bodies are described by hand
+here, as they are not protocol messages.
 """
 
 from __future__ import annotations
@@ -41,11 +42,11 @@ def _moved(node: Any) -> Any:
 
 def components() -> dict[str, Any]:
     """``components.schemas`` entries: every protocol definition and the three bodies."""
-    start, phonemes, audio, words = (
-        load_schema(kind) for kind in ("start", "phonemes", "audio", "words")
+    start, phonemes, audio, words, text = (
+        load_schema(kind) for kind in ("start", "phonemes", "audio", "words", "text")
     )
     schemas: dict[str, Any] = {}
-    for schema in (start, phonemes, audio, words):
+    for schema in (start, phonemes, audio, words, text):
         schemas.update(
             {PREFIX + name: _moved(value) for name, value in schema.get("$defs", {}).items()}
         )
@@ -71,14 +72,36 @@ def components() -> dict[str, Any]:
         "description": "Optional speech audio for engines that use it (PCM16 mono; bin in "
         "msgpack, base64 in JSON).",
     }
+    for key in ("text", "lang", "voice", "rate"):
+        properties[key] = _moved(text["properties"][key])
     schemas[PREFIX + "SynthesizeRequest"] = {
         "type": "object",
         "additionalProperties": False,
         "required": ["engine", "character"],
-        "oneOf": [{"required": ["items"]}, {"required": ["words"]}],
+        "oneOf": [
+            {
+                "required": ["items"],
+                "not": {"anyOf": [{"required": ["words"]}, {"required": ["text"]}]},
+            },
+            {
+                "required": ["words"],
+                "not": {"anyOf": [{"required": ["items"]}, {"required": ["text"]}]},
+            },
+            {
+                "required": ["text"],
+                "not": {
+                    "anyOf": [
+                        {"required": ["items"]},
+                        {"required": ["words"]},
+                        {"required": ["audio"]},
+                    ]
+                },
+            },
+        ],
         "properties": properties,
-        "description": "A start message's fields, the utterance's phonemes (or a TTS's "
-        "timings) and optional audio.",
+        "description": "A start message's fields, then the utterance's phonemes (or a TTS's "
+        "timings) and optional audio, or a text for espeak-ng to speak (in lang, with voice "
+        "and rate).",
     }
     schemas[PREFIX + "SynthesizeResponse"] = _response_schema()
     schemas[PREFIX + "Error"] = _error_schema()
@@ -126,6 +149,13 @@ def _response_schema() -> dict[str, Any]:
             "stats": {
                 "type": "object",
                 "properties": {"frames": {"type": "integer"}, "engine": {"type": "object"}},
+            },
+            "speech": {
+                "type": "object",
+                "required": ["sample_rate", "pcm16"],
+                "properties": {"sample_rate": {"type": "integer"}, "pcm16": {}},
+                "description": "a text request's speech, whole: PCM16 mono (bin in msgpack, "
+                "base64 in JSON), frame i at i / fps on its clock",
             },
         },
         "description": "ready's resolved parameters, every frame, and done's stats.",

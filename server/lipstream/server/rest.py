@@ -1,13 +1,15 @@
 """``POST /v1/synthesize``: a whole utterance in, all its frames out, through the stream's code.
 
 Sketch: the body, JSON or msgpack by ``Content-Type``, holds the fields of a
-``start`` message plus ``items`` (its phonemes, as in ``phonemes``) or ``words`` (a
-TTS's timings: the fields of a ``words`` message, ``{timings, format, offset, voice}``)
-and an optional ``audio`` (``{sample_rate, pcm16}`` as in ``audio``). The protocol
+``start`` message plus one input: ``items`` (its phonemes, as in ``phonemes``) or
+``words`` (a TTS's timings: the fields of a ``words`` message, ``{timings, format,
+offset, voice}``), each with an optional ``audio`` (``{sample_rate, pcm16}`` as in
+``audio``), or instead the fields of a ``text`` message (``text``, ``lang``, ``voice``,
+``rate``), whose speech the answer carries as ``speech``. The protocol
 codec parses it, it is split into those protocol messages, each validated by
 the codec as parsed (never re-encoded, so a number that overflows to infinity
 is the codec's error, not a fault), and played
-through a fresh ``Session`` (start, audio, phonemes, end) in the synthesis
+through a fresh ``Session`` (start, audio, phonemes or text, end) in the synthesis
 thread pool. So the frames equal, value for value, what ``/v1/stream``
 sends for the same request, since engines give the same frames for any
 chunking of the input. The response, msgpack or JSON by ``Accept`` (default:
@@ -41,11 +43,12 @@ is refused before its body is read, with 503 ``server_busy``,
 from __future__ import annotations
 
 import asyncio
+import base64
 import json
 import math
 import time
 from collections.abc import AsyncIterator, Callable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 import msgpack
@@ -55,6 +58,7 @@ from starlette.responses import Response, StreamingResponse
 from starlette.types import Receive, Scope, Send
 
 from lipstream_client import (
+    AudioChunk,
     Done,
     Encoding,
     End,
@@ -92,7 +96,8 @@ START_FIELDS = (
     "options",
     "phoneme_source",
 )
-BODY_FIELDS = (*START_FIELDS, "items", "words", "audio")
+TEXT_FIELDS = ("text", "lang", "voice", "rate")
+BODY_FIELDS = (*START_FIELDS, "items", "words", "audio", *TEXT_FIELDS)
 MEDIA_TYPES: dict[str, Encoding] = {
     "application/json": "json",
     "application/msgpack": "msgpack",
@@ -153,6 +158,7 @@ class Synthesis:
     ready: Ready
     frames: np.ndarray
     done: Done
+    speech: list[AudioChunk] = field(default_factory=list)
 
 
 async def synthesize(request: Request, state: ServerState) -> Response:
@@ -194,7 +200,7 @@ def _answer(messages: list[Message], state: ServerState, encoding: ResponseForma
     result = _run(messages, state)
     if encoding == "csv":
         return frames_csv_text(result.frames, result.ready.channels, result.ready.fps).encode()
-    body = _fields(result)
+    body = _fields(result, "msgpack")
     body["data"] = np.ascontiguousarray(result.frames, dtype="<f4").tobytes()
     packed: bytes = msgpack.packb(body, use_bin_type=True)
     return packed
@@ -283,11 +289,21 @@ def _parse(body: bytes, encoding: Encoding) -> dict[str, Any]:
             INVALID_MESSAGE,
             f"unknown field(s) {', '.join(unknown)}; expected {', '.join(BODY_FIELDS)}",
         )
-    if ("items" in parsed) == ("words" in parsed):
+    inputs = [key for key in ("items", "words", "text") if key in parsed]
+    if len(inputs) != 1:
         raise HttpError(
             INVALID_MESSAGE,
-            "items or words: give exactly one (the utterance's phonemes, or a TTS's timings)",
+            "items, words or text: give exactly one (the utterance's phonemes, a TTS's "
+            "timings, or a text for espeak-ng to speak)",
         )
+    if "text" in parsed and "audio" in parsed:
+        raise HttpError(
+            INVALID_MESSAGE, "audio: goes with phonemes; with text the speech is espeak-ng's"
+        )
+    if "text" not in parsed:
+        given = [key for key in TEXT_FIELDS if key in parsed]
+        if given:
+            raise HttpError(INVALID_MESSAGE, f"{given[0]}: goes with text, not with {inputs[0]}")
     return parsed
 
 
@@ -305,6 +321,8 @@ def _messages(body: dict[str, Any], encoding: Encoding) -> list[Message]:
         if not isinstance(words, dict):
             raise HttpError(INVALID_MESSAGE, "words: must be an object {timings, format, ...}")
         parts.append(("words", words))
+    elif "text" in body:
+        parts.append(("text", {key: body[key] for key in TEXT_FIELDS if key in body}))
     else:
         parts.append(("phonemes", {"items": body["items"]}))
     return [_decoded(kind, fields, encoding) for kind, fields in parts] + [End(REQUEST_ID)]
@@ -332,6 +350,7 @@ def _run(messages: list[Message], state: ServerState) -> Synthesis:
     ready: Ready | None = None
     done: Done | None = None
     blocks: list[np.ndarray] = []
+    speech: list[AudioChunk] = []
     try:
         for message in messages:
             for outgoing in session.handle(message, time.monotonic()):
@@ -344,13 +363,15 @@ def _run(messages: list[Message], state: ServerState) -> Synthesis:
                     blocks.append(np.frombuffer(answer.data, "<f4").reshape(-1, answer.n_channels))
                 elif isinstance(answer, Done):
                     done = answer
+                elif isinstance(answer, AudioChunk):
+                    speech.append(answer)
     finally:
         session.close()  # releases what the request held of its input
     if ready is None or done is None:
         raise HttpError(INTERNAL_ERROR, "the synthesis did not complete")
     width = len(ready.channels)
     frames = np.concatenate(blocks) if blocks else np.zeros((0, width), dtype="<f4")
-    return Synthesis(ready, frames, done)
+    return Synthesis(ready, frames, done, speech)
 
 
 class HeldAnswer(StreamingResponse):
@@ -397,7 +418,9 @@ async def _json_pieces(result: Synthesis, state: ServerState) -> AsyncIterator[b
     ``JSON_CHUNK_VALUES`` numbers at a time (each encoded in the pool), then ``]}``."""
     loop = asyncio.get_running_loop()
     frames = result.frames
-    head = json.dumps({**_fields(result), "data": []}, allow_nan=False, separators=JSON_SEPARATORS)
+    head = json.dumps(
+        {**_fields(result, "json"), "data": []}, allow_nan=False, separators=JSON_SEPARATORS
+    )
     yield head[: -len("]}")].encode()
     rows = max(1, JSON_CHUNK_VALUES // max(1, frames.shape[1]))
     for start in range(0, len(frames), rows):
@@ -413,8 +436,20 @@ def _json_rows(frames: np.ndarray) -> bytes:
     return json.dumps(rows, allow_nan=False, separators=JSON_SEPARATORS)[1:-1].encode()
 
 
-def _fields(result: Synthesis) -> dict[str, Any]:
-    """The answer's fields before ``data``: ``ready``'s parameters and ``done``'s stats."""
+def _speech(result: Synthesis, encoding: Encoding) -> dict[str, Any] | None:
+    """A text request's speech, whole: ``{sample_rate, pcm16}`` (base64 in JSON)."""
+    if not result.speech:
+        return None
+    pcm = b"".join(chunk.pcm16 for chunk in result.speech)
+    return {
+        "sample_rate": result.speech[0].sample_rate,
+        "pcm16": pcm if encoding == "msgpack" else base64.b64encode(pcm).decode("ascii"),
+    }
+
+
+def _fields(result: Synthesis, encoding: Encoding) -> dict[str, Any]:
+    """The answer's fields before ``data``: ``ready``'s parameters, ``done``'s stats and a
+    text request's ``speech``."""
     ready, frames = result.ready, result.frames
     body: dict[str, Any] = {
         "engine": ready.engine,
@@ -431,6 +466,7 @@ def _fields(result: Synthesis) -> dict[str, Any]:
         "n_frames": len(frames),
         "n_channels": len(ready.channels),
         "stats": {"frames": result.done.stats.frames, "engine": dict(result.done.stats.engine)},
+        "speech": _speech(result, encoding),
     }
     return {key: value for key, value in body.items() if value is not None}
 

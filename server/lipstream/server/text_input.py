@@ -20,9 +20,10 @@ import numpy as np
 
 from lipstream_client import AudioChunk, Text
 from lipstream_client.errors import TEXT_TOO_LONG
+from lipstream_client.messages import JsonValue
 
 from ..audio import Audio
-from ..errors import LipstreamError
+from ..errors import LipstreamError, UnmappedPhonemeError
 from ..speech.text_frontend import MAX_TEXT_CHARS, SpokenText, speak_text
 from ..timeline import PhonemeSpan
 from .outgoing import Outgoing
@@ -35,9 +36,13 @@ _PCM16_BYTES = 2
 def speak(message: Text) -> SpokenText:
     """espeak-ng's speech for ``message``; a ``RequestError`` with the front end's code."""
     try:
-        return speak_text(message.text, message.voice, message.rate)
+        return speak_text(message.text, message.voice, message.rate, lang=message.lang)
     except LipstreamError as error:
-        details = {"max_text_chars": MAX_TEXT_CHARS} if error.code == TEXT_TOO_LONG else None
+        details: dict[str, JsonValue] | None = None
+        if error.code == TEXT_TOO_LONG:
+            details = {"max_text_chars": MAX_TEXT_CHARS}
+        elif isinstance(error, UnmappedPhonemeError):
+            details = {"phoneme": error.phoneme, "lang": error.lang}
         raise RequestError(
             error.message, code=error.code, where=error.where, details=details
         ) from None

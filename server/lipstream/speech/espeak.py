@@ -4,7 +4,12 @@ Sketch: ``libespeak`` speaks and reports (phoneme name, start ms) events;
 each event starts a phoneme that lasts until the next event, and the last
 one lasts until the end of the audio. Pause phonemes
 (``_``, ``_:``, ...) and any gap before the first phoneme become ``sil``; the
-other names go through ``normalize_phoneme(name, source="espeak")``.
+other names go through a reader: by default ``normalize_phoneme(name,
+source="espeak")`` (English mnemonics), or, for IPA names of any language,
+``frontends.espeak_ipa.ipa_event_phonemes``. An event the reader makes
+several phonemes (Mandarin ``ong``) shares its time equally among them; one
+it makes none (a language switch, a bare length mark) lets the phoneme
+before it go on.
 
 libespeak-ng keeps global state and is not reentrant, so the process holds one
 library handle behind one lock; an ``EspeakSynthesizer`` is only a voice setting
@@ -15,7 +20,7 @@ must survive a crash of the library speak in a worker process instead
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from ..audio import Audio
@@ -24,6 +29,9 @@ from ..phonemes import SILENCE, normalize_phoneme
 from ..timeline import PhonemeSpan
 from . import libespeak
 from .libespeak import EspeakFailure, RawSpeech
+
+EventReader = Callable[[str, str], tuple[str, ...]]
+"""(espeak-ng phoneme name, where) -> the phonemes of the set it holds, in order."""
 
 RATE_RANGE_WPM = (80, 450)
 PITCH_RANGE = (0, 100)
@@ -115,21 +123,29 @@ def check_text(text: str) -> None:
 
 
 def speech_result(
-    text: str, pcm: bytes, sample_rate: int, events: Sequence[tuple[str, int]]
+    text: str,
+    pcm: bytes,
+    sample_rate: int,
+    events: Sequence[tuple[str, int]],
+    read: EventReader | None = None,
 ) -> tuple[Audio, list[PhonemeSpan]]:
-    """Audio and contiguous spans from espeak-ng's raw output for ``text``."""
+    """Audio and contiguous spans from espeak-ng's raw output for ``text`` (``read``:
+    how event names become phonemes; default English mnemonics)."""
     audio = Audio.from_pcm16(pcm, sample_rate)
     if audio.duration <= 0 or not events:
         raise SpeechError(f"espeak-ng produced no speech for {text!r}", where="speak")
     starts = [(name, position_ms / 1000.0) for name, position_ms in events]
-    return audio, phoneme_spans(starts, audio.duration, where=f"speak({text!r})")
+    return audio, phoneme_spans(starts, audio.duration, where=f"speak({text!r})", read=read)
 
 
-def _label(name: str, where: str) -> str:
+def read_mnemonic(name: str, where: str) -> tuple[str, ...]:
+    """An English mnemonic event's phoneme; pauses are silence, a language switch none."""
     if not name or name.startswith("_"):
-        return SILENCE
+        return (SILENCE,)
+    if name.startswith("(") and name.endswith(")"):
+        return ()
     try:
-        return normalize_phoneme(name, source="espeak", where=where)
+        return (normalize_phoneme(name, source="espeak", where=where),)
     except LipstreamError as exc:
         raise SpeechError(
             f"espeak-ng phoneme {name!r} has no ARPAbet label: {exc.message}", where=where
@@ -137,27 +153,48 @@ def _label(name: str, where: str) -> str:
 
 
 def phoneme_spans(
-    events: Sequence[tuple[str, float]], duration_s: float, *, where: str = "espeak"
+    events: Sequence[tuple[str, float]],
+    duration_s: float,
+    *,
+    where: str = "espeak",
+    read: EventReader | None = None,
 ) -> list[PhonemeSpan]:
     """Contiguous spans over [0, ``duration_s``] from (espeak name, start s) events.
 
-    Each event lasts until the next one; events past the end are dropped, a gap
-    before the first becomes silence, and touching silences merge.
+    Each event lasts until the next one that holds a phoneme; events past the
+    end are dropped, a gap before the first becomes silence, an event of several
+    phonemes shares its time equally, and touching repeats merge.
     """
-    ordered = sorted(events, key=lambda event: event[1])
+    reader = read or read_mnemonic
+    raw = sorted(events, key=lambda event: event[1])
+    raw_ends = [start for _, start in raw[1:]] + [duration_s]
+    ordered: list[tuple[tuple[str, ...], float]] = []
+    for (name, start), raw_end in zip(raw, raw_ends):
+        if min(raw_end, duration_s) <= start:
+            continue  # an instant (a language switch, or past the end) holds no phoneme
+        phonemes = reader(name, where)
+        if phonemes:
+            ordered.append((phonemes, start))
     spans: list[PhonemeSpan] = []
     starts = [min(max(start, 0.0), duration_s) for _, start in ordered]
     ends = starts[1:] + [duration_s]
     if starts and starts[0] > 0.0:
         spans.append(PhonemeSpan(SILENCE, 0.0, starts[0]))
-    for (name, _), start, end in zip(ordered, starts, ends):
+    for (phonemes, _), start, end in zip(ordered, starts, ends):
         if end <= start:
             continue
-        label = _label(name, where)
-        if spans and label == SILENCE and spans[-1].phoneme == SILENCE:
-            spans[-1] = PhonemeSpan(SILENCE, spans[-1].start, end)
-        else:
-            spans.append(PhonemeSpan(label, start, end))
+        step = (end - start) / len(phonemes)
+        for index, label in enumerate(phonemes):
+            piece_start = start + index * step
+            piece_end = end if index == len(phonemes) - 1 else start + (index + 1) * step
+            _append(spans, label, piece_start, piece_end)
     if not spans:
         return [PhonemeSpan(SILENCE, 0.0, duration_s)]
     return spans
+
+
+def _append(spans: list[PhonemeSpan], label: str, start: float, end: float) -> None:
+    if spans and label == SILENCE and spans[-1].phoneme == SILENCE:
+        spans[-1] = PhonemeSpan(SILENCE, spans[-1].start, end)
+    else:
+        spans.append(PhonemeSpan(label, start, end))

@@ -4,8 +4,10 @@ Sketch: libespeak-ng runs in synchronous mode with phoneme events switched on.
 One callback collects the PCM16 chunks, the ``espeakEVENT_PHONEME`` events
 (name, ``audio_position`` in ms) and the ``espeakEVENT_WORD`` events (the word's
 first character, 1-based, its length in characters, and ``audio_position``). The
-library keeps global state and is not reentrant, so a process holds one ``Library``
-behind one lock.
+phoneme names are espeak-ng's mnemonics, or, for a library made with ``ipa_names``
+(``espeakINITIALIZE_PHONEME_IPA``, an option of initialization only), their IPA: the
+notation every language shares. The library keeps global state and is not reentrant,
+so a process holds one ``Library`` behind one lock.
 
 This module imports nothing beyond the standard library, so that
 ``python -I libespeak.py`` starts in tens of milliseconds: that is the worker
@@ -30,6 +32,7 @@ LIBRARY_NAME = "libespeak-ng.so.1"
 
 _AUDIO_OUTPUT_SYNCHRONOUS = 2
 _INITIALIZE_PHONEME_EVENTS = 0x0001
+_INITIALIZE_PHONEME_IPA = 0x0002
 _CHARS_UTF8 = 1
 _POS_CHARACTER = 1
 _EVENT_LIST_TERMINATED = 0
@@ -91,9 +94,10 @@ class _Capture:
 
 
 class Library:
-    """The process-wide libespeak-ng handle; use it through ``speak`` (which locks)."""
+    """A libespeak-ng handle (one per process; phoneme names in IPA with ``ipa_names``);
+    use it through ``speak`` (which locks)."""
 
-    def __init__(self) -> None:
+    def __init__(self, ipa_names: bool = False) -> None:
         try:
             self._lib = ctypes.CDLL(LIBRARY_NAME)
         except OSError as exc:
@@ -101,8 +105,9 @@ class Library:
                 f"cannot load {LIBRARY_NAME} ({exc}); install the Debian package espeak-ng"
             ) from None
         self._declare_signatures()
+        options = _INITIALIZE_PHONEME_EVENTS | (_INITIALIZE_PHONEME_IPA if ipa_names else 0)
         sample_rate = self._lib.espeak_Initialize(
-            _AUDIO_OUTPUT_SYNCHRONOUS, _BUFFER_MS, None, _INITIALIZE_PHONEME_EVENTS
+            _AUDIO_OUTPUT_SYNCHRONOUS, _BUFFER_MS, None, options
         )
         if sample_rate <= 0:
             raise EspeakFailure(
@@ -206,7 +211,10 @@ def serve(requests: list[dict[str, Any]]) -> tuple[dict[str, Any], list[bytes]]:
     header: list[dict[str, Any]] = []
     pcm: list[bytes] = []
     try:
-        library = shared_library()
+        naming = {bool(request.get("ipa_names", False)) for request in requests}
+        if len(naming) > 1:
+            raise EspeakFailure("a batch must ask for one kind of phoneme names", "ipa_names")
+        library = Library(ipa_names=True) if naming == {True} else shared_library()
         for request in requests:
             audio, rate, events, words = library.speak_words(
                 str(request["voice"]),

@@ -30,13 +30,15 @@ TIMEOUT_PER_REQUEST_S = 5.0
 
 @dataclass(frozen=True)
 class SpeechRequest:
-    """One utterance for the worker: text and an espeak-ng voice setting."""
+    """One utterance for the worker: text and an espeak-ng voice setting; ``ipa_names``
+    asks for the phoneme events' names in IPA (the same for every request of a batch)."""
 
     text: str
     voice: str = "en-us"
     rate: int = 175
     pitch: int = 50
     pitch_range: int = 50
+    ipa_names: bool = False
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,7 @@ OPERATIONS = {
     ("/readyz", "get"): "readyz",
     ("/v1/engines", "get"): "list_engines",
     ("/v1/characters", "get"): "list_characters",
+    ("/v1/languages", "get"): "list_languages",
     ("/v1/synthesize", "post"): "synthesize",
     ("/metrics", "get"): "metrics",
     ("/v1/characters/{character}/phoneme-maps/{phoneme}", "get"): "get_phoneme_map",

@@ -34,10 +34,10 @@ def served(
         yield server
 
 
-def say(served: LiveServer, engine: str, text: str) -> StreamResult:
+def say(served: LiveServer, engine: str, text: str, lang: str | None = None) -> StreamResult:
     with Client(served.ws) as client:
         stream = client.start(engine, "demo", fps=FPS)
-        stream.send_text(text)
+        stream.send_text(text, lang=lang)
         stream.end()
         return stream.collect(timeout=60)
 
@@ -80,3 +80,23 @@ def test_text_with_no_options_plays_on_every_engine_and_ends_at_rest(
     assert np.array_equal(rows[-1], rest)
     settle = smoothstep_to(offline[-1].astype(np.float64), rest.astype(np.float64), SETTLE_FRAMES)
     assert np.allclose(rows[spoken_frames:], settle, atol=1e-5)
+
+
+@pytest.mark.parametrize("engine", engine_names())
+def test_text_in_another_language_plays_on_every_engine(
+    served: LiveServer, trained_models: dict[str, Model], engine: str
+) -> None:
+    text, lang = "Schöne Grüße aus München!", "de"
+    result = say(served, engine, text, lang)
+    spoken = speak_text(text, lang=lang)
+    spoken_frames = frame_count(len(spoken.pcm16) / 2 / spoken.sample_rate, FPS)
+    assert result.done.reason == "end" and result.speech_pcm16() == spoken.pcm16
+    model = trained_models[engine]
+    offline = model.synthesize(
+        spoken.spans,
+        fps=FPS,
+        audio=spoken.audio if model.uses_audio else None,
+        **dict(result.ready.options),
+    ).frames
+    rows = np.asarray(result.rows(), dtype=np.float32)
+    assert np.allclose(rows[:spoken_frames], offline, atol=1e-5)

@@ -20,6 +20,7 @@ import {
   connected,
   ensureAudio,
   errors,
+  getJson,
   loadControls,
   now,
   playAt,
@@ -33,6 +34,7 @@ const AUDIO_CHUNK_S = 0.25;
 const PHONEMES_PER_MESSAGE = 256;
 const DEFAULT_PLOTTED = ["jawOpen", "mouthClose", "mouthFunnel", "mouthSmileLeft"];
 const DEFAULT_ENGINE = "anime-graph";
+const DEFAULT_LANG = "en-us";
 const RETURN_S = 0.15;
 const DECIMALS = 2;
 
@@ -181,7 +183,8 @@ function finish(state) {
 
 function textInput() {
   const message = { type: "text", text: $("text").value };
-  if ($("voice").value.trim()) message.voice = $("voice").value.trim();
+  if ($("lang").value) message.lang = $("lang").value;
+  if ($("voice").value) message.voice = $("voice").value;
   if ($("rate").value) message.rate = Number($("rate").value);
   return { send: (id) => send({ ...message, id }) };
 }
@@ -304,6 +307,25 @@ function setStatus(text) {
   $("status").textContent = text;
 }
 
+// The languages and voice variants espeak-ng has, for the text's language and voice.
+async function loadLanguages() {
+  let listed;
+  try {
+    listed = await getJson("/v1/languages");
+  } catch (error) {
+    showError(`cannot list the languages: ${error.message}`);
+    return;
+  }
+  const languages = $("lang");
+  languages.replaceChildren();
+  for (const language of listed.languages) {
+    languages.add(new Option(`${language.name} (${language.lang})`, language.lang));
+  }
+  languages.value = DEFAULT_LANG;
+  const voices = $("voice");
+  for (const variant of listed.variants) voices.add(new Option(variant));
+}
+
 $("text-form").addEventListener("submit", (event) => {
   event.preventDefault();
   startRequest(textInput());
@@ -337,5 +359,5 @@ window.lipstreamDemo = {
   faceValues: () => ({ ...face.values }),
 };
 
-loadControls(DEFAULT_ENGINE);
+loadControls(DEFAULT_ENGINE, loadLanguages);
 requestAnimationFrame(tick);

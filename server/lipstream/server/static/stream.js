@@ -115,14 +115,15 @@ export function clearErrors() {
 
 // ---- controls ------------------------------------------------------------------------
 
-async function getJson(path) {
+export async function getJson(path) {
   const answer = await fetch(path);
   if (!answer.ok) throw new Error(`${path}: HTTP ${answer.status}`);
   return answer.json();
 }
 
-// Fill the #engine and #character selects from the server, then mark the body ready.
-export async function loadControls(defaultEngine) {
+// Fill the #engine and #character selects from the server, then the page's own controls
+// (`more`), then mark the body ready.
+export async function loadControls(defaultEngine, more = async () => {}) {
   let engines;
   let characters;
   try {
@@ -150,5 +151,6 @@ export async function loadControls(defaultEngine) {
   };
   select.addEventListener("change", fillCharacters);
   fillCharacters();
+  await more();
   document.body.dataset.ready = "true";
 }
