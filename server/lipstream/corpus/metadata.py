@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import CorpusError
-from .model import EMOTIONS
+from ..timeline import EMOTIONS
 from .validation import at_line
 
 METADATA_KEYS = ("emotion", "speaker", "text")

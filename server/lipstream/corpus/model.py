@@ -18,9 +18,8 @@ import numpy as np
 
 from ..audio import Audio
 from ..errors import CorpusError
-from ..timeline import PhonemeSpan
+from ..timeline import EMOTIONS, PhonemeSpan
 
-EMOTIONS: tuple[str, ...] = ("neutral", "happy", "angry", "sad")
 HELDOUT_EVERY = 10
 
 
