@@ -24,7 +24,6 @@ the results into docs/reports/scale-out.md.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import shlex
@@ -36,6 +35,7 @@ from typing import Any
 
 from .._version import __version__
 from ..models import model_dirs
+from ..results_file import write_results
 from ..store import read_manifest
 from .serving import children, serving
 
@@ -152,7 +152,7 @@ def main(argv: list[str] | None = None) -> int:
     given = argv if argv is not None else sys.argv[1:]
     results = run(args.models, args.workers, list(given))
     if args.json is not None:
-        args.json.write_text(json.dumps(results, indent=2) + "\n")
+        write_results(results, args.json)
     return 0
 
 
