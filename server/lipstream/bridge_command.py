@@ -162,7 +162,7 @@ def _sink(args: argparse.Namespace, target: Target) -> Sink:
         return LiveLinkSink(UdpSender(target.host, target.port, bind), encoder)
     from lipstream_client.sinks.vmc import VmcSink, require_python_osc
 
-    require_python_osc()  # before the socket opens
+    require_python_osc("--to")  # before the socket opens
     return VmcSink(UdpSender(target.host, target.port, bind))
 
 

@@ -37,8 +37,9 @@ _BUNDLE_HEAD = 16  # "#bundle\0" and the time tag
 _ELEMENT_SIZE = 4  # each bundle element is prefixed by its length
 
 
-def require_python_osc() -> None:
-    """Raise ``BridgeError`` (``missing_dependency``) unless python-osc can be imported."""
+def require_python_osc(where: str = "sinks.vmc") -> None:
+    """Raise ``BridgeError`` (``missing_dependency``, at ``where``) unless python-osc can be
+    imported."""
     try:
         import pythonosc  # noqa: F401
     except ImportError:
@@ -46,7 +47,7 @@ def require_python_osc() -> None:
             MISSING_DEPENDENCY,
             "the VMC sink builds its OSC messages with python-osc, which is not installed: "
             'pip install "lipstream-client[vmc]"',
-            "sinks.vmc",
+            where,
         ) from None
 
 
