@@ -10,7 +10,6 @@ schemas and ``py.typed``, and its VMC sink, whose python-osc is an extra, says s
 
 from __future__ import annotations
 
-import json
 import shutil
 import tomllib
 from pathlib import Path
