@@ -162,8 +162,9 @@ def _sink(args: argparse.Namespace, target: Target) -> Sink:
     if target.kind == "livelink":
         encoder = LiveLinkEncoder(args.subject or "lipstream")
         return LiveLinkSink(UdpSender(target.host, target.port, bind), encoder)
-    from lipstream_client.sinks.vmc import VmcSink
+    from lipstream_client.sinks.vmc import VmcSink, require_python_osc
 
+    require_python_osc("--to")  # before the socket opens
     return VmcSink(UdpSender(target.host, target.port, bind))
 
 

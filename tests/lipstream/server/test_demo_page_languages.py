@@ -20,7 +20,7 @@ from lipstream.engines.base import Model, frame_count
 from lipstream.speech.text_frontend import speak_text
 from lipstream.training import train_engine
 from tests.helpers import return_frames
-from tests.lipstream.server.test_demo_page import CHROMIUM, LAUNCH_ARGS, WAIT_MS
+from tests.lipstream.server.browser import CHROMIUM, WAIT_MS, opened_page
 from tests.live_server import LiveServer, live_server
 
 pytestmark = [
@@ -49,25 +49,11 @@ def served(lerp: Model, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Li
 
 
 @pytest.fixture(scope="module")
-def page(served: LiveServer) -> Iterator[Any]:
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as playwright:
-        browser = playwright.chromium.launch(executable_path=str(CHROMIUM), args=LAUNCH_ARGS)
-        context = browser.new_context(viewport={"width": 1360, "height": 820})
-        page = context.new_page()
-        page.sent = []  # type: ignore[attr-defined]
-        page.on(
-            "websocket",
-            lambda socket: socket.on(
-                "framesent",
-                lambda frame: page.sent.append(frame),  # type: ignore[attr-defined]
-            ),
-        )
-        page.goto(served.http + "/")
-        page.wait_for_selector("body[data-ready=true]", timeout=WAIT_MS)
+def page(browser: Any, served: LiveServer) -> Iterator[Any]:
+    with opened_page(browser, served.http + "/", 1360, 820) as page:
+        page.sent = []
+        page.on("websocket", lambda socket: socket.on("framesent", lambda f: page.sent.append(f)))
         yield page
-        browser.close()
 
 
 def _listed(argument: str) -> list[str]:
