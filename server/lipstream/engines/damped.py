@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -108,6 +109,14 @@ def follow_rates(
         step_toward(x, v, targets[row], omega, times[row] - previous)
         previous = times[row]
         out[row] = x
+
+
+class FilterState(NamedTuple):
+    """A compiled caller's filter: value ``x`` and velocity ``v`` (n,) float64, which its
+    kernels step in place; the caller keeps the time they are at."""
+
+    x: np.ndarray
+    v: np.ndarray
 
 
 @dataclass
