@@ -59,7 +59,7 @@ from ..durations import DurationModel
 from .causal import CausalSynthesizer
 from .dominance import reach
 from .em import SIGMA_MIN
-from .kernels import choose_modes, render_run, search_tables
+from .kernels import Animemes, DamTables, choose_modes, search_tables
 from .modes import PHONEME_INDEX, SILENCE_INDEX, emotion_index
 from .selection import Costs, Layer, end_derivatives
 from .spans import DamSpans
@@ -118,29 +118,18 @@ class DamModel(Model):
             w_context=float(hyper["w_context"]),
             w_smooth=float(hyper["w_smooth"]),
         )
-        self.tables = search_tables(
-            self.offsets,
-            self.stand_in,
-            self.stored["count_previous"],
-            self.stored["count_following"],
-            self.count_emotion,
-            self.costs.alpha,
+        self.tables = DamTables(
+            search_tables(self.offsets, self.stand_in, self.costs),
+            Animemes(
+                _float64(self.sigma), _float64(self.reach), self.eps, _float64(self.coefficients)
+            ),
+            _float64(self.basis.components),
+            _float64(self.basis.mean),
+            self.tail,
+            self.search_behind,
+            self.causal_kappa,
         )
-        tables, costs = self.tables, self.costs
-        self.search_arguments = (
-            tables.set_start,
-            tables.set_stop,
-            tables.modes,
-            tables.log_previous,
-            tables.log_following,
-            tables.log_emotion,
-            costs.ends,
-            costs.starts,
-            costs.reference_duration,
-            costs.w_context,
-            costs.w_smooth,
-        )
-        """The tables and weights every compiled search takes, last, in the kernels' order."""
+        """The arrays every compiled call takes, in the groups its kernels read."""
 
     # -- options, lookahead, ladder -------------------------------------------------------
 
@@ -247,7 +236,7 @@ class DamModel(Model):
         phoneme = np.array(phonemes, dtype=np.int64)
         return np.asarray(
             choose_modes(
-                phoneme * self.tables.set_start.shape[1] + emotion,
+                phoneme * self.tables.search.set_start.shape[1] + emotion,
                 np.array([before, *phonemes[:-1]], dtype=np.int64),
                 np.array([*phonemes[1:], after], dtype=np.int64),
                 emotion,
@@ -256,7 +245,7 @@ class DamModel(Model):
                 last - low,
                 self.search_behind,
                 ahead,
-                *self.search_arguments,
+                self.tables.search,
             )
         )
 
@@ -277,28 +266,14 @@ class DamModel(Model):
             tracked = DamSpans(request, resolved, spans)
         search, ahead = tracked.resolved
         request.guard.check()
-        count, starts, ends, phonemes, emotions, modes = tracked.arrays()
-        frames, tracked.owner = render_run(
-            np.asarray(times, dtype=np.float64),
+        frames, tracked.owner = tracked.render_call(
+            np.ascontiguousarray(times, dtype=np.float64),
             tracked.owner,
-            count,
-            starts,
-            ends,
-            phonemes,
-            emotions,
-            modes,
-            SILENCE_INDEX,
-            self.search_behind,
+            tracked.arrays(),
+            tracked.count,
             search,
-            self.tail,
             ahead,
-            self.sigma,
-            self.reach,
-            self.eps,
-            self.coefficients,
-            self.basis.components,
-            self.basis.mean,
-            *self.search_arguments,
+            self.tables,
         )
         return frames
 
@@ -330,6 +305,10 @@ class DamModel(Model):
         fields.number(*member(extra, "extra", "reference_duration"), 0.0, 60.0, above=True)
         reader = ArrayReader(arrays, str(path / ARRAYS_NAME))
         return cls(manifest, check_arrays(reader, degree, len(manifest.channels)))
+
+
+def _float64(values: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(values, dtype=np.float64)
 
 
 MAX_COUNT = 2**31 - 1
