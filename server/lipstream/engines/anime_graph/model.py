@@ -33,7 +33,7 @@ from .graph import SearchGraph
 from .options import ENGINE, MAX_PQ_WINDOW, OPTION_NAMES, SearchOptions, parse_options
 from .search import LayeredMatcher, Matcher, SuffixMatcher
 from .smoothing import lowpass_kernels
-from .synthesizer import AnimeGraphSynthesizer
+from .synthesizer import AnimeGraphSynthesizer, StreamCalls
 from .track import anime_motion
 from .views import WHOLE, GraphView, load_view
 
@@ -109,6 +109,7 @@ class AnimeGraphModel(Model):
             self.channel_map,
             self.anime_motion,
         )
+        self.stream_calls = StreamCalls()
 
     @property
     def n_components(self) -> int:

@@ -133,12 +133,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         self.clock = CausalClock(self.fps, self.lead_s, options.blend)
         self.guard = request.guard
         self._searches: dict[str, GreedySearch] = {}  # without audio, by view
-        # The streaming calls that take named groups, each bound to this request's types.
-        self._causal_step_call = DirectCall(causal_step)
-        self._causal_emit_call = DirectCall(causal_emit)
-        self._greedy_call = DirectCall(greedy_tiles)
-        self._grid_call = DirectCall(_grid_samples)
-        self._frames_call = DirectCall(_interpolated_frames)
+        self.calls = model.stream_calls
         self.search_guard = WorkGuard(options.pq_budget_s, time.perf_counter, _search_timeout)
         self.stats: dict[str, Any] = {
             "frames": 0,
@@ -342,7 +337,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         guard = self.search_guard
         guard.check()
         started = time.perf_counter()
-        nodes, ends, pending = self._greedy_call(
+        nodes, ends, pending = self.calls.greedy_tiles(
             self._labels.data[start:stop],
             self.options.max_tile or 0,
             -1 if continuing is None else continuing,
@@ -463,7 +458,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         buffers = track.reserve(new, 2 * new)
         self.search_guard.check()
         started = time.perf_counter()
-        chosen, jumps, stop, frames = self._causal_step_call(
+        chosen, jumps, stop, frames = self.calls.causal_step(
             self._labels.data,
             self._bounds.data,
             placed,
@@ -583,7 +578,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         if count <= have or not self.spans:
             return
         track = self.track
-        values = self._grid_call(
+        values = self.calls.grid_samples(
             have,
             count,
             float(self.model.fps),
@@ -635,7 +630,7 @@ class AnimeGraphSynthesizer(Synthesizer):
             return np.zeros((0, len(self.model.channels)), dtype=np.float32)
         self.guard.check()
         model = self.model
-        frames = self._frames_call(
+        frames = self.calls.interpolated_frames(
             self.emitted,
             stop,
             model.fps / self.fps,
@@ -665,7 +660,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         """Frames whose time plus the lead lies within the decided spans (all, once
         finished): the damped filter stepped toward the track there (``causal_emit``)."""
         track = self.track
-        stop, frames = self._causal_emit_call(
+        stop, frames = self.calls.causal_emit(
             self.emitted,
             self.finished,
             len(self.nodes),
@@ -780,6 +775,20 @@ def _filter(block: np.ndarray, kernels: np.ndarray) -> np.ndarray:
                 total += block[row + tap, component] * kernels[component, tap]
             out[row, component] = total
     return out
+
+
+class StreamCalls:
+    """The kernels a model's synthesizers call on every streamed message, each through one
+    ``DirectCall`` that they share: the argument types at each call site are fixed by the
+    model's arrays and the requests' buffers, so the first request binds them and the
+    others skip the binding (a few hundred µs of typing named groups in Python)."""
+
+    def __init__(self) -> None:
+        self.causal_step = DirectCall(causal_step)
+        self.causal_emit = DirectCall(causal_emit)
+        self.greedy_tiles = DirectCall(greedy_tiles)
+        self.grid_samples = DirectCall(_grid_samples)
+        self.interpolated_frames = DirectCall(_interpolated_frames)
 
 
 def _search_timeout(spent_s: float, budget_s: float) -> SearchTimeout:

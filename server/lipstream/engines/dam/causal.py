@@ -27,7 +27,7 @@ Cost: a server at lead 0 calls the synthesizer once per phoneme message, so
 each call is one compiled call (``kernels.causal_run``): the modes of the
 spans that arrived (``commit_modes``), the frames' raw curve (``causal_sum``,
 the latest span begun found by binary search over the spans' starts), the
-filter, and the motion basis, through the request's ``DirectCall``. The spans'
+filter, and the motion basis, through the model's ``DirectCall``. The spans'
 starts, ends, phonemes, emotions, modes and rates are kept in ``Growable`` arrays,
 so a call converts only the spans it brought, and handed to the kernels as
 ``kernels.SpanArrays`` and the rates beside them.
@@ -40,13 +40,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ...numerics.direct_call import DirectCall
 from ...timeline import PhonemeSpan
 from ..base import ShiftedSynthesizer, SynthesisRequest, fill_gaps, frame_count
 from ..damped import FilterState
 from ..damped_fit import RawCurve, best_following_kappa
 from ..growable import Growable
-from .kernels import SpanArrays, causal_run, causal_sum, commit_modes
+from .kernels import SpanArrays, causal_sum, commit_modes
 from .modes import PHONEME_INDEX, emotion_index
 
 if TYPE_CHECKING:
@@ -133,7 +132,6 @@ class CausalSynthesizer(ShiftedSynthesizer):
         self.state = FilterState(
             np.zeros(model.basis.n_components), np.zeros(model.basis.n_components)
         )
-        self.run_call = DirectCall(causal_run)
 
     def _emit(self, stop: int) -> np.ndarray:
         if stop <= self.emitted:
@@ -141,7 +139,7 @@ class CausalSynthesizer(ShiftedSynthesizer):
         self.request.guard.check()
         curve = self.curve
         curve.add(self.spans)
-        frames = self.run_call(
+        frames = self.model.causal_call(
             self.emitted,
             stop,
             float(self.request.fps),

@@ -38,6 +38,7 @@ from ...audio import Audio
 from ...errors import InvalidRequestError
 from ...model_checks import ArrayReader, FieldReader
 from ...numerics.basis import MotionBasis, read_components
+from ...numerics.direct_call import DirectCall
 from ...phonemes import PHONEMES
 from ...store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
 from ...timeline import EMOTIONS, PhonemeSpan
@@ -59,7 +60,7 @@ from ..durations import DurationModel
 from .causal import CausalSynthesizer
 from .dominance import reach
 from .em import SIGMA_MIN
-from .kernels import Animemes, DamTables, choose_modes, search_tables
+from .kernels import Animemes, DamTables, causal_run, choose_modes, render_run, search_tables
 from .modes import PHONEME_INDEX, SILENCE_INDEX, emotion_index
 from .selection import Costs, Layer, end_derivatives
 from .spans import DamSpans
@@ -130,6 +131,10 @@ class DamModel(Model):
             self.causal_kappa,
         )
         """The arrays every compiled call takes, in the groups its kernels read."""
+        # Every request's streamed calls share one DirectCall per kernel: the argument types
+        # are the model's and the fixed ones of the requests' buffers, bound by the first.
+        self.render_call = DirectCall(render_run)
+        self.causal_call = DirectCall(causal_run)
 
     # -- options, lookahead, ladder -------------------------------------------------------
 
@@ -266,7 +271,7 @@ class DamModel(Model):
             tracked = DamSpans(request, resolved, spans)
         search, ahead = tracked.resolved
         request.guard.check()
-        frames, tracked.owner = tracked.render_call(
+        frames, tracked.owner = self.render_call(
             np.ascontiguousarray(times, dtype=np.float64),
             tracked.owner,
             tracked.arrays(),

@@ -6,8 +6,7 @@ span's start, end, phoneme, emotion (the request's when the span names none)
 and its mode once chosen (-1 before). ``arrays()`` brings them up to date with
 the spans appended since the last call, so a streaming call converts only its
 new spans, and hands the kernel their buffers (``kernels.SpanArrays``, no views to
-make) while ``count`` says how many rows hold spans; the request's calls go through one
-``DirectCall`` (``render_call``);
+make) while ``count`` says how many rows hold spans;
 the modes chosen by one call are reused by the next: a span's mode depends
 only on the spans of its search window (and, at the end of the input, on
 there being none after them), which never change.
@@ -21,12 +20,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ...numerics.direct_call import DirectCall
 from ...phonemes import PHONEME_INDEX
 from ...timeline import PhonemeSpan
 from ..base import SynthesisRequest
 from ..growable import Growable
-from .kernels import SpanArrays, render_run
+from .kernels import SpanArrays
 from .modes import emotion_index
 
 
@@ -50,7 +48,6 @@ class DamSpans(list[PhonemeSpan]):
         self.emotions = Growable(np.int64)
         self.modes = Growable(np.int64)
         self._arrays = self._gather()
-        self.render_call = DirectCall(render_run)
 
     @property
     def count(self) -> int:
