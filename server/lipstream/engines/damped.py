@@ -60,9 +60,14 @@ def step_toward(
 
 @njit(cache=True)
 def follow_frame_rates(
-    x: np.ndarray, v: np.ndarray, t: float, raw: np.ndarray, omegas: np.ndarray,
-    times: np.ndarray, out: np.ndarray,
-) -> None:  # fmt: skip
+    x: np.ndarray,
+    v: np.ndarray,
+    t: float,
+    raw: np.ndarray,
+    omegas: np.ndarray,
+    times: np.ndarray,
+    out: np.ndarray,
+) -> None:
     """Step from time ``t`` to each of ``times`` toward that frame's ``raw`` row at its rate
     ``omegas`` (every column), recording the value in ``out``."""
     for row in range(len(times)):

@@ -31,6 +31,7 @@ from typing import Protocol
 
 import numpy as np
 
+from ...numerics.direct_call import DirectCall
 from .costs import Labels, Ranking
 from .graph import AnimeGraph, SearchGraph, csr_offsets
 from .index import SuffixIndex
@@ -101,6 +102,7 @@ class SuffixMatcher:
     graph: AnimeGraph
     limit: int | None = None
     tables: SuffixTables = field(init=False, repr=False)
+    _greedy_tiles: DirectCall = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         index, limit = self.index, self.limit or 0
@@ -111,6 +113,7 @@ class SuffixMatcher:
         single_offsets, single_starts = single_occurrences(
             limit, transitions, low, high, ends, text_anime
         )
+        self._greedy_tiles = DirectCall(greedy_tiles)  # every request's: the view fixes the types
         self.tables = SuffixTables(
             limit,
             transitions,
@@ -137,7 +140,7 @@ class SuffixMatcher:
     ) -> list[np.ndarray]:
         labels = np.asarray(query[start:stop], dtype=np.int64)
         joined = previous if ranked_from is None else ranked_from
-        nodes, ends, pending = greedy_tiles(
+        nodes, ends, pending = self._greedy_tiles(
             labels,
             cap or 0,
             -1 if previous is None else previous,
@@ -188,6 +191,7 @@ class LayeredMatcher:
         # Scratch for ``reach``, shared by every thread using this matcher: safe because the
         # compiled kernels hold the GIL (none is ``nogil``) and leave it all -1.
         self._slot = np.full(n_nodes, -1, dtype=np.int64)
+        self._cheapest = DirectCall(cheapest)  # every request's: the view fixes the types
 
     def _steps(self, graph: SearchGraph) -> tuple[np.ndarray, np.ndarray]:
         """CSR keyed by source * n_labels + label over the edges' targets with that label,
@@ -230,7 +234,7 @@ class LayeredMatcher:
         (states, offsets), ((sources, targets),) = match.layers, match.steps
         labels = np.asarray(query[match.start : match.start + match.length], dtype=np.int64)
         return np.asarray(
-            cheapest(
+            self._cheapest(
                 labels,
                 Layers(states, offsets, sources, targets),
                 -1 if previous is None else previous,

@@ -458,6 +458,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         buffers = track.reserve(new, 2 * new)
         self.search_guard.check()
         started = time.perf_counter()
+        frames: np.ndarray
         chosen, jumps, stop, frames = self.calls.causal_step(
             self._labels.data,
             self._bounds.data,
@@ -630,7 +631,7 @@ class AnimeGraphSynthesizer(Synthesizer):
             return np.zeros((0, len(self.model.channels)), dtype=np.float32)
         self.guard.check()
         model = self.model
-        frames = self.calls.interpolated_frames(
+        frames: np.ndarray = self.calls.interpolated_frames(
             self.emitted,
             stop,
             model.fps / self.fps,
@@ -660,6 +661,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         """Frames whose time plus the lead lies within the decided spans (all, once
         finished): the damped filter stepped toward the track there (``causal_emit``)."""
         track = self.track
+        frames: np.ndarray
         stop, frames = self.calls.causal_emit(
             self.emitted,
             self.finished,

@@ -139,7 +139,7 @@ class CausalSynthesizer(ShiftedSynthesizer):
         self.request.guard.check()
         curve = self.curve
         curve.add(self.spans)
-        frames = self.model.causal_call(
+        frames: np.ndarray = self.model.causal_call(
             self.emitted,
             stop,
             float(self.request.fps),

@@ -271,11 +271,12 @@ class DamModel(Model):
             tracked = DamSpans(request, resolved, spans)
         search, ahead = tracked.resolved
         request.guard.check()
+        frames: np.ndarray
         frames, tracked.owner = self.render_call(
             np.ascontiguousarray(times, dtype=np.float64),
             tracked.owner,
             tracked.arrays(),
-            tracked.count,
+            tracked.rows,
             search,
             ahead,
             self.tables,

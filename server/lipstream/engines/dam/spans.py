@@ -6,7 +6,7 @@ span's start, end, phoneme, emotion (the request's when the span names none)
 and its mode once chosen (-1 before). ``arrays()`` brings them up to date with
 the spans appended since the last call, so a streaming call converts only its
 new spans, and hands the kernel their buffers (``kernels.SpanArrays``, no views to
-make) while ``count`` says how many rows hold spans;
+make) while ``rows`` says how many rows hold spans;
 the modes chosen by one call are reused by the next: a span's mode depends
 only on the spans of its search window (and, at the end of the input, on
 there being none after them), which never change.
@@ -50,7 +50,7 @@ class DamSpans(list[PhonemeSpan]):
         self._arrays = self._gather()
 
     @property
-    def count(self) -> int:
+    def rows(self) -> int:
         """Spans whose rows ``arrays()`` holds."""
         return self.starts.count
 
@@ -64,7 +64,7 @@ class DamSpans(list[PhonemeSpan]):
         )
 
     def arrays(self) -> SpanArrays:
-        """The buffers whose first ``count`` rows hold the spans' start, end, phoneme, emotion
+        """The buffers whose first ``rows`` rows hold the spans' start, end, phoneme, emotion
         and mode, every span appended so far taken in."""
         if self.starts.count == len(self):
             return self._arrays
