@@ -1,8 +1,8 @@
 """The ``lipstream`` command line.
 
-Subcommands: build-demo, train, synth, serve, inspect, bench, loadtest, path, retarget. Every
-option has a help line (``lipstream <command> --help``); ``--version`` prints the
-version. A user-facing failure prints one line (``error [code]: where: message``) and
+Subcommands: build-demo, train, synth, serve, inspect, bench, loadtest, capture, align, path,
+retarget. Every option has a help line (``lipstream <command> --help``); ``--version``
+prints the version. A user-facing failure prints one line (``error [code]: where: message``) and
 exits 2.
 """
 
@@ -22,6 +22,8 @@ from ._version import __version__
 from .config import ServerSettings, Settings, demo_model_path, load_settings
 from .errors import LipstreamError
 from .exports import FORMATS, MOHO_FPS
+from .capture.command import add_capture_parser
+from .frontends.command import add_align_parser
 from .loadtest.command import add_loadtest_parser
 
 if TYPE_CHECKING:
@@ -545,6 +547,8 @@ def _parser() -> argparse.ArgumentParser:
     bench.set_defaults(run=_bench)
 
     add_loadtest_parser(commands)
+    add_capture_parser(commands)
+    add_align_parser(commands)
 
     path = commands.add_parser(
         "path", help="print where the demo character's models are (or will be built)"

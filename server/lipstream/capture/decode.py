@@ -36,8 +36,14 @@ class VideoFrame:
     rgb: np.ndarray
 
 
+def _av() -> Any:
+    from .dependencies import require
+
+    return require("av")
+
+
 def _open(path: Path) -> Any:
-    import av
+    av = _av()
 
     try:
         return av.open(str(path))
@@ -66,7 +72,7 @@ def read_frames(path: Path) -> Iterator[VideoFrame]:
 
 def read_audio(path: Path, origin: float) -> Audio:
     """The audio track, mono float32 at its own rate, from ``origin`` (s) on."""
-    import av
+    av = _av()
 
     resampler: Any = None
     chunks: list[np.ndarray] = []
@@ -92,8 +98,21 @@ def read_audio(path: Path, origin: float) -> Audio:
     return Audio(np.clip(samples, -1.0, 1.0), rate)
 
 
+def media_audio(path: Path) -> Audio:
+    """The sound of a video (on the video's clock) or of a sound file (from its start)."""
+    with _open(path) as container:
+        has_video = bool(container.streams.video)
+    return read_audio(path, video_start(path) if has_video else _audio_start(path))
+
+
+def _audio_start(path: Path) -> float:
+    for frame in _decoded(path, "audio"):
+        return float(frame.time or 0.0)
+    return 0.0
+
+
 def _decoded(path: Path, kind: str) -> Iterator[Any]:
-    import av
+    av = _av()
 
     container = _open(path)
     with container:

@@ -5,7 +5,8 @@ order). One video may take ``--transcript``, as the text itself or a ``.txt`` fi
 otherwise, and always for several videos, each video's transcript is the ``.txt`` file
 of the same stem beside it. A missing or empty transcript is ``missing_transcript``, a
 path that is neither a video nor a folder ``no_videos``, two videos of one stem
-``invalid_request``, each naming the file.
+``invalid_request``, each naming the file. The videos are one speaker's unless each is
+declared its own (``speaker_per_video``).
 """
 
 from __future__ import annotations
@@ -25,14 +26,24 @@ TRANSCRIPT_SUFFIX = ".txt"
 
 @dataclass(frozen=True)
 class CaptureJob:
-    """One video, its transcript and its utterance stem."""
+    """One video, its transcript, its utterance stem and its speaker (whose range its
+    channels are mapped through; None: the run's one unnamed speaker)."""
 
     video: Path
     transcript: str
     stem: str
+    speaker: str | None = None
 
 
-def capture_jobs(arguments: Sequence[str], transcript: str | None) -> list[CaptureJob]:
+def capture_jobs(
+    arguments: Sequence[str],
+    transcript: str | None,
+    *,
+    speaker: str | None = None,
+    speaker_per_video: bool = False,
+) -> list[CaptureJob]:
+    """The jobs of the command's arguments; ``speaker`` names the one speaker of every
+    video, ``speaker_per_video`` makes each video's stem its own speaker."""
     videos = _videos(arguments)
     if transcript is not None and len(videos) > 1:
         raise LipstreamError(
@@ -57,7 +68,8 @@ def capture_jobs(arguments: Sequence[str], transcript: str | None) -> list[Captu
             raise LipstreamError(
                 "the transcript is empty", where=str(video), code=MISSING_TRANSCRIPT
             )
-        jobs.append(CaptureJob(video, " ".join(text.split()), video.stem))
+        who = video.stem if speaker_per_video else speaker
+        jobs.append(CaptureJob(video, " ".join(text.split()), video.stem, who))
     return jobs
 
 

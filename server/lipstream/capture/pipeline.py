@@ -2,8 +2,8 @@
 
 Sketch: each video is decoded (``decode``), its face tracked (``track``), checked for one
 face and its short gaps bridged (``gaps``), its pose removed (``pose``) and its speech
-aligned to the transcript (``frontends.align``). Then, over all of the run's videos (one
-speaker), every clip's measures are taken against its own rest pose and mapped to [0, 1]
+aligned to the transcript (``frontends.align``). Then, over each speaker's videos (one
+speaker per run unless each video is declared its own), every clip's measures are taken against its own rest pose and mapped to [0, 1]
 through the speaker's ranges (``channels``), resampled from the video's frame times onto
 the corpus grid (``round(1 / median frame step)`` of the first video, as the corpus
 loader does) and written with ``write_corpus``: frames CSV, TextGrid, WAV and metadata
@@ -73,17 +73,24 @@ def track_clip(job: CaptureJob) -> TrackedClip:
     return TrackedClip(job, track.times, face_frame(track.landmarks), audio, alignment)
 
 
-def clips_corpus(clips: Sequence[TrackedClip], name: str, speaker: str | None) -> Corpus:
-    """The corpus of ``clips``, one speaker's, channels mapped through the speaker's ranges."""
+def clips_corpus(clips: Sequence[TrackedClip], name: str) -> Corpus:
+    """The corpus of ``clips``, each clip's channels mapped through its speaker's ranges."""
     measures = []
     for clip in clips:
         quiet = _in_silence(clip.times, clip.alignment.phones)
         measures.append(raw_measures(clip.face, rest_pose(clip.face, quiet)))
-    ranges = speaker_ranges(measures)
+    speakers = {clip.job.speaker for clip in clips}
+    ranges = {
+        who: speaker_ranges(
+            [measure for clip, measure in zip(clips, measures) if clip.job.speaker == who]
+        )
+        for who in speakers
+    }
     fps = estimate_fps(clips[0].times, str(clips[0].job.video))
     utterances = []
     for clip, measure in zip(clips, measures, strict=True):
-        frames = resample_to_grid(clip.times, to_channels(measure, ranges), fps)
+        channels = to_channels(measure, ranges[clip.job.speaker])
+        frames = resample_to_grid(clip.times, channels, fps)
         end = (grid_size(float(clip.times[-1]), fps) - 1) / fps
         utterances.append(
             Utterance(
@@ -92,7 +99,7 @@ def clips_corpus(clips: Sequence[TrackedClip], name: str, speaker: str | None) -
                 phones=_phones_until(clip.alignment.phones, end),
                 fps=fps,
                 audio=clip.audio,
-                speaker=speaker,
+                speaker=clip.job.speaker,
                 text=clip.job.transcript,
                 alignment_confidence=clip.alignment.confidence,
             )
@@ -105,7 +112,6 @@ def capture(
     out: Path,
     *,
     name: str | None = None,
-    speaker: str | None = None,
     report: Callable[[str], None] = lambda line: None,
 ) -> CaptureResult:
     """Capture every job into the corpus directory ``out``; the failures are returned."""
@@ -125,7 +131,7 @@ def capture(
         )
     if not clips:
         return CaptureResult(None, failures)
-    corpus = clips_corpus(clips, name or out.name, speaker)
+    corpus = clips_corpus(clips, name or out.name)
     write_corpus(corpus, out)
     return CaptureResult(corpus, failures)
 
