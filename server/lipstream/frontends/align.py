@@ -5,7 +5,9 @@ each word's pronunciation comes from pocketsphinx's own CMUdict, or, for a word 
 (names, numbers), from espeak-ng's phonemes for that word mapped to ARPAbet. The audio is
 resampled to 16 kHz 16-bit mono, the rate of pocketsphinx's en-us acoustic model. Two
 passes of pocketsphinx's alignment search (its documented recipe: words, then phones)
-place every phone on its 10 ms frame grid; the gaps pocketsphinx leaves and its ``SIL``
+place every phone on its 10 ms frame grid; when the search finds no path, it is run again
+over the audio with a faint noise floor added (``NOISE_FLOORS``), which synthetic speech
+with digital silence needs; the gaps pocketsphinx leaves and its ``SIL``
 become ``sil``, so the spans cover [0, audio duration] contiguously.
 
 Confidence: pocketsphinx's scores are log-likelihoods whose scale depends on the voice
@@ -40,6 +42,11 @@ from ..timeline import PhonemeSpan
 ALIGNER_RATE_HZ = 16000
 FRAME_S = 0.01  # pocketsphinx's frame period (100 frames a second)
 MIN_CONFIDENCE = 0.25
+# Noise floors tried in turn (seeded, so runs repeat) until one aligns: digital silence,
+# as synthetic speech has, gives log-energy features pocketsphinx's search cannot follow,
+# while added noise can lose a real recording that aligned without it.
+NOISE_FLOORS = (0.0, 1e-4, 1e-3)
+NOISE_SEED = 0
 EMPTY_TRANSCRIPT = "empty_transcript"
 ALIGNMENT_FAILED = "alignment_failed"
 TRANSCRIPT_MISMATCH = "transcript_mismatch"
@@ -97,10 +104,17 @@ def align(
         raise LipstreamError(
             "the transcript has no words to align", where=where, code=EMPTY_TRANSCRIPT
         )
-    pcm = _pcm16_at_aligner_rate(audio, where)
+    samples = _at_aligner_rate(audio, where)
     decoder = _decoder()
     _add_missing_words(decoder, words, pronounce or espeak_pronunciations, where)
-    entries = _aligned_phones(decoder, pcm, " ".join(words), where)
+    for attempt, floor in enumerate(NOISE_FLOORS, start=1):
+        pcm = _pcm16(samples, floor)
+        try:
+            entries = _aligned_phones(decoder, pcm, " ".join(words), where)
+            break
+        except LipstreamError:
+            if attempt == len(NOISE_FLOORS):
+                raise
     phones = _spans(entries, audio.duration)
     confidence = _confidence(phones, _free_phone_loop(pcm))
     if confidence < min_confidence:
@@ -113,7 +127,7 @@ def align(
     return Alignment(phones, _words(decoder), confidence, audio.duration)
 
 
-def _pcm16_at_aligner_rate(audio: Audio, where: str) -> bytes:
+def _at_aligner_rate(audio: Audio, where: str) -> np.ndarray:
     samples = np.asarray(audio.samples, dtype=np.float64)
     if audio.duration < 0.1 or not np.any(np.abs(samples) > 1e-4):
         raise LipstreamError(
@@ -122,8 +136,15 @@ def _pcm16_at_aligner_rate(audio: Audio, where: str) -> bytes:
             code=NOT_SPEECH,
         )
     common = math.gcd(ALIGNER_RATE_HZ, audio.sample_rate)
-    resampled = resample_poly(samples, ALIGNER_RATE_HZ // common, audio.sample_rate // common)
-    return (np.clip(resampled, -1.0, 1.0) * 32767.0).astype("<i2").tobytes()
+    resampled: np.ndarray = resample_poly(
+        samples, ALIGNER_RATE_HZ // common, audio.sample_rate // common
+    )
+    return resampled
+
+
+def _pcm16(samples: np.ndarray, noise_floor: float) -> bytes:
+    noise = np.random.default_rng(NOISE_SEED).standard_normal(len(samples))
+    return (np.clip(samples + noise_floor * noise, -1.0, 1.0) * 32767.0).astype("<i2").tobytes()
 
 
 def _decoder(**options: object) -> object:
