@@ -1,7 +1,8 @@
 """Bridging short tracking drop-outs, refusing long ones.
 
-Sketch: a run of frames without a face is a gap, measured from the last tracked frame
-before it to the first after it (at the video's own frame times). A gap of at most
+Sketch: a run of frames without a face is a gap, lasting from its first frame's time to
+the time of the next tracked frame (the video's own frame times; at the video's end, one
+median frame step past its last frame). A gap of at most
 ``MAX_GAP_S`` is bridged: each landmark is interpolated linearly in time between the two
 tracked frames around it (held at the first or last tracked frame at the video's ends).
 A longer gap is ``tracking_gap``, naming where it is; a video whose face is missing from
@@ -51,15 +52,13 @@ def bridge_gaps(track: Track, where: str, max_gap_s: float = MAX_GAP_S) -> Track
         return track
     tracked = np.flatnonzero(found)
     times = track.times
+    step = float(np.median(np.diff(times))) if len(times) > 1 else 0.0
     for start, end in _runs(~found):
-        before = start - 1 if start > 0 else None
-        after = end if end < len(times) else None
-        left = times[before] if before is not None else times[start]
-        right = times[after] if after is not None else times[end - 1]
-        if right - left > max_gap_s + 1e-9:
+        back = times[end] if end < len(times) else times[-1] + step
+        if back - times[start] > max_gap_s + 1e-9:
             raise LipstreamError(
-                f"the face was lost from {times[start]:.2f} s to {times[end - 1]:.2f} s "
-                f"({right - left:.3f} s; gaps up to {max_gap_s * 1000:.0f} ms are bridged)",
+                f"the face was lost from {times[start]:.2f} s to {back:.2f} s "
+                f"({back - times[start]:.3f} s; gaps up to {max_gap_s * 1000:.0f} ms are bridged)",
                 where=where,
                 code=TRACKING_GAP,
             )
