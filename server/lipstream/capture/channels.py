@@ -16,12 +16,13 @@ jaw drop plus inner-lip gap is smallest. Landmark numbers are MediaPipe FaceMesh
 | mouthFunnel | the same rounding while the lips are apart |
 | mouthStretchLeft/Right | mouth corner 291 / 61 moving outward |
 | mouthSmileLeft/Right | mouth corner 291 / 61 moving up |
-| mouthRollUpper | upper lip's red (0 to 13) thinning |
-| mouthRollLower | lower lip's red (14 to 17) thinning |
+| mouthRollUpper | upper lip's red (0 to 13) thinning, against the clip's median |
+| mouthRollLower | lower lip's red (14 to 17) thinning, against the clip's median |
 | mouthLowerDownLeft/Right | lower lip at 314 / 84 moving down |
 | mouthUpperUpLeft/Right | upper lip at 267 / 37 moving up |
 
-Rounding splits between pucker and funnel by the lips' opening share (the inner-lip gap
+The rolls are measured against the clip's median lip height rather than the rest, since
+the rest (lips closed) already presses the lips thin. Rounding splits between pucker and funnel by the lips' opening share (the inner-lip gap
 growth over the speaker's 99th percentile of it): closed lips give pucker, open ones
 funnel.
 """
@@ -48,9 +49,10 @@ CHANNELS: tuple[str, ...] = (
 RANGE_PERCENTILE = 99.0
 REST_SHARE = 0.2
 MIN_REST_FRAMES = 3
-# A speaker whose 99th percentile stays under this (face-scale units) never made the
-# move: the channel stays 0 rather than amplifying tracking noise.
-MIN_RANGE = 0.004
+# A speaker whose 99th percentile stays under this (face-scale units: 1% of the eye-corner
+# distance, about FaceMesh's frame-to-frame jitter) never made the move: the channel
+# stays 0 rather than amplifying tracking noise.
+MIN_RANGE = 0.01
 
 
 def rest_pose(face: np.ndarray, quiet: np.ndarray) -> np.ndarray:
@@ -76,6 +78,12 @@ def raw_measures(face: np.ndarray, rest: np.ndarray) -> dict[str, np.ndarray]:
         distance: np.ndarray = points[..., lower, Y] - points[..., upper, Y]
         return distance
 
+    def thinning(upper: int, lower: int) -> np.ndarray:
+        # Against the clip's median: the rest (lips closed) already presses the lips.
+        height = gap(face, upper, lower)
+        result: np.ndarray = np.median(height) - height
+        return result
+
     jaw = moved(CHIN, Y)
     lip_gap = gap(face, UPPER_LIP_INNER, LOWER_LIP_INNER) - gap(rest, UPPER_LIP_INNER, LOWER_LIP_INNER)
     width = np.linalg.norm(face[:, LEFT_CORNER] - face[:, RIGHT_CORNER], axis=1)
@@ -90,10 +98,8 @@ def raw_measures(face: np.ndarray, rest: np.ndarray) -> dict[str, np.ndarray]:
         "mouthStretchRight": -moved(RIGHT_CORNER, X),
         "mouthSmileLeft": -moved(LEFT_CORNER, Y),
         "mouthSmileRight": -moved(RIGHT_CORNER, Y),
-        "mouthRollUpper": gap(rest, UPPER_LIP_TOP, UPPER_LIP_INNER)
-        - gap(face, UPPER_LIP_TOP, UPPER_LIP_INNER),
-        "mouthRollLower": gap(rest, LOWER_LIP_INNER, LOWER_LIP_BOTTOM)
-        - gap(face, LOWER_LIP_INNER, LOWER_LIP_BOTTOM),
+        "mouthRollUpper": thinning(UPPER_LIP_TOP, UPPER_LIP_INNER),
+        "mouthRollLower": thinning(LOWER_LIP_INNER, LOWER_LIP_BOTTOM),
         "mouthLowerDownLeft": moved(LEFT_LOWER_LIP, Y),
         "mouthLowerDownRight": moved(RIGHT_LOWER_LIP, Y),
         "mouthUpperUpLeft": -moved(LEFT_UPPER_LIP, Y),

@@ -23,7 +23,8 @@ import numpy as np
 from ..audio import Audio
 from ..corpus import Corpus, Utterance, write_corpus
 from ..corpus.grid import estimate_fps, grid_size, resample_to_grid
-from ..errors import LipstreamError
+from ..corpus.layout import is_corpus_file
+from ..errors import CorpusError, LipstreamError
 from ..frontends.align import Alignment, align
 from ..phonemes import SILENCE
 from ..timeline import PhonemeSpan
@@ -115,6 +116,7 @@ def capture(
     report: Callable[[str], None] = lambda line: None,
 ) -> CaptureResult:
     """Capture every job into the corpus directory ``out``; the failures are returned."""
+    _check_target(out)
     clips: list[TrackedClip] = []
     failures: list[LipstreamError] = []
     for index, job in enumerate(jobs, start=1):
@@ -134,6 +136,17 @@ def capture(
     corpus = clips_corpus(clips, name or out.name)
     write_corpus(corpus, out)
     return CaptureResult(corpus, failures)
+
+
+def _check_target(out: Path) -> None:
+    """Refuse, before any work, a target that ``write_corpus`` would refuse after it."""
+    if out.exists() and not out.is_dir():
+        raise CorpusError("exists and is not a directory", where=str(out))
+    if out.is_dir() and any(is_corpus_file(path) for path in out.iterdir()):
+        raise CorpusError(
+            "already holds corpus files; capture writes into an empty or new directory",
+            where=str(out),
+        )
 
 
 def _in_silence(times: np.ndarray, phones: Sequence[PhonemeSpan]) -> np.ndarray:

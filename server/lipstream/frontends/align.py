@@ -17,7 +17,7 @@ en-us phone language model). It is the share of the transcript's phones that the
 loop also heard, with the same label, within the aligned phone's span, times the share of
 the free loop's phone time that lies inside the transcript's phones (so speech the
 transcript leaves out lowers it too). pocketsphinx refuses most transcripts of other
-sentences outright (``alignment_failed``); below ``MIN_CONFIDENCE`` the rest are refused
+sentences outright (no path through the words); below ``MIN_CONFIDENCE`` the rest are refused
 as ``transcript_mismatch``. The phone loop is noisy on real speech, so matching
 transcripts score well under 1 (docs/how-to/capture-from-video.md gives the spread on
 GRID). Every failure is a ``LipstreamError`` naming the audio file.
@@ -96,8 +96,9 @@ def align(
 
     ``pronounce``: pronunciations of the words pocketsphinx's dictionary lacks (default:
     espeak-ng's). Raises ``empty_transcript``, ``not_speech`` (silent or too short audio),
-    ``alignment_failed`` (the search found no path through the words) or
-    ``transcript_mismatch`` (confidence below ``min_confidence``).
+    ``alignment_failed`` (a word without a pronunciation, or no alignment produced) or
+    ``transcript_mismatch`` (no path through the words, or confidence below
+    ``min_confidence``).
     """
     words = transcript_words(transcript)
     if not words:
@@ -203,9 +204,10 @@ def _aligned_phones(decoder: object, pcm: bytes, text: str, where: str) -> list[
         alignment = decoder.get_alignment()  # type: ignore[attr-defined]
     except RuntimeError as error:
         raise LipstreamError(
-            f"pocketsphinx could not align the transcript to the audio ({error})",
+            f"the transcript does not match the speech: pocketsphinx found no path through "
+            f"its words in the audio ({error})",
             where=where,
-            code=ALIGNMENT_FAILED,
+            code=TRANSCRIPT_MISMATCH,
         ) from None
     if alignment is None:
         raise LipstreamError(

@@ -22,7 +22,7 @@ import av
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent.parent / "lipstream" / "capture"))
-from grid_names import grid_words  # noqa: E402
+from grid_names import grid_words  # noqa: E402  (beside the tests)
 
 CLIP = "swwp2s"
 
