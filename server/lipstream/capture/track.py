@@ -9,6 +9,7 @@ Tracking counts the frames that held more than one face, for the ``several_faces
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
@@ -58,7 +59,9 @@ def track_faces(frames: Iterable[VideoFrame]) -> Track:
     points: list[np.ndarray] = []
     faces: list[int] = []
     missing = np.full((N_LANDMARKS, 3), np.nan)
-    with face_mesh() as mesh:
+    with warnings.catch_warnings(), face_mesh() as mesh:
+        # mediapipe 0.10.14 calls a protobuf 4 API that warns on every frame
+        warnings.filterwarnings("ignore", "SymbolDatabase.GetPrototype", UserWarning)
         for frame in frames:
             height, width = frame.rgb.shape[:2]
             result = mesh.process(frame.rgb)
