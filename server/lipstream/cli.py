@@ -19,10 +19,10 @@ from typing import TYPE_CHECKING
 from lipstream_client.messages import NAMINGS, VISEME_SETS
 
 from ._version import __version__
+from .capture.command import add_capture_parser
 from .config import ServerSettings, Settings, demo_model_path, load_settings
 from .errors import LipstreamError
 from .exports import FORMATS, MOHO_FPS
-from .capture.command import add_capture_parser
 from .frontends.command import add_align_parser
 from .loadtest.command import add_loadtest_parser
 

@@ -699,7 +699,14 @@ def capture(bench: Bench) -> str:
             ("whole capture step, frames/s", "capture_fps"),
             ("alignment, s per s of audio", "alignment_real_time_factor"),
         ):
-            rows.append([f"`{run['video']}` ({run['frames']} frames)", label, number(run[key], 2 if "factor" in key else 0), number(cpu[key], 2 if "factor" in key else 0)])
+            rows.append(
+                [
+                    f"`{run['video']}` ({run['frames']} frames)",
+                    label,
+                    number(run[key], 2 if "factor" in key else 0),
+                    number(cpu[key], 2 if "factor" in key else 0),
+                ]
+            )
     return text + table(["video", "step", "per wall-clock second", "per CPU second"], rows)
 
 

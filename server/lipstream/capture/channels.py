@@ -22,9 +22,10 @@ jaw drop plus inner-lip gap is smallest. Landmark numbers are MediaPipe FaceMesh
 | mouthUpperUpLeft/Right | upper lip at 267 / 37 moving up |
 
 The rolls are measured against the clip's median lip height rather than the rest, since
-the rest (lips closed) already presses the lips thin. Rounding splits between pucker and funnel by the lips' opening share (the inner-lip gap
-growth over the speaker's 99th percentile of it): closed lips give pucker, open ones
-funnel.
+the rest (lips closed) already presses the lips thin. Rounding (corners 61-291 closer plus
+lips 0/17 forward) splits between pucker and funnel by the lips' opening share (the
+inner-lip gap growth over the speaker's 99th percentile of it): pucker is rounding times
+(1 - opening), funnel rounding times opening.
 """
 
 from __future__ import annotations
@@ -85,7 +86,9 @@ def raw_measures(face: np.ndarray, rest: np.ndarray) -> dict[str, np.ndarray]:
         return result
 
     jaw = moved(CHIN, Y)
-    lip_gap = gap(face, UPPER_LIP_INNER, LOWER_LIP_INNER) - gap(rest, UPPER_LIP_INNER, LOWER_LIP_INNER)
+    lip_gap = gap(face, UPPER_LIP_INNER, LOWER_LIP_INNER) - gap(
+        rest, UPPER_LIP_INNER, LOWER_LIP_INNER
+    )
     width = np.linalg.norm(face[:, LEFT_CORNER] - face[:, RIGHT_CORNER], axis=1)
     rest_width = float(np.linalg.norm(rest[LEFT_CORNER] - rest[RIGHT_CORNER]))
     forward = -0.5 * (moved(UPPER_LIP_TOP, Z) + moved(LOWER_LIP_BOTTOM, Z))

@@ -108,8 +108,7 @@ def _beside(video: Path) -> str:
     path = video.with_suffix(TRANSCRIPT_SUFFIX)
     if not path.is_file():
         raise LipstreamError(
-            f"no transcript: expected {path.name} beside the video (or --transcript for one "
-            "video)",
+            f"no transcript: expected {path.name} beside the video (or --transcript for one video)",
             where=str(video),
             code=MISSING_TRANSCRIPT,
         )

@@ -2,9 +2,10 @@
 
 Sketch: each video is decoded (``decode``), its face tracked (``track``), checked for one
 face and its short gaps bridged (``gaps``), its pose removed (``pose``) and its speech
-aligned to the transcript (``frontends.align``). Then, over each speaker's videos (one
-speaker per run unless each video is declared its own), every clip's measures are taken against its own rest pose and mapped to [0, 1]
-through the speaker's ranges (``channels``), resampled from the video's frame times onto
+aligned to the transcript (``frontends.align``). Then every clip's measures are taken
+against its own rest pose and mapped to [0, 1] through its speaker's ranges over all of
+that speaker's videos (``channels``; one speaker per run unless each video is declared
+its own), resampled from the video's frame times onto
 the corpus grid (``round(1 / median frame step)`` of the first video, as the corpus
 loader does) and written with ``write_corpus``: frames CSV, TextGrid, WAV and metadata
 with the transcript and the alignment's confidence. A video that fails is reported with

@@ -30,6 +30,7 @@ import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy.signal import resample_poly
@@ -148,16 +149,16 @@ def _pcm16(samples: np.ndarray, noise_floor: float) -> bytes:
     return (np.clip(samples + noise_floor * noise, -1.0, 1.0) * 32767.0).astype("<i2").tobytes()
 
 
-def _decoder(**options: object) -> object:
+def _decoder(**options: object) -> Any:
     from pocketsphinx import Decoder
 
     return Decoder(samprate=ALIGNER_RATE_HZ, loglevel="FATAL", **options)
 
 
 def _add_missing_words(
-    decoder: object, words: Sequence[str], pronounce: Pronouncer, where: str
+    decoder: Any, words: Sequence[str], pronounce: Pronouncer, where: str
 ) -> None:
-    missing = sorted({word for word in words if decoder.lookup_word(word) is None})  # type: ignore[attr-defined]
+    missing = sorted({word for word in words if decoder.lookup_word(word) is None})
     if not missing:
         return
     pronunciations = pronounce(missing)
@@ -167,7 +168,7 @@ def _add_missing_words(
             raise LipstreamError(
                 f"no pronunciation for the word {word!r}", where=where, code=ALIGNMENT_FAILED
             )
-        decoder.add_word(word, " ".join(phones), word == missing[-1])  # type: ignore[attr-defined]
+        decoder.add_word(word, " ".join(phones), word == missing[-1])
 
 
 def espeak_pronunciations(words: Sequence[str]) -> dict[str, list[str]]:
@@ -192,16 +193,16 @@ class _Entry:
     end: float
 
 
-def _aligned_phones(decoder: object, pcm: bytes, text: str, where: str) -> list[_Entry]:
+def _aligned_phones(decoder: Any, pcm: bytes, text: str, where: str) -> list[_Entry]:
     """The two alignment passes (words, then phones), as pocketsphinx documents them."""
     try:
-        decoder.set_align_text(text)  # type: ignore[attr-defined]
+        decoder.set_align_text(text)
         _decode(decoder, pcm)
-        if decoder.hyp() is None:  # type: ignore[attr-defined]
+        if decoder.hyp() is None:
             raise RuntimeError("no path through the words")
-        decoder.set_alignment()  # type: ignore[attr-defined]
+        decoder.set_alignment()
         _decode(decoder, pcm)
-        alignment = decoder.get_alignment()  # type: ignore[attr-defined]
+        alignment = decoder.get_alignment()
     except RuntimeError as error:
         raise LipstreamError(
             f"the transcript does not match the speech: pocketsphinx found no path through "
@@ -219,22 +220,20 @@ def _aligned_phones(decoder: object, pcm: bytes, text: str, where: str) -> list[
     ]
 
 
-def _decode(decoder: object, pcm: bytes) -> None:
-    decoder.start_utt()  # type: ignore[attr-defined]
-    decoder.process_raw(pcm, full_utt=True)  # type: ignore[attr-defined]
-    decoder.end_utt()  # type: ignore[attr-defined]
+def _decode(decoder: Any, pcm: bytes) -> None:
+    decoder.start_utt()
+    decoder.process_raw(pcm, full_utt=True)
+    decoder.end_utt()
 
 
-def _words(decoder: object) -> list[WordSpan]:
-    alignment = decoder.get_alignment()  # type: ignore[attr-defined]
+def _words(decoder: Any) -> list[WordSpan]:
+    alignment = decoder.get_alignment()
     found = []
     for word in alignment.words():
         name = re.sub(r"\(\d+\)$", "", word.name)  # pronunciation variant: white(2)
         if name in _POCKETSPHINX_SILENCES:
             continue
-        found.append(
-            WordSpan(name, word.start * FRAME_S, (word.start + word.duration) * FRAME_S)
-        )
+        found.append(WordSpan(name, word.start * FRAME_S, (word.start + word.duration) * FRAME_S))
     return found
 
 
@@ -278,7 +277,7 @@ def _free_phone_loop(pcm: bytes) -> list[_Entry]:
     _decode(decoder, pcm)
     return [
         _Entry(segment.word, segment.start_frame * FRAME_S, (segment.end_frame + 1) * FRAME_S)
-        for segment in decoder.seg()  # type: ignore[attr-defined]
+        for segment in decoder.seg()
         if segment.word not in _POCKETSPHINX_SILENCES
     ]
 

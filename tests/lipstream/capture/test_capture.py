@@ -9,13 +9,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from tests.lipstream.capture.clips import CLIP, DATA
-from tests.lipstream.capture.grid_names import grid_words
 from praatio import textgrid
 
 from lipstream.capture.channels import CHANNELS
 from lipstream.cli import main
 from lipstream.corpus import load_corpus
+from tests.lipstream.capture.clips import CLIP, DATA
+from tests.lipstream.capture.grid_names import grid_words
 
 GRID_UNITS_PER_S = 25000  # GRID's .align times: 1000 per 25 fps frame
 
@@ -79,7 +79,20 @@ def test_the_lips_close_for_p_inside_grids_word_p(captured: Path) -> None:
 
 
 def test_train_takes_the_captured_corpus_as_it_is(captured: Path, tmp_path: Path) -> None:
-    assert main(["train", "--corpus", str(captured), "--engine", "viseme-lerp", "--out", str(tmp_path / "m")]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--corpus",
+                str(captured),
+                "--engine",
+                "viseme-lerp",
+                "--out",
+                str(tmp_path / "m"),
+            ]
+        )
+        == 0
+    )
 
 
 def test_the_shipped_real_face_set_loads_and_trains(tmp_path: Path) -> None:
@@ -89,4 +102,17 @@ def test_the_shipped_real_face_set_loads_and_trains(tmp_path: Path) -> None:
         assert utterance.text == " ".join(grid_words(utterance.stem))
         assert utterance.speaker == utterance.stem  # ten speakers, each on their own range
         assert utterance.alignment_confidence is not None
-    assert main(["train", "--corpus", str(DATA / "corpus"), "--engine", "viseme-lerp", "--out", str(tmp_path / "m")]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--corpus",
+                str(DATA / "corpus"),
+                "--engine",
+                "viseme-lerp",
+                "--out",
+                str(tmp_path / "m"),
+            ]
+        )
+        == 0
+    )

@@ -9,7 +9,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from lipstream.capture.channels import CHANNELS, raw_measures, rest_pose, speaker_ranges, to_channels
+from lipstream.capture.channels import (
+    CHANNELS,
+    raw_measures,
+    rest_pose,
+    speaker_ranges,
+    to_channels,
+)
 from lipstream.capture.pose import face_frame, similarity
 
 EYE_DISTANCE = 60.0  # pixels: the face-scale unit of the rest face below
@@ -62,16 +68,16 @@ def moved(**moves: tuple[int, float, float, float]) -> np.ndarray:
 
 def test_similarity_recovers_a_known_rotation_scale_and_translation() -> None:
     rotation = Rotation.from_euler("xyz", (12, -30, 7), degrees=True).as_matrix()
-    scale, found_rotation, shift = similarity(REST, posed(REST, rotation, 2.5, np.array([5, -3, 9])))
+    scale, found_rotation, shift = similarity(
+        REST, posed(REST, rotation, 2.5, np.array([5, -3, 9]))
+    )
     assert scale == pytest.approx(2.5, rel=1e-12)
     np.testing.assert_allclose(found_rotation, rotation, atol=1e-12)
     np.testing.assert_allclose(shift, [5, -3, 9], atol=1e-9)
 
 
 def frames_under_poses(faces: list[np.ndarray]) -> np.ndarray:
-    return np.stack(
-        [posed(face, *pose) for face, pose in zip(faces, random_pose(len(faces)))]
-    )
+    return np.stack([posed(face, *pose) for face, pose in zip(faces, random_pose(len(faces)))])
 
 
 def test_a_jaw_drop_under_any_pose_reads_as_the_drop_in_eye_distances() -> None:
@@ -89,9 +95,7 @@ def test_a_jaw_drop_under_any_pose_reads_as_the_drop_in_eye_distances() -> None:
 
 def test_lips_parting_with_the_jaw_are_not_mouth_close() -> None:
     drops = np.array([0, 0, 0, 6, 12])
-    faces = [
-        moved(chin=(152, 0, d, 0), inner=(14, 0, d, 0), outer=(17, 0, d, 0)) for d in drops
-    ]
+    faces = [moved(chin=(152, 0, d, 0), inner=(14, 0, d, 0), outer=(17, 0, d, 0)) for d in drops]
     face = face_frame(frames_under_poses(faces))
     measures = raw_measures(face, rest_pose(face, drops == 0))
     np.testing.assert_allclose(measures["jawOpen"], drops / EYE_DISTANCE, atol=1e-9)

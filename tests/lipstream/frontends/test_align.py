@@ -89,12 +89,16 @@ def test_an_empty_transcript_and_silent_audio_are_coded_errors() -> None:
     assert (quiet.value.code, quiet.value.where) == ("not_speech", "b.wav")
 
 
-def test_the_align_command_writes_phones_and_words_tiers(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_the_align_command_writes_phones_and_words_tiers(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     text = "Hello there, how are you?"
     spoken = speak_text(text)
     write_wav(tmp_path / "hello.wav", spoken.audio)
     out = tmp_path / "hello.TextGrid"
-    assert main(["align", str(tmp_path / "hello.wav"), "--transcript", text, "--out", str(out)]) == 0
+    assert (
+        main(["align", str(tmp_path / "hello.wav"), "--transcript", text, "--out", str(out)]) == 0
+    )
     assert "alignment confidence" in capsys.readouterr().out
     phones = read_textgrid_phones(out)
     assert [s.phoneme for s in phones if s.phoneme != "sil"][:3] == ["HH", "AH", "L"]
@@ -108,7 +112,16 @@ def test_the_align_command_refuses_a_wrong_transcript_with_a_coded_line(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     write_wav(tmp_path / "a.wav", speak_text("The quick brown fox.").audio)
-    code = main(["align", str(tmp_path / "a.wav"), "--transcript", "", "--out", str(tmp_path / "a.TextGrid")])
+    code = main(
+        [
+            "align",
+            str(tmp_path / "a.wav"),
+            "--transcript",
+            "",
+            "--out",
+            str(tmp_path / "a.TextGrid"),
+        ]
+    )
     assert code == 2
     assert capsys.readouterr().err.startswith(f"error [empty_transcript]: {tmp_path / 'a.wav'}:")
     assert not (tmp_path / "a.TextGrid").exists()
