@@ -49,9 +49,11 @@ def add_capture_parser(commands: argparse._SubParsersAction[argparse.ArgumentPar
 
 
 def run_capture(args: argparse.Namespace, settings: Settings) -> None:
+    from .dependencies import require_capture_extra
     from .jobs import capture_jobs
     from .pipeline import capture
 
+    require_capture_extra()
     jobs = capture_jobs(
         args.videos,
         args.transcript,

@@ -20,3 +20,9 @@ def require(module: str) -> Any:
             where=module.split(".")[0],
             code=MISSING_DEPENDENCY,
         ) from None
+
+
+def require_capture_extra() -> None:
+    """``missing_dependency`` before any work when PyAV or mediapipe is not installed."""
+    require("av")
+    require("mediapipe")
