@@ -13,6 +13,7 @@ import numpy as np
 DATA = Path(__file__).resolve().parents[2] / "data" / "grid"
 CLIP = DATA / "swwp2s.mp4"
 FPS = 25
+TIME_BASE = Fraction(1, 1000)
 
 
 @dataclass(frozen=True)
@@ -36,15 +37,24 @@ def read_clip(path: Path = CLIP) -> Clip:
     return Clip(pictures, np.concatenate(pieces), rate)
 
 
-def write_clip(path: Path, pictures: list[np.ndarray], sound: np.ndarray | None, rate: int) -> Path:
+def write_clip(
+    path: Path,
+    pictures: list[np.ndarray],
+    sound: np.ndarray | None,
+    rate: int,
+    times: list[Fraction] | None = None,
+) -> Path:
+    """An MP4 of ``pictures`` at ``times`` (s, default i / 25) and ``sound`` from 0 s."""
     height, width = pictures[0].shape[:2]
     with av.open(str(path), "w", options={"movflags": "faststart"}) as out:
         video = out.add_stream("libx264", rate=FPS, options={"crf": "18"})
+        video.time_base = video.codec_context.time_base = TIME_BASE
         video.width, video.height, video.pix_fmt = width, height, "yuv420p"
         audio = out.add_stream("aac", rate=rate, layout="mono") if sound is not None else None
         for index, picture in enumerate(pictures):
             frame = av.VideoFrame.from_ndarray(picture, format="rgb24")
-            frame.pts, frame.time_base = index, Fraction(1, FPS)
+            at = times[index] if times is not None else Fraction(index, FPS)
+            frame.pts, frame.time_base = int(at / TIME_BASE), TIME_BASE
             out.mux(video.encode(frame))
         out.mux(video.encode(None))
         if audio is not None and sound is not None:

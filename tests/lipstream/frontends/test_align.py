@@ -125,3 +125,19 @@ def test_the_align_command_refuses_a_wrong_transcript_with_a_coded_line(
     assert code == 2
     assert capsys.readouterr().err.startswith(f"error [empty_transcript]: {tmp_path / 'a.wav'}:")
     assert not (tmp_path / "a.TextGrid").exists()
+
+
+def test_a_confidence_under_the_threshold_is_a_mismatch_saying_by_how_much() -> None:
+    spoken = speak_text("Hello there, how are you?")
+    passed = align(spoken.audio, "Hello there, how are you?", where="a.wav")
+    with pytest.raises(LipstreamError) as raised:
+        align(spoken.audio, "Hello there, how are you?", where="a.wav", min_confidence=1.01)
+    assert raised.value.code == "transcript_mismatch"
+    assert f"only {passed.confidence:.0%} of its phones" in raised.value.message
+
+
+def test_a_word_nobody_can_pronounce_is_alignment_failed() -> None:
+    spoken = speak_text("Hello there.")
+    with pytest.raises(LipstreamError) as raised:
+        align(spoken.audio, "hello qzxv", where="a.wav", pronounce=lambda words: {})
+    assert raised.value.code == "alignment_failed" and "'qzxv'" in raised.value.message
