@@ -1,7 +1,7 @@
 """The ``lipstream`` command line.
 
-Subcommands: build-demo, train, synth, serve, inspect, bench, loadtest, bridge, path,
-retarget. Every option has a help line (``lipstream <command> --help``); ``--version``
+Subcommands: build-demo, train, synth, serve, inspect, bench, loadtest, bridge, capture,
+align, path, retarget. Every option has a help line (``lipstream <command> --help``); ``--version``
 prints the version. A user-facing failure prints one line (``error [code]: where: message``) and
 exits 2.
 """
@@ -21,9 +21,11 @@ from lipstream_client.messages import NAMINGS, VISEME_SETS
 
 from ._version import __version__
 from .bridge_command import add_bridge_parser
+from .capture.command import add_capture_parser
 from .config import ServerSettings, Settings, demo_model_path, load_settings
 from .errors import LipstreamError
 from .exports import FORMATS, MOHO_FPS
+from .frontends.command import add_align_parser
 from .frontends.timings import TIMING_FORMATS
 from .loadtest.command import add_loadtest_parser
 
@@ -635,6 +637,8 @@ def _parser() -> argparse.ArgumentParser:
 
     add_loadtest_parser(commands)
     add_bridge_parser(commands)
+    add_capture_parser(commands)
+    add_align_parser(commands)
 
     path = commands.add_parser(
         "path", help="print where the demo character's models are (or will be built)"
