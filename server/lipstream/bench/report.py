@@ -839,9 +839,45 @@ def language_phonemes(bench: Bench) -> str:
     return table(["espeak-ng name", "names", "as IPA", "phonemes", "languages"], rows)
 
 
+CAPTURE = "capture.json"
+
+
+def capture(bench: Bench) -> str:
+    """``lipstream capture`` on one core: decode, tracking, the whole step, alignment."""
+    if not bench.exists(CAPTURE):
+        return f"Not measured yet: no `bench/{CAPTURE}` (`python -m lipstream.bench.capture`).\n"
+    doc = bench.load(CAPTURE)
+    load = doc.get("load_average_1min", {})
+    text = bench.source(CAPTURE, doc)
+    if load:
+        text += (
+            f"Load average (1 min) {number(load['before'], 1)} before, "
+            f"{number(load['after'], 1)} after.\n\n"
+        )
+    rows = []
+    for run in doc["runs"]:
+        cpu = run["per_cpu_second"]
+        for label, key in (
+            ("decoding (PyAV, to RGB), frames/s", "decode_fps"),
+            ("tracking (FaceMesh), frames/s", "tracking_fps"),
+            ("whole capture step, frames/s", "capture_fps"),
+            ("alignment, s per s of audio", "alignment_real_time_factor"),
+        ):
+            rows.append(
+                [
+                    f"`{run['video']}` ({run['frames']} frames)",
+                    label,
+                    number(run[key], 2 if "factor" in key else 0),
+                    number(cpu[key], 2 if "factor" in key else 0),
+                ]
+            )
+    return text + table(["video", "step", "per wall-clock second", "per CPU second"], rows)
+
+
 BLOCKS: dict[str, Callable[[Bench], str]] = {
     "languages": languages,
     "language-phonemes": language_phonemes,
+    "capture": capture,
     "first-start-summary": first_start_summary,
     "first-start": first_start,
     "engines-summary": engines_summary,

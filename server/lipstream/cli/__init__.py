@@ -1,10 +1,11 @@
 """The ``lipstream`` command line.
 
 Subcommands: build-demo, train, synth, serve, inspect, retarget, bench, loadtest, bridge,
-path. Each command's parser and handler are one module, ``add_<command>_parser`` adding
-the command to the subcommands with its handler as ``run``: here in ``lipstream.cli``,
-except for a command whose work is a package of its own, which keeps its command
-module beside that work (``lipstream.loadtest.command``). Every option has a help line
+capture, align, path. Each command's parser and handler are one module,
+``add_<command>_parser`` adding the command to the subcommands with its handler as ``run``:
+here in ``lipstream.cli``, except for a command whose work is a package of its own, which
+keeps its command module beside that work (``lipstream.loadtest.command``,
+``lipstream.capture.command``, ``lipstream.frontends.command``). Every option has a help line
 (``lipstream <command> --help``); ``--version`` prints the version. A user-facing failure
 prints one line (``error [code]: where: message``) and exits 2.
 """
@@ -17,8 +18,10 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 from .._version import __version__
+from ..capture.command import add_capture_parser
 from ..config import load_settings
 from ..errors import LipstreamError
+from ..frontends.command import add_align_parser
 from ..loadtest.command import add_loadtest_parser
 from .bench import add_bench_parser
 from .bridge import add_bridge_parser
@@ -43,6 +46,8 @@ COMMANDS: tuple[Callable[[Commands], None], ...] = (
     add_bench_parser,
     add_loadtest_parser,
     add_bridge_parser,
+    add_capture_parser,
+    add_align_parser,
     add_path_parser,
 )
 """Each command's parser, in the order ``lipstream --help`` lists them."""
