@@ -237,15 +237,13 @@ def _scan(
     p: int,
     best: Best,
     terms: np.ndarray,
-    skip: int,
 ) -> Best:
     """One viseme group of ``previous`` (``members[group[0]:group[1]]``, ascending φ), every
     pair into b (p = pre(b)) adding ``penalty``, priced up to a bar of the best +
     ``_margin``: the same pairs replace the best, in the same order, as with the bar at the
     best, and ``second`` (the least other cost seen) is exact below the bar, so the best
     wins by the margin iff ``second`` ≥ the bar at the end. The best pair's terms of the
-    cost, (α3·PGap, VGap, PNT or 0, α2·DSC), go to ``terms``. The pair from position
-    ``skip`` (−1: none) is already priced in ``best``."""
+    cost, (α3·PGap, VGap, PNT or 0, α2·DSC), go to ``terms``."""
     prev_nodes, prev_f = previous.nodes, previous.costs
     viseme, leaving, arriving, packed = joins.viseme, joins.leaving, joins.arriving, joins.packed
     dims = joins.natural.shape[0]
@@ -257,7 +255,7 @@ def _scan(
         if floor >= bar:
             break
         a = prev_nodes[i]
-        if a == p or i == skip:
+        if a == p:
             continue
         budget = bar - floor + SLACK * (abs(bar) + 1.0)
         velocity = _velocity_squares(leaving, a, arriving, b, dims, budget * budget)
@@ -298,19 +296,19 @@ def _scan_all(
     p: int,
     best: Best,
     terms: np.ndarray,
-    skip: int,
 ) -> Best:
     """``_scan`` over the group of p's viseme first, then every other group (with PNT)."""
     own = joins.viseme[p]
     classes = len(starts) - 1
     if own < classes:
-        group = (starts[own], starts[own + 1])
-        best = _scan(previous, joins, members, group, 0.0, b, p, best, terms, skip)
+        best = _scan(
+            previous, joins, members, (starts[own], starts[own + 1]), 0.0, b, p, best, terms
+        )
     penalty = joins.packed[3]
     for v in range(classes):
         if v != own and starts[v + 1] > starts[v]:
             group = (starts[v], starts[v + 1])
-            best = _scan(previous, joins, members, group, penalty, b, p, best, terms, skip)
+            best = _scan(previous, joins, members, group, penalty, b, p, best, terms)
     return best
 
 
@@ -339,7 +337,7 @@ def fast_step(
         best = Best(np.inf, 0, np.inf)
         if position[p] >= 0:
             best = Best(prev_f[position[p]], position[p], np.inf)
-        best = _scan_all(previous, joins, members, starts, b, p, best, terms, -1)
+        best = _scan_all(previous, joins, members, starts, b, p, best, terms)
         f[j] = best.cost + next_u[j]
         back[j] = best.arg
     for i in range(len(prev_nodes)):
@@ -502,60 +500,6 @@ def _given(
     return position[then.nodes[known.back[o]]], o
 
 
-@njit(cache=True, inline="always")
-def _warm(b: int, position: np.ndarray, old_position: np.ndarray, known: Ranked, then: Ranked) -> int:
-    """The position now of b's best predecessor in the last window when a scan priced it
-    there (its terms are kept), else −1."""
-    o = old_position[b]
-    if o < 0 or known.kind[o] != PRICED:
-        return -1
-    return int(position[then.nodes[known.back[o]]])
-
-
-@njit(cache=True, inline="always")
-def _summed(base: float, terms: np.ndarray, row: int) -> float:
-    """``base`` (φ of a) + a pair's ``terms[row]``, summed in ``_scan``'s order: the cost
-    the scan computes for that pair."""
-    cost = base + terms[row, 0] + terms[row, 1]
-    if terms[row, 2] != 0.0:
-        cost += terms[row, 2]
-    return float(cost + terms[row, 3])
-
-
-@njit(cache=True, inline="always")
-def _warm_scan(
-    previous: Ranked,
-    joins: Joins,
-    groups: tuple[np.ndarray, np.ndarray],
-    b: int,
-    start: Best,
-    warm: tuple[int, float],
-    terms: np.ndarray,
-) -> Best:
-    """``_scan_all`` from ``start`` (Rule 1's pair or none), the pair at position
-    ``warm[0]`` (cost ``warm[1]``, its terms in ``terms``; −1: none) priced first: the same best, arg and margin
-    flag as the scan without it. The scan keeps the first pair of least cost in its order;
-    ahead of it the warm pair becomes the best only when strictly cheaper than the start,
-    and when it stays the best the scan saw every pair below its bar, so a tie
-    (``second`` equal to the best) is the only case where the order could pick another
-    pair: that one is scanned again without the warm pair."""
-    members, starts = groups
-    p = joins.pre[b]
-    position, cost = warm
-    best = start
-    if position >= 0:
-        if cost < start.cost:
-            best = Best(cost, position, start.cost)
-        else:
-            best = Best(start.cost, start.arg, min(start.second, cost))
-            terms[:] = 0.0
-    found = _scan_all(previous, joins, members, starts, b, p, best, terms, position)
-    if position < 0 or found.arg != position or found.second != found.cost:
-        return found
-    terms[:] = 0.0
-    return _scan_all(previous, joins, members, starts, b, p, start, terms, -1)
-
-
 @njit(cache=True)
 def lag_step(
     previous: Ranked,
@@ -607,7 +551,10 @@ def lag_step(
             if known.kind[o] == NATURAL:
                 cost = prev_f[i]
             else:
-                cost = _summed(prev_f[i], old_terms, o)
+                cost = prev_f[i] + old_terms[o, 0] + old_terms[o, 1]
+                if old_terms[o, 2] != 0.0:
+                    cost += old_terms[o, 2]
+                cost += old_terms[o, 3]
             f[j] = cost + next_u[j]
             back[j] = i
             kind[j] = known.kind[o]
@@ -615,18 +562,13 @@ def lag_step(
                 terms[j, k] = old_terms[o, k]
             continue
         scanned += 1
-        start = Best(np.inf, 0, np.inf)
+        best = Best(np.inf, 0, np.inf)
         if position[p] >= 0:
-            start = Best(prev_f[position[p]], position[p], np.inf)
+            best = Best(prev_f[position[p]], position[p], np.inf)
             kind[j] = NATURAL
-        warm = (_warm(b, position, old_position, known, then), np.inf)
-        if warm[0] >= 0:
-            o = old_position[b]
-            warm = (warm[0], _summed(prev_f[warm[0]], known.terms, o))
-            for k in range(4):
-                terms[j, k] = known.terms[o, k]
-        best = _warm_scan(previous, joins, (members, starts), b, start, warm, terms[j])
-        if kind[j] == NATURAL and best.arg != start.arg:
+        start = best.arg
+        best = _scan_all(previous, joins, members, starts, b, p, best, terms[j])
+        if kind[j] == NATURAL and best.arg != start:
             kind[j] = PRICED
         f[j] = best.cost + next_u[j]
         back[j] = best.arg
