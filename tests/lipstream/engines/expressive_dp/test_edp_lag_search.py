@@ -17,7 +17,14 @@ from hypothesis import strategies as st
 from lipstream.engines.base import Model
 from lipstream.engines.expressive_dp import ExpressiveDpModel
 from lipstream.engines.expressive_dp.contamination import Contamination
-from lipstream.engines.expressive_dp.fast_step import PRICED, SURE, Layer, Ranked, fast_step, lag_step
+from lipstream.engines.expressive_dp.fast_step import (
+    PRICED,
+    SURE,
+    Layer,
+    Ranked,
+    fast_step,
+    lag_step,
+)
 from lipstream.engines.expressive_dp.lag_search import LagMemory
 from lipstream.engines.expressive_dp.search import LayerSpec, SearchSpace, search
 from lipstream.engines.expressive_dp.synthesizer import extend_path
@@ -257,7 +264,11 @@ def test_a_node_scanned_again_on_a_tie_takes_the_scans_first_pair_not_its_last_b
     assert plain_back.tolist() == [0]
 
     none = np.zeros(0, dtype=np.int64)
-    no_sure, no_kind, no_terms = np.zeros(0, dtype=bool), np.zeros(0, dtype=np.int8), np.zeros((0, 4))
+    no_sure, no_kind, no_terms = (
+        np.zeros(0, dtype=bool),
+        np.zeros(0, dtype=np.int8),
+        np.zeros((0, 4)),
+    )
     empty = Ranked(none, np.zeros(0), none, no_sure, no_kind, no_terms, none)
     previous = Ranked(prev_nodes, prev_f, none, no_sure, no_kind, no_terms, np.full(2, 7))
     scratch = (np.full(n, -1, dtype=np.int64), np.full(n, -1, dtype=np.int64))
