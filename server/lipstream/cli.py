@@ -529,7 +529,7 @@ def _parser() -> argparse.ArgumentParser:
 
     synth = commands.add_parser(
         "synth",
-        help="synthesize frames for a phones file, a text, a TTS timing file or a transcribed recording",
+        help="frames for phones, a text, a TTS timing file or a recording and its transcript",
     )
     synth.add_argument(
         "--model",
@@ -563,7 +563,8 @@ def _parser() -> argparse.ArgumentParser:
         help="format of --words (default: detected from the content)",
     )
     synth.add_argument(
-        "--audio", help="mono WAV of the speech, for engines that use audio (with --transcript: aligned)"
+        "--audio",
+        help="mono WAV of the speech, for engines that use audio (with --transcript: aligned)",
     )
     synth.add_argument("--wav", help="with --text: write espeak-ng's speech to this WAV file")
     synth.add_argument(

@@ -33,7 +33,9 @@ def delayed(spans: list[PhonemeSpan], delay: float) -> list[PhonemeSpan]:
     """``spans`` with every boundary ``delay`` s later, the first span stretched to 0 and
     the last cut at the old end."""
     end = spans[-1].end
-    moved = [replace(s, start=min(s.start + delay, end), end=min(s.end + delay, end)) for s in spans]
+    moved = [
+        replace(s, start=min(s.start + delay, end), end=min(s.end + delay, end)) for s in spans
+    ]
     moved[0] = replace(moved[0], start=0.0)
     return [s for s in moved if s.end > s.start]
 
