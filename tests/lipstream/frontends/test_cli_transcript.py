@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import shutil
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +16,7 @@ from lipstream.audio import Audio, write_wav
 from lipstream.cli import main
 from lipstream.engines import load_model
 from lipstream.speech.text_frontend import speak_text
-from lipstream.timeline import PhonemeSpan
+from tests.helpers import delayed_spans
 
 pytestmark = pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng missing")
 
@@ -27,17 +26,6 @@ FPS = 50.0
 # espeak-ng's events; frames of the aligned phones must then be closer to the true
 # frames than the true frames delayed by that much are.
 P90_ONSET_ERROR_S = 0.05
-
-
-def delayed(spans: list[PhonemeSpan], delay: float) -> list[PhonemeSpan]:
-    """``spans`` with every boundary ``delay`` s later, the first span stretched to 0 and
-    the last cut at the old end."""
-    end = spans[-1].end
-    moved = [
-        replace(s, start=min(s.start + delay, end), end=min(s.end + delay, end)) for s in spans
-    ]
-    moved[0] = replace(moved[0], start=0.0)
-    return [s for s in moved if s.end > s.start]
 
 
 def frames_of(path: Path) -> np.ndarray:
@@ -69,7 +57,9 @@ def test_aligned_frames_are_within_the_aligners_error_of_espeak_ngs_own(
     assert 0.25 <= confidence <= 1.0
     model = load_model(lerp_model_dir)
     truth = np.asarray(model.synthesize(spoken.spans, fps=FPS, audio=spoken.audio).frames)
-    late = np.asarray(model.synthesize(delayed(spoken.spans, P90_ONSET_ERROR_S), fps=FPS).frames)
+    late = np.asarray(
+        model.synthesize(delayed_spans(spoken.spans, P90_ONSET_ERROR_S), fps=FPS).frames
+    )
     aligned = frames_of(out)
     assert abs(len(aligned) - len(truth)) <= 1
     assert rms(aligned, truth) < rms(late, truth)

@@ -9,7 +9,6 @@ import base64
 import json
 import shutil
 from collections.abc import Iterator
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +19,7 @@ import pytest
 from lipstream.config import ServerSettings
 from lipstream.speech.text_frontend import SpokenText, speak_text
 from lipstream.timeline import PhonemeSpan
+from tests.helpers import delayed_spans
 from tests.lipstream.server.harness import Served, serving
 
 pytestmark = pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng missing")
@@ -52,15 +52,6 @@ def items(spans: list[PhonemeSpan]) -> list[dict[str, Any]]:
     return [{"phoneme": s.phoneme, "start": s.start, "end": s.end} for s in spans]
 
 
-def delayed(spans: list[PhonemeSpan], delay: float) -> list[PhonemeSpan]:
-    end = spans[-1].end
-    moved = [
-        replace(s, start=min(s.start + delay, end), end=min(s.end + delay, end)) for s in spans
-    ]
-    moved[0] = replace(moved[0], start=0.0)
-    return [s for s in moved if s.end > s.start]
-
-
 def post(served: Served, body: dict[str, Any]) -> httpx.Response:
     return httpx.post(
         f"{served.http}/v1/synthesize",
@@ -83,7 +74,7 @@ def test_a_transcript_of_the_audio_gives_frames_within_the_aligners_error(
     answer = aligned.json()
     assert 0.25 <= answer["alignment"]["confidence"] <= 1.0
     truth = post(served, {**BODY, "items": items(spoken.spans)}).json()["data"]
-    late = post(served, {**BODY, "items": items(delayed(spoken.spans, P90_ONSET_ERROR_S))})
+    late = post(served, {**BODY, "items": items(delayed_spans(spoken.spans, P90_ONSET_ERROR_S))})
     assert abs(len(answer["data"]) - len(truth)) <= 1
     assert rms(answer["data"], truth) < rms(late.json()["data"], truth)
     assert "alignment" not in post(served, {**BODY, "items": items(spoken.spans)}).json()
