@@ -114,3 +114,26 @@ def test_a_transcript_without_audio_or_with_text_options_is_refused(
     )  # fmt: skip
     assert status == 2
     assert capsys.readouterr().err.startswith(f"error [invalid_request]: {where}:")
+
+
+def test_the_audio_reaches_an_engine_that_hears_it(all_models_dir: Path, tmp_path: Path) -> None:
+    """``hmm`` listens: the transcript's frames are those of ``lipstream align``'s TextGrid
+    played with the same WAV through ``--phones``, and differ from them without the WAV."""
+    spoken = speak_text(TEXT)
+    wav = tmp_path / "stella.wav"
+    write_wav(wav, spoken.audio)
+    grid = tmp_path / "stella.TextGrid"
+    assert main(["align", str(wav), "--transcript", TEXT, "--out", str(grid)]) in (0, None)
+    model = ["--model", str(all_models_dir / "hmm"), "--fps", str(FPS)]
+    runs = {
+        "transcript": ["--audio", str(wav), "--transcript", TEXT],
+        "phones": ["--phones", str(grid), "--audio", str(wav)],
+        "deaf": ["--phones", str(grid)],
+    }
+    frames = {}
+    for name, given in runs.items():
+        out = tmp_path / f"{name}.json"
+        assert main(["synth", *model, *given, "--out", str(out)]) in (0, None)
+        frames[name] = frames_of(out)
+    np.testing.assert_allclose(frames["transcript"], frames["phones"], atol=1e-3)
+    assert rms(frames["deaf"], frames["phones"]) > 1e-3
