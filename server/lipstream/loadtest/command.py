@@ -234,9 +234,7 @@ def _cpu(args: argparse.Namespace, settings: Settings) -> None:
 
     path = settings.results_file(args.results, RESULTS_NAME)
     read_results(path)  # before minutes of measuring, not after
-    base = _config(
-        args, settings, streams=args.streams, latency_budget_ms=args.latency_budget_ms
-    )
+    base = _config(args, settings, streams=args.streams, latency_budget_ms=args.latency_budget_ms)
     command = "lipstream " + shlex.join(sys.argv[1:])
     for engine in _capacity_engines(base.url, args.engine, args.character, args.token):
         comparison = CpuComparison(

@@ -90,7 +90,11 @@ def leg_config(comparison: CpuComparison, url: str) -> LoadTestConfig:
 def check_comparison(comparison: CpuComparison) -> None:
     """InvalidRequestError naming the flag whose value is out of bounds."""
     bounds: list[tuple[str, bool, str]] = [
-        ("--duration", 1.0 <= comparison.duration_s <= MAX_DURATION_S, f"[1, {MAX_DURATION_S:g}] s"),
+        (
+            "--duration",
+            1.0 <= comparison.duration_s <= MAX_DURATION_S,
+            f"[1, {MAX_DURATION_S:g}] s",
+        ),
         ("--rounds", 1 <= comparison.rounds <= MAX_ROUNDS, f"1..{MAX_ROUNDS}"),
         ("--pause", 0 <= comparison.pause_s <= 60, "[0, 60] s"),
     ]
@@ -263,7 +267,7 @@ def record_run(path: Path, result: dict[str, Any], command: str) -> None:
     """Add ``result`` to the results file at ``path``, replacing a run with the same key;
     the run keeps its date and ``command``."""
     document = read_results(path)
-    date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    date = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
     entry = {**result, "date": date, "command": command}
     key = tuple(entry.get(name) for name in _RUN_KEY)
     kept = [old for old in document["runs"] if tuple(old.get(name) for name in _RUN_KEY) != key]
