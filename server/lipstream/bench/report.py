@@ -536,6 +536,27 @@ def cpu_per_session(bench: Bench) -> str:
     )
 
 
+def server_profile(bench: Bench) -> str:
+    name = "server_profile.json"
+    doc = bench.load(name)
+    text = bench.source(name, doc) + (
+        f"{doc['samples']} samples of the serving process, each counted in the first layer "
+        "its stack passes through (`lipstream.bench.server_profile`).\n\n"
+    )
+    layers = table(
+        ["layer", "samples", "share"],
+        ([row["layer"], str(row["samples"]), percent(row["share"])] for row in doc["layers"]),
+    )
+    functions = table(
+        ["innermost function", "samples", "share"],
+        (
+            [f"`{row['function']}`", str(row["samples"]), percent(row["share"])]
+            for row in doc["top_functions"]
+        ),
+    )
+    return text + layers + "\nThe innermost functions that took the most samples:\n\n" + functions
+
+
 def capacity_workers(bench: Bench) -> str:
     doc = bench.load("capacity_workers.json")
     text = bench.source("capacity_workers.json", doc)
@@ -909,6 +930,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "capacity-best-two-workers": _capacity("capacity_best_two_workers.json"),
     "capacity-workers": capacity_workers,
     "cpu-per-session": cpu_per_session,
+    "server-profile": server_profile,
     "capacity-earlier": _capacity("capacity.json"),
     "loadtest": loadtest,
     "scale-out": scale_out,
