@@ -541,16 +541,25 @@ def server_profile(bench: Bench) -> str:
     doc = bench.load(name)
     text = bench.source(name, doc) + (
         f"{doc['samples']} samples of the serving process, each counted in the first layer "
-        "its stack passes through (`lipstream.bench.server_profile`).\n\n"
+        "its stack passes through (`lipstream.bench.server_profile`); "
+        f"{doc['event_loop_samples']} of them in the event loop's thread.\n\n"
     )
     layers = table(
-        ["layer", "samples", "share"],
-        ([row["layer"], str(row["samples"]), percent(row["share"])] for row in doc["layers"]),
+        ["layer", "samples", "share of all", "share of the event loop's thread"],
+        (
+            [
+                row["layer"],
+                str(row["samples"]),
+                percent(row["share"]),
+                "–" if row["share_of_event_loop"] is None else percent(row["share_of_event_loop"]),
+            ]
+            for row in doc["layers"]
+        ),
     )
     functions = table(
-        ["innermost function", "samples", "share"],
+        ["innermost function", "samples", "share of the event loop's thread"],
         (
-            [f"`{row['function']}`", str(row["samples"]), percent(row["share"])]
+            [f"`{row['function']}`", str(row["samples"]), percent(row["share_of_event_loop"])]
             for row in doc["top_functions"]
         ),
     )

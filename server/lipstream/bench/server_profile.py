@@ -7,7 +7,9 @@ sample belongs to the first layer in ``LAYERS`` that any of its frames
 matches, so a layer nested inside another (the engine call inside the
 session, a metric recorded on the send path) is counted as itself, not as
 its caller. Samples that match none are the event loop's own work and the
-rest of the web stack (``other``). The result also lists the innermost
+rest of the web stack (``other``). Stacks without the event loop's
+``run_forever`` are other threads' (the synthesis pool, among them workers
+py-spy did not see as idle): ``other threads``. The result also lists the innermost
 functions that took the most samples.
 
 Usage::
@@ -49,6 +51,8 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("event loop polling", ("select (selectors.py", "poll (selectors.py")),
 )
 OTHER = "other"
+OTHER_THREADS = "other threads"
+EVENT_LOOP = "run_forever ("
 TOP_FUNCTIONS = 15
 
 
@@ -61,7 +65,10 @@ def parse_line(line: str) -> tuple[list[str], int] | None:
 
 
 def layer_of(frames: Sequence[str]) -> str:
-    """The first layer of ``LAYERS`` any frame matches, else ``OTHER``."""
+    """``OTHER_THREADS`` for a stack outside the event loop's thread, else the first layer
+    of ``LAYERS`` any frame matches, else ``OTHER``."""
+    if not any(EVENT_LOOP in frame for frame in frames):
+        return OTHER_THREADS
     for name, patterns in LAYERS:
         if any(pattern in frame for frame in frames for pattern in patterns):
             return name
@@ -69,8 +76,8 @@ def layer_of(frames: Sequence[str]) -> str:
 
 
 def breakdown(lines: Iterable[str]) -> dict[str, Any]:
-    """Samples in all, per layer (in ``LAYERS`` order, then ``OTHER``) and per innermost
-    function."""
+    """Samples in all, per layer (in ``LAYERS`` order, then ``OTHER`` and
+    ``OTHER_THREADS``) and per innermost function of the event loop's thread."""
     layers: Counter[str] = Counter()
     leaves: Counter[str] = Counter()
     for line in lines:
@@ -78,18 +85,29 @@ def breakdown(lines: Iterable[str]) -> dict[str, Any]:
         if parsed is None:
             continue
         frames, samples = parsed
-        layers[layer_of(frames)] += samples
-        leaves[frames[-1]] += samples
+        layer = layer_of(frames)
+        layers[layer] += samples
+        if layer != OTHER_THREADS:
+            leaves[frames[-1]] += samples
     total = sum(layers.values())
-    names = [name for name, _ in LAYERS] + [OTHER]
+    loop_total = total - layers[OTHER_THREADS]
+    names = [name for name, _ in LAYERS] + [OTHER, OTHER_THREADS]
     return {
         "samples": total,
+        "event_loop_samples": loop_total,
         "layers": [
-            {"layer": name, "samples": layers[name], "share": layers[name] / total if total else 0}
+            {
+                "layer": name,
+                "samples": layers[name],
+                "share": layers[name] / total if total else 0.0,
+                "share_of_event_loop": None
+                if name == OTHER_THREADS or not loop_total
+                else layers[name] / loop_total,
+            }
             for name in names
         ],
         "top_functions": [
-            {"function": name, "samples": count, "share": count / total}
+            {"function": name, "samples": count, "share_of_event_loop": count / loop_total}
             for name, count in leaves.most_common(TOP_FUNCTIONS)
         ],
     }

@@ -22,6 +22,7 @@ STACKS = [
     f"{HANDLE};_send_all (lipstream/server/websocket.py:480);write (asyncio/selector_events.py:1) 20",
     f"{HANDLE};_receive (lipstream/server/websocket.py:385);receive (starlette/websockets.py:1) 5",
     f"{LOOP};_read_ready (asyncio/selector_events.py:1) 2",
+    "_bootstrap (threading.py:1002);_worker (concurrent/futures/thread.py:81) 9",
     "not a stack line",
 ]
 
@@ -32,7 +33,7 @@ def test_each_sample_goes_to_the_first_layer_its_stack_matches(tmp_path: Path) -
     results = tmp_path / "bench" / "server_profile.json"
     assert main([str(stacks), "--command", "py-spy record ...", "--results", str(results)]) == 0
     document = json.loads(results.read_text(encoding="utf-8"))
-    assert document["samples"] == 100
+    assert document["samples"] == 109
     samples = {row["layer"]: row["samples"] for row in document["layers"]}
     assert samples == {
         "engine call": 7,
@@ -42,16 +43,18 @@ def test_each_sample_goes_to_the_first_layer_its_stack_matches(tmp_path: Path) -
         "receiving and decoding": 5,
         "event loop polling": 50,
         "other": 2,
+        "other threads": 9,
     }
     assert document["top_functions"][0] == {
         "function": "select (selectors.py:468)",
         "samples": 50,
-        "share": 0.5,
+        "share_of_event_loop": 0.5,
     }
     assert document["command"] == "py-spy record ..." and document["date"]
     rendered = server_profile(Bench(results.parent))
-    assert "| engine call | 7 | 7.0% |" in rendered
-    assert "| event loop polling | 50 | 50.0% |" in rendered
+    assert "| engine call | 7 | 6.4% | 7.0% |" in rendered
+    assert "| event loop polling | 50 | 45.9% | 50.0% |" in rendered
+    assert "| other threads | 9 | 8.3% | – |" in rendered
 
 
 def test_an_empty_profile_has_no_shares(tmp_path: Path) -> None:
