@@ -489,6 +489,21 @@ def _rung(run: dict[str, Any]) -> str:
     return f"`{run['fidelity']}` ({conditions})"
 
 
+CAUSAL_CPU_RATIO_TARGET = 1.25
+BEST_CPU_RATIO_TARGET = 1.5
+
+
+def _against_target(fidelity: str, ratio: float | None) -> str:
+    """Whether ``ratio`` meets the target for its rung (causal rungs 1.25, best
+    rungs 1.5), and if not by what factor it misses."""
+    target = CAUSAL_CPU_RATIO_TARGET if "causal" in fidelity else BEST_CPU_RATIO_TARGET
+    if ratio is None:
+        return f"≤ {target:g}: not measured"
+    if ratio <= target:
+        return f"≤ {target:g}: met"
+    return f"≤ {target:g}: missed by {number(ratio / target, 2)}×"
+
+
 def cpu_per_session(bench: Bench) -> str:
     name = "cpu_per_session.json"
     doc = bench.load(name)
@@ -511,6 +526,7 @@ def cpu_per_session(bench: Bench) -> str:
                     for side in (server, reference)
                 ),
                 " / ".join("yes" if side["held"] else "no" for side in (server, reference)),
+                _against_target(run["fidelity"], ratio),
             ]
         )
     header = [
@@ -522,6 +538,7 @@ def cpu_per_session(bench: Bench) -> str:
         "ratio (per round)",
         "p99 frame lag ms: server / reference",
         "count held: server / reference",
+        "target",
     ]
     text = bench.source(name, doc) + (
         "Each round is one leg against the server, then one against the reference; every "

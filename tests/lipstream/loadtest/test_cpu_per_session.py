@@ -11,7 +11,7 @@ from typing import Any
 
 import pytest
 
-from lipstream.bench.report import Bench, cpu_per_session
+from lipstream.bench.report import Bench, _against_target, cpu_per_session
 from lipstream.engines.base import frame_count
 from lipstream.errors import InvalidRequestError, LipstreamError
 from lipstream.loadtest.cpu_per_session import (
@@ -140,8 +140,30 @@ def test_runs_accumulate_by_key_and_render_into_the_report(tmp_path: Path) -> No
     assert document["machine"]["cpus"] >= 1 and document["date"] and document["command"]
     rendered = cpu_per_session(Bench(path.parent))
     assert "| `anime-graph` | `causal_lead` (lead 0 ms, budget 20 ms) | 100, 1 × 20 s |" in rendered
-    assert "| 4.000 | 1.000 | **4.00** (4.00) | 12.0 / 4.0 | yes / yes |" in rendered
-    assert "| 3.000 | 2.000 | **1.50** (1.50) |" in rendered
+    assert (
+        "| 4.000 | 1.000 | **4.00** (4.00) | 12.0 / 4.0 | yes / yes | ≤ 1.25: missed by 3.20× |"
+        in rendered
+    )
+    assert (
+        "| 3.000 | 2.000 | **1.50** (1.50) | 12.0 / 4.0 | yes / yes | ≤ 1.25: missed by 1.20× |"
+        in rendered
+    )
+
+
+@pytest.mark.parametrize(
+    ("fidelity", "ratio", "verdict"),
+    [
+        ("causal", 1.25, "≤ 1.25: met"),
+        ("causal_lead", 2.5, "≤ 1.25: missed by 2.00×"),
+        ("lag-4", 1.5, "≤ 1.5: met"),
+        ("greedy_tile10", 3.0, "≤ 1.5: missed by 2.00×"),
+        ("full", None, "≤ 1.5: not measured"),
+    ],
+)
+def test_each_ratio_is_held_against_its_rungs_target(
+    fidelity: str, ratio: float | None, verdict: str
+) -> None:
+    assert _against_target(fidelity, ratio) == verdict
 
 
 def test_a_file_of_another_kind_is_not_overwritten(tmp_path: Path) -> None:
