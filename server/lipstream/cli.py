@@ -470,7 +470,7 @@ def _bench_real(args: argparse.Namespace, settings: Settings) -> None:
     path = settings.results_file(args.results, "real_faces.json")
     engines = args.engines.split(",") if args.engines else None
     results = run_real_bench(
-        load_corpus(corpus_dir), demo_models(models_dir, engines), ["lipstream", *sys.argv[1:]]
+        load_corpus(corpus_dir), demo_models(models_dir, engines), args.command_line
     )
     write_results(results, path)
     print(f"wrote {path}", file=sys.stderr)
@@ -666,7 +666,8 @@ def _parser() -> argparse.ArgumentParser:
         "--real",
         action="store_true",
         help="instead: the demo character's models against real lips (--corpus: a capture "
-        "corpus, default the checkout's GRID set; default file real_faces.json)",
+        "corpus, default the checkout's GRID set; results by default in "
+        "$LIPSTREAM_HOME/bench/real_faces.json)",
     )
     bench.add_argument(
         "--models",
@@ -729,6 +730,7 @@ def _add_retarget_parser(commands: argparse._SubParsersAction[argparse.ArgumentP
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    args.command_line = ["lipstream", *(sys.argv[1:] if argv is None else argv)]
     run: Callable[[argparse.Namespace, Settings], None] = args.run
     try:
         run(args, load_settings())

@@ -104,7 +104,9 @@ def real_clips(corpus: Corpus) -> list[Clip]:
                 code="invalid_corpus",
             )
         speech = speech_mask(utterance.phones, corpus.fps, len(aperture))
-        clips.append(Clip(_stem(utterance), _speaker(utterance), aperture, speech, utterance.phones))
+        clips.append(
+            Clip(_stem(utterance), _speaker(utterance), aperture, speech, utterance.phones)
+        )
     return clips
 
 
@@ -149,21 +151,34 @@ class RealFaceRow:
     aperture_r_by_clip: dict[str, float | None]
 
 
-def bench_real_engine(model: Model, clips: Sequence[Clip], fps: float, threshold: float) -> RealFaceRow:
+def predicted_apertures(model: Model, clips: Sequence[Clip], fps: float) -> list[np.ndarray]:
+    """``model``'s lip aperture for each clip, from its phones, on the clip's frames (the
+    last frame held should the synthesis end early)."""
     predicted = []
     for clip in clips:
         frames = model.synthesize(clip.phones, fps=fps, audio=None).frames
         aperture = lip_aperture(frames, model.channels)
-        if aperture is None:
+        if aperture is None or len(aperture) == 0:
             raise LipstreamError(
-                "the model has no jawOpen and mouthClose channels",
+                "the model gives no lip aperture (jawOpen and mouthClose)",
                 where=model.manifest.engine,
                 code="invalid_model",
             )
         n = len(clip.aperture)
-        padded = np.full(n, aperture[-1] if len(aperture) else 0.0)
+        padded = np.full(n, aperture[-1])
         padded[: min(n, len(aperture))] = aperture[:n]
         predicted.append(padded)
+    return predicted
+
+
+def score_apertures(
+    engine: str,
+    clips: Sequence[Clip],
+    predicted: Sequence[np.ndarray],
+    fps: float,
+    threshold: float,
+) -> RealFaceRow:
+    """The figures of predicted apertures (one (n_frames,) per clip) against the real ones."""
     maps, own = speaker_maps(clips, predicted)
     by_clip = {
         clip.stem: pearson_r(p[clip.speech], clip.aperture[clip.speech])
@@ -178,7 +193,7 @@ def bench_real_engine(model: Model, clips: Sequence[Clip], fps: float, threshold
         lags.extend(closure_lags(clip.aperture, prediction, clip.phones, fps))
     lags_ms = 1000.0 * np.asarray(lags)
     return RealFaceRow(
-        engine=model.manifest.engine,
+        engine=engine,
         aperture_r=float(np.mean(known)) if known else None,
         closure_rate=closed / total if total else None,
         closure_lag_ms=float(lags_ms.mean()) if len(lags) else None,
@@ -198,10 +213,14 @@ def demo_models(models_dir: Path, engines: Sequence[str] | None = None) -> list[
         raise LipstreamError(
             f"no {BASELINE} model to compare with", where=str(models_dir), code="invalid_request"
         )
-    return sorted(models, key=lambda model: (model.manifest.engine != BASELINE, model.manifest.engine))
+    return sorted(
+        models, key=lambda model: (model.manifest.engine != BASELINE, model.manifest.engine)
+    )
 
 
-def run_real_bench(corpus: Corpus, models: Sequence[Model], command: Sequence[str]) -> dict[str, Any]:
+def run_real_bench(
+    corpus: Corpus, models: Sequence[Model], command: Sequence[str]
+) -> dict[str, Any]:
     """Every model of ``models`` against the real clips of ``corpus``."""
     clips = real_clips(corpus)
     threshold = closure_threshold(((c.aperture, c.phones) for c in clips), corpus.fps)
@@ -210,7 +229,16 @@ def run_real_bench(corpus: Corpus, models: Sequence[Model], command: Sequence[st
         got, count = closure_counts(clip.aperture, clip.phones, corpus.fps, threshold)
         recorded_closed, recorded_total = recorded_closed + got, recorded_total + count
     with threadpool_limits(limits=1):
-        rows = [bench_real_engine(model, clips, corpus.fps, threshold) for model in models]
+        rows = [
+            score_apertures(
+                model.manifest.engine,
+                clips,
+                predicted_apertures(model, clips, corpus.fps),
+                corpus.fps,
+                threshold,
+            )
+            for model in models
+        ]
     return {
         "lipstream_version": __version__,
         "date": datetime.now(UTC).isoformat(timespec="seconds"),
@@ -227,9 +255,7 @@ def run_real_bench(corpus: Corpus, models: Sequence[Model], command: Sequence[st
             "clips": len(clips),
             "speakers": len({clip.speaker for clip in clips}),
         },
-        "models": {
-            model.manifest.engine: model.manifest.name for model in models
-        },
+        "models": {model.manifest.engine: model.manifest.name for model in models},
         "recorded": {
             "closure_threshold": threshold,
             "closure_rate": recorded_closed / recorded_total if recorded_total else None,
