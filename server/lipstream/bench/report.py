@@ -884,10 +884,12 @@ def real_faces_summary(bench: Bench) -> str:
     best = max(learned, key=lambda row: row["aperture_r"] or -1.0)
     lags = [row["closure_lag_ms"] for row in learned if row["closure_lag_ms"] is not None]
     return (
-        f"On real lips ({doc['corpus']['clips']} GRID clips): aperture r up to "
+        "Real lips (GRID): aperture r up to "
         f"{best['aperture_r']:.2f} (`{best['engine']}`; `viseme-lerp` {base['aperture_r']:.2f}), "
-        f"/p b m/ closing {min(lags):+.0f} to {max(lags):+.0f} ms late "
-        f"([real faces](docs/reports/engines.md#real-faces)).\n"
+        f"/p b m/ closure lag {_signed(min(lags, default=None))} to "
+        f"{_signed(max(lags, default=None))} ms "
+        f"(`viseme-lerp` {_signed(base['closure_lag_ms'])}; "
+        f"[more](docs/reports/engines.md#real-faces)).\n"
     )
 
 
