@@ -255,7 +255,13 @@ def run_real_bench(
             "clips": len(clips),
             "speakers": len({clip.speaker for clip in clips}),
         },
-        "models": {model.manifest.engine: model.manifest.name for model in models},
+        "models": {
+            model.manifest.engine: {
+                "character": model.manifest.name,
+                "corpus_digest": model.manifest.corpus_digest,
+            }
+            for model in models
+        },
         "recorded": {
             "closure_threshold": threshold,
             "closure_rate": recorded_closed / recorded_total if recorded_total else None,

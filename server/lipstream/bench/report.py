@@ -893,6 +893,14 @@ def real_faces_summary(bench: Bench) -> str:
     )
 
 
+def _trained_on(doc: dict[str, Any]) -> str:
+    models = doc.get("models", {}).values()
+    pairs = sorted(
+        {(m["character"], m["corpus_digest"][:12]) for m in models if isinstance(m, dict)}
+    )
+    return "".join(f" Models of `{name}` (corpus digest `{digest}`)." for name, digest in pairs)
+
+
 def real_faces(bench: Bench) -> str:
     """``lipstream bench --real``: every engine of the demo character against real lips."""
     if not bench.exists(REAL_FACES):
@@ -904,7 +912,7 @@ def real_faces(bench: Bench) -> str:
         f"Corpus `{corpus['name']}` (digest `{corpus['digest'][:12]}`, {corpus['fps']:g} fps): "
         f"{corpus['clips']} clips, {corpus['speakers']} speakers; the real lips close on "
         f"{percent(recorded['closure_rate'])} of their {recorded['bilabials']} /p b m/ "
-        f"(threshold {recorded['closure_threshold']:.3f}).\n\n"
+        f"(threshold {recorded['closure_threshold']:.3f}).{_trained_on(doc)}\n\n"
     )
     rows = []
     for row in _by_engine(doc["engines"]):
