@@ -416,6 +416,17 @@ def _shown_maps(model: Model, directory: Path, name: str | None) -> dict[str, Re
 
 
 def _bench(args: argparse.Namespace, settings: Settings) -> None:
+    if (args.models or args.engines) and not args.real:
+        raise LipstreamError(
+            "--models and --engines go with --real", where="--models", code="invalid_request"
+        )
+    if args.real and (args.word_timings or args.no_engine_benches):
+        raise LipstreamError(
+            "--real measures the demo models on real lips; it takes no --word-timings or "
+            "--no-engine-benches",
+            where="--real",
+            code="invalid_request",
+        )
     if args.word_timings:
         _bench_word_timings(args, settings)
         return

@@ -195,3 +195,18 @@ def test_bench_real_wants_a_baseline(
     error = capsys.readouterr().err
     assert "[invalid_request]" in error and "no viseme-lerp model" in error
     assert not (tmp_path / "x.json").exists()
+
+
+@pytest.mark.parametrize(
+    "extra", [["--real", "--word-timings"], ["--real", "--no-engine-benches"], ["--models", "m"]]
+)
+def test_options_that_do_not_go_together_are_refused(
+    extra: list[str],
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    monkeypatch.setenv("LIPSTREAM_HOME", str(tmp_path / "home"))
+    assert cli.main(["bench", *extra, "--results", str(tmp_path / "x.json")]) == 2
+    assert "[invalid_request]" in capsys.readouterr().err
+    assert not (tmp_path / "x.json").exists()
