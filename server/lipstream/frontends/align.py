@@ -39,6 +39,7 @@ from ..audio import Audio
 from ..errors import LipstreamError
 from ..phonemes import SILENCE, normalize_phoneme
 from ..timeline import PhonemeSpan
+from .align_codes import ALIGNMENT_FAILED, EMPTY_TRANSCRIPT, NOT_SPEECH, TRANSCRIPT_MISMATCH
 
 ALIGNER_RATE_HZ = 16000
 FRAME_S = 0.01  # pocketsphinx's frame period (100 frames a second)
@@ -48,10 +49,6 @@ MIN_CONFIDENCE = 0.25
 # while added noise can lose a real recording that aligned without it.
 NOISE_FLOORS = (0.0, 1e-4, 1e-3)
 NOISE_SEED = 0
-EMPTY_TRANSCRIPT = "empty_transcript"
-ALIGNMENT_FAILED = "alignment_failed"
-TRANSCRIPT_MISMATCH = "transcript_mismatch"
-NOT_SPEECH = "not_speech"
 _POCKETSPHINX_SILENCES = frozenset({"SIL", "<sil>", "<s>", "</s>", "+SPN+", "+NSN+", "(NULL)"})
 _WORD = re.compile(r"[a-z0-9]+(?:'[a-z0-9]+)*")
 

@@ -52,7 +52,7 @@ import math
 import time
 from collections.abc import AsyncIterator, Callable, Mapping
 from dataclasses import dataclass, field, replace
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import msgpack
 import numpy as np
@@ -86,11 +86,14 @@ from lipstream_client.errors import (
 from ..audio import Audio
 from ..corpus.frames_csv import frames_csv_text
 from ..errors import LipstreamError
-from ..frontends.align import EMPTY_TRANSCRIPT, Alignment, align
+from ..frontends.align_codes import EMPTY_TRANSCRIPT
 from .admission import bearer_token, token_accepted
 from .load import MIB
 from .session import Session
 from .state import ServerState
+
+if TYPE_CHECKING:
+    from ..frontends.align import Alignment
 
 REQUEST_ID = "synthesize"
 START_FIELDS = (
@@ -383,6 +386,8 @@ def _aligned(transcript: Transcript, messages: list[BodyPart]) -> Alignment:
     located at ``audio`` (or ``transcript`` when it has no words)."""
     chunk = next(message for message in messages if isinstance(message, AudioChunk))
     samples = np.frombuffer(chunk.pcm16, "<i2").astype(np.float32) / 32768.0
+    from ..frontends.align import align  # pocketsphinx loads with the first transcript
+
     where = "transcript" if not transcript.text.strip() else "audio"
     try:
         return align(Audio(samples, chunk.sample_rate), transcript.text, where=where)
