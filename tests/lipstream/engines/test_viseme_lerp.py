@@ -12,7 +12,9 @@ import pytest
 
 from lipstream.corpus import Corpus, Utterance
 from lipstream.engines import load_model
-from lipstream.engines.viseme_lerp import KAPPAS, VisemeLerpEngine
+from lipstream.engines.base import SynthesisRequest
+from lipstream.engines.damped_fit import KAPPAS
+from lipstream.engines.viseme_lerp import VisemeLerpEngine
 from lipstream.errors import InvalidRequestError, ModelStoreError
 from lipstream.output.visemes import get_scheme
 from lipstream.store import save_model_dir
@@ -188,7 +190,7 @@ def test_bad_damped_options_get_a_coded_error(
 ) -> None:
     model = VisemeLerpEngine().fit(corpus)
     with pytest.raises(InvalidRequestError) as caught:
-        model.start(fps=FPS, **options)
+        model.start(SynthesisRequest(fps=FPS, options=options))
     assert caught.value.code == "invalid_request" and caught.value.where == where
 
 
