@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from lipstream.engines.base import CallCost, Lookahead, Rung, SynthesisRequest
+from lipstream.engines.viseme_lerp import VisemeLerpModel
 from lipstream.errors import ModelStoreError
 from lipstream.phonemes import SILENCE
 from lipstream.server.budget import BudgetInfeasible, choose_rung, estimate, lookahead_ms
@@ -186,10 +187,9 @@ def test_catalog_ladder_follows_each_models_declared_rungs(catalog: Catalog) -> 
 
 def test_rest_pose_of_viseme_lerp_is_its_silence_key_pose(catalog: Catalog) -> None:
     model = catalog.model("viseme-lerp", "demo")
-    silence_row = model.scheme.classes.index(  # type: ignore[attr-defined]
-        model.scheme.viseme_of(SILENCE)
-    )  # type: ignore[attr-defined]
-    expected = model.poses[silence_row]  # type: ignore[attr-defined]
+    assert isinstance(model, VisemeLerpModel)
+    silence_row = model.scheme.classes.index(model.scheme.viseme_of(SILENCE))
+    expected = model.poses[silence_row]
     for emotion in (None, "happy"):
         np.testing.assert_allclose(catalog.rest_pose(model, emotion), expected, atol=1e-7)
 

@@ -115,7 +115,7 @@ def test_ready_reports_the_causal_rung_and_every_frame_arrives_as_its_span_does(
     spans = [PhonemeSpan(label.rstrip("1"), start, end) for label, start, end in SPANS]
     model = trained_models[engine]
     options = dict(ready.options)
-    expected = model.synthesize(spans, fps=60, emotion="neutral", **options).frames
+    expected = model.synthesize(spans, fps=60, audio=None, emotion="neutral", **options).frames
     np.testing.assert_allclose([rows[i] for i in range(spoken)], expected, atol=1e-6)
 
 

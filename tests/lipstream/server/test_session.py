@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from lipstream.audio import Audio
+from lipstream.engines.anime_graph import AnimeGraphModel
 from lipstream.server.catalog import Catalog
 from lipstream.server.outgoing import Outgoing
 from lipstream.server.request import RequestLimits
@@ -150,8 +151,9 @@ def test_cancel_reports_the_frames_sent_and_frees_the_id(catalog: Catalog) -> No
     )
     sent = len(frames_of(out))
     assert sent == 4  # lookahead of one phoneme: final before 0.4 s, frames 0..3 at 10 fps
-    assert out[-1] == Done("a", out[-1].stats, "cancel")  # type: ignore[union-attr]
-    assert out[-1].stats.frames == sent  # type: ignore[union-attr]
+    done = out[-1]
+    assert isinstance(done, Done) and done == Done("a", done.stats, "cancel")
+    assert done.stats.frames == sent
     assert errors(play(session, Phonemes("a", ITEMS))) == [("unknown_request", "a", False)]
     assert isinstance(play(session, Start("a", "viseme-lerp", "demo"))[0], Ready)
 
@@ -329,7 +331,7 @@ def test_message_scope_errors_leave_requests_running(catalog: Catalog) -> None:
     ]
     assert errors(play(session, End("zz"))) == [("unknown_request", "zz", False)]
     malformed = decode(b"\xc1", "msgpack", sender="client")
-    assert errors(play(session, malformed)) == [("malformed", None, False)]  # type: ignore[arg-type]
+    assert errors(play(session, malformed)) == [("malformed", None, False)]
     out = play(session, Phonemes("a", ITEMS), End("a"))
     assert isinstance(out[-1], Done)
     assert errors(play(session, Phonemes("a", ITEMS))) == [("request_finished", "a", False)]
@@ -434,6 +436,7 @@ def test_options_outside_the_ladder_are_priced_by_the_engine_not_a_rung(
     catalog: Catalog,
 ) -> None:
     model = catalog.model("anime-graph", "demo")
+    assert isinstance(model, AnimeGraphModel)
     top = catalog.ladder(model)[0]
     # Naming the rung's own defaults still selects it: the measured cost.
     same = catalog.call_cost(model, {**top.rung.options, "graph": model.default_graph})

@@ -83,7 +83,7 @@ def raw_websocket(served: Served, receive_buffer: int) -> socket.socket:
 
 def send_messages(sock: socket.socket, *messages: ClientMessage) -> None:
     for message in messages:
-        sock.sendall(masked_frame(encode(message, "msgpack")))  # type: ignore[arg-type]
+        sock.sendall(masked_frame(encode(message, "msgpack")))
 
 
 def server_connection(served: Served, client_port: int) -> object | None:

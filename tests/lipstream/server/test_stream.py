@@ -148,7 +148,7 @@ def test_requests_multiplexed_on_one_connection_stay_independent(
             )
             if len(spans) > 2:
                 ws.send(End(identifier))
-        messages = []
+        messages: list[Message] = []
         while sum(isinstance(m, Done) for m in messages) < 3:
             messages.append(ws.recv())
     model = catalog.model("viseme-lerp", "demo")
@@ -213,7 +213,9 @@ def _output_json(profile: OutputProfile | None) -> dict | None:  # type: ignore[
 def test_subprotocol_negotiation_and_no_compression(served: Served) -> None:
     with client(served.ws, "msgpack", subprotocols=None, compression="deflate") as ws:
         assert ws.connection.subprotocol is None  # none offered: msgpack
-        assert ws.connection.response.headers.get("Sec-WebSocket-Extensions") is None
+        response = ws.connection.response
+        assert response is not None
+        assert response.headers.get("Sec-WebSocket-Extensions") is None
         ws.send(Start("a", "viseme-lerp", "demo"))
         assert isinstance(ws.recv(), Ready)
     with client(
