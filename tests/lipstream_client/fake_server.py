@@ -47,6 +47,7 @@ from lipstream_client import (
     encode,
     encoding_for_subprotocol,
 )
+from lipstream_client.messages import JsonValue
 
 CHANNELS = ("jawOpen", "mouthClose")
 DEFAULT_RETURN_MS = 100.0
@@ -203,7 +204,7 @@ class _Session:
             return
         if self.server.busy_starts > 0:
             self.server.busy_starts -= 1
-            details = {"reason": "loop_busy", "retry_after_ms": 50}
+            details: dict[str, JsonValue] = {"reason": "loop_busy", "retry_after_ms": 50}
             await self.send(ErrorMessage("server_busy", "busy", start.id, True, details))
             return
         offset = start.options.get("offset", 0.0)

@@ -85,7 +85,7 @@ def test_text_in_live_link_packets_out(server: LiveServer, tmp_path: Path) -> No
     assert len(expected.channels) == 52
     assert [packet.frame_number for packet in packets] == list(range(1000, 1000 + len(rows)))
     for packet, row in zip(packets, rows):
-        assert (packet.version, packet.count, packet.subject) == (6, 61, "Ada")
+        assert (packet.version, packet.curve_count, packet.subject) == (6, 61, "Ada")
         assert (packet.fps, packet.denominator) == (60, 1)
         curves = [0.0] * 61
         for name, value in zip(expected.channels, row):

@@ -48,9 +48,9 @@ FRAMES = {
 
 def with_field(base: dict[str, Any], path: str, value: Any) -> dict[str, Any]:
     """A deep copy of ``base`` with the dotted ``path`` (list indices as numbers) set."""
-    copy = json.loads(json.dumps(base))
+    copy: dict[str, Any] = json.loads(json.dumps(base))
     *parents, last = path.split(".")
-    node = copy
+    node: Any = copy
     for key in parents:
         node = node[int(key)] if isinstance(node, list) else node[key]
     if isinstance(node, list):

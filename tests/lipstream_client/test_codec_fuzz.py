@@ -100,7 +100,8 @@ envelopes = st.fixed_dictionaries(
 def packed(value: Any) -> bytes | None:
     """msgpack bytes of ``value``, or None when msgpack cannot hold its integers."""
     try:
-        return msgpack.packb(value, use_bin_type=True)
+        packed_value: bytes = msgpack.packb(value, use_bin_type=True)
+        return packed_value
     except OverflowError:
         return None
 

@@ -20,7 +20,7 @@ from lipstream_client import (
     Start,
     Text,
 )
-from lipstream_client.resume import MAX_REPLAY_ITEMS, RequestLog, merged
+from lipstream_client.resume import MAX_REPLAY_ITEMS, RequestInput, RequestLog, merged
 
 FPS = 60.0
 SPANS = [
@@ -40,7 +40,7 @@ def frames_block(seq: int, first: int, n: int) -> Frames:
 def test_the_log_replays_the_whole_input_after_a_resume_that_names_what_is_held() -> None:
     log = RequestLog(Start("a", "viseme-lerp", "demo", fps=FPS, latency_budget_ms=300.0))
     audio = [AudioChunk("a", 16000, bytes([i]) * 4) for i in range(3)]
-    inputs = [
+    inputs: list[RequestInput] = [
         audio[0],
         audio[1],
         Phonemes("a", items(SPANS[:2])),
