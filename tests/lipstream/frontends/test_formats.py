@@ -21,7 +21,7 @@ ELEVENLABS = {
         "character_end_times_seconds": [0.116, 0.186, 0.232, 0.279, 0.325, 0.371, 0.418, 0.464, 0.557],
     },
 }  # fmt: skip
-AZURE = [
+AZURE: list[dict[str, int | str]] = [
     {"audioOffset": 500000, "duration": 3125000, "text": "Hello", "textOffset": 0,
      "wordLength": 5, "boundaryType": "WordBoundary"},
     {"audioOffset": 3625000, "duration": 0, "text": ",", "textOffset": 5, "wordLength": 1,
