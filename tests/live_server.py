@@ -155,7 +155,8 @@ def per_worker(directory: Path, kind: str, name: str, **labels: str) -> dict[int
     values = {}
     for path in directory.glob(f"{kind}_*.db"):
         pid = int(path.stem.rsplit("_", 1)[1])
-        merged = MultiProcessCollector.merge([str(path)], accumulate=True)
+        # prometheus_client leaves merge unannotated, as lipstream.server.metrics notes too
+        merged = MultiProcessCollector.merge([str(path)], accumulate=True)  # type: ignore[no-untyped-call]
         values[pid] = sum(
             sample.value
             for metric in merged
