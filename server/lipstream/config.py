@@ -24,6 +24,8 @@ DEMO_MODELS_DIR = "models"
 KERNEL_CACHE_DIR = "numba-cache"
 RESULTS_DIR = "bench"
 NUMBA_CACHE_VARIABLE = "NUMBA_CACHE_DIR"
+LOG_LEVELS: tuple[str, ...] = ("critical", "error", "warning", "info", "debug", "trace")
+"""uvicorn's log levels (``LIPSTREAM_LOG_LEVEL``, ``lipstream serve --log-level``)."""
 
 
 def _home(environ: Mapping[str, str]) -> Path:
@@ -154,8 +156,8 @@ def _words(name: str, text: str) -> tuple[str, ...]:
 
 def _log_level(name: str, text: str) -> str:
     level = text.strip().lower()
-    if level not in ("critical", "error", "warning", "info", "debug", "trace"):
-        raise _invalid(name, text, "one of critical, error, warning, info, debug, trace")
+    if level not in LOG_LEVELS:
+        raise _invalid(name, text, f"one of {', '.join(LOG_LEVELS)}")
     return level
 
 

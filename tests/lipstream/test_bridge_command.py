@@ -8,6 +8,7 @@ import json
 import re
 import socket
 import struct
+import sys
 import wave
 from collections.abc import Iterator
 from pathlib import Path
@@ -204,6 +205,17 @@ def test_options_that_do_not_go_together(
 ) -> None:
     line = error_line(capsys, "--server", "ws://127.0.0.1:1/v1/stream", *argv)
     assert line.startswith(f"error [invalid_request]: {where}: ")
+
+
+def test_a_vmc_target_without_python_osc(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setitem(sys.modules, "pythonosc", None)  # any import of python-osc now fails
+    line = error_line(
+        capsys, "--server", "ws://127.0.0.1:1/v1/stream", "--to", "vmc://127.0.0.1", "--text", "hi"
+    )
+    assert line.startswith("error [missing_dependency]: --to: ")
+    assert 'pip install "lipstream-client[vmc]"' in line
 
 
 @pytest.mark.skipif(has_sound_device(), reason="this machine has a sound device")

@@ -8,7 +8,7 @@ import shutil
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from lipstream.cli import _stale_demo
+from lipstream.cli.demo_cache import _stale_demo
 from lipstream.engines import engine_names
 from lipstream.frontends.word_durations import MANIFEST_FILE
 

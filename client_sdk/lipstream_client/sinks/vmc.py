@@ -9,18 +9,23 @@ E O``, ``aa ih ou ee oh``) or ARKit's 52 for "perfect sync" avatars. Messages ar
 built with python-osc and sent as OSC bundles (the protocol allows bundling), in
 order, each datagram at most ``max_datagram`` bytes so that none is fragmented on an
 Ethernet link; ``Apply`` closes the last one.
+
+python-osc is the ``vmc`` extra of lipstream-client, imported when a VMC sink or
+message is first made: without it the rest of the SDK works, and these raise
+``BridgeError`` with code ``missing_dependency``.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-
-from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
-from pythonosc.osc_message import OscMessage
-from pythonosc.osc_message_builder import OscMessageBuilder
+from typing import TYPE_CHECKING
 
 from .base import Delivery
+from .errors import MISSING_DEPENDENCY, BridgeError
 from .udp import UdpSender
+
+if TYPE_CHECKING:
+    from pythonosc.osc_message import OscMessage
 
 OK_ADDRESS = "/VMC/Ext/OK"
 TIME_ADDRESS = "/VMC/Ext/T"
@@ -32,7 +37,23 @@ _BUNDLE_HEAD = 16  # "#bundle\0" and the time tag
 _ELEMENT_SIZE = 4  # each bundle element is prefixed by its length
 
 
+def require_python_osc(where: str = "sinks.vmc") -> None:
+    """Raise ``BridgeError`` (``missing_dependency``, at ``where``) unless python-osc can be
+    imported."""
+    try:
+        import pythonosc  # noqa: F401
+    except ImportError:
+        raise BridgeError(
+            MISSING_DEPENDENCY,
+            "the VMC sink builds its OSC messages with python-osc, which is not installed: "
+            'pip install "lipstream-client[vmc]"',
+            where,
+        ) from None
+
+
 def _message(address: str, *args: tuple[str | int | float, str]) -> OscMessage:
+    from pythonosc.osc_message_builder import OscMessageBuilder
+
     builder = OscMessageBuilder(address)
     for value, kind in args:
         builder.add_arg(value, kind)
@@ -41,6 +62,7 @@ def _message(address: str, *args: tuple[str | int | float, str]) -> OscMessage:
 
 def frame_messages(names: Sequence[str], time_s: float, row: Sequence[float]) -> list[OscMessage]:
     """The messages of one frame, in the order they are sent."""
+    require_python_osc()
     messages = [
         _message(OK_ADDRESS, (1, "i")),
         _message(TIME_ADDRESS, (float(time_s), "f")),
@@ -73,6 +95,8 @@ def bundle_datagrams(
 
 
 def _bundle(messages: Sequence[OscMessage]) -> bytes:
+    from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
+
     builder = OscBundleBuilder(IMMEDIATELY)
     for message in messages:
         builder.add_content(message)
@@ -83,6 +107,7 @@ class VmcSink:
     """Frames to a VMC receiver (port 39539) over ``sender``, a bundle or a few per frame."""
 
     def __init__(self, sender: UdpSender, max_datagram: int = MAX_DATAGRAM) -> None:
+        require_python_osc()
         self.sender = sender
         self.max_datagram = max_datagram
         self.names: tuple[str, ...] = ()

@@ -19,18 +19,16 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
-import shlex
 import statistics
 import subprocess
 import sys
 import tempfile
 from collections.abc import Sequence
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from ..results_file import write_results
+from ..results_file import recorded, script_command, write_results
+from .report import rows_of
 
 
 def tree_revision(tree: Path) -> str:
@@ -54,8 +52,7 @@ def measure_tree(tree: Path, floor_args: Sequence[str]) -> list[dict[str, Any]]:
         subprocess.run(
             [*command, "--json", str(out)], env=environment, check=True, capture_output=True
         )
-        rows: list[dict[str, Any]] = json.loads(out.read_text())
-    return rows
+        return rows_of(json.loads(out.read_text()))
 
 
 def compare(
@@ -125,15 +122,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         )
     if args.json is not None:
         results = {
-            "date": datetime.now(UTC).isoformat(timespec="seconds"),
-            "machine": {
-                "python": platform.python_version(),
-                "processor": platform.machine(),
-                "system": platform.system(),
-                "cores": os.cpu_count(),
-            },
-            "command": "python -m lipstream.bench.call_pairs "
-            + " ".join(shlex.quote(arg) for arg in (argv or sys.argv[1:])),
+            **recorded(script_command("lipstream.bench.call_pairs", argv)),
             "before": tree_revision(args.before),
             "after": tree_revision(args.after),
             "rows": rows,

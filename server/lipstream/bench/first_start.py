@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import re
 import resource
 import signal
@@ -36,15 +35,13 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, BinaryIO
 
 import httpx
 
-from .._version import __version__
 from ..config import load_settings
-from ..results_file import write_results
+from ..results_file import recorded, write_results
 
 COMMAND = "python -m lipstream.bench.first_start"
 PROBE_S = 0.2
@@ -179,23 +176,6 @@ def _children_cpu_s() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def machine() -> dict[str, Any]:
-    model = ""
-    cpuinfo = Path("/proc/cpuinfo")
-    if cpuinfo.is_file():
-        for line in cpuinfo.read_text(encoding="utf-8").splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return {
-        "cores": cores,
-        "processor": model or platform.machine(),
-        "system": platform.system(),
-        "python": platform.python_version(),
-    }
-
-
 def bench(home: Path, port: int) -> dict[str, Any]:
     """A first start from the empty ``home``, then a later one from what it left, in the
     shape ``lipstream.bench.report`` renders (``starts``: start, total_s, phases)."""
@@ -208,10 +188,7 @@ def bench(home: Path, port: int) -> dict[str, Any]:
     )
     cpu = ", ".join(f"{name} start {run.cpu_s} s" for name, run in runs.items())
     return {
-        "command": COMMAND,
-        "lipstream_version": __version__,
-        "date": datetime.now(UTC).isoformat(timespec="seconds"),
-        "machine": machine(),
+        **recorded(COMMAND),
         "note": (
             f"load average (1 min): {load}; CPU time of the server's process tree: {cpu}; "
             f"targets: {TARGETS}"

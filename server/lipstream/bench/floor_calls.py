@@ -15,12 +15,13 @@ ahead of time would.
 
     python -m lipstream.bench.floor_calls --models DIR [--character demo]
         [--engine NAME ...] [--all-rungs] [--calls 200] [--passes 3] [--json out.json]
+
+``--json`` writes the rows (``rows``) after the command, date and machine.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import time
 from collections.abc import Sequence
@@ -29,6 +30,7 @@ from pathlib import Path
 
 from ..engines.base import Model, Rung, make_request
 from ..models import ModelRegistry
+from ..results_file import recorded, script_command, write_results
 
 LABELS = tuple("HH AH0 L OW1 W ER1 L D sil M AA1 P B IY1 S T".split())
 PHONEME_S = 0.08
@@ -108,7 +110,8 @@ def main(argv: Sequence[str] | None = None) -> None:
                 f"mean {row.mean_us:8.1f} µs   p90 {row.p90_us:8.1f} µs"
             )
     if args.json is not None:
-        args.json.write_text(json.dumps([asdict(row) for row in rows], indent=2) + "\n")
+        command = script_command("lipstream.bench.floor_calls", argv)
+        write_results({**recorded(command), "rows": [asdict(row) for row in rows]}, args.json)
 
 
 if __name__ == "__main__":

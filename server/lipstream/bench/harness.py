@@ -21,7 +21,6 @@ anime-graph search comparison of Cao et al.'s Tables 1 and 2.
 from __future__ import annotations
 
 import importlib
-import platform
 import time
 from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
@@ -35,6 +34,7 @@ from ..corpus import Corpus
 from ..engines import engine_names
 from ..engines.base import Model
 from ..evaluation import rms_error
+from ..results_file import machine
 from ..training import train_engine
 from .closure import closure_lag_ms, closure_rate, learned_threshold
 from .rungs import RungRow, rung_rows
@@ -175,11 +175,7 @@ def run_bench(
     return {
         "lipstream_version": __version__,
         "date": datetime.now(UTC).isoformat(timespec="seconds"),
-        "machine": {
-            "python": platform.python_version(),
-            "processor": platform.machine(),
-            "system": platform.system(),
-        },
+        "machine": machine(),
         "corpus": {
             "name": corpus.name,
             "digest": corpus.digest(),

@@ -39,6 +39,7 @@ from lipstream_client import AsyncClient, Frames
 from ..config import load_settings
 from ..corpus import load_corpus
 from ..engines import load_model
+from ..results_file import recorded, script_command, write_results
 from ..training import DEMO_CORPUS_DIR
 from .serving import serving
 
@@ -182,6 +183,7 @@ def main(argv: list[str] | None = None) -> int:
                 )
             )
     report = {
+        **recorded(script_command("lipstream.bench.hmm_first_frame", argv)),
         "utterance": line.stem,
         "audio_s": line.audio.duration,
         "fps": FPS,
@@ -190,7 +192,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     print(json.dumps(report, indent=2))
     if args.json is not None:
-        args.json.write_text(json.dumps(report, indent=2) + "\n")
+        write_results(report, args.json)
     return 0
 
 

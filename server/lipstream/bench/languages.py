@@ -20,18 +20,15 @@ from __future__ import annotations
 import argparse
 import subprocess
 from collections.abc import Sequence
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from .._version import __version__
 from ..errors import LipstreamError
 from ..frontends.espeak_ipa import as_ipa, ipa_event_phonemes, is_language_switch
 from ..frontends.espeak_languages import EspeakLanguage, espeak_languages
-from ..results_file import write_results
+from ..results_file import recorded, write_results
 from ..speech.espeak import read_mnemonic
 from ..speech.worker import SpeechRequest, speak_in_worker
-from .first_start import machine
 
 COMMAND = "python -m lipstream.bench.languages"
 NUMBERS = "0 1 2 3 4 5 6 7 8 9 10 11 12 13 17 20 30 40 50 60 70 80 90 100 1000"
@@ -127,10 +124,7 @@ def survey() -> dict[str, Any]:
     rows = {row["code"]: row for row in _speak_all(english, False) + _speak_all(others, True)}
     return _factored(
         {
-            "command": COMMAND,
-            "lipstream_version": __version__,
-            "date": datetime.now(UTC).isoformat(timespec="seconds"),
-            "machine": machine(),
+            **recorded(COMMAND),
             "espeak_ng": espeak_version(),
             "numbers": NUMBERS,
             "served": list(SERVED),

@@ -21,13 +21,14 @@ p50 and p99 and first-frame latency p50 and p99, in ms.
     python -m lipstream.bench.lead0 --url ws://127.0.0.1:8000/v1/stream --models DIR
         [--character demo] [--engine NAME ...] [--clip 10] [--requests 2] [--probes 20]
         [--json out.json]
+
+``--json`` writes the rows (``rows``) after the command, date and machine.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
-import json
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
@@ -38,6 +39,7 @@ from lipstream_client import AsyncClient, Frames, ServerMessage, Stream
 from ..engines.base import Rung
 from ..loadtest.clips import Span, synthetic_clip
 from ..models import ModelRegistry
+from ..results_file import recorded, script_command, write_results
 from ..server.session import json_value
 
 FPS = 60.0
@@ -179,7 +181,8 @@ def main(argv: Sequence[str] | None = None) -> None:
                 f"p99 {row.first_frame_p99_ms:6.1f} ms"
             )
     if args.json is not None:
-        args.json.write_text(json.dumps([asdict(row) for row in rows], indent=2) + "\n")
+        command = script_command("lipstream.bench.lead0", argv)
+        write_results({**recorded(command), "rows": [asdict(row) for row in rows]}, args.json)
 
 
 if __name__ == "__main__":

@@ -126,6 +126,13 @@ def source(name: str, doc: Any, recovered: dict[str, Any] | None = None) -> str:
     return line + "\n"
 
 
+def rows_of(doc: Any) -> list[dict[str, Any]]:
+    """A file's rows: its ``rows``, or the file itself when it is a list of rows (as those
+    written before they recorded their machine, date and command are)."""
+    rows: list[dict[str, Any]] = doc["rows"] if isinstance(doc, dict) else doc
+    return rows
+
+
 def _by_engine(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
     known = {name: index for index, name in enumerate(ENGINE_ORDER)}
     return sorted(rows, key=lambda row: known.get(row["engine"], len(known)))
@@ -151,7 +158,7 @@ def engines_summary(bench: Bench) -> str:
                 f"{row['rms_error']:.4f} ({row['rms_ratio']:.2f})",
                 percent(row["closure_rate"]),
                 f"{row['ms_per_phoneme']:.4f} ({row['speed_ratio']:.1f}×)",
-                _causal_call_us(calls, row["engine"]),
+                _causal_call_us(rows_of(calls), row["engine"]),
             ]
         )
     header = [
@@ -256,7 +263,7 @@ def stream_calls(bench: Bench) -> str:
                 number(row["p90_us"]),
                 number(row["mean_us"]),
             ]
-            for row in _by_engine(calls)
+            for row in _by_engine(rows_of(calls))
         ),
     )
 
@@ -297,8 +304,8 @@ def call_pairs(bench: Bench) -> str:
 
 
 def lead0(bench: Bench) -> str:
-    rows = bench.load("lead0_rungs.json")
-    return bench.source("lead0_rungs.json", rows) + table(
+    doc = bench.load("lead0_rungs.json")
+    return bench.source("lead0_rungs.json", doc) + table(
         [
             "engine",
             "rung",
@@ -316,7 +323,7 @@ def lead0(bench: Bench) -> str:
                 f"{number(row['lag_p50_ms'], 0)} / {number(row['lag_p99_ms'], 0)}",
                 f"{number(row['first_frame_p50_ms'])} / {number(row['first_frame_p99_ms'])}",
             ]
-            for row in _by_engine(rows)
+            for row in _by_engine(rows_of(doc))
         ),
     )
 
@@ -832,9 +839,45 @@ def language_phonemes(bench: Bench) -> str:
     return table(["espeak-ng name", "names", "as IPA", "phonemes", "languages"], rows)
 
 
+CAPTURE = "capture.json"
+
+
+def capture(bench: Bench) -> str:
+    """``lipstream capture`` on one core: decode, tracking, the whole step, alignment."""
+    if not bench.exists(CAPTURE):
+        return f"Not measured yet: no `bench/{CAPTURE}` (`python -m lipstream.bench.capture`).\n"
+    doc = bench.load(CAPTURE)
+    load = doc.get("load_average_1min", {})
+    text = bench.source(CAPTURE, doc)
+    if load:
+        text += (
+            f"Load average (1 min) {number(load['before'], 1)} before, "
+            f"{number(load['after'], 1)} after.\n\n"
+        )
+    rows = []
+    for run in doc["runs"]:
+        cpu = run["per_cpu_second"]
+        for label, key in (
+            ("decoding (PyAV, to RGB), frames/s", "decode_fps"),
+            ("tracking (FaceMesh), frames/s", "tracking_fps"),
+            ("whole capture step, frames/s", "capture_fps"),
+            ("alignment, s per s of audio", "alignment_real_time_factor"),
+        ):
+            rows.append(
+                [
+                    f"`{run['video']}` ({run['frames']} frames)",
+                    label,
+                    number(run[key], 2 if "factor" in key else 0),
+                    number(cpu[key], 2 if "factor" in key else 0),
+                ]
+            )
+    return text + table(["video", "step", "per wall-clock second", "per CPU second"], rows)
+
+
 BLOCKS: dict[str, Callable[[Bench], str]] = {
     "languages": languages,
     "language-phonemes": language_phonemes,
+    "capture": capture,
     "first-start-summary": first_start_summary,
     "first-start": first_start,
     "engines-summary": engines_summary,

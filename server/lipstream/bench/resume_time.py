@@ -34,6 +34,7 @@ from prometheus_client.multiprocess import MultiProcessCollector
 from lipstream_client import AsyncClient, Frames, Ready, ResumePolicy, ServerMessage
 
 from ..loadtest.stats import percentile
+from ..results_file import recorded, script_command, write_results
 from .serving import Served, serving
 
 FPS = 60.0
@@ -134,7 +135,8 @@ def main(argv: list[str] | None = None) -> int:
     }
     print(json.dumps(summary, indent=2))
     if args.json is not None:
-        args.json.write_text(json.dumps({**summary, "resume_ms": times_ms}, indent=2) + "\n")
+        command = script_command("lipstream.bench.resume_time", argv)
+        write_results({**recorded(command), **summary, "resume_ms": times_ms}, args.json)
     return 0
 
 

@@ -28,13 +28,11 @@ import shlex
 import sys
 import time
 from collections.abc import Callable, Sequence
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .._version import __version__
 from ..demo.sentences import load_sentences
 from ..engines import load_model
 from ..engines.base import Model
@@ -42,11 +40,10 @@ from ..evaluation import closure_lags, lip_aperture
 from ..frontends.formats import parse_timings
 from ..frontends.word_durations import WordDurationModel
 from ..frontends.words_to_spans import timings_to_spans
-from ..results_file import write_results
+from ..results_file import recorded, write_results
 from ..speech.spoken_words import SpokenUtterance, speak_words
 from ..timeline import PhonemeSpan
 from . import tts_shapes
-from .first_start import machine
 
 TOOL = "python -m lipstream.bench.word_timings"
 RATES_WPM = (140, 175, 220)
@@ -171,10 +168,7 @@ def run(command: Sequence[str], model_path: Path | None = None) -> dict[str, Any
     model, described = _model(model_path)
     at_rate = speak_words(heldout_text, rate=FRAMES_RATE_WPM)
     return {
-        "command": shlex.join(command),
-        "lipstream_version": __version__,
-        "date": datetime.now(UTC).isoformat(timespec="seconds"),
-        "machine": machine(),
+        **recorded(shlex.join(command)),
         "rates_wpm": list(RATES_WPM),
         "training_sentences": len(train_text),
         "heldout_sentences": len(heldout_text),

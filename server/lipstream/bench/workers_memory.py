@@ -24,9 +24,7 @@ the results into docs/reports/scale-out.md.
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
 import shlex
 import sys
 from dataclasses import asdict, dataclass
@@ -36,6 +34,7 @@ from typing import Any
 
 from .._version import __version__
 from ..models import model_dirs
+from ..results_file import machine, write_results
 from ..store import read_manifest
 from .serving import children, serving
 
@@ -104,22 +103,13 @@ def describe_models(models: Path) -> list[dict[str, Any]]:
     return described
 
 
-def machine() -> dict[str, Any]:
-    return {
-        "cpus": os.cpu_count(),
-        "platform": platform.platform(),
-        "python": platform.python_version(),
-        "load_average": [round(load, 2) for load in os.getloadavg()],
-    }
-
-
 def run(models: Path, workers: list[int], argv: list[str]) -> dict[str, Any]:
     """The results file: how it was measured, then every process of each ``--workers N``."""
     results: dict[str, Any] = {
         "tool": f"lipstream.bench.workers_memory {__version__}",
         "command": shlex.join([*TOOL.split(), *argv]),
         "date": datetime.now(UTC).isoformat(timespec="seconds"),
-        "machine": machine(),
+        "machine": {**machine(), "load_average": [round(load, 2) for load in os.getloadavg()]},
         "models": describe_models(models),
         "workers": {},
     }
@@ -152,7 +142,7 @@ def main(argv: list[str] | None = None) -> int:
     given = argv if argv is not None else sys.argv[1:]
     results = run(args.models, args.workers, list(given))
     if args.json is not None:
-        args.json.write_text(json.dumps(results, indent=2) + "\n")
+        write_results(results, args.json)
     return 0
 
 

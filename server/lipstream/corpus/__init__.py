@@ -7,12 +7,13 @@ and resamples every utterance onto one ``i / fps`` grid, ``write_corpus``
 writes one back. See ``docs/reference/corpus-formats.md``.
 """
 
+from ..timeline import EMOTIONS
 from .frames_csv import read_frames_csv, write_frames_csv
 from .lab import read_lab_phones
 from .livelink import read_livelink_csv
 from .loader import load_corpus
 from .metadata import CorpusWarning
-from .model import EMOTIONS, Corpus, Utterance
+from .model import Corpus, Utterance
 from .textgrid import read_textgrid_phones
 from .writer import write_corpus
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lipstream_client.sinks.livelink import LIVELINK_ROTATIONS
+from lipstream_client.sinks.livelink import LIVELINK_BLENDSHAPES, LIVELINK_ROTATIONS
 
 from ..errors import CorpusError
 from .frames_csv import check_increasing, require_rows
@@ -27,23 +27,15 @@ TIMECODE_COLUMN = "Timecode"
 COUNT_COLUMN = "BlendshapeCount"
 TIMECODE_RATE = 60.0
 
-# The CSV's column order; the app's UDP packets order the jaw and mouth sides the other
-# way round (lipstream_client.sinks.livelink.LIVELINK_BLENDSHAPES).
-ARKIT_BLENDSHAPES: tuple[str, ...] = (
-    "eyeBlinkLeft", "eyeLookDownLeft", "eyeLookInLeft", "eyeLookOutLeft", "eyeLookUpLeft",
-    "eyeSquintLeft", "eyeWideLeft", "eyeBlinkRight", "eyeLookDownRight", "eyeLookInRight",
-    "eyeLookOutRight", "eyeLookUpRight", "eyeSquintRight", "eyeWideRight",
-    "jawForward", "jawRight", "jawLeft", "jawOpen",
-    "mouthClose", "mouthFunnel", "mouthPucker", "mouthRight", "mouthLeft",
-    "mouthSmileLeft", "mouthSmileRight", "mouthFrownLeft", "mouthFrownRight",
-    "mouthDimpleLeft", "mouthDimpleRight", "mouthStretchLeft", "mouthStretchRight",
-    "mouthRollLower", "mouthRollUpper", "mouthShrugLower", "mouthShrugUpper",
-    "mouthPressLeft", "mouthPressRight", "mouthLowerDownLeft", "mouthLowerDownRight",
-    "mouthUpperUpLeft", "mouthUpperUpRight",
-    "browDownLeft", "browDownRight", "browInnerUp", "browOuterUpLeft", "browOuterUpRight",
-    "cheekPuff", "cheekSquintLeft", "cheekSquintRight", "noseSneerLeft", "noseSneerRight",
-    "tongueOut",
-)  # fmt: skip
+SIDES_SWAPPED = {"jawLeft": "jawRight", "jawRight": "jawLeft"} | {
+    "mouthLeft": "mouthRight",
+    "mouthRight": "mouthLeft",
+}
+ARKIT_BLENDSHAPES: tuple[str, ...] = tuple(
+    SIDES_SWAPPED.get(name, name) for name in LIVELINK_BLENDSHAPES
+)
+"""The 52 ARKit blendshapes in the CSV's column order: the app's UDP packet order
+(``LIVELINK_BLENDSHAPES``) with the jaw's and the mouth's sides the other way round."""
 ROTATIONS: tuple[str, ...] = LIVELINK_ROTATIONS
 LIVELINK_CHANNELS = frozenset(ARKIT_BLENDSHAPES + ROTATIONS)
 

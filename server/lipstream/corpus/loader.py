@@ -169,6 +169,7 @@ def _utterance(
         emotion=metadata.emotion,
         speaker=metadata.speaker,
         text=metadata.text,
+        alignment_confidence=metadata.alignment_confidence,
     )
 
 

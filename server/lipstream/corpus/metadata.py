@@ -1,4 +1,5 @@
-"""Per-utterance metadata, ``<stem>.json``: ``{"emotion": ..., "speaker": ..., "text": ...}``.
+"""Per-utterance metadata, ``<stem>.json``: ``{"emotion": ..., "speaker": ..., "text": ...,
+"alignment_confidence": ...}``.
 
 Sketch: parse the JSON (syntax errors name file:line:column) and require an
 object whose known keys have the right type; a wrong value is refused. Other
@@ -16,10 +17,10 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import CorpusError
-from .model import EMOTIONS
+from ..timeline import EMOTIONS
 from .validation import at_line
 
-METADATA_KEYS = ("emotion", "speaker", "text")
+METADATA_KEYS = ("emotion", "speaker", "text", "alignment_confidence")
 
 
 class CorpusWarning(UserWarning):
@@ -31,6 +32,7 @@ class UtteranceMetadata:
     emotion: str = "neutral"
     speaker: str | None = None
     text: str | None = None
+    alignment_confidence: float | None = None
 
 
 def read_json_object(
@@ -77,8 +79,20 @@ def read_utterance_metadata(path: str | Path) -> UtteranceMetadata:
             where=path.name,
         )
     return UtteranceMetadata(
-        emotion, _optional_text(path, data, "speaker"), _optional_text(path, data, "text")
+        emotion,
+        _optional_text(path, data, "speaker"),
+        _optional_text(path, data, "text"),
+        _optional_share(path, data, "alignment_confidence"),
     )
+
+
+def _optional_share(path: Path, data: dict[str, Any], key: str) -> float | None:
+    value = data.get(key)
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | float) or not 0.0 <= value <= 1.0:
+        raise CorpusError(f"key {key!r} must be a number in [0, 1], got {value!r}", where=path.name)
+    return float(value)
 
 
 def _optional_text(path: Path, data: dict[str, Any], key: str) -> str | None:
@@ -91,9 +105,11 @@ def _optional_text(path: Path, data: dict[str, Any], key: str) -> str | None:
 
 
 def write_utterance_metadata(path: Path, metadata: UtteranceMetadata) -> None:
-    data: dict[str, str] = {"emotion": metadata.emotion}
+    data: dict[str, str | float] = {"emotion": metadata.emotion}
     if metadata.speaker is not None:
         data["speaker"] = metadata.speaker
     if metadata.text is not None:
         data["text"] = metadata.text
+    if metadata.alignment_confidence is not None:
+        data["alignment_confidence"] = round(metadata.alignment_confidence, 4)
     path.write_text(json.dumps(data, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")

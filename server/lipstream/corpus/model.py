@@ -18,9 +18,8 @@ import numpy as np
 
 from ..audio import Audio
 from ..errors import CorpusError
-from ..timeline import PhonemeSpan
+from ..timeline import EMOTIONS, PhonemeSpan
 
-EMOTIONS: tuple[str, ...] = ("neutral", "happy", "angry", "sad")
 HELDOUT_EVERY = 10
 
 
@@ -31,6 +30,8 @@ class Utterance:
     ``frames``: (n_frames, n_channels) float32; frame ``i`` is at ``i / fps`` s.
     ``phones``: contiguous spans in seconds (gaps already filled with silence).
     ``text``: the transcript, when the corpus carries one (not used in training).
+    ``alignment_confidence``: in [0, 1], when a forced aligner placed the phones (``lipstream
+    capture``); not used in training nor in ``Corpus.digest``.
     """
 
     stem: str
@@ -41,6 +42,7 @@ class Utterance:
     emotion: str = "neutral"
     speaker: str | None = None
     text: str | None = None
+    alignment_confidence: float | None = None
 
     def __post_init__(self) -> None:
         where = f"utterance {self.stem!r}"

@@ -97,5 +97,7 @@ def _write_utterance(
         write_lab_phones(root / f"{stem}{LAB_SUFFIX}", utterance.phones, units=units)
     if utterance.audio is not None:
         write_wav(root / f"{stem}{AUDIO_SUFFIX}", utterance.audio)
-    metadata = UtteranceMetadata(utterance.emotion, utterance.speaker, utterance.text)
+    metadata = UtteranceMetadata(
+        utterance.emotion, utterance.speaker, utterance.text, utterance.alignment_confidence
+    )
     write_utterance_metadata(root / f"{stem}{METADATA_SUFFIX}", metadata)

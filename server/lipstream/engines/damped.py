@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -59,9 +60,14 @@ def step_toward(
 
 @njit(cache=True)
 def follow_frame_rates(
-    x: np.ndarray, v: np.ndarray, t: float, raw: np.ndarray, omegas: np.ndarray,
-    times: np.ndarray, out: np.ndarray,
-) -> None:  # fmt: skip
+    x: np.ndarray,
+    v: np.ndarray,
+    t: float,
+    raw: np.ndarray,
+    omegas: np.ndarray,
+    times: np.ndarray,
+    out: np.ndarray,
+) -> None:
     """Step from time ``t`` to each of ``times`` toward that frame's ``raw`` row at its rate
     ``omegas`` (every column), recording the value in ``out``."""
     for row in range(len(times)):
@@ -108,6 +114,14 @@ def follow_rates(
         step_toward(x, v, targets[row], omega, times[row] - previous)
         previous = times[row]
         out[row] = x
+
+
+class FilterState(NamedTuple):
+    """A compiled caller's filter: value ``x`` and velocity ``v`` (n,) float64, which its
+    kernels step in place; the caller keeps the time they are at."""
+
+    x: np.ndarray
+    v: np.ndarray
 
 
 @dataclass

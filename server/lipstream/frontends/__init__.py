@@ -1,5 +1,5 @@
-"""Front ends: what speech engines give (text, word, character, viseme or phoneme timings,
-IPA in any language) as phoneme spans.
+"""Front ends: what speech engines and recordings give (text, word, character, viseme or
+phoneme timings, IPA in any language, recorded speech with its transcript) as phoneme spans.
 
 Sketch: each module is one step. Timings: a timing file or message is parsed by its format
 (``formats``) into one common type, ``timings.SpeechTimings``, whose times are checked
@@ -13,5 +13,6 @@ describes the phoneme set the same way, ``ipa_segments`` reads a label into segm
 ``nearest_phoneme`` maps each segment to the phoneme nearest by features, ``espeak_ipa``
 reads espeak-ng's phoneme names as IPA, and ``espeak_languages`` names the languages and
 voice variants espeak-ng speaks (``lipstream.bench.languages`` surveys which of them map
-fully).
+fully). Recordings: ``align`` finds a recording's phoneme spans from its transcript by
+forced alignment (pocketsphinx), the one aligner of the code base.
 """

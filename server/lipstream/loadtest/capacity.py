@@ -42,8 +42,6 @@ Usage (the server already running on this machine)::
 from __future__ import annotations
 
 import json
-import os
-import platform
 import time
 from collections.abc import Callable
 from contextlib import AbstractContextManager
@@ -53,7 +51,7 @@ from typing import Any
 
 from .._version import __version__
 from ..errors import InvalidRequestError, LipstreamError
-from ..results_file import write_results
+from ..results_file import machine, write_results
 from .load import LoadTestConfig, check_config, loadtest
 from .reference import ReferenceTraffic, engine_traffic, reference_server
 from .sessions import event_loop_name
@@ -333,12 +331,7 @@ def merge_results(path: Path, search: dict[str, Any]) -> dict[str, Any]:
     ]
     return {
         "tool": f"lipstream loadtest capacity {__version__}",
-        "machine": {
-            "cpus": os.cpu_count(),
-            "platform": platform.platform(),
-            "python": platform.python_version(),
-            "event_loop": event_loop_name(),
-        },
+        "machine": {**machine(), "event_loop": event_loop_name()},
         "searches": [*kept, search],
     }
 

@@ -18,10 +18,15 @@ import json
 import shlex
 import sys
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+from lipstream_client.messages import ENCODINGS
 
 from ..config import Settings
 from ..results_file import write_results
+
+if TYPE_CHECKING:
+    from ..cli.commands import Commands
 
 
 def default_url(settings: Settings) -> str:
@@ -53,7 +58,7 @@ def _target_options(parser: argparse.ArgumentParser, *, required_target: bool) -
     parser.add_argument("--fps", type=float, default=60.0, help="frame rate requested (default 60)")
     parser.add_argument(
         "--encoding",
-        choices=["msgpack", "json"],
+        choices=ENCODINGS,
         default="msgpack",
         help="wire encoding (default msgpack)",
     )
@@ -180,7 +185,7 @@ def _capacity_line(result: dict[str, Any], args: argparse.Namespace) -> str:
     return line
 
 
-def _add_capacity_parser(runs: Any) -> None:
+def _add_capacity_parser(runs: Commands) -> None:
     capacity = runs.add_parser(
         "capacity",
         help="the most concurrent real-time sessions the server holds under a lag limit",
@@ -250,7 +255,7 @@ def _soak(args: argparse.Namespace, settings: Settings) -> None:
     print(f"results written to {path}", file=sys.stderr)
 
 
-def _add_soak_parser(runs: Any) -> None:
+def _add_soak_parser(runs: Commands) -> None:
     from .hostile import HOSTILE_KINDS
 
     soak = runs.add_parser(
@@ -325,7 +330,7 @@ def _storm(args: argparse.Namespace, settings: Settings) -> None:
     print(json.dumps(results, indent=2))
 
 
-def _add_storm_parser(runs: Any) -> None:
+def _add_storm_parser(runs: Commands) -> None:
     from .storm import KINDS
 
     storm = runs.add_parser(
@@ -380,7 +385,7 @@ def _add_storm_parser(runs: Any) -> None:
     storm.set_defaults(run=_storm)
 
 
-def add_loadtest_parser(commands: Any) -> None:
+def add_loadtest_parser(commands: Commands) -> None:
     """Add ``loadtest`` and its runs to the CLI's subcommands ``commands``."""
     load = commands.add_parser(
         "loadtest",

@@ -38,8 +38,6 @@ from __future__ import annotations
 
 import ipaddress
 import math
-import os
-import platform
 import random
 import time
 from collections import Counter
@@ -54,6 +52,7 @@ from lipstream_client.rest import RestClient
 
 from .._version import __version__
 from ..errors import InvalidRequestError, LipstreamError
+from ..results_file import machine
 from .clips import synthetic_clip
 from .cpu import ServerCpu
 from .sessions import (
@@ -333,12 +332,7 @@ def loadtest(config: LoadTestConfig) -> dict[str, Any]:
         "tool": f"lipstream loadtest {__version__}",
         "method": "Audio2Face-3D nim_performance_test: streams x requests over each clip, "
         "seeded [0, 1) s start delays; phonemes paced in real time",
-        "machine": {
-            "cpus": os.cpu_count(),
-            "platform": platform.platform(),
-            "python": platform.python_version(),
-            "event_loop": event_loop_name(),
-        },
+        "machine": {**machine(), "event_loop": event_loop_name()},
         "config": {**asdict(config), "token": None, "engine": engine, "character": character},
         "statistics": [name for name, _ in A2F_STATISTICS],
         "clips": clips,

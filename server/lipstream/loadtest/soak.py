@@ -28,8 +28,6 @@ import asyncio
 import json
 import math
 import multiprocessing
-import os
-import platform
 import random
 import resource
 import time
@@ -48,6 +46,7 @@ from lipstream_client.rest import RestClient
 
 from .._version import __version__
 from ..errors import InvalidRequestError
+from ..results_file import machine
 from .clips import synthetic_clip
 from .hostile import HOSTILE_KINDS, KindTally, Target, run_kind
 from .load import HTTP_TIMEOUT_S, MAX_JITTER_S, check_loopback, http_base
@@ -420,12 +419,7 @@ def soak(config: SoakConfig, command: str | None = None) -> dict[str, Any]:
         "tool": f"lipstream loadtest soak {__version__}",
         "date": date,
         "command": command,
-        "machine": {
-            "cpus": os.cpu_count(),
-            "platform": platform.platform(),
-            "python": platform.python_version(),
-            "event_loop": event_loop_name(),
-        },
+        "machine": {**machine(), "event_loop": event_loop_name()},
         "config": {
             **asdict(config),
             "kinds": list(config.kinds),

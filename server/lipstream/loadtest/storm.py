@@ -43,7 +43,6 @@ import json
 import math
 import multiprocessing
 import os
-import platform
 import shlex
 import threading
 import time
@@ -67,7 +66,7 @@ from lipstream_client import (
 from lipstream_client.client import Stream
 
 from .._version import __version__
-from ..results_file import write_results
+from ..results_file import machine, write_results
 from .stats import LAG_STATISTICS, Summary, summarize
 
 PHONEME_S = 0.08
@@ -542,12 +541,7 @@ def storm_results(report: StormReport, command: list[str]) -> dict[str, Any]:
         "tool": f"lipstream loadtest storm {__version__}",
         "date": datetime.now(UTC).isoformat(timespec="seconds"),
         "command": shlex.join(["lipstream", *command[1:]]),
-        "machine": {
-            "cpus": os.cpu_count(),
-            "platform": platform.platform(),
-            "python": platform.python_version(),
-            "load_average": list(os.getloadavg()),
-        },
+        "machine": {**machine(), "load_average": list(os.getloadavg())},
         "report": asdict(report),
     }
 

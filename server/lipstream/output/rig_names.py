@@ -18,6 +18,7 @@ Sources (names only; no data is copied):
 from __future__ import annotations
 
 from lipstream_client.channels import rename_channel
+from lipstream_client.sinks.livelink import LIVELINK_BLENDSHAPES as PACKET_BLENDSHAPES
 
 from ..corpus.livelink import ARKIT_BLENDSHAPES
 
@@ -91,21 +92,8 @@ LIVELINK_BLENDSHAPES: tuple[str, ...] = tuple(
     rename_channel(name, "livelink") for name in ARKIT_BLENDSHAPES
 )
 
-A2F_FACE: tuple[str, ...] = (
-    "EyeBlinkLeft", "EyeLookDownLeft", "EyeLookInLeft", "EyeLookOutLeft", "EyeLookUpLeft",
-    "EyeSquintLeft", "EyeWideLeft", "EyeBlinkRight", "EyeLookDownRight", "EyeLookInRight",
-    "EyeLookOutRight", "EyeLookUpRight", "EyeSquintRight", "EyeWideRight",
-    "JawForward", "JawLeft", "JawRight", "JawOpen",
-    "MouthClose", "MouthFunnel", "MouthPucker", "MouthLeft", "MouthRight",
-    "MouthSmileLeft", "MouthSmileRight", "MouthFrownLeft", "MouthFrownRight",
-    "MouthDimpleLeft", "MouthDimpleRight", "MouthStretchLeft", "MouthStretchRight",
-    "MouthRollLower", "MouthRollUpper", "MouthShrugLower", "MouthShrugUpper",
-    "MouthPressLeft", "MouthPressRight", "MouthLowerDownLeft", "MouthLowerDownRight",
-    "MouthUpperUpLeft", "MouthUpperUpRight",
-    "BrowDownLeft", "BrowDownRight", "BrowInnerUp", "BrowOuterUpLeft", "BrowOuterUpRight",
-    "CheekPuff", "CheekSquintLeft", "CheekSquintRight", "NoseSneerLeft", "NoseSneerRight",
-    "TongueOut",
-)  # fmt: skip
+A2F_FACE: tuple[str, ...] = tuple(rename_channel(name, "livelink") for name in PACKET_BLENDSHAPES)
+"""Audio2Face-3D's 52 face shapes: ARKit's in the Live Link packet's order, PascalCase."""
 A2F_TONGUE: tuple[str, ...] = (
     "TongueTipUp", "TongueTipDown", "TongueTipLeft", "TongueTipRight",
     "TongueRollUp", "TongueRollDown", "TongueRollLeft", "TongueRollRight",

@@ -30,9 +30,23 @@ def test_the_command_writes_a_row_for_each_engine_of_the_character(
 ) -> None:
     out = tmp_path / "floor.json"
     character = trained_models["viseme-lerp"].name
-    main(["--models", str(lerp_dir), "--character", character, "--calls", "5", "--passes", "2",
-          "--json", str(out)])  # fmt: skip
-    rows = json.loads(out.read_text())
+    argv = [
+        "--models",
+        str(lerp_dir),
+        "--character",
+        character,
+        "--calls",
+        "5",
+        "--passes",
+        "2",
+        "--json",
+        str(out),
+    ]
+    main(argv)
+    written = json.loads(out.read_text())
+    assert written["command"] == "python -m lipstream.bench.floor_calls " + " ".join(argv)
+    assert written["date"].startswith("20") and written["machine"]["cores"] >= 1
+    rows = written["rows"]
     assert [(row["engine"], row["calls"]) for row in rows] == [("viseme-lerp", 10)]
     assert "viseme-lerp" in capsys.readouterr().out
 
@@ -46,6 +60,6 @@ def test_every_rung_gets_a_row_with_all_rungs(
     model = trained_models["viseme-lerp"]
     main(["--models", str(lerp_dir), "--character", model.name, "--calls", "4", "--passes", "1",
           "--all-rungs", "--json", str(out)])  # fmt: skip
-    rows = json.loads(out.read_text())
+    rows = json.loads(out.read_text())["rows"]
     assert [row["rung"] for row in rows] == [rung.name for rung in model.fidelity_ladder()]
     assert all(row["calls"] == 4 for row in rows)

@@ -26,7 +26,10 @@ def test_each_rung_is_served_with_its_own_lookahead_and_every_frame_is_timed(
     with live_server(lerp_dir) as server:
         main(["--url", server.ws, "--models", str(lerp_dir), "--character", model.name,
               "--clip", "1.5", "--requests", "2", "--probes", "2", "--json", str(out)])  # fmt: skip
-    rows = json.loads(out.read_text())
+    written = json.loads(out.read_text())
+    assert written["command"].startswith(f"python -m lipstream.bench.lead0 --url {server.ws} ")
+    assert written["date"].startswith("20") and written["machine"]["cores"] >= 1
+    rows = written["rows"]
     rungs = [rung.name for rung in model.fidelity_ladder()]
     assert [(row["engine"], row["rung"]) for row in rows] == [("viseme-lerp", r) for r in rungs]
     lookaheads = [row["lookahead_ms"] for row in rows]

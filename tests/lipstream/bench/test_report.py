@@ -228,6 +228,53 @@ def test_every_results_file_is_rendered() -> None:
     assert results - shown == set()
 
 
+def test_streamed_calls_in_either_shape(tmp_path: Path) -> None:
+    """Rows alone (as first written) and rows beside their machine, date and command render
+    the same table; only the second names its own machine."""
+    rows = [
+        {
+            "engine": "dam",
+            "rung": "causal",
+            "calls": 6,
+            "median_us": 7.26,
+            "p90_us": 9.0,
+            "mean_us": 8.0,
+        },
+        {
+            "engine": "viseme-lerp",
+            "rung": "causal",
+            "calls": 6,
+            "median_us": 1.5,
+            "p90_us": 2.0,
+            "mean_us": 1.74,
+        },
+    ]
+    stamped = {
+        "command": "python -m lipstream.bench.floor_calls --models M",
+        "date": "2030-05-06T07:08:09+00:00",
+        "machine": {"cores": 2},
+        "rows": rows,
+    }
+    rendered = []
+    for doc in (rows, stamped):
+        (tmp_path / "stream_calls.json").write_text(json.dumps(doc))
+        rendered.append(BLOCKS["stream-calls"](Bench(tmp_path)))
+    tables = [[line for line in text.splitlines() if line.startswith("| `")] for text in rendered]
+    assert (
+        tables[0]
+        == tables[1]
+        == [
+            "| `viseme-lerp` | `causal` | 6 | 1.5 | 2.0 | 1.7 |",
+            "| `dam` | `causal` | 6 | 7.3 | 9.0 | 8.0 |",
+        ]
+    )
+    assert rendered[0].startswith(f"Source: `bench/stream_calls.json`; machine: {NOT_RECORDED};")
+    assert rendered[1].startswith(
+        "Source: `bench/stream_calls.json`; machine: cores 2; date: 2030-05-06T07:08:09+00:00; "
+        "command: `python -m lipstream.bench.floor_calls --models M`."
+    )
+
+
 def test_workers_memory_in_either_shape(tmp_path: Path) -> None:
     """The file as first written (worker counts at the top) and with its machine, date,
     command and models beside ``workers`` render the same table."""

@@ -90,7 +90,7 @@ def test_a_run_records_the_command_machine_models_and_each_process(
     assert main(argv) == 0
     results = json.loads(out.read_text())
     assert results["command"] == "python -m lipstream.bench.workers_memory " + " ".join(argv)
-    assert results["machine"]["cpus"] == os.cpu_count()
+    assert results["machine"]["cores"] == len(os.sched_getaffinity(0))
     on_disk = sum(path.stat().st_size for path in (models / "lerp").rglob("*") if path.is_file())
     assert results["models"] == [{"name": "lerp", "engine": "viseme-lerp", "bytes": on_disk}]
     [worker] = results["workers"]["1"]

@@ -38,8 +38,8 @@ def test_unknown_keys_warn_naming_file_and_key_and_load(build: Any, tmp_path: Pa
         corpus = load_corpus(tmp_path)
     messages = [str(warning.message) for warning in caught]
     assert messages == [
-        "a.json: unknown key 'duration' ignored; known keys: emotion, speaker, text",
-        "a.json: unknown key 'id' ignored; known keys: emotion, speaker, text",
+        "a.json: unknown key 'duration' ignored; known keys: emotion, speaker, text, alignment_confidence",
+        "a.json: unknown key 'id' ignored; known keys: emotion, speaker, text, alignment_confidence",
     ]
     assert (corpus.utterances[0].text, corpus.utterances[0].emotion) == ("hi", "happy")
 

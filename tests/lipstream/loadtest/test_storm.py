@@ -113,7 +113,7 @@ def test_a_run_is_added_to_the_results_file_beside_the_others(tmp_path: Path) ->
     assert written["earlier"] == {"kept": True}
     run = written["client_clock"]
     assert run["command"] == "lipstream loadtest storm"
-    assert run["machine"]["cpus"] >= 1 and run["date"].startswith("20")
+    assert run["machine"]["cores"] >= 1 and run["date"].startswith("20")
     assert run["report"]["kind"] == "sessions" and run["report"]["connections"] == 3
 
 

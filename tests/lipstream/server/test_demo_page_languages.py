@@ -20,7 +20,7 @@ from lipstream.engines.base import Model, frame_count
 from lipstream.speech.text_frontend import speak_text
 from lipstream.training import train_engine
 from tests.helpers import return_frames
-from tests.lipstream.server.browser import CHROMIUM, LAUNCH_ARGS, WAIT_MS
+from tests.lipstream.server.browser import CHROMIUM, WAIT_MS, opened_page
 from tests.live_server import LiveServer, live_server
 
 pytestmark = [
@@ -49,27 +49,11 @@ def served(lerp: Model, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Li
 
 
 @pytest.fixture(scope="module")
-def sent() -> list[str | bytes]:
-    """Every WebSocket frame the page sends."""
-    return []
-
-
-@pytest.fixture(scope="module")
-def page(served: LiveServer, sent: list[str | bytes]) -> Iterator[Any]:
-    from playwright.sync_api import WebSocket, sync_playwright
-
-    def record_frames(socket: WebSocket) -> None:
-        socket.on("framesent", sent.append)
-
-    with sync_playwright() as playwright:
-        browser = playwright.chromium.launch(executable_path=str(CHROMIUM), args=LAUNCH_ARGS)
-        context = browser.new_context(viewport={"width": 1360, "height": 820})
-        page = context.new_page()
-        page.on("websocket", record_frames)
-        page.goto(served.http + "/")
-        page.wait_for_selector("body[data-ready=true]", timeout=WAIT_MS)
+def page(browser: Any, served: LiveServer) -> Iterator[Any]:
+    with opened_page(browser, served.http + "/", 1360, 820) as page:
+        page.sent = []
+        page.on("websocket", lambda socket: socket.on("framesent", lambda f: page.sent.append(f)))
         yield page
-        browser.close()
 
 
 def _listed(argument: str) -> list[str]:
@@ -87,9 +71,7 @@ def test_the_pickers_offer_espeak_ngs_languages_and_variants(page: Any) -> None:
     assert variants[0] == "" and variants[1:] == list(dict.fromkeys(listed))
 
 
-def test_a_german_sentence_in_a_chosen_voice_is_spoken_and_voiced(
-    page: Any, sent: list[str | bytes], lerp: Model
-) -> None:
+def test_a_german_sentence_in_a_chosen_voice_is_spoken_and_voiced(page: Any, lerp: Model) -> None:
     page.select_option("#engine", "viseme-lerp")
     page.fill("#fps", str(int(FPS)))
     page.select_option("#lang", "de")
@@ -99,7 +81,7 @@ def test_a_german_sentence_in_a_chosen_voice_is_spoken_and_voiced(
     page.wait_for_function("window.lipstreamDemo.log.done.length > 0", timeout=WAIT_MS)
     texts = [
         json.loads(frame)
-        for frame in sent
+        for frame in page.sent
         if isinstance(frame, str) and '"type":"text"' in frame.replace(" ", "")
     ]
     assert [(m["text"], m["lang"], m["voice"]) for m in texts] == [(GERMAN, "de", "f3")]

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -24,9 +25,9 @@ Labels = Sequence[int] | np.ndarray
 """A query: phoneme labels, (l,)."""
 
 
-@dataclass(frozen=True)
-class Poses:
-    """First and last pose (n_animes, n_pc) of every anime and its ``successor`` (n_animes,)."""
+class Poses(NamedTuple):
+    """First and last pose (n_animes, n_pc) of every anime and its ``successor`` (n_animes,);
+    the compiled search reads them as one group."""
 
     first: np.ndarray
     last: np.ndarray
@@ -38,6 +39,17 @@ class Poses:
         right = np.asarray(right)
         gap = np.linalg.norm(self.last[left] - self.first[right], axis=-1)
         return np.where(self.successor[left] == right, 0.0, gap)
+
+
+class TileRanking(NamedTuple):
+    """A ``Ranking`` as the compiled searches read it: by audio (``use_audio``: the query's
+    ``query_summaries`` (l, D) against the animes' ``summaries`` (n_animes, D)), else by
+    the pose jump (``poses``)."""
+
+    use_audio: bool
+    query_summaries: np.ndarray
+    summaries: np.ndarray
+    poses: Poses
 
 
 @dataclass
@@ -80,6 +92,11 @@ class Ranking:
         else:
             rows = np.stack([self.query_summaries[p] for p in range(start, start + length)])
         return np.asarray(rows, dtype=np.float64)
+
+    def compiled(self, summaries: np.ndarray) -> TileRanking:
+        """This ranking for a compiled search of a query whose audio ``summaries`` are given
+        (``summaries_of``)."""
+        return TileRanking(self.uses_audio, summaries, self.anime_summaries, self.poses)
 
     def join_costs(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
         """Cost of each join left[i] -> right[i] between graph nodes."""
@@ -134,9 +151,7 @@ def cheapest_run(
     use_audio: bool,
     query_summaries: np.ndarray,
     summaries: np.ndarray,
-    last: np.ndarray,
-    first: np.ndarray,
-    successor: np.ndarray,
+    poses: Poses,
 ) -> int:
     """Index into ``starts`` of the cheapest recording run starts[s] .. starts[s] + length - 1
     (anime ids) shown at ``length`` query positions with audio summaries (length, D): the
@@ -159,7 +174,7 @@ def cheapest_run(
                 if total > best_cost:
                     break
         elif previous >= 0:
-            total = pose_jump(previous, start, last, first, successor)
+            total = pose_jump(previous, start, poses.last, poses.first, poses.successor)
         if total < best_cost:
             best, best_cost = index, total
     return best

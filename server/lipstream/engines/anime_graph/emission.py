@@ -15,21 +15,50 @@ makes it on every streamed message and its few frames cost less than the calls' 
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
-from ..damped import follow_rates
-from .track import evaluate_track
+from ..damped import FilterState, follow_rates
+from .track import AnimeMotion, TrackBuffers, evaluate_track
+
+
+class ChannelMap(NamedTuple):
+    """PCA values to channels: ``components`` (n_pc, n_channels), ``mean`` (n_channels,),
+    each channel held inside [``low``, ``high``] (n_channels,), the range the recordings
+    span; all float64, C-contiguous."""
+
+    components: np.ndarray
+    mean: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+
+
+class CausalEmission(NamedTuple):
+    """What a causal request's frames are made with, per model: the filter's rate per PCA
+    component ``omegas`` (n_pc,) float64, the ``channels`` map and the animes' ``motion``."""
+
+    omegas: np.ndarray
+    channels: ChannelMap
+    motion: AnimeMotion
+
+
+class CausalClock(NamedTuple):
+    """A causal request's output rate ``fps``, its lead ``lead_s`` (s) and whether its joins
+    blend (``blend``; else they cut)."""
+
+    fps: float
+    lead_s: float
+    blend: bool
 
 
 @njit(cache=True)
-def channel_frames(
-    values: np.ndarray, components: np.ndarray, mean: np.ndarray, low: np.ndarray,
-    high: np.ndarray,
-) -> np.ndarray:  # fmt: skip
+def channel_frames(values: np.ndarray, channels: ChannelMap) -> np.ndarray:
     """Channel frames (n, n_channels) float32 of PCA ``values`` (n, n_pc), each channel
     held inside [low, high]."""
-    frames = np.dot(values, components)
+    frames = np.dot(values, channels.components)
+    mean, low, high = channels.mean, channels.low, channels.high
     out = np.empty(frames.shape, dtype=np.float32)
     for row in range(frames.shape[0]):
         for column in range(frames.shape[1]):
@@ -42,54 +71,33 @@ def channel_frames(
 def causal_frames(
     first: int,
     stop: int,
-    fps: float,
-    lead_s: float,
+    clock: CausalClock,
     covered_until: float,
-    x: np.ndarray,
-    v: np.ndarray,
-    t: float,
-    at_rest: bool,
-    omegas: np.ndarray,
-    components: np.ndarray,
-    mean: np.ndarray,
-    low: np.ndarray,
-    high: np.ndarray,
-    starts: np.ndarray,
-    ends: np.ndarray,
-    animes: np.ndarray,
-    knot_offsets: np.ndarray,
-    knot_targets: np.ndarray,
-    knot_sources: np.ndarray,
-    join_kinds: np.ndarray,
-    left_examples: np.ndarray,
-    right_examples: np.ndarray,
-    anime_start: np.ndarray,
-    anime_end: np.ndarray,
-    utterance: np.ndarray,
-    values: np.ndarray,
-    offsets: np.ndarray,
-    rate: float,
+    state: FilterState,
+    emission: CausalEmission,
+    track: TrackBuffers,
+    count: int,
+    knots: int,
 ) -> np.ndarray:
-    """Channel frames (``channel_frames``) of output frames first .. stop - 1; the filter's
-    ``x`` and ``v`` (at time ``t``) advance to the last frame, or (``at_rest``) start at
-    rest on frame ``first``'s sample. The track arguments are ``MotionTrack.arrays()``."""
+    """Channel frames (``channel_frames``) of output frames first .. stop - 1 on the first
+    ``count`` placements (``knots`` knots) of ``track``; the filter ``state``, at frame
+    ``first`` - 1, advances to the last frame, or at frame 0 starts at rest on its sample."""
+    fps, lead_s = clock.fps, clock.lead_s
     times = np.empty(stop - first)
     ahead = np.empty(stop - first)
     for row in range(stop - first):
         times[row] = (first + row) / fps
         ahead[row] = min(times[row] + lead_s, covered_until)
-    targets = evaluate_track(
-        ahead, starts, ends, animes, knot_offsets, knot_targets, knot_sources, join_kinds,
-        left_examples, right_examples, anime_start, anime_end, utterance, values, offsets,
-        rate, True,
-    )  # fmt: skip
+    targets = evaluate_track(ahead, track, count, knots, emission.motion, True)
+    x, v = state.x, state.v
     out = np.empty_like(targets)
     done = 0
-    if at_rest:
+    if first == 0:
         x[:] = targets[0]
         v[:] = 0.0
         out[0] = x
         done = 1
     if len(times) > done:
-        follow_rates(x, v, t, targets[done:], omegas, times[done:], out[done:])
-    return channel_frames(out, components, mean, low, high)
+        t = 0.0 if first == 0 else (first - 1) / fps
+        follow_rates(x, v, t, targets[done:], emission.omegas, times[done:], out[done:])
+    return channel_frames(out, emission.channels)

@@ -125,17 +125,23 @@ class AnimeGraphEngine(Engine):
         bar.update()
         bar.close()
         arrays |= {
-            "basis_mean": basis.mean, "basis_components": basis.components,
-            "channel_low": all_frames.min(axis=0), "channel_high": all_frames.max(axis=0),
-            "anime_label": animes.labels, "anime_utterance": animes.utterance,
-            "anime_start": animes.start, "anime_end": animes.end,
-            "motion": animes.motion.values, "motion_offsets": animes.motion.offsets,
+            "basis_mean": basis.mean,
+            "basis_components": basis.components,
+            "channel_low": all_frames.min(axis=0),
+            "channel_high": all_frames.max(axis=0),
+            "anime_label": animes.labels,
+            "anime_utterance": animes.utterance,
+            "anime_start": animes.start,
+            "anime_end": animes.end,
+            "motion": animes.motion.values,
+            "motion_offsets": animes.motion.offsets,
             "features": animes.features.values if animes.features else np.zeros((0, 0), np.float32),
             "feature_offsets": (
                 animes.features.offsets if animes.features else np.zeros(1, np.int64)
             ),
-            "anime_summary": animes.summaries(), "cutoffs": cutoffs,
-        }  # fmt: skip
+            "anime_summary": animes.summaries(),
+            "cutoffs": cutoffs,
+        }
         manifest = self.new_manifest(
             corpus,
             metrics=_metrics(

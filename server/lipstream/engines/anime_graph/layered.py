@@ -15,19 +15,43 @@ node id. A query costs O(states + edges stepped), whatever the graph's size.
 
 Arrays, CSR keyed by node * n_labels + label: ``step_offsets`` over
 ``step_targets``, the successors of the node that carry the label (so a
-step touches only edges it keeps), and ``entry_offsets`` over
-``entry_members``, the node's member animes with the label; ``motion`` (n,)
-is the anime each node shows.
+step touches only edges it keeps), and ``NodeMembers``: ``entry_offsets`` over
+``entry_members``, the node's member animes with the label, and ``motion`` (n,),
+the anime each node shows.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
-from .costs import audio_cost, pose_jump
+from .costs import TileRanking, audio_cost, pose_jump
+
+
+class NodeMembers(NamedTuple):
+    """A graph's members by (node, label), built once per ``LayeredMatcher``: node c's
+    member animes with label l are entry_members[entry_offsets[key] : entry_offsets[key +
+    1]], key = c * ``n_labels`` + l; ``motion`` (n,) int64 is the anime each node shows."""
+
+    n_labels: int
+    entry_offsets: np.ndarray
+    entry_members: np.ndarray
+    motion: np.ndarray
+
+
+class Layers(NamedTuple):
+    """What ``reach`` found: ``states`` (N,) node ids layer after layer, ``layer_offsets``
+    (depth + 1,), and the edges stepped as (``sources``, ``targets``) state pairs (M,),
+    grouped by layer."""
+
+    states: np.ndarray
+    layer_offsets: np.ndarray
+    sources: np.ndarray
+    targets: np.ndarray
+
 
 _CACHE = True
 
@@ -97,27 +121,20 @@ def reach(
 @njit(cache=_CACHE)
 def cheapest(
     query: np.ndarray,
-    states: np.ndarray,
-    layer_offsets: np.ndarray,
-    sources: np.ndarray,
-    targets: np.ndarray,
+    layers: Layers,
     previous: int,
-    use_audio: bool,
-    query_summaries: np.ndarray,
-    n_labels: int,
-    entry_offsets: np.ndarray,
-    entry_members: np.ndarray,
-    summaries: np.ndarray,
-    motion: np.ndarray,
-    last: np.ndarray,
-    first: np.ndarray,
-    successor: np.ndarray,
+    ranking: TileRanking,
+    members: NodeMembers,
 ) -> np.ndarray:
-    """Node ids (L,) of the cheapest path through the layers ``reach`` found.
+    """Node ids (L,) of the cheapest path through the ``layers`` ``reach`` found.
 
-    With ``use_audio``, state s at depth d costs the audio distance to
+    With ``ranking.use_audio``, state s at depth d costs the audio distance to
     query_summaries[d] (L, D) and joins are free; otherwise states are free and each
     join (and the one from ``previous``, when >= 0) costs its pose discontinuity."""
+    states, layer_offsets = layers.states, layers.layer_offsets
+    sources, targets = layers.sources, layers.targets
+    use_audio, poses, motion = ranking.use_audio, ranking.poses, members.motion
+    last, first, successor = poses.last, poses.first, poses.successor
     n_layers = len(layer_offsets) - 1
     alive = np.zeros(len(states), dtype=np.bool_)
     alive[layer_offsets[n_layers - 1] :] = True
@@ -129,18 +146,7 @@ def cheapest(
     depth_end = layer_offsets[1]
     for state in range(depth_end):
         if alive[state]:
-            costs[state] = _node_cost(
-                state,
-                0,
-                query,
-                states,
-                use_audio,
-                query_summaries,
-                n_labels,
-                entry_offsets,
-                entry_members,
-                summaries,
-            )
+            costs[state] = _node_cost(state, 0, query, states, ranking, members)
             if previous >= 0 and not use_audio:
                 costs[state] += pose_jump(
                     motion[previous], motion[states[state]], last, first, successor
@@ -149,20 +155,7 @@ def cheapest(
     edge = 0
     while edge < len(sources):
         while targets[edge] >= layer_offsets[depth + 1]:
-            _price_layer(
-                depth,
-                layer_offsets,
-                alive,
-                costs,
-                query,
-                states,
-                use_audio,
-                query_summaries,
-                n_labels,
-                entry_offsets,
-                entry_members,
-                summaries,
-            )
+            _price_layer(depth, layers, alive, costs, query, ranking, members)
             depth += 1
         target, source = targets[edge], sources[edge]
         if alive[target]:
@@ -183,20 +176,7 @@ def cheapest(
                 costs[target], back[target] = reaching, source
         edge += 1
     while depth < n_layers:
-        _price_layer(
-            depth,
-            layer_offsets,
-            alive,
-            costs,
-            query,
-            states,
-            use_audio,
-            query_summaries,
-            n_labels,
-            entry_offsets,
-            entry_members,
-            summaries,
-        )
+        _price_layer(depth, layers, alive, costs, query, ranking, members)
         depth += 1
     best = layer_offsets[n_layers - 1]
     for state in range(best + 1, layer_offsets[n_layers]):
@@ -217,53 +197,34 @@ def _node_cost(
     depth: int,
     query: np.ndarray,
     states: np.ndarray,
-    use_audio: bool,
-    query_summaries: np.ndarray,
-    n_labels: int,
-    entry_offsets: np.ndarray,
-    entry_members: np.ndarray,
-    summaries: np.ndarray,
+    ranking: TileRanking,
+    members: NodeMembers,
 ) -> float:
-    if not use_audio:
+    if not ranking.use_audio:
         return 0.0
     return audio_cost(
         states[state],
         query[depth],
-        query_summaries[depth],
-        n_labels,
-        entry_offsets,
-        entry_members,
-        summaries,
+        ranking.query_summaries[depth],
+        members.n_labels,
+        members.entry_offsets,
+        members.entry_members,
+        ranking.summaries,
     )
 
 
 @njit(cache=_CACHE)
 def _price_layer(
     depth: int,
-    layer_offsets: np.ndarray,
+    layers: Layers,
     alive: np.ndarray,
     costs: np.ndarray,
     query: np.ndarray,
-    states: np.ndarray,
-    use_audio: bool,
-    query_summaries: np.ndarray,
-    n_labels: int,
-    entry_offsets: np.ndarray,
-    entry_members: np.ndarray,
-    summaries: np.ndarray,
+    ranking: TileRanking,
+    members: NodeMembers,
 ) -> None:
     """Add the node costs of layer ``depth``, once all its incoming edges are relaxed."""
+    layer_offsets = layers.layer_offsets
     for state in range(layer_offsets[depth], layer_offsets[depth + 1]):
         if alive[state]:
-            costs[state] += _node_cost(
-                state,
-                depth,
-                query,
-                states,
-                use_audio,
-                query_summaries,
-                n_labels,
-                entry_offsets,
-                entry_members,
-                summaries,
-            )
+            costs[state] += _node_cost(state, depth, query, layers.states, ranking, members)

@@ -28,19 +28,19 @@ from ..damped import omega_for_cutoff
 from .animes import AnimeTable, Curves
 from .checks import check_stored_model
 from .costs import Poses
-from .emission import channel_frames
+from .emission import CausalEmission, ChannelMap, channel_frames
 from .graph import SearchGraph
 from .options import ENGINE, MAX_PQ_WINDOW, OPTION_NAMES, SearchOptions, parse_options
 from .search import LayeredMatcher, Matcher, SuffixMatcher
 from .smoothing import lowpass_kernels
-from .synthesizer import AnimeGraphSynthesizer
+from .synthesizer import AnimeGraphSynthesizer, StreamCalls
+from .track import anime_motion
 from .views import WHOLE, GraphView, load_view
 
-REQUIRED_ARRAYS = [
-    "basis_mean", "basis_components", "channel_low", "channel_high", "anime_label",
-    "anime_utterance", "anime_start", "anime_end", "motion", "motion_offsets", "features",
-    "feature_offsets", "anime_summary", "cutoffs",
-]  # fmt: skip
+REQUIRED_ARRAYS = (
+    "basis_mean basis_components channel_low channel_high anime_label anime_utterance "
+    "anime_start anime_end motion motion_offsets features feature_offsets anime_summary cutoffs"
+).split()
 LADDER_TILES = (10, 4, 2, 1)
 MIN_CAUSAL_CUTOFF_HZ = 2.0
 CAUSAL_CUTOFF_FACTOR = 2.0
@@ -76,6 +76,13 @@ class AnimeGraphModel(RenderingModel):
         self.channel_low = np.asarray(arrays["channel_low"], dtype=np.float64)
         self.channel_high = np.asarray(arrays["channel_high"], dtype=np.float64)
         self.animes = _anime_table(arrays, self.fps, self.mfcc, self.has_audio)
+        self.anime_motion = anime_motion(self.animes)
+        self.channel_map = ChannelMap(
+            np.ascontiguousarray(self.basis.components),
+            np.ascontiguousarray(self.basis.mean),
+            np.ascontiguousarray(self.channel_low),
+            np.ascontiguousarray(self.channel_high),
+        )
         successor = self.animes.successors()
         everything = np.arange(self.animes.size)
         self.poses = Poses(
@@ -97,6 +104,12 @@ class AnimeGraphModel(RenderingModel):
         self.causal_omegas = omega_for_cutoff(
             CAUSAL_CUTOFF_FACTOR * np.maximum(self.cutoffs, MIN_CAUSAL_CUTOFF_HZ)
         )
+        self.causal_emission = CausalEmission(
+            np.ascontiguousarray(self.causal_omegas, dtype=np.float64),
+            self.channel_map,
+            self.anime_motion,
+        )
+        self.stream_calls = StreamCalls()
 
     @property
     def n_components(self) -> int:
@@ -238,11 +251,7 @@ class AnimeGraphModel(RenderingModel):
         """PCA coefficients (n, n_pc) to channel frames (n, n_channels) float32, held inside
         the range the recordings span."""
         return channel_frames(
-            np.ascontiguousarray(coefficients, dtype=np.float64),
-            self.basis.components,
-            self.basis.mean,
-            self.channel_low,
-            self.channel_high,
+            np.ascontiguousarray(coefficients, dtype=np.float64), self.channel_map
         )
 
     def start(

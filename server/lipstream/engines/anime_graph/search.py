@@ -27,20 +27,21 @@ exactly, while with a cap the jumps can exceed the minimum.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Protocol, TypeAlias
+from typing import Protocol
 
 import numpy as np
 
+from ...numerics.direct_call import DirectCall
 from .costs import Labels, Ranking
 from .graph import AnimeGraph, SearchGraph, csr_offsets
 from .index import SuffixIndex
-from .layered import cheapest, reach
-from .suffix_search import greedy_tiles, single_occurrences
-
-GreedyArguments: TypeAlias = tuple[
-    int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-    np.ndarray, np.ndarray, bool, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-]  # fmt: skip
+from .layered import Layers, NodeMembers, cheapest, reach
+from .suffix_search import (
+    GreedySearch,
+    SuffixTables,
+    greedy_tiles,
+    single_occurrences,
+)
 
 
 @dataclass(frozen=True)
@@ -100,17 +101,30 @@ class SuffixMatcher:
     index: SuffixIndex
     graph: AnimeGraph
     limit: int | None = None
-    single_offsets: np.ndarray = field(init=False, repr=False)
-    single_starts: np.ndarray = field(init=False, repr=False)
+    tables: SuffixTables = field(init=False, repr=False)
+    _greedy_tiles: DirectCall = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        self.single_offsets, self.single_starts = single_occurrences(
-            self.limit or 0,
-            self.index.transitions,
-            self.index.low,
-            self.index.high,
-            self.index.ends,
-            self.index.text_anime,
+        index, limit = self.index, self.limit or 0
+        transitions, low, high, ends, text_anime = (
+            np.ascontiguousarray(array)
+            for array in (index.transitions, index.low, index.high, index.ends, index.text_anime)
+        )
+        single_offsets, single_starts = single_occurrences(
+            limit, transitions, low, high, ends, text_anime
+        )
+        self._greedy_tiles = DirectCall(greedy_tiles)  # every request's: the view fixes the types
+        self.tables = SuffixTables(
+            limit,
+            transitions,
+            low,
+            high,
+            ends,
+            text_anime,
+            single_offsets,
+            single_starts,
+            np.ascontiguousarray(self.graph.labels),
+            np.ascontiguousarray(self.graph.successor),
         )
 
     def tiles(
@@ -126,41 +140,23 @@ class SuffixMatcher:
     ) -> list[np.ndarray]:
         labels = np.asarray(query[start:stop], dtype=np.int64)
         joined = previous if ranked_from is None else ranked_from
-        nodes, ends, pending = greedy_tiles(
+        nodes, ends, pending = self._greedy_tiles(
             labels,
             cap or 0,
             -1 if previous is None else previous,
             -1 if joined is None else joined,
             final_only,
-            *self.kernel_arguments(ranking, ranking.summaries_of(start, stop - start)),
+            self.kernel_arguments(ranking, ranking.summaries_of(start, stop - start)),
         )
         if len(nodes) < stop - start and not pending:
             missing(query, start + len(nodes))
         bounds = [0, *ends.tolist()]
         return [nodes[low:high] for low, high in zip(bounds, bounds[1:])]
 
-    def kernel_arguments(self, ranking: Ranking, summaries: np.ndarray) -> GreedyArguments:
-        """``greedy_tiles``'s arguments after the query, cap and previous nodes, for a query
-        whose audio ``summaries`` are given (``Ranking.summaries_of``)."""
-        index, poses = self.index, ranking.poses
-        return (
-            self.limit or 0,
-            index.transitions,
-            index.low,
-            index.high,
-            index.ends,
-            index.text_anime,
-            self.single_offsets,
-            self.single_starts,
-            self.graph.labels,
-            self.graph.successor,
-            ranking.uses_audio,
-            summaries,
-            ranking.anime_summaries,
-            poses.last,
-            poses.first,
-            poses.successor,
-        )
+    def kernel_arguments(self, ranking: Ranking, summaries: np.ndarray) -> GreedySearch:
+        """``greedy_tiles``'s tables and ranking, for a query whose audio ``summaries`` are
+        given (``Ranking.summaries_of``)."""
+        return GreedySearch(self.tables, ranking.compiled(summaries))
 
 
 def missing(query: Labels, position: int) -> None:
@@ -183,15 +179,19 @@ class LayeredMatcher:
         labels = np.asarray(labels, dtype=np.int64)
         self.n_labels = int(labels.max()) + 1 if len(labels) else 1
         keys = owners * self.n_labels + labels
-        self.entry_offsets = csr_offsets(keys, n_nodes * self.n_labels)
-        self.entry_members = np.asarray(members, dtype=np.int64)[np.argsort(keys, kind="stable")]
+        self.members = NodeMembers(
+            self.n_labels,
+            csr_offsets(keys, n_nodes * self.n_labels),
+            np.asarray(members, dtype=np.int64)[np.argsort(keys, kind="stable")],
+            np.asarray(graph.motion_of(np.arange(n_nodes)), dtype=np.int64),
+        )
         self.carries = np.zeros((n_nodes, self.n_labels), dtype=np.bool_)
         self.carries[owners, labels] = True
         self.step_offsets, self.step_targets = self._steps(graph)
-        self.motion = np.asarray(graph.motion_of(np.arange(n_nodes)), dtype=np.int64)
         # Scratch for ``reach``, shared by every thread using this matcher: safe because the
         # compiled kernels hold the GIL (none is ``nogil``) and leave it all -1.
         self._slot = np.full(n_nodes, -1, dtype=np.int64)
+        self._cheapest = DirectCall(cheapest)  # every request's: the view fixes the types
 
     def _steps(self, graph: SearchGraph) -> tuple[np.ndarray, np.ndarray]:
         """CSR keyed by source * n_labels + label over the edges' targets with that label,
@@ -233,25 +233,13 @@ class LayeredMatcher:
     ) -> np.ndarray:
         (states, offsets), ((sources, targets),) = match.layers, match.steps
         labels = np.asarray(query[match.start : match.start + match.length], dtype=np.int64)
-        poses = ranking.poses
         return np.asarray(
-            cheapest(
+            self._cheapest(
                 labels,
-                states,
-                offsets,
-                sources,
-                targets,
+                Layers(states, offsets, sources, targets),
                 -1 if previous is None else previous,
-                ranking.uses_audio,
-                ranking.summaries_of(match.start, match.length),
-                self.n_labels,
-                self.entry_offsets,
-                self.entry_members,
-                ranking.anime_summaries,
-                self.motion,
-                poses.last,
-                poses.first,
-                poses.successor,
+                ranking.compiled(ranking.summaries_of(match.start, match.length)),
+                self.members,
             )
         )
 

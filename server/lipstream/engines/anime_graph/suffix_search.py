@@ -16,10 +16,37 @@ and one interpreter round trip.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
-from .costs import cheapest_run
+from .costs import TileRanking, cheapest_run
+
+
+class SuffixTables(NamedTuple):
+    """One view's search tables, built once by its ``SuffixMatcher``: ``limit`` (<= 0: none)
+    the occurrences ranked; ``transitions``, ``low``, ``high``, ``ends`` and ``text_anime``
+    its ``SuffixIndex``; ``single_offsets``/``single_starts`` the ``single_occurrences`` of
+    that index and limit; ``labels`` and ``successor`` (n_animes,) its anime graph's."""
+
+    limit: int
+    transitions: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+    ends: np.ndarray
+    text_anime: np.ndarray
+    single_offsets: np.ndarray
+    single_starts: np.ndarray
+    labels: np.ndarray
+    successor: np.ndarray
+
+
+class GreedySearch(NamedTuple):
+    """``greedy_tiles``'s tables and ranking."""
+
+    tables: SuffixTables
+    ranking: TileRanking
 
 
 @njit(cache=True)
@@ -71,36 +98,21 @@ def greedy_tiles(
     previous: int,
     joined: int,
     final_only: bool,
-    limit: int,
-    transitions: np.ndarray,
-    low: np.ndarray,
-    high: np.ndarray,
-    ends: np.ndarray,
-    text_anime: np.ndarray,
-    single_offsets: np.ndarray,
-    single_starts: np.ndarray,
-    labels: np.ndarray,
-    successor: np.ndarray,
-    use_audio: bool,
-    query_summaries: np.ndarray,
-    summaries: np.ndarray,
-    last: np.ndarray,
-    first: np.ndarray,
-    pose_successor: np.ndarray,
+    search: GreedySearch,
 ) -> tuple[np.ndarray, np.ndarray, bool]:
     """Tile ``query`` (l,) labels: (anime per position (l,), tile end positions (T,), and
-        whether a last tile was left out as pending).
+    whether a last tile was left out as pending).
 
-        ``cap`` <= 0 leaves tiles uncapped; ``previous`` (-1: none) is the anime before the
-        query, which the first tile may continue, and ``joined`` the one its join is ranked
-        from (they differ only when the query enters a view that lacks the anime shown
-        last); ``query_summaries`` (l, D) are used when ``use_audio``; ``successor`` is the
-        graph's, ``last``/``first``/``pose_successor`` the ``costs.Poses``;
-        ``single_offsets``/``single_starts`` are ``single_occurrences`` of the same index and
-        ``limit``. Stops early, with
-        the last end short of l, at a phoneme the corpus never says. ``final_only`` leaves out a
-    last tile that reaches the end of ``query`` below ``cap`` (more input may extend it):
-    it is found without ranking its occurrences, which is most of a call."""
+    ``cap`` <= 0 leaves tiles uncapped; ``previous`` (-1: none) is the anime before the
+    query, which the first tile may continue, and ``joined`` the one its join is ranked
+    from (they differ only when the query enters a view that lacks the anime shown last);
+    the ranking's ``query_summaries`` are the query's (l, D). Stops early, with the last
+    end short of l, at a phoneme the corpus never says. ``final_only`` leaves out a last
+    tile that reaches the end of ``query`` below ``cap`` (more input may extend it): it is
+    found without ranking its occurrences, which is most of a call."""
+    tables, ranking = search.tables, search.ranking
+    limit, transitions = tables.limit, tables.transitions
+    labels, successor = tables.labels, tables.successor
     nodes = np.empty(len(query), dtype=np.int64)
     tile_ends = np.empty(len(query), dtype=np.int64)
     position = n_tiles = 0
@@ -128,20 +140,21 @@ def greedy_tiles(
                 break
             if length == 1:  # state is the root's child by this label
                 label = query[position]
-                starts = single_starts[single_offsets[label] : single_offsets[label + 1]]
+                offsets = tables.single_offsets
+                starts = tables.single_starts[offsets[label] : offsets[label + 1]]
             else:
-                starts = _occurrences(state, length, limit, low, high, ends, text_anime)
+                starts = _occurrences(
+                    state, length, limit, tables.low, tables.high, tables.ends, tables.text_anime
+                )
             chosen = starts[
                 cheapest_run(
                     starts,
                     length,
                     joined,
-                    use_audio,
-                    query_summaries[position : position + length],
-                    summaries,
-                    last,
-                    first,
-                    pose_successor,
+                    ranking.use_audio,
+                    ranking.query_summaries[position : position + length],
+                    ranking.summaries,
+                    ranking.poses,
                 )
             ]
         for offset in range(length):

@@ -54,23 +54,25 @@ from numba import njit
 
 from ...audio import Audio
 from ...errors import InvalidRequestError
+from ...numerics.direct_call import DirectCall
 from ...phonemes import PHONEME_INDEX, SILENCE
 from ...timeline import PhonemeSpan, SpanLike, coerce_spans
 from ..base import SynthesisRequest, Synthesizer, fill_gaps, frame_count
+from ..damped import FilterState
 from ..growable import Growable
 from ..work import WorkGuard
 from .animes import summarize
 from .blending import Join, PairIndex, plan_join
 from .causal_call import causal_emit, causal_step
 from .costs import Ranking
-from .emission import channel_frames
+from .emission import CausalClock, ChannelMap, channel_frames
 from .graph import AnimeGraph, SearchGraph
 from .options import SearchOptions
 from .pq import SearchTimeout, pq_window
 from .request_audio import RequestAudio
-from .search import GreedyArguments, Matcher, SuffixMatcher, count_jumps, missing
-from .suffix_search import greedy_tiles
-from .track import MotionTrack, Placement, evaluate_track
+from .search import Matcher, SuffixMatcher, count_jumps, missing
+from .suffix_search import GreedySearch, greedy_tiles
+from .track import AnimeMotion, MotionTrack, Placement, TrackBuffers, evaluate_track
 from .views import WHOLE, GraphView
 from .warp import Alignment, Warp, dtw_warps, linear_warp
 
@@ -118,7 +120,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         self.audio: RequestAudio | None = None
         self.audio_mode: bool | None = None
         self.summaries: Growable | None = None
-        self.track = MotionTrack(model.animes)
+        self.track = MotionTrack(model.anime_motion)
         self.half_width = model.half_width if options.smooth else 0
         self.kernels = model.kernels if options.smooth else np.ones((model.n_components, 1))
         self.raw = Growable(np.float64, (model.n_components,))
@@ -126,28 +128,12 @@ class AnimeGraphSynthesizer(Synthesizer):
         self.emitted = 0
         self.finished = False
         # The causal filter's value and velocity per PCA component, at rest before frame 0.
-        self._filter_x = np.empty(model.n_components)
-        self._filter_v = np.zeros(model.n_components)
+        self.filter_state = FilterState(np.empty(model.n_components), np.zeros(model.n_components))
         self.lead_s = model.causal_shift_s(options.lead_ms)
+        self.clock = CausalClock(self.fps, self.lead_s, options.blend)
         self.guard = request.guard
-        self._filter_arguments: tuple[Any, ...] = (
-            model.causal_omegas,
-            model.basis.components,
-            model.basis.mean,
-            model.channel_low,
-            model.channel_high,
-        )
-        motion = model.animes.motion
-        self._track_arguments: tuple[Any, ...] = (
-            model.animes.start,
-            model.animes.end,
-            model.animes.utterance,
-            motion.values,
-            motion.offsets,
-            float(motion.rate),
-        )
-        self._causal_arguments: dict[str, tuple[Any, ...]] = {}  # ``causal_step``'s, by view
-        self._greedy_arguments: dict[str, GreedyArguments] = {}  # without audio, by view
+        self._searches: dict[str, GreedySearch] = {}  # without audio, by view
+        self.calls = model.stream_calls
         self.search_guard = WorkGuard(options.pq_budget_s, time.perf_counter, _search_timeout)
         self.stats: dict[str, Any] = {
             "frames": 0,
@@ -347,21 +333,17 @@ class AnimeGraphSynthesizer(Synthesizer):
         """``_greedy_tiles`` without audio by suffix automaton: ``SuffixMatcher.tiles`` with
         the view's kernel arguments kept (without audio they do not depend on the
         positions) and the search timed as ``_timed`` does, without its wrapping."""
-        arguments = self._greedy_arguments.get(searcher.view.name)
-        if arguments is None:
-            ranking = self.ranking(searcher.graph, start, stop)
-            arguments = matcher.kernel_arguments(ranking, ranking.summaries_of(start, 0))
-            self._greedy_arguments[searcher.view.name] = arguments
+        search = self._search_of(searcher, matcher, start, stop)
         guard = self.search_guard
         guard.check()
         started = time.perf_counter()
-        nodes, ends, pending = greedy_tiles(
+        nodes, ends, pending = self.calls.greedy_tiles(
             self._labels.data[start:stop],
             self.options.max_tile or 0,
             -1 if continuing is None else continuing,
             -1 if ranked is None else ranked,
             not closed,
-            *arguments,
+            search,
         )
         spent = time.perf_counter() - started
         guard.spent_s += spent
@@ -372,6 +354,18 @@ class AnimeGraphSynthesizer(Synthesizer):
             return None
         chosen, bounds = nodes.tolist(), [0, *ends.tolist()]
         return [chosen[low:high] for low, high in zip(bounds, bounds[1:])]
+
+    def _search_of(
+        self, searcher: _Searcher, matcher: SuffixMatcher, start: int, stop: int
+    ) -> GreedySearch:
+        """The view's ``greedy_tiles`` tables and ranking without audio, made once (without
+        audio they do not depend on the positions)."""
+        search = self._searches.get(searcher.view.name)
+        if search is None:
+            ranking = self.ranking(searcher.graph, start, stop)
+            search = matcher.kernel_arguments(ranking, ranking.summaries_of(start, 0))
+            self._searches[searcher.view.name] = search
+        return search
 
     def _audio_ready_stop(self, start: int, stop: int) -> int:
         """The largest p in [start, stop] such that the audio covers spans start..p-1."""
@@ -459,33 +453,25 @@ class AnimeGraphSynthesizer(Synthesizer):
     ) -> np.ndarray:
         """``_causal_frames`` by ``causal_step``, whose whole call counts as search time."""
         self.guard.check()
-        arguments = self._causal_arguments.get(searcher.view.name)
-        if arguments is None:
-            ranking = self.ranking(searcher.graph, placed, total)
-            greedy = matcher.kernel_arguments(ranking, ranking.summaries_of(placed, 0))
-            arguments = (*greedy, *self._filter_arguments, *self._track_arguments)
-            self._causal_arguments[searcher.view.name] = arguments
+        search = self._search_of(searcher, matcher, placed, total)
         track, new = self.track, total - placed
         buffers = track.reserve(new, 2 * new)
         self.search_guard.check()
         started = time.perf_counter()
-        chosen, jumps, stop, frames = causal_step(
+        frames: np.ndarray
+        chosen, jumps, stop, frames = self.calls.causal_step(
             self._labels.data,
+            self._bounds.data,
             placed,
             total,
-            self._bounds.data,
-            self.nodes[-1] if placed else -1,
-            self.options.blend,
             self.emitted,
             self.finished,
-            self.fps,
-            self.lead_s,
-            self._filter_x,
-            self._filter_v,
-            placed,
+            self.clock,
+            self.filter_state,
+            buffers,
             track.knots,
-            *buffers,
-            *arguments,
+            search,
+            self.model.causal_emission,
         )
         spent = time.perf_counter() - started  # what ``_timed`` adds, without its wrapping
         self.search_guard.spent_s += spent
@@ -593,15 +579,15 @@ class AnimeGraphSynthesizer(Synthesizer):
         if count <= have or not self.spans:
             return
         track = self.track
-        values = _grid_samples(
+        values = self.calls.grid_samples(
             have,
             count,
             float(self.model.fps),
             self.covered_until,
+            track.buffers,
             len(track),
             track.knots,
-            *track.reserve(0, 0),
-            *self._track_arguments,
+            track.motion,
         )
         if self.raw.count == 0:
             self.raw.extend(np.repeat(values[:1], self.half_width, axis=0))
@@ -645,17 +631,14 @@ class AnimeGraphSynthesizer(Synthesizer):
             return np.zeros((0, len(self.model.channels)), dtype=np.float32)
         self.guard.check()
         model = self.model
-        frames = _interpolated_frames(
+        frames: np.ndarray = self.calls.interpolated_frames(
             self.emitted,
             stop,
             model.fps / self.fps,
             self.smoothed.view(),
             self.smoothed.first,
             self.smoothed.count,
-            model.basis.components,
-            model.basis.mean,
-            model.channel_low,
-            model.channel_high,
+            model.channel_map,
         )
         self.emitted = stop
         self.stats["frames"] = stop
@@ -678,21 +661,19 @@ class AnimeGraphSynthesizer(Synthesizer):
         """Frames whose time plus the lead lies within the decided spans (all, once
         finished): the damped filter stepped toward the track there (``causal_emit``)."""
         track = self.track
-        stop, frames = causal_emit(
+        frames: np.ndarray
+        stop, frames = self.calls.causal_emit(
             self.emitted,
             self.finished,
             len(self.nodes),
             self._labels.count,
             self._bounds.data,
-            self.fps,
-            self.lead_s,
-            self._filter_x,
-            self._filter_v,
+            self.clock,
+            self.filter_state,
+            track.buffers,
             len(track),
             track.knots,
-            *self._filter_arguments,
-            *track.reserve(0, 0),
-            *self._track_arguments,
+            self.model.causal_emission,
         )
         if stop > self.emitted:
             self.guard.check()
@@ -706,37 +687,18 @@ def _grid_samples(
     stop: int,
     fps_model: float,
     until: float,
+    track: TrackBuffers,
     count: int,
     knots: int,
-    starts: np.ndarray,
-    ends: np.ndarray,
-    animes: np.ndarray,
-    knot_offsets: np.ndarray,
-    knot_targets: np.ndarray,
-    knot_sources: np.ndarray,
-    join_kinds: np.ndarray,
-    left_examples: np.ndarray,
-    right_examples: np.ndarray,
-    anime_start: np.ndarray,
-    anime_end: np.ndarray,
-    utterance: np.ndarray,
-    values: np.ndarray,
-    offsets: np.ndarray,
-    rate: float,
+    motion: AnimeMotion,
 ) -> np.ndarray:
-    """The track of ``count`` placements and ``knots`` knots (``MotionTrack.reserve``'s
-    buffers, then the anime arrays of ``MotionTrack.arrays()``) at model-grid samples
+    """The first ``count`` placements (``knots`` knots) of ``track`` at model-grid samples
     ``first`` .. ``stop`` - 1, sample k at k / ``fps_model`` s but no later than ``until``:
     (stop - first, n_pc)."""
     times = np.empty(stop - first)
     for row in range(stop - first):
         times[row] = min((first + row) / fps_model, until)
-    joins = max(count - 1, 0)
-    return evaluate_track(
-        times, starts[:count], ends[:count], animes[:count], knot_offsets[: count + 1],
-        knot_targets[:knots], knot_sources[:knots], join_kinds[:joins], left_examples[:joins],
-        right_examples[:joins], anime_start, anime_end, utterance, values, offsets, rate, False,
-    )  # fmt: skip
+    return evaluate_track(times, track, count, knots, motion, False)
 
 
 @njit(cache=True)
@@ -794,15 +756,12 @@ def _interpolated_frames(
     curve: np.ndarray,
     offset: int,
     count: int,
-    components: np.ndarray,
-    mean: np.ndarray,
-    low: np.ndarray,
-    high: np.ndarray,
+    channels: ChannelMap,
 ) -> np.ndarray:
     """``_interpolate``'s values as channel frames (``emission.channel_frames``), in one
     call."""
     values = _interpolate(first, stop, ratio, curve, offset, count)
-    return channel_frames(values, components, mean, low, high)
+    return channel_frames(values, channels)
 
 
 @njit(cache=True)
@@ -818,6 +777,20 @@ def _filter(block: np.ndarray, kernels: np.ndarray) -> np.ndarray:
                 total += block[row + tap, component] * kernels[component, tap]
             out[row, component] = total
     return out
+
+
+class StreamCalls:
+    """The kernels a model's synthesizers call on every streamed message, each through one
+    ``DirectCall`` that they share: the argument types at each call site are fixed by the
+    model's arrays and the requests' buffers, so the first request binds them and the
+    others skip the binding (a few hundred µs of typing named groups in Python)."""
+
+    def __init__(self) -> None:
+        self.causal_step = DirectCall(causal_step)
+        self.causal_emit = DirectCall(causal_emit)
+        self.greedy_tiles = DirectCall(greedy_tiles)
+        self.grid_samples = DirectCall(_grid_samples)
+        self.interpolated_frames = DirectCall(_interpolated_frames)
 
 
 def _search_timeout(spent_s: float, budget_s: float) -> SearchTimeout:

@@ -22,7 +22,7 @@ when asked for.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, TypeAlias
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -47,11 +47,52 @@ _MIN_PLACEMENTS = 16
 FORWARD_BLEND_SHARE = 0.5
 """A forward join blends the previous recording out over this share of the next span, so a
 short span (a closure) still reaches its own fragment's pose."""
-TrackArrays: TypeAlias = tuple[
-    np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-    np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float,
-]  # fmt: skip
-TrackBuffers: TypeAlias = tuple[Any, ...]  # ``MotionTrack.reserve``'s nine arrays
+
+
+class TrackBuffers(NamedTuple):
+    """A ``MotionTrack``'s placements and joins, in buffers longer than they are: placement
+    i shows anime ``animes[i]`` over [starts[i], ends[i]) s through the warp whose knots are
+    knot_targets/knot_sources[knot_offsets[i] : knot_offsets[i + 1]] (target and recording
+    s); join i, into placement i + 1, is ``join_kinds[i]`` (``_KIND_CODES``) with pair
+    examples ``left_examples[i]``, ``right_examples[i]`` (-1: none). float64 times, int64
+    ids, each array C-contiguous."""
+
+    starts: np.ndarray
+    ends: np.ndarray
+    animes: np.ndarray
+    knot_offsets: np.ndarray
+    knot_targets: np.ndarray
+    knot_sources: np.ndarray
+    join_kinds: np.ndarray
+    left_examples: np.ndarray
+    right_examples: np.ndarray
+
+
+class AnimeMotion(NamedTuple):
+    """What a track is evaluated on, per anime (n,): its recording ``start`` and ``end`` (s,
+    float64) and ``utterance`` (int64); the recordings' PCA curves ``values`` (n_samples,
+    n_pc), utterance u owning rows offsets[u]:offsets[u + 1] (int64), at ``rate`` Hz.
+    Built once per model by ``anime_motion``."""
+
+    start: np.ndarray
+    end: np.ndarray
+    utterance: np.ndarray
+    values: np.ndarray
+    offsets: np.ndarray
+    rate: float
+
+
+def anime_motion(animes: AnimeTable) -> AnimeMotion:
+    """``animes``' arrays as the kernels read them, with fixed dtypes, C-contiguous."""
+    motion = animes.motion
+    return AnimeMotion(
+        np.ascontiguousarray(animes.start, dtype=np.float64),
+        np.ascontiguousarray(animes.end, dtype=np.float64),
+        np.ascontiguousarray(animes.utterance, dtype=np.int64),
+        np.ascontiguousarray(motion.values),
+        np.ascontiguousarray(motion.offsets, dtype=np.int64),
+        float(motion.rate),
+    )
 
 
 @dataclass(frozen=True)
@@ -65,10 +106,11 @@ class Placement:
 
 
 class MotionTrack:
-    """Placements in timeline order and the joins between neighbours."""
+    """Placements in timeline order and the joins between neighbours, over the animes of
+    ``motion`` (``anime_motion``)."""
 
-    def __init__(self, animes: AnimeTable) -> None:
-        self.animes = animes
+    def __init__(self, motion: AnimeMotion) -> None:
+        self.motion = motion
         self._count = 0
         self._knots = 0
         self._starts = np.zeros(_MIN_PLACEMENTS)
@@ -134,8 +176,8 @@ class MotionTrack:
         low = self._knots
         self._knot_targets[low] = start
         self._knot_targets[low + 1] = end
-        self._knot_sources[low] = self.animes.start[anime]
-        self._knot_sources[low + 1] = self.animes.end[anime]
+        self._knot_sources[low] = self.motion.start[anime]
+        self._knot_sources[low + 1] = self.motion.end[anime]
         self._close_knots(low + 2)
 
     def _add(self, start: float, end: float, anime: int, join: Join | None, knots: int) -> None:
@@ -154,7 +196,7 @@ class MotionTrack:
         self._animes[index] = anime
 
     def reserve(self, placements: int, knots: int) -> TrackBuffers:
-        """The buffers (``arrays()``'s first nine, whole), with room for ``placements`` more
+        """The buffers, whole, with room for ``placements`` more
         placements of ``knots`` more knots in all, for a compiled call to write them in place
         (join ``i`` into placement ``i + 1``, as ``_KIND_CODES``, and each placement's knots
         after the last, closing ``knot_offsets``); ``commit`` then counts them."""
@@ -163,11 +205,23 @@ class MotionTrack:
             self._grow(count + 1, self._knots + knots)
         return self._buffers
 
+    @property
+    def buffers(self) -> TrackBuffers:
+        """The buffers as they are (``len(self)`` placements, ``knots`` knots in use)."""
+        return self._buffers
+
     def _gather(self) -> TrackBuffers:
-        return (
-            self._starts, self._ends, self._animes, self._knot_offsets, self._knot_targets,
-            self._knot_sources, self._join_kinds, self._left_examples, self._right_examples,
-        )  # fmt: skip
+        return TrackBuffers(
+            self._starts,
+            self._ends,
+            self._animes,
+            self._knot_offsets,
+            self._knot_targets,
+            self._knot_sources,
+            self._join_kinds,
+            self._left_examples,
+            self._right_examples,
+        )
 
     def commit(self, placements: int, knots: int) -> None:
         """Count ``placements`` placements and ``knots`` knots written after ``reserve``."""
@@ -187,8 +241,15 @@ class MotionTrack:
     def _grow(self, placements: int, knots: int) -> None:
         """Double the buffers until they hold ``placements`` placements and ``knots`` knots."""
         rows = max(placements, 2 * len(self._starts))
-        for name in ("_starts", "_ends", "_animes", "_join_kinds", "_left_examples",
-                     "_right_examples"):  # fmt: skip
+        resized = (
+            "_starts",
+            "_ends",
+            "_animes",
+            "_join_kinds",
+            "_left_examples",
+            "_right_examples",
+        )
+        for name in resized:
             setattr(self, name, _resized(getattr(self, name), rows))
         self._knot_offsets = _resized(self._knot_offsets, rows + 1)
         if knots > len(self._knot_targets):
@@ -200,28 +261,13 @@ class MotionTrack:
     def evaluate(self, times: np.ndarray, left_continuous: bool = False) -> np.ndarray:
         """Track values (n, n_pc) at ascending ``times``; a time belongs to the last
         placement starting at or before it (``left_continuous``: strictly before it)."""
-        return evaluate_track(np.asarray(times, dtype=np.float64), *self.arrays(), left_continuous)
-
-    def arrays(self) -> TrackArrays:
-        """The track as the flat arrays that ``evaluate_track`` (and kernels calling it) read,
-        in its argument order after ``times``."""
-        animes, motion, count = self.animes, self.animes.motion, self._count
-        return (
-            self._starts[:count],
-            self._ends[:count],
-            self._animes[:count],
-            self._knot_offsets[: count + 1],
-            self._knot_targets[: self._knots],
-            self._knot_sources[: self._knots],
-            self._join_kinds[: max(count - 1, 0)],
-            self._left_examples[: max(count - 1, 0)],
-            self._right_examples[: max(count - 1, 0)],
-            animes.start,
-            animes.end,
-            animes.utterance,
-            motion.values,
-            motion.offsets,
-            float(motion.rate),
+        return evaluate_track(
+            np.asarray(times, dtype=np.float64),
+            self._buffers,
+            self._count,
+            self._knots,
+            self.motion,
+            left_continuous,
         )
 
 
@@ -237,25 +283,19 @@ def _resized(values: np.ndarray, rows: int) -> np.ndarray:
 @njit(cache=True)
 def evaluate_track(
     times: np.ndarray,
-    starts: np.ndarray,
-    ends: np.ndarray,
-    animes: np.ndarray,
-    knot_offsets: np.ndarray,
-    knot_targets: np.ndarray,
-    knot_sources: np.ndarray,
-    join_kinds: np.ndarray,
-    left_examples: np.ndarray,
-    right_examples: np.ndarray,
-    anime_start: np.ndarray,
-    anime_end: np.ndarray,
-    utterance: np.ndarray,
-    values: np.ndarray,
-    offsets: np.ndarray,
-    rate: float,
+    track: TrackBuffers,
+    count: int,
+    knots: int,
+    motion: AnimeMotion,
     left_continuous: bool,
 ) -> np.ndarray:
-    """Each time's fragment value plus the corrections of the joins on either side:
+    """Each time's fragment value on the first ``count`` placements of ``track`` (``knots``
+    knots) plus the corrections of the joins on either side:
     out = base + w_left (left - base) + w_right (right - base), w clipped to [0, 1]."""
+    starts, joins = track.starts[:count], max(count - 1, 0)
+    knot_targets, knot_sources = track.knot_targets[:knots], track.knot_sources[:knots]
+    join_kinds, animes = track.join_kinds, track.animes
+    values, offsets, utterance, rate = motion.values, motion.offsets, motion.utterance, motion.rate
     out = np.empty((len(times), values.shape[1]))
     base = np.empty(values.shape[1])
     other = np.empty(values.shape[1])
@@ -265,30 +305,19 @@ def evaluate_track(
             index = max(np.searchsorted(starts, time, side="left") - 1, 0)
         else:
             index = max(np.searchsorted(starts, time, side="right") - 1, 0)
-        low, high = knot_offsets[index], knot_offsets[index + 1]
+        low, high = track.knot_offsets[index], track.knot_offsets[index + 1]
         recording = np.interp(time, knot_targets[low:high], knot_sources[low:high])
         sample_into(base, values, offsets, utterance[animes[index]], recording, rate, True)
         out[row] = base
         for side in range(2):
             join = index - 1 if side == 0 else index
-            if join < 0 or join >= len(join_kinds):
+            if join < 0 or join >= joins:
                 continue
-            if join_kinds[join] == SEAMLESS_CODE or join_kinds[join] == CUT_CODE:
+            kind = join_kinds[join]
+            if kind == SEAMLESS_CODE or kind == CUT_CODE or (kind == _FORWARD and side == 1):
                 continue
-            if join_kinds[join] == _FORWARD and side == 1:
-                continue
-            weight, anime, recording = _correction(
-                side,
-                join_kinds[join],
-                time,
-                index,
-                starts,
-                ends,
-                animes,
-                right_examples[join] if side == 0 else left_examples[join],
-                anime_start,
-                anime_end,
-            )
+            example = track.right_examples[join] if side == 0 else track.left_examples[join]
+            weight, anime, recording = _correction(side, kind, time, index, example, track, motion)
             weight = min(max(weight, 0.0), 1.0)
             if weight > 0.0:
                 sample_into(other, values, offsets, utterance[anime], recording, rate, True)
@@ -303,16 +332,15 @@ def _correction(
     kind: int,
     time: float,
     index: int,
-    starts: np.ndarray,
-    ends: np.ndarray,
-    animes: np.ndarray,
     example: int,
-    anime_start: np.ndarray,
-    anime_end: np.ndarray,
+    track: TrackBuffers,
+    motion: AnimeMotion,
 ) -> tuple[float, int, float]:
     """(weight, anime, recording time) of the correction from the left (``side`` 0) or
-    right (1) join of placement ``index``: a pair example stretched onto the span, or the
-    neighbour's recording extended across it."""
+    right (1) join of placement ``index``: a pair example (anime ``example``) stretched onto
+    the span, or the neighbour's recording extended across it."""
+    starts, ends, animes = track.starts, track.ends, track.animes
+    anime_start, anime_end = motion.start, motion.end
     start, end = starts[index], ends[index]
     if kind == _PAIR:
         relative = (time - start) / (end - start)

@@ -132,11 +132,16 @@ def fit_view(
     else:
         assignment = representative = np.zeros(0, dtype=np.int32)
     arrays = {
-        "members": members, "substitution": substitution_table(labels[members]),
-        "index_transitions": index.transitions, "index_low": index.low,
-        "index_high": index.high, "index_ends": index.ends, "index_text_anime": index.text_anime,
-        "cluster_assignment": assignment, "cluster_representative": representative,
-    }  # fmt: skip
+        "members": members,
+        "substitution": substitution_table(labels[members]),
+        "index_transitions": index.transitions,
+        "index_low": index.low,
+        "index_high": index.high,
+        "index_ends": index.ends,
+        "index_text_anime": index.text_anime,
+        "cluster_assignment": assignment,
+        "cluster_representative": representative,
+    }
     return {f"{name}_{key}": value for key, value in arrays.items()}
 
 

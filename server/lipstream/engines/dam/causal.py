@@ -27,9 +27,10 @@ Cost: a server at lead 0 calls the synthesizer once per phoneme message, so
 each call is one compiled call (``kernels.causal_run``): the modes of the
 spans that arrived (``commit_modes``), the frames' raw curve (``causal_sum``,
 the latest span begun found by binary search over the spans' starts), the
-filter, and the motion basis. The spans' starts, ends, phonemes, emotions,
-modes and rates are kept in ``Growable`` arrays, so a call converts only the
-spans it brought.
+filter, and the motion basis, through the model's ``DirectCall``. The spans'
+starts, ends, phonemes, emotions, modes and rates are kept in ``Growable`` arrays,
+so a call converts only the spans it brought, and handed to the kernels as
+``kernels.SpanArrays`` and the rates beside them.
 """
 
 from __future__ import annotations
@@ -41,18 +42,14 @@ import numpy as np
 
 from ...timeline import PhonemeSpan
 from ..base import ShiftedSynthesizer, SynthesisRequest, fill_gaps, frame_count
-from ..damped import DampedState
+from ..damped import FilterState
 from ..damped_fit import RawCurve, best_following_kappa
 from ..growable import Growable
-from .kernels import causal_run, causal_sum, commit_modes
-from .modes import PHONEME_INDEX, SILENCE_INDEX, emotion_index
+from .kernels import SpanArrays, causal_sum, commit_modes
+from .modes import PHONEME_INDEX, emotion_index
 
 if TYPE_CHECKING:
     from .model import DamModel
-
-_STARTED = 1e-9
-"""A span starting within this of τ has not begun at τ: the frame at a span's end is final
-with that span's input."""
 
 
 class CausalCurve:
@@ -70,6 +67,28 @@ class CausalCurve:
         self.rates = Growable(np.float64)
         """1 / the median duration (s) of each span's phoneme: ω over κ."""
         self.committed = 0
+        self._arrays = self._gather()
+
+    def _gather(self) -> SpanArrays:
+        return SpanArrays(
+            self.starts.data,
+            self.ends.data,
+            self.phonemes.data,
+            self.emotions.data,
+            self.modes.data,
+        )
+
+    @property
+    def count(self) -> int:
+        """Spans added."""
+        return self.starts.count
+
+    @property
+    def spans(self) -> SpanArrays:
+        """The buffers whose first ``count`` rows hold the spans added (``rates`` beside)."""
+        if self._arrays.starts is not self.starts.data:  # the buffers grow together
+            self._arrays = self._gather()
+        return self._arrays
 
     def add(self, spans: Sequence[PhonemeSpan]) -> None:
         """Take the arrays of the spans not yet added (their modes not yet committed)."""
@@ -86,40 +105,15 @@ class CausalCurve:
     def commit(self, spans: Sequence[PhonemeSpan]) -> None:
         """Commit the mode of every span not yet committed, in order."""
         self.add(spans)
-        starts, ends, phonemes, emotions, modes, _ = self.arrays()
-        commit_modes(self.committed, starts, ends, phonemes, emotions, modes, SILENCE_INDEX,
-                     *self.model.search_arguments)  # fmt: skip
+        commit_modes(self.committed, self.spans, self.count, self.model.tables.search)
         self.committed = self.modes.count
-
-    def arrays(
-        self,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Start, end, phoneme, emotion, mode and rate of every span added, (n,) each."""
-        return (
-            self.starts.view(),
-            self.ends.view(),
-            self.phonemes.view(),
-            self.emotions.view(),
-            self.modes.view(),
-            self.rates.view(),
-        )
 
     def raw(self, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """r at times ``at`` (components) and 1 / the median duration of the latest span begun
         at each (the filter's ω over κ); the spans reaching ``at`` are committed."""
-        model = self.model
+        tables = self.model.tables
         values, rates = causal_sum(
-            at,
-            self.starts.view(),
-            self.ends.view(),
-            self.modes.view(),
-            self.rates.view(),
-            model.tail,
-            model.sigma,
-            model.reach,
-            model.eps,
-            model.coefficients,
-            _STARTED,
+            at, self.spans, self.count, self.rates.data, tables.tail, tables.animemes
         )
         return np.asarray(values), np.asarray(rates)
 
@@ -134,25 +128,29 @@ class CausalSynthesizer(ShiftedSynthesizer):
         super().__init__(model, request)
         self.shift_s = shift_s
         self.curve = CausalCurve(model, request)
-        self.state: DampedState | None = None
+        # The filter's value and velocity per basis component, at rest before frame 0.
+        self.state = FilterState(
+            np.zeros(model.basis.n_components), np.zeros(model.basis.n_components)
+        )
 
     def _emit(self, stop: int) -> np.ndarray:
         if stop <= self.emitted:
             return np.zeros((0, len(self.model.channels)), dtype=np.float32)
         self.request.guard.check()
-        model, curve, state = self.model, self.curve, self.state
+        curve = self.curve
         curve.add(self.spans)
-        fresh = state is None
-        if state is None:
-            state = self.state = DampedState.at_rest(np.zeros(model.basis.n_components))
-        frames, state.t = causal_run(
-            self.emitted, stop, self.request.fps, self.shift_s, _STARTED, model.causal_kappa,
-            state.x, state.v, state.t, fresh, curve.committed, curve.starts.count,
-            curve.starts.data, curve.ends.data, curve.phonemes.data, curve.emotions.data,
-            curve.modes.data, curve.rates.data, SILENCE_INDEX, model.tail, model.sigma, model.reach,
-            model.eps, model.coefficients, model.basis.components, model.basis.mean,
-            *model.search_arguments,
-        )  # fmt: skip
+        frames: np.ndarray = self.model.causal_call(
+            self.emitted,
+            stop,
+            float(self.request.fps),
+            self.shift_s,
+            self.state,
+            curve.committed,
+            curve.spans,
+            curve.count,
+            curve.rates.data,
+            self.model.tables,
+        )
         curve.committed = curve.modes.count
         self.emitted = stop
         self.stats["frames"] = stop

@@ -89,12 +89,24 @@ class DamEngine(Engine):
         )
         with threadpool_limits(limits=1):
             fitted = em.fit(
-                occurrences, mode_of, modes.count, frames, settings, self.n_iter, self.em_tol,
+                occurrences,
+                mode_of,
+                modes.count,
+                frames,
+                settings,
+                self.n_iter,
+                self.em_tol,
                 self.sigma_init,
-            )  # fmt: skip
+            )
             args = (
-                occurrences, mode_of, fitted.sigma, fitted.coefficients, basis, recorded, settings,
-            )  # fmt: skip
+                occurrences,
+                mode_of,
+                fitted.sigma,
+                fitted.coefficients,
+                basis,
+                recorded,
+                settings,
+            )
             tail, tail_error = choose_tail(*args, self.truncation_bound)
             rung_errors = {
                 f"tail_ahead={ahead}": float(truncation_errors(*args, (tail, ahead)).max())
@@ -126,12 +138,10 @@ class DamEngine(Engine):
             **DurationModel.fit(utterance.phones for utterance in corpus.utterances).arrays(),
             "causal_kappa": np.array([KAPPAS[0]]),
         }
-        model = self.make_model(manifest, arrays)
-        kappa = fit_causal_kappa(model, validation_utterances(corpus))
-        model.causal_kappa = kappa
-        model.stored["causal_kappa"] = np.array([kappa])
+        # κ is fitted on the model's own causal curves, which do not depend on it
+        kappa = fit_causal_kappa(self.make_model(manifest, arrays), validation_utterances(corpus))
         manifest.metrics["causal_kappa"] = kappa
-        return model
+        return self.make_model(manifest, {**arrays, "causal_kappa": np.array([kappa])})
 
     def make_model(self, manifest: ModelManifest, arrays: dict[str, np.ndarray]) -> DamModel:
         return DamModel(manifest, arrays)
@@ -163,9 +173,24 @@ class CohenMassaroEngine(DamEngine):
         search_ahead: int = 2,
     ) -> None:
         super().__init__(
-            0, variance, points, min_occurrences, eps, tol, ridge, sigma_init, sigma_max, n_iter,
-            em_tol, truncation_bound, alpha, w_context, w_smooth, search_behind, search_ahead,
-        )  # fmt: skip
+            0,
+            variance,
+            points,
+            min_occurrences,
+            eps,
+            tol,
+            ridge,
+            sigma_init,
+            sigma_max,
+            n_iter,
+            em_tol,
+            truncation_bound,
+            alpha,
+            w_context,
+            w_smooth,
+            search_behind,
+            search_ahead,
+        )
         del self.degree  # M is no hyperparameter here: it is 0
 
     def polynomial_degree(self) -> int:

@@ -19,6 +19,11 @@ few integer arrays per span, and two kernels do the rest:
   ahead whose dominance reaches it, each term D·A with A on the clamped local
   time, in the order ``model.render`` adds them.
 
+The kernels take the model's arrays in named groups, built once when it loads:
+``SearchTables`` (candidates, log shares, end derivatives, weights), ``Animemes``
+(dominance and coefficients) and ``DamTables`` (those two, the basis and the
+model's integers); a request's spans come as ``SpanArrays``.
+
 A streamed call of a search rung is one call of ``render_run``: each frame's
 owner span found by stepping on from the last call's, ``choose_modes`` for
 the spans whose mode no earlier call chose (a span's mode depends only on the
@@ -43,24 +48,32 @@ in order, as a plain loop too.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 from ...phonemes import PHONEMES
 from ...timeline import EMOTIONS
-from ..damped import follow_frame_rates
+from ..damped import FilterState, follow_frame_rates
+from .modes import SILENCE_INDEX
+from .selection import Costs
+
+STARTED = 1e-9
+"""A span starting within this of τ has not begun at τ (causal rungs): the frame at a span's
+end is final with that span's input."""
 
 
-@dataclass(frozen=True)
-class SearchTables:
-    """Candidates and context costs of every (phoneme, emotion), flat.
+class SearchTables(NamedTuple):
+    """Everything a mode search reads, flat, built once per model by ``search_tables``.
 
     ``set_start``/``set_stop`` (phonemes, emotions) bound the candidates of a span of that
     canonical phoneme (its stand-in's modes, those said with the emotion if any) in
     ``modes``; ``log_previous`` / ``log_following`` (positions, phonemes) and
-    ``log_emotion`` (positions, emotions) hold each candidate's log share."""
+    ``log_emotion`` (positions, emotions) hold each candidate's log share; ``ends`` and
+    ``starts`` (modes, 3, components) each mode's value and local-time derivatives at its
+    ends (``selection.end_derivatives``), E_s's terms scaled by ``reference_duration``
+    (s); ``w_context`` and ``w_smooth`` weigh E_c and E_s."""
 
     set_start: np.ndarray
     set_stop: np.ndarray
@@ -68,6 +81,48 @@ class SearchTables:
     log_previous: np.ndarray
     log_following: np.ndarray
     log_emotion: np.ndarray
+    ends: np.ndarray
+    starts: np.ndarray
+    reference_duration: float
+    w_context: float
+    w_smooth: float
+
+
+class Animemes(NamedTuple):
+    """What Eq. 2 sums, per mode: dominance width ``sigma`` and ``reach`` (modes,), the
+    dominance's ``eps``, and the animeme ``coefficients`` (modes, M + 1, components)."""
+
+    sigma: np.ndarray
+    reach: np.ndarray
+    eps: float
+    coefficients: np.ndarray
+
+
+class DamTables(NamedTuple):
+    """A model's arrays as its kernels read them (``DamModel.tables``): the mode
+    ``search``, the ``animemes``, the motion basis (``components`` (components,
+    channels), ``mean`` (channels,)), the spans summed on each side (``tail``) and searched
+    behind (``search_behind``), and the causal filter's ``kappa``."""
+
+    search: SearchTables
+    animemes: Animemes
+    components: np.ndarray
+    mean: np.ndarray
+    tail: int
+    search_behind: int
+    kappa: float
+
+
+class SpanArrays(NamedTuple):
+    """A request's spans, one row each (buffers that may hold more rows than spans): start
+    and end (s, float64), phoneme and emotion (int64 indices), and mode (int64; -1: not
+    chosen yet)."""
+
+    starts: np.ndarray
+    ends: np.ndarray
+    phonemes: np.ndarray
+    emotions: np.ndarray
+    modes: np.ndarray
 
 
 def _log_shares(table: np.ndarray, candidates: np.ndarray, alpha: float) -> np.ndarray:
@@ -77,15 +132,11 @@ def _log_shares(table: np.ndarray, candidates: np.ndarray, alpha: float) -> np.n
     return np.asarray(np.log(counts / counts.sum(axis=1)[:, None]).T)
 
 
-def search_tables(
-    offsets: np.ndarray,
-    stand_in: np.ndarray,
-    count_previous: np.ndarray,
-    count_following: np.ndarray,
-    count_emotion: np.ndarray,
-    alpha: float,
-) -> SearchTables:
-    """The tables of a model's modes (see ``SearchTables``)."""
+def search_tables(offsets: np.ndarray, stand_in: np.ndarray, costs: Costs) -> SearchTables:
+    """The tables of a model's modes (``offsets`` by phoneme, ``stand_in`` for phonemes
+    without any) and its search ``costs`` (see ``SearchTables``)."""
+    count_previous, count_following = costs.previous, costs.following
+    count_emotion, alpha = costs.emotion, costs.alpha
     n_phonemes, n_emotions = len(PHONEMES), len(EMOTIONS)
     set_start = np.zeros((n_phonemes, n_emotions), dtype=np.int64)
     set_stop = np.zeros((n_phonemes, n_emotions), dtype=np.int64)
@@ -120,6 +171,11 @@ def search_tables(
         np.concatenate([share[0] for share in shares]),
         np.concatenate([share[1] for share in shares]),
         np.concatenate([share[2] for share in shares]),
+        np.ascontiguousarray(costs.ends, dtype=np.float64),
+        np.ascontiguousarray(costs.starts, dtype=np.float64),
+        float(costs.reference_duration),
+        float(costs.w_context),
+        float(costs.w_smooth),
     )
 
 
@@ -130,13 +186,13 @@ def _node(
     previous: int,
     following: int,
     emotion: int,
-    log_previous: np.ndarray,
-    log_following: np.ndarray,
-    log_emotion: np.ndarray,
+    search: SearchTables,
     out: np.ndarray,
 ) -> None:
     """E_c of one layer's candidates into ``out``, term by term as
     ``selection.context_cost``."""
+    log_previous, log_following = search.log_previous, search.log_following
+    log_emotion = search.log_emotion
     for position in range(start, stop):
         value = 0.0
         if previous >= 0:
@@ -154,12 +210,11 @@ def _joins(
     right: np.ndarray,
     left_duration: float,
     right_duration: float,
-    ends: np.ndarray,
-    starts: np.ndarray,
-    reference_duration: float,
+    search: SearchTables,
     out: np.ndarray,
 ) -> None:
     """E_s of each (left, right) candidate pair into ``out``, as ``selection.smooth_cost``."""
+    ends, starts, reference_duration = search.ends, search.starts, search.reference_duration
     scale = np.array([1.0, reference_duration, reference_duration**2])
     left_factor = np.empty(3)
     right_factor = np.empty(3)
@@ -191,25 +246,16 @@ def choose_modes(
     chosen_last: int,
     search_behind: int,
     ahead: int,
-    set_start: np.ndarray,
-    set_stop: np.ndarray,
-    modes: np.ndarray,
-    log_previous: np.ndarray,
-    log_following: np.ndarray,
-    log_emotion: np.ndarray,
-    ends: np.ndarray,
-    starts: np.ndarray,
-    reference_duration: float,
-    w_context: float,
-    w_smooth: float,
+    search: SearchTables,
 ) -> np.ndarray:
     """The mode of each span chosen_first .. chosen_last (indices into the per-span arrays,
     which hold every span a window reaches; ``following`` is the next span's phoneme,
     silence after the utterance's last); ``span_set`` indexes ``set_start``/``set_stop``
     flattened as phoneme * emotions + emotion."""
     n = len(span_set)
-    flat_start = set_start.ravel()
-    flat_stop = set_stop.ravel()
+    flat_start = search.set_start.ravel()
+    flat_stop = search.set_stop.ravel()
+    modes, w_context, w_smooth = search.modes, search.w_context, search.w_smooth
     size = np.empty(n, dtype=np.int64)
     for j in range(n):
         size[j] = flat_stop[span_set[j]] - flat_start[span_set[j]]
@@ -218,16 +264,13 @@ def choose_modes(
     cut_nodes = np.zeros((n, width))
     for j in range(n):
         start, stop = flat_start[span_set[j]], flat_stop[span_set[j]]
-        shares = (log_previous, log_following, log_emotion)
-        _node(start, stop, previous[j], following[j], emotion[j], *shares, open_nodes[j])
-        _node(start, stop, previous[j], -1, emotion[j], *shares, cut_nodes[j])
+        _node(start, stop, previous[j], following[j], emotion[j], search, open_nodes[j])
+        _node(start, stop, previous[j], -1, emotion[j], search, cut_nodes[j])
     joins = np.zeros((max(n - 1, 0), width, width))
     for j in range(n - 1):
         left = modes[flat_start[span_set[j]] : flat_stop[span_set[j]]]
         right = modes[flat_start[span_set[j + 1]] : flat_stop[span_set[j + 1]]]
-        _joins(
-            left, right, durations[j], durations[j + 1], ends, starts, reference_duration, joins[j]
-        )
+        _joins(left, right, durations[j], durations[j + 1], search, joins[j])
     chosen = np.empty(chosen_last - chosen_first + 1, dtype=np.int64)
     total = np.empty(width)
     following_total = np.empty(width)
@@ -267,19 +310,17 @@ def _dam_frame(
     time: float,
     low: int,
     high: int,
-    span_start: np.ndarray,
-    span_end: np.ndarray,
-    span_mode: np.ndarray,
-    sigma: np.ndarray,
-    reach: np.ndarray,
-    eps: float,
-    coefficients: np.ndarray,
+    spans: SpanArrays,
+    animemes: Animemes,
     animeme: np.ndarray,
     out: np.ndarray,
 ) -> None:
     """Add to ``out`` (components) Eq. 2 at ``time`` over spans ``low`` .. ``high``: D·A of each
     span's mode wherever its local time lies within the mode's reach (``animeme`` is
     scratch)."""
+    span_start, span_end, span_mode = spans.starts, spans.ends, spans.modes
+    sigma, reach, eps = animemes.sigma, animemes.reach, animemes.eps
+    coefficients = animemes.coefficients
     n_terms, n_components = coefficients.shape[1], coefficients.shape[2]
     for k in range(low, high + 1):
         mode = span_mode[k]
@@ -306,26 +347,21 @@ def _dam_frame(
 def dam_sum(
     times: np.ndarray,
     owner: np.ndarray,
-    span_start: np.ndarray,
-    span_end: np.ndarray,
-    span_mode: np.ndarray,
+    spans: SpanArrays,
+    n_spans: int,
     tail: int,
     ahead: int,
-    sigma: np.ndarray,
-    reach: np.ndarray,
-    eps: float,
-    coefficients: np.ndarray,
+    animemes: Animemes,
 ) -> np.ndarray:
-    """Eq. 2 at ``times`` (components): frame i sums, over spans k (indices into the per-span
-    arrays) from owner[i] - tail to owner[i] + ahead, D·A of span k's mode wherever its local
-    time lies within the mode's reach."""
-    n_spans = len(span_mode)
-    frames = np.zeros((len(times), coefficients.shape[2]))
-    animeme = np.empty(coefficients.shape[2])
+    """Eq. 2 at ``times`` (components): frame i sums, over spans k (rows of ``spans``, the
+    first ``n_spans``) from owner[i] - tail to owner[i] + ahead, D·A of span k's mode wherever
+    its local time lies within the mode's reach."""
+    n_components = animemes.coefficients.shape[2]
+    frames = np.zeros((len(times), n_components))
+    animeme = np.empty(n_components)
     for i in range(len(times)):
         low, high = max(0, owner[i] - tail), min(n_spans - 1, owner[i] + ahead)
-        _dam_frame(times[i], low, high, span_start, span_end, span_mode, sigma, reach, eps,
-                   coefficients, animeme, frames[i])  # fmt: skip
+        _dam_frame(times[i], low, high, spans, animemes, animeme, frames[i])
     return frames
 
 
@@ -351,45 +387,24 @@ def channels(values: np.ndarray, components: np.ndarray, mean: np.ndarray) -> np
 def render_run(
     times: np.ndarray,
     owner: int,
+    spans: SpanArrays,
     n_spans: int,
-    span_start: np.ndarray,
-    span_end: np.ndarray,
-    span_phoneme: np.ndarray,
-    span_emotion: np.ndarray,
-    span_mode: np.ndarray,
-    silence: int,
-    search_behind: int,
     search: int,
-    tail: int,
     ahead: int,
-    sigma: np.ndarray,
-    reach: np.ndarray,
-    eps: float,
-    coefficients: np.ndarray,
-    components: np.ndarray,
-    mean: np.ndarray,
-    set_start: np.ndarray,
-    set_stop: np.ndarray,
-    modes: np.ndarray,
-    log_previous: np.ndarray,
-    log_following: np.ndarray,
-    log_emotion: np.ndarray,
-    ends: np.ndarray,
-    starts: np.ndarray,
-    reference_duration: float,
-    w_context: float,
-    w_smooth: float,
+    tables: DamTables,
 ) -> tuple[np.ndarray, int]:
     """A search rung's float32 frames at ascending ``times``, over the first ``n_spans``
-    spans (rows of the per-span arrays, which may hold more): each frame's owner (the first
-    span ending after it, the last span after the end) found by stepping from ``owner``,
-    the modes of the spans the frames reach that ``span_mode`` does not hold yet (-1)
-    chosen by ``choose_modes`` and stored there, then ``dam_sum`` and ``channels``.
-    Returns the frames and the owner of the last time."""
-    n = n_spans
-    span_start, span_end, span_mode = span_start[:n], span_end[:n], span_mode[:n]
+    rows of ``spans`` (which may hold more), searching ``search`` spans ahead and summing
+    ``ahead`` spans ahead: each frame's owner (the first span ending after it, the last
+    span after the end) found by stepping from ``owner``, the modes of the spans the frames
+    reach that ``spans.modes`` does not hold yet (-1) chosen by ``choose_modes`` and stored
+    there, then ``dam_sum`` and ``channels``. Returns the frames and the owner of the last
+    time."""
+    n, tail, search_behind = n_spans, tables.tail, tables.search_behind
+    span_start, span_end, span_mode = spans.starts[:n], spans.ends[:n], spans.modes[:n]
+    span_phoneme, span_emotion = spans.phonemes, spans.emotions
     if len(times) == 0:
-        return np.zeros((0, components.shape[1]), dtype=np.float32), owner
+        return np.zeros((0, tables.components.shape[1]), dtype=np.float32), owner
     owners = np.empty(len(times), dtype=np.int64)
     owner = min(max(owner, 0), n - 1)
     for i in range(len(times)):
@@ -409,18 +424,25 @@ def render_run(
         previous = np.empty(high - low + 1, dtype=np.int64)
         following = np.empty(high - low + 1, dtype=np.int64)
         for k in range(low, high + 1):
-            previous[k - low] = span_phoneme[k - 1] if k > 0 else silence
-            following[k - low] = span_phoneme[k + 1] if k + 1 < n else silence
-        sets = span_phoneme[low : high + 1] * set_start.shape[1] + span_emotion[low : high + 1]
+            previous[k - low] = span_phoneme[k - 1] if k > 0 else SILENCE_INDEX
+            following[k - low] = span_phoneme[k + 1] if k + 1 < n else SILENCE_INDEX
+        emotions = span_emotion[low : high + 1]
+        sets = span_phoneme[low : high + 1] * tables.search.set_start.shape[1] + emotions
+        durations = span_end[low : high + 1] - span_start[low : high + 1]
         span_mode[missing : last + 1] = choose_modes(
-            sets, previous, following, span_emotion[low : high + 1],
-            span_end[low : high + 1] - span_start[low : high + 1], missing - low, last - low,
-            search_behind, search, set_start, set_stop, modes, log_previous, log_following,
-            log_emotion, ends, starts, reference_duration, w_context, w_smooth,
-        )  # fmt: skip
-    values = dam_sum(times, owners, span_start, span_end, span_mode, tail, ahead, sigma, reach,
-                     eps, coefficients)  # fmt: skip
-    return channels(values, components, mean), owner
+            sets,
+            previous,
+            following,
+            emotions,
+            durations,
+            missing - low,
+            last - low,
+            search_behind,
+            search,
+            tables.search,
+        )
+    values = dam_sum(times, owners, spans, n, tail, ahead, tables.animemes)
+    return channels(values, tables.components, tables.mean), owner
 
 
 @njit(cache=True)
@@ -431,32 +453,22 @@ def commit_mode(
     duration: float,
     before_mode: int,
     before_duration: float,
-    set_start: np.ndarray,
-    set_stop: np.ndarray,
-    modes: np.ndarray,
-    log_previous: np.ndarray,
-    log_following: np.ndarray,
-    log_emotion: np.ndarray,
-    ends: np.ndarray,
-    starts: np.ndarray,
-    reference_duration: float,
-    w_context: float,
-    w_smooth: float,
+    search: SearchTables,
 ) -> int:
     """The causal rungs' mode of a span as it arrives (``span_set``, ``previous``, ``emotion``
     as in ``choose_modes``): the least w_c·E_c, its next phoneme unknown, plus w_s·E_s of its
     join to ``before_mode``, the mode committed at the span before (of ``before_duration``
     s; no join when negative); the first minimum on ties."""
-    start, stop = set_start.ravel()[span_set], set_stop.ravel()[span_set]
+    start, stop = search.set_start.ravel()[span_set], search.set_stop.ravel()[span_set]
+    modes, w_context, w_smooth = search.modes, search.w_context, search.w_smooth
     cost = np.empty(stop - start)
-    _node(start, stop, previous, -1, emotion, log_previous, log_following, log_emotion, cost)
+    _node(start, stop, previous, -1, emotion, search, cost)
     for a in range(stop - start):
         cost[a] = w_context * cost[a]
     if before_mode >= 0:
         join = np.empty((1, stop - start))
         left = np.full(1, before_mode, dtype=np.int64)
-        _joins(left, modes[start:stop], before_duration, duration, ends, starts,
-               reference_duration, join)  # fmt: skip
+        _joins(left, modes[start:stop], before_duration, duration, search, join)
         for a in range(stop - start):
             cost[a] = cost[a] + w_smooth * join[0, a]
     position = 0
@@ -469,66 +481,49 @@ def commit_mode(
 @njit(cache=True)
 def causal_sum(
     times: np.ndarray,
-    span_start: np.ndarray,
-    span_end: np.ndarray,
-    span_mode: np.ndarray,
-    span_rate: np.ndarray,
+    spans: SpanArrays,
+    n_spans: int,
+    rates: np.ndarray,
     tail: int,
-    sigma: np.ndarray,
-    reach: np.ndarray,
-    eps: float,
-    coefficients: np.ndarray,
-    started: float,
+    animemes: Animemes,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The causal rungs' raw curve: Eq. 2 at each of ``times`` over the latest span begun by
-    then (the last whose start lies more than ``started`` before it; span 0 at the first
-    times) and the ``tail`` spans before it, and that span's ``span_rate``."""
-    frames = np.zeros((len(times), coefficients.shape[2]))
-    rates = np.empty(len(times))
-    animeme = np.empty(coefficients.shape[2])
+    """The causal rungs' raw curve over the first ``n_spans`` rows of ``spans``: Eq. 2 at
+    each of ``times`` over the latest span begun by then (the last whose start lies more
+    than ``STARTED`` before it; span 0 at the first times) and the ``tail`` spans before
+    it, and that span's rate (``rates``, one per span)."""
+    span_start = spans.starts[:n_spans]
+    n_components = animemes.coefficients.shape[2]
+    frames = np.zeros((len(times), n_components))
+    out_rates = np.empty(len(times))
+    animeme = np.empty(n_components)
     for i in range(len(times)):
-        begun = max(np.searchsorted(span_start, times[i] - started) - 1, 0)
-        _dam_frame(times[i], max(0, begun - tail), begun, span_start, span_end, span_mode,
-                   sigma, reach, eps, coefficients, animeme, frames[i])  # fmt: skip
-        rates[i] = span_rate[begun]
-    return frames, rates
+        begun = max(np.searchsorted(span_start, times[i] - STARTED) - 1, 0)
+        _dam_frame(times[i], max(0, begun - tail), begun, spans, animemes, animeme, frames[i])
+        out_rates[i] = rates[begun]
+    return frames, out_rates
 
 
 @njit(cache=True)
-def commit_modes(
-    first: int,
-    span_start: np.ndarray,
-    span_end: np.ndarray,
-    span_phoneme: np.ndarray,
-    span_emotion: np.ndarray,
-    span_mode: np.ndarray,
-    silence: int,
-    set_start: np.ndarray,
-    set_stop: np.ndarray,
-    modes: np.ndarray,
-    log_previous: np.ndarray,
-    log_following: np.ndarray,
-    log_emotion: np.ndarray,
-    ends: np.ndarray,
-    starts: np.ndarray,
-    reference_duration: float,
-    w_context: float,
-    w_smooth: float,
-) -> None:
-    """``commit_mode`` of spans ``first`` .. the last, in order, into ``span_mode`` (each
-    joined to the mode committed before it; the first span after silence)."""
-    n_emotions = set_start.shape[1]
-    for k in range(first, len(span_mode)):
-        previous, before_mode, before_duration = silence, -1, 1.0
+def commit_modes(first: int, spans: SpanArrays, n_spans: int, search: SearchTables) -> None:
+    """``commit_mode`` of spans ``first`` .. ``n_spans`` - 1, in order, into ``spans.modes``
+    (each joined to the mode committed before it; the first span after silence)."""
+    span_start, span_end, span_mode = spans.starts, spans.ends, spans.modes
+    span_phoneme, span_emotion = spans.phonemes, spans.emotions
+    n_emotions = search.set_start.shape[1]
+    for k in range(first, n_spans):
+        previous, before_mode, before_duration = SILENCE_INDEX, -1, 1.0
         if k > 0:
             previous, before_mode = span_phoneme[k - 1], span_mode[k - 1]
             before_duration = span_end[k - 1] - span_start[k - 1]
         span_mode[k] = commit_mode(
-            span_phoneme[k] * n_emotions + span_emotion[k], previous, span_emotion[k],
-            span_end[k] - span_start[k], before_mode, before_duration, set_start, set_stop,
-            modes, log_previous, log_following, log_emotion, ends, starts, reference_duration,
-            w_context, w_smooth,
-        )  # fmt: skip
+            span_phoneme[k] * n_emotions + span_emotion[k],
+            previous,
+            span_emotion[k],
+            span_end[k] - span_start[k],
+            before_mode,
+            before_duration,
+            search,
+        )
 
 
 @njit(cache=True)
@@ -537,66 +532,36 @@ def causal_run(
     stop_frame: int,
     fps: float,
     shift: float,
-    started: float,
-    kappa: float,
-    x: np.ndarray,
-    v: np.ndarray,
-    t: float,
-    fresh: bool,
+    state: FilterState,
     committed: int,
+    spans: SpanArrays,
     n_spans: int,
-    span_start: np.ndarray,
-    span_end: np.ndarray,
-    span_phoneme: np.ndarray,
-    span_emotion: np.ndarray,
-    span_mode: np.ndarray,
-    span_rate: np.ndarray,
-    silence: int,
-    tail: int,
-    sigma: np.ndarray,
-    reach: np.ndarray,
-    eps: float,
-    coefficients: np.ndarray,
-    components: np.ndarray,
-    mean: np.ndarray,
-    set_start: np.ndarray,
-    set_stop: np.ndarray,
-    modes: np.ndarray,
-    log_previous: np.ndarray,
-    log_following: np.ndarray,
-    log_emotion: np.ndarray,
-    ends: np.ndarray,
-    starts: np.ndarray,
-    reference_duration: float,
-    w_context: float,
-    w_smooth: float,
-) -> tuple[np.ndarray, float]:
+    rates: np.ndarray,
+    tables: DamTables,
+) -> np.ndarray:
     """A causal rung's float32 frames ``first_frame`` .. ``stop_frame`` - 1 at ``fps``, over
-    the first ``n_spans`` spans (rows of the per-span arrays, which may hold more): the
+    the first ``n_spans`` rows of ``spans`` (which may hold more) and their ``rates``: the
     modes of the spans from ``committed`` on committed (``commit_modes``), the raw curve at
-    each frame's time + ``shift`` (``causal_sum``), the filter (value ``x``, velocity
-    ``v``, at time ``t``; ``fresh``: none yet, it starts at rest on the first raw value)
-    stepped toward it at ω = ``kappa`` times the rates (``damped.follow_frame_rates``), and
-    the basis (``channels``). ``x`` and ``v`` are updated in place; returns the frames and
-    the filter's time."""
-    n = n_spans
-    span_start, span_end, span_mode = span_start[:n], span_end[:n], span_mode[:n]
-    span_phoneme, span_emotion, span_rate = span_phoneme[:n], span_emotion[:n], span_rate[:n]
-    commit_modes(committed, span_start, span_end, span_phoneme, span_emotion, span_mode,
-                 silence, set_start, set_stop, modes, log_previous, log_following, log_emotion,
-                 ends, starts, reference_duration, w_context, w_smooth)  # fmt: skip
+    each frame's time + ``shift`` (``causal_sum``), the filter ``state`` (at frame
+    ``first_frame`` - 1; at frame 0 it starts at rest on the first raw value) stepped
+    toward it at ω = kappa times the rates (``damped.follow_frame_rates``), and the basis
+    (``channels``). The state is updated in place."""
+    commit_modes(committed, spans, n_spans, tables.search)
     times = np.arange(first_frame, stop_frame) / fps
-    raw, rates = causal_sum(times + shift, span_start, span_end, span_mode, span_rate, tail,
-                            sigma, reach, eps, coefficients, started)  # fmt: skip
-    values = np.empty((len(times), coefficients.shape[2]))
+    raw, frame_rates = causal_sum(
+        times + shift, spans, n_spans, rates[:n_spans], tables.tail, tables.animemes
+    )
+    x, v = state.x, state.v
+    values = np.empty((len(times), tables.animemes.coefficients.shape[2]))
     first = 0
-    if fresh:
+    t = (first_frame - 1) / fps
+    if first_frame == 0:
         x[:] = raw[0]
         v[:] = 0.0
         t = times[0]
         values[0] = x
         first = 1
     if len(times) > first:
-        omegas = kappa * rates
+        omegas = tables.kappa * frame_rates
         follow_frame_rates(x, v, t, raw[first:], omegas[first:], times[first:], values[first:])
-    return channels(values, components, mean), times[-1]
+    return channels(values, tables.components, tables.mean)

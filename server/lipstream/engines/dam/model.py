@@ -38,6 +38,7 @@ from ...audio import Audio
 from ...errors import InvalidRequestError
 from ...model_checks import ArrayReader, FieldReader
 from ...numerics.basis import MotionBasis, read_components
+from ...numerics.direct_call import DirectCall
 from ...phonemes import PHONEMES
 from ...store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
 from ...timeline import EMOTIONS, PhonemeSpan
@@ -59,7 +60,7 @@ from ..durations import DurationModel
 from .causal import CausalSynthesizer
 from .dominance import reach
 from .em import SIGMA_MIN
-from .kernels import choose_modes, render_run, search_tables
+from .kernels import Animemes, DamTables, causal_run, choose_modes, render_run, search_tables
 from .modes import PHONEME_INDEX, SILENCE_INDEX, emotion_index
 from .selection import Costs, Layer, end_derivatives
 from .spans import DamSpans
@@ -118,29 +119,22 @@ class DamModel(RenderingModel):
             w_context=float(hyper["w_context"]),
             w_smooth=float(hyper["w_smooth"]),
         )
-        self.tables = search_tables(
-            self.offsets,
-            self.stand_in,
-            self.stored["count_previous"],
-            self.stored["count_following"],
-            self.count_emotion,
-            self.costs.alpha,
+        self.tables = DamTables(
+            search_tables(self.offsets, self.stand_in, self.costs),
+            Animemes(
+                _float64(self.sigma), _float64(self.reach), self.eps, _float64(self.coefficients)
+            ),
+            _float64(self.basis.components),
+            _float64(self.basis.mean),
+            self.tail,
+            self.search_behind,
+            self.causal_kappa,
         )
-        tables, costs = self.tables, self.costs
-        self.search_arguments = (
-            tables.set_start,
-            tables.set_stop,
-            tables.modes,
-            tables.log_previous,
-            tables.log_following,
-            tables.log_emotion,
-            costs.ends,
-            costs.starts,
-            costs.reference_duration,
-            costs.w_context,
-            costs.w_smooth,
-        )
-        """The tables and weights every compiled search takes, last, in the kernels' order."""
+        """The arrays every compiled call takes, in the groups its kernels read."""
+        # Every request's streamed calls share one DirectCall per kernel: the argument types
+        # are the model's and the fixed ones of the requests' buffers, bound by the first.
+        self.render_call = DirectCall(render_run)
+        self.causal_call = DirectCall(causal_run)
 
     # -- options, lookahead, ladder -------------------------------------------------------
 
@@ -247,7 +241,7 @@ class DamModel(RenderingModel):
         phoneme = np.array(phonemes, dtype=np.int64)
         return np.asarray(
             choose_modes(
-                phoneme * self.tables.set_start.shape[1] + emotion,
+                phoneme * self.tables.search.set_start.shape[1] + emotion,
                 np.array([before, *phonemes[:-1]], dtype=np.int64),
                 np.array([*phonemes[1:], after], dtype=np.int64),
                 emotion,
@@ -256,7 +250,7 @@ class DamModel(RenderingModel):
                 last - low,
                 self.search_behind,
                 ahead,
-                *self.search_arguments,
+                self.tables.search,
             )
         )
 
@@ -277,28 +271,15 @@ class DamModel(RenderingModel):
             tracked = DamSpans(request, resolved, spans)
         search, ahead = tracked.resolved
         request.guard.check()
-        count, starts, ends, phonemes, emotions, modes = tracked.arrays()
-        frames, tracked.owner = render_run(
-            np.asarray(times, dtype=np.float64),
+        frames: np.ndarray
+        frames, tracked.owner = self.render_call(
+            np.ascontiguousarray(times, dtype=np.float64),
             tracked.owner,
-            count,
-            starts,
-            ends,
-            phonemes,
-            emotions,
-            modes,
-            SILENCE_INDEX,
-            self.search_behind,
+            tracked.arrays(),
+            tracked.rows,
             search,
-            self.tail,
             ahead,
-            self.sigma,
-            self.reach,
-            self.eps,
-            self.coefficients,
-            self.basis.components,
-            self.basis.mean,
-            *self.search_arguments,
+            self.tables,
         )
         return frames
 
@@ -330,6 +311,10 @@ class DamModel(RenderingModel):
         fields.number(*member(extra, "extra", "reference_duration"), 0.0, 60.0, above=True)
         reader = ArrayReader(arrays, str(path / ARRAYS_NAME))
         return cls(manifest, check_arrays(reader, degree, len(manifest.channels)))
+
+
+def _float64(values: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(values, dtype=np.float64)
 
 
 MAX_COUNT = 2**31 - 1

@@ -5,7 +5,8 @@ spans arrive) that also keeps, in growing arrays (``engines.growable``), each
 span's start, end, phoneme, emotion (the request's when the span names none)
 and its mode once chosen (-1 before). ``arrays()`` brings them up to date with
 the spans appended since the last call, so a streaming call converts only its
-new spans, and hands the kernel their buffers and count (no views to make);
+new spans, and hands the kernel their buffers (``kernels.SpanArrays``, no views to
+make) while ``rows`` says how many rows hold spans;
 the modes chosen by one call are reused by the next: a span's mode depends
 only on the spans of its search window (and, at the end of the input, on
 there being none after them), which never change.
@@ -23,6 +24,7 @@ from ...phonemes import PHONEME_INDEX
 from ...timeline import PhonemeSpan
 from ..base import SynthesisRequest
 from ..growable import Growable
+from .kernels import SpanArrays
 from .modes import emotion_index
 
 
@@ -45,10 +47,27 @@ class DamSpans(list[PhonemeSpan]):
         self.phonemes = Growable(np.int64)
         self.emotions = Growable(np.int64)
         self.modes = Growable(np.int64)
+        self._arrays = self._gather()
 
-    def arrays(self) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The count of spans n, and the buffers whose first n rows hold their start, end,
-        phoneme, emotion and mode."""
+    @property
+    def rows(self) -> int:
+        """Spans whose rows ``arrays()`` holds."""
+        return self.starts.count
+
+    def _gather(self) -> SpanArrays:
+        return SpanArrays(
+            self.starts.data,
+            self.ends.data,
+            self.phonemes.data,
+            self.emotions.data,
+            self.modes.data,
+        )
+
+    def arrays(self) -> SpanArrays:
+        """The buffers whose first ``rows`` rows hold the spans' start, end, phoneme, emotion
+        and mode, every span appended so far taken in."""
+        if self.starts.count == len(self):
+            return self._arrays
         for span in self[self.starts.count :]:
             phoneme = PHONEME_INDEX[span.phoneme]
             emotion = emotion_index(self.request, span)
@@ -57,11 +76,6 @@ class DamSpans(list[PhonemeSpan]):
             self.phonemes.append(phoneme)
             self.emotions.append(emotion)
             self.modes.append(-1)
-        return (
-            self.starts.count,
-            self.starts.data,
-            self.ends.data,
-            self.phonemes.data,
-            self.emotions.data,
-            self.modes.data,
-        )
+        if self._arrays.starts is not self.starts.data:  # the buffers grow together
+            self._arrays = self._gather()
+        return self._arrays

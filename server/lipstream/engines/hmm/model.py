@@ -34,6 +34,7 @@ from ...errors import InvalidRequestError
 from ...features import DEFAULT_MFCC, MfccConfig
 from ...model_checks import ArrayReader, FieldReader
 from ...numerics.basis import MotionBasis, read_components
+from ...numerics.direct_call import DirectCall
 from ...numerics.trellis import predecessors
 from ...phonemes import PHONEMES
 from ...store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
@@ -47,7 +48,7 @@ from ..base import (
     Synthesizer,
     resolved_rung,
 )
-from . import trajectory
+from . import kernels, trajectory
 from .gaussian import Gaussians
 from .synthesizer import AUDIO, AUTO, BOTH, DRIVES, HmmSynthesizer, Plan
 
@@ -98,6 +99,10 @@ class HmmModel(Model):
         self.uses_audio = self.vocal is not None
         self._dynamics: dict[tuple[float, bool], trajectory.Dynamics] = {}
         self.dynamics = self.dynamics_at(self.synthesis_fps)
+        # Every request's streamed calls share one DirectCall per kernel: the argument types
+        # are the model's and the synthesizer's buffers', the same for every request.
+        self.decode_step = DirectCall(kernels.decode)
+        self.solve_step = DirectCall(kernels.solve_block)
         self.stepwise_dynamics = self.dynamics_at(self.synthesis_fps, coupled=False)
         self.audio_weight = float(manifest.hyperparameters["audio_weight"])
         self.default_lag_ms = float(manifest.hyperparameters["lag_ms"])

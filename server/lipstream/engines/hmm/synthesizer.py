@@ -62,7 +62,6 @@ from ...audio import Audio
 from ...errors import InvalidRequestError
 from ...features import speech_features
 from ...numerics.banded import check_block_tridiagonal
-from ...numerics.direct_call import DirectCall
 from ...numerics.trellis import FixedLagViterbi
 from ...phonemes import PHONEME_INDEX
 from ...timeline import PhonemeSpan, SpanLike, coerce_spans
@@ -173,8 +172,6 @@ class HmmSynthesizer(Synthesizer):
         self.decoder = FixedLagViterbi(
             model.log_start, model.log_transition, plan.lag, model.predecessors
         )
-        self.decode_step = DirectCall(kernels.decode)
-        self.solve_step = DirectCall(kernels.solve_block)
         self.observed = 0
         self.unheard = np.zeros((0, len(model.log_start)))
         self.states = Growable(np.int64)
@@ -287,7 +284,7 @@ class HmmSynthesizer(Synthesizer):
             out = states.reserve(decoder.most_committed(target - first))
             terms, heard_from = self._audio_terms(first, target)
             spans = self.span_rows
-            fresh = self.decode_step(
+            fresh = model.decode_step(
                 spans.data,
                 spans.count if self.reading else 0,
                 first,
@@ -348,7 +345,7 @@ class HmmSynthesizer(Synthesizer):
             self.request.guard.check()
             terms, curve = self.dynamics, self.curve
             check_block_tridiagonal(
-                self.solve_step(
+                self.model.solve_step(
                     self.states.data,
                     self.states.count,
                     self.ratio,

@@ -11,16 +11,18 @@ import argparse
 import asyncio
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-from .config import Settings
-from .errors import LipstreamError
-from .loadtest.command import default_url
+from ..config import Settings
+from ..errors import LipstreamError
+from ..loadtest.command import default_url
 
 if TYPE_CHECKING:
     from lipstream_client.bridge import BridgeInput, BridgeReport
     from lipstream_client.sinks import Sink, Target
     from lipstream_client.sinks.sound import SoundPlayer
+
+    from .commands import Commands
 
 
 OPTION_OF_FIELD = {
@@ -122,7 +124,7 @@ def _source(args: argparse.Namespace) -> BridgeInput:
     audio, rate = _read_audio(Path(args.audio)) if args.audio else (None, 16000)
     phonemes: list[tuple[str, float, float]] = []
     if args.phones is not None:
-        from .phones_io import read_phones
+        from ..phones_io import read_phones
 
         spans = read_phones(Path(args.phones), args.tier)
         phonemes = [(span.phoneme, span.start, span.end) for span in spans]
@@ -132,7 +134,7 @@ def _source(args: argparse.Namespace) -> BridgeInput:
 def _read_audio(path: Path) -> tuple[bytes, int]:
     import numpy as np
 
-    from .audio import read_wav
+    from ..audio import read_wav
 
     audio = read_wav(path)
     pcm = np.clip(np.round(audio.samples * 32767.0), -32768, 32767).astype("<i2")
@@ -160,8 +162,9 @@ def _sink(args: argparse.Namespace, target: Target) -> Sink:
     if target.kind == "livelink":
         encoder = LiveLinkEncoder(args.subject or "lipstream")
         return LiveLinkSink(UdpSender(target.host, target.port, bind), encoder)
-    from lipstream_client.sinks.vmc import VmcSink
+    from lipstream_client.sinks.vmc import VmcSink, require_python_osc
 
+    require_python_osc("--to")  # before the socket opens
     return VmcSink(UdpSender(target.host, target.port, bind))
 
 
@@ -183,7 +186,7 @@ def _summary(report: BridgeReport, target: Target) -> str:
     return line
 
 
-def add_bridge_parser(commands: Any) -> None:
+def add_bridge_parser(commands: Commands) -> None:
     """Add ``bridge`` to the CLI's subcommands ``commands``."""
     from lipstream_client.sinks import LINE_FORMATS
 

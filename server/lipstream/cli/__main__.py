@@ -1,0 +1,7 @@
+"""``python -m lipstream.cli``: the ``lipstream`` command."""
+
+import sys
+
+from . import main
+
+sys.exit(main())
