@@ -268,14 +268,14 @@ def stream_calls(bench: Bench) -> str:
     )
 
 
-def call_pairs(bench: Bench) -> str:
-    doc = bench.load("call_pairs.json")
+def _call_pairs(bench: Bench, name: str) -> str:
+    doc = bench.load(name)
     header = (
         f"Before: `{doc['before']}`; after: `{doc['after']}`; "
         f"{doc['rows'][0]['rounds']} alternating rounds.\n\n"
     )
     return (
-        bench.source("call_pairs.json", doc)
+        bench.source(name, doc)
         + header
         + table(
             [
@@ -301,6 +301,11 @@ def call_pairs(bench: Bench) -> str:
             ),
         )
     )
+
+
+def call_pairs(name: str) -> Callable[[Bench], str]:
+    """The block of one ``bench.call_pairs`` results file."""
+    return lambda bench: _call_pairs(bench, name)
 
 
 def lead0(bench: Bench) -> str:
@@ -883,7 +888,8 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "engines-summary": engines_summary,
     "engines": engines,
     "stream-calls": stream_calls,
-    "call-pairs": call_pairs,
+    "call-pairs": call_pairs("call_pairs.json"),
+    "call-pairs-expressive-dp": call_pairs("call_pairs_expressive_dp.json"),
     "lead0": lead0,
     "hmm-first-frame": hmm_first_frame,
     "word-timings": word_timings,

@@ -17,7 +17,14 @@ from hypothesis import strategies as st
 from lipstream.engines.base import Model
 from lipstream.engines.expressive_dp import ExpressiveDpModel
 from lipstream.engines.expressive_dp.contamination import Contamination
-from lipstream.engines.expressive_dp.fast_step import SURE, Layer, Ranked, lag_step
+from lipstream.engines.expressive_dp.fast_step import (
+    PRICED,
+    SURE,
+    Layer,
+    Ranked,
+    fast_step,
+    lag_step,
+)
 from lipstream.engines.expressive_dp.lag_search import LagMemory
 from lipstream.engines.expressive_dp.search import LayerSpec, SearchSpace, search
 from lipstream.engines.expressive_dp.synthesizer import PathSynthesizer, extend_path
@@ -226,3 +233,60 @@ def test_a_best_predecessor_is_sure_only_when_it_wins_by_the_margin(gap: float) 
     assert rescanned == (0 if gap > SURE else 1)
     assert again.costs.tobytes() == f.tobytes()
     assert again.back.tolist() == back.tolist()
+
+
+def test_a_node_scanned_again_on_a_tie_takes_the_scans_first_pair_not_its_last_best() -> None:
+    """Two predecessors of one pattern and one phoneme (copies: the same join into b to the
+    bit) with the same φ tie exactly; ``fast_step`` keeps the first in its order. The last
+    window's best pair into b was the second, by another root than the one committed, so b
+    is scanned again: the step takes the first, as ``fast_step`` does, with its φ, and does
+    not call it sure (a scan seeded with the last window's pair would keep the second)."""
+    rng = np.random.default_rng(3)
+    n = 60
+    space = random_space(rng, n, 3, copies=True)
+    leaving, viseme, pre = space.records.leaving, space.features.viseme, space.nodes.pre
+    pairs = [
+        (b, a1, a2)
+        for b in np.flatnonzero(pre >= 0).tolist()
+        for a1 in range(n)
+        for a2 in range(a1 + 1, n)
+        if pre[b] not in (a1, a2)
+        and viseme[a1] == viseme[a2]
+        and np.array_equal(leaving[a1], leaving[a2])
+    ]
+    assert pairs, "the copies database has interchangeable nodes"
+    b, a1, a2 = pairs[0]
+    prev_nodes = np.array([a1, a2])
+    prev_f = np.array([1.0, 1.0])
+    candidates = Layer(np.array([b]), np.zeros(1))
+    plain_nodes, plain_f, plain_back = fast_step(
+        Layer(prev_nodes, prev_f), candidates, space.joins, np.full(n, -1, dtype=np.int64)
+    )
+    assert plain_back.tolist() == [0]
+
+    none = np.zeros(0, dtype=np.int64)
+    no_sure, no_kind, no_terms = (
+        np.zeros(0, dtype=bool),
+        np.zeros(0, dtype=np.int8),
+        np.zeros((0, 4)),
+    )
+    empty = Ranked(none, np.zeros(0), none, no_sure, no_kind, no_terms, none)
+    previous = Ranked(prev_nodes, prev_f, none, no_sure, no_kind, no_terms, np.full(2, 7))
+    scratch = (np.full(n, -1, dtype=np.int64), np.full(n, -1, dtype=np.int64))
+    cold, _ = lag_step(previous, candidates, space.joins, empty, empty, 7, *scratch)
+    then = previous._replace(root=np.full(2, 8))
+    known = Ranked(
+        np.array([b]),
+        cold.costs,
+        np.array([1]),
+        np.ones(1, dtype=bool),
+        np.full(1, PRICED, dtype=np.int8),
+        cold.terms,
+        np.full(1, 8),
+    )
+    made, scanned = lag_step(previous, candidates, space.joins, known, then, 7, *scratch)
+    assert scanned == 1
+    assert made.back.tolist() == [0]
+    assert made.costs.tobytes() == plain_f.tobytes()
+    assert made.nodes.tolist() == plain_nodes.tolist()
+    assert not made.sure[0]
