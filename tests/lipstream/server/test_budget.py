@@ -9,13 +9,21 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pytest
 
+from lipstream.audio import Audio
 from lipstream.engines.base import CallCost, Lookahead, Rung, SynthesisRequest
 from lipstream.engines.viseme_lerp import VisemeLerpModel
 from lipstream.errors import ModelStoreError
 from lipstream.phonemes import SILENCE
-from lipstream.server.budget import BudgetInfeasible, choose_rung, estimate, lookahead_ms
+from lipstream.server.budget import (
+    BudgetInfeasible,
+    RungEstimate,
+    choose_rung,
+    estimate,
+    lookahead_ms,
+)
 from lipstream.server.calibration import CALIBRATION_PHONEMES, calibration_spans, measure
 from lipstream.server.catalog import Catalog, CatalogError
+from lipstream.timeline import PhonemeSpan
 
 if TYPE_CHECKING:
     from lipstream.engines.base import Model
@@ -25,7 +33,7 @@ FIXED_LAG = Rung("fixed_lag", Lookahead(seconds=0.05, phonemes=1), {"lag": 1})
 GREEDY = Rung("greedy", Lookahead())
 
 
-def ladder() -> list:  # type: ignore[type-arg]
+def ladder() -> list[RungEstimate]:
     # max phoneme 200 ms, margin 5 ms: exact 100 + 800 + 12 + 5 = 917 ms,
     # fixed_lag 50 + 200 + 3 + 5 = 258 ms, greedy 0 + 0 + 20.4 + 5 = 25.4 ms.
     return [
@@ -78,7 +86,7 @@ class _ChargedSynthesizer:
     def __init__(self, real: Any, clock: _Clock, fps: float) -> None:
         self.real, self.clock, self.fps, self.charged_frames = real, clock, fps, 0
 
-    def feed(self, spans: list, audio: object = None) -> None:  # type: ignore[type-arg]
+    def feed(self, spans: list[PhonemeSpan], audio: Audio | None = None) -> None:
         self.real.feed(spans, audio)
         frames = math.floor(spans[-1].end * self.fps + 1e-9) + 1  # frames i with i/fps <= end
         self.clock.now += PHONEME_COST_S * len(spans)
@@ -197,11 +205,14 @@ def test_rest_pose_of_viseme_lerp_is_its_silence_key_pose(catalog: Catalog) -> N
 NO_FRAMES = np.zeros((0, 1), dtype=np.float32)
 
 
+Fed = tuple[PhonemeSpan, Audio | None]  # a feed's first span and its audio
+
+
 class _RecordingSynthesizer:
-    def __init__(self, fed: list) -> None:  # type: ignore[type-arg]
+    def __init__(self, fed: list[Fed]) -> None:
         self.fed = fed
 
-    def feed(self, spans: list, audio: object = None) -> None:  # type: ignore[type-arg]
+    def feed(self, spans: list[PhonemeSpan], audio: Audio | None = None) -> None:
         self.fed.append((spans[0], audio))
 
     def frames(self) -> np.ndarray:
@@ -217,7 +228,7 @@ class _AudioEngineModel:
     uses_audio = True
 
     def __init__(self) -> None:
-        self.passes: list[list] = []  # type: ignore[type-arg]
+        self.passes: list[list[Fed]] = []
 
     def start(self, request: object) -> _RecordingSynthesizer:
         self.passes.append([])
@@ -235,9 +246,11 @@ def test_an_engine_that_uses_audio_is_also_calibrated_with_audio_under_each_span
     offline = [fed for fed in model.passes if len(fed) == 1]
     assert len(offline) == 8 and all(fed[0][1] is None for fed in offline)
     for fed in with_audio:
-        ends = [round(span.end * audio.sample_rate) for span, audio in fed]
-        assert [len(audio.samples) for _, audio in fed] == np.diff([0, *ends]).tolist()
-        assert all(np.abs(audio.samples).max() > 0.2 for _, audio in fed)  # voiced, not silence
+        voiced = [(span, audio) for span, audio in fed if audio is not None]
+        assert len(voiced) == len(fed)  # audio under every span
+        ends = [round(span.end * audio.sample_rate) for span, audio in voiced]
+        assert [len(audio.samples) for _, audio in voiced] == np.diff([0, *ends]).tolist()
+        assert all(np.abs(audio.samples).max() > 0.2 for _, audio in voiced)  # voiced, not silence
 
 
 class _Clock:
@@ -254,7 +267,7 @@ class _TimedSynthesizer:
     def __init__(self, clock: _Clock, slow_call: int | None) -> None:
         self.clock, self.slow_call, self.calls = clock, slow_call, 0
 
-    def feed(self, spans: list, audio: object = None) -> None:  # type: ignore[type-arg]
+    def feed(self, spans: list[PhonemeSpan], audio: Audio | None = None) -> None:
         self.clock.now += 0.010 if self.calls == self.slow_call else 0.001
         self.calls += 1
 

@@ -25,13 +25,14 @@ from lipstream_client import (
     Start,
     encode,
 )
+from lipstream_client.messages import JsonValue
 from tests.helpers import eventually, return_frames
 from tests.lipstream.server.harness import Client, client, serving
 
 ITEMS = (PhonemeItem("HH", 0.0, 0.1), PhonemeItem("AY1", 0.1, 0.3))
 
 
-def connection_error(messages: list) -> tuple[str, bool, str | None]:  # type: ignore[type-arg]
+def connection_error(messages: list[Message]) -> tuple[str, bool, str | None]:
     [error] = [m for m in messages if isinstance(m, ErrorMessage)]
     return error.code, error.fatal, error.id
 
@@ -191,7 +192,7 @@ def test_limits_do_not_touch_well_behaved_clients(lerp_dir: Path, payload: bytes
     assert isinstance(answers[0], Ready) and isinstance(answers[-1], Done)
 
 
-def request_error(answers: list) -> tuple[str, bool, str | None, dict]:  # type: ignore[type-arg]
+def request_error(answers: list[Message]) -> tuple[str, bool, str | None, dict[str, JsonValue]]:
     [error] = [m for m in answers if isinstance(m, ErrorMessage)]
     return error.code, error.fatal, error.id, dict(error.details or {})
 

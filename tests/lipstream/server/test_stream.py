@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import json
 import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import httpx
 import msgpack
@@ -57,12 +59,14 @@ def served(all_models_dir: Path) -> Iterator[Served]:
         yield running
 
 
-def rows_of(messages: list, identifier: str) -> np.ndarray:  # type: ignore[type-arg]
+def rows_of(messages: list[Message], identifier: str) -> np.ndarray:
     rows = frame_rows([m for m in messages if getattr(m, "id", None) == identifier])
     return np.array([rows[index] for index in sorted(rows)], dtype=np.float32)
 
 
-def rest_frames(served: Served, body: dict, encoding: Encoding) -> tuple[np.ndarray, dict]:  # type: ignore[type-arg]
+def rest_frames(
+    served: Served, body: dict[str, Any], encoding: Encoding
+) -> tuple[np.ndarray, dict[str, Any]]:
     if encoding == "msgpack":
         answer = httpx.post(
             f"{served.http}/v1/synthesize",
@@ -70,7 +74,7 @@ def rest_frames(served: Served, body: dict, encoding: Encoding) -> tuple[np.ndar
             headers={"Content-Type": "application/msgpack", "Accept": "application/msgpack"},
         )
         assert answer.status_code == 200, answer.content
-        result = msgpack.unpackb(answer.content)
+        result: dict[str, Any] = msgpack.unpackb(answer.content)
         frames = np.frombuffer(result["data"], "<f4").reshape(-1, result["n_channels"])
     else:
         answer = httpx.post(f"{served.http}/v1/synthesize", json=body)
@@ -203,11 +207,12 @@ def test_streamed_frames_equal_post_synthesize(
     assert len(frames) == int(0.5 * start.fps) + 1 + return_frames(start.fps)
 
 
-def _output_json(profile: OutputProfile | None) -> dict | None:  # type: ignore[type-arg]
+def _output_json(profile: OutputProfile | None) -> dict[str, Any] | None:
     if profile is None:
         return None
     message = encode(Start("x", "e", "c", output=profile), "json")
-    return __import__("json").loads(message)["output"]  # type: ignore[no-any-return]
+    output: dict[str, Any] = json.loads(message)["output"]
+    return output
 
 
 def test_subprotocol_negotiation_and_no_compression(served: Served) -> None:
