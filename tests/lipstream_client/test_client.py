@@ -10,7 +10,7 @@ from typing import TypeVar
 
 import pytest
 
-from lipstream_client import EncodeError, End, Frames, PhonemeItem
+from lipstream_client import EncodeError, Encoding, End, Frames, PhonemeItem
 from lipstream_client.client import AsyncClient, RequestOver, StreamResult
 from lipstream_client.exceptions import (
     ConnectionClosed,
@@ -51,8 +51,8 @@ def expected_rows(last_time: float, offset: float = 0.0) -> list[list[float]]:
     return [expected_row(index, offset) for index in range(count)]
 
 
-async def one_request(url: str, encoding: str, offset: float = 0.0) -> StreamResult:
-    async with AsyncClient(url, encoding=encoding) as client:  # type: ignore[arg-type]
+async def one_request(url: str, encoding: Encoding, offset: float = 0.0) -> StreamResult:
+    async with AsyncClient(url, encoding=encoding) as client:
         stream = await client.start("viseme-lerp", "demo", fps=FPS, options={"offset": offset})
         await stream.send_phonemes(PHONEMES[:2])
         await stream.send_phonemes([{"phoneme": "sil", "start": 0.3, "end": 0.42}])
@@ -61,7 +61,7 @@ async def one_request(url: str, encoding: str, offset: float = 0.0) -> StreamRes
 
 
 @pytest.mark.parametrize("encoding", ["msgpack", "json"])
-def test_async_request_gets_every_frame_in_order(server: FakeServer, encoding: str) -> None:
+def test_async_request_gets_every_frame_in_order(server: FakeServer, encoding: Encoding) -> None:
     result = run(lambda: one_request(server.url, encoding))
     assert result.ready.channels == CHANNELS and result.ready.fps == FPS
     assert [block.seq for block in result.frames] == list(range(len(result.frames)))
@@ -73,9 +73,11 @@ def test_async_request_gets_every_frame_in_order(server: FakeServer, encoding: s
 
 
 @pytest.mark.parametrize("encoding", ["msgpack", "json"])
-def test_sync_and_async_clients_receive_identical_frames(server: FakeServer, encoding: str) -> None:
+def test_sync_and_async_clients_receive_identical_frames(
+    server: FakeServer, encoding: Encoding
+) -> None:
     from_async = run(lambda: one_request(server.url, encoding, offset=0.125))
-    with Client(server.url, encoding, timeout=10) as client:  # type: ignore[arg-type]
+    with Client(server.url, encoding, timeout=10) as client:
         assert client.encoding == encoding
         stream = client.start("viseme-lerp", "demo", fps=FPS, options={"offset": 0.125})
         stream.send_phonemes(PHONEMES[:2])

@@ -11,7 +11,14 @@ import numpy as np
 import pytest
 
 from lipstream.engines.base import Model
-from lipstream_client import AsyncClient, Client, EncodeError, LipstreamServerError, StreamResult
+from lipstream_client import (
+    AsyncClient,
+    Client,
+    EncodeError,
+    Encoding,
+    LipstreamServerError,
+    StreamResult,
+)
 from lipstream_client.rest import RestClient, RestServerError
 from tests.helpers import return_frames
 from tests.live_server import LiveServer, live_server, save_models
@@ -55,10 +62,10 @@ async def request(
     url: str,
     engine: str,
     spans: list[tuple[str, float, float]],
-    encoding: str = "msgpack",
+    encoding: Encoding = "msgpack",
     chunk: int = 3,
 ) -> StreamResult:
-    async with AsyncClient(url, encoding=encoding) as client:  # type: ignore[arg-type]
+    async with AsyncClient(url, encoding=encoding) as client:
         stream = await client.start(engine, "demo", fps=FPS)
         for first in range(0, len(spans), chunk):
             await stream.send_phonemes(spans[first : first + chunk])
@@ -78,7 +85,7 @@ def test_server_lists_what_it_serves(served: LiveServer, trained_models: dict[st
 @pytest.mark.parametrize("encoding", ["msgpack", "json"])
 @pytest.mark.parametrize("engine", ["viseme-lerp", "anime-graph"])
 def test_streamed_frames_equal_offline_synthesis(
-    served: LiveServer, trained_models: dict[str, Model], engine: str, encoding: str
+    served: LiveServer, trained_models: dict[str, Model], engine: str, encoding: Encoding
 ) -> None:
     result = asyncio.run(request(served.ws, engine, LINE, encoding))
     model = trained_models[engine]
@@ -202,9 +209,9 @@ def test_loadtest_against_the_real_server(served: LiveServer, tmp_path: Path) ->
 
 
 @pytest.mark.parametrize("encoding", ["msgpack", "json"])
-def test_rest_synthesize_equals_the_stream(served: LiveServer, encoding: str) -> None:
+def test_rest_synthesize_equals_the_stream(served: LiveServer, encoding: Encoding) -> None:
     rest = RestClient(served.ws)
-    answer = rest.synthesize("viseme-lerp", "demo", LINE, fps=FPS, encoding=encoding)  # type: ignore[arg-type]
+    answer = rest.synthesize("viseme-lerp", "demo", LINE, fps=FPS, encoding=encoding)
     stream = asyncio.run(request(served.ws, "viseme-lerp", LINE))
     assert answer.channels == stream.channels and answer.ready.fps == FPS
     assert answer.stats.frames == stream.done.stats.frames == answer.frames.n_frames

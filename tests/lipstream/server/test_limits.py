@@ -15,6 +15,7 @@ import pytest
 from lipstream.config import ServerSettings
 from lipstream_client import (
     Done,
+    Encoding,
     End,
     ErrorMessage,
     Frames,
@@ -272,11 +273,13 @@ def test_a_request_without_messages_times_out_while_others_go_on(lerp_dir: Path)
 
 @pytest.mark.parametrize("fps", [1e-308, 0.5])
 @pytest.mark.parametrize("encoding", ["msgpack", "json"])
-def test_fps_below_one_is_refused_before_ready(lerp_dir: Path, fps: float, encoding: str) -> None:
+def test_fps_below_one_is_refused_before_ready(
+    lerp_dir: Path, fps: float, encoding: Encoding
+) -> None:
     start = {"v": 1, "type": "start", "id": "a", "engine": "viseme-lerp", "character": "demo"}
     payload = {**start, "fps": fps}
     wire = msgpack.packb(payload) if encoding == "msgpack" else json.dumps(payload)
-    with serving(lerp_dir) as served, client(served.ws, encoding) as ws:  # type: ignore[arg-type]
+    with serving(lerp_dir) as served, client(served.ws, encoding) as ws:
         ws.send_raw(wire)
         error = ws.recv()
         assert isinstance(error, ErrorMessage)
