@@ -10,7 +10,7 @@ from typing import TypeVar
 
 import pytest
 
-from lipstream_client import EncodeError, Encoding, End, Frames, PhonemeItem
+from lipstream_client import Done, EncodeError, Encoding, End, Frames, PhonemeItem
 from lipstream_client.client import AsyncClient, RequestOver, StreamResult
 from lipstream_client.exceptions import (
     ConnectionClosed,
@@ -120,7 +120,7 @@ def test_multiplexed_requests_each_get_their_own_frames(server: FakeServer) -> N
 
 
 def test_cancel_ends_with_the_frames_sent_so_far(server: FakeServer) -> None:
-    async def scenario() -> tuple[list[Frames], object]:
+    async def scenario() -> tuple[list[Frames], Done]:
         async with AsyncClient(server.url) as client:
             stream = await client.start("viseme-lerp", "demo", fps=FPS)
             await stream.send_phonemes([("AA", 0.0, 0.2)])
@@ -129,7 +129,7 @@ def test_cancel_ends_with_the_frames_sent_so_far(server: FakeServer) -> None:
             return blocks, await stream.done()
 
     blocks, done = run(scenario)
-    assert done.reason == "cancel" and done.stats.frames == 10  # type: ignore[attr-defined]
+    assert done.reason == "cancel" and done.stats.frames == 10
     assert FrameTimeline(FPS, blocks).rows() == [expected_row(i) for i in range(10)]
 
 

@@ -14,6 +14,7 @@ from lipstream.engines.base import Model
 from lipstream_client import (
     AsyncClient,
     Client,
+    Done,
     EncodeError,
     Encoding,
     LipstreamServerError,
@@ -142,7 +143,7 @@ def test_multiplexed_requests_each_get_their_own_frames(
 def test_cancel_and_interrupt(served: LiveServer, trained_models: dict[str, Model]) -> None:
     at = 0.5
 
-    async def scenario() -> tuple[object, StreamResult]:
+    async def scenario() -> tuple[Done, StreamResult]:
         async with AsyncClient(served.ws) as client:
             cancelled = await client.start("viseme-lerp", "demo", fps=FPS)
             await cancelled.send_phonemes(LINE[:4])
@@ -154,7 +155,7 @@ def test_cancel_and_interrupt(served: LiveServer, trained_models: dict[str, Mode
             return cancel_done, await asyncio.wait_for(cut.collect(), 20)
 
     cancel_done, interrupted = asyncio.run(scenario())
-    assert cancel_done.reason == "cancel"  # type: ignore[attr-defined]
+    assert cancel_done.reason == "cancel"
     assert interrupted.done.reason == "interrupt"
     cut_index = math.ceil(at * FPS - 1e-9)
     assert any(block.first_frame == cut_index for block in interrupted.frames)
