@@ -169,7 +169,9 @@ def add_stream_route(served: Served, path: str, chunks: int | None) -> list[asyn
             await asyncio.sleep(0)  # as a real source would wait for its next part
 
     async def stream() -> StreamingResponse:
-        tasks.append(asyncio.current_task())  # type: ignore[arg-type]
+        task = asyncio.current_task()
+        assert task is not None
+        tasks.append(task)
         length = {} if chunks is None else {"content-length": str(chunks * len(STREAM_CHUNK))}
         return StreamingResponse(body(), headers=length, media_type="application/octet-stream")
 
