@@ -253,7 +253,7 @@ def test_bad_input_is_refused_locally_and_never_sent(server: FakeServer) -> None
             with pytest.raises(ValueError, match="still open"):
                 await client.start("viseme-lerp", "demo", id="x")
             with pytest.raises(ValueError, match="items\\[1\\]"):
-                await stream.send_phonemes([("AA", 0.0, 0.1), ["AA", 0.1, 0.2]])  # type: ignore[list-item]
+                await stream.send_phonemes([("AA", 0.0, 0.1), ["AA", 0.1, 0.2]])  # type: ignore[list-item]  # a list item on purpose: the check under test
             await stream.cancel()
             await stream.done()
             with pytest.raises(RequestOver):

@@ -471,11 +471,11 @@ def test_encode_refuses_invalid_messages() -> None:
     with pytest.raises(EncodeError):
         encode(Start("r1", "dp", "ada", fps=math.nan), "msgpack")
     with pytest.raises(EncodeError):
-        encode(Start("r1", "dp", "ada", options={"t": (1, 2)}), "msgpack")  # type: ignore[dict-item, call-overload]
+        encode(Start("r1", "dp", "ada", options={"t": (1, 2)}), "msgpack")  # type: ignore[dict-item, call-overload]  # a tuple on purpose
     with pytest.raises(EncodeError):
         encode(Frames("r1", 0, 0, 60.0, 2, b"\x00" * 12), "msgpack")
     with pytest.raises(TypeError):
-        encode({"type": "end"}, "json")  # type: ignore[call-overload]
+        encode({"type": "end"}, "json")  # type: ignore[call-overload]  # not a message, on purpose
     unchecked = encode(Start("r1", "dp", "ada", fps=-1.0), "msgpack", validate=False)
     assert msgpack.unpackb(unchecked)["fps"] == -1.0
 

@@ -229,7 +229,7 @@ def test_an_unknown_ipa_phoneme_names_it() -> None:
 
 
 def test_elevenlabs_websocket_chunks_in_ms_with_durations() -> None:
-    chunk = {
+    chunk: dict[str, Any] = {
         "audio": "",
         "isFinal": None,
         "normalizedAlignment": {
@@ -244,7 +244,7 @@ def test_elevenlabs_websocket_chunks_in_ms_with_durations() -> None:
         ("Hi", 0.0, 0.186),
         ("you", 0.232, pytest.approx(0.418)),
     ]
-    chunk["normalizedAlignment"]["charDurationsMs"][1] = -5  # type: ignore[index]
+    chunk["normalizedAlignment"]["charDurationsMs"][1] = -5
     error = _error(chunk)
     assert (error.code, error.where) == ("invalid_times", "normalizedAlignment.charDurationsMs[1]")
 

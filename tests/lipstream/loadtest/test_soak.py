@@ -114,7 +114,7 @@ def test_a_short_soak_reports_every_part_and_the_valid_sessions_complete(
     ],
 )
 def test_bounds_name_the_flag(change: dict[str, object], flag: str) -> None:
-    config = dataclasses.replace(SoakConfig(), **change)  # type: ignore[arg-type]
+    config = dataclasses.replace(SoakConfig(), **change)  # type: ignore[arg-type]  # bad values on purpose
     with pytest.raises(LipstreamError) as refused:
         check_soak(config)
     assert refused.value.where == flag

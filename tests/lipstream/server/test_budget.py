@@ -117,7 +117,7 @@ def test_calibration_utterance_and_measurement(
     clock = _Clock()
     monkeypatch.setattr("lipstream.server.calibration.time", clock)
     model = _ChargedModel(trained_models["viseme-lerp"], clock)
-    cost = measure(model, Rung("default", Lookahead(phonemes=1)))  # type: ignore[arg-type]
+    cost = measure(model, Rung("default", Lookahead(phonemes=1)))  # type: ignore[arg-type]  # a stand-in with what measure uses
     # 48 phonemes of 80 ms at 60 fps: frames 0..4 come with the first (4.8 frames each, so
     # 4 or 5 after it), 231 in all (3.84 s). The slowest call is the first: 1 + 5 × 0.01 ms.
     assert cost.max_call_ms == pytest.approx(1.05)
@@ -237,7 +237,7 @@ class _AudioEngineModel:
 
 def test_an_engine_that_uses_audio_is_also_calibrated_with_audio_under_each_span() -> None:
     model = _AudioEngineModel()
-    measure(model, Rung("default", Lookahead(phonemes=1)))  # type: ignore[arg-type]
+    measure(model, Rung("default", Lookahead(phonemes=1)))  # type: ignore[arg-type]  # a stand-in with what measure uses
     streamed = [fed for fed in model.passes if len(fed) > 1]
     with_audio = [fed for fed in streamed if fed[0][1] is not None]
     without = [fed for fed in streamed if fed[0][1] is None]
@@ -297,7 +297,7 @@ def test_compute_time_is_the_slowest_call_at_its_fastest_over_the_passes(
 ) -> None:
     clock = _Clock()
     monkeypatch.setattr("lipstream.server.calibration.time", clock)
-    cost = measure(_PreemptedModel(clock), GREEDY)  # type: ignore[arg-type]
+    cost = measure(_PreemptedModel(clock), GREEDY)  # type: ignore[arg-type]  # a stand-in with what measure uses
     # Every call takes 1 ms in some pass; the finish calls take no time.
     assert cost.max_call_ms == pytest.approx(1.0)
     # 48 calls at their fastest, 1 ms each, over 48 phonemes.
@@ -324,7 +324,7 @@ class _NanModel(_AudioEngineModel):
 
 def test_a_non_finite_frame_in_calibration_refuses_the_model_naming_the_rung() -> None:
     with pytest.raises(ModelStoreError) as caught:
-        measure(_NanModel(), Rung("lag-2", Lookahead(phonemes=1)), where="/m/x")  # type: ignore[arg-type]
+        measure(_NanModel(), Rung("lag-2", Lookahead(phonemes=1)), where="/m/x")  # type: ignore[arg-type]  # a stand-in with what measure uses
     assert (caught.value.code, caught.value.where) == ("model_invalid", "/m/x: probe on rung lag-2")
     assert caught.value.message.startswith(
         "synthesized 1 NaN or infinite values from the calibration utterance "

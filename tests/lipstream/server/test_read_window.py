@@ -33,7 +33,7 @@ def _protocol(loop: asyncio.AbstractEventLoop) -> tuple[ReadWindowProtocol, _Tra
         config=config, server_state=ServerState(), app_state={}, _loop=loop
     )
     transport = _Transport()
-    protocol.transport = transport  # type: ignore[assignment]
+    protocol.transport = transport  # type: ignore[assignment]  # a fake that counts pauses
     return protocol, transport
 
 

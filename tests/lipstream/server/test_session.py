@@ -413,7 +413,7 @@ def test_an_engine_fault_ends_only_its_request(catalog: Catalog) -> None:
     def broken(*_args: object, **_kwargs: object) -> None:
         raise RuntimeError("engine bug")
 
-    session.requests["a"].synthesizer.feed = broken  # type: ignore[method-assign]
+    session.requests["a"].synthesizer.feed = broken  # type: ignore[method-assign]  # an engine that fails
     out = play(session, Phonemes("a", ITEMS))
     assert errors(out) == [("internal_error", "a", True)]
     fault = out[0]
