@@ -17,6 +17,7 @@ if TYPE_CHECKING:
     import numpy as np
 
     from lipstream.engines.base import Model
+    from lipstream.timeline import PhonemeSpan
 
 REPO = Path(__file__).resolve().parents[1]
 # Real Live Link Face exports, when present: .ci/run points it at ../shared/data/livelink-face.
@@ -177,3 +178,16 @@ def return_frames(fps: float, return_ms: float = 150.0) -> int:
     import math
 
     return max(1, math.ceil(round(return_ms * fps / 1000.0, 9)))
+
+
+def delayed_spans(spans: list[PhonemeSpan], delay: float) -> list[PhonemeSpan]:
+    """``spans`` with every boundary ``delay`` s later, the first span stretched back to 0
+    and the last cut at the old end: a known timing error, to bound an aligner's against."""
+    from dataclasses import replace
+
+    end = spans[-1].end
+    moved = [
+        replace(s, start=min(s.start + delay, end), end=min(s.end + delay, end)) for s in spans
+    ]
+    moved[0] = replace(moved[0], start=0.0)
+    return [s for s in moved if s.end > s.start]

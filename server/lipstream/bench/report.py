@@ -488,6 +488,113 @@ def _capacity(name: str, key: str = "searches") -> Callable[[Bench], str]:
     return render
 
 
+def _cost(side: dict[str, Any]) -> str:
+    value = side.get("cpu_ms_per_session_s")
+    return "–" if value is None else number(value, 3)
+
+
+def _rung(run: dict[str, Any]) -> str:
+    budget = run.get("latency_budget_ms")
+    conditions = f"lead {run['lead_ms']:g} ms, " + (
+        f"budget {budget:g} ms" if budget is not None else "no budget"
+    )
+    return f"`{run['fidelity']}` ({conditions})"
+
+
+CAUSAL_CPU_RATIO_TARGET = 1.25
+BEST_CPU_RATIO_TARGET = 1.5
+
+
+def _against_target(fidelity: str, ratio: float | None) -> str:
+    """Whether ``ratio`` meets the target for its rung (causal rungs 1.25, best
+    rungs 1.5), and if not by what factor it misses."""
+    target = CAUSAL_CPU_RATIO_TARGET if "causal" in fidelity else BEST_CPU_RATIO_TARGET
+    if ratio is None:
+        return f"≤ {target:g}: not measured"
+    if ratio <= target:
+        return f"≤ {target:g}: met"
+    return f"≤ {target:g}: missed by {number(ratio / target, 2)}×"
+
+
+def cpu_per_session(bench: Bench) -> str:
+    name = "cpu_per_session.json"
+    doc = bench.load(name)
+    rows = []
+    for run in _by_engine(doc["runs"]):
+        server, reference, ratio = run["server"], run["reference"], run.get("cpu_ratio")
+        per_round = ", ".join(
+            "–" if value is None else number(value, 2) for value in run["cpu_ratio_per_round"]
+        )
+        rows.append(
+            [
+                f"`{run['engine']}`",
+                _rung(run),
+                f"{run['streams']}, {run['rounds']} × {run['duration_s']:g} s",
+                _cost(server),
+                _cost(reference),
+                "–" if ratio is None else f"**{number(ratio, 2)}** ({per_round})",
+                " / ".join(
+                    "–" if side["frame_lag_ms_p99"] is None else number(side["frame_lag_ms_p99"])
+                    for side in (server, reference)
+                ),
+                " / ".join("yes" if side["held"] else "no" for side in (server, reference)),
+                _against_target(run["fidelity"], ratio),
+            ]
+        )
+    header = [
+        "engine",
+        "rung",
+        "sessions, rounds × leg",
+        "server CPU ms per session-second",
+        "reference",
+        "ratio (per round)",
+        "p99 frame lag ms: server / reference",
+        "count held: server / reference",
+        "target",
+    ]
+    text = bench.source(name, doc) + (
+        "Each round is one leg against the server, then one against the reference; every "
+        "session streams one clip as long as the leg, at the fps of its command.\n\n"
+    )
+    commands = sorted({run["command"] for run in doc["runs"]})
+    return (
+        text
+        + table(header, rows)
+        + "\nEach run's command:\n\n"
+        + "".join(f"- `{command}`\n" for command in commands)
+    )
+
+
+def server_profile(bench: Bench) -> str:
+    name = "server_profile.json"
+    doc = bench.load(name)
+    text = bench.source(name, doc) + (
+        f"{doc['samples']} samples of the serving process, each counted in the first layer "
+        "its stack passes through (`lipstream.bench.server_profile`); "
+        f"{doc['event_loop_samples']} of them in the event loop's thread.\n\n"
+    )
+    layers = table(
+        ["layer", "samples", "share of all", "share of the event loop's thread"],
+        (
+            [
+                row["layer"],
+                str(row["samples"]),
+                percent(row["share"]),
+                "–" if row["share_of_event_loop"] is None else percent(row["share_of_event_loop"]),
+            ]
+            for row in doc["layers"]
+        ),
+    )
+    functions = table(
+        ["innermost function", "samples", "share of the event loop's thread"],
+        (
+            [f"`{row['function']}`", str(row["samples"]), percent(row["share_of_event_loop"])]
+            for row in doc["top_functions"]
+        ),
+    )
+    return text + layers + "\nThe innermost functions that took the most samples:\n\n" + functions
+
+
 def capacity_workers(bench: Bench) -> str:
     doc = bench.load("capacity_workers.json")
     text = bench.source("capacity_workers.json", doc)
@@ -897,6 +1004,8 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "capacity-best": _capacity("capacity_best.json"),
     "capacity-best-two-workers": _capacity("capacity_best_two_workers.json"),
     "capacity-workers": capacity_workers,
+    "cpu-per-session": cpu_per_session,
+    "server-profile": server_profile,
     "capacity-earlier": _capacity("capacity.json"),
     "loadtest": loadtest,
     "scale-out": scale_out,

@@ -4,6 +4,7 @@ written in an export format, through an output profile when one is given."""
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -41,6 +42,8 @@ def _synth(args: argparse.Namespace, settings: Settings) -> None:
     if args.words is not None:
         spans = _word_timing_spans(args, model_dir)
         audio = read_wav(Path(args.audio)) if args.audio else None
+    elif args.transcript is not None:
+        spans, audio = _aligned_spans(args)
     elif args.text is not None:
         from ..speech.text_frontend import speak_text
 
@@ -77,6 +80,29 @@ def _word_timing_spans(args: argparse.Namespace, model_dir: Path) -> list[Phonem
     return timings_to_spans(timings, WordDurationModel.load(model_dir), args.voice or DEFAULT_VOICE)
 
 
+def _aligned_spans(args: argparse.Namespace) -> tuple[list[PhonemeSpan], Audio]:
+    """The phoneme spans of ``--audio`` by forced alignment to ``--transcript``, its
+    confidence reported on stderr; the aligner's errors name the audio file."""
+    from ..audio import read_wav
+    from ..frontends.align import align
+    from ..frontends.command import read_transcript
+
+    if not args.audio:
+        raise LipstreamError(
+            "--transcript needs --audio WAV, the recording it transcribes",
+            where="--transcript",
+            code="invalid_request",
+        )
+    options = (("--wav", args.wav), ("--voice", args.voice), ("--rate", args.rate))
+    for option, value in (*options, ("--lang", args.lang)):
+        if value is not None:
+            raise LipstreamError(f"{option} goes with --text", where=option, code="invalid_request")
+    audio = read_wav(Path(args.audio))
+    alignment = align(audio, read_transcript(args.transcript), where=args.audio)
+    print(f"alignment confidence {alignment.confidence:.2f}", file=sys.stderr)
+    return alignment.phones, audio
+
+
 def _check_text_options(args: argparse.Namespace) -> None:
     if args.audio:
         raise LipstreamError(
@@ -111,7 +137,8 @@ def _output_profile(args: argparse.Namespace, *, shapes: bool) -> OutputProfile 
 
 def add_synth_parser(commands: Commands) -> None:
     synth = commands.add_parser(
-        "synth", help="synthesize frames for a phones file, a text or a TTS timing file"
+        "synth",
+        help="frames for phones, a text, a TTS timing file or a recording and its transcript",
     )
     synth.add_argument(
         "--model",
@@ -144,13 +171,21 @@ def _input_options(synth: argparse.ArgumentParser) -> None:
         metavar="FILE",
         help="word, character, viseme or phoneme timings from a TTS (JSON or JSON lines)",
     )
+    given.add_argument(
+        "--transcript",
+        metavar="TEXT|FILE",
+        help="what --audio says (the text, or a .txt file): phones by forced alignment",
+    )
     synth.add_argument(
         "--words-format",
         choices=("auto", *TIMING_FORMATS),
         default="auto",
         help="format of --words (default: detected from the content)",
     )
-    synth.add_argument("--audio", help="mono WAV of the speech, for engines that use audio")
+    synth.add_argument(
+        "--audio",
+        help="mono WAV of the speech, for engines that use audio (with --transcript: aligned)",
+    )
     synth.add_argument("--wav", help="with --text: write espeak-ng's speech to this WAV file")
     synth.add_argument(
         "--lang",

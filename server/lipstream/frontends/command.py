@@ -34,7 +34,7 @@ def run_align(args: argparse.Namespace, settings: Settings) -> None:
     from .align import align, write_alignment_textgrid
 
     source = Path(args.audio)
-    alignment = align(_audio(source), _transcript(args.transcript), where=str(source))
+    alignment = align(_audio(source), read_transcript(args.transcript), where=str(source))
     write_alignment_textgrid(Path(args.out), alignment)
     spoken = sum(span.phoneme != "sil" for span in alignment.phones)
     print(
@@ -53,7 +53,8 @@ def _audio(path: Path) -> Audio:
     return media_audio(path)
 
 
-def _transcript(given: str) -> str:
+def read_transcript(given: str) -> str:
+    """``--transcript``: the text itself, or the text of the ``.txt`` file it names."""
     path = Path(given)
     if path.suffix.lower() == ".txt" and path.is_file():
         return path.read_text(encoding="utf-8-sig")

@@ -4,7 +4,9 @@ Sketch: ``lipstream loadtest [options]`` is the Audio2Face-3D style load
 test (``load``); ``lipstream loadtest capacity`` searches for the most
 sessions a server holds under a lag limit (``capacity``); ``lipstream
 loadtest soak`` runs valid sessions among hostile clients (``soak``); ``lipstream
-loadtest storm`` opens a burst of connections of one kind at once (``storm``). The options that
+loadtest storm`` opens a burst of connections of one kind at once (``storm``); ``lipstream
+loadtest cpu`` compares the server's CPU per session-second with the reference server's
+(``cpu_per_session``). The options that
 name the target and shape the sessions are declared once (``_target_options``)
 and given to each. The CLI (``lipstream.cli``) builds this part of its one
 parser with ``add_loadtest_parser``; the handlers import their run lazily, so
@@ -225,6 +227,60 @@ def _add_capacity_parser(runs: Commands) -> None:
     capacity.set_defaults(run=_capacity)
 
 
+def _cpu(args: argparse.Namespace, settings: Settings) -> None:
+    from .cpu_per_session import (
+        RESULTS_NAME,
+        CpuComparison,
+        compare_cpu,
+        comparison_line,
+        read_results,
+        record_run,
+    )
+
+    path = settings.results_file(args.results, RESULTS_NAME)
+    read_results(path)  # before minutes of measuring, not after
+    base = _config(args, settings, streams=args.streams, latency_budget_ms=args.latency_budget_ms)
+    command = "lipstream " + shlex.join(sys.argv[1:])
+    for engine in _capacity_engines(base.url, args.engine, args.character, args.token):
+        comparison = CpuComparison(
+            replace(base, engine=engine),
+            duration_s=args.duration,
+            rounds=args.rounds,
+            pause_s=args.pause,
+        )
+        print(f"{engine}:")
+        result = compare_cpu(comparison, progress=print)
+        record_run(path, result, command)
+        print(f"{comparison_line(result)}; written to {path}")
+
+
+def _add_cpu_parser(runs: Any) -> None:
+    cpu = runs.add_parser(
+        "cpu",
+        help="the server's CPU per session-second beside the reference server's",
+        description="Hold a number of real-time sessions for a fixed time against the server "
+        "and against the reference server (the same messages, no synthesis), alternating "
+        "A B A B in one run; read each server's CPU time from /proc and report CPU ms per "
+        "session-second for each, their ratio, p99 frame lag and whether the count was held.",
+    )
+    _target_options(cpu, required_target=True)
+    _load_options(cpu)
+    _budget_option(cpu)
+    cpu.add_argument("--streams", type=int, default=100, help="concurrent sessions (default 100)")
+    cpu.add_argument(
+        "--duration", type=float, default=20.0, help="seconds each leg streams (default 20)"
+    )
+    cpu.add_argument(
+        "--rounds", type=int, default=2, help="pairs of legs, server then reference (default 2)"
+    )
+    cpu.add_argument("--pause", type=float, default=2.0, help="seconds between legs")
+    cpu.add_argument(
+        "--results",
+        help="JSON file to add the run to (default $LIPSTREAM_HOME/bench/cpu_per_session.json)",
+    )
+    cpu.set_defaults(run=_cpu)
+
+
 def _soak(args: argparse.Namespace, settings: Settings) -> None:
     from .soak import SoakConfig, format_report, soak
 
@@ -415,7 +471,8 @@ def add_loadtest_parser(commands: Commands) -> None:
         help="JSON file to write the results to (default $LIPSTREAM_HOME/bench/loadtest.json)",
     )
     load.set_defaults(run=_loadtest)
-    runs = load.add_subparsers(dest="loadtest_run", metavar="{capacity,soak,storm}")
+    runs = load.add_subparsers(dest="loadtest_run", metavar="{capacity,cpu,soak,storm}")
     _add_capacity_parser(runs)
+    _add_cpu_parser(runs)
     _add_soak_parser(runs)
     _add_storm_parser(runs)

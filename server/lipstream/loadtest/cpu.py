@@ -49,13 +49,24 @@ def pids_holding(inodes: set[str], proc: Path = PROC) -> list[int]:
     for entry in proc.iterdir():
         if not entry.name.isdigit():
             continue
-        try:
-            links = {os.readlink(fd) for fd in (entry / "fd").iterdir()}
-        except OSError:
-            continue
-        if links & wanted:
+        if any(_link(fd) in wanted for fd in _descriptors(entry)):
             found.append(int(entry.name))
     return sorted(found)
+
+
+def _descriptors(process: Path) -> list[Path]:
+    try:
+        return list((process / "fd").iterdir())
+    except OSError:
+        return []
+
+
+def _link(descriptor: Path) -> str | None:
+    # A descriptor closed between listing and reading must not hide its process's others.
+    try:
+        return os.readlink(descriptor)
+    except OSError:
+        return None
 
 
 def cpu_seconds(pids: Iterable[int], proc: Path = PROC) -> float | None:

@@ -74,34 +74,29 @@ def components() -> dict[str, Any]:
     }
     for key in ("text", "lang", "voice", "rate"):
         properties[key] = _moved(text["properties"][key])
+    properties["transcript"] = {
+        "type": "string",
+        "description": "Instead of items: what the audio (then required) says; its phonemes "
+        "come from forced alignment (English), and the answer carries alignment.confidence.",
+    }
+    inputs = ("items", "words", "text", "transcript")
     schemas[PREFIX + "SynthesizeRequest"] = {
         "type": "object",
         "additionalProperties": False,
         "required": ["engine", "character"],
         "oneOf": [
+            {"required": ["items"], "not": _any_of(inputs, "items")},
+            {"required": ["words"], "not": _any_of(inputs, "words")},
+            {"required": ["text"], "not": _any_of((*inputs, "audio"), "text")},
             {
-                "required": ["items"],
-                "not": {"anyOf": [{"required": ["words"]}, {"required": ["text"]}]},
-            },
-            {
-                "required": ["words"],
-                "not": {"anyOf": [{"required": ["items"]}, {"required": ["text"]}]},
-            },
-            {
-                "required": ["text"],
-                "not": {
-                    "anyOf": [
-                        {"required": ["items"]},
-                        {"required": ["words"]},
-                        {"required": ["audio"]},
-                    ]
-                },
+                "required": ["transcript", "audio"],
+                "not": _any_of((*inputs, "phoneme_source"), "transcript"),
             },
         ],
         "properties": properties,
         "description": "A start message's fields, then the utterance's phonemes (or a TTS's "
         "timings) and optional audio, or a text for espeak-ng to speak (in lang, with voice "
-        "and rate).",
+        "and rate), or audio and its transcript.",
     }
     schemas[PREFIX + "SynthesizeResponse"] = _response_schema()
     schemas[PREFIX + "Error"] = _error_schema()
@@ -157,9 +152,20 @@ def _response_schema() -> dict[str, Any]:
                 "description": "a text request's speech, whole: PCM16 mono (bin in msgpack, "
                 "base64 in JSON), frame i at i / fps on its clock",
             },
+            "alignment": {
+                "type": "object",
+                "required": ["confidence"],
+                "properties": {"confidence": {"type": "number", "minimum": 0, "maximum": 1}},
+                "description": "a transcript request's forced alignment: its confidence",
+            },
         },
         "description": "ready's resolved parameters, every frame, and done's stats.",
     }
+
+
+def _any_of(fields: tuple[str, ...], but: str) -> dict[str, Any]:
+    """A schema matching an object that has any of ``fields`` other than ``but``."""
+    return {"anyOf": [{"required": [key]} for key in fields if key != but]}
 
 
 def _error_schema() -> dict[str, Any]:

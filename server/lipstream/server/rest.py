@@ -5,7 +5,10 @@ Sketch: the body, JSON or msgpack by ``Content-Type``, holds the fields of a
 ``words`` (a TTS's timings: the fields of a ``words`` message, ``{timings, format,
 offset, voice}``), each with an optional ``audio`` (``{sample_rate, pcm16}`` as in
 ``audio``), or instead the fields of a ``text`` message (``text``, ``lang``, ``voice``,
-``rate``), whose speech the answer carries as ``speech``. The protocol
+``rate``), whose speech the answer carries as ``speech``, or a ``transcript`` of its
+``audio`` (required then), whose phonemes the forced aligner finds (``align``: after the
+start and the audio have passed the session's limits, in the synthesis pool, off the event
+loop) and whose answer carries ``alignment: {confidence}``. The protocol
 codec parses it, it is split into those protocol messages, each validated by
 the codec as parsed (never re-encoded, so a number that overflows to infinity
 is the codec's error, not a fault), and played
@@ -65,6 +68,8 @@ from lipstream_client import (
     ErrorMessage,
     Frames,
     Message,
+    PhonemeItem,
+    Phonemes,
     ProtocolError,
     Ready,
 )
@@ -78,7 +83,10 @@ from lipstream_client.errors import (
     UNAUTHORIZED,
 )
 
+from ..audio import Audio
 from ..corpus.frames_csv import frames_csv_text
+from ..errors import LipstreamError
+from ..frontends.align import EMPTY_TRANSCRIPT, Alignment, align
 from .admission import bearer_token, token_accepted
 from .load import MIB
 from .session import Session
@@ -97,7 +105,8 @@ START_FIELDS = (
     "phoneme_source",
 )
 TEXT_FIELDS = ("text", "lang", "voice", "rate")
-BODY_FIELDS = (*START_FIELDS, "items", "words", "audio", *TEXT_FIELDS)
+BODY_FIELDS = (*START_FIELDS, "items", "words", "audio", "transcript", *TEXT_FIELDS)
+INPUTS = ("items", "words", "text", "transcript")
 MEDIA_TYPES: dict[str, Encoding] = {
     "application/json": "json",
     "application/msgpack": "msgpack",
@@ -116,6 +125,7 @@ STATUS = {
     "mismatched_words": 400,
     "empty_timings": 400,
     "invalid_audio": 400,
+    EMPTY_TRANSCRIPT: 400,
     "unsupported_version": 400,
     "unknown_type": 400,
     "unknown_engine": 404,
@@ -151,14 +161,26 @@ class HttpError(Exception):
         self.details = dict(details or {})
 
 
+@dataclass(frozen=True)
+class Transcript:
+    """The body's ``transcript``: what its audio says, aligned when the session has the audio."""
+
+    text: str
+
+
+BodyPart = Message | Transcript
+
+
 @dataclass
 class Synthesis:
-    """What the session answered: ``ready``, the frame rows and ``done``."""
+    """What the session answered: ``ready``, the frame rows and ``done``; a transcript's
+    alignment ``confidence``."""
 
     ready: Ready
     frames: np.ndarray
     done: Done
     speech: list[AudioChunk] = field(default_factory=list)
+    confidence: float | None = None
 
 
 async def synthesize(request: Request, state: ServerState) -> Response:
@@ -194,7 +216,7 @@ def rest_client(request: Request) -> tuple[str, str]:
     return ("rest", request.client.host if request.client is not None else "")
 
 
-def _answer(messages: list[Message], state: ServerState, encoding: ResponseFormat) -> bytes:
+def _answer(messages: list[BodyPart], state: ServerState, encoding: ResponseFormat) -> bytes:
     """Synthesize and encode a msgpack or CSV answer (in the thread pool: both scale with
     the utterance; their encoders take milliseconds where JSON's takes seconds)."""
     result = _run(messages, state)
@@ -289,13 +311,15 @@ def _parse(body: bytes, encoding: Encoding) -> dict[str, Any]:
             INVALID_MESSAGE,
             f"unknown field(s) {', '.join(unknown)}; expected {', '.join(BODY_FIELDS)}",
         )
-    inputs = [key for key in ("items", "words", "text") if key in parsed]
+    inputs = [key for key in INPUTS if key in parsed]
     if len(inputs) != 1:
         raise HttpError(
             INVALID_MESSAGE,
-            "items, words or text: give exactly one (the utterance's phonemes, a TTS's "
-            "timings, or a text for espeak-ng to speak)",
+            "items, words, text or transcript: give exactly one (the utterance's phonemes, a "
+            "TTS's timings, a text for espeak-ng to speak, or the transcript of the audio)",
         )
+    if "transcript" in parsed:
+        _check_transcript(parsed)
     if "text" in parsed and "audio" in parsed:
         raise HttpError(
             INVALID_MESSAGE, "audio: goes with phonemes; with text the speech is espeak-ng's"
@@ -307,7 +331,18 @@ def _parse(body: bytes, encoding: Encoding) -> dict[str, Any]:
     return parsed
 
 
-def _messages(body: dict[str, Any], encoding: Encoding) -> list[Message]:
+def _check_transcript(body: dict[str, Any]) -> None:
+    if not isinstance(body["transcript"], str):
+        raise HttpError(INVALID_MESSAGE, "transcript: must be a string, what the audio says")
+    if "audio" not in body:
+        raise HttpError(INVALID_MESSAGE, "transcript: needs audio, the speech it transcribes")
+    if "phoneme_source" in body:
+        raise HttpError(
+            INVALID_MESSAGE, "phoneme_source: goes with items; the aligner names its own phonemes"
+        )
+
+
+def _messages(body: dict[str, Any], encoding: Encoding) -> list[BodyPart]:
     """The body as protocol messages, each validated by the codec."""
     start = {key: body[key] for key in START_FIELDS if key in body}
     parts: list[tuple[str, dict[str, Any]]] = [("start", start)]
@@ -323,9 +358,12 @@ def _messages(body: dict[str, Any], encoding: Encoding) -> list[Message]:
         parts.append(("words", words))
     elif "text" in body:
         parts.append(("text", {key: body[key] for key in TEXT_FIELDS if key in body}))
-    else:
+    elif "items" in body:
         parts.append(("phonemes", {"items": body["items"]}))
-    return [_decoded(kind, fields, encoding) for kind, fields in parts] + [End(REQUEST_ID)]
+    decoded: list[BodyPart] = [_decoded(kind, fields, encoding) for kind, fields in parts]
+    if "transcript" in body:
+        decoded.append(Transcript(body["transcript"]))
+    return [*decoded, End(REQUEST_ID)]
 
 
 def _decoded(kind: str, fields: dict[str, Any], encoding: Encoding) -> Message:
@@ -340,8 +378,26 @@ def _decoded(kind: str, fields: dict[str, Any], encoding: Encoding) -> Message:
     return decoded
 
 
-def _run(messages: list[Message], state: ServerState) -> Synthesis:
-    """Play the messages through a one-request session (in the thread pool)."""
+def _aligned(transcript: Transcript, messages: list[BodyPart]) -> Alignment:
+    """The body's audio aligned to its transcript; the aligner's refusals as ``HttpError``s
+    located at ``audio`` (or ``transcript`` when it has no words)."""
+    chunk = next(message for message in messages if isinstance(message, AudioChunk))
+    samples = np.frombuffer(chunk.pcm16, "<i2").astype(np.float32) / 32768.0
+    where = "transcript" if not transcript.text.strip() else "audio"
+    try:
+        return align(Audio(samples, chunk.sample_rate), transcript.text, where=where)
+    except LipstreamError as error:
+        raise HttpError(error.code, f"{error.where}: {error.message}") from None
+
+
+def _phonemes(alignment: Alignment) -> Phonemes:
+    items = tuple(PhonemeItem(span.phoneme, span.start, span.end) for span in alignment.phones)
+    return Phonemes(REQUEST_ID, items)
+
+
+def _run(messages: list[BodyPart], state: ServerState) -> Synthesis:
+    """Play the messages through a one-request session (in the thread pool); a transcript
+    is aligned once the session has taken the start and the audio."""
     session = Session(
         state.catalog,
         replace(state.session_limits, max_requests=1),
@@ -351,8 +407,15 @@ def _run(messages: list[Message], state: ServerState) -> Synthesis:
     done: Done | None = None
     blocks: list[np.ndarray] = []
     speech: list[AudioChunk] = []
+    confidence: float | None = None
     try:
-        for message in messages:
+        for given in messages:
+            message: Message
+            if isinstance(given, Transcript):
+                alignment = _aligned(given, messages)
+                message, confidence = _phonemes(alignment), alignment.confidence
+            else:
+                message = given
             for outgoing in session.handle(message, time.monotonic()):
                 answer = outgoing.message
                 if isinstance(answer, ErrorMessage):
@@ -371,7 +434,7 @@ def _run(messages: list[Message], state: ServerState) -> Synthesis:
         raise HttpError(INTERNAL_ERROR, "the synthesis did not complete")
     width = len(ready.channels)
     frames = np.concatenate(blocks) if blocks else np.zeros((0, width), dtype="<f4")
-    return Synthesis(ready, frames, done, speech)
+    return Synthesis(ready, frames, done, speech, confidence)
 
 
 class HeldAnswer(StreamingResponse):
@@ -467,6 +530,7 @@ def _fields(result: Synthesis, encoding: Encoding) -> dict[str, Any]:
         "n_channels": len(ready.channels),
         "stats": {"frames": result.done.stats.frames, "engine": dict(result.done.stats.engine)},
         "speech": _speech(result, encoding),
+        "alignment": None if result.confidence is None else {"confidence": result.confidence},
     }
     return {key: value for key, value in body.items() if value is not None}
 

@@ -2,7 +2,8 @@
 //
 // Sound and face share one clock (stream.js): the first `audio` or `frames` message of a
 // request fixes t0 on it (plus a short lead); speech chunks are scheduled at t0 + their
-// `start`, an uploaded WAV at t0, and every animation frame shows the frame for now() - t0.
+// `start`, an uploaded WAV (beside phones or a TTS's timing file) at t0, and every animation
+// frame shows the frame for now() - t0.
 //
 // A request ends with the face at rest. After `done`, playback reaches the last frame, which
 // the server makes the character's rest pose, and the face stays there. An error leaves no
@@ -189,14 +190,18 @@ function textInput() {
   return { send: (id) => send({ ...message, id }) };
 }
 
+// The WAV chosen in the file input `inputId`, decoded, or null.
+async function chosenAudio(inputId) {
+  const wavFile = $(inputId).files[0];
+  return wavFile ? ensureAudio().decodeAudioData(await wavFile.arrayBuffer()) : null;
+}
+
 async function fileInput() {
   const phonesFile = $("phones-file").files[0];
   if (!phonesFile) throw new Error("choose a .TextGrid or .lab file first");
   const text = await phonesFile.text();
   const items = /\.lab$/i.test(phonesFile.name) ? parseLab(text) : parseTextGrid(text);
-  let audioBuffer = null;
-  const wavFile = $("wav-file").files[0];
-  if (wavFile) audioBuffer = await ensureAudio().decodeAudioData(await wavFile.arrayBuffer());
+  const audioBuffer = await chosenAudio("wav-file");
   return {
     audioBuffer,
     send: (id) => {
@@ -204,6 +209,29 @@ async function fileInput() {
       for (let i = 0; i < items.length; i += PHONEMES_PER_MESSAGE) {
         send({ type: "phonemes", id, items: items.slice(i, i + PHONEMES_PER_MESSAGE) });
       }
+    },
+  };
+}
+
+// A TTS's timing file as one `words` message: its JSON value, or JSON lines as text (the
+// server reads both, and says what is wrong with either), after the audio's chunks.
+async function timingInput() {
+  const timingFile = $("timing-file").files[0];
+  if (!timingFile) throw new Error("choose a timing file first");
+  const text = await timingFile.text();
+  let timings;
+  try {
+    timings = JSON.parse(text);
+  } catch (_) {
+    timings = text; // JSON lines (Polly's speech marks), or not JSON at all
+  }
+  const format = $("timing-format").value;
+  const audioBuffer = await chosenAudio("timing-wav-file");
+  return {
+    audioBuffer,
+    send: (id) => {
+      if (audioBuffer !== null) sendAudio(id, audioBuffer);
+      send({ type: "words", id, timings, format });
     },
   };
 }
@@ -331,14 +359,20 @@ $("text-form").addEventListener("submit", (event) => {
   startRequest(textInput());
 });
 
-$("file-form").addEventListener("submit", async (event) => {
-  event.preventDefault();
-  try {
-    await startRequest(await fileInput());
-  } catch (error) {
-    showError(error.message);
-  }
-});
+// A form whose input is read from files (`makeInput`), which may fail before any request.
+function playsFiles(formId, makeInput) {
+  $(formId).addEventListener("submit", async (event) => {
+    event.preventDefault();
+    try {
+      await startRequest(await makeInput());
+    } catch (error) {
+      showError(error.message);
+    }
+  });
+}
+
+playsFiles("file-form", fileInput);
+playsFiles("timing-form", timingInput);
 
 $("plot-channels").addEventListener("change", drawPlot);
 
