@@ -16,6 +16,7 @@ from tests.lipstream_client.fake_server import FakeServer
 
 COMMANDS = [
     (["bench"], "results.json"),
+    (["bench", "--real"], "real_faces.json"),
     (["loadtest"], "loadtest.json"),
     (["loadtest", "capacity", "--engine", "hmm", "--character", "demo"], "capacity.json"),
     (["loadtest", "soak"], "soak.json"),

@@ -986,7 +986,82 @@ def capture(bench: Bench) -> str:
     return text + table(["video", "step", "per wall-clock second", "per CPU second"], rows)
 
 
+REAL_FACES = "real_faces.json"
+
+
+def _signed(value: float | None, digits: int = 0) -> str:
+    return "–" if value is None else f"{value:+.{digits}f}"
+
+
+def real_faces_summary(bench: Bench) -> str:
+    """The README's line: aperture r and closure lag on real lips, engines against the
+    baseline."""
+    doc = bench.load(REAL_FACES)
+    rows = _by_engine(doc["engines"])
+    learned = [row for row in rows if row["engine"] != "viseme-lerp"]
+    base = next(row for row in rows if row["engine"] == "viseme-lerp")
+    best = max(learned, key=lambda row: row["aperture_r"] or -1.0)
+    lags = [row["closure_lag_ms"] for row in learned if row["closure_lag_ms"] is not None]
+    return (
+        "Real lips (GRID): aperture r up to "
+        f"{best['aperture_r']:.2f} (`{best['engine']}`; `viseme-lerp` {base['aperture_r']:.2f}), "
+        f"/p b m/ closure lag {_signed(min(lags, default=None))} to "
+        f"{_signed(max(lags, default=None))} ms "
+        f"(`viseme-lerp` {_signed(base['closure_lag_ms'])}; "
+        f"[more](docs/reports/engines.md#real-faces)).\n"
+    )
+
+
+def _trained_on(doc: dict[str, Any]) -> str:
+    models = doc.get("models", {}).values()
+    pairs = sorted(
+        {(m["character"], m["corpus_digest"][:12]) for m in models if isinstance(m, dict)}
+    )
+    return "".join(f" Models of `{name}` (corpus digest `{digest}`)." for name, digest in pairs)
+
+
+def real_faces(bench: Bench) -> str:
+    """``lipstream bench --real``: every engine of the demo character against real lips."""
+    if not bench.exists(REAL_FACES):
+        return f"Not measured yet: no `bench/{REAL_FACES}` (`lipstream bench --real`).\n"
+    doc = bench.load(REAL_FACES)
+    corpus, recorded = doc["corpus"], doc["recorded"]
+    text = bench.source(REAL_FACES, doc)
+    text += (
+        f"Corpus `{corpus['name']}` (digest `{corpus['digest'][:12]}`, {corpus['fps']:g} fps): "
+        f"{corpus['clips']} clips, {corpus['speakers']} speakers; the real lips close on "
+        f"{percent(recorded['closure_rate'])} of their {recorded['bilabials']} /p b m/ "
+        f"(threshold {recorded['closure_threshold']:.3f}).{_trained_on(doc)}\n\n"
+    )
+    rows = []
+    for row in _by_engine(doc["engines"]):
+        rate = row["closure_rate"]
+        rows.append(
+            [
+                f"`{row['engine']}`",
+                "–" if row["aperture_r"] is None else number(row["aperture_r"], 3),
+                "–" if rate is None else percent(rate),
+                _signed(row["closure_lag_ms"], 1),
+                "–" if row["closure_lag_sd_ms"] is None else number(row["closure_lag_sd_ms"], 1),
+                str(row["closures_timed"]),
+                str(row["clips_mapped_on_themselves"]),
+            ]
+        )
+    header = [
+        "engine",
+        "aperture r",
+        "/p b m/ closed",
+        "closure lag ms (mean)",
+        "lag sd ms",
+        "closures timed",
+        "clips mapped on themselves",
+    ]
+    return text + table(header, rows)
+
+
 BLOCKS: dict[str, Callable[[Bench], str]] = {
+    "real-faces-summary": real_faces_summary,
+    "real-faces": real_faces,
     "languages": languages,
     "language-phonemes": language_phonemes,
     "capture": capture,

@@ -64,6 +64,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    args.command_line = ["lipstream", *(sys.argv[1:] if argv is None else argv)]
     run: Handler = args.run
     try:
         run(args, load_settings())

@@ -332,3 +332,48 @@ def test_a_results_file_it_cannot_read_changes_nothing(
     error = capsys.readouterr().err
     assert "b.md: report block 'soak' (soak in" in error and "KeyError" in error
     assert (reports / "a.md").read_text(encoding="utf-8") == stale_page
+
+
+def _real_row(engine: str, r: float, closed: float, lag: float) -> dict[str, object]:
+    return {
+        "engine": engine,
+        "aperture_r": r,
+        "closure_rate": closed,
+        "closure_lag_ms": lag,
+        "closure_lag_sd_ms": 40.0,
+        "closures_timed": 14,
+        "clips_mapped_on_themselves": 11,
+        "aperture_r_by_clip": {},
+    }
+
+
+def test_real_faces_render_every_engine_and_the_readme_line(tmp_path: Path) -> None:
+    doc = {
+        "date": "2030-01-02T03:04:05+00:00",
+        "machine": {"python": "3.11.7"},
+        "command": "lipstream bench --real",
+        "corpus": {
+            "name": "grid",
+            "digest": "0123456789abcdef",
+            "fps": 25.0,
+            "clips": 11,
+            "speakers": 11,
+        },
+        "recorded": {"closure_threshold": 0.0441, "closure_rate": 1.0, "bilabials": 14},
+        "engines": [
+            _real_row("dam", 0.566, 0.714, 15.7),
+            _real_row("viseme-lerp", 0.496, 0.929, 17.1),
+            _real_row("hmm", 0.433, 0.786, 28.6),
+        ],
+    }
+    (tmp_path / "real_faces.json").write_text(json.dumps(doc))
+    bench = Bench(tmp_path)
+    rendered = BLOCKS["real-faces"](bench)
+    rows = [line for line in rendered.splitlines() if line.startswith("| `")]
+    assert rows[0] == "| `viseme-lerp` | 0.496 | 92.9% | +17.1 | 40.0 | 14 | 11 |"
+    assert rows[1] == "| `dam` | 0.566 | 71.4% | +15.7 | 40.0 | 14 | 11 |"
+    assert "close on 100.0% of their 14 /p b m/ (threshold 0.044)" in rendered
+    summary = BLOCKS["real-faces-summary"](bench)
+    assert "aperture r up to 0.57 (`dam`; `viseme-lerp` 0.50)" in summary
+    assert "closure lag +16 to +29 ms (`viseme-lerp` +17;" in summary
+    assert "Not measured yet" in BLOCKS["real-faces"](Bench(tmp_path / "empty"))

@@ -55,7 +55,7 @@ VARIABLE = {
 }
 NUMBERS = re.compile(r"\d+(?:\.\d+)?")
 # server_busy (an overloaded server), text and its audio (espeak-ng's own samples), resume.
-MAX_EXCUSED = 4
+MAX_EXCUSED = 6
 
 
 @dataclass(frozen=True)
