@@ -88,7 +88,7 @@ def run_on_virtual_time(
     for them in wall time."""
     clock = VirtualClock()
     loop = asyncio.SelectorEventLoop(_JumpingSelector(clock))
-    loop.time = clock.time  # type: ignore[method-assign]
+    loop.time = clock.time  # type: ignore[method-assign]  # the loop reads the fake clock
     try:
         return loop.run_until_complete(scenario(clock))
     finally:

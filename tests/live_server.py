@@ -13,7 +13,7 @@ from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, AnyStr
 
 import httpx
 from prometheus_client.multiprocess import MultiProcessCollector
@@ -81,7 +81,7 @@ def live_server(models_dir: Path, *extra: str) -> Iterator[LiveServer]:
             stop_process(process)
 
 
-def stop_process(process: subprocess.Popen) -> None:  # type: ignore[type-arg]
+def stop_process(process: subprocess.Popen[AnyStr]) -> None:
     """SIGTERM, then SIGKILL if the process has not exited within 15 s; then SIGKILL to any
     of its descendants still running (workers of a supervisor that was killed, or failed to
     stop them), so no server outlives its test."""
@@ -155,7 +155,8 @@ def per_worker(directory: Path, kind: str, name: str, **labels: str) -> dict[int
     values = {}
     for path in directory.glob(f"{kind}_*.db"):
         pid = int(path.stem.rsplit("_", 1)[1])
-        merged = MultiProcessCollector.merge([str(path)], accumulate=True)
+        # prometheus_client leaves merge unannotated, as lipstream.server.metrics notes too
+        merged = MultiProcessCollector.merge([str(path)], accumulate=True)  # type: ignore[no-untyped-call]
         values[pid] = sum(
             sample.value
             for metric in merged

@@ -1,4 +1,4 @@
-"""mypy runs on the code: a type error anywhere in the packages fails the suite."""
+"""Strict mypy runs on the packages and on tests/: a type error anywhere fails the suite."""
 
 from __future__ import annotations
 

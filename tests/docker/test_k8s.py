@@ -52,7 +52,10 @@ def test_a_mistyped_field_fails_validation() -> None:
 
 
 def container() -> dict[str, Any]:
-    [only] = by_kind()["Deployment"]["spec"]["template"]["spec"]["containers"]
+    containers: list[dict[str, Any]] = by_kind()["Deployment"]["spec"]["template"]["spec"][
+        "containers"
+    ]
+    [only] = containers
     return only
 
 

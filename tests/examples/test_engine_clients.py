@@ -81,9 +81,10 @@ def exchange(served: LiveServer, sent: list[dict[str, Any]]) -> list[dict[str, A
     """Send ``sent`` back to back on a JSON connection; the server's messages up to ``done``
     or a fatal error."""
     from websockets.sync.client import connect
+    from websockets.typing import Subprotocol
 
     received = []
-    with connect(served.ws, subprotocols=["lipstream.v1.json"], proxy=None) as ws:  # type: ignore[arg-type]
+    with connect(served.ws, subprotocols=[Subprotocol("lipstream.v1.json")], proxy=None) as ws:
         assert ws.subprotocol == "lipstream.v1.json"
         for message in sent:
             ws.send(json.dumps(message))

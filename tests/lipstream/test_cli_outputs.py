@@ -11,6 +11,7 @@ from typing import Any
 import pytest
 
 from lipstream import cli
+from lipstream.config import load_settings
 from tests.lipstream_client.fake_server import FakeServer
 
 COMMANDS = [
@@ -38,7 +39,7 @@ def test_no_results_option_means_a_file_under_lipstream_home(
 ) -> None:
     args = cli._parser().parse_args(argv)
     assert args.results is None
-    settings = cli.load_settings({"LIPSTREAM_HOME": str(tmp_path)})
+    settings = load_settings({"LIPSTREAM_HOME": str(tmp_path)})
     assert settings.results_file(args.results, name) == tmp_path / "bench" / name
     given = str(tmp_path / "mine.json")
     assert settings.results_file(given, name) == tmp_path / "mine.json"

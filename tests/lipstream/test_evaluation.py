@@ -21,7 +21,9 @@ def test_rms_error_matches_hand_computation() -> None:
 
 def test_aperture_is_jaw_minus_close_and_needs_both_channels() -> None:
     frames = np.array([[0.5, 0.2, 0.9], [0.3, 0.3, 0.0]])
-    np.testing.assert_allclose(lip_aperture(frames, ["jawOpen", "mouthClose", "x"]), [0.3, 0.0])
+    aperture = lip_aperture(frames, ["jawOpen", "mouthClose", "x"])
+    assert aperture is not None
+    np.testing.assert_allclose(aperture, [0.3, 0.0])
     assert lip_aperture(frames, ["jawOpen", "x", "y"]) is None
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pytest
 
@@ -21,9 +23,9 @@ from lipstream.model_checks import (
 WHERE = "m/arrays.npz: x"
 
 
-def _refused(call: object, *args: object, **kwargs: object) -> ModelStoreError:
+def _refused(call: Callable[..., object], *args: object, **kwargs: object) -> ModelStoreError:
     with pytest.raises(ModelStoreError) as caught:
-        call(*args, **kwargs)  # type: ignore[operator]
+        call(*args, **kwargs)
     assert caught.value.code == "model_invalid"
     return caught.value
 

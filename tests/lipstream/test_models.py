@@ -86,7 +86,7 @@ def test_an_unexpected_exception_sets_only_that_model_aside(
 ) -> None:
     lerp.save(tmp_path / "good")
     lerp.save(tmp_path / "odd")
-    real = VisemeLerpModel.from_arrays.__func__  # type: ignore[attr-defined]
+    real = VisemeLerpModel.from_arrays.__func__  # type: ignore[attr-defined]  # the classmethod's function
 
     def from_arrays(cls: type, manifest: object, arrays: object, path: Path) -> object:
         if path.name == "odd":

@@ -8,7 +8,7 @@ import pytest
 from lipstream.engines.base import SynthesisRequest, fill_gaps
 from lipstream.engines.viseme_lerp import VisemeLerpEngine
 from lipstream.errors import InvalidRequestError
-from lipstream.timeline import PhonemeSpan, coerce_spans
+from lipstream.timeline import PhonemeSpan, SpanLike, coerce_spans
 from tests.lipstream.engines.anime_graph.anime_synthetic import make_corpus
 
 
@@ -35,7 +35,7 @@ def test_spans_carry_an_optional_emotion_in_every_accepted_form() -> None:
 @pytest.mark.parametrize(
     "span", [("AA", 0.0, 0.1, "bored"), {"phoneme": "AA", "start": 0.0, "end": 0.1, "emotion": 3}]
 )
-def test_an_unknown_span_emotion_is_refused_where_it_stands(span: object) -> None:
+def test_an_unknown_span_emotion_is_refused_where_it_stands(span: SpanLike) -> None:
     with pytest.raises(InvalidRequestError) as caught:
         coerce_spans([("sil", 0.0, 0.05), span], first_index=4)
     assert (caught.value.code, caught.value.where) == ("unknown_emotion", "spans[5].emotion")

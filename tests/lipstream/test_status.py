@@ -24,7 +24,8 @@ def test_phase_reports_the_step_and_its_duration() -> None:
 
 
 def test_the_heartbeat_repeats_the_open_step_every_interval_of_silence() -> None:
-    clock, lines = Clock(), []
+    clock = Clock()
+    lines: list[str] = []
     heartbeat = Heartbeat(lines.append, interval_s=2.0, clock=clock)
     assert not heartbeat.beat()  # no step open
     heartbeat.report("training dam ...")
@@ -44,7 +45,8 @@ def test_the_heartbeat_repeats_the_open_step_every_interval_of_silence() -> None
 
 
 def test_every_open_step_is_named_with_its_whole_seconds() -> None:
-    clock, lines = Clock(), []
+    clock = Clock()
+    lines: list[str] = []
     heartbeat = Heartbeat(lines.append, interval_s=2.0, clock=clock)
     heartbeat.report("training 2 engines ...")
     heartbeat.report("training dam ...")
@@ -88,7 +90,8 @@ def test_a_start_up_watched_second_by_second_never_waits_longer_than_the_interva
 
 
 def test_the_heartbeat_thread_beats_until_stopped() -> None:
-    clock, lines = Clock(), []
+    clock = Clock()
+    lines: list[str] = []
     beaten = threading.Event()
 
     def report(line: str) -> None:

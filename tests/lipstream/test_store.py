@@ -36,7 +36,7 @@ def _manifest() -> ModelManifest:
 
 
 def test_round_trip_memory_maps_every_array(tmp_path: Path) -> None:
-    arrays = {
+    arrays: dict[str, np.ndarray] = {
         "poses": np.arange(12, dtype=np.float32).reshape(3, 4),
         "index": np.array([5, -1, 7], dtype=np.int64),
         "fortran": np.asfortranarray(np.arange(6, dtype=np.float64).reshape(2, 3)),
@@ -110,7 +110,8 @@ def _write_manifest(directory: Path, text: str) -> None:
 
 
 def _fields() -> dict[str, object]:
-    return json.loads(_manifest().to_json())
+    fields: dict[str, object] = json.loads(_manifest().to_json())
+    return fields
 
 
 @pytest.mark.parametrize(

@@ -28,6 +28,7 @@ from typing import Any, Self
 
 from websockets.asyncio.server import Server, ServerConnection, serve
 from websockets.http11 import Request, Response
+from websockets.typing import Subprotocol
 
 from lipstream_client import (
     SUBPROTOCOLS,
@@ -47,6 +48,7 @@ from lipstream_client import (
     encode,
     encoding_for_subprotocol,
 )
+from lipstream_client.messages import JsonValue
 
 CHANNELS = ("jawOpen", "mouthClose")
 DEFAULT_RETURN_MS = 100.0
@@ -111,7 +113,7 @@ class FakeServer:
             self._handle,
             "127.0.0.1",
             0,
-            subprotocols=list(SUBPROTOCOLS),  # type: ignore[arg-type]
+            subprotocols=[Subprotocol(name) for name in SUBPROTOCOLS],
             process_request=self._process_request,
             compression=None,
         )
@@ -203,11 +205,12 @@ class _Session:
             return
         if self.server.busy_starts > 0:
             self.server.busy_starts -= 1
-            details = {"reason": "loop_busy", "retry_after_ms": 50}
+            details: dict[str, JsonValue] = {"reason": "loop_busy", "retry_after_ms": 50}
             await self.send(ErrorMessage("server_busy", "busy", start.id, True, details))
             return
         offset = start.options.get("offset", 0.0)
-        self.requests[start.id] = _Request(start, float(offset))  # type: ignore[arg-type]
+        assert isinstance(offset, int | float), offset  # the tests' own option
+        self.requests[start.id] = _Request(start, float(offset))
         await self.send(
             Ready(start.id, start.engine, start.character, start.fps, CHANNELS, 0.0, "exact")
         )

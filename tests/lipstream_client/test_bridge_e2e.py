@@ -15,8 +15,15 @@ from pathlib import Path
 import pytest
 
 from lipstream.corpus import Corpus
-from lipstream_client.bridge import Bridge, BridgeInput
-from lipstream_client.sinks import BridgeError, LinesSink, LiveLinkEncoder, LiveLinkSink, UdpSender
+from lipstream_client.bridge import Bridge, BridgeInput, BridgeReport
+from lipstream_client.sinks import (
+    BridgeError,
+    LinesSink,
+    LiveLinkEncoder,
+    LiveLinkSink,
+    Sink,
+    UdpSender,
+)
 from lipstream_client.sinks.vmc import VmcSink
 from tests.bridge_server import FPS, TEXT, bridge_server, served
 from tests.helpers import eventually
@@ -38,8 +45,10 @@ def server(
         yield live
 
 
-def bridge(server: LiveServer, sink: object, preset: str | None, **options: object) -> object:
-    runner = Bridge(sink, SteppedClock(), **options)  # type: ignore[arg-type]
+def bridge(
+    server: LiveServer, sink: Sink, preset: str | None, wav: Path | None = None
+) -> BridgeReport:
+    runner = Bridge(sink, SteppedClock(), wav=wav)
     request = runner.run(
         server.ws,
         BridgeInput(text=TEXT),
@@ -51,7 +60,7 @@ def bridge(server: LiveServer, sink: object, preset: str | None, **options: obje
     try:
         return asyncio.run(request)
     finally:
-        sink.close()  # type: ignore[attr-defined]
+        sink.close()
 
 
 def test_a_sink_serves_one_request_after_another(server: LiveServer) -> None:
@@ -81,11 +90,11 @@ def test_text_in_live_link_packets_out(server: LiveServer, tmp_path: Path) -> No
         )
         report = bridge(server, sink, "arkit52", wav=tmp_path / "speech.wav")
         packets = [decode(receiver.recv(4096)) for _ in rows]
-    assert report.sent == report.frames == len(rows) and report.dropped == 0  # type: ignore[attr-defined]
+    assert report.sent == report.frames == len(rows) and report.dropped == 0
     assert len(expected.channels) == 52
     assert [packet.frame_number for packet in packets] == list(range(1000, 1000 + len(rows)))
     for packet, row in zip(packets, rows):
-        assert (packet.version, packet.count, packet.subject) == (6, 61, "Ada")
+        assert (packet.version, packet.curve_count, packet.subject) == (6, 61, "Ada")
         assert (packet.fps, packet.denominator) == (60, 1)
         curves = [0.0] * 61
         for name, value in zip(expected.channels, row):
@@ -107,7 +116,7 @@ def test_text_in_vmc_out_every_shape_then_apply_per_frame(server: LiveServer) ->
     with vmc_receiver() as (port, received):
         report = bridge(server, VmcSink(UdpSender("127.0.0.1", port)), "arkit52")
         eventually(lambda: received.count("/VMC/Ext/Blend/Apply") == len(rows), "every Apply")
-    assert report.sent == len(rows) and report.delivery.refused == 0  # type: ignore[attr-defined]
+    assert report.sent == len(rows) and report.delivery.refused == 0
     per_frame = 3 + len(expected.channels)
     frames = [
         received.messages[i : i + per_frame] for i in range(0, len(received.messages), per_frame)
@@ -130,8 +139,8 @@ def test_a_receiver_that_is_not_there_is_counted_and_the_bridge_finishes(
         port = probe.getsockname()[1]
     sink = LiveLinkSink(UdpSender("127.0.0.1", port), LiveLinkEncoder())
     report = bridge(server, sink, None)
-    assert report.sent == report.frames > 0  # type: ignore[attr-defined]
-    assert report.delivery.refused >= 1  # type: ignore[attr-defined]
+    assert report.sent == report.frames > 0
+    assert report.delivery.refused >= 1
 
 
 def test_an_unknown_preset_is_the_server_s_coded_error(server: LiveServer) -> None:

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from lipstream_client import AudioChunk, Done, DoneStats, Frames, Ready
-from lipstream_client.bridge import Bridge, BridgeInput
+from lipstream_client.bridge import Bridge, BridgeInput, BridgeReport
 from lipstream_client.float32 import pack_float32
 from lipstream_client.sinks import Delivery
 
@@ -80,7 +80,8 @@ def block(first: int, rows: list[list[float]]) -> Frames:
 ROWS = [[i / 16, 1 - i / 16] for i in range(10)]
 
 
-def run(bridge: Bridge, stream: KnownStream) -> object:
+def run(bridge: Bridge, stream: KnownStream) -> BridgeReport:
+    # KnownStream plays the client's Stream by duck typing: only what _forward reads.
     return asyncio.run(bridge._forward(stream, BridgeInput(text="x")))  # type: ignore[arg-type]
 
 
@@ -94,7 +95,7 @@ def test_frames_go_out_at_their_due_times_in_order() -> None:
     )
     assert [entry[1] for entry in sink.sent] == pytest.approx([i * PERIOD for i in range(10)])
     assert [entry[3] for entry in sink.sent] == ROWS  # sixteenths: exact in float32
-    assert report.sent == 10 and report.dropped == 0 and report.frames == 10  # type: ignore[attr-defined]
+    assert report.sent == 10 and report.dropped == 0 and report.frames == 10
 
 
 def test_a_frame_whose_successor_is_due_is_dropped_not_queued() -> None:
@@ -112,7 +113,7 @@ def test_a_frame_whose_successor_is_due_is_dropped_not_queued() -> None:
     assert [entry[0] for entry in sink.sent] == [0, 1, 2, 5, 6, 7, 8, 9]
     sent_at = {entry[0]: entry[2] - 100.0 for entry in sink.sent}
     assert sent_at[5] == pytest.approx(5.5 * PERIOD) and sent_at[6] == pytest.approx(6 * PERIOD)
-    assert report.sent == 8 and report.dropped == 2  # type: ignore[attr-defined]
+    assert report.sent == 8 and report.dropped == 2
 
 
 def test_the_speech_is_written_on_the_frames_clock(tmp_path: Path) -> None:
@@ -131,7 +132,7 @@ def test_the_speech_is_written_on_the_frames_clock(tmp_path: Path) -> None:
     assert pcm[: 2 * 800] == b"\x10\x00" * 800
     assert pcm[2 * 800 : 2 * 1200] == bytes(800)  # 0.10 s to 0.15 s: silence
     assert pcm[2 * 1200 :] == b"\x20\x00" * 400
-    assert report.speech_s == pytest.approx(0.2)  # type: ignore[attr-defined]
+    assert report.speech_s == pytest.approx(0.2)
 
 
 def test_the_player_hears_the_speech_from_the_first_frame(tmp_path: Path) -> None:

@@ -10,7 +10,7 @@ from typing import TypeVar
 
 import pytest
 
-from lipstream_client import EncodeError, End, Frames, PhonemeItem
+from lipstream_client import Done, EncodeError, Encoding, End, Frames, PhonemeItem
 from lipstream_client.client import AsyncClient, RequestOver, StreamResult
 from lipstream_client.exceptions import (
     ConnectionClosed,
@@ -51,8 +51,8 @@ def expected_rows(last_time: float, offset: float = 0.0) -> list[list[float]]:
     return [expected_row(index, offset) for index in range(count)]
 
 
-async def one_request(url: str, encoding: str, offset: float = 0.0) -> StreamResult:
-    async with AsyncClient(url, encoding=encoding) as client:  # type: ignore[arg-type]
+async def one_request(url: str, encoding: Encoding, offset: float = 0.0) -> StreamResult:
+    async with AsyncClient(url, encoding=encoding) as client:
         stream = await client.start("viseme-lerp", "demo", fps=FPS, options={"offset": offset})
         await stream.send_phonemes(PHONEMES[:2])
         await stream.send_phonemes([{"phoneme": "sil", "start": 0.3, "end": 0.42}])
@@ -61,7 +61,7 @@ async def one_request(url: str, encoding: str, offset: float = 0.0) -> StreamRes
 
 
 @pytest.mark.parametrize("encoding", ["msgpack", "json"])
-def test_async_request_gets_every_frame_in_order(server: FakeServer, encoding: str) -> None:
+def test_async_request_gets_every_frame_in_order(server: FakeServer, encoding: Encoding) -> None:
     result = run(lambda: one_request(server.url, encoding))
     assert result.ready.channels == CHANNELS and result.ready.fps == FPS
     assert [block.seq for block in result.frames] == list(range(len(result.frames)))
@@ -73,9 +73,11 @@ def test_async_request_gets_every_frame_in_order(server: FakeServer, encoding: s
 
 
 @pytest.mark.parametrize("encoding", ["msgpack", "json"])
-def test_sync_and_async_clients_receive_identical_frames(server: FakeServer, encoding: str) -> None:
+def test_sync_and_async_clients_receive_identical_frames(
+    server: FakeServer, encoding: Encoding
+) -> None:
     from_async = run(lambda: one_request(server.url, encoding, offset=0.125))
-    with Client(server.url, encoding, timeout=10) as client:  # type: ignore[arg-type]
+    with Client(server.url, encoding, timeout=10) as client:
         assert client.encoding == encoding
         stream = client.start("viseme-lerp", "demo", fps=FPS, options={"offset": 0.125})
         stream.send_phonemes(PHONEMES[:2])
@@ -118,7 +120,7 @@ def test_multiplexed_requests_each_get_their_own_frames(server: FakeServer) -> N
 
 
 def test_cancel_ends_with_the_frames_sent_so_far(server: FakeServer) -> None:
-    async def scenario() -> tuple[list[Frames], object]:
+    async def scenario() -> tuple[list[Frames], Done]:
         async with AsyncClient(server.url) as client:
             stream = await client.start("viseme-lerp", "demo", fps=FPS)
             await stream.send_phonemes([("AA", 0.0, 0.2)])
@@ -127,7 +129,7 @@ def test_cancel_ends_with_the_frames_sent_so_far(server: FakeServer) -> None:
             return blocks, await stream.done()
 
     blocks, done = run(scenario)
-    assert done.reason == "cancel" and done.stats.frames == 10  # type: ignore[attr-defined]
+    assert done.reason == "cancel" and done.stats.frames == 10
     assert FrameTimeline(FPS, blocks).rows() == [expected_row(i) for i in range(10)]
 
 
@@ -251,7 +253,7 @@ def test_bad_input_is_refused_locally_and_never_sent(server: FakeServer) -> None
             with pytest.raises(ValueError, match="still open"):
                 await client.start("viseme-lerp", "demo", id="x")
             with pytest.raises(ValueError, match="items\\[1\\]"):
-                await stream.send_phonemes([("AA", 0.0, 0.1), ["AA", 0.1, 0.2]])  # type: ignore[list-item]
+                await stream.send_phonemes([("AA", 0.0, 0.1), ["AA", 0.1, 0.2]])  # type: ignore[list-item]  # a list item on purpose: the check under test
             await stream.cancel()
             await stream.done()
             with pytest.raises(RequestOver):

@@ -11,7 +11,15 @@ import numpy as np
 import pytest
 
 from lipstream.engines.base import Model
-from lipstream_client import AsyncClient, Client, EncodeError, LipstreamServerError, StreamResult
+from lipstream_client import (
+    AsyncClient,
+    Client,
+    Done,
+    EncodeError,
+    Encoding,
+    LipstreamServerError,
+    StreamResult,
+)
 from lipstream_client.rest import RestClient, RestServerError
 from tests.helpers import return_frames
 from tests.live_server import LiveServer, live_server, save_models
@@ -55,10 +63,10 @@ async def request(
     url: str,
     engine: str,
     spans: list[tuple[str, float, float]],
-    encoding: str = "msgpack",
+    encoding: Encoding = "msgpack",
     chunk: int = 3,
 ) -> StreamResult:
-    async with AsyncClient(url, encoding=encoding) as client:  # type: ignore[arg-type]
+    async with AsyncClient(url, encoding=encoding) as client:
         stream = await client.start(engine, "demo", fps=FPS)
         for first in range(0, len(spans), chunk):
             await stream.send_phonemes(spans[first : first + chunk])
@@ -78,7 +86,7 @@ def test_server_lists_what_it_serves(served: LiveServer, trained_models: dict[st
 @pytest.mark.parametrize("encoding", ["msgpack", "json"])
 @pytest.mark.parametrize("engine", ["viseme-lerp", "anime-graph"])
 def test_streamed_frames_equal_offline_synthesis(
-    served: LiveServer, trained_models: dict[str, Model], engine: str, encoding: str
+    served: LiveServer, trained_models: dict[str, Model], engine: str, encoding: Encoding
 ) -> None:
     result = asyncio.run(request(served.ws, engine, LINE, encoding))
     model = trained_models[engine]
@@ -135,7 +143,7 @@ def test_multiplexed_requests_each_get_their_own_frames(
 def test_cancel_and_interrupt(served: LiveServer, trained_models: dict[str, Model]) -> None:
     at = 0.5
 
-    async def scenario() -> tuple[object, StreamResult]:
+    async def scenario() -> tuple[Done, StreamResult]:
         async with AsyncClient(served.ws) as client:
             cancelled = await client.start("viseme-lerp", "demo", fps=FPS)
             await cancelled.send_phonemes(LINE[:4])
@@ -147,7 +155,7 @@ def test_cancel_and_interrupt(served: LiveServer, trained_models: dict[str, Mode
             return cancel_done, await asyncio.wait_for(cut.collect(), 20)
 
     cancel_done, interrupted = asyncio.run(scenario())
-    assert cancel_done.reason == "cancel"  # type: ignore[attr-defined]
+    assert cancel_done.reason == "cancel"
     assert interrupted.done.reason == "interrupt"
     cut_index = math.ceil(at * FPS - 1e-9)
     assert any(block.first_frame == cut_index for block in interrupted.frames)
@@ -202,9 +210,9 @@ def test_loadtest_against_the_real_server(served: LiveServer, tmp_path: Path) ->
 
 
 @pytest.mark.parametrize("encoding", ["msgpack", "json"])
-def test_rest_synthesize_equals_the_stream(served: LiveServer, encoding: str) -> None:
+def test_rest_synthesize_equals_the_stream(served: LiveServer, encoding: Encoding) -> None:
     rest = RestClient(served.ws)
-    answer = rest.synthesize("viseme-lerp", "demo", LINE, fps=FPS, encoding=encoding)  # type: ignore[arg-type]
+    answer = rest.synthesize("viseme-lerp", "demo", LINE, fps=FPS, encoding=encoding)
     stream = asyncio.run(request(served.ws, "viseme-lerp", LINE))
     assert answer.channels == stream.channels and answer.ready.fps == FPS
     assert answer.stats.frames == stream.done.stats.frames == answer.frames.n_frames

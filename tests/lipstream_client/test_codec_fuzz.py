@@ -9,7 +9,7 @@ import msgpack
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from lipstream_client import ERROR_CODES, ProtocolError, decode, encode
+from lipstream_client import ERROR_CODES, Encoding, ProtocolError, decode, encode
 from lipstream_client.messages import MESSAGE_TYPES, Message
 from lipstream_client.wire import message_to_wire
 from tests.lipstream_client.strategies import messages
@@ -100,7 +100,8 @@ envelopes = st.fixed_dictionaries(
 def packed(value: Any) -> bytes | None:
     """msgpack bytes of ``value``, or None when msgpack cannot hold its integers."""
     try:
-        return msgpack.packb(value, use_bin_type=True)
+        packed_value: bytes = msgpack.packb(value, use_bin_type=True)
+        return packed_value
     except OverflowError:
         return None
 
@@ -173,9 +174,9 @@ def paths(node: Any, prefix: tuple[Any, ...] = ()) -> list[tuple[Any, ...]]:
 
 
 @st.composite
-def mutated_payloads(draw: st.DrawFn, encoding: str) -> dict[str, Any]:
+def mutated_payloads(draw: st.DrawFn, encoding: Encoding) -> dict[str, Any]:
     """A valid message's wire payload with one field replaced, removed or added."""
-    payload = message_to_wire(draw(messages()), encoding)  # type: ignore[arg-type]
+    payload = message_to_wire(draw(messages()), encoding)
     path = draw(st.sampled_from(paths(payload)))
     *parents, last = path
     node: Any = payload

@@ -242,4 +242,4 @@ def test_subprotocol_names_select_encodings() -> None:
     )
     assert select_subprotocol(["lipstream.v2.msgpack"]) is None
     with pytest.raises(ValueError, match="encoding"):
-        subprotocol_for("xml")  # type: ignore[arg-type]
+        subprotocol_for("xml")  # type: ignore[arg-type]  # an unknown encoding on purpose

@@ -17,6 +17,7 @@ from lipstream_client import (
     canonical_viseme,
     rename_channel,
 )
+from lipstream_client.messages import Naming
 
 CLIENT_SDK = Path(__file__).resolve().parents[2] / "client_sdk"
 PROTOCOL_DOC = Path(__file__).resolve().parents[2] / "docs" / "reference" / "protocol.md"
@@ -109,8 +110,8 @@ def test_the_clients_are_imported_on_first_use() -> None:
         ("Left", "suffix_lr", "Left"),
     ],
 )
-def test_rename_channel(arkit: str, naming: str, expected: str) -> None:
-    assert rename_channel(arkit, naming) == expected  # type: ignore[arg-type]
+def test_rename_channel(arkit: str, naming: Naming, expected: str) -> None:
+    assert rename_channel(arkit, naming) == expected
 
 
 def test_oculus_visemes_order_and_spellings() -> None:

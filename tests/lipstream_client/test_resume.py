@@ -20,7 +20,7 @@ from lipstream_client import (
     Start,
     Text,
 )
-from lipstream_client.resume import MAX_REPLAY_ITEMS, RequestLog, merged
+from lipstream_client.resume import MAX_REPLAY_ITEMS, RequestInput, RequestLog, merged
 
 FPS = 60.0
 SPANS = [
@@ -40,7 +40,7 @@ def frames_block(seq: int, first: int, n: int) -> Frames:
 def test_the_log_replays_the_whole_input_after_a_resume_that_names_what_is_held() -> None:
     log = RequestLog(Start("a", "viseme-lerp", "demo", fps=FPS, latency_budget_ms=300.0))
     audio = [AudioChunk("a", 16000, bytes([i]) * 4) for i in range(3)]
-    inputs = [
+    inputs: list[RequestInput] = [
         audio[0],
         audio[1],
         Phonemes("a", items(SPANS[:2])),
@@ -73,8 +73,9 @@ def test_the_log_replays_the_whole_input_after_a_resume_that_names_what_is_held(
 def test_merging_keeps_order_and_splits_long_runs() -> None:
     many = [Phonemes("a", (PhonemeItem("AA", i, i + 1),)) for i in range(MAX_REPLAY_ITEMS + 3)]
     out = list(merged([*many, End("a")]))
-    assert [len(m.items) for m in out[:2]] == [MAX_REPLAY_ITEMS, 3]  # type: ignore[union-attr]
-    flat = [item for m in out[:2] for item in m.items]  # type: ignore[union-attr]
+    runs = [m for m in out[:2] if isinstance(m, Phonemes)]
+    assert len(runs) == 2 and [len(m.items) for m in runs] == [MAX_REPLAY_ITEMS, 3]
+    flat = [item for m in runs for item in m.items]
     assert flat == [m.items[0] for m in many] and out[2] == End("a")
     rates = [AudioChunk("a", 16000, b"\0\0"), AudioChunk("a", 8000, b"\1\1")]
     assert list(merged(rates)) == rates  # a rate change is not merged (the server refuses it)
@@ -92,7 +93,8 @@ def test_a_text_request_replays_its_text_and_names_the_speech_chunks_it_holds() 
     log.record(said[1])
     log.record(End("a"))
     start, *replayed = log.replay()
-    assert start.resume == Resume(frames=5, seq=1, fidelity=None, audio=3)  # type: ignore[union-attr]
+    assert isinstance(start, Start)
+    assert start.resume == Resume(frames=5, seq=1, fidelity=None, audio=3)
     assert replayed == [*said, End("a")] and log.resumable
 
 

@@ -83,7 +83,8 @@ def schema_accepts(payload: Any) -> bool:
     message_type = payload.get("type") if isinstance(payload, dict) else None
     if not isinstance(message_type, str) or message_type not in MESSAGE_TYPES:
         return False
-    return validator(message_type).is_valid(payload)
+    valid: bool = validator(message_type).is_valid(payload)
+    return valid
 
 
 @pytest.mark.parametrize(
@@ -186,7 +187,7 @@ replacements = st.recursive(
 
 @st.composite
 def mutated(draw: st.DrawFn) -> dict[str, Any]:
-    payload = json.loads(json.dumps(message_to_wire(draw(messages()), "json")))
+    payload: dict[str, Any] = json.loads(json.dumps(message_to_wire(draw(messages()), "json")))
     for _ in range(draw(st.integers(1, 2))):
         path = draw(st.sampled_from(paths(payload)))
         node: Any = payload

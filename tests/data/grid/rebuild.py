@@ -39,13 +39,16 @@ def transcode(source: Path, target: Path) -> None:
         video.width, video.height, video.pix_fmt = video_in.width, video_in.height, "yuv420p"
         audio = out.add_stream("aac", rate=audio_in.sample_rate, layout="mono")
         mono = av.AudioResampler(format="fltp", layout="mono", rate=audio_in.sample_rate)
+        rate = video_in.average_rate
+        if rate is None:
+            raise ValueError(f"{source}: the video stream has no average frame rate")
         for index, frame in enumerate(pictures.decode(video_in)):
-            frame.pts, frame.time_base = index, 1 / Fraction(video_in.average_rate)
+            frame.pts, frame.time_base = index, 1 / Fraction(rate)
             out.mux(video.encode(frame))
         out.mux(video.encode(None))
         samples = 0
-        for frame in sound.decode(audio_in):
-            for piece in mono.resample(frame):
+        for sound_frame in sound.decode(audio_in):
+            for piece in mono.resample(sound_frame):
                 piece.pts = samples  # in samples: the encoder's time base is 1 / sample rate
                 samples += piece.samples
                 out.mux(audio.encode(piece))

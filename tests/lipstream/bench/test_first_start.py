@@ -35,6 +35,8 @@ def test_the_steps_are_the_done_lines() -> None:
 
 def test_the_longest_silence_leaves_out_the_probes_own_log_lines() -> None:
     # spoken at 0.3, 0.31, 2.1, 2.2, 3.7, 5.9, 6.0, then ready at 7.5: the gap 3.7 -> 5.9
-    assert abs(longest_silence(OUTPUT, until=7.5) - 2.2) < 1e-9  # type: ignore[operator]
-    assert abs(longest_silence(OUTPUT, until=9.0) - 3.0) < 1e-9  # type: ignore[operator]
+    before_ready = longest_silence(OUTPUT, until=7.5)
+    assert before_ready is not None and abs(before_ready - 2.2) < 1e-9
+    later = longest_silence(OUTPUT, until=9.0)
+    assert later is not None and abs(later - 3.0) < 1e-9
     assert longest_silence([], until=1.0) is None

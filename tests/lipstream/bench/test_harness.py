@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -12,12 +14,12 @@ from lipstream.engines.viseme_lerp import VisemeLerpEngine
 
 
 @pytest.fixture(scope="module")
-def results(small_demo_corpus: Corpus) -> dict:
+def results(small_demo_corpus: Corpus) -> dict[str, Any]:
     return run_bench(small_demo_corpus, [BASELINE], engine_benches=False)
 
 
 def test_baseline_rms_matches_a_direct_computation(
-    results: dict, small_demo_corpus: Corpus
+    results: dict[str, Any], small_demo_corpus: Corpus
 ) -> None:
     train, heldout = small_demo_corpus.split()
     model = VisemeLerpEngine().fit(train)
@@ -32,14 +34,14 @@ def test_baseline_rms_matches_a_direct_computation(
     assert row["rms_ratio"] == 1.0 and row["speed_ratio"] == 1.0
 
 
-def test_recorded_closure_and_threshold_are_reported(results: dict) -> None:
+def test_recorded_closure_and_threshold_are_reported(results: dict[str, Any]) -> None:
     recorded = results["recorded"]
     assert 0.0 < recorded["closure_threshold"] < 0.05
     assert recorded["closure_rate"] == pytest.approx(1.0, abs=0.1)
     assert results["corpus"]["heldout_utterances"] >= 2
 
 
-def test_table_names_every_engine_benchmarked(results: dict) -> None:
+def test_table_names_every_engine_benchmarked(results: dict[str, Any]) -> None:
     table = format_table(results)
     assert table.splitlines()[2].startswith(BASELINE)
     assert "recorded" in table.splitlines()[-1]
@@ -47,7 +49,7 @@ def test_table_names_every_engine_benchmarked(results: dict) -> None:
 
 
 def test_rms_per_emotion_is_the_mean_of_each_emotions_lines(
-    results: dict, small_demo_corpus: Corpus
+    results: dict[str, Any], small_demo_corpus: Corpus
 ) -> None:
     _, heldout = small_demo_corpus.split()
     row = results["engines"][0]

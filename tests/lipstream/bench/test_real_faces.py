@@ -64,7 +64,7 @@ def _phones(closure_start_frame: int) -> list[PhonemeSpan]:
 
 def _real_aperture(n: int, shut: range, wobble: float) -> np.ndarray:
     """Open at 0.5 (with a wobble so r is defined), shut at 0 for the frames of ``shut``."""
-    aperture = 0.5 + wobble * np.sin(np.arange(n) * 0.7)
+    aperture: np.ndarray = 0.5 + wobble * np.sin(np.arange(n) * 0.7)
     aperture[list(shut)] = 0.0
     return aperture
 

@@ -61,8 +61,8 @@ def write_clip(
             step = 1024
             for start in range(0, len(sound), step):
                 chunk = sound[start : start + step].astype(np.float32)[None, :]
-                frame = av.AudioFrame.from_ndarray(chunk, format="flt", layout="mono")
-                frame.sample_rate, frame.pts = rate, start
-                out.mux(audio.encode(frame))
+                sound_frame = av.AudioFrame.from_ndarray(chunk, format="flt", layout="mono")
+                sound_frame.sample_rate, sound_frame.pts = rate, start
+                out.mux(audio.encode(sound_frame))
             out.mux(audio.encode(None))
     return path

@@ -17,7 +17,7 @@ def grid_words(stem: str) -> list[str]:
     """The six words a GRID file name encodes (``swwp2s`` -> set white with p two soon)."""
     if len(stem) != 6:
         raise ValueError(f"a GRID name has six characters, not {stem!r}")
-    command, colour, preposition, letter, digit, adverb = stem
+    command, colour, preposition, letter, digit, adverb = tuple(stem)
     return [
         COMMANDS[command],
         COLOURS[colour],

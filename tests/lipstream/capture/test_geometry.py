@@ -44,7 +44,7 @@ REST = rest_face()
 
 
 def posed(face: np.ndarray, rotation: np.ndarray, scale: float, shift: np.ndarray) -> np.ndarray:
-    return scale * face @ rotation.T + shift
+    return np.asarray(scale * face @ rotation.T + shift)
 
 
 def random_pose(count: int) -> list[tuple[np.ndarray, float, np.ndarray]]:

@@ -27,7 +27,7 @@ PHONES: list[Interval] = [(0.0, 0.2, ""), (0.2, 0.45, "HH"), (0.5, 0.8, "AY1"), 
 
 def linear_frames(times: np.ndarray) -> np.ndarray:
     """The generating function: channel c is INTERCEPTS[c] + SLOPES[c] * t, shape (n, 3)."""
-    return INTERCEPTS[None, :] + SLOPES[None, :] * np.asarray(times)[:, None]
+    return np.asarray(INTERCEPTS[None, :] + SLOPES[None, :] * np.asarray(times)[:, None])
 
 
 def write_frames(

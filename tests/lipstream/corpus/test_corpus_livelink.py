@@ -147,7 +147,7 @@ def test_midnight_wrap_and_bad_timecode(tmp_path: Path) -> None:
                     "00:00:00:00.500,2,0.3,0.0\n")  # fmt: skip
     times, frames, channels = read_livelink_csv(path)
     np.testing.assert_allclose(times, [0.0, 1 / 60, 2 / 60], atol=1e-9)
-    np.testing.assert_array_equal(frames[:, 0], np.float32([0.1, 0.2, 0.3]))
+    np.testing.assert_array_equal(frames[:, 0], np.array([0.1, 0.2, 0.3], dtype=np.float32))
     assert channels == ("jawOpen", "headYaw")
     path.write_text(header + "10:00:00:01.000,2,0.1,0.0\n10:00:00:61.000,2,0.2,0.0\n")
     with pytest.raises(CorpusError, match=r"late\.csv:line 3.*out of range"):

@@ -34,7 +34,7 @@ def _channel(frames: np.ndarray, name: str) -> np.ndarray:
 
 
 def _lips_apart(frames: np.ndarray) -> np.ndarray:
-    return _channel(frames, "jawOpen") - _channel(frames, "mouthClose")
+    return np.asarray(_channel(frames, "jawOpen") - _channel(frames, "mouthClose"))
 
 
 def _frame(time_s: float) -> int:

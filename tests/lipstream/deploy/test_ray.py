@@ -70,7 +70,8 @@ def proxy(lerp_dir: Path) -> Iterator[str]:
         serve.run(application, name=APPLICATION_NAME, route_prefix="/")
         yield f"http://127.0.0.1:{port}"
     finally:
-        serve.shutdown()
+        # unannotated in ray; absent (so Any) where ray is not installed, as in lipstream.deploy.ray
+        serve.shutdown()  # type: ignore[no-untyped-call, unused-ignore]
         ray.shutdown()
 
 
@@ -111,7 +112,9 @@ def test_the_deployment_takes_its_limits_from_the_server_settings(proxy: str) ->
     assert status.status == "HEALTHY"
     config = serve.get_app_handle(APPLICATION_NAME)  # the application is running
     assert config is not None
-    details = serve.context._get_global_client().get_serve_details()
+    serve_client = serve.context._get_global_client()
+    assert serve_client is not None
+    details = serve_client.get_serve_details()
     deployment = details["applications"][APPLICATION_NAME]["deployments"][DEPLOYMENT_NAME]
     options = deployment["deployment_config"]
     assert options["num_replicas"] == REPLICAS

@@ -68,4 +68,5 @@ def test_bad_stored_statistics_are_refused_naming_the_array(name: str, value: np
     with pytest.raises(ModelStoreError) as caught:
         DurationModel.from_arrays(ArrayReader(arrays, "arrays.npz"))
     assert caught.value.code == "model_invalid"
-    assert caught.value.where.startswith("arrays.npz: duration_")
+    where = caught.value.where
+    assert where is not None and where.startswith("arrays.npz: duration_")

@@ -10,6 +10,7 @@ unchanged models still load.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -34,10 +35,10 @@ def saved(
     return {name: directory / name for name in trained_models}
 
 
-def _variant(source: Path, target: Path, name: str, change: object) -> None:
+def _variant(source: Path, target: Path, name: str, change: Callable[[np.ndarray], object]) -> None:
     """``source``'s model with array ``name`` changed by ``change(array)`` (in place)."""
     arrays = {key: np.array(value) for key, value in load_arrays(source).items()}
-    change(arrays[name])  # type: ignore[operator]
+    change(arrays[name])
     save_model_dir(target, read_manifest(source), arrays)
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pytest
 
@@ -19,10 +21,10 @@ CHUNK = RATE // 2  # 0.5 s, as a client streams it
     [(mfcc, DEFAULT_MFCC.n_coefficients, 0), (speech_features, 28, 1)],
 )
 def test_streamed_audio_holds_features_and_a_window_and_gives_the_offline_frames(
-    analyse: object, width: int, lookback: int
+    analyse: Callable[..., np.ndarray], width: int, lookback: int
 ) -> None:
     samples = np.random.default_rng(1).normal(scale=0.1, size=RATE * SECONDS).astype(np.float32)
-    stream = StreamedFeatures(DEFAULT_MFCC, width, analyse, lookback)  # type: ignore[arg-type]
+    stream = StreamedFeatures(DEFAULT_MFCC, width, analyse, lookback)
     held = []
     for first in range(0, len(samples), CHUNK):
         chunk = samples[first : first + CHUNK]
@@ -30,7 +32,7 @@ def test_streamed_audio_holds_features_and_a_window_and_gives_the_offline_frames
         stream.add(Audio(chunk, RATE))
         held.append(stream.held_bytes)
         assert held[-1] <= bound
-    offline = analyse(samples, RATE)  # type: ignore[operator]
+    offline = analyse(samples, RATE)
     streamed = stream.through(len(offline))
     np.testing.assert_array_equal(streamed, offline)
     # The whole audio is 15 MB as float32; the stream holds its features (a buffer at most

@@ -12,7 +12,9 @@ import pytest
 
 from lipstream.corpus import Corpus, Utterance
 from lipstream.engines import load_model
-from lipstream.engines.viseme_lerp import KAPPAS, VisemeLerpEngine
+from lipstream.engines.base import SynthesisRequest
+from lipstream.engines.damped_fit import KAPPAS
+from lipstream.engines.viseme_lerp import VisemeLerpEngine, VisemeLerpModel
 from lipstream.errors import InvalidRequestError, ModelStoreError
 from lipstream.output.visemes import get_scheme
 from lipstream.store import save_model_dir
@@ -112,7 +114,8 @@ def test_a_corrupt_stored_model_is_refused_naming_the_array_or_field(
 ) -> None:
     model = VisemeLerpEngine().fit(corpus)
     model.save(tmp_path)
-    assert np.array_equal(load_model(tmp_path).poses, model.poses)  # type: ignore[attr-defined]
+    loaded = load_model(tmp_path)
+    assert isinstance(loaded, VisemeLerpModel) and np.array_equal(loaded.poses, model.poses)
     poses, hyperparameters = corrupt(model.poses, dict(model.manifest.hyperparameters))
     manifest = replace(model.manifest, hyperparameters=hyperparameters)
     save_model_dir(tmp_path, manifest, {**model.arrays(), "poses": poses})
@@ -125,7 +128,8 @@ def test_a_corrupt_stored_model_is_refused_naming_the_array_or_field(
 def test_a_scheme_alias_still_loads(corpus: Corpus, tmp_path: Path) -> None:
     model = VisemeLerpEngine(scheme="OVR").fit(corpus)
     model.save(tmp_path)
-    assert load_model(tmp_path).scheme.name == "oculus15"  # type: ignore[attr-defined]
+    loaded = load_model(tmp_path)
+    assert isinstance(loaded, VisemeLerpModel) and loaded.scheme.name == "oculus15"
 
 
 # The toy corpus's spans: sil 0.2, 0.2, 0.1, 0.2 s (4, enough for its own statistics); AA,
@@ -188,7 +192,7 @@ def test_bad_damped_options_get_a_coded_error(
 ) -> None:
     model = VisemeLerpEngine().fit(corpus)
     with pytest.raises(InvalidRequestError) as caught:
-        model.start(fps=FPS, **options)
+        model.start(SynthesisRequest(fps=FPS, options=options))
     assert caught.value.code == "invalid_request" and caught.value.where == where
 
 

@@ -21,7 +21,7 @@ ELEVENLABS = {
         "character_end_times_seconds": [0.116, 0.186, 0.232, 0.279, 0.325, 0.371, 0.418, 0.464, 0.557],
     },
 }  # fmt: skip
-AZURE = [
+AZURE: list[dict[str, int | str]] = [
     {"audioOffset": 500000, "duration": 3125000, "text": "Hello", "textOffset": 0,
      "wordLength": 5, "boundaryType": "WordBoundary"},
     {"audioOffset": 3625000, "duration": 0, "text": ",", "textOffset": 5, "wordLength": 1,
@@ -229,7 +229,7 @@ def test_an_unknown_ipa_phoneme_names_it() -> None:
 
 
 def test_elevenlabs_websocket_chunks_in_ms_with_durations() -> None:
-    chunk = {
+    chunk: dict[str, Any] = {
         "audio": "",
         "isFinal": None,
         "normalizedAlignment": {
@@ -244,7 +244,7 @@ def test_elevenlabs_websocket_chunks_in_ms_with_durations() -> None:
         ("Hi", 0.0, 0.186),
         ("you", 0.232, pytest.approx(0.418)),
     ]
-    chunk["normalizedAlignment"]["charDurationsMs"][1] = -5  # type: ignore[index]
+    chunk["normalizedAlignment"]["charDurationsMs"][1] = -5
     error = _error(chunk)
     assert (error.code, error.where) == ("invalid_times", "normalizedAlignment.charDurationsMs[1]")
 

@@ -4,6 +4,7 @@ it survives a save and load, and a damaged file is a coded error naming it."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -93,10 +94,10 @@ def test_saved_and_loaded_it_spreads_the_same(
     ],
 )  # fmt: skip
 def test_a_damaged_duration_model_is_model_invalid_naming_the_file(
-    espeak_durations: WordDurationModel, tmp_path: Path, damage: object, file: str
+    espeak_durations: WordDurationModel, tmp_path: Path, damage: Callable[[Path], object], file: str
 ) -> None:
     espeak_durations.save(tmp_path)
-    damage(tmp_path)  # type: ignore[operator]
+    damage(tmp_path)
     with pytest.raises(LipstreamError) as caught:
         WordDurationModel.load(tmp_path)
     assert caught.value.code == "model_invalid"

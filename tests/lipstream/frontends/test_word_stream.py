@@ -4,6 +4,7 @@ comes from the next word, and whatever is held is released at the end."""
 from __future__ import annotations
 
 from lipstream.frontends.formats import parse_timings
+from lipstream.frontends.timings import SpeechTimings
 from lipstream.frontends.word_stream import WordStream
 
 
@@ -15,8 +16,8 @@ def _chars(text: str, start: float, step: float = 0.1) -> dict[str, object]:
     }
 
 
-def _words(chunks: list[list[object]]) -> list[tuple[str, float, float | None]]:
-    return [(w.text, w.start, w.end) for chunk in chunks for t in chunk for w in t.words]  # type: ignore[attr-defined]
+def _words(chunks: list[list[SpeechTimings]]) -> list[tuple[str, float, float | None]]:
+    return [(w.text, w.start, w.end) for chunk in chunks for t in chunk for w in t.words]
 
 
 def test_a_word_cut_between_character_chunks_is_joined() -> None:

@@ -23,7 +23,7 @@ from lipstream.loadtest.load import (
     loadtest,
     planned_duration_s,
 )
-from lipstream.loadtest.stats import overall_summary, percentile, summarize
+from lipstream.loadtest.stats import Summary, overall_summary, percentile, summarize
 from lipstream.phonemes import PHONEMES
 from lipstream.results_file import write_results
 from tests.helpers import run_cli
@@ -55,7 +55,7 @@ def test_percentile_matches_numpy_default() -> None:
 
 def test_empty_sample_gives_nulls_and_overall_summary_follows_a2f() -> None:
     assert set(summarize([]).values()) == {None}
-    clips = [
+    clips: list[dict[str, Summary]] = [
         {
             "first_packet_latency_ms": {"p99": 12.0, "mean": 4.0},
             "fps": {"p1": 58.0},
@@ -72,7 +72,7 @@ def test_empty_sample_gives_nulls_and_overall_summary_follows_a2f() -> None:
             "frame_lag_ms": {"p99": None, "max": None},
         },
     ]
-    assert overall_summary(clips) == {  # type: ignore[arg-type]
+    assert overall_summary(clips) == {
         "worst_p99_first_packet_latency_ms": 30.0,
         "mean_first_packet_latency_ms": 6.0,
         "lowest_p1_fps": 55.5,
@@ -142,7 +142,7 @@ def test_other_targets_are_refused(url: str) -> None:
     ],
 )
 def test_counts_and_duration_are_bounded(change: dict[str, object], flag: str) -> None:
-    config = dataclasses.replace(LoadTestConfig(), **change)  # type: ignore[arg-type]
+    config = dataclasses.replace(LoadTestConfig(), **change)  # type: ignore[arg-type]  # bad values on purpose
     with pytest.raises(InvalidRequestError) as refused:
         check_config(config)
     assert refused.value.where == flag

@@ -114,7 +114,7 @@ def test_a_short_soak_reports_every_part_and_the_valid_sessions_complete(
     ],
 )
 def test_bounds_name_the_flag(change: dict[str, object], flag: str) -> None:
-    config = dataclasses.replace(SoakConfig(), **change)  # type: ignore[arg-type]
+    config = dataclasses.replace(SoakConfig(), **change)  # type: ignore[arg-type]  # bad values on purpose
     with pytest.raises(LipstreamError) as refused:
         check_soak(config)
     assert refused.value.where == flag
@@ -132,7 +132,8 @@ def test_the_cli_refuses_a_remote_target_with_one_line(tmp_path: Path) -> None:
 def test_memory_comes_from_proc_or_from_the_metrics_exposition() -> None:
     status = Path(f"/proc/{os.getpid()}/status").read_text()
     own_kib = next(int(line.split()[1]) for line in status.splitlines() if line[:6] == "VmRSS:")
-    assert process_tree_rss(os.getpid()) >= 0.5 * own_kib * 1024
+    rss = process_tree_rss(os.getpid())
+    assert rss is not None and rss >= 0.5 * own_kib * 1024
     exposition = (
         "# HELP process_resident_memory_bytes Resident memory size in bytes.\n"
         "# TYPE process_resident_memory_bytes gauge\n"

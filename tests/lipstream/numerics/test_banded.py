@@ -23,7 +23,9 @@ def window_matrix(stencil: np.ndarray, frames: int) -> np.ndarray:
     return np.array(rows).reshape(-1, frames)
 
 
-def dense_solution(windows, means, precisions) -> np.ndarray:
+def dense_solution(
+    windows: list[np.ndarray], means: np.ndarray, precisions: np.ndarray
+) -> np.ndarray:
     """Stack every window row over time ⊗ dimensions and solve the weighted normal equations."""
     _, frames, dims = means.shape
     normal = np.zeros((frames * dims, frames * dims))

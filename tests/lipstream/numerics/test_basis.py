@@ -16,7 +16,7 @@ def _frames(seed: int = 0) -> np.ndarray:
     loud = rng.normal(size=(4000, 2)) * [3.0, 2.0]
     quiet = rng.normal(size=(4000, 1)) * 0.3
     mixing = np.array([[1.0, 0.5, 0.0, 0.2, 0.0], [0.0, 0.4, 1.0, 0.7, 0.0]])
-    return loud @ mixing + quiet @ np.array([[0.0, 0.0, 0.0, 0.0, 1.0]])
+    return np.asarray(loud @ mixing + quiet @ np.array([[0.0, 0.0, 0.0, 0.0, 1.0]]))
 
 
 def test_channel_shares_match_the_reconstruction_of_each_channel() -> None:

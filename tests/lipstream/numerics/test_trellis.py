@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -21,7 +22,9 @@ def _tiny_model(seed: int, states: int = 3, frames: int = 6) -> tuple[np.ndarray
     return start, transition, emission
 
 
-def _paths(start: np.ndarray, transition: np.ndarray, emission: np.ndarray):
+def _paths(
+    start: np.ndarray, transition: np.ndarray, emission: np.ndarray
+) -> Iterator[tuple[np.ndarray, float]]:
     """Every path with its joint log-probability log P(path, X)."""
     with np.errstate(divide="ignore"):
         log_start, log_transition = np.log(start), np.log(transition)

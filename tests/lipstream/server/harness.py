@@ -194,3 +194,10 @@ def frame_rows(messages: list[Message]) -> dict[int, list[float]]:
             for offset, row in enumerate(message.rows()):
                 rows[message.first_frame + offset] = row
     return rows
+
+
+def only_errors(messages: list[Message]) -> list[ErrorMessage]:
+    """``messages``, every one of which must be an ``ErrorMessage``."""
+    errors = [message for message in messages if isinstance(message, ErrorMessage)]
+    assert len(errors) == len(messages), messages
+    return errors

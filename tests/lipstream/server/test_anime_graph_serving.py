@@ -8,9 +8,11 @@ import math
 import numpy as np
 import pytest
 
+from lipstream.engines.anime_graph import AnimeGraphModel
 from lipstream.engines.base import frames_before
 from lipstream.server.catalog import Catalog
 from lipstream_client import End, ErrorMessage, PhonemeItem, Phonemes, Ready, Start, decode, encode
+from lipstream_client.messages import JsonValue
 from tests.lipstream.server.test_session import frames_of, new_session, play, returning
 
 ENGINE = "anime-graph"
@@ -41,8 +43,14 @@ WORDS = [
 ]
 
 
-def test_the_catalog_measures_every_rung_of_the_declared_ladder(catalog: Catalog) -> None:
+def _demo(catalog: Catalog) -> AnimeGraphModel:
     model = catalog.model(ENGINE, "demo")
+    assert isinstance(model, AnimeGraphModel)
+    return model
+
+
+def test_the_catalog_measures_every_rung_of_the_declared_ladder(catalog: Catalog) -> None:
+    model = _demo(catalog)
     ladder = catalog.ladder(model)
     assert [estimate.rung for estimate in ladder] == list(model.fidelity_ladder())
     # Hand-computed in test_budget.DEMO_LOOKAHEAD_MS: 108.333 ms of grid sample and filter,
@@ -59,7 +67,7 @@ def test_the_catalog_measures_every_rung_of_the_declared_ladder(catalog: Catalog
 
 @pytest.mark.parametrize("lower", [1, 2, 3, 4])
 def test_a_budget_between_two_rungs_gets_the_lower_one(catalog: Catalog, lower: int) -> None:
-    model = catalog.model(ENGINE, "demo")
+    model = _demo(catalog)
     ladder = catalog.ladder(model)
     if lower >= len(ladder):
         pytest.skip(f"the demo model's ladder has {len(ladder)} rungs")
@@ -84,12 +92,12 @@ def test_a_budget_between_two_rungs_gets_the_lower_one(catalog: Catalog, lower: 
     assert (ready.fidelity, ready.lookahead_ms) == (chosen.rung.name, chosen.lookahead_ms)
     # The rung's options override the client's (max_tile), the client's others stay.
     assert ready.options == {"graph": "unclustered", **chosen.rung.options}
-    expected = model.synthesize(WORDS, fps=60, **ready.options).frames
+    expected = model.synthesize(WORDS, fps=60, audio=None, emotion=None, **ready.options).frames
     np.testing.assert_array_equal(frames_of(out)[: -returning(60)], expected)
 
 
 def test_without_a_budget_the_top_rung_serves(catalog: Catalog) -> None:
-    model = catalog.model(ENGINE, "demo")
+    model = _demo(catalog)
     top = catalog.ladder(model)[0]
     [ready] = play(new_session(catalog), Start("a", ENGINE, "demo"))
     assert isinstance(ready, Ready)
@@ -108,8 +116,8 @@ def test_without_a_budget_the_top_rung_serves(catalog: Catalog) -> None:
     ],
 )
 def test_options_that_leave_every_rung_are_served_as_custom_with_their_own_lookahead(
-    catalog: Catalog, options: dict, lookahead_ms: float
-) -> None:  # type: ignore[type-arg]
+    catalog: Catalog, options: dict[str, JsonValue], lookahead_ms: float
+) -> None:
     [ready] = play(new_session(catalog), Start("a", ENGINE, "demo", options=options))
     assert isinstance(ready, Ready) and ready.fidelity == "custom"
     assert ready.lookahead_ms == pytest.approx(lookahead_ms, abs=1e-3)
@@ -123,7 +131,7 @@ def test_an_uncapped_tile_may_wait_for_the_longest_request(catalog: Catalog) -> 
 
 
 def test_a_client_repeating_the_top_rungs_options_gets_that_rung(catalog: Catalog) -> None:
-    top = catalog.ladder(catalog.model(ENGINE, "demo"))[0]
+    top = catalog.ladder(_demo(catalog))[0]
     [ready] = play(
         new_session(catalog),
         Start("a", ENGINE, "demo", options={**top.rung.options, "blend": True}),
@@ -133,7 +141,7 @@ def test_a_client_repeating_the_top_rungs_options_gets_that_rung(catalog: Catalo
 
 
 def test_a_budget_below_the_lowest_rung_names_the_smallest_feasible_one(catalog: Catalog) -> None:
-    model = catalog.model(ENGINE, "demo")
+    model = _demo(catalog)
     lowest = catalog.ladder(model)[-1]
     smallest = math.ceil(lowest.worst_case_ms)
     session = new_session(catalog)
@@ -149,7 +157,7 @@ def test_a_budget_below_the_lowest_rung_names_the_smallest_feasible_one(catalog:
 
 
 def test_each_phonemes_emotion_reaches_the_engine(catalog: Catalog) -> None:
-    model = catalog.model(ENGINE, "demo")
+    model = _demo(catalog)
     emotions = ["happy"] * 5 + [None] * 4 + ["sad"] * 5
     items = tuple(PhonemeItem(*word, emotion) for word, emotion in zip(WORDS, emotions))
     # Over the wire and back, in three messages, with the request's own emotion angry.
@@ -178,7 +186,7 @@ def test_each_phonemes_emotion_reaches_the_engine(catalog: Catalog) -> None:
 
 
 def test_the_emotion_of_each_phoneme_changes_the_frames_of_its_run_only(catalog: Catalog) -> None:
-    model = catalog.model(ENGINE, "demo")
+    model = _demo(catalog)
     first = len(WORDS) - 5
     spans = [(*word, "happy" if index >= first else None) for index, word in enumerate(WORDS)]
     out = play(

@@ -9,12 +9,21 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pytest
 
+from lipstream.audio import Audio
 from lipstream.engines.base import CallCost, Lookahead, Rung, SynthesisRequest
+from lipstream.engines.viseme_lerp import VisemeLerpModel
 from lipstream.errors import ModelStoreError
 from lipstream.phonemes import SILENCE
-from lipstream.server.budget import BudgetInfeasible, choose_rung, estimate, lookahead_ms
+from lipstream.server.budget import (
+    BudgetInfeasible,
+    RungEstimate,
+    choose_rung,
+    estimate,
+    lookahead_ms,
+)
 from lipstream.server.calibration import CALIBRATION_PHONEMES, calibration_spans, measure
 from lipstream.server.catalog import Catalog, CatalogError
+from lipstream.timeline import PhonemeSpan
 
 if TYPE_CHECKING:
     from lipstream.engines.base import Model
@@ -24,7 +33,7 @@ FIXED_LAG = Rung("fixed_lag", Lookahead(seconds=0.05, phonemes=1), {"lag": 1})
 GREEDY = Rung("greedy", Lookahead())
 
 
-def ladder() -> list:  # type: ignore[type-arg]
+def ladder() -> list[RungEstimate]:
     # max phoneme 200 ms, margin 5 ms: exact 100 + 800 + 12 + 5 = 917 ms,
     # fixed_lag 50 + 200 + 3 + 5 = 258 ms, greedy 0 + 0 + 20.4 + 5 = 25.4 ms.
     return [
@@ -77,7 +86,7 @@ class _ChargedSynthesizer:
     def __init__(self, real: Any, clock: _Clock, fps: float) -> None:
         self.real, self.clock, self.fps, self.charged_frames = real, clock, fps, 0
 
-    def feed(self, spans: list, audio: object = None) -> None:  # type: ignore[type-arg]
+    def feed(self, spans: list[PhonemeSpan], audio: Audio | None = None) -> None:
         self.real.feed(spans, audio)
         frames = math.floor(spans[-1].end * self.fps + 1e-9) + 1  # frames i with i/fps <= end
         self.clock.now += PHONEME_COST_S * len(spans)
@@ -108,7 +117,7 @@ def test_calibration_utterance_and_measurement(
     clock = _Clock()
     monkeypatch.setattr("lipstream.server.calibration.time", clock)
     model = _ChargedModel(trained_models["viseme-lerp"], clock)
-    cost = measure(model, Rung("default", Lookahead(phonemes=1)))  # type: ignore[arg-type]
+    cost = measure(model, Rung("default", Lookahead(phonemes=1)))  # type: ignore[arg-type]  # a stand-in with what measure uses
     # 48 phonemes of 80 ms at 60 fps: frames 0..4 come with the first (4.8 frames each, so
     # 4 or 5 after it), 231 in all (3.84 s). The slowest call is the first: 1 + 5 × 0.01 ms.
     assert cost.max_call_ms == pytest.approx(1.05)
@@ -186,10 +195,9 @@ def test_catalog_ladder_follows_each_models_declared_rungs(catalog: Catalog) -> 
 
 def test_rest_pose_of_viseme_lerp_is_its_silence_key_pose(catalog: Catalog) -> None:
     model = catalog.model("viseme-lerp", "demo")
-    silence_row = model.scheme.classes.index(  # type: ignore[attr-defined]
-        model.scheme.viseme_of(SILENCE)
-    )  # type: ignore[attr-defined]
-    expected = model.poses[silence_row]  # type: ignore[attr-defined]
+    assert isinstance(model, VisemeLerpModel)
+    silence_row = model.scheme.classes.index(model.scheme.viseme_of(SILENCE))
+    expected = model.poses[silence_row]
     for emotion in (None, "happy"):
         np.testing.assert_allclose(catalog.rest_pose(model, emotion), expected, atol=1e-7)
 
@@ -197,11 +205,14 @@ def test_rest_pose_of_viseme_lerp_is_its_silence_key_pose(catalog: Catalog) -> N
 NO_FRAMES = np.zeros((0, 1), dtype=np.float32)
 
 
+Fed = tuple[PhonemeSpan, Audio | None]  # a feed's first span and its audio
+
+
 class _RecordingSynthesizer:
-    def __init__(self, fed: list) -> None:  # type: ignore[type-arg]
+    def __init__(self, fed: list[Fed]) -> None:
         self.fed = fed
 
-    def feed(self, spans: list, audio: object = None) -> None:  # type: ignore[type-arg]
+    def feed(self, spans: list[PhonemeSpan], audio: Audio | None = None) -> None:
         self.fed.append((spans[0], audio))
 
     def frames(self) -> np.ndarray:
@@ -217,7 +228,7 @@ class _AudioEngineModel:
     uses_audio = True
 
     def __init__(self) -> None:
-        self.passes: list[list] = []  # type: ignore[type-arg]
+        self.passes: list[list[Fed]] = []
 
     def start(self, request: object) -> _RecordingSynthesizer:
         self.passes.append([])
@@ -226,7 +237,7 @@ class _AudioEngineModel:
 
 def test_an_engine_that_uses_audio_is_also_calibrated_with_audio_under_each_span() -> None:
     model = _AudioEngineModel()
-    measure(model, Rung("default", Lookahead(phonemes=1)))  # type: ignore[arg-type]
+    measure(model, Rung("default", Lookahead(phonemes=1)))  # type: ignore[arg-type]  # a stand-in with what measure uses
     streamed = [fed for fed in model.passes if len(fed) > 1]
     with_audio = [fed for fed in streamed if fed[0][1] is not None]
     without = [fed for fed in streamed if fed[0][1] is None]
@@ -235,9 +246,11 @@ def test_an_engine_that_uses_audio_is_also_calibrated_with_audio_under_each_span
     offline = [fed for fed in model.passes if len(fed) == 1]
     assert len(offline) == 8 and all(fed[0][1] is None for fed in offline)
     for fed in with_audio:
-        ends = [round(span.end * audio.sample_rate) for span, audio in fed]
-        assert [len(audio.samples) for _, audio in fed] == np.diff([0, *ends]).tolist()
-        assert all(np.abs(audio.samples).max() > 0.2 for _, audio in fed)  # voiced, not silence
+        voiced = [(span, audio) for span, audio in fed if audio is not None]
+        assert len(voiced) == len(fed)  # audio under every span
+        ends = [round(span.end * audio.sample_rate) for span, audio in voiced]
+        assert [len(audio.samples) for _, audio in voiced] == np.diff([0, *ends]).tolist()
+        assert all(np.abs(audio.samples).max() > 0.2 for _, audio in voiced)  # voiced, not silence
 
 
 class _Clock:
@@ -254,7 +267,7 @@ class _TimedSynthesizer:
     def __init__(self, clock: _Clock, slow_call: int | None) -> None:
         self.clock, self.slow_call, self.calls = clock, slow_call, 0
 
-    def feed(self, spans: list, audio: object = None) -> None:  # type: ignore[type-arg]
+    def feed(self, spans: list[PhonemeSpan], audio: Audio | None = None) -> None:
         self.clock.now += 0.010 if self.calls == self.slow_call else 0.001
         self.calls += 1
 
@@ -284,7 +297,7 @@ def test_compute_time_is_the_slowest_call_at_its_fastest_over_the_passes(
 ) -> None:
     clock = _Clock()
     monkeypatch.setattr("lipstream.server.calibration.time", clock)
-    cost = measure(_PreemptedModel(clock), GREEDY)  # type: ignore[arg-type]
+    cost = measure(_PreemptedModel(clock), GREEDY)  # type: ignore[arg-type]  # a stand-in with what measure uses
     # Every call takes 1 ms in some pass; the finish calls take no time.
     assert cost.max_call_ms == pytest.approx(1.0)
     # 48 calls at their fastest, 1 ms each, over 48 phonemes.
@@ -311,7 +324,7 @@ class _NanModel(_AudioEngineModel):
 
 def test_a_non_finite_frame_in_calibration_refuses_the_model_naming_the_rung() -> None:
     with pytest.raises(ModelStoreError) as caught:
-        measure(_NanModel(), Rung("lag-2", Lookahead(phonemes=1)), where="/m/x")  # type: ignore[arg-type]
+        measure(_NanModel(), Rung("lag-2", Lookahead(phonemes=1)), where="/m/x")  # type: ignore[arg-type]  # a stand-in with what measure uses
     assert (caught.value.code, caught.value.where) == ("model_invalid", "/m/x: probe on rung lag-2")
     assert caught.value.message.startswith(
         "synthesized 1 NaN or infinite values from the calibration utterance "

@@ -14,7 +14,7 @@ from lipstream.engines.base import Model, frame_count
 from lipstream.server.budget import choose_rung
 from lipstream.server.catalog import Catalog
 from lipstream.timeline import PhonemeSpan
-from lipstream_client import End, Frames, PhonemeItem, Phonemes, Ready, Start
+from lipstream_client import End, Frames, Message, PhonemeItem, Phonemes, Ready, Start
 from tests.helpers import return_frames
 from tests.lipstream.server.harness import (
     FIXED_COMPUTE_MS,
@@ -99,7 +99,7 @@ def test_ready_reports_the_causal_rung_and_every_frame_arrives_as_its_span_does(
         ready = ws.recv()
         assert isinstance(ready, Ready)
         assert (ready.fidelity, ready.lookahead_ms) == ("causal", 0.0)
-        received: list = []  # type: ignore[type-arg]
+        received: list[Message] = []
         for item in ITEMS:
             ws.send(Phonemes("r", (item,)))
             # The frames up to the span's end come before anything waits for more input.
@@ -115,7 +115,7 @@ def test_ready_reports_the_causal_rung_and_every_frame_arrives_as_its_span_does(
     spans = [PhonemeSpan(label.rstrip("1"), start, end) for label, start, end in SPANS]
     model = trained_models[engine]
     options = dict(ready.options)
-    expected = model.synthesize(spans, fps=60, emotion="neutral", **options).frames
+    expected = model.synthesize(spans, fps=60, audio=None, emotion="neutral", **options).frames
     np.testing.assert_allclose([rows[i] for i in range(spoken)], expected, atol=1e-6)
 
 

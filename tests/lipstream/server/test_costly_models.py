@@ -40,7 +40,9 @@ if TYPE_CHECKING:
 COSTLY_ALPHAS = [10.0, 10.0, 1.0, 0.5, 0.1, 0.1]  # α1, α2 at their highest; α5, α6 lowest
 MAX_SESSION_COST = 0.02  # ten times what these engines' rungs need on the demo corpus
 CLOCK_STEP_S = 10.0
-ITEMS = [PhonemeItem(p, i * 0.08, (i + 1) * 0.08) for i, p in enumerate(["HH", "AH", "L", "OW"])]
+ITEMS = tuple(
+    PhonemeItem(p, i * 0.08, (i + 1) * 0.08) for i, p in enumerate(["HH", "AH", "L", "OW"])
+)
 
 
 def _costly_expressive_dp(model: Model, directory: Path) -> None:

@@ -88,7 +88,7 @@ def test_a_deadline_moved_later_fires_once_at_its_last_position() -> None:
             timers += getattr(callback, "__self__", None) is deadline
             return call_at(when, callback, *args, **kwargs)
 
-        loop.call_at = counting_call_at  # type: ignore[method-assign,assignment]
+        loop.call_at = counting_call_at  # type: ignore[method-assign,assignment]  # counts the loop's timers
         deadline = LaterDeadline(loop, lambda: deadline_at[0], lambda: fired.append(loop.time()))
         for _ in range(20):  # a message every 0.02 s moves the deadline on
             deadline.arm(deadline_at[0])

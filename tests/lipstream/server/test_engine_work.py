@@ -36,6 +36,7 @@ from lipstream_client import (
     Start,
     Text,
 )
+from lipstream_client.messages import JsonValue
 from tests.helpers import eventually, return_frames
 from tests.lipstream.server.harness import Client, Served, client, serving
 from tests.live_server import save_models
@@ -43,7 +44,7 @@ from tests.live_server import save_models
 ANSWER_BOUND_S = 5.0  # whether the server answers at all, not how fast
 WORK_BOUND_S = 60.0  # a budget of CPU seconds takes longer on a busy machine
 # The whole corpus: a request naming no emotion searches only its default emotion's recordings.
-PQ = {"search": "pq", "pq_window": 6, "match_emotion": False}
+PQ: dict[str, JsonValue] = {"search": "pq", "pq_window": 6, "match_emotion": False}
 PQ_PHONEMES = 42  # 6 × 42 = 252, within the cap of 256
 SEARCHES = 5
 FLOOD = 8
@@ -79,7 +80,7 @@ def metric(served: Served, name: str) -> float:
     return float(found.group(1)) if found else 0.0
 
 
-def short_request_completes(served: Served, identifier: str, options: dict) -> None:  # type: ignore[type-arg]
+def short_request_completes(served: Served, identifier: str, options: dict[str, JsonValue]) -> None:
     """A short request on a new connection gets its done."""
     with client(served.ws) as ws:
         ws.send(Start(identifier, "anime-graph", "demo", options=options))

@@ -79,8 +79,9 @@ def test_audio_past_the_input_limit_ends_only_its_request(audio_models_dir: Path
             assert (last.code, last.id, last.fatal) == (INPUT_TOO_LARGE, identifier, True)
             assert last.details["max_input_bytes"] == BUDGET_BYTES
             needed, others = last.details["needed_bytes"], last.details["held_bytes"]
+            assert isinstance(needed, int) and isinstance(others, int)
             assert needed >= 4 * RATE  # at least the chunk as float32
-            assert others + needed > BUDGET_BYTES  # type: ignore[operator]
+            assert others + needed > BUDGET_BYTES
         heavy.send(Start("d", "viseme-lerp", "demo"), Phonemes("d", ITEMS), End("d"))
         assert isinstance(heavy.until_done("d")[-1], Done)
         other.send(Phonemes("o", ITEMS[1:]), End("o"))

@@ -15,6 +15,7 @@ import pytest
 from lipstream.config import ServerSettings
 from lipstream_client import (
     Done,
+    Encoding,
     End,
     ErrorMessage,
     Frames,
@@ -25,13 +26,14 @@ from lipstream_client import (
     Start,
     encode,
 )
+from lipstream_client.messages import JsonValue
 from tests.helpers import eventually, return_frames
-from tests.lipstream.server.harness import Client, client, serving
+from tests.lipstream.server.harness import Client, client, only_errors, serving
 
 ITEMS = (PhonemeItem("HH", 0.0, 0.1), PhonemeItem("AY1", 0.1, 0.3))
 
 
-def connection_error(messages: list) -> tuple[str, bool, str | None]:  # type: ignore[type-arg]
+def connection_error(messages: list[Message]) -> tuple[str, bool, str | None]:
     [error] = [m for m in messages if isinstance(m, ErrorMessage)]
     return error.code, error.fatal, error.id
 
@@ -40,7 +42,8 @@ def test_message_size_limit_closes_with_1009(lerp_dir: Path) -> None:
     with serving(lerp_dir, ServerSettings(max_message_bytes=2048)) as served:
         with client(served.ws, "json") as ws:
             ws.send_raw('{"v":1,"type":"end","id":"' + "x" * 100 + '"}')
-            assert ws.recv().code == "unknown_request"  # type: ignore[union-attr]
+            [unknown] = only_errors([ws.recv()])
+            assert unknown.code == "unknown_request"
             ws.send_raw(" " * 3000)  # above the limit, below the WebSocket layer's 2x
             messages, code, reason = ws.closed()
         assert connection_error(messages) == ("message_too_large", True, None)
@@ -98,7 +101,7 @@ def test_message_rate_limit_closes_with_1008(lerp_dir: Path) -> None:
         for _ in range(6):
             ws.send(End("x"))
         messages, code, reason = ws.closed()
-    assert [m.code for m in messages] == ["unknown_request"] * 4 + ["rate_limited"]  # type: ignore[union-attr]
+    assert [m.code for m in only_errors(messages)] == ["unknown_request"] * 4 + ["rate_limited"]
     assert (code, reason) == (1008, "rate_limited")
 
 
@@ -191,7 +194,7 @@ def test_limits_do_not_touch_well_behaved_clients(lerp_dir: Path, payload: bytes
     assert isinstance(answers[0], Ready) and isinstance(answers[-1], Done)
 
 
-def request_error(answers: list) -> tuple[str, bool, str | None, dict]:  # type: ignore[type-arg]
+def request_error(answers: list[Message]) -> tuple[str, bool, str | None, dict[str, JsonValue]]:
     [error] = [m for m in answers if isinstance(m, ErrorMessage)]
     return error.code, error.fatal, error.id, dict(error.details or {})
 
@@ -270,11 +273,13 @@ def test_a_request_without_messages_times_out_while_others_go_on(lerp_dir: Path)
 
 @pytest.mark.parametrize("fps", [1e-308, 0.5])
 @pytest.mark.parametrize("encoding", ["msgpack", "json"])
-def test_fps_below_one_is_refused_before_ready(lerp_dir: Path, fps: float, encoding: str) -> None:
+def test_fps_below_one_is_refused_before_ready(
+    lerp_dir: Path, fps: float, encoding: Encoding
+) -> None:
     start = {"v": 1, "type": "start", "id": "a", "engine": "viseme-lerp", "character": "demo"}
     payload = {**start, "fps": fps}
     wire = msgpack.packb(payload) if encoding == "msgpack" else json.dumps(payload)
-    with serving(lerp_dir) as served, client(served.ws, encoding) as ws:  # type: ignore[arg-type]
+    with serving(lerp_dir) as served, client(served.ws, encoding) as ws:
         ws.send_raw(wire)
         error = ws.recv()
         assert isinstance(error, ErrorMessage)

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pytest
 
+from lipstream.engines.viseme_lerp import VisemeLerpModel
 from lipstream.errors import LipstreamError
 from lipstream.output.probes import mouth_channels, probe_key_poses
 from lipstream.output.visemes import OCULUS15, PRESTON_BLAIR
@@ -17,6 +18,7 @@ from lipstream.server.catalog import Catalog
 from lipstream.server.profiles import (
     ProfileError,
     ProfileRequest,
+    ResolvedProfile,
     load_presets,
     parse_profile,
     requested_profile,
@@ -25,6 +27,7 @@ from lipstream.server.profiles import (
 from lipstream.server.viseme_projection import VisemeProjector
 from lipstream_client import ChannelTransform, OutputProfile, Start
 from lipstream_client.channels import OCULUS15_VISEMES, PRESTON_BLAIR_SHAPES
+from lipstream_client.messages import Naming
 
 if TYPE_CHECKING:
     from lipstream.engines.base import Model
@@ -39,7 +42,7 @@ def no_projector(visemes: str) -> VisemeProjector:
     raise AssertionError("a blendshape profile must not build the viseme projector")
 
 
-def resolved(profile: OutputProfile | None, field: str = "output"):  # type: ignore[no-untyped-def]
+def resolved(profile: OutputProfile | None, field: str = "output") -> ResolvedProfile:
     return resolve_profile(RIG, ProfileRequest(profile, field), no_projector)
 
 
@@ -57,8 +60,8 @@ def test_default_profile_is_every_channel_in_arkit_names_unchanged() -> None:
         ("suffix_lr", ("jawOpen", "mouthClose", "eyeBlink_L", "eyeBlink_R")),
     ],
 )
-def test_naming_styles(naming: str, expected: tuple[str, ...]) -> None:
-    assert resolved(OutputProfile(naming=naming)).channels == expected  # type: ignore[arg-type]
+def test_naming_styles(naming: Naming, expected: tuple[str, ...]) -> None:
+    assert resolved(OutputProfile(naming=naming)).channels == expected
 
 
 def test_subset_picks_and_orders_columns_in_the_output_naming() -> None:
@@ -212,10 +215,11 @@ def test_probing_viseme_lerp_returns_its_trained_key_poses(
     trained_models: dict[str, Model],
 ) -> None:
     model = trained_models["viseme-lerp"]
+    assert isinstance(model, VisemeLerpModel)
     assert model.manifest.hyperparameters["scheme"] == "oculus15"
     np.testing.assert_allclose(
         probe_key_poses(model),
-        model.poses,  # type: ignore[attr-defined]
+        model.poses,
         atol=1e-6,
     )
 
@@ -257,7 +261,8 @@ def test_preston_blair_key_poses_of_viseme_lerp_average_its_oculus_poses(
     trained_models: dict[str, Model],
 ) -> None:
     model = trained_models["viseme-lerp"]
-    oculus_poses = model.poses.astype(np.float64)  # type: ignore[attr-defined]
+    assert isinstance(model, VisemeLerpModel)
+    oculus_poses = model.poses.astype(np.float64)
     expected = np.stack(
         [
             np.mean(
@@ -272,8 +277,9 @@ def test_preston_blair_key_poses_of_viseme_lerp_average_its_oculus_poses(
 
 def test_a_viseme_lerp_frame_projects_onto_mouth_shapes(catalog: Catalog) -> None:
     model = catalog.model("viseme-lerp", "demo")
+    assert isinstance(model, VisemeLerpModel)
     projector = catalog.projector(model, "preston-blair")
-    poses = model.poses.astype(np.float64)  # type: ignore[attr-defined]
+    poses = model.poses.astype(np.float64)
     # Shape A is P B M (all Oculus PP); shape D is AA AY AW (all Oculus aa).
     frame = 0.7 * poses[OCULUS15.classes.index("PP")] + 0.3 * poses[OCULUS15.classes.index("aa")]
     expected = np.zeros(9)
@@ -327,8 +333,9 @@ def test_presets_file_is_validated_by_the_codec(tmp_path: Path) -> None:
 
 def test_a_viseme_lerp_frame_projects_onto_the_two_visemes_it_blends(catalog: Catalog) -> None:
     model = catalog.model("viseme-lerp", "demo")
+    assert isinstance(model, VisemeLerpModel)
     projector = catalog.projector(model)
-    poses = model.poses.astype(np.float64)  # type: ignore[attr-defined]
+    poses = model.poses.astype(np.float64)
     pp, aa = OCULUS15_VISEMES.index("viseme_PP"), OCULUS15_VISEMES.index("viseme_aa")
     frame = 0.7 * poses[pp] + 0.3 * poses[aa]
     expected = np.zeros(15)

@@ -31,6 +31,7 @@ from typing import Any
 import pytest
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import ClientConnection, connect
+from websockets.typing import Subprotocol
 
 from lipstream.engines.base import Model
 from tests.helpers import REPO
@@ -41,7 +42,7 @@ TRANSCRIPT = re.compile(r"<!-- exchange -->\n```text\n(.*?)```", re.DOTALL)
 # A JSON example, unless a comment says why it is not in the transcript.
 JSON_EXAMPLE = re.compile(r"(<!-- not in the transcript: [^>]+ -->\n)?```json\n(.*?)```", re.DOTALL)
 SEND, RECEIVE = "→ ", "← "
-SUBPROTOCOL = "lipstream.v1.json"
+SUBPROTOCOL = Subprotocol("lipstream.v1.json")
 ANSWER_TIMEOUT_S = 20.0
 QUIET_S = 0.1  # only when regenerating: the silence that ends the answers to a message
 # (message type, path) of the values that may differ from the page.
@@ -202,6 +203,7 @@ def regenerate(url: str) -> str:
                     text = socket.recv(timeout=QUIET_S)
                 except (TimeoutError, ConnectionClosed):
                     break
+                assert isinstance(text, str)  # the JSON subprotocol sends text frames
                 lines.append(RECEIVE + text)
     return "\n".join(lines)
 

@@ -20,7 +20,8 @@ def test_room_is_bounded_by_bytes_and_count_but_one_message_always_fits() -> Non
     for index in range(3):
         queue.push(Received(text(10), float(index)))
     assert not queue.has_room()  # three messages
-    assert [queue.pop().at for _ in range(3)] == [0.0, 1.0, 2.0]  # type: ignore[union-attr]
+    popped = [queue.pop() for _ in range(3)]
+    assert [item.at if item is not None else None for item in popped] == [0.0, 1.0, 2.0]
     assert queue.pop() is None
 
 

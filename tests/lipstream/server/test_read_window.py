@@ -6,6 +6,7 @@ import asyncio
 import math
 
 import uvicorn
+from uvicorn._types import ASGIReceiveEvent
 from uvicorn.server import ServerState
 
 from lipstream.server.read_window import READ_WINDOW_BYTES, ReadWindowProtocol
@@ -32,8 +33,16 @@ def _protocol(loop: asyncio.AbstractEventLoop) -> tuple[ReadWindowProtocol, _Tra
         config=config, server_state=ServerState(), app_state={}, _loop=loop
     )
     transport = _Transport()
-    protocol.transport = transport  # type: ignore[assignment]
+    protocol.transport = transport  # type: ignore[assignment]  # a fake that counts pauses
     return protocol, transport
+
+
+def _payload(message: ASGIReceiveEvent) -> bytes:
+    """The bytes of a binary WebSocket message; any other event fails the test."""
+    assert message["type"] == "websocket.receive"
+    payload = message["bytes"]
+    assert isinstance(payload, bytes)
+    return payload
 
 
 def _arrive(protocol: ReadWindowProtocol, payload: bytes) -> None:
@@ -55,8 +64,8 @@ def test_reading_pauses_at_the_window_and_resumes_once_the_app_has_taken_every_m
         _arrive(protocol, b"z" * size)  # bytes already read while the pause takes effect
         assert transport.pauses == 1
         received = [await protocol.receive() for _ in range(under_window + 2)]
-        assert [len(message["bytes"]) for message in received] == [size] * (under_window + 2)
-        assert received[-1]["bytes"] == b"z" * size
+        assert [len(_payload(message)) for message in received] == [size] * (under_window + 2)
+        assert _payload(received[-1]) == b"z" * size
         assert transport.resumes == 1 and not protocol.read_paused
         assert protocol.queued_bytes == 0
 
@@ -71,7 +80,7 @@ def test_a_message_larger_than_the_window_pauses_at_once_and_the_count_survives_
         _arrive(protocol, b"a" * (READ_WINDOW_BYTES + 1))
         assert transport.pauses == 1
         protocol.queue.put_nowait({"type": "websocket.disconnect", "code": 1006})
-        assert len((await protocol.receive())["bytes"]) == READ_WINDOW_BYTES + 1
+        assert len(_payload(await protocol.receive())) == READ_WINDOW_BYTES + 1
         assert protocol.queued_bytes == 0
         assert (await protocol.receive())["type"] == "websocket.disconnect"
         assert protocol.queued_bytes == 0 and transport.resumes == 1

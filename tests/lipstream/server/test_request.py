@@ -135,7 +135,7 @@ def test_requests_without_a_message_for_the_timeout_end(catalog: Catalog) -> Non
     assert list(session.requests) == ["a"] and session.next_expiry() == 9.0
     [unknown] = handle(session, Phonemes("b", (PhonemeItem("M", 0.0, 0.1),)), now=6.5)
     assert isinstance(unknown, ErrorMessage) and unknown.code == "unknown_request"
-    assert [item.message.id for item in session.expire(9.0)] == ["a"]  # type: ignore[union-attr]
+    assert [item.message.id for item in session.expire(9.0)] == ["a"]
     assert session.active_requests == 0 and session.next_expiry() is None
 
 

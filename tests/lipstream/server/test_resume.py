@@ -24,6 +24,7 @@ from lipstream.server.request import RequestLimits
 from lipstream.server.session import Session, SessionLimits
 from lipstream_client import (
     AudioChunk,
+    Done,
     End,
     ErrorMessage,
     Frames,
@@ -110,7 +111,8 @@ def test_a_resumed_request_sends_exactly_the_frames_the_client_lacks(
     assert resumed[0].first_frame == held
     assert all(b.first_frame == a.end_frame for a, b in zip(resumed, resumed[1:], strict=False))
     np.testing.assert_array_equal(rows(resumed), expected[held:])
-    assert answers[-1].stats.frames == len(expected)  # type: ignore[union-attr]
+    done = answers[-1]
+    assert isinstance(done, Done) and done.stats.frames == len(expected)
 
 
 def test_the_resumed_rung_is_the_named_one_not_the_budgets(fixed_cost_catalog: Catalog) -> None:

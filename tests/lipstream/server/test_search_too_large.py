@@ -24,11 +24,13 @@ from typing import Any
 import pytest
 
 from lipstream.engines.anime_graph import synthesizer
+from lipstream.engines.anime_graph.pq import pq_window
 from lipstream.engines.base import Model
 from lipstream.server.catalog import Catalog
 from lipstream.server.request import RequestLimits
 from lipstream.server.session import Session, SessionLimits
 from lipstream_client import Done, End, ErrorMessage, PhonemeItem, Phonemes, Ready, Start
+from lipstream_client.messages import JsonValue
 from tests.lipstream.server.harness import client, serving
 
 HOLD_S = 20.0  # a bound on a stalled machine, not a speed
@@ -55,7 +57,7 @@ class Searches:
 
 @pytest.fixture
 def searches(monkeypatch: pytest.MonkeyPatch) -> Searches:
-    real = synthesizer.pq_window
+    real = pq_window
     searched = Searches()
 
     def counted(*args: Any) -> Any:
@@ -82,7 +84,7 @@ def one_phoneme_messages(identifier: str, count: int) -> list[Phonemes]:
 def test_pq_past_its_cap_is_refused_before_searching_the_queued_phonemes(
     anime_dir: Path, searches: Searches
 ) -> None:
-    options = {"search": "pq", "pq_window": WINDOW}
+    options: dict[str, JsonValue] = {"search": "pq", "pq_window": WINDOW}
     with serving(anime_dir) as served, client(served.ws, max_queue=None) as ws:
         ws.send(Start("a", "anime-graph", "demo", options=options))
         ws.send(*one_phoneme_messages("a", ALLOWED + 6), End("a"))
@@ -106,7 +108,7 @@ def test_phonemes_waiting_past_the_cap_end_the_request_at_its_next_message(
 ) -> None:
     searches.hold = False
     session = Session(catalog, SessionLimits(2, RequestLimits(1000, 100_000, 100.0)))
-    options = {"search": "pq", "pq_window": WINDOW}
+    options: dict[str, JsonValue] = {"search": "pq", "pq_window": WINDOW}
     messages = one_phoneme_messages("a", ALLOWED + 1)
     assert isinstance(
         session.handle(Start("a", "anime-graph", "demo", options=options), 0.0)[0].message, Ready

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from lipstream.audio import Audio
+from lipstream.engines.anime_graph import AnimeGraphModel
 from lipstream.server.catalog import Catalog
 from lipstream.server.outgoing import Outgoing
 from lipstream.server.request import RequestLimits
@@ -81,6 +82,13 @@ def frames_of(messages: list[ServerMessage], identifier: str = "a") -> np.ndarra
     )
 
 
+def last_done(messages: list[ServerMessage]) -> Done:
+    """The request's closing ``Done``, which must be the last message."""
+    done = messages[-1]
+    assert isinstance(done, Done), messages
+    return done
+
+
 def errors(messages: list[ServerMessage]) -> list[tuple[str, str | None, bool]]:
     return [(m.code, m.id, m.fatal) for m in messages if isinstance(m, ErrorMessage)]
 
@@ -150,8 +158,9 @@ def test_cancel_reports_the_frames_sent_and_frees_the_id(catalog: Catalog) -> No
     )
     sent = len(frames_of(out))
     assert sent == 4  # lookahead of one phoneme: final before 0.4 s, frames 0..3 at 10 fps
-    assert out[-1] == Done("a", out[-1].stats, "cancel")  # type: ignore[union-attr]
-    assert out[-1].stats.frames == sent  # type: ignore[union-attr]
+    done = out[-1]
+    assert isinstance(done, Done) and done == Done("a", done.stats, "cancel")
+    assert done.stats.frames == sent
     assert errors(play(session, Phonemes("a", ITEMS))) == [("unknown_request", "a", False)]
     assert isinstance(play(session, Start("a", "viseme-lerp", "demo"))[0], Ready)
 
@@ -200,7 +209,7 @@ def test_interrupt_after_the_input_cuts_at_its_end_with_the_default_return(
     blocks = [m for m in out if isinstance(m, Frames)]
     # The cut is at the input's end, 0.4 s = frame 4; 100 ms at 10 fps is one step.
     assert blocks[-1].first_frame == 4 and blocks[-1].n_frames == 2
-    assert out[-1].stats.frames == 6  # type: ignore[union-attr]
+    assert last_done(out).stats.frames == 6
 
 
 @pytest.mark.parametrize(
@@ -216,8 +225,9 @@ def test_a_request_ended_or_interrupted_before_any_input_is_done_with_the_rest_p
     for fps in (1.0, 60.0, 119.0, 120.0, 121.0, 240.0, 999.5, 1000.0):
         out = play(session, Start("a", engine, "demo", fps=fps), End("a"))
         assert isinstance(out[0], Ready)
-        assert out[1:] == [Done("a", out[-1].stats, "end")], (fps, out)  # type: ignore[union-attr]
-        assert out[-1].stats.frames == 0  # type: ignore[union-attr]
+        done = last_done(out)
+        assert out[1:] == [Done("a", done.stats, "end")], (fps, out)
+        assert done.stats.frames == 0
         out = play(
             session, Start("a", engine, "demo", fps=fps), Interrupt("a", at=0.0, return_ms=0)
         )
@@ -225,7 +235,7 @@ def test_a_request_ended_or_interrupted_before_any_input_is_done_with_the_rest_p
         [block] = [m for m in out if isinstance(m, Frames)]
         assert (block.first_frame, block.n_frames) == (0, 1)
         np.testing.assert_array_equal(np.frombuffer(block.data, "<f4"), rest)
-        assert out[-1] == Done("a", out[-1].stats, "interrupt")  # type: ignore[union-attr]
+        assert out[-1] == Done("a", last_done(out).stats, "interrupt")
 
 
 def test_oculus_visemes_through_the_session_are_distributions(catalog: Catalog) -> None:
@@ -329,7 +339,7 @@ def test_message_scope_errors_leave_requests_running(catalog: Catalog) -> None:
     ]
     assert errors(play(session, End("zz"))) == [("unknown_request", "zz", False)]
     malformed = decode(b"\xc1", "msgpack", sender="client")
-    assert errors(play(session, malformed)) == [("malformed", None, False)]  # type: ignore[arg-type]
+    assert errors(play(session, malformed)) == [("malformed", None, False)]
     out = play(session, Phonemes("a", ITEMS), End("a"))
     assert isinstance(out[-1], Done)
     assert errors(play(session, Phonemes("a", ITEMS))) == [("request_finished", "a", False)]
@@ -403,10 +413,11 @@ def test_an_engine_fault_ends_only_its_request(catalog: Catalog) -> None:
     def broken(*_args: object, **_kwargs: object) -> None:
         raise RuntimeError("engine bug")
 
-    session.requests["a"].synthesizer.feed = broken  # type: ignore[method-assign]
+    session.requests["a"].synthesizer.feed = broken  # type: ignore[method-assign]  # an engine that fails
     out = play(session, Phonemes("a", ITEMS))
     assert errors(out) == [("internal_error", "a", True)]
-    assert "engine bug" not in out[0].message  # type: ignore[union-attr]
+    fault = out[0]
+    assert isinstance(fault, ErrorMessage) and "engine bug" not in fault.message
     assert isinstance(play(session, Phonemes("b", ITEMS), End("b"))[-1], Done)
 
 
@@ -434,6 +445,7 @@ def test_options_outside_the_ladder_are_priced_by_the_engine_not_a_rung(
     catalog: Catalog,
 ) -> None:
     model = catalog.model("anime-graph", "demo")
+    assert isinstance(model, AnimeGraphModel)
     top = catalog.ladder(model)[0]
     # Naming the rung's own defaults still selects it: the measured cost.
     same = catalog.call_cost(model, {**top.rung.options, "graph": model.default_graph})

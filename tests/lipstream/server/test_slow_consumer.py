@@ -83,7 +83,7 @@ def raw_websocket(served: Served, receive_buffer: int) -> socket.socket:
 
 def send_messages(sock: socket.socket, *messages: ClientMessage) -> None:
     for message in messages:
-        sock.sendall(masked_frame(encode(message, "msgpack")))  # type: ignore[arg-type]
+        sock.sendall(masked_frame(encode(message, "msgpack")))
 
 
 def server_connection(served: Served, client_port: int) -> object | None:
@@ -146,7 +146,7 @@ def test_a_client_that_never_reads_again_is_reset_while_others_are_served(
             End("slow"),
         )
         connection = eventually(lambda: server_connection(served, client_port), "connected")
-        transport = connection.transport  # type: ignore[attr-defined]
+        transport = connection.transport  # type: ignore[attr-defined]  # uvicorn's protocol state
         eventually(lambda: transport.get_write_buffer_size() > 0, "the send stalls")
 
         with client(served.ws) as other:
@@ -162,7 +162,7 @@ def test_a_client_that_never_reads_again_is_reset_while_others_are_served(
         eventually(lambda: not lifecycle.connections, "the app gives the session up")
         # The app is done, the bytes stay unsent: the socket's watch waits one send timeout
         # of no progress (when it fires: test_flush_watch, on a loop fired by hand).
-        watch_timeout_s = connection.flush_watch.timeout_s  # type: ignore[attr-defined]
+        watch_timeout_s = connection.flush_watch.timeout_s  # type: ignore[attr-defined]  # uvicorn's protocol state
         eventually(lambda: server_connection(served, client_port) is None, "the socket is freed")
         sessions_after = open_sessions(served)
         states_after = server_socket_states(server_port, client_port)

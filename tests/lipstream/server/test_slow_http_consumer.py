@@ -169,7 +169,9 @@ def add_stream_route(served: Served, path: str, chunks: int | None) -> list[asyn
             await asyncio.sleep(0)  # as a real source would wait for its next part
 
     async def stream() -> StreamingResponse:
-        tasks.append(asyncio.current_task())  # type: ignore[arg-type]
+        task = asyncio.current_task()
+        assert task is not None
+        tasks.append(task)
         length = {} if chunks is None else {"content-length": str(chunks * len(STREAM_CHUNK))}
         return StreamingResponse(body(), headers=length, media_type="application/octet-stream")
 
@@ -190,7 +192,7 @@ def test_a_client_that_never_reads_its_response_is_reset_while_others_are_served
     server_port, client_port = never.getpeername()[1], never.getsockname()[1]
     send_request(never, "POST", "/v1/synthesize", synthesize_body(LONG_SPANS, NEVER_READ_FPS))
     connection = eventually(lambda: server_connection(served, client_port), "connected")
-    transport = connection.transport  # type: ignore[attr-defined]
+    transport = connection.transport  # type: ignore[attr-defined]  # uvicorn's protocol state
     eventually(lambda: transport.get_write_buffer_size() > 0, "the response stalls")
 
     short = synthesize_body(SPANS, 60)
@@ -227,7 +229,7 @@ def test_a_client_that_never_reads_its_response_is_reset_while_others_are_served
     np.testing.assert_array_equal(np.array([rows[i] for i in range(spoken)]), expected)
 
     # Judged by the send timeout (the checks a reset takes: test_flush_watch, by hand).
-    assert connection.flush_watch.timeout_s == SEND_TIMEOUT_S  # type: ignore[attr-defined]
+    assert connection.flush_watch.timeout_s == SEND_TIMEOUT_S  # type: ignore[attr-defined]  # uvicorn's protocol state
     # A reset: the server's end is gone from the kernel's table, not flushing in FIN_WAIT1 ...
     assert states_after <= TCP_STATES_GONE
     # ... and the client read only what its own small buffer held of ~10 MB, then ECONNRESET.
@@ -274,7 +276,7 @@ def test_a_streamed_response_the_client_stops_reading_ends_the_apps_wait(served:
     client_port = never.getsockname()[1]
     send_request(never, "GET", "/test/endless")
     connection = eventually(lambda: server_connection(served, client_port), "connected")
-    transport = connection.transport  # type: ignore[attr-defined]
+    transport = connection.transport  # type: ignore[attr-defined]  # uvicorn's protocol state
     eventually(lambda: transport.get_write_buffer_size() > 0, "the response stalls")
     eventually(lambda: server_connection(served, client_port) is None, "the socket is freed")
     # The app waits for a drain that never comes (the buffer may fill, drain into the
@@ -295,7 +297,7 @@ def test_a_slow_but_steady_reader_gets_a_whole_streamed_response(served: Served)
     connection = eventually(lambda: server_connection(served, client_port), "connected")
     # A small kernel buffer on the server's side: the transport's buffer then fills and
     # drains again and again, and the app writes each time it has drained.
-    server_socket = connection.transport.get_extra_info("socket")  # type: ignore[attr-defined]
+    server_socket = connection.transport.get_extra_info("socket")  # type: ignore[attr-defined]  # uvicorn's protocol state
     server_socket.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, 1 << 16)
     send_request(sock, "GET", "/test/finite")
     status, body = read_response(sock, STEADY_PAUSE_S, STEADY_CHUNK)
@@ -314,7 +316,7 @@ def test_a_websocket_upgrade_behind_an_unread_response_is_left_to_the_websocket_
     key = base64.b64encode(os.urandom(16)).decode()
     send_request(sock, "POST", "/v1/synthesize", synthesize_body(LONG_SPANS, UPGRADE_FPS))
     connection = eventually(lambda: server_connection(served, client_port), "connected")
-    transport = connection.transport  # type: ignore[attr-defined]
+    transport = connection.transport  # type: ignore[attr-defined]  # uvicorn's protocol state
     eventually(lambda: unsent_bytes(transport) > 0, "the response is written whole")
     sock.sendall(
         f"GET /v1/stream HTTP/1.1\r\nHost: lipstream\r\nUpgrade: websocket\r\n"

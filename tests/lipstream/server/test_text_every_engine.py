@@ -71,6 +71,7 @@ def test_text_with_no_options_plays_on_every_engine_and_ends_at_rest(
         spoken.spans,
         fps=FPS,
         audio=spoken.audio if model.uses_audio else None,
+        emotion=None,
         **dict(result.ready.options),
     ).frames
     rows = np.asarray(result.rows(), dtype=np.float32)
@@ -96,6 +97,7 @@ def test_text_in_another_language_plays_on_every_engine(
         spoken.spans,
         fps=FPS,
         audio=spoken.audio if model.uses_audio else None,
+        emotion=None,
         **dict(result.ready.options),
     ).frames
     rows = np.asarray(result.rows(), dtype=np.float32)

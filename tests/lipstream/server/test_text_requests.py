@@ -21,6 +21,7 @@ from lipstream_client import (
     AsyncClient,
     AudioChunk,
     Client,
+    Encoding,
     Frames,
     LipstreamServerError,
     ResumePolicy,
@@ -51,9 +52,9 @@ def say(client: Client, *texts: str) -> StreamResult:
 
 @pytest.mark.parametrize("encoding", ["msgpack", "json"])
 def test_text_streams_the_speech_and_the_frames_of_what_was_said(
-    served: Served, trained_models: dict[str, Model], encoding: str
+    served: Served, trained_models: dict[str, Model], encoding: Encoding
 ) -> None:
-    with Client(served.ws, encoding=encoding) as client:  # type: ignore[arg-type]
+    with Client(served.ws, encoding=encoding) as client:
         result = say(client, SENTENCE)
     spoken = speak_text(SENTENCE)  # a fresh worker speaks the same bytes
     assert result.speech_pcm16() == spoken.pcm16

@@ -14,13 +14,18 @@ import socket
 import tomllib
 from importlib.metadata import version
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import uvicorn
 from packaging.requirements import Requirement
-from uvicorn.protocols.http.auto import AutoHTTPProtocol
 from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 from uvicorn.server import ServerState
+
+if TYPE_CHECKING:
+    # uvicorn types its auto protocol as a bare asyncio.Protocol; http_flush types it the same way.
+    from uvicorn.protocols.http.h11_impl import H11Protocol as AutoHTTPProtocol
+else:
+    from uvicorn.protocols.http.auto import AutoHTTPProtocol
 
 from lipstream.server.closing import BoundedCloseProtocol
 from lipstream.server.handshake import GuardedHTTPProtocol

@@ -65,9 +65,10 @@ def load_model(page: Any, data: bytes) -> None:
 def served_frames(served: LiveServer, rig: str) -> tuple[list[str], np.ndarray]:
     """The test's own request, as the page sends it: (channels, frames as float32)."""
     from websockets.sync.client import connect
+    from websockets.typing import Subprotocol
 
     rows: dict[int, list[float]] = {}
-    with connect(served.ws, subprotocols=["lipstream.v1.json"], proxy=None) as ws:  # type: ignore[arg-type]
+    with connect(served.ws, subprotocols=[Subprotocol("lipstream.v1.json")], proxy=None) as ws:
         for message in (
             {
                 "type": "start",

@@ -17,6 +17,7 @@ import pytest
 from lipstream.frontends.formats import parse_timings
 from lipstream.frontends.word_durations import WordDurationModel
 from lipstream.frontends.words_to_spans import timings_to_spans
+from lipstream.timeline import PhonemeSpan
 from lipstream_client import Client
 from tests.lipstream.server.harness import Served, serving
 
@@ -47,7 +48,7 @@ def _expected_spans(
     """The spans of ``TEXT``'s characters from ``begin`` to ``end``, group after group, each
     spread on its own from where the previous ended."""
     durations = WordDurationModel.load(words_models / "viseme-lerp")
-    spans = []
+    spans: list[PhonemeSpan] = []
     for begin, end in groups:
         timings = parse_timings({"alignment": _alignment(TEXT[begin:end], begin)})
         spans += timings_to_spans(timings, durations, after=spans[-1].end if spans else 0.0)

@@ -31,6 +31,7 @@ from lipstream_client import (
     Start,
     Words,
 )
+from lipstream_client.messages import JsonValue
 
 FPS = 50.0
 
@@ -76,7 +77,7 @@ def test_words_drive_a_request_as_their_spans_sent_as_phonemes_would(
     words_catalog: Catalog, words_models: Path
 ) -> None:
     session = _session(words_catalog)
-    timings = [
+    timings: list[JsonValue] = [
         {"word": "Map", "start": 0.1, "end": 0.42},
         {"word": "the", "start": 0.6, "end": 0.75},
     ]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import ctypes
 import threading
 from itertools import pairwise
+from typing import TypedDict
 
 import numpy as np
 import pytest
@@ -14,6 +15,15 @@ from lipstream.errors import SpeechError
 from lipstream.speech import libespeak
 from lipstream.speech.espeak import EspeakSynthesizer, phoneme_spans
 from lipstream.timeline import PhonemeSpan
+
+
+class VoiceSettings(TypedDict, total=False):
+    """The synthesizer settings a test sets out of range."""
+
+    voice: str
+    rate: int
+    pitch: int
+
 
 VOWELS = {"AA", "AE", "AH", "AO", "AW", "AY", "EH", "ER", "EY", "IH", "IY", "OW", "OY", "UH", "UW"}
 
@@ -158,7 +168,7 @@ def test_unknown_espeak_name_is_a_speech_error() -> None:
     ("settings", "where"),
     [({"rate": 10}, "rate"), ({"pitch": 101}, "pitch"), ({"voice": ""}, "voice")],
 )
-def test_bad_settings_raise(settings: dict[str, object], where: str) -> None:
+def test_bad_settings_raise(settings: VoiceSettings, where: str) -> None:
     with pytest.raises(SpeechError) as raised:
         EspeakSynthesizer(**settings)
     assert where in str(raised.value.where)

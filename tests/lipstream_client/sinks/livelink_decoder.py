@@ -29,7 +29,7 @@ class Packet(NamedTuple):
     sub_frame: float
     fps: int
     denominator: int
-    count: int
+    curve_count: int
     curves: tuple[float, ...]
 
 

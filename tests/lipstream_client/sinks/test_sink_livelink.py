@@ -29,7 +29,7 @@ GOLDEN = Path(__file__).parent / "data" / "pylivelinkface-0.1-packet.bin"
 def test_the_encoder_makes_pylivelinkface_s_packet_byte_for_byte() -> None:
     golden = GOLDEN.read_bytes()
     read = decode(golden)
-    assert read.version == 6 and read.count == 61 and read.subject == "lipstream"
+    assert read.version == 6 and read.curve_count == 61 and read.subject == "lipstream"
     assert read.device_id == "$12345678-9abc-4def-8123-456789abcdef"
     assert (read.fps, read.denominator) == (60, 1)
     assert read.curves == tuple(

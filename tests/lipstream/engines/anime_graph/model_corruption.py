@@ -327,7 +327,7 @@ def write_variant(corruption: Corruption, arrays: Arrays, manifest: Manifest, ou
     changed = dict(arrays)
     if corruption.arrays is not None:
         corruption.arrays(_ViewAliases(changed, manifest))
-    np.savez(out / ARRAYS_NAME, **changed)
+    np.savez(out / ARRAYS_NAME, allow_pickle=False, **changed)
     declared = {
         "arrays_file_bytes": (out / ARRAYS_NAME).stat().st_size,
         "array_data_bytes": {name: int(np.asarray(a).nbytes) for name, a in changed.items()},

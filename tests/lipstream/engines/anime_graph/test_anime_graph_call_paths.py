@@ -87,9 +87,9 @@ def general(synthesizer: AnimeGraphSynthesizer) -> AnimeGraphSynthesizer:
         AnimeGraphSynthesizer._place(synthesizer, position, anime, built)
         assert len(synthesizer.track) == placed + 1
 
-    synthesizer._causal_step = causal_step  # type: ignore[method-assign]
-    synthesizer._suffix_tiles = suffix_tiles  # type: ignore[method-assign]
-    synthesizer._place = place  # type: ignore[method-assign]
+    synthesizer._causal_step = causal_step  # type: ignore[method-assign]  # spies on the steps
+    synthesizer._suffix_tiles = suffix_tiles  # type: ignore[method-assign]  # spies on the steps
+    synthesizer._place = place  # type: ignore[method-assign]  # spies on the steps
     return synthesizer
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+from typing import TypedDict
 
 import numpy as np
 import pytest
@@ -13,7 +14,7 @@ from lipstream.audio import Audio
 from lipstream.corpus import Corpus
 from lipstream.engines.anime_graph import AnimeGraphEngine, AnimeGraphModel
 from lipstream.engines.anime_graph.synthesizer import AnimeGraphSynthesizer
-from lipstream.engines.base import frames_before
+from lipstream.engines.base import SynthesisRequest, frames_before
 from lipstream.timeline import PhonemeSpan
 from tests.lipstream.engines.anime_graph.anime_synthetic import (
     PHONES,
@@ -22,8 +23,22 @@ from tests.lipstream.engines.anime_graph.anime_synthetic import (
     render_audio,
 )
 
+
+class SearchOptions(TypedDict, total=False):
+    """The anime-graph options these tests vary."""
+
+    graph: str
+    search: str
+    pq_window: int
+    pq_advance: int
+
+
 RECORDED = ("neutral", "happy")  # utterance i of the corpus has RECORDED[i % 2]
-OPTION_SETS = [{}, {"graph": "clustered"}, {"search": "pq", "pq_window": 3, "pq_advance": 2}]
+OPTION_SETS: list[SearchOptions] = [
+    {},
+    {"graph": "clustered"},
+    {"search": "pq", "pq_window": 3, "pq_advance": 2},
+]
 FPS = 60.0
 
 
@@ -59,7 +74,7 @@ def decided(
     **options: object,
 ) -> tuple[AnimeGraphSynthesizer, np.ndarray, np.ndarray]:
     """The finished synthesizer, its frames and the anime shown at each query position."""
-    synthesizer = model.start(fps=FPS, emotion=emotion, **options)
+    synthesizer = model.start(SynthesisRequest(fps=FPS, emotion=emotion, options=options))
     synthesizer.feed(spans, audio)
     frames = synthesizer.finish()
     animes = np.array([placement.anime for placement in synthesizer.track.placements])
@@ -73,7 +88,7 @@ def recorded_emotion(model: AnimeGraphModel, animes: np.ndarray) -> list[str]:
 @pytest.mark.parametrize("options", OPTION_SETS)
 @pytest.mark.parametrize("request_emotion", [None, "happy", "sad"])
 def test_each_run_shows_only_recordings_of_its_emotion(
-    model: AnimeGraphModel, options: dict, request_emotion: str | None
+    model: AnimeGraphModel, options: SearchOptions, request_emotion: str | None
 ) -> None:
     pieces = runs(3, ["neutral", "happy", None, "sad", "neutral"])
     spans = list(itertools.chain.from_iterable(pieces))
@@ -95,7 +110,7 @@ def test_each_run_shows_only_recordings_of_its_emotion(
 
 @pytest.mark.parametrize("options", OPTION_SETS)
 def test_a_change_of_emotion_mid_recording_does_not_continue_that_recording(
-    model: AnimeGraphModel, corpus: Corpus, options: dict
+    model: AnimeGraphModel, corpus: Corpus, options: SearchOptions
 ) -> None:
     """The query is a neutral recording, its second half asked for happy: the neutral run
     finds the recording itself, and its natural continuation must not leak into the happy
@@ -126,7 +141,7 @@ def test_without_match_emotion_every_run_searches_the_whole_corpus(model: AnimeG
 
 @pytest.mark.parametrize("options", OPTION_SETS)
 def test_the_first_run_is_what_its_emotion_alone_gives(
-    model: AnimeGraphModel, options: dict
+    model: AnimeGraphModel, options: SearchOptions
 ) -> None:
     first, second = runs(6, ["neutral", "happy"], length=9)
     mixed, mixed_frames, _ = decided(model, first + second, **options)
@@ -141,7 +156,7 @@ def test_the_first_run_is_what_its_emotion_alone_gives(
 
 @pytest.mark.parametrize("options", OPTION_SETS)
 def test_a_later_run_does_not_depend_on_the_run_before(
-    model: AnimeGraphModel, options: dict
+    model: AnimeGraphModel, options: SearchOptions
 ) -> None:
     """With audio, joins cost nothing, so a run in a view that holds none of the previous
     run's animes restarts the search: change the phonemes of the neutral run and the happy
@@ -207,9 +222,9 @@ def _stream(
     cuts: list[int],
     audio: Audio | None,
     emotion: str | None,
-    options: dict,
+    options: SearchOptions,
 ) -> np.ndarray:
-    synthesizer = model.start(fps=FPS, emotion=emotion, **options)
+    synthesizer = model.start(SynthesisRequest(fps=FPS, emotion=emotion, options=options))
     bounds = [0, *sorted(set(cuts)), len(spans)]
     out = []
     for index, (low, high) in enumerate(itertools.pairwise(bounds)):
@@ -238,7 +253,7 @@ def test_mixed_emotions_stream_exactly_like_offline(
             data.draw(st.sampled_from([None, "neutral", "happy"])),
         )
     audio = render_audio(spans, np.random.default_rng(seed)) if data.draw(st.booleans()) else None
-    options: dict = data.draw(st.sampled_from(OPTION_SETS))
+    options: SearchOptions = data.draw(st.sampled_from(OPTION_SETS))
     emotion = data.draw(st.sampled_from([None, "happy"]))
     cuts = data.draw(st.lists(st.integers(1, len(spans) - 1), max_size=10))
     offline = model.synthesize(spans, fps=FPS, audio=audio, emotion=emotion, **options).frames

@@ -26,7 +26,11 @@ from tests.lipstream.engines.anime_graph.anime_synthetic import (
     render_audio,
 )
 
-OPTION_SETS = [{}, {"graph": "clustered"}, {"search": "pq", "pq_window": 3, "pq_advance": 2}]
+OPTION_SETS: list[dict[str, object]] = [
+    {},
+    {"graph": "clustered"},
+    {"search": "pq", "pq_window": 3, "pq_advance": 2},
+]
 
 
 @pytest.fixture(scope="module")
@@ -42,10 +46,11 @@ def _stream(
     audio: Audio | None,
     audio_cuts: list[int],
     fps: float,
+    emotion: str | None = None,
     **options: object,
 ) -> np.ndarray:
     """Feed span chunk i with audio piece i; audio pieces left over follow with no spans."""
-    synthesizer = model.start(fps=fps, **options)
+    synthesizer = model.start(SynthesisRequest(fps=fps, emotion=emotion, options=options))
     bounds = [0, *sorted(set(cuts)), len(spans)]
     pieces: list[Audio | None] = [None] * (len(bounds) - 1)
     if audio is not None:
@@ -86,11 +91,11 @@ def test_any_chunking_gives_the_offline_frames(model: AnimeGraphModel, data: st.
 
 @pytest.mark.parametrize("options", OPTION_SETS)
 def test_frames_come_out_within_the_declared_lookahead(
-    model: AnimeGraphModel, options: dict
+    model: AnimeGraphModel, options: dict[str, object]
 ) -> None:
     spans = make_spans(np.random.default_rng(11), 30)
     lookahead = model.lookahead
-    synthesizer = model.start(fps=60.0, **options)
+    synthesizer = model.start(SynthesisRequest(fps=60.0, options=options))
     emitted = 0
     for index, span in enumerate(spans):
         synthesizer.feed([span])
@@ -197,9 +202,11 @@ def test_a_phoneme_the_corpus_never_says_borrows_its_viseme(model: AnimeGraphMod
         ({"pq_budget_s": 0}, "options.pq_budget_s"),
     ],
 )
-def test_bad_options_are_refused(model: AnimeGraphModel, options: dict, where: str) -> None:
+def test_bad_options_are_refused(
+    model: AnimeGraphModel, options: dict[str, object], where: str
+) -> None:
     with pytest.raises(InvalidRequestError) as caught:
-        model.start(fps=60.0, **options)
+        model.start(SynthesisRequest(fps=60.0, options=options))
     assert caught.value.where == where
 
 

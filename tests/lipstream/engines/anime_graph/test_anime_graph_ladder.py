@@ -10,7 +10,7 @@ import pytest
 
 from lipstream.audio import Audio
 from lipstream.engines.anime_graph import AnimeGraphEngine, AnimeGraphModel
-from lipstream.engines.base import Lookahead, Rung, final_until, frames_before
+from lipstream.engines.base import Lookahead, Rung, SynthesisRequest, final_until, frames_before
 from lipstream.errors import InvalidRequestError
 from lipstream.server.budget import lookahead_ms
 from lipstream.timeline import PhonemeSpan
@@ -111,10 +111,10 @@ def test_the_top_rung_is_the_models_own_tile_cap(max_tile: int, expected: list[s
 
 
 def _stream_one_by_one(
-    model: AnimeGraphModel, spans: list[PhonemeSpan], options: dict, fps: float = FPS
+    model: AnimeGraphModel, spans: list[PhonemeSpan], options: dict[str, object], fps: float = FPS
 ) -> tuple[np.ndarray, list[int]]:
     """All frames, and how many had come out after each span was fed."""
-    synthesizer = model.start(fps=fps, **options)
+    synthesizer = model.start(SynthesisRequest(fps=fps, options=options))
     pieces, emitted = [], []
     for span in spans:
         synthesizer.feed([span])
@@ -209,10 +209,14 @@ def audio_model() -> AnimeGraphModel:
 
 
 def _stream_with_audio(
-    model: AnimeGraphModel, spans: list[PhonemeSpan], audio: Audio, reach_s: float, options: dict
+    model: AnimeGraphModel,
+    spans: list[PhonemeSpan],
+    audio: Audio,
+    reach_s: float,
+    options: dict[str, object],
 ) -> list[int]:
     """Frames out after each span is fed with the audio up to its end + ``reach_s``."""
-    synthesizer = model.start(fps=FPS, **options)
+    synthesizer = model.start(SynthesisRequest(fps=FPS, options=options))
     rate, sent, emitted = audio.sample_rate, 0, [0]
     for span in spans:
         until = min(len(audio.samples), round((span.end + reach_s) * rate))
@@ -254,7 +258,9 @@ def test_audio_that_reaches_the_declared_wait_releases_every_promised_frame(
         {"search": "pq", "pq_window": 4, "pq_advance": 3, "graph": "clustered"},
     ],
 )
-def test_the_lookahead_of_any_options_is_kept(model: AnimeGraphModel, options: dict) -> None:  # type: ignore[type-arg]
+def test_the_lookahead_of_any_options_is_kept(
+    model: AnimeGraphModel, options: dict[str, object]
+) -> None:
     lookahead = model.lookahead_for(options)
     assert lookahead is not None
     for seed in (3, 4):
@@ -282,7 +288,7 @@ def test_causal_options_that_would_look_ahead_are_refused(
     model: AnimeGraphModel, options: dict[str, object], where: str
 ) -> None:
     with pytest.raises(InvalidRequestError) as caught:
-        model.start(fps=FPS, **options)
+        model.start(SynthesisRequest(fps=FPS, options=options))
     assert caught.value.code == "invalid_request" and caught.value.where == where
 
 

@@ -31,7 +31,7 @@ FPS = 120.0
 
 def _tones(seconds: float, parts: list[tuple[float, float]]) -> np.ndarray:
     times = np.arange(int(seconds * FPS)) / FPS
-    return sum(amplitude * np.sin(2 * np.pi * hz * times) for hz, amplitude in parts)
+    return np.asarray(sum(amplitude * np.sin(2 * np.pi * hz * times) for hz, amplitude in parts))
 
 
 def test_learned_cutoff_keeps_99_percent_of_the_energy() -> None:
@@ -113,7 +113,9 @@ def _monotone_paths(n: int, m: int) -> list[list[tuple[int, int]]]:
 
 
 @pytest.mark.parametrize("shape", [(2, 2), (3, 5), (5, 3), (4, 4)])
-def test_dtw_matches_each_target_frame_along_the_cheapest_of_all_paths(shape: tuple) -> None:
+def test_dtw_matches_each_target_frame_along_the_cheapest_of_all_paths(
+    shape: tuple[int, int],
+) -> None:
     n, m = shape
     rng = np.random.default_rng(n * 10 + m)
     target, source = rng.normal(size=(n, 3)), rng.normal(size=(m, 3))

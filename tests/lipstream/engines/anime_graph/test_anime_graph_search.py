@@ -30,8 +30,11 @@ def _successor(utterance: np.ndarray) -> np.ndarray:
     return np.where(same, following, -1).astype(np.int32)
 
 
+Database = tuple[np.ndarray, np.ndarray, list[int]]
+
+
 @st.composite
-def databases(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray, list[int]]:
+def databases(draw: st.DrawFn) -> Database:
     """(labels, utterance, query): recordings over a small alphabet and a query whose
     labels all occur in them."""
     recordings = draw(
@@ -93,7 +96,7 @@ def _min_tiles(
 
 @settings(max_examples=200, deadline=None)
 @given(databases())
-def test_greedy_uses_the_minimum_number_of_jumps(database: tuple) -> None:
+def test_greedy_uses_the_minimum_number_of_jumps(database: Database) -> None:
     labels, utterance, query = database
     successor = _successor(utterance)
     graph = AnimeGraph.build(labels, successor, ALPHABET)
@@ -111,7 +114,7 @@ def test_greedy_uses_the_minimum_number_of_jumps(database: tuple) -> None:
 @settings(max_examples=150, deadline=None)
 @given(databases(), st.integers(1, 3))
 def test_capped_greedy_continues_a_cut_tile_and_matches_uncapped_below_the_cap(
-    database: tuple, cap: int
+    database: Database, cap: int
 ) -> None:
     labels, utterance, query = database
     successor = _successor(utterance)
@@ -133,7 +136,7 @@ def test_capped_greedy_continues_a_cut_tile_and_matches_uncapped_below_the_cap(
 @settings(max_examples=150, deadline=None)
 @given(databases(), st.integers(1, 6), st.integers(0, 2**16))
 def test_greedy_on_a_clustered_graph_uses_the_minimum_number_of_jumps(
-    database: tuple, k: int, seed: int
+    database: Database, k: int, seed: int
 ) -> None:
     labels, utterance, query = database
     successor = _successor(utterance)
@@ -151,7 +154,7 @@ def test_greedy_on_a_clustered_graph_uses_the_minimum_number_of_jumps(
 
 @settings(max_examples=150, deadline=None)
 @given(databases(), st.data())
-def test_suffix_index_finds_every_occurrence(database: tuple, data: st.DataObject) -> None:
+def test_suffix_index_finds_every_occurrence(database: Database, data: st.DataObject) -> None:
     labels, utterance, _ = database
     index = SuffixIndex.build(labels, utterance, ALPHABET)
     pattern = data.draw(st.lists(st.integers(0, ALPHABET - 1), min_size=1, max_size=4))
@@ -292,7 +295,7 @@ def _path_cost(
 @settings(max_examples=120, deadline=None)
 @given(databases(), st.integers(1, 6), st.integers(0, 2**16), st.booleans(), st.data())
 def test_layered_matcher_takes_the_cheapest_of_the_longest_paths(
-    database: tuple, k: int, seed: int, audio: bool, data: st.DataObject
+    database: Database, k: int, seed: int, audio: bool, data: st.DataObject
 ) -> None:
     labels, utterance, query = database
     query = query[:6]
@@ -322,7 +325,7 @@ def test_layered_matcher_takes_the_cheapest_of_the_longest_paths(
 @settings(max_examples=100, deadline=None)
 @given(databases(), st.integers(1, 6), st.integers(0, 2**16))
 def test_layered_ties_go_to_the_lowest_last_node_then_the_lowest_predecessors(
-    database: tuple, k: int, seed: int
+    database: Database, k: int, seed: int
 ) -> None:
     labels, utterance, query = database
     query = query[:6]
@@ -355,7 +358,7 @@ def test_clustered_audio_costs_at_are_each_nodes_nearest_member_per_label() -> N
 @settings(max_examples=150, deadline=None)
 @given(databases(), st.integers(0, 3), st.booleans(), st.integers(0, 2**16), st.data())
 def test_compiled_tiles_equal_the_match_and_choose_loop(
-    database: tuple, cap: int, audio: bool, seed: int, data: st.DataObject
+    database: Database, cap: int, audio: bool, seed: int, data: st.DataObject
 ) -> None:
     labels, utterance, query = database
     successor = _successor(utterance)

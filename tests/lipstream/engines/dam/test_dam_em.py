@@ -9,12 +9,15 @@ import numpy as np
 import pytest
 
 from lipstream.engines.dam import em
+from lipstream.engines.dam.modes import Occurrences
 from tests.lipstream.engines.dam.dam_synthetic import known_dam, layout
 
 EPS = 1e-4
 
 
-def _problem(seed: int, n_modes: int, degree: int) -> tuple:
+def _problem(
+    seed: int, n_modes: int, degree: int
+) -> tuple[np.random.Generator, Occurrences, np.ndarray]:
     rng = np.random.default_rng(seed)
     durations = [list(rng.uniform(0.06, 0.2, size=6)) for _ in range(5)]
     occurrences, _ = layout(durations, fps=100.0)

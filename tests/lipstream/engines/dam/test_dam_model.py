@@ -52,7 +52,7 @@ def _by_loops(model: DamModel, spans: list[PhonemeSpan], fps: float) -> np.ndarr
             weight = math.exp(-gap * gap / (2 * model.sigma[mode] ** 2 + eps))
             if weight >= tol:
                 out[i] += weight * model.coefficients[mode, 0]
-    return out @ model.basis.components + model.basis.mean
+    return np.asarray(out @ model.basis.components + model.basis.mean)
 
 
 def test_cohen_massaro_is_the_dam_with_m_zero(
@@ -176,9 +176,10 @@ def test_bad_option_values_are_coded_errors(
     model = _dam(trained_models)
     for name in ("search_ahead", "tail_ahead"):
         with pytest.raises(InvalidRequestError) as caught:
-            model.start(fps=60, **{name: value})
+            model.start(SynthesisRequest(fps=60, options={name: value}))
         assert caught.value.where == f"options.{name}"
-    assert model.lookahead_for({"search_ahead": 0, "tail_ahead": 1}).phonemes == 1
+    searching = model.lookahead_for({"search_ahead": 0, "tail_ahead": 1})
+    assert searching is not None and searching.phonemes == 1
 
 
 def _damped_by_hand(raw: np.ndarray, omegas: np.ndarray, dt: float) -> np.ndarray:
@@ -269,7 +270,8 @@ def test_causal_options_are_checked_and_select_the_causal_rungs(
     median = model.durations.pooled_median_s()
     assert lead.lookahead.seconds == min(0.12, 2.0 * median / model.causal_kappa)
     assert model.rung_for({"causal": True, "lead_ms": 50}) is None
-    assert model.lookahead_for({"causal": True, "lead_ms": 50}).seconds > 0.0
+    shifted = model.lookahead_for({"causal": True, "lead_ms": 50})
+    assert shifted is not None and shifted.seconds > 0.0
 
 
 def _corrupt(directory: Path, name: str, change: object) -> None:

@@ -15,7 +15,10 @@ from lipstream.engines.expressive_dp.search import NO_NODE, LayerSpec, SearchSpa
 
 
 def path_cost(
-    space: SearchSpace, layers: Sequence[LayerSpec], path: Sequence[int], before: int = -1
+    space: SearchSpace,
+    layers: Sequence[LayerSpec],
+    path: Sequence[int] | np.ndarray,
+    before: int = -1,
 ) -> float:
     """Eq. 4 of ``path`` (infinite when it breaks a constraint); silences cost nothing and
     no TC crosses them. ``before`` is a node fixed ahead of the first layer."""

@@ -27,7 +27,7 @@ from lipstream.engines.expressive_dp.fast_step import (
 )
 from lipstream.engines.expressive_dp.lag_search import LagMemory
 from lipstream.engines.expressive_dp.search import LayerSpec, SearchSpace, search
-from lipstream.engines.expressive_dp.synthesizer import extend_path
+from lipstream.engines.expressive_dp.synthesizer import PathSynthesizer, extend_path
 from lipstream.phonemes import PHONEME_INDEX
 from lipstream.timeline import EMOTIONS
 
@@ -154,6 +154,7 @@ def _synthesize(
     **options: Any,
 ) -> tuple[str, float, np.ndarray]:  # fmt: skip
     synthesizer = model.start(fps=60, emotion="happy", **options)
+    assert isinstance(synthesizer, PathSynthesizer)
     if not reuse:
         synthesizer.memory = None
     out = []
@@ -221,7 +222,7 @@ def test_a_best_predecessor_is_sure_only_when_it_wins_by_the_margin(gap: float) 
     candidates = Layer(np.array([b]), np.zeros(1))
 
     def step(known: Ranked, then: Ranked) -> tuple[Ranked, int]:
-        return lag_step(previous, candidates, space.joins, known, then, 7, *scratch)  # type: ignore[no-any-return]
+        return lag_step(previous, candidates, space.joins, known, then, 7, *scratch)
 
     made, scanned = step(empty, empty)
     nodes, f, back, sure, kind, terms, root = made

@@ -14,6 +14,7 @@ from lipstream.engines.expressive_dp.fast_step import Layer, fast_step
 from lipstream.engines.expressive_dp.search import (
     NO_NODE,
     LayerSpec,
+    SearchSpace,
     one_layer,
     search,
 )
@@ -25,14 +26,16 @@ from .edp_synthetic import PHONEMES, brute_force, loop_tc, loop_unary, random_sp
 SILENCE = PHONEME_INDEX["sil"]
 
 
-def _problem(seed: int, n: int, t: int, constrain: bool, contaminate: bool):  # type: ignore[no-untyped-def]
+def _problem(
+    seed: int, n: int, t: int, constrain: bool, contaminate: bool
+) -> tuple[SearchSpace, list[LayerSpec], np.ndarray]:
     rng = np.random.default_rng(seed)
     space = random_space(rng, n)
     excluded = np.zeros(n, dtype=bool)
     if contaminate:
         excluded[rng.choice(n, size=max(1, n // 3), replace=False)] = True
     free = np.flatnonzero(~excluded)
-    layers = []
+    layers: list[LayerSpec] = []
     for _ in range(t):
         phoneme = SILENCE if rng.random() < 0.25 else int(rng.choice(PHONEMES))
         chosen = constrain and phoneme != SILENCE and rng.random() < 0.3

@@ -43,7 +43,10 @@ def test_entropic_map_sharpens_and_its_negative_scale_flattens() -> None:
     omega = np.array([6.0, 3.0, 1.0])
     plain = omega / omega.sum()
     sharp, flat = entropic_map(omega, 1.0), entropic_map(omega, -1.0)
-    entropy = lambda p: -float(np.sum(p * np.log(p)))  # noqa: E731
+
+    def entropy(p: np.ndarray) -> float:
+        return -float(np.sum(p * np.log(p)))
+
     assert entropy(sharp) < entropy(plain) < entropy(flat)
     assert np.allclose(entropic_map(omega, 0.0), plain)
 
