@@ -18,12 +18,35 @@ from pathlib import Path
 from typing import Any
 
 from ._version import __version__
+from .errors import LipstreamError
 
 
 def write_results(results: dict[str, Any], path: Path) -> None:
     """Write ``results`` to ``path`` as indented JSON, replacing the file."""
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(results, indent=2) + "\n", encoding="utf-8")
+
+
+def read_accumulated(path: Path, runs: str, kind: str) -> dict[str, Any]:
+    """A results file that gathers a command's runs under the list ``runs`` (an empty one
+    when there is none yet); LipstreamError ``invalid_results_file`` when it cannot be read
+    or is not a ``kind`` results file, which the command must not overwrite."""
+    if not path.exists():
+        return {runs: []}
+    try:
+        document = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as error:
+        raise LipstreamError(
+            f"cannot read the results file: {error}", where=str(path), code="invalid_results_file"
+        ) from None
+    if not isinstance(document, dict) or not isinstance(document.get(runs), list):
+        raise LipstreamError(
+            f"the file is not a {kind} results file (no '{runs}' list); choose another "
+            "--results rather than overwrite it",
+            where=str(path),
+            code="invalid_results_file",
+        )
+    return document
 
 
 def recorded(command: str) -> dict[str, Any]:

@@ -41,7 +41,6 @@ Usage (the server already running on this machine)::
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from contextlib import AbstractContextManager
@@ -50,8 +49,8 @@ from pathlib import Path
 from typing import Any
 
 from .._version import __version__
-from ..errors import InvalidRequestError, LipstreamError
-from ..results_file import machine, write_results
+from ..errors import InvalidRequestError
+from ..results_file import machine, read_accumulated, write_results
 from .load import LoadTestConfig, check_config, loadtest
 from .reference import ReferenceTraffic, engine_traffic, reference_server
 from .sessions import event_loop_name
@@ -301,25 +300,8 @@ def _number(value: float | None, digits: int = 1) -> str:
 
 
 def read_results(path: Path) -> dict[str, Any]:
-    """The capacity results file at ``path`` (an empty one when there is none yet);
-    LipstreamError ``invalid_results_file`` when it cannot be read or holds something else,
-    which a search must not overwrite."""
-    if not path.exists():
-        return {"searches": []}
-    try:
-        document = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as error:
-        raise LipstreamError(
-            f"cannot read the results file: {error}", where=str(path), code="invalid_results_file"
-        ) from None
-    if not isinstance(document, dict) or not isinstance(document.get("searches"), list):
-        raise LipstreamError(
-            "the file is not a capacity results file (no 'searches' list); choose another "
-            "--results rather than overwrite it",
-            where=str(path),
-            code="invalid_results_file",
-        )
-    return document
+    """The capacity results file at ``path`` (``results_file.read_accumulated``)."""
+    return read_accumulated(path, "searches", "capacity")
 
 
 def merge_results(path: Path, search: dict[str, Any]) -> dict[str, Any]:

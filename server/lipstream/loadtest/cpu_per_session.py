@@ -28,7 +28,6 @@ Usage (the server already running on this machine)::
 from __future__ import annotations
 
 import datetime
-import json
 import os
 import platform
 import time
@@ -38,8 +37,8 @@ from pathlib import Path
 from typing import Any
 
 from .._version import __version__
-from ..errors import InvalidRequestError, LipstreamError
-from ..results_file import write_results
+from ..errors import InvalidRequestError
+from ..results_file import read_accumulated, write_results
 from .capacity import LearnTraffic, Progress, ServeReference, reference_workers, traffic_of
 from .load import LoadTestConfig, check_config, loadtest
 from .reference import reference_server
@@ -243,24 +242,8 @@ def comparison_line(result: dict[str, Any]) -> str:
 
 
 def read_results(path: Path) -> dict[str, Any]:
-    """The results file at ``path`` (an empty one when there is none yet); LipstreamError
-    ``invalid_results_file`` when it cannot be read or holds something else."""
-    if not path.exists():
-        return {"runs": []}
-    try:
-        document = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as error:
-        raise LipstreamError(
-            f"cannot read the results file: {error}", where=str(path), code="invalid_results_file"
-        ) from None
-    if not isinstance(document, dict) or not isinstance(document.get("runs"), list):
-        raise LipstreamError(
-            "the file is not a CPU-per-session results file (no 'runs' list); choose another "
-            "--results rather than overwrite it",
-            where=str(path),
-            code="invalid_results_file",
-        )
-    return document
+    """The CPU-per-session results file at ``path`` (``results_file.read_accumulated``)."""
+    return read_accumulated(path, "runs", "CPU-per-session")
 
 
 def record_run(path: Path, result: dict[str, Any], command: str) -> None:
