@@ -31,6 +31,7 @@ import numpy as np
 from ...errors import InvalidRequestError
 from ...model_checks import ArrayReader, FieldReader
 from ...numerics.basis import MotionBasis, read_components
+from ...numerics.direct_call import DirectCall
 from ...store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
 from ..base import (
     Lookahead,
@@ -45,7 +46,7 @@ from ..base import (
 )
 from ..damped_fit import KAPPA_RANGE
 from ..durations import DurationModel
-from .causal_curve import NodeCurves
+from .causal_curve import NodeCurves, follow_raw
 from .contamination import Contamination
 from .costs import ALPHA_NAMES, NodeBounds, Weights
 from .isomap import PhonemeMaps
@@ -95,6 +96,9 @@ class ExpressiveDpModel(Model):
         self.space = SearchSpace(self.nodes, self.features, bounds, packed)
         self.rest_pose = self.stored["rest_pose"]
         self.curves = NodeCurves(self.nodes.frames, self.nodes.offsets, self.rest_pose)
+        # Every request's causal frames go through one DirectCall: the argument types are the
+        # model's and the synthesizer's buffers', the same for every request.
+        self.follow = DirectCall(follow_raw)
         self.lag = int(hyper["lag"])
         self.renderer = Renderer(
             self.nodes,

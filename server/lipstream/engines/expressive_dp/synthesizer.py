@@ -50,7 +50,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ...errors import InvalidRequestError
-from ...numerics.direct_call import DirectCall
 from ...phonemes import PHONEME_INDEX, SILENCE
 from ...timeline import PhonemeSpan
 from ..base import (
@@ -65,7 +64,7 @@ from ..damped import DampedState
 from ..damped_fit import RawCurve
 from ..growable import Growable
 from ..work import WorkGuard
-from .causal_curve import follow_raw, raw_rows
+from .causal_curve import raw_rows
 from .lag_search import LagMemory
 from .nodes import EMOTION_INDEX
 from .postprocess import RenderCache
@@ -204,7 +203,6 @@ class CausalSynthesizer(PathSynthesizer, ShiftedSynthesizer):
         self.omegas = model.causal_omegas
         self.rows = Growable(np.float64, (3,))
         self.nodes = Growable(np.int64)
-        self.follow = DirectCall(follow_raw)
 
     def _emit(self, stop: int) -> np.ndarray:
         if stop <= self.emitted:
@@ -217,10 +215,10 @@ class CausalSynthesizer(PathSynthesizer, ShiftedSynthesizer):
             self.state = DampedState.at_rest(self.model.rest_pose)
         values = np.empty((stop - self.emitted, len(self.state.x)))
         state = self.state
-        self.follow(
+        self.model.follow(
             self.emitted,
             stop,
-            self.request.fps,
+            float(self.request.fps),
             self.shift_s,
             self.rows.view(),
             self.nodes.view(),
