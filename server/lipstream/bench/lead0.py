@@ -83,16 +83,24 @@ class _Tap:
             self.lags_ms.append((received_at - self.sent_at - index / message.fps) * _MS)
 
 
-async def _start(client: AsyncClient, tap: _Tap, engine: str, character: str, rung: Rung,
-                 request_id: str) -> Stream:  # fmt: skip
+async def _start(
+    client: AsyncClient, tap: _Tap, engine: str, character: str, rung: Rung, request_id: str
+) -> Stream:
     """Start a request at ``rung`` (its options, no budget), its frames timed from now."""
     tap.begin(request_id)
     options = {key: json_value(value) for key, value in rung.options.items()}
     return await client.start(engine, character, id=request_id, fps=FPS, options=options)
 
 
-async def _paced(client: AsyncClient, tap: _Tap, engine: str, character: str, rung: Rung,
-                 spans: Sequence[Span], request_id: str) -> float:  # fmt: skip
+async def _paced(
+    client: AsyncClient,
+    tap: _Tap,
+    engine: str,
+    character: str,
+    rung: Rung,
+    spans: Sequence[Span],
+    request_id: str,
+) -> float:
     """Stream ``spans`` at lead 0; the lookahead ``ready`` reported (ms)."""
     stream = await _start(client, tap, engine, character, rung, request_id)
     for label, start, end in spans:
@@ -106,8 +114,9 @@ async def _paced(client: AsyncClient, tap: _Tap, engine: str, character: str, ru
     return (await stream.ready()).lookahead_ms
 
 
-async def _probe(client: AsyncClient, tap: _Tap, engine: str, character: str, rung: Rung,
-                 request_id: str) -> float:  # fmt: skip
+async def _probe(
+    client: AsyncClient, tap: _Tap, engine: str, character: str, rung: Rung, request_id: str
+) -> float:
     """First-frame latency (ms) of 30 phonemes sent whole."""
     labels = [label for label, _, _ in synthetic_clip(10.0, seed=7) if label != "sil"]
     items = [
@@ -128,8 +137,9 @@ def _quantile(values: Sequence[float], q: float) -> float:
     return round(ordered[min(len(ordered) - 1, int(q * (len(ordered) - 1) + 0.5))], 1)
 
 
-async def measure_rung(url: str, engine: str, character: str, rung: Rung, clip_s: float,
-                       requests: int, probes: int) -> Lead0Row:  # fmt: skip
+async def measure_rung(
+    url: str, engine: str, character: str, rung: Rung, clip_s: float, requests: int, probes: int
+) -> Lead0Row:
     """``Lead0Row`` of one rung, on a fresh connection."""
     tap = _Tap()
     client = AsyncClient(url, on_message=tap)
@@ -149,9 +159,15 @@ async def measure_rung(url: str, engine: str, character: str, rung: Rung, clip_s
     finally:
         await client.close()
     return Lead0Row(
-        engine, rung.name, round(lookahead_ms, 1), len(lags), _quantile(lags, 0.5),
-        _quantile(lags, 0.99), _quantile(firsts, 0.5), _quantile(firsts, 0.99),
-    )  # fmt: skip
+        engine,
+        rung.name,
+        round(lookahead_ms, 1),
+        len(lags),
+        _quantile(lags, 0.5),
+        _quantile(lags, 0.99),
+        _quantile(firsts, 0.5),
+        _quantile(firsts, 0.99),
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> None:
