@@ -10,6 +10,7 @@ phoneme durations and the causal rungs' filter speed κ (``causal``).
 
 from __future__ import annotations
 
+import inspect
 from typing import Any
 
 import numpy as np
@@ -153,44 +154,10 @@ class CohenMassaroEngine(DamEngine):
     name = "cohen-massaro"
     model_class = CohenMassaroModel
 
-    def __init__(
-        self,
-        variance: float = 0.99,
-        points: int = 8,
-        min_occurrences: int = 3,
-        eps: float = 1e-4,
-        tol: float = 1e-3,
-        ridge: float = 1e-6,
-        sigma_init: float = 0.2,
-        sigma_max: float = 0.6,
-        n_iter: int = 3,
-        em_tol: float = 1e-4,
-        truncation_bound: float = 0.01,
-        alpha: float = 1.0,
-        w_context: float = 1000.0,
-        w_smooth: float = 1.0,
-        search_behind: int = 2,
-        search_ahead: int = 2,
-    ) -> None:
-        super().__init__(
-            0,
-            variance,
-            points,
-            min_occurrences,
-            eps,
-            tol,
-            ridge,
-            sigma_init,
-            sigma_max,
-            n_iter,
-            em_tol,
-            truncation_bound,
-            alpha,
-            w_context,
-            w_smooth,
-            search_behind,
-            search_ahead,
-        )
+    def __init__(self, **hyperparameters: Any) -> None:
+        """DAM's hyperparameters but ``degree``, which is 0 here (constant targets); the
+        signature below names them, read from ``DamEngine``'s."""
+        super().__init__(degree=0, **hyperparameters)
         del self.degree  # M is no hyperparameter here: it is 0
 
     def polynomial_degree(self) -> int:
@@ -198,3 +165,17 @@ class CohenMassaroEngine(DamEngine):
 
     def make_model(self, manifest: ModelManifest, arrays: dict[str, np.ndarray]) -> DamModel:
         return CohenMassaroModel(manifest, arrays)
+
+
+def _without_degree(signature: inspect.Signature) -> inspect.Signature:
+    kept = [p for p in signature.parameters.values() if p.name != "degree"]
+    return signature.replace(
+        parameters=[p.replace(kind=p.KEYWORD_ONLY) if p.name != "self" else p for p in kept]
+    )
+
+
+# Engine.hyperparameter_names reads a signature, as scikit-learn's get_params does: give the
+# derived constructor DAM's, less degree, instead of listing sixteen parameters again.
+CohenMassaroEngine.__init__.__signature__ = _without_degree(  # type: ignore[attr-defined]
+    inspect.signature(DamEngine.__init__)
+)

@@ -349,3 +349,19 @@ def test_a_phoneme_never_trained_is_spoken_by_its_stand_in(small_demo_corpus: Co
         assert stand_in != phoneme
         frames = model.synthesize([(phoneme, 0.0, 0.2)]).frames
         np.testing.assert_array_equal(frames, model.synthesize([(stand_in, 0.0, 0.2)]).frames)
+
+
+def test_cohen_massaro_takes_dams_hyperparameters_but_degree() -> None:
+    from lipstream.engines.dam.engine import CohenMassaroEngine, DamEngine
+
+    assert set(DamEngine.hyperparameter_names()) - set(
+        CohenMassaroEngine.hyperparameter_names()
+    ) == {"degree"}
+    engine = CohenMassaroEngine(points=6, w_smooth=2.0)
+    assert engine.polynomial_degree() == 0
+    assert (engine.points, engine.w_smooth) == (6, 2.0)
+    assert CohenMassaroEngine(**engine.hyperparameters()).hyperparameters() == (
+        engine.hyperparameters()
+    )
+    with pytest.raises(TypeError):
+        CohenMassaroEngine(degree=3)
