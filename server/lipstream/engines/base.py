@@ -156,6 +156,8 @@ class SynthesisRequest:
             raise InvalidRequestError(
                 f"emotion must be one of {EMOTIONS}, got {self.emotion!r}", where="emotion"
             )
+        # one type whatever the client sent (30 or 30.0): compiled kernels take it as is
+        object.__setattr__(self, "fps", float(fps))
 
     def emotion_of(self, span: PhonemeSpan) -> str | None:
         """The emotion ``span`` is spoken with: its own, else the request's."""
