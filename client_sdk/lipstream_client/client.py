@@ -94,7 +94,7 @@ RESUMABLE_CLOSE_CODES: frozenset[int | None] = frozenset(
 )
 """Closes after which open requests are resumed: the connection broke (no close frame,
 1006), or the server went away, failed or asked for a retry."""
-_HANDSHAKE_BODY_CHARS = 200
+_HANDSHAKE_BODY_CHARS = 1000  # room for a JSON error body whole
 
 MessageTap: TypeAlias = Callable[[ServerMessage, float], None]
 

@@ -319,6 +319,7 @@ ERROR_CODES: dict[str, ErrorCodeInfo] = {
     SERVER_BUSY: ErrorCodeInfo(
         "the server is at its capacity: its session cap, its measured load (event-loop lag "
         "or busy time) or its memory ceiling; details.retry_after_ms says when to retry. "
+        "Refused for load, the upgrade gets HTTP 503 with this error as its JSON body. "
         "Refusing a `start` (memory), it ends only that request",
         "server",
         "connection",

@@ -15,6 +15,7 @@ lost connection raises ``ResumeFailed``.
 
 from __future__ import annotations
 
+import json
 import random
 from collections.abc import Mapping
 
@@ -125,13 +126,16 @@ class ResumeFailed(ConnectionClosed):
 
 class HandshakeRejected(LipstreamClientError):
     """The server refused the WebSocket upgrade with HTTP ``status`` (403 when it speaks
-    none of the offered subprotocols, 503 when it holds as many connections as it can);
-    ``retry_after`` is its ``Retry-After`` header, if any."""
+    none of the offered subprotocols, 503 when it is busy or holds as many connections as it
+    can); ``retry_after`` is its ``Retry-After`` header, if any, and ``error`` the lipstream
+    error of a JSON body (``{"error": {"code", "message", "details"}}``, e.g. ``server_busy``
+    with ``details.retry_after_ms``), if it sent one."""
 
     def __init__(self, status: int, body: str = "", retry_after: str | None = None) -> None:
         self.status = status
         self.body = body
         self.retry_after = retry_after
+        self.error = error_of_body(body)
         super().__init__(
             f"WebSocket upgrade refused with HTTP {status}" + (f": {body}" if body else "")
         )
@@ -142,7 +146,25 @@ class HandshakeRejected(LipstreamClientError):
 
     @property
     def retry_after_s(self) -> float | None:
+        if self.error is not None and self.error.retry_after_s is not None:
+            return self.error.retry_after_s
         return retry_after_header_s(self.retry_after)
+
+
+def error_of_body(body: str) -> LipstreamServerError | None:
+    """The lipstream error an HTTP answer's JSON body carries, or None for any other body."""
+    try:
+        parsed = json.loads(body)
+    except ValueError:
+        return None
+    error = parsed.get("error") if isinstance(parsed, dict) else None
+    if not isinstance(error, dict):
+        return None
+    code, message = error.get("code"), error.get("message")
+    details = error.get("details", {})
+    if not (isinstance(code, str) and isinstance(message, str) and isinstance(details, dict)):
+        return None
+    return LipstreamServerError(code, message, True, None, details)
 
 
 class ProtocolViolation(LipstreamClientError):

@@ -187,7 +187,10 @@ async def run_kind(kind: str, target: Target, tally: KindTally, deadline: float)
         except LipstreamServerError as error:
             tally.server_error(error)
         except HandshakeRejected as error:
-            tally.failures[f"http_{error.status}"] += 1
+            if error.error is not None:
+                tally.server_error(error.error)
+            else:
+                tally.failures[f"http_{error.status}"] += 1
         except (OSError, LipstreamClientError, WebSocketClosed, InvalidHandshake) as error:
             tally.failures[type(error).__name__] += 1
         if tally.skipped is not None:

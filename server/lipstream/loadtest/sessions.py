@@ -337,9 +337,9 @@ def _probing(plan: ClipPlan, running: Callable[[], bool]) -> bool:
 
 def refusal_code(refused: ConnectionClosed | HandshakeRejected) -> str:
     """The error key of a closed or refused connection: the server's code, ``closed_<code>``
-    for a close without one, ``http_<status>`` for a refused upgrade."""
+    for a close without one, ``http_<status>`` for an upgrade refused without an error body."""
     if isinstance(refused, HandshakeRejected):
-        return f"http_{refused.status}"
+        return refused.error.code if refused.error else f"http_{refused.status}"
     return refused.error.code if refused.error else f"closed_{refused.code}"
 
 

@@ -296,8 +296,9 @@ async def storm(
 
 
 def refusals(outcomes: list[str]) -> dict[str, int]:
-    """The refused connections by reason: ``server_busy`` by its ``details.reason``, an
-    upgrade refused with an HTTP status (``http_503``: shed or past the connection cap),
+    """The refused connections by reason: ``server_busy`` by its ``details.reason`` (as an
+    ``error`` or as the JSON body of an upgrade refused with HTTP 503), an upgrade refused
+    with an HTTP status and no error body (``http_503``: shed or past the connection cap),
     another error code."""
     counted: Counter[str] = Counter()
     for outcome in outcomes:
@@ -351,6 +352,8 @@ async def _session(
         reason = busy.error.details.get("reason") if busy.error is not None else None
         return f"server_busy:{reason}"
     except HandshakeRejected as rejected:
+        if rejected.error is not None and rejected.error.code == "server_busy":
+            return f"server_busy:{rejected.error.details.get('reason')}"
         return f"http_{rejected.status}"
     except LipstreamServerError as error:
         if error.code == "server_busy":

@@ -28,8 +28,15 @@ protocol with ``http_flush``'s bound on unsent bytes) adds:
   the address's ``LIPSTREAM_CLIENT_UPGRADE_RATE`` is refused too; both get HTTP 503 with
   ``too_many_client_connections`` in a JSON error body, ``Retry-After`` and
   ``Connection: close``, so one client cannot fill the worker's cap for everyone else;
+- *admission at the upgrade*: a WebSocket upgrade to ``/v1/stream`` is admitted or refused
+  for load (``overload``: memory, lag, the loop's CPU) as soon as its head is parsed; a
+  refused one gets HTTP 503 with the ``server_busy`` error (``details.reason``,
+  ``details.retry_after_ms``) as its JSON body, ``Retry-After`` and ``Connection: close``,
+  so a storm's refusals cost no WebSocket handshake, no app task and no close handshake, and
+  an admitted one counts against the next head at once. While the server drains, the
+  endpoint answers instead (``shutting_down``);
 - *shedding*: while the event loop lags far behind (``overload.OverloadPolicy.shedding``),
-  a WebSocket upgrade gets the same 503 at once, with no WebSocket work;
+  a WebSocket upgrade gets a 503 at once, with no verdict and no WebSocket work;
 - a *head size limit*: a request head (request line and header fields) of more than
   ``MAX_HEAD_BYTES`` gets HTTP 431 and the connection is closed, whether the head arrives
   whole (h11 parses any complete head) or in pieces (h11 stops buffering an incomplete one
@@ -41,10 +48,11 @@ protocol with ``http_flush``'s bound on unsent bytes) adds:
   middleware, no lifespan state, the cheapest answer the event loop can give.
 
 Connections closed at the deadline, refused past the cap, refused past a client's limits,
-shed and refused for their head's size are counted in ``lipstream_connections_refused``
-(codes ``handshake_timeout``, ``too_many_connections``, ``too_many_client_connections``,
-``shedding`` and ``head_too_large``); a client's refusals also in
-``lipstream_client_refusals`` by reason.
+refused for load, shed and refused for their head's size are counted in
+``lipstream_connections_refused`` (codes ``handshake_timeout``, ``too_many_connections``,
+``too_many_client_connections``, ``server_busy``, ``shedding`` and ``head_too_large``); a
+client's refusals also in ``lipstream_client_refusals`` by reason, a refusal for load also in
+``lipstream_busy_refusals`` by reason.
 """
 
 from __future__ import annotations
@@ -65,9 +73,12 @@ from uvicorn._types import (
 )
 from uvicorn.server import ServerState as UvicornState
 
+from lipstream_client.errors import SERVER_BUSY
+
 from .client_limits import CONNECTIONS, UPGRADE_RATE, ClientLimits, refusal_body, refusal_headers
 from .http_flush import BoundedFlushHTTPProtocol
 from .open_files import connection_cap, open_file_limit
+from .overload import Refusal, Upgrade
 from .startup import server_of
 
 HANDSHAKE_TIMEOUT = "handshake_timeout"
@@ -80,6 +91,7 @@ MAX_HEAD_BYTES = 16 * 1024  # h11's own bound on an incomplete head
 LINGER_S = 2.0
 LINGER_BYTES = 4 * 1024 * 1024
 HEALTHZ_PATH = "/healthz"
+STREAM_PATH = "/v1/stream"
 HEALTHZ_BODY = json.dumps({"status": "ok"}, separators=(",", ":")).encode()
 PROBE_LANE = 64
 PROBE_HEAD_S = 1.0
@@ -137,6 +149,37 @@ def shedding(app_state: Mapping[str, Any]) -> bool:
     (``overload.OverloadPolicy.shedding``)."""
     server = server_of(app_state)
     return server is not None and server.overload.shedding(len(server.lifecycle.connections))
+
+
+def upgrade_refusal(app_state: Mapping[str, Any], client: tuple[str, int] | None) -> Refusal | None:
+    """The load verdict on a WebSocket upgrade from ``client`` (None: admitted and pending as
+    ``Upgrade(client)``, or not the app's to give yet: starting, draining, no address)."""
+    server = server_of(app_state)
+    if server is None or client is None or server.lifecycle.draining:
+        return None
+    busy = server.overload.upgrade_refusal(len(server.lifecycle.connections), Upgrade(client))
+    if busy is not None:
+        refused(app_state, SERVER_BUSY)
+        server.metrics.labelled(server.metrics.busy_refusals, busy.reason).inc()
+    return busy
+
+
+def busy_response(refusal: Refusal) -> bytes:
+    """The whole HTTP 503 answer to an upgrade refused for load."""
+    error = {"code": refusal.code, "message": refusal.message, "details": refusal.details}
+    body = json.dumps({"error": error}, separators=(",", ":")).encode()
+    headers = [
+        (b"content-type", b"application/json"),
+        (b"content-length", str(len(body)).encode()),
+        (b"retry-after", str(-(-refusal.retry_after_ms // 1000)).encode()),
+        (b"connection", b"close"),
+    ]
+    return (
+        b"HTTP/1.1 503 Service Unavailable\r\n"
+        + b"".join(name + b": " + value + b"\r\n" for name, value in headers)
+        + b"\r\n"
+        + body
+    )
 
 
 def client_limits(app_state: Mapping[str, Any]) -> ClientLimits | None:
@@ -266,6 +309,11 @@ class GuardedHTTPProtocol(BoundedFlushHTTPProtocol):
         if shedding(self.app_state):
             self._refuse(SHEDDING)
             return
+        if self.scope["path"] == STREAM_PATH:
+            busy = upgrade_refusal(self.app_state, self.client)
+            if busy is not None:
+                self._refuse_busy(busy)
+                return
         super().handle_websocket_upgrade(*request)
 
     async def _route(
@@ -354,6 +402,13 @@ class GuardedHTTPProtocol(BoundedFlushHTTPProtocol):
             + body
         )
         self.transport.close()
+
+    def _refuse_busy(self, refusal: Refusal) -> None:
+        """HTTP 503 ``server_busy`` and close (counted by ``upgrade_refusal``)."""
+        self.over_cap = True
+        if not self.transport.is_closing():
+            self.transport.write(busy_response(refusal))
+            self.transport.close()
 
     def _refuse(self, code: str) -> None:
         """HTTP 503 and close, whatever the client sent or will send; counted as ``code``."""

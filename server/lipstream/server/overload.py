@@ -40,9 +40,14 @@ when the burst needs it to look dear.
 
 A refusal through the WebSocket (accept, ``error``, close) costs the loop about as much as
 a short request; in a storm of connections those refusals alone keep the loop behind. So
-while the lag exceeds ``SHED_FACTOR`` times its limit (``shedding``), the HTTP protocol
-answers new upgrades with 503 and ``Retry-After`` before any WebSocket work
-(``handshake``).
+the HTTP protocol decides admission itself, when a WebSocket upgrade's head is parsed and
+before any WebSocket work (``handshake``): a refused upgrade gets HTTP 503 with the
+``server_busy`` error as its JSON body and ``Retry-After``; an admitted one is pending from
+that moment, under the key ``Upgrade(client)``, so the next head of the same burst already
+counts it, and the WebSocket endpoint ``adopt``s it under its connection. An upgrade the
+endpoint never adopts (the client left during the handshake) stops counting after
+``UPGRADE_TTL_S``. While the lag exceeds ``SHED_FACTOR`` times its limit (``shedding``),
+upgrades get the same 503 without a verdict.
 
 Left at 0, the memory ceiling is ``AUTO_MEMORY_SHARE`` of the memory the process may use
 (the machine's, or a smaller container limit) divided among the workers. A refusal is
@@ -78,6 +83,7 @@ LAG_FROM_SESSIONS = 16
 SHED_FACTOR = 4.0
 LEARN_WEIGHT = 0.1
 AUTO_MEMORY_SHARE = 0.8
+UPGRADE_TTL_S = 10.0  # at least the head deadline plus a WebSocket handshake
 MESSAGE_OVERHEAD_MS = 0.13  # uvicorn, websockets, codec and session per message in and out
 
 
@@ -94,6 +100,14 @@ class Refusal:
     @property
     def details(self) -> dict[str, JsonValue]:
         return {"retry_after_ms": self.retry_after_ms, "reason": self.reason}
+
+
+@dataclass(frozen=True)
+class Upgrade:
+    """The admission key of a WebSocket upgrade admitted by the HTTP protocol, until the
+    endpoint adopts it: the client's (host, port)."""
+
+    client: tuple[str, int]
 
 
 @dataclass(frozen=True)
@@ -190,6 +204,17 @@ class OverloadPolicy:
                 self.recent.append((now, cost))
             return refusal
 
+    def adopt(self, upgrade: Upgrade, key: Hashable) -> bool:
+        """Session ``key`` is the upgrade the HTTP protocol admitted as ``upgrade``: pending
+        under ``key`` from when the upgrade was admitted. False when no such upgrade is
+        pending (admitted too long ago, or never)."""
+        with self.lock:
+            admitted = self.pending.pop(upgrade, None)
+            if admitted is None:
+                return False
+            self.pending[key] = admitted
+            return True
+
     def set_streaming(self, key: Hashable, streaming: bool) -> None:
         """Whether session ``key`` has a request active (the sessions the cost is learned
         from)."""
@@ -226,6 +251,13 @@ class OverloadPolicy:
         window."""
         while self.recent and now - self.recent[0][0] >= RECENT_S:
             self.recent.popleft()
+        stale = [
+            key
+            for key, at in self.pending.items()
+            if isinstance(key, Upgrade) and now - at >= UPGRADE_TTL_S
+        ]
+        for key in stale:
+            del self.pending[key]
         started = sum(cost * (1.0 - (now - at) / RECENT_S) for at, cost in self.recent)
         return started + len(self.pending) * self.session_cost
 
@@ -278,6 +310,14 @@ class Overload:
 
     def session_refusal(self, sessions: int, key: Hashable) -> Refusal | None:
         return self.policy.session_refusal(self.monitor.sample(), sessions, time.monotonic(), key)
+
+    def upgrade_refusal(self, sessions: int, upgrade: Upgrade) -> Refusal | None:
+        """For a WebSocket upgrade, from the HTTP protocol: admitted, it is pending as
+        ``upgrade`` until the endpoint ``adopt``s it."""
+        return self.session_refusal(sessions, upgrade)
+
+    def adopt(self, upgrade: Upgrade, key: Hashable) -> bool:
+        return self.policy.adopt(upgrade, key)
 
     def start_refusal(self, key: Hashable, engine: str) -> Refusal | None:
         """For a session's ``start``; safe from the synthesis pool's threads, where a

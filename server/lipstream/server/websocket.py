@@ -79,6 +79,7 @@ from lipstream_client.messages import JsonValue
 from .admission import TokenBucket, bearer_token, origin_allowed, token_accepted
 from .deadline import LaterDeadline, SendDeadline
 from .outgoing import Outgoing, Stamped
+from .overload import Upgrade
 from .read_ahead import DISCONNECT, ReadAhead, Received
 from .read_window import ARRIVED_AT
 from .session import InputMessage, Session
@@ -117,8 +118,11 @@ async def stream_endpoint(websocket: WebSocket) -> None:
     refusal = _refusal(websocket, state)
     connection = Connection(websocket, encoding, state)
     details: dict[str, JsonValue] | None = None
+    admitted = _adopt_upgrade(websocket, state, connection)
     if refusal is None:
-        busy = state.overload.session_refusal(len(state.lifecycle.connections), connection)
+        busy = None
+        if not admitted:
+            busy = state.overload.session_refusal(len(state.lifecycle.connections), connection)
         if busy is None and not state.lifecycle.admit(connection):
             busy = state.overload.policy.sessions_refusal(state.settings.max_sessions)
         if busy is not None:
@@ -138,6 +142,15 @@ async def stream_endpoint(websocket: WebSocket) -> None:
     finally:
         state.lifecycle.release(connection)
         state.overload.policy.closed(connection)
+
+
+def _adopt_upgrade(websocket: WebSocket, state: ServerState, connection: Connection) -> bool:
+    """Whether the HTTP protocol admitted this connection's upgrade for load (``handshake``);
+    it is then pending under ``connection``."""
+    client = websocket.scope.get("client")
+    if client is None:
+        return False
+    return state.overload.adopt(Upgrade((client[0], client[1])), connection)
 
 
 def _refusal(websocket: WebSocket, state: ServerState) -> tuple[str, str] | None:

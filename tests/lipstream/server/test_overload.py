@@ -28,9 +28,11 @@ from lipstream.server.overload import (
     MEMORY_RETRY_AFTER_MS,
     RECENT_S,
     RETRY_AFTER_MS,
+    UPGRADE_TTL_S,
     LoadLimits,
     OverloadPolicy,
     Refusal,
+    Upgrade,
     calibrated_session_cost,
     engine_costs,
 )
@@ -38,10 +40,9 @@ from lipstream.server.request import RequestLimits
 from lipstream.server.session import Session, SessionLimits
 from lipstream_client import (
     AsyncClient,
-    ConnectionClosed,
     ErrorMessage,
+    HandshakeRejected,
     Ready,
-    ServerBusy,
     Start,
     retry_delay_s,
 )
@@ -237,39 +238,64 @@ def test_a_refused_start_ends_only_that_request(catalog: Catalog) -> None:
     assert isinstance(ready.message, Ready) and session.active_requests == 1
 
 
-def test_an_overloaded_server_refuses_sessions_with_retry_after(lerp_dir: Path) -> None:
+def refused_upgrade(url: str) -> HandshakeRejected:
+    async def connect() -> HandshakeRejected:
+        try:
+            async with AsyncClient(url, open_timeout=10):
+                pass
+        except HandshakeRejected as rejected:
+            return rejected
+        raise AssertionError("the upgrade was admitted")
+
+    return asyncio.run(connect())
+
+
+def test_an_overloaded_server_refuses_upgrades_with_http_503_and_server_busy(
+    lerp_dir: Path,
+) -> None:
     # Any measured busy time at all exceeds this limit, and a session's cost alone does.
     with serving(lerp_dir, ServerSettings(max_loop_busy=1e-9)) as served:
-        with client(served.ws) as ws:
-            messages, code, reason = ws.closed()
-        [error] = messages
-        assert isinstance(error, ErrorMessage)
-        assert (error.code, error.fatal, error.id, code, reason) == (
+        rejected = refused_upgrade(served.ws)
+        assert rejected.status == 503 and rejected.error is not None
+        assert (rejected.error.code, rejected.error.details["reason"]) == (
             "server_busy",
-            True,
-            None,
-            1013,
-            "server_busy",
+            "loop_busy",
         )
-        assert error.details["reason"] == "loop_busy"
-        wait = error.details["retry_after_ms"]
+        wait = rejected.error.details["retry_after_ms"]
         assert isinstance(wait, int) and RETRY_AFTER_MS <= wait < 2 * RETRY_AFTER_MS
+        assert rejected.retry_after == str(math.ceil(wait / 1000))
+        assert rejected.retry_after_s == wait / 1000
+        assert retry_delay_s(rejected, attempt=5) == wait / 1000
         assert httpx.get(f"{served.http}/healthz").json() == {"status": "ok"}
         metrics = httpx.get(f"{served.http}/metrics").text
         assert 'lipstream_connections_refused_total{code="server_busy"} 1.0' in metrics
+        assert 'lipstream_busy_refusals_total{reason="loop_busy"} 1.0' in metrics
+        assert served.app.state.startup.server.overload.policy.pending == {}
         resident = re.search(r"^lipstream_resident_memory_bytes (\S+)$", metrics, re.M)
         assert resident is not None and float(resident.group(1)) > 1 << 20
         busy = re.search(r"^lipstream_event_loop_busy_ratio (\S+)$", metrics, re.M)
         assert busy is not None and 0.0 <= float(busy.group(1)) <= 1.0
 
 
+def test_an_admitted_upgrade_is_pending_under_its_connection_until_it_closes(
+    lerp_dir: Path,
+) -> None:
+    with serving(lerp_dir) as served:
+        policy = served.app.state.startup.server.overload.policy
+        with client(served.ws) as ws:
+            [key] = policy.pending  # adopted by the endpoint: no Upgrade key left
+            assert not isinstance(key, Upgrade)
+            ws.send(Start("a", "viseme-lerp", "demo"))
+            assert isinstance(ws.recv(), Ready)
+            assert policy.pending == {} and len(policy.priced) == 1
+        eventually(lambda: not policy.priced, "the closed session forgotten")
+
+
 def test_above_the_memory_ceiling_nothing_new_is_taken_on(lerp_dir: Path) -> None:
     with serving(lerp_dir, ServerSettings(max_memory_mb=1)) as served:
-        with client(served.ws) as ws:
-            messages, code, _ = ws.closed()
-        [error] = messages
-        assert isinstance(error, ErrorMessage) and code == 1013
-        assert error.details["reason"] == "memory"
+        rejected = refused_upgrade(served.ws)
+        assert rejected.status == 503 and rejected.error is not None
+        assert rejected.error.details["reason"] == "memory"
         body = {"engine": "viseme-lerp", "character": "demo", "items": []}
         refused = httpx.post(f"{served.http}/v1/synthesize", json=body)
         assert refused.status_code == 503
@@ -280,18 +306,27 @@ def test_above_the_memory_ceiling_nothing_new_is_taken_on(lerp_dir: Path) -> Non
         assert refused.headers["retry-after"] == str(math.ceil(wait_ms / 1000))
 
 
-def test_the_client_sdk_reports_the_servers_retry_after(lerp_dir: Path) -> None:
-    async def refused(url: str) -> ConnectionClosed:
-        async with AsyncClient(url, open_timeout=10) as sdk:
-            return await sdk.wait_closed()
-
-    with serving(lerp_dir, ServerSettings(max_memory_mb=1)) as served:
-        closed = asyncio.run(refused(served.ws))
-    assert isinstance(closed, ServerBusy) and closed.error is not None
-    wait_ms = closed.error.details["retry_after_ms"]
-    assert isinstance(wait_ms, int)
-    assert closed.retry_after_s == wait_ms / 1000
-    assert retry_delay_s(closed, attempt=5) == wait_ms / 1000
+def test_upgrades_of_a_burst_count_against_each_other_at_once() -> None:
+    """An upgrade admitted by the HTTP protocol is pending at once (the next head of the
+    burst sees it), moves to its connection when the endpoint adopts it, and stops counting
+    after UPGRADE_TTL_S when no endpoint ever does."""
+    overload = policy()
+    upgrades = [Upgrade(("127.0.0.1", 40000 + index)) for index in range(6)]
+    for upgrade in upgrades:
+        assert overload.session_refusal(QUIET, 0, 0.0, upgrade) is None
+    refusal = overload.session_refusal(QUIET, 0, 0.0, Upgrade(("127.0.0.1", 1)))
+    assert refusal is not None and refusal.reason == "loop_busy"  # 7 x 0.125 > 0.75
+    assert overload.adopt(upgrades[0], "session") and not overload.adopt(upgrades[0], "again")
+    assert not overload.adopt(Upgrade(("127.0.0.1", 1)), "refused one")
+    overload.closed("session")  # the adopted one closes: its share is free
+    assert admitted_in_a_burst(overload, QUIET, now=1.0) == 1
+    # The five never adopted still count just before the TTL, and not from it on.
+    assert admitted_in_a_burst(overload, QUIET, now=UPGRADE_TTL_S - 0.5) == 0
+    fresh = policy()
+    for upgrade in upgrades:
+        fresh.session_refusal(QUIET, 0, 0.0, upgrade)
+    assert admitted_in_a_burst(fresh, QUIET, now=UPGRADE_TTL_S) == 6
+    assert not fresh.adopt(upgrades[2], "too late")
 
 
 def test_shedding_needs_a_far_lagging_loop_and_enough_sessions() -> None:
