@@ -32,3 +32,21 @@ def test_without_retry_after_the_delay_is_jittered_exponential_backoff() -> None
         delays = [retry_delay_s(plain, attempt, rng=rng) for _ in range(200)]
         assert all(0.0 <= delay <= ceiling for delay in delays)
         assert max(delays) > ceiling / 2  # spread over the range, not stuck at its bottom
+
+
+def test_a_refused_upgrade_carries_the_error_of_its_json_body() -> None:
+    body = (
+        '{"error":{"code":"server_busy","message":"busy; retry in 1420 ms",'
+        '"details":{"retry_after_ms":1420,"reason":"loop_busy"}}}'
+    )
+    rejected = HandshakeRejected(503, body, retry_after="2")
+    assert rejected.error is not None
+    assert (rejected.error.code, rejected.error.message) == (
+        "server_busy",
+        "busy; retry in 1420 ms",
+    )
+    assert rejected.error.details == {"retry_after_ms": 1420, "reason": "loop_busy"}
+    assert rejected.retry_after_s == 1.42  # the body's milliseconds, finer than the header
+    for other in ("full", "", body[:60], '{"error": "x"}', "[1]", '{"error":{"code":1}}'):
+        refused = HandshakeRejected(503, other, retry_after="2")
+        assert refused.error is None and refused.retry_after_s == 2.0
