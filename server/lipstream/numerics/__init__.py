@@ -1,7 +1,11 @@
 """Numerical kernels shared by engines (numpy/scipy/numba, no engine imports).
 
-- ``basis``: the motion basis (PCA) and its reconstruction;
-- ``banded``: banded and block-tridiagonal solves;
+- ``basis``: the motion basis (PCA, ``MotionBasis``, ``fit_basis``) and its compiled
+  reconstruction as float32 channel frames (``basis_frames``: BLAS or in-order sums,
+  optional per-channel bounds);
+- ``banded``: banded and block-tridiagonal solves (``solve_spd_banded``; the factor-once,
+  solve-many pair ``factor_spd_banded`` / ``solve_with_factor``;
+  ``solve_spd_block_tridiagonal``; ``windowed_least_squares``);
 - ``trellis``: the Viterbi trellis and the fixed-lag decoder (``FixedLagViterbi``,
   ``ViterbiState``);
 - ``direct_call``: calling a compiled kernel without numba's per-call typing

@@ -21,6 +21,13 @@ band of width 2h, solved together as one dimension-major system.
 A window term at frame t is used only where the stencil lies inside the
 sequence; near the ends a velocity or curvature target simply has no term.
 
+A system solved again and again with new right-hand sides (the expressive DP's
+boundary smoothing: one matrix per pattern of weights) is factored once by
+``factor_spd_banded`` (LAPACK's dpbtrf) and solved by ``solve_with_factor``
+(dpbtrs): ``solve_spd_banded`` is LAPACK's dpbsv, which is those two calls, so
+the solutions are the same to the bit, except for a tridiagonal A (one
+sub-diagonal), which scipy's ``solveh_banded`` solves by dptsv (LDLᵀ) instead.
+
 Block-tridiagonal systems (first-order windows with full precisions, as Brand's
 Eq. 6) have a sharper solver than LAPACK's band storage, whose 2D − 1
 sub-diagonals carry a quarter zeros and cost about 2D³ multiply-adds per frame
@@ -34,12 +41,14 @@ about 7/6 D³ multiply-adds per frame, in one compiled loop.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
 import scipy.linalg
 from numba import njit
 from numpy.typing import NDArray
+from scipy.linalg.lapack import dpbtrf, dpbtrs
 
 FloatArray = NDArray[np.float64]
 
@@ -65,6 +74,47 @@ def solve_spd_banded(lower_bands: FloatArray, rhs: FloatArray) -> FloatArray:
             "banded system is not positive definite: some frame has no positive precision "
             f"from any window ({error})"
         ) from error
+    return np.asarray(solution, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class BandedFactor:
+    """The banded Cholesky factor L (A = L Lᵀ) of ``factor_spd_banded``, read-only, in
+    LAPACK's lower band storage (``lower[i - j, j] = L[i, j]``)."""
+
+    lower: FloatArray
+
+
+def factor_spd_banded(lower_bands: FloatArray) -> BandedFactor | None:
+    """Factor the symmetric positive definite banded A of ``lower_bands`` (as
+    ``solve_spd_banded`` reads it) once, for ``solve_with_factor``; None when A has a
+    non-finite entry or is not positive definite (``solve_spd_banded`` says which)."""
+    if lower_bands.ndim != 2:
+        raise ValueError(f"banded matrix must be (bandwidth + 1, N), got {lower_bands.shape}")
+    if not np.isfinite(lower_bands).all():
+        return None
+    factor, info = dpbtrf(lower_bands, lower=1)
+    if info != 0:
+        return None
+    lower = np.asarray(factor, dtype=np.float64)
+    lower.setflags(write=False)
+    return BandedFactor(lower)
+
+
+def solve_with_factor(factor: BandedFactor, rhs: FloatArray) -> FloatArray:
+    """Solve A x = rhs, (N,) or (N, K), with A's ``factor``: ``solve_spd_banded``'s solution
+    to the bit (but for a tridiagonal A, see above). Raises ``ValueError`` when rhs does not
+    match A or has a non-finite entry."""
+    if factor.lower.shape[1] != rhs.shape[0]:
+        raise ValueError(
+            f"banded factor of shape {factor.lower.shape} does not match a right-hand side of "
+            f"{rhs.shape[0]} rows"
+        )
+    if not np.isfinite(rhs).all():
+        raise ValueError("banded system has a non-finite entry")
+    solution, info = dpbtrs(factor.lower, rhs, lower=1)
+    if info != 0:
+        raise ValueError(f"dpbtrs refused its argument {-info}")
     return np.asarray(solution, dtype=np.float64)
 
 

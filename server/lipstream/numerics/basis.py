@@ -9,6 +9,14 @@ can keep under half of ``mouthClose`` (the demo character: 9 components,
 46%) and lose the /p b m/ closures; channel c's share after k components is
 sum_i<k lambda_i v_ic^2 / var_c. Animes are stored and synthesized in the
 kept coefficients and mapped back to channels only when frames are emitted.
+
+Emission. The engines' compiled kernels map coefficients back with
+``basis_frames``: float32 channel frames of values @ components + mean, each
+channel optionally held inside a range. Its ``summation`` picks the order of
+each channel's sum, because the engines' frames are pinned to the bit: ``BLAS``
+is the product numpy's ``@`` uses (``MotionBasis.reconstruct``, the anime graph
+and the HMM), ``IN_ORDER`` adds the components one by one in a plain loop (the
+DAM's frames); the two differ in the last bits of float64.
 """
 
 from __future__ import annotations
@@ -16,6 +24,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from sklearn.decomposition import PCA
 
 from ..errors import CorpusError
@@ -42,6 +51,47 @@ class MotionBasis:
         frames: np.ndarray = np.asarray(coefficients, dtype=np.float64) @ self.components
         frames += self.mean
         return frames
+
+
+BLAS = 0
+"""``basis_frames`` summation: the BLAS product numpy's ``@`` uses."""
+IN_ORDER = 1
+"""``basis_frames`` summation: each channel's terms added in component order, a plain loop."""
+
+
+@njit(cache=True)
+def basis_frames(
+    values: np.ndarray,
+    components: np.ndarray,
+    mean: np.ndarray,
+    low: np.ndarray,
+    high: np.ndarray,
+    summation: int,
+) -> np.ndarray:
+    """Float32 channel frames (n, n_channels) of coefficients ``values`` (n, n_components):
+    values @ ``components`` (n_components, n_channels) + ``mean`` (n_channels,), summed as
+    ``summation`` (``BLAS`` or ``IN_ORDER``), each channel then held inside [``low``,
+    ``high``] (n_channels,) in float64 before the cast; empty ``low`` and ``high``: no
+    bounds. All float64."""
+    n_channels = components.shape[1]
+    if summation == BLAS:
+        frames = np.dot(values, components)
+    else:
+        frames = np.zeros((values.shape[0], n_channels))
+        for row in range(values.shape[0]):
+            for component in range(components.shape[0]):
+                weight = values[row, component]
+                for channel in range(n_channels):
+                    frames[row, channel] += weight * components[component, channel]
+    bounded = len(low) > 0
+    out = np.empty((values.shape[0], n_channels), dtype=np.float32)
+    for row in range(values.shape[0]):
+        for channel in range(n_channels):
+            value = frames[row, channel] + mean[channel]
+            if bounded:
+                value = min(max(value, low[channel]), high[channel])
+            out[row, channel] = value
+    return out
 
 
 def fit_basis(

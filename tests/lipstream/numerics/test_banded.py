@@ -6,8 +6,10 @@ import numpy as np
 import pytest
 
 from lipstream.numerics.banded import (
+    factor_spd_banded,
     solve_spd_banded,
     solve_spd_block_tridiagonal,
+    solve_with_factor,
     windowed_least_squares,
 )
 
@@ -95,6 +97,59 @@ def test_solve_spd_banded_matches_dense() -> None:
     bands = np.array([np.pad(np.diag(dense, -k), (0, k)) for k in range(width + 1)])
     rhs = rng.normal(size=(size, 2))
     np.testing.assert_allclose(solve_spd_banded(bands, rhs), np.linalg.solve(dense, rhs))
+
+
+def banded_system(rng: np.random.Generator, size: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """A dense SPD matrix of ``width`` sub-diagonals (a sum of random Gram terms over windows
+    of width + 1 unknowns, plus a small ridge) and its lower bands in LAPACK storage."""
+    dense = 0.05 * np.eye(size)
+    for start in range(size - width):
+        rows = rng.normal(size=(width + 1, width + 1))
+        dense[start : start + width + 1, start : start + width + 1] += rows.T @ rows
+    bands = np.array([np.pad(np.diag(dense, -k), (0, k)) for k in range(width + 1)])
+    return dense, bands
+
+
+@pytest.mark.parametrize(("size", "width"), [(1, 0), (6, 1), (12, 2), (20, 5)])
+def test_a_factor_solves_many_right_hand_sides_as_a_dense_solve(size: int, width: int) -> None:
+    rng = np.random.default_rng(size + width)
+    dense, bands = banded_system(rng, max(size, width + 1), width)
+    factor = factor_spd_banded(bands)
+    assert factor is not None
+    assert not factor.lower.flags.writeable
+    for shape in [(len(dense),), (len(dense), 3)]:
+        rhs = rng.normal(size=shape)
+        solution = solve_with_factor(factor, rhs)
+        np.testing.assert_allclose(solution, np.linalg.solve(dense, rhs), rtol=1e-8, atol=1e-10)
+        if width != 1:  # scipy solves a tridiagonal band by dptsv (LDLᵀ), not dpbsv
+            assert np.array_equal(solution, solve_spd_banded(bands, rhs))
+
+
+def test_a_matrix_that_cannot_be_factored_has_no_factor() -> None:
+    rng = np.random.default_rng(8)
+    dense, bands = banded_system(rng, 7, 2)
+    indefinite = bands.copy()
+    indefinite[0, 4] = -1.0
+    assert factor_spd_banded(indefinite) is None
+    with pytest.raises(np.linalg.LinAlgError, match="not positive definite"):
+        solve_spd_banded(indefinite, np.ones(7))
+    infinite = bands.copy()
+    infinite[1, 2] = np.inf
+    assert factor_spd_banded(infinite) is None
+    assert factor_spd_banded(bands) is not None
+
+
+def test_solving_with_a_factor_refuses_a_bad_right_hand_side() -> None:
+    rng = np.random.default_rng(9)
+    _, bands = banded_system(rng, 5, 1)
+    factor = factor_spd_banded(bands)
+    assert factor is not None
+    with pytest.raises(ValueError, match="does not match"):
+        solve_with_factor(factor, np.ones(4))
+    with pytest.raises(ValueError, match="non-finite"):
+        solve_with_factor(factor, np.array([1.0, np.nan, 0.0, 0.0, 0.0]))
+    with pytest.raises(ValueError, match="bandwidth"):
+        factor_spd_banded(np.ones(5))
 
 
 def block_tridiagonal_system(

@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 from sklearn.decomposition import PCA
 
-from lipstream.numerics.basis import MotionBasis, channel_shares, fit_basis
+from lipstream.numerics.basis import (
+    BLAS,
+    IN_ORDER,
+    MotionBasis,
+    basis_frames,
+    channel_shares,
+    fit_basis,
+)
 
 
 def _frames(seed: int = 0) -> np.ndarray:
@@ -60,3 +67,54 @@ def test_reconstruct_is_the_product_plus_the_mean_and_leaves_its_input() -> None
     frames = basis.reconstruct(coefficients)
     assert np.array_equal(frames, coefficients @ basis.components + basis.mean)
     assert np.array_equal(coefficients, kept)
+
+
+def _coefficients_and_basis(seed: int, rows: int = 40) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    components = rng.normal(size=(6, 11))
+    return rng.normal(size=(rows, 6)), components, rng.normal(size=11)
+
+
+NO_BOUNDS = np.empty(0)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_basis_frames_by_blas_are_numpys_product_plus_the_mean_to_the_bit(seed: int) -> None:
+    values, components, mean = _coefficients_and_basis(seed)
+    frames = basis_frames(values, components, mean, NO_BOUNDS, NO_BOUNDS, BLAS)
+    expected = MotionBasis(mean, components).reconstruct(values).astype(np.float32)
+    assert frames.dtype == np.float32
+    assert np.array_equal(frames, expected)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_basis_frames_in_order_add_the_components_one_by_one(seed: int) -> None:
+    values, components, mean = _coefficients_and_basis(seed)
+    total = np.zeros((len(values), components.shape[1]))
+    for component in range(len(components)):
+        total = total + values[:, component, None] * components[component]
+    frames = basis_frames(values, components, mean, NO_BOUNDS, NO_BOUNDS, IN_ORDER)
+    assert np.array_equal(frames, (total + mean).astype(np.float32))
+    blas = basis_frames(values, components, mean, NO_BOUNDS, NO_BOUNDS, BLAS)
+    np.testing.assert_allclose(frames, blas, rtol=1e-6, atol=1e-6)
+
+
+@pytest.mark.parametrize("summation", [BLAS, IN_ORDER])
+def test_basis_frames_hold_each_channel_inside_its_bounds(summation: int) -> None:
+    values, components, mean = _coefficients_and_basis(3)
+    low, high = np.full(11, -1.5), np.full(11, 2.0)
+    low[0], high[0] = -np.inf, np.inf
+    frames = basis_frames(values, components, mean, low, high, summation)
+    unbounded = values @ components + mean
+    expected = np.clip(unbounded, low, high).astype(np.float32)
+    np.testing.assert_allclose(frames, expected, rtol=1e-6, atol=1e-6)
+    assert (unbounded[:, 1:] < low[1:]).any() and (unbounded[:, 1:] > high[1:]).any()
+    assert frames[:, 1:].min() == -1.5 and frames[:, 1:].max() == 2.0
+    assert frames[:, 0].min() < -1.5 and frames[:, 0].max() > 2.0
+
+
+@pytest.mark.parametrize("summation", [BLAS, IN_ORDER])
+def test_basis_frames_of_no_rows_are_empty(summation: int) -> None:
+    _, components, mean = _coefficients_and_basis(0)
+    frames = basis_frames(np.zeros((0, 6)), components, mean, NO_BOUNDS, NO_BOUNDS, summation)
+    assert frames.shape == (0, 11) and frames.dtype == np.float32

@@ -1,16 +1,17 @@
 """Emitting frames in compiled calls: PCA values to channels, and the causal rung's frames.
 
 Sketch: ``channel_frames`` maps PCA values to channel frames (values @ components + mean,
-clipped to each channel's recorded range, as float32), with the BLAS product numpy's
-``@`` uses, so its frames are numpy's. ``causal_frames`` makes a causal request's frames
-in one call: output frame k is at t_k = k / fps; the track is sampled left-continuously
-at min(t_k + lead, end of the input) (``track.evaluate_track``), and the critically
-damped filter (``damped``) steps from its state to each t_k toward that sample, at each
-PCA component's rate; a request's first frame starts the filter at rest on its sample.
-It is the arithmetic of ``MotionTrack.evaluate``, ``DampedState.follow`` and
-``channel_frames`` in one call instead of a dozen numpy calls, because a causal request
-makes it on every streamed message and its few frames cost less than the calls' set-up;
-``causal_call`` runs it inside the compiled call that also picks and places the spans.
+clipped to each channel's recorded range, as float32: ``numerics.basis.basis_frames``),
+with the BLAS product numpy's ``@`` uses, so its frames are numpy's. ``causal_frames``
+makes a causal request's frames in one call: output frame k is at t_k = k / fps; the track
+is sampled left-continuously at min(t_k + lead, end of the input)
+(``track.evaluate_track``), and the critically damped filter (``damped``) steps from its
+state to each t_k toward that sample, at each PCA component's rate; a request's first frame
+starts the filter at rest on its sample. It is the arithmetic of ``MotionTrack.evaluate``,
+``DampedState.follow`` and ``channel_frames`` in one call instead of a dozen numpy calls,
+because a causal request makes it on every streamed message and its few frames cost less
+than the calls' set-up; ``causal_call`` runs it inside the compiled call that also picks
+and places the spans.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from ...numerics.basis import BLAS, basis_frames
 from ..damped import FilterState, follow_rates
 from .track import AnimeMotion, TrackBuffers, evaluate_track
 
@@ -56,15 +58,10 @@ class CausalClock(NamedTuple):
 @njit(cache=True)
 def channel_frames(values: np.ndarray, channels: ChannelMap) -> np.ndarray:
     """Channel frames (n, n_channels) float32 of PCA ``values`` (n, n_pc), each channel
-    held inside [low, high]."""
-    frames = np.dot(values, channels.components)
-    mean, low, high = channels.mean, channels.low, channels.high
-    out = np.empty(frames.shape, dtype=np.float32)
-    for row in range(frames.shape[0]):
-        for column in range(frames.shape[1]):
-            value = frames[row, column] + mean[column]
-            out[row, column] = min(max(value, low[column]), high[column])
-    return out
+    held inside [low, high] (``numerics.basis.basis_frames``, numpy's BLAS product)."""
+    return basis_frames(
+        values, channels.components, channels.mean, channels.low, channels.high, BLAS
+    )
 
 
 @njit(cache=True)

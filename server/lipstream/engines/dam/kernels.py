@@ -53,6 +53,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from ...numerics.basis import IN_ORDER, basis_frames
 from ...phonemes import PHONEMES
 from ...timeline import EMOTIONS
 from ..damped import FilterState, follow_frame_rates
@@ -366,21 +367,12 @@ def dam_sum(
 
 
 @njit(cache=True)
-def channels(values: np.ndarray, components: np.ndarray, mean: np.ndarray) -> np.ndarray:
-    """``MotionBasis.reconstruct`` of ``values`` (frames, components) as float32 frames: each
-    channel the sum over components, added in component order, plus the mean."""
-    n_channels = components.shape[1]
-    out = np.empty((values.shape[0], n_channels), dtype=np.float32)
-    total = np.empty(n_channels)
-    for i in range(values.shape[0]):
-        total[:] = 0.0
-        for component in range(components.shape[0]):
-            weight = values[i, component]
-            for channel in range(n_channels):
-                total[channel] += weight * components[component, channel]
-        for channel in range(n_channels):
-            out[i, channel] = np.float32(total[channel] + mean[channel])
-    return out
+def channels(values: np.ndarray, tables: DamTables) -> np.ndarray:
+    """The basis of ``tables`` back to float32 channel frames, each channel's components
+    added in order (``IN_ORDER``: the DAM's frames have always been summed so, and BLAS's
+    product differs in the last bits)."""
+    unbounded = np.empty(0)
+    return basis_frames(values, tables.components, tables.mean, unbounded, unbounded, IN_ORDER)
 
 
 @njit(cache=True)
@@ -442,7 +434,7 @@ def render_run(
             tables.search,
         )
     values = dam_sum(times, owners, spans, n, tail, ahead, tables.animemes)
-    return channels(values, tables.components, tables.mean), owner
+    return channels(values, tables), owner
 
 
 @njit(cache=True)
@@ -564,4 +556,4 @@ def causal_run(
     if len(times) > first:
         omegas = tables.kappa * frame_rates
         follow_frame_rates(x, v, t, raw[first:], omegas[first:], times[first:], values[first:])
-    return channels(values, tables.components, tables.mean)
+    return channels(values, tables)

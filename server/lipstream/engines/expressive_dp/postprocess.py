@@ -18,8 +18,8 @@ input belongs to the last span, at relative time 1).
   side's node phoneme (Table IV: 2 for /p b m f v w/, 0.5 for /k g ch ng r/, 1
   otherwise), λ = ``smoothness``. It is one banded solve per join for every
   basis component at once, the Cholesky factor kept per weight pattern and only
-  its substitutions run (``smooth_join``: what ``numerics.banded.solve_spd_banded``
-  gives, bit for bit).
+  its substitutions run (``smooth_join``, ``numerics.banded.factor_spd_banded`` and
+  ``solve_with_factor``: what ``solve_spd_banded`` gives, bit for bit).
 * Silence: a silence has no node (the search splits there, ``search``); its
   points are interpolated linearly from the last frame of the node before it
   (the last of one search segment) to the first frame of the node after it (the
@@ -41,10 +41,13 @@ from operator import attrgetter
 
 import numpy as np
 from numba import njit
-from scipy.linalg.lapack import dpbtrf as _pbtrf
-from scipy.linalg.lapack import dpbtrs as _pbtrs
 
-from ...numerics.banded import solve_spd_banded
+from ...numerics.banded import (
+    BandedFactor,
+    factor_spd_banded,
+    solve_spd_banded,
+    solve_with_factor,
+)
 from ...phonemes import SILENCE
 from ...timeline import PhonemeSpan
 from .nodes import NodeDatabase
@@ -278,17 +281,14 @@ def smooth_join(fitted: np.ndarray, weights: np.ndarray, smoothness: float) -> n
     """argmin_g Σ_t weights_t (g_t − f_t)² + smoothness Σ_t (g_{t−1} − 2g_t + g_{t+1})² for
     every column of ``fitted`` (n, K): the normal equations (diag(W) + λ D²ᵀD²) g = W f are
     pentadiagonal, one banded Cholesky solve with K right-hand sides. The factor is kept per
-    weight pattern (``_normal_factor``) and only the substitutions run: LAPACK's dpbsv
-    (``numerics.banded.solve_spd_banded``) is dpbtrf then dpbtrs, so the solution is the
-    same to the last bit; a pattern without a factor, or a non-finite entry, goes the
-    general way, which raises."""
+    weight pattern (``_normal_factor``) and only the substitutions run
+    (``numerics.banded.solve_with_factor``, ``solve_spd_banded``'s solution to the last
+    bit); a pattern without a factor goes the general way, which raises."""
     key = tuple(weights.tolist())
     factor = _normal_factor(key, smoothness)
     rhs = weights[:, None] * fitted
-    if factor is not None and np.isfinite(rhs).all():
-        solution, info = _pbtrs(factor, rhs, lower=1)
-        if info == 0:
-            return np.asarray(solution)
+    if factor is not None:
+        return solve_with_factor(factor, rhs)
     return solve_spd_banded(_normal_bands(key, smoothness), rhs)
 
 
@@ -308,17 +308,9 @@ def _normal_bands(weights: tuple[float, ...], smoothness: float) -> np.ndarray:
 
 
 @lru_cache(maxsize=256)
-def _normal_factor(weights: tuple[float, ...], smoothness: float) -> np.ndarray | None:
-    """dpbtrf's banded Cholesky factor of ``_normal_bands`` (None when it fails)."""
-    bands = _normal_bands(weights, smoothness)
-    if not np.isfinite(bands).all():
-        return None
-    factor, info = _pbtrf(bands, lower=1)
-    if info != 0:
-        return None
-    factor = np.asarray(factor)
-    factor.setflags(write=False)
-    return factor
+def _normal_factor(weights: tuple[float, ...], smoothness: float) -> BandedFactor | None:
+    """The banded Cholesky factor of ``_normal_bands`` (None when it fails)."""
+    return factor_spd_banded(_normal_bands(weights, smoothness))
 
 
 @njit(cache=True)

@@ -18,7 +18,8 @@ read and write them in place:
 - ``recurse``: the frame-at-a-time solve y_t = G_cur⁻¹ (r_cur − G_cross y_{t−1})
   written into the trajectory buffer;
 - ``output_frames``: output frames ``first .. stop − 1`` (trajectory frame
-  ⌊i f / fps⌋ back in channel space), up to the first not yet solved.
+  ⌊i f / fps⌋ back in channel space by ``numerics.basis.basis_frames``, the BLAS
+  product of ``MotionBasis.reconstruct``), up to the first not yet solved.
 
 Every value is computed by the same floating-point operations as the numpy
 expressions they replace (the same sums in the same order, the same BLAS
@@ -33,6 +34,7 @@ import numpy as np
 from numba import njit
 
 from ...numerics.banded import SOLVED, solve_block_tridiagonal_into
+from ...numerics.basis import BLAS, basis_frames
 from ...numerics.trellis import ViterbiState, advance
 from .trajectory import Blocks, assemble
 
@@ -199,6 +201,5 @@ def output_frames(
     rows = np.empty((count, curve.shape[1]))
     for offset in range(count):
         rows[offset] = curve[int(math.floor(float(first + offset) * step + EPS))]
-    frames: np.ndarray = np.dot(rows, components)  # the BLAS product of ``reconstruct``, to the bit
-    frames += mean
-    return frames.astype(np.float32)
+    unbounded = np.empty(0)
+    return basis_frames(rows, components, mean, unbounded, unbounded, BLAS)
