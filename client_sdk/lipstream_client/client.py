@@ -222,7 +222,8 @@ class Stream:
         provider's JSON value (ElevenLabs ``alignment``, Azure events, Polly marks, Cartesia
         or Hume phoneme timestamps, a word list) or JSON lines text, in ``format`` (one of
         ``TIMING_FORMATS``; ``auto``: detected), its times plus ``offset`` seconds on the
-        utterance clock; ``voice``: the espeak-ng voice for words CMUdict lacks."""
+        utterance clock; ``voice``: the espeak-ng voice for words CMUdict lacks (a voice of
+        another language, ``de``, pronounces every word in it)."""
         await self._send(Words(self.id, timings, format, offset, voice))
 
     async def end(self) -> None:

@@ -5,10 +5,12 @@ root or the ``ws(s)://.../v1/stream`` URL a streaming client uses, sends the
 bearer token if one is given, and returns parsed answers. ``synthesize``
 posts a whole utterance to ``POST /v1/synthesize``: the body is a ``start``
 message's fields plus ``items`` (and optionally ``audio``), built and
-validated by the protocol codec and sent as msgpack or JSON; the answer
-carries ``ready``'s resolved parameters, every frame and ``done``'s stats,
-the frames equal to what ``/v1/stream`` sends for the same request. An error
-answer (``{"error": {code, message, details}}``) becomes a
+validated by the protocol codec and sent as msgpack or JSON; ``synthesize_text``
+sends a text instead of ``items``, ``synthesize_transcript`` audio and its
+transcript for the server to align. The answer carries ``ready``'s resolved
+parameters, every frame and ``done``'s stats (and a transcript's alignment
+confidence), the frames equal to what ``/v1/stream`` sends for the same
+request. An error answer (``{"error": {code, message, details}}``) becomes a
 ``RestServerError``; any other non-2xx an ``HttpError``; transport failures
 stay ``OSError``. Loopback addresses bypass any configured proxy.
 """
@@ -27,6 +29,7 @@ from urllib.parse import urlsplit, urlunsplit
 import msgpack
 
 from .codec import encode
+from .errors import INVALID_MESSAGE, EncodeError, ProtocolError
 from .exceptions import LipstreamClientError, LipstreamServerError, retry_after_header_s
 from .float32 import pack_float32
 from .items import PhonemeLike, is_loopback_url, phoneme_items
@@ -97,6 +100,8 @@ class Synthesis:
     stats: DoneStats
     speech: tuple[bytes, int] | None = None
     """A text request's speech: (PCM16 little-endian mono bytes, sample rate Hz)."""
+    alignment_confidence: float | None = None
+    """A transcript request's forced-alignment confidence, 0 to 1 (None for others)."""
 
     @property
     def channels(self) -> tuple[str, ...]:
@@ -237,6 +242,45 @@ class RestClient:
         parts: list[Message] = [start, Text(SYNTHESIZE_ID, text, voice, rate, lang)]
         return self._post_synthesize(_synthesize_body(parts, encoding), encoding)
 
+    def synthesize_transcript(
+        self,
+        engine: str,
+        character: str,
+        audio: tuple[bytes, int],
+        transcript: str,
+        *,
+        fps: float = DEFAULT_FPS,
+        channels: Sequence[str] | None = None,
+        output: OutputProfile | None = None,
+        emotion: str | None = None,
+        latency_budget_ms: float | None = None,
+        options: JsonMap | None = None,
+        encoding: Encoding = "msgpack",
+    ) -> Synthesis:
+        """``POST /v1/synthesize`` with recorded ``audio`` (PCM16 little-endian mono bytes,
+        sample rate Hz) and its ``transcript``: the server aligns the words to the audio and
+        answers the frames, with the alignment's confidence
+        (``Synthesis.alignment_confidence``). Errors as for ``synthesize``; the server's
+        refusals include ``empty_transcript`` and ``transcript_mismatch`` (audio the
+        aligner cannot follow)."""
+        if not isinstance(transcript, str):
+            reason = "must be a string, what the audio says"
+            raise EncodeError(ProtocolError(INVALID_MESSAGE, reason, where="transcript"))
+        start = Start(
+            SYNTHESIZE_ID,
+            engine,
+            character,
+            fps,
+            tuple(channels) if channels is not None else None,
+            output,
+            emotion,
+            latency_budget_ms,
+            dict(options or {}),
+        )
+        parts: list[Message] = [start, AudioChunk(SYNTHESIZE_ID, audio[1], bytes(audio[0]))]
+        body = _synthesize_body(parts, encoding, {"transcript": transcript})
+        return self._post_synthesize(body, encoding)
+
     def _post_synthesize(self, body: bytes, encoding: Encoding) -> Synthesis:
         media = _MEDIA_TYPES[encoding]
         request = urllib.request.Request(
@@ -286,10 +330,12 @@ class RestClient:
             ) from None
 
 
-def _synthesize_body(parts: list[Message], encoding: Encoding) -> bytes:
+def _synthesize_body(
+    parts: list[Message], encoding: Encoding, extra: JsonMap | None = None
+) -> bytes:
     """One map: the start's fields, ``items`` and ``audio`` or the text's fields, each
-    validated by the codec."""
-    body: dict[str, Any] = {}
+    validated by the codec, and the ``extra`` fields no message carries (``transcript``)."""
+    body: dict[str, Any] = dict(extra or {})
     for message in parts:
         encode(message, encoding)  # EncodeError for what the protocol refuses
         fields = {
@@ -340,6 +386,8 @@ def _synthesis(answer: Any) -> Synthesis:
         done = DoneStats(int(stats["frames"]), engine=stats.get("engine") or {})
         frames = Frames(SYNTHESIZE_ID, 0, int(answer.get("first_frame", 0)), fps, width, data)
         speech = _speech(answer.get("speech"))
+        alignment = answer.get("alignment")
+        confidence = None if alignment is None else float(alignment["confidence"])
     except (KeyError, TypeError, ValueError, OverflowError) as error:
         raise LipstreamClientError(f"unexpected /v1/synthesize answer: {error!r}") from None
     if len(data) != frames.n_frames * width * 4 or frames.n_frames != answer.get("n_frames"):
@@ -347,7 +395,7 @@ def _synthesis(answer: Any) -> Synthesis:
             "the /v1/synthesize answer's data does not hold "
             f"{answer.get('n_frames')} rows of {width} float32"
         )
-    return Synthesis(ready, frames, done, speech)
+    return Synthesis(ready, frames, done, speech, confidence)
 
 
 def _speech(field: Any) -> tuple[bytes, int] | None:

@@ -4,8 +4,9 @@ from them land from the phonemes espeak-ng really spoke.
 Sketch: espeak-ng's word and phoneme events on its own speech are the truth
 (``speech.spoken_words``). From them this module writes what each TTS would have sent
 for that speech, in that TTS's own shape and units: a generic word list (seconds),
-ElevenLabs' character alignment (each word's characters sharing its time evenly, spaces
-over the pauses, rounded to the millisecond), Azure's word boundary events (100-ns
+ElevenLabs' character alignment (each character timed by the phonemes it spells, as a
+character aligner would: ``character_times``; spaces over the pauses; rounded to the
+millisecond), Azure's word boundary events (100-ns
 ticks, punctuation as its own boundary) and viseme events, Polly's speech marks (word
 marks with byte offsets, viseme marks, ms) and Cartesia's IPA phoneme timestamps.
 ``onset_errors`` aligns each word's derived phonemes with its true ones (edit distance,
@@ -40,6 +41,7 @@ POLLY_VISEME_OF = {
     "AW": "a", "EY": "e", "EH": "e", "ER": "E", "OW": "o", "AO": "O", "OY": "O",
     SILENCE: "sil",
 }  # fmt: skip
+VOWEL_PHONEMES = frozenset("AA AE AH AO AW AY EH ER EY IH IY OW OY UH UW".split())
 IPA_OF = {
     "AA": "ɑ", "AE": "æ", "AH": "ʌ", "AO": "ɔ", "AW": "aʊ", "AY": "aɪ", "B": "b", "CH": "tʃ",
     "D": "d", "DH": "ð", "EH": "ɛ", "ER": "ɝ", "EY": "eɪ", "F": "f", "G": "ɡ", "HH": "h",
@@ -60,7 +62,13 @@ def words_input(utterance: SpokenUtterance) -> list[dict[str, Any]]:
     ]
 
 
-def elevenlabs_input(utterance: SpokenUtterance) -> dict[str, Any]:
+def elevenlabs_input(utterance: SpokenUtterance, grid_s: float = 0.001) -> dict[str, Any]:
+    """``grid_s``: the step every time is rounded to (1 ms, as ElevenLabs writes them; a
+    coarser one mimics an aligner that works in audio frames)."""
+
+    def _ms(seconds: float) -> float:
+        return round(round(seconds / grid_s) * grid_s, 3)
+
     characters: list[str] = []
     starts: list[float] = []
     ends: list[float] = []
@@ -69,17 +77,78 @@ def elevenlabs_input(utterance: SpokenUtterance) -> dict[str, Any]:
             characters.append(" ")
             starts.append(_ms(ends[-1]))
             ends.append(_ms(word.start))
-        step = (word.end - word.start) / len(word.text)
-        for position, char in enumerate(word.text):
+        for char, start, end in character_times(word):
             characters.append(char)
-            starts.append(_ms(word.start + position * step))
-            ends.append(_ms(word.start + (position + 1) * step))
+            starts.append(_ms(start))
+            ends.append(_ms(end))
     alignment = {
         "characters": characters,
         "character_start_times_seconds": starts,
         "character_end_times_seconds": ends,
     }
     return {"audio_base64": "", "alignment": alignment, "normalized_alignment": alignment}
+
+
+def character_times(word: SpokenWord) -> list[tuple[str, float, float]]:
+    """Each character of ``word`` timed by the true phonemes it spells, as a character
+    aligner would time it: letters and phonemes aligned by class alone (``_class_groups``),
+    the letters of a group sharing its phonemes' time evenly."""
+    phonemes = word.phonemes
+    timed: list[tuple[str, float, float]] = []
+    for letters, (first, last) in _class_groups(word.text, [p.phoneme for p in phonemes]):
+        start, end = phonemes[first].start, phonemes[last - 1].end
+        step = (end - start) / len(letters)
+        timed += [(c, start + k * step, start + (k + 1) * step) for k, c in enumerate(letters)]
+    return timed
+
+
+def _class_groups(text: str, phonemes: Sequence[str]) -> list[tuple[str, tuple[int, int]]]:
+    """``text`` cut into letter runs, each with the run of ``phonemes`` [first, last) it
+    spells: a monotonic alignment scoring a vowel letter with a vowel phoneme and a
+    consonant letter with a consonant +1, across classes -1, a letter left silent -0.4 (a
+    character that is no letter is always silent, at no cost) and a phoneme no letter
+    spells -0.6. Knowing no spelling, it is independent of the runtime's
+    ``letter_alignment``. A silent letter or unspelt phoneme joins the run before it (the
+    first run, at the word's start)."""
+    n, m = len(text), len(phonemes)
+    best = [[float("-inf")] * (m + 1) for _ in range(n + 1)]
+    back: dict[tuple[int, int], tuple[int, int]] = {}
+    best[0][0] = 0.0
+    for i in range(n + 1):
+        for j in range(m + 1):
+            for di, dj in ((1, 1), (1, 0), (0, 1)):
+                if i < di or j < dj or best[i - di][j - dj] == float("-inf"):
+                    continue
+                if di and dj and not text[i - 1].isalpha():
+                    continue
+                if di and dj:
+                    vowel = text[i - 1].lower() in "aeiouy"
+                    score = 1.0 if vowel == (phonemes[j - 1] in VOWEL_PHONEMES) else -1.0
+                elif di:
+                    score = -0.4 if text[i - 1].isalpha() else 0.0
+                else:
+                    score = -0.6
+                if best[i - di][j - dj] + score > best[i][j]:
+                    best[i][j] = best[i - di][j - dj] + score
+                    back[(i, j)] = (di, dj)
+    steps: list[tuple[int, int]] = []
+    i, j = n, m
+    while i or j:
+        di, dj = back[(i, j)]
+        steps.append((di, dj))
+        i, j = i - di, j - dj
+    runs: list[list[Any]] = []  # [letters, first phoneme, last phoneme]
+    i = j = 0
+    for di, dj in reversed(steps):
+        if di and dj or not runs:
+            runs.append(["", j, j])
+        runs[-1][0] += text[i : i + di]
+        runs[-1][2] = j + dj
+        i, j = i + di, j + dj
+    while len(runs) > 1 and not (runs[0][0] and runs[0][2] > runs[0][1]):
+        head = runs.pop(0)  # silent letters or unspelt phonemes at the start
+        runs[0] = [head[0] + runs[0][0], head[1], runs[0][2]]
+    return [(letters, (first, last)) for letters, first, last in runs]
 
 
 def azure_input(utterance: SpokenUtterance, *, visemes: bool = True) -> list[dict[str, Any]]:

@@ -8,13 +8,15 @@ shape (``tts_shapes``), read back as a file would be, turned into spans
 (``frontends.words_to_spans``) and each derived phoneme onset is compared with the true
 one (``tts_shapes.onset_errors``): median and 90th percentile in ms, of every phoneme and of
 those after each word's first (which word timings give outright), with even spreading
-within each given word as the baseline. The real-time factor is the time from the
-timing text to spans over the seconds of speech. The frames a model (``--model``, default a
-``viseme-lerp`` trained on a small demo corpus) gives for the derived spans are compared
-with its frames for espeak-ng's own spans: RMS over every frame and channel, and the lag of
-each /p b m/ closure (``evaluation.closure_lags``). Writes ``bench/word_timings.json``
-(``--json``) with machine, date and command; ``python -m lipstream.bench.report``
-renders it.
+within each given word as the baseline. Character timings are made from the true phonemes
+by an alignment that knows no spelling (``tts_shapes.character_times``), on the
+millisecond and, to see what a coarser aligner costs, on a grid of 11.6 ms. The real-time
+factor is the time from the timing text to spans over the seconds of speech. The frames
+a model (``--model``, default a ``viseme-lerp`` trained on a small demo corpus) gives for
+the derived spans are compared with its frames for espeak-ng's own spans: RMS over every
+frame and channel, and the lag of each /p b m/ closure (``evaluation.closure_lags``).
+Writes ``bench/word_timings.json`` (``--json``) with machine, date and command;
+``python -m lipstream.bench.report`` renders it.
 
     python -m lipstream.bench.word_timings --json bench/word_timings.json
     lipstream bench --word-timings --results bench/word_timings.json
@@ -53,10 +55,15 @@ TARGETS_MS = {"word timings median": 20.0, "character timings median": 10.0}
 FRAMES_FPS = 60.0
 FRAMES_RATE_WPM = 175
 SMALL_CORPUS_SENTENCES = 40
+FRAME_GRID_S = 256 / 22050
+"""One hop of 256 samples at 22.05 kHz: character times an aligner of audio frames gives."""
 FRAME_FORMATS = ("words", "elevenlabs", "polly", "azure visemes only")
 FORMATS: dict[str, Callable[[SpokenUtterance], Any]] = {
     "words": tts_shapes.words_input,
     "elevenlabs": tts_shapes.elevenlabs_input,
+    "elevenlabs, times on an 11.6 ms grid": lambda utterance: tts_shapes.elevenlabs_input(
+        utterance, FRAME_GRID_S
+    ),
     "azure": tts_shapes.azure_input,
     "polly": tts_shapes.polly_input,
     "ipa": tts_shapes.ipa_input,

@@ -8,7 +8,9 @@ normalization sees each in context ("$42", "Dr."): its word events name the char
 where each spoken word came from, and the phoneme events between one word event and the
 next are that word's. A word espeak-ng says nothing for (a dash, a lone comma) has no
 phonemes and its time becomes silence. English voices only read CMUdict; any other voice
-is espeak-ng's alone.
+is espeak-ng's alone, its phoneme events read as IPA through the feature table as for a
+text in that language (a phoneme no table reads is ``unmapped_phoneme``; a glottal stop,
+read as silence, is left out of the word's phonemes).
 """
 
 from __future__ import annotations
@@ -18,8 +20,9 @@ from functools import cache
 
 from lipstream_client.errors import UNSPEAKABLE_TEXT
 
-from ..errors import LipstreamError, SpeechError
-from ..phonemes import normalize_phoneme
+from ..errors import LipstreamError, SpeechError, UnmappedPhonemeError
+from ..phonemes import SILENCE, normalize_phoneme
+from ..speech.text_frontend import choose_voice, event_reader
 from ..speech.worker import SpeechRequest, speak_words_in_worker
 
 Pronunciation = tuple[str, ...]
@@ -82,10 +85,13 @@ def espeak_pronunciations(words: Sequence[str], voice: str = "en-us") -> list[Pr
     text = " ".join(words)
     if not text.strip():
         return [() for _ in words]
+    choice = choose_voice(voice, None)
     try:
-        spoken = speak_words_in_worker([SpeechRequest(text, voice)])[0]
+        request = SpeechRequest(text, choice.voice, ipa_names=choice.ipa_names)
+        spoken = speak_words_in_worker([request])[0]
     except SpeechError as error:
         raise LipstreamError(error.message, where="words", code=error.code) from None
+    read = event_reader(choice)
     _, _, phoneme_events = spoken.raw
     marks = sorted(
         [(ms, 0, first - 1) for first, _, ms in spoken.words]
@@ -100,8 +106,12 @@ def espeak_pronunciations(words: Sequence[str], voice: str = "en-us") -> list[Pr
         elif current is not None and not str(value).startswith("_"):
             label = str(value)
             try:
-                result[current].append(normalize_phoneme(label, "espeak", f"words[{current}]"))
-            except LipstreamError:
+                sounds = read(label, f"words[{current}]")
+                result[current] += [phoneme for phoneme in sounds if phoneme != SILENCE]
+            except UnmappedPhonemeError as error:
+                error.where = f"words[{current}]"
+                raise
+            except (LipstreamError, SpeechError):
                 raise LipstreamError(
                     f"espeak-ng says {label!r} for {words[current]!r}, a sound the phoneme "
                     "set lacks",

@@ -8,7 +8,9 @@ exp(a_i + λ s_i²), with λ found by Newton's method on log Σ exp(a_i + λ s_i
 (increasing in λ, so it converges in a few steps). Time before the first word and
 between words is silence, and so is a word with no phonemes (a dash). A word whose end
 is not given (Polly's last word) lasts its phonemes' mean durations at the rate of the
-words before it, and ends before the next word starts.
+words before it, and ends before the next word starts. A word may fix some of its
+phonemes' onsets (character timings, ``letter_alignment``): its time is then cut at those
+onsets and each piece is shared among its own phonemes in the same way.
 """
 
 from __future__ import annotations
@@ -29,11 +31,13 @@ MIN_GAP_S = 1e-4
 
 @dataclass(frozen=True, slots=True)
 class PronouncedWord:
-    """A word's canonical phonemes and its time (``end`` None: not given)."""
+    """A word's canonical phonemes and its time (``end`` None: not given); ``onsets``:
+    each phoneme's known onset or None (empty: none known)."""
 
     phonemes: tuple[str, ...]
     start: float
     end: float | None
+    onsets: tuple[float | None, ...] = ()
 
 
 def spread_words(
@@ -41,46 +45,66 @@ def spread_words(
 ) -> list[PhonemeSpan]:
     """Contiguous spans from ``after`` (the end of earlier input) to the last word's end."""
     timed = _closed(model, words)
-    layout: list[tuple[str, float, float, slice | None]] = []
+    layout: list[tuple[str, float, float, slice | None, list[Piece]]] = []
     ids: list[int] = []
     first_pass: list[float] = []
     clock = after
-    for phonemes, start, end in timed:
+    for (phonemes, start, end), word in zip(timed, words):
         if start - clock > MIN_GAP_S:
-            layout.append((SILENCE, clock, start, None))
+            layout.append((SILENCE, clock, start, None, []))
             ids.append(PHONEME_INDEX[SILENCE])
             first_pass.append(start - clock)
         else:
             start = clock
         if end - start <= 0 or not phonemes:
             if end > start:
-                layout.append((SILENCE, start, end, None))
+                layout.append((SILENCE, start, end, None, []))
                 ids.append(PHONEME_INDEX[SILENCE])
                 first_pass.append(end - start)
             clock = max(clock, end)
             continue
         word_ids = [PHONEME_INDEX[phoneme] for phoneme in phonemes]
         means = np.exp(model.log_mean_[word_ids])
-        layout.append(("", start, end, slice(len(ids), len(ids) + len(word_ids))))
+        pieces = _pieces(len(word_ids), start, end, word.onsets)
+        layout.append(("", start, end, slice(len(ids), len(ids) + len(word_ids)), pieces))
         ids += word_ids
-        first_pass += list(means * (end - start) / means.sum())
+        for first, last, left, right in pieces:
+            first_pass += list(means[first:last] * (right - left) / means[first:last].sum())
         clock = end
     id_array = np.array(ids, dtype=np.int64)
     log_first = np.log(np.maximum(np.array(first_pass), 1e-6))
     predicted = model.predict_log(id_array, model.local_rates(id_array, log_first))
     spans: list[PhonemeSpan] = []
-    for label, start, end, phonemes_at in layout:
+    for label, start, end, phonemes_at, pieces in layout:
         if phonemes_at is None:
             _append(spans, PhonemeSpan(label, start, end))
             continue
         at = id_array[phonemes_at]
-        durations = share(predicted[phonemes_at], model.spread_[at] ** 2, end - start)
-        edges = start + np.concatenate([[0.0], np.cumsum(durations)])
-        edges[-1] = end
-        for phoneme_id, left, right in zip(at, edges[:-1], edges[1:]):
-            if right > left:
-                _append(spans, PhonemeSpan(PHONEMES[phoneme_id], float(left), float(right)))
+        word_predicted = predicted[phonemes_at]
+        for first, last, left, right in pieces:
+            piece = at[first:last]
+            durations = share(word_predicted[first:last], model.spread_[piece] ** 2, right - left)
+            edges = left + np.concatenate([[0.0], np.cumsum(durations)])
+            edges[-1] = right
+            for phoneme_id, low, high in zip(piece, edges[:-1], edges[1:]):
+                if high > low:
+                    _append(spans, PhonemeSpan(PHONEMES[phoneme_id], float(low), float(high)))
     return spans
+
+
+Piece = tuple[int, int, float, float]
+"""Phonemes [first, last) of a word sharing the time [left, right]."""
+
+
+def _pieces(count: int, start: float, end: float, onsets: Sequence[float | None]) -> list[Piece]:
+    """The word cut at each known onset that falls strictly inside the time left for it."""
+    cuts = [(0, start)]
+    for index in range(1, min(count, len(onsets))):
+        onset = onsets[index]
+        if onset is not None and cuts[-1][1] < onset < end:
+            cuts.append((index, onset))
+    cuts.append((count, end))
+    return [(first, last, left, right) for (first, left), (last, right) in zip(cuts[:-1], cuts[1:])]
 
 
 def share(log_durations: np.ndarray, weights: np.ndarray, total: float) -> np.ndarray:

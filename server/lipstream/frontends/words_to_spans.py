@@ -4,8 +4,10 @@ Sketch: phoneme timings are used as they are, with silence where nothing is said
 viseme-only timings become representative phonemes (``viseme_spans``); word and
 character timings get each word's phonemes from the lexicon (``lexicon``, all words of
 the input at once, so espeak-ng reads them in context) and the duration model spreads
-them over the word (``spreading``). The result runs contiguously from 0 s, or from
-where earlier input ended (a stream of timings, ``word_stream``).
+them over the word (``spreading``), between the onsets that an English word's character
+times fix where its letters align with its phonemes with confidence
+(``letter_alignment``). The result runs contiguously from 0 s, or from where earlier
+input ended (a stream of timings, ``word_stream``).
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from lipstream_client.errors import EMPTY_TIMINGS, NON_MONOTONIC_TIMES
 from ..errors import LipstreamError
 from ..phonemes import SILENCE
 from ..timeline import PhonemeSpan
+from .letter_alignment import letter_onsets
 from .lexicon import pronounce
 from .spreading import PronouncedWord, spread_words
 from .timing_checks import OVERLAP_TOLERANCE_S
@@ -51,8 +54,14 @@ def timings_to_spans(
     else:
         texts = [word.text for word in timings.words]
         pronunciations = pronounce(texts, voice) if texts else []
+        english = voice.lower().startswith("en")
         words = [
-            PronouncedWord(pronunciation, word.start, word.end)
+            PronouncedWord(
+                pronunciation,
+                word.start,
+                word.end,
+                letter_onsets(word.characters, pronunciation) if english else (),
+            )
             for word, pronunciation in zip(timings.words, pronunciations)
         ]
         spans = spread_words(durations, words, after) if words else []

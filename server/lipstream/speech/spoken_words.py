@@ -17,9 +17,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from ..audio import Audio
-from ..phonemes import normalize_phoneme
 from ..timeline import PhonemeSpan
-from .espeak import speech_result
+from .espeak import EventReader, speech_result
+from .text_frontend import choose_voice, event_reader
 from .worker import SpeechRequest, WordedSpeech, speak_words_in_worker
 
 
@@ -52,14 +52,20 @@ class SpokenUtterance:
 def speak_words(
     texts: Sequence[str], voice: str = "en-us", rate: int = 175
 ) -> list[SpokenUtterance]:
-    """Each text spoken (one worker process for all) with its words."""
-    spoken = speak_words_in_worker([SpeechRequest(text, voice, rate) for text in texts])
-    return [_utterance(text, result) for text, result in zip(texts, spoken)]
+    """Each text spoken (one worker process for all) with its words; ``voice`` an
+    espeak-ng voice, of any language (``text_frontend.choose_voice``)."""
+    choice = choose_voice(voice, None)
+    requests = [
+        SpeechRequest(text, choice.voice, rate, ipa_names=choice.ipa_names) for text in texts
+    ]
+    read = event_reader(choice)
+    spoken = speak_words_in_worker(requests)
+    return [_utterance(text, result, read) for text, result in zip(texts, spoken)]
 
 
-def _utterance(text: str, spoken: WordedSpeech) -> SpokenUtterance:
+def _utterance(text: str, spoken: WordedSpeech, read: EventReader) -> SpokenUtterance:
     pcm, sample_rate, events = spoken.raw
-    audio, spans = speech_result(text, pcm, sample_rate, events)
+    audio, spans = speech_result(text, pcm, sample_rate, events, read)
     tokens = _tokens(text)
     marks = sorted(
         [(ms, 0, first - 1) for first, _, ms in spoken.words]
@@ -80,9 +86,13 @@ def _utterance(text: str, spoken: WordedSpeech) -> SpokenUtterance:
     by_token: dict[int, list[PhonemeSpan]] = {}
     for index, token in owner.items():
         start, end = starts[index], min(ends[index], audio.duration)
-        if end > start:
-            label = normalize_phoneme(events[index][0], "espeak", f"speak({text!r})")
-            by_token.setdefault(token, []).append(PhonemeSpan(label, start, end))
+        labels = read(events[index][0], f"speak({text!r})") if end > start else ()
+        step = (end - start) / max(len(labels), 1)
+        for k, label in enumerate(labels):  # an event of several phonemes shares its time
+            span = PhonemeSpan(
+                label, start + k * step, end if k == len(labels) - 1 else start + (k + 1) * step
+            )
+            by_token.setdefault(token, []).append(span)
     words = [
         SpokenWord(text[tokens[token][0] : tokens[token][1]], tuple(by_token[token]))
         for token in sorted(by_token)

@@ -38,7 +38,7 @@ from ..frontends.espeak_ipa import ipa_event_phonemes
 from ..frontends.espeak_languages import find_language, resolve_language, resolve_variant
 from ..phonemes import SILENCE
 from ..timeline import PhonemeSpan
-from .espeak import RATE_RANGE_WPM, EventReader, speech_result
+from .espeak import RATE_RANGE_WPM, EventReader, read_mnemonic, speech_result
 from .worker import SpeechRequest, speak_in_worker
 
 MAX_TEXT_CHARS = 1000
@@ -128,9 +128,7 @@ def speak_text(
         if "no voice" in error.message:
             raise LipstreamError(error.message, where="voice", code=INVALID_REQUEST) from None
         raise LipstreamError(error.message, where=error.where, code=SPEECH_FAILED) from None
-    read: EventReader | None = None
-    if choice.ipa_names:
-        read = partial(_read_ipa_event, lang=choice.lang or choice.voice)
+    read = event_reader(choice)
     try:
         audio, spans = speech_result(text, pcm, sample_rate, events, read)
     except SpeechError as error:
@@ -142,8 +140,16 @@ def speak_text(
     return SpokenText(pcm, sample_rate, audio, spans)
 
 
-def _read_ipa_event(name: str, where: str, *, lang: str) -> tuple[str, ...]:
-    return ipa_event_phonemes(name, lang, where="text")
+def event_reader(choice: VoiceChoice, where: str = "text") -> EventReader:
+    """How the phoneme events of ``choice`` become phonemes: English mnemonics, or IPA
+    read through the feature table (an unmapped one names ``where``)."""
+    if not choice.ipa_names:
+        return read_mnemonic
+    return partial(_read_ipa_event, lang=choice.lang or choice.voice, at=where)
+
+
+def _read_ipa_event(name: str, where: str, *, lang: str, at: str) -> tuple[str, ...]:
+    return ipa_event_phonemes(name, lang, where=at)
 
 
 def _clipped(text: str, length: int = 40) -> str:

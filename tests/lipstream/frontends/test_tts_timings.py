@@ -19,6 +19,7 @@ from lipstream.speech.spoken_words import SpokenUtterance
 
 WORD_TIMING_MEDIAN_MS = 20.0
 WORD_TIMING_P90_MS = 60.0
+CHARACTER_TIMING_INNER_MEDIAN_MS = 10.0
 
 BUILDERS: dict[str, Callable[[SpokenUtterance], Any]] = {
     "words": tts_shapes.words_input,
@@ -109,3 +110,20 @@ def test_timings_that_say_nothing_are_empty_timings(espeak_durations: WordDurati
     with pytest.raises(LipstreamError) as caught:
         timings_to_spans(parse_timings([{"word": "—", "start": 0.0, "end": 0.3}]), espeak_durations)
     assert caught.value.code == "empty_timings"
+
+
+def test_character_timings_place_onsets_inside_words_within_10_ms(
+    espeak_spoken: tuple[list[SpokenUtterance], list[SpokenUtterance]],
+    espeak_durations: WordDurationModel,
+) -> None:
+    inner: dict[str, list[float]] = {"elevenlabs": [], "words": []}
+    for utterance in espeak_spoken[1]:
+        for format in inner:
+            timings = parse_timings(json.dumps(BUILDERS[format](utterance)))
+            spans = timings_to_spans(timings, espeak_durations)
+            inner[format] += tts_shapes.onset_errors(utterance.words, spans, inner=True)
+    characters_ms, words_ms = (np.array(inner[name]) * 1000 for name in ("elevenlabs", "words"))
+    assert len(characters_ms) > 300
+    assert np.median(characters_ms) <= CHARACTER_TIMING_INNER_MEDIAN_MS
+    assert np.median(characters_ms) < np.median(words_ms)
+    assert np.percentile(characters_ms, 90) < np.percentile(words_ms, 90)

@@ -1,7 +1,8 @@
 """``POST /v1/synthesize`` with ``audio`` and its ``transcript`` against a real uvicorn
 server on loopback: the aligned phonemes' frames stay as close to those of espeak-ng's own
 phoneme events as the aligner's measured onset error allows, the answer carries the
-alignment's confidence, and each refusal has its code while /healthz keeps answering."""
+alignment's confidence, and each refusal has its code while /healthz keeps answering; the
+SDK's ``RestClient.synthesize_transcript`` gets the same answer and the same codes."""
 
 from __future__ import annotations
 
@@ -19,6 +20,9 @@ import pytest
 from lipstream.config import ServerSettings
 from lipstream.speech.text_frontend import SpokenText, speak_text
 from lipstream.timeline import PhonemeSpan
+from lipstream_client import EncodeError
+from lipstream_client.messages import Encoding
+from lipstream_client.rest import RestClient, RestServerError
 from tests.helpers import delayed_spans
 from tests.lipstream.server.harness import Served, serving
 
@@ -114,3 +118,52 @@ def test_audio_longer_than_a_request_may_be_is_refused_before_aligning(
         assert (answer.status_code, answer.json()["error"]["code"]) == (400, "invalid_audio")
         assert "1 s" in answer.json()["error"]["message"]
         assert httpx.get(f"{short.http}/healthz").status_code == 200
+
+
+@pytest.mark.parametrize("encoding", ["msgpack", "json"])
+def test_the_sdk_sends_audio_and_transcript_and_gets_the_rest_answer(
+    served: Served, spoken: SpokenText, encoding: Encoding
+) -> None:
+    raw = post(served, {**BODY, "audio": audio_field(spoken), "transcript": TEXT}).json()
+    result = RestClient(served.http).synthesize_transcript(
+        "viseme-lerp",
+        "demo",
+        (spoken.pcm16, spoken.sample_rate),
+        TEXT,
+        fps=FPS,
+        encoding=encoding,
+    )
+    assert result.alignment_confidence == raw["alignment"]["confidence"]
+    assert (result.channels, result.ready.fps) == (tuple(raw["channels"]), FPS)
+    assert np.array_equal(
+        np.asarray(result.rows(), np.float32), np.asarray(raw["data"], np.float32)
+    )
+    phonemes = RestClient(served.http).synthesize(
+        "viseme-lerp", "demo", items(spoken.spans), fps=FPS
+    )
+    assert phonemes.alignment_confidence is None
+
+
+@pytest.mark.parametrize(
+    ("transcript", "status", "code"),
+    [
+        (" .! ", 400, "empty_transcript"),
+        ("Seven green apples sat in a bowl.", 422, "transcript_mismatch"),
+    ],
+)
+def test_the_sdk_raises_the_servers_code_for_a_bad_transcript(
+    served: Served, spoken: SpokenText, transcript: str, status: int, code: str
+) -> None:
+    with pytest.raises(RestServerError) as raised:
+        RestClient(served.http).synthesize_transcript(
+            "viseme-lerp", "demo", (spoken.pcm16, spoken.sample_rate), transcript, fps=FPS
+        )
+    assert (raised.value.status, raised.value.code) == (status, code)
+    assert httpx.get(f"{served.http}/healthz").status_code == 200
+
+
+def test_the_sdk_refuses_a_transcript_that_is_not_text_before_sending() -> None:
+    client = RestClient("http://127.0.0.1:9")  # nothing listens: the refusal comes first
+    with pytest.raises(EncodeError) as raised:
+        client.synthesize_transcript("viseme-lerp", "demo", (b"\0\0", 16000), 7)  # type: ignore[arg-type]
+    assert raised.value.error.where == "transcript"

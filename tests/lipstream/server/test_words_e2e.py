@@ -1,11 +1,13 @@
 """Word timings end to end: the SDK's ``send_words`` against a real uvicorn server on
 loopback, chunk by chunk as a TTS sends them, cut inside words, gives the frames of the
 whole words each chunk completes sent as phonemes; ``POST /v1/synthesize`` with ``words``
-gives the frames of the same timings sent whole as phonemes."""
+gives the frames of the same timings sent whole as phonemes, German words (``voice``
+"de") included, whose phonemes land near espeak-ng's own."""
 
 from __future__ import annotations
 
 import json
+import shutil
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -14,9 +16,11 @@ import httpx
 import numpy as np
 import pytest
 
+from lipstream.bench import tts_shapes
 from lipstream.frontends.formats import parse_timings
 from lipstream.frontends.word_durations import WordDurationModel
 from lipstream.frontends.words_to_spans import timings_to_spans
+from lipstream.speech.spoken_words import speak_words
 from lipstream.timeline import PhonemeSpan
 from lipstream_client import Client
 from tests.lipstream.server.harness import Served, serving
@@ -24,6 +28,7 @@ from tests.lipstream.server.harness import Served, serving
 FPS = 50.0
 TEXT = "Map the bay "
 STEP_S = 0.07
+WORD_TIMING_MEDIAN_MS = 20.0
 
 
 def _alignment(text: str, first: int) -> dict[str, Any]:
@@ -112,3 +117,24 @@ def test_rest_refuses_bad_words_with_their_code(
     )
     assert (answer.status_code, answer.json()["error"]["code"]) == (status, code)
     assert httpx.get(f"{served.http}/healthz").status_code == 200
+
+
+@pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng missing")
+def test_rest_takes_german_words_with_their_voice(served: Served, words_models: Path) -> None:
+    spoken = speak_words(["Die Kinder spielen im Garten mit dem Ball."], voice="de")[0]
+    timings = tts_shapes.words_input(spoken)
+    body = {"engine": "viseme-lerp", "character": "demo", "fps": FPS}
+    by_words = httpx.post(
+        f"{served.http}/v1/synthesize",
+        json={**body, "words": {"timings": timings, "format": "words", "voice": "de"}},
+    )
+    assert by_words.status_code == 200, by_words.text
+    durations = WordDurationModel.load(words_models / "viseme-lerp")
+    spans = timings_to_spans(parse_timings(timings), durations, voice="de")
+    # The derived phonemes are espeak-ng's own German ones, near its own onsets.
+    errors_ms = np.array(tts_shapes.onset_errors(spoken.words, spans)) * 1000
+    assert len(errors_ms) > 0.8 * sum(len(word.phonemes) for word in spoken.words)
+    assert np.median(errors_ms) <= WORD_TIMING_MEDIAN_MS
+    items = [{"phoneme": s.phoneme, "start": s.start, "end": s.end} for s in spans]
+    by_items = httpx.post(f"{served.http}/v1/synthesize", json={**body, "items": items})
+    assert by_words.json()["data"] == by_items.json()["data"]
