@@ -17,6 +17,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import LipstreamError
+from ..numerics.resample import interp_columns
 from .errors import NO_FACE, SEVERAL_FACES, TRACKING_GAP
 from .track import Track
 
@@ -63,9 +64,7 @@ def bridge_gaps(track: Track, where: str, max_gap_s: float = MAX_GAP_S) -> Track
                 code=TRACKING_GAP,
             )
     landmarks = track.landmarks.reshape(len(times), -1)
-    filled = np.empty_like(landmarks)
-    for column in range(landmarks.shape[1]):
-        filled[:, column] = np.interp(times, times[tracked], landmarks[tracked, column])
+    filled = interp_columns(times, times[tracked], landmarks[tracked]).astype(landmarks.dtype)
     return replace(track, landmarks=filled.reshape(track.landmarks.shape))
 
 

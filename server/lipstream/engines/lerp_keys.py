@@ -9,7 +9,8 @@ first time, up to the first centre after its last time) by stepping from a
 starting key, then walks the run's times forward through that window. It
 computes each value as the numpy expression it replaces did (float32 keys
 widened to float64, ``left·(1 - w) + right·w``, w clipped to [0, 1], rounded
-to float32), so the frames are that expression's to the bit.
+to float32: ``numerics.resample.blend_into``), so the frames are that
+expression's to the bit.
 
 ``KeyedSpans`` is a request's span list that also keeps each span's centre and
 phoneme in growing arrays (brought up to date when the keys are read, so only
@@ -25,6 +26,7 @@ from collections.abc import Sequence
 import numpy as np
 from numba import njit
 
+from ..numerics.resample import blend_into
 from ..phonemes import PHONEME_INDEX
 from ..timeline import PhonemeSpan
 from .growable import Growable
@@ -89,9 +91,6 @@ def lerp_frames(
             weight = 0.0
         if weight > 1.0:
             weight = 1.0
-        low = poses[pose_rows[phonemes[left]]]
-        high = poses[pose_rows[phonemes[left + 1]]]
-        for channel in range(poses.shape[1]):
-            value = np.float64(low[channel]) * (1.0 - weight) + np.float64(high[channel]) * weight
-            out[i, channel] = np.float32(value)
+        low, high = pose_rows[phonemes[left]], pose_rows[phonemes[left + 1]]
+        blend_into(out[i], poses, low, high, weight)
     return out, key

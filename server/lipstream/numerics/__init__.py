@@ -8,6 +8,9 @@
   ``solve_spd_block_tridiagonal``; ``windowed_least_squares``);
 - ``trellis``: the Viterbi trellis and the fixed-lag decoder (``FixedLagViterbi``,
   ``ViterbiState``);
+- ``resample``: linear interpolation of a curve's rows at fractional positions
+  (``bracket``, ``blend_into``, ``extend_into``, ``sample_curves``) and
+  ``np.interp`` per column (``interp_columns``);
 - ``direct_call``: calling a compiled kernel without numba's per-call typing
   (``DirectCall``), for kernels that take named groups of arrays.
 """

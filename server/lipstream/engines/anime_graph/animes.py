@@ -23,6 +23,7 @@ from ...audio import Audio
 from ...errors import CorpusError
 from ...features import MfccConfig, frame_count, mfcc
 from ...numerics.basis import MotionBasis
+from ...numerics.resample import extend_into
 from ...phonemes import PHONEME_INDEX
 
 if TYPE_CHECKING:
@@ -104,10 +105,8 @@ def sample_into(
     low = int(min(max(math.floor(position), 0.0), float(max(last - 1, 0))))
     high = min(low + 1, last)
     fraction = position - low if high > low else 0.0
-    for column in range(values.shape[1]):
-        a = np.float64(values[first + low, column])
-        b = np.float64(values[first + high, column])
-        out[column] = a + fraction * (b - a)
+    # the line form (not blend_into, which rounds differently): it continues the end segments
+    extend_into(out, values, first + low, first + high, fraction)
 
 
 @dataclass(frozen=True)

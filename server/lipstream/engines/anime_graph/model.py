@@ -21,6 +21,7 @@ from ...audio import Audio
 from ...errors import InvalidRequestError, ModelStoreError
 from ...features import MfccConfig
 from ...numerics.basis import MotionBasis
+from ...numerics.resample import interp_columns
 from ...store import ModelManifest, require_arrays
 from ...timeline import PhonemeSpan
 from ..base import Lookahead, RenderingModel, Rung, SynthesisRequest, causal_rungs, resolved_rung
@@ -276,8 +277,7 @@ class AnimeGraphModel(RenderingModel):
         synthesizer.feed(spans, audio)
         frames = synthesizer.finish().astype(np.float64)
         grid = np.arange(len(frames)) / self.fps
-        columns = [np.interp(times, grid, frames[:, c]) for c in range(frames.shape[1])]
-        return np.stack(columns, axis=1).astype(np.float32)
+        return interp_columns(times, grid, frames).astype(np.float32)
 
     def arrays(self) -> dict[str, np.ndarray]:
         return dict(self._arrays)

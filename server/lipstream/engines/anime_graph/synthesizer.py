@@ -55,6 +55,7 @@ from numba import njit
 from ...audio import Audio
 from ...errors import InvalidRequestError
 from ...numerics.direct_call import DirectCall
+from ...numerics.resample import blend_into, bracket
 from ...phonemes import PHONEME_INDEX, SILENCE
 from ...timeline import PhonemeSpan, SpanLike, coerce_spans
 from ..base import SynthesisRequest, Synthesizer, fill_gaps, frame_count
@@ -738,13 +739,8 @@ def _interpolate(
         snapped = np.round(position)
         if abs(position - snapped) < _SNAP:
             position = snapped
-        low = int(np.floor(position))
-        fraction = position - low
-        high = min(low + 1, count - 1)
-        for column in range(curve.shape[1]):
-            values[row, column] = (1.0 - fraction) * curve[low - offset, column] + (
-                fraction * curve[high - offset, column]
-            )
+        low, high, fraction = bracket(position, count - 1)
+        blend_into(values[row], curve, low - offset, high - offset, fraction)
     return values
 
 

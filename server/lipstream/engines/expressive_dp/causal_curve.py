@@ -13,12 +13,12 @@ request's length.
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
+from ...numerics.resample import blend_into, bracket
 from ..damped import pull_toward
 
 _STARTED = 1e-9
@@ -67,13 +67,8 @@ def _raw_row(
     last = offsets[node + 1] - 1
     relative = (at - rows[k, START]) / (rows[k, END] - rows[k, START])
     position = min(max(relative, 0.0), 1.0) * (last - first)
-    low = min(int(math.floor(position)), last - first)
-    high = min(low + 1, last - first)
-    fraction = position - low
-    for column in range(frames.shape[1]):
-        out[column] = (
-            frames[first + low, column] * (1.0 - fraction) + frames[first + high, column] * fraction
-        )
+    low, high, fraction = bracket(position, last - first)
+    blend_into(out, frames, first + low, first + high, fraction)
 
 
 @njit(cache=True)

@@ -27,6 +27,7 @@ import numpy as np
 
 from ...model_checks import ArrayReader
 from ...numerics.basis import MotionBasis
+from ...numerics.resample import sample_curves
 from ...output.visemes import DENG15
 from ...phonemes import PHONEME_INDEX, PHONEMES, SILENCE
 from ...timeline import EMOTIONS
@@ -209,15 +210,8 @@ class NodeFeatures:
 def resample_nodes(nodes: NodeDatabase, points: int) -> np.ndarray:
     """Every node time-warped (linearly) to ``points`` evenly spaced samples, (N, points, K)."""
     counts = np.diff(nodes.offsets)
-    position = np.linspace(0.0, 1.0, points)[None, :] * (counts[:, None] - 1)
-    low = np.floor(position).astype(np.int64)
-    high = np.minimum(low + 1, counts[:, None] - 1)
-    fraction = (position - low)[:, :, None]
-    base = nodes.offsets[:-1, None]
-    frames = nodes.frames
-    return np.ascontiguousarray(
-        frames[base + low] * (1.0 - fraction) + frames[base + high] * fraction
-    )
+    positions = np.linspace(0.0, 1.0, points)[None, :] * (counts[:, None] - 1)
+    return np.asarray(sample_curves(nodes.frames, nodes.offsets, positions))
 
 
 def blend_halves(shapes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -236,11 +230,9 @@ def blend_halves(shapes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def warp_node(frames: np.ndarray, relative: np.ndarray) -> np.ndarray:
     """A node's frames (n, K) time-warped to relative times ``relative`` in [0, 1], (m, K)."""
-    position = np.clip(relative, 0.0, 1.0) * (len(frames) - 1)
-    low = np.minimum(np.floor(position).astype(np.int64), len(frames) - 1)
-    high = np.minimum(low + 1, len(frames) - 1)
-    fraction = (position - low)[:, None]
-    return np.asarray(frames[low] * (1.0 - fraction) + frames[high] * fraction)
+    positions = np.clip(relative, 0.0, 1.0) * (len(frames) - 1)
+    whole = np.array([0, len(frames)])
+    return np.asarray(sample_curves(frames, whole, positions[None, :])[0])
 
 
 def node_context(nodes: NodeDatabase, node: int) -> Mapping[str, str]:

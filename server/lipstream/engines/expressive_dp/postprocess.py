@@ -48,6 +48,7 @@ from ...numerics.banded import (
     solve_spd_banded,
     solve_with_factor,
 )
+from ...numerics.resample import blend_into, bracket, extend_into
 from ...phonemes import SILENCE
 from ...timeline import PhonemeSpan
 from .nodes import NodeDatabase
@@ -333,13 +334,8 @@ def warped_points(
     length = end - start
     for i in range(high - low):
         position = min(max(((low + i) / rate - start) / length, 0.0), 1.0) * last
-        below = min(int(np.floor(position)), last)
-        above = min(below + 1, last)
-        fraction = position - below
-        for c in range(frames.shape[1]):
-            out[i, c] = (
-                frames[first + below, c] * (1.0 - fraction) + frames[first + above, c] * fraction
-            )
+        below, above, fraction = bracket(position, last)
+        blend_into(out[i], frames, first + below, first + above, fraction)
     return out
 
 
@@ -369,8 +365,8 @@ def _interpolated(grid: np.ndarray, low: np.ndarray, fraction: np.ndarray, top: 
     for i in range(len(low)):
         base = low[i] - low[0]
         following = min(low[i] + 1, top) - low[0]
-        for c in range(grid.shape[1]):
-            out[i, c] = grid[base, c] + fraction[i] * (grid[following, c] - grid[base, c])
+        # the line form the frames were made with (blend_into rounds differently)
+        extend_into(out[i], grid, base, following, fraction[i])
     return out
 
 

@@ -23,6 +23,7 @@ from threadpoolctl import threadpool_limits
 from ...corpus import Corpus, Utterance
 from ...features import speech_features
 from ...numerics.basis import MotionBasis, fit_basis
+from ...numerics.resample import interp_columns
 from ...numerics.trellis import forward_backward
 from ...phonemes import PHONEME_INDEX, PHONEMES
 from ...timeline import EMOTIONS
@@ -42,9 +43,7 @@ def observations(utterance: Utterance, basis: MotionBasis, hmm_fps: float) -> np
     """[pose, velocity] (T, 2D) at the HMM rate; frame 0's velocity is frame 1's."""
     times = hmm_times(utterance, hmm_fps)
     pose = basis.project(utterance.frames)
-    sampled = np.stack(
-        [np.interp(times, utterance.times(), pose[:, d]) for d in range(pose.shape[1])], axis=1
-    )
+    sampled = interp_columns(times, utterance.times(), pose)
     velocity = np.diff(sampled, axis=0, prepend=sampled[:1])
     if len(sampled) > 1:
         velocity[0] = velocity[1]
