@@ -29,6 +29,10 @@ def problems(seed: int, count: int, full_rank: bool) -> list[tuple[np.ndarray, n
     return out
 
 
+def random_set(rng: np.random.Generator, size: int, share: float) -> np.ndarray:
+    return np.asarray(rng.random(size) < share, dtype=np.bool_)
+
+
 def assert_kkt(matrix: np.ndarray, target: np.ndarray, x: np.ndarray) -> None:
     dual = matrix.T @ (target - matrix @ x)
     assert (x >= 0).all() and np.isfinite(x).all()
@@ -46,7 +50,7 @@ def test_full_rank_problems_match_scipy_cold_and_from_wrong_active_sets() -> Non
         expected, _ = nnls(matrix, target)
         system = nnls_system(matrix)
         np.testing.assert_allclose(solve_nnls(system, target), expected, atol=SOLUTION_ATOL)
-        for wrong in (rng.random(matrix.shape[1]) < 0.5, np.ones(matrix.shape[1], bool)):
+        for wrong in (random_set(rng, matrix.shape[1], 0.5), np.ones(matrix.shape[1], bool)):
             passive = wrong.copy()
             found = solve_nnls(system, target, passive)
             np.testing.assert_allclose(found, expected, atol=SOLUTION_ATOL)
@@ -58,7 +62,7 @@ def test_more_columns_than_rows_reach_scipys_residual_and_the_kkt_conditions() -
     for matrix, target in problems(1, 200, full_rank=False):
         expected, _ = nnls(matrix, target)
         system = nnls_system(matrix)
-        for passive in (None, rng.random(matrix.shape[1]) < 0.3):
+        for passive in (None, random_set(rng, matrix.shape[1], 0.3)):
             found = solve_nnls(system, target, passive)
             assert residual(matrix, target, found) == pytest.approx(
                 residual(matrix, target, expected), abs=RESIDUAL_ATOL
