@@ -87,6 +87,12 @@ def solve_nnls(
     return solution
 
 
+def warm_nnls() -> None:
+    """Compile (or load from numba's cache) ``solve_nnls_rows`` for the argument types every
+    caller passes, so a stream's first bounded frame does not pay for it."""
+    solve_nnls(nnls_system(np.array([[1.0, 1.0], [0.0, 1.0]])), np.array([1.0, -1.0]))
+
+
 @njit(cache=True)
 def solve_nnls_rows(
     system: NnlsSystem,

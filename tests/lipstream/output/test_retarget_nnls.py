@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from scipy.optimize import nnls
 
+from lipstream.numerics.nnls import solve_nnls_rows, warm_nnls
 from lipstream.output.probes import probe_rig
 from lipstream.output.rig_presets import model_maps
 
@@ -113,3 +114,13 @@ def test_rest_and_a_frame_at_rest_plus_nothing_give_the_rest_controls(
         rest = retarget.pairs.source_rest[None]
         controls = retarget.stream().apply(np.vstack([rest, rest]))
         np.testing.assert_array_equal(controls, np.tile(retarget.pairs.control_rest, (2, 1)))
+
+
+def test_the_kernel_warmed_at_start_up_is_the_one_a_stream_calls(
+    streamed: dict[str, tuple[np.ndarray, dict[str, RetargetMap]]],
+) -> None:
+    warm_nnls()
+    warmed = set(solve_nnls_rows.signatures)
+    frames, maps = streamed["dam"]
+    maps["vrm1"].stream().apply(frames[:20])
+    assert set(solve_nnls_rows.signatures) == warmed
