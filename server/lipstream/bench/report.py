@@ -268,6 +268,26 @@ def stream_calls(bench: Bench) -> str:
     )
 
 
+def retarget_cost(bench: Bench) -> str:
+    """CPU per frame of each rig preset's map: scipy's NNLS per frame and the compiled,
+    warm-started one, side by side."""
+    costs = bench.load("retarget_cost.json")
+    return bench.source("retarget_cost.json", costs) + table(
+        ["engine", "preset", "frames by NNLS", "scipy µs/frame", "compiled µs/frame", "ratio"],
+        (
+            [
+                f"`{row['engine']}`",
+                f"`{row['preset']}`",
+                percent(row["nnls_share"]),
+                number(row["scipy_us"]),
+                number(row["compiled_us"]),
+                f"{number(row['ratio'])}×",
+            ]
+            for row in _by_engine(rows_of(costs))
+        ),
+    )
+
+
 def _call_pairs(bench: Bench, name: str) -> str:
     doc = bench.load(name)
     header = (
@@ -1070,6 +1090,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "engines-summary": engines_summary,
     "engines": engines,
     "stream-calls": stream_calls,
+    "retarget-cost": retarget_cost,
     "call-pairs": call_pairs("call_pairs.json"),
     "call-pairs-expressive-dp": call_pairs("call_pairs_expressive_dp.json"),
     "lead0": lead0,

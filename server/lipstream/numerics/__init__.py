@@ -11,6 +11,9 @@
 - ``resample``: linear interpolation of a curve's rows at fractional positions
   (``bracket``, ``blend_into``, ``extend_into``, ``sample_curves``) and
   ``np.interp`` per column (``interp_columns``);
+- ``nnls``: Lawson–Hanson non-negative least squares for a fixed design matrix, its Gram
+  matrix precomputed and each solve warm-started from an active set (``NnlsSystem``,
+  ``solve_nnls``, ``solve_nnls_rows``);
 - ``direct_call``: calling a compiled kernel without numba's per-call typing
   (``DirectCall``), for kernels that take named groups of arrays.
 """

@@ -5,11 +5,18 @@ pose s_k in the model's channels and the rig controls c_k ∈ [0,1] that make
 the rig show that pose, plus a rest pair (s_0, c_0). Stage 1, per frame x:
 the frame is expressed as a non-negative blend of the key poses' deltas from
 rest, α = argmin_{α≥0} ||W (D α − (x − s_0))||² with D = [s_k − s_0] and W
-the per-channel fit weights (Lawson–Hanson NNLS, ``scipy.optimize.nnls``;
-K is at most ``MAX_KEYS``). A block of frames is first solved without the
-bound by one product with the pseudo-inverse of W D; a frame whose solution
-is already non-negative has its NNLS optimum there (the unconstrained
-minimum is feasible), and only the others are solved one by one. Stage 2: the
+the per-channel fit weights (Lawson–Hanson NNLS, ``numerics.nnls``; K is at
+most ``MAX_KEYS``). A block of frames is first solved without the bound by
+one product with the pseudo-inverse of W D; a frame whose solution is
+already non-negative has its NNLS optimum there (the unconstrained minimum
+is feasible), and only the others are solved one by one, by the compiled
+active-set solver on the map's precomputed Gram matrix, each started from
+the active set of the frame solved before it. A stream keeps that set from
+block to block (``RetargetMap.stream``: one ``RetargetStream`` per output
+stream), so a frame usually costs one small Cholesky solve. The presets have
+more keys than fitted channels, so α itself need not be unique (the
+residual is); where it is not, the blend found may depend on the frames
+before (docs/how-to/retarget.md). Stage 2: the
 rig controls are the same blend of the key controls, c = c_0 + Σ α_k (c_k −
 c_0), projected onto [0,1] — the bounded least-squares solution of
 min ||c − c_0 − Σ α_k (c_k − c_0)||² over c ∈ [0,1], which is a clip. A
@@ -44,10 +51,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.optimize import lsq_linear, nnls
+from scipy.optimize import lsq_linear
 
 from ..errors import ModelStoreError
 from ..model_checks import ArrayReader, FieldReader
+from ..numerics.nnls import BoolArray, NnlsSystem, cold_passive, nnls_system, solve_nnls_rows
 from ..store import load_arrays
 from .pairs_csv import csv_document, document_csv
 
@@ -105,6 +113,11 @@ class RetargetMap:
         return np.asarray(deltas[fitted] * pairs.channel_weights[fitted, None], dtype=np.float64)
 
     @cached_property
+    def _nnls(self) -> NnlsSystem:
+        """The stage-1 system with its Gram matrix, for the compiled NNLS."""
+        return nnls_system(self._system)
+
+    @cached_property
     def _pseudo_inverse(self) -> np.ndarray:
         """(K, fitted channels): the unconstrained least-squares solve of stage 1."""
         return np.linalg.pinv(self._system)
@@ -121,8 +134,15 @@ class RetargetMap:
             return None
         return rows, system[rows, np.arange(system.shape[1])]
 
-    def blend_weights(self, frames: np.ndarray) -> np.ndarray:
-        """Stage 1: non-negative blend weights α float64 (n_frames, K) of the key poses."""
+    def stream(self) -> RetargetStream:
+        """A mapper for one stream of frames, keeping the NNLS warm start between blocks."""
+        return RetargetStream(self, cold_passive(self._nnls))
+
+    def blend_weights(self, frames: np.ndarray, passive: BoolArray | None = None) -> np.ndarray:
+        """Stage 1: non-negative blend weights α float64 (n_frames, K) of the key poses.
+
+        ``passive`` (K,) bool is the NNLS warm start, the active set of the frame solved
+        before (updated in place); None starts the block cold."""
         pairs = self.pairs
         fitted = pairs.channel_weights > 0
         residual = np.asarray(frames, dtype=np.float64) - pairs.source_rest
@@ -131,19 +151,20 @@ class RetargetMap:
             rows, scale = self._diagonal
             diagonal: np.ndarray = np.maximum(targets[:, rows] / scale, 0.0)
             return diagonal
-        system = self._system
         weights: np.ndarray = targets @ self._pseudo_inverse.T
         # A non-finite frame (an engine fault) stays non-finite, for the caller to report.
         bounded = (weights < 0).any(axis=1) & np.isfinite(targets).all(axis=1)
-        for index in np.flatnonzero(bounded):
-            weights[index], _ = nnls(system, targets[index])
+        if bounded.any():
+            state = cold_passive(self._nnls) if passive is None else passive
+            rows = np.flatnonzero(bounded).astype(np.intp)
+            solve_nnls_rows(self._nnls, np.ascontiguousarray(targets), rows, state, weights)
         return weights
 
-    def apply(self, frames: np.ndarray) -> np.ndarray:
+    def apply(self, frames: np.ndarray, passive: BoolArray | None = None) -> np.ndarray:
         """Rig controls float64 (n_frames, n_controls) in [0,1] for model frames
-        (n_frames, n_channels)."""
+        (n_frames, n_channels); ``passive`` as in ``blend_weights``."""
         pairs = self.pairs
-        blended = pairs.control_rest + self.blend_weights(frames) @ (
+        blended = pairs.control_rest + self.blend_weights(frames, passive) @ (
             pairs.control_keys - pairs.control_rest
         )
         controls: np.ndarray = np.clip(blended, 0.0, 1.0)
@@ -153,6 +174,19 @@ class RetargetMap:
         """Per key, the largest control error of the map applied to its own key pose."""
         errors = np.abs(self.apply(self.pairs.source_keys) - self.pairs.control_keys).max(axis=1)
         return {name: float(error) for name, error in zip(self.pairs.key_names, errors)}
+
+
+@dataclass(frozen=True, eq=False)
+class RetargetStream:
+    """One stream's mapper: ``map`` applied block after block, each NNLS frame started from
+    the active set the stream's previous one ended with (``passive``, (K,) bool)."""
+
+    map: RetargetMap
+    passive: BoolArray
+
+    def apply(self, frames: np.ndarray) -> np.ndarray:
+        """Rig controls float64 (n_frames, n_controls) in [0,1], as ``RetargetMap.apply``."""
+        return self.map.apply(frames, self.passive)
 
 
 def fit_controls(

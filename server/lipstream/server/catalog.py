@@ -39,6 +39,7 @@ from ..engines.work import WorkGuard
 from ..errors import LipstreamError, ModelStoreError
 from ..frontends.word_durations import WordDurationModel
 from ..models import ModelRegistry
+from ..numerics.nnls import warm_nnls
 from ..output.probes import RigProbe, probe_closures, probe_phoneme_poses, probe_rest_poses
 from ..output.retarget import RetargetMap
 from ..output.rig_presets import model_maps
@@ -128,6 +129,7 @@ class Catalog:
                 logger.exception("probing model %s failed", name)
                 fault = f"its start-up probe failed ({type(error).__name__}: {error})"
                 registry.drop(name, ModelStoreError(fault, where=name))
+        warm_nnls()  # the retarget maps' kernel, before a stream's first frame needs it
         catalog.presets = _presets(registry, settings)
         registry.require_models(strict=settings.strict_models)
         if settings.profiles is not None:
@@ -265,6 +267,7 @@ def warm_kernels(model: Model) -> None:
     """Make the calls that compile ``model``'s kernels at start-up (its rest poses, the viseme
     probe, every rung's calibration stream), timing nothing: run in another process, they
     leave the compiled kernels in numba's on-disk cache for the server to load."""
+    warm_nnls()
     probe_rest_poses(model)
     probe_phoneme_poses(model)
     probe_closures(model)

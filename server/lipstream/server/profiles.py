@@ -34,7 +34,7 @@ from lipstream_client.messages import VisemeSet
 from ..engines.base import DEFAULT_EMOTION_KEY, Model, SynthesisResult
 from ..errors import LipstreamError
 from ..output.probes import mouth_channels, probe_key_poses
-from ..output.retarget import RetargetMap
+from ..output.retarget import RetargetMap, RetargetStream
 from ..output.rig_presets import model_maps
 from ..timeline import EMOTIONS
 from .viseme_projection import VISEME_SCHEMES, VisemeProjector
@@ -57,6 +57,7 @@ class ResolvedProfile:
     columns of the viseme weights the projector computes first, or, with a
     ``retarget`` map, columns of the rig controls it computes first; then
     output column j is ``clip(value * multiplier[j] + offset[j], low[j], high[j])``.
+    A profile is resolved per stream, so it holds the stream's retarget warm start.
     """
 
     channels: tuple[str, ...]
@@ -71,6 +72,10 @@ class ResolvedProfile:
     @property
     def n_channels(self) -> int:
         return len(self.channels)
+
+    @cached_property
+    def _retarget_stream(self) -> RetargetStream | None:
+        return None if self.retarget is None else self.retarget.stream()
 
     @cached_property
     def identity(self) -> bool:
@@ -98,8 +103,8 @@ class ResolvedProfile:
             if not math.isfinite(total) and not np.isfinite(frames).all():
                 raise ValueError("the engine produced non-finite values")
             return np.asarray(frames, dtype=np.float32)
-        if self.retarget is not None:
-            source = self.retarget.apply(frames)
+        if self._retarget_stream is not None:
+            source = self._retarget_stream.apply(frames)
         elif self.projector is not None:
             source = self.projector.weights(frames)
         else:
