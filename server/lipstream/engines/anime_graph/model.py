@@ -160,7 +160,7 @@ class AnimeGraphModel(RenderingModel):
     @property
     def audio_wait_s(self) -> float:
         """How far past a span's end the audio must reach before the span's MFCC frames are
-        final (``RequestAudio.ready``): two frame steps plus half a window; 0 without audio
+        final (``StreamedFeatures.ready``): two frame steps plus half a window; 0 without audio
         features."""
         if not self.has_audio:
             return 0.0

@@ -54,14 +54,16 @@ from numba import njit
 
 from ...audio import Audio
 from ...errors import InvalidRequestError
+from ...features import mfcc
 from ...numerics.direct_call import DirectCall
 from ...phonemes import PHONEME_INDEX, SILENCE
 from ...timeline import PhonemeSpan, SpanLike, coerce_spans
 from ..base import SynthesisRequest, Synthesizer, fill_gaps, frame_count
 from ..damped import FilterState
 from ..growable import Growable
+from ..streamed_features import StreamedFeatures
 from ..work import WorkGuard
-from .animes import summarize
+from .animes import Curves, summarize
 from .blending import Join, PairIndex, plan_join
 from .causal_call import causal_emit, causal_step
 from .costs import Ranking
@@ -69,7 +71,6 @@ from .emission import CausalClock, ChannelMap, channel_frames
 from .graph import AnimeGraph, SearchGraph
 from .options import SearchOptions
 from .pq import SearchTimeout, pq_window
-from .request_audio import RequestAudio
 from .search import Matcher, SuffixMatcher, count_jumps, missing
 from .suffix_search import GreedySearch, greedy_tiles
 from .track import AnimeMotion, MotionTrack, Placement, TrackBuffers, evaluate_track
@@ -117,7 +118,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         self._labels = Growable(np.int64)
         self._bounds = Growable(np.float64, (2,))  # each span's start and end (s), if causal
         self.nodes: list[int] = []
-        self.audio: RequestAudio | None = None
+        self.audio: StreamedFeatures | None = None
         self.audio_mode: bool | None = None
         self.summaries: Growable | None = None
         self.track = MotionTrack(model.anime_motion)
@@ -200,8 +201,13 @@ class AnimeGraphSynthesizer(Synthesizer):
     def held_input_bytes_after(self, n_samples: int, sample_rate: int) -> int:
         if self.audio is None and (self.audio_mode is False or not self.model.has_audio):
             return 0  # audio this request takes is not kept
-        audio = self.audio or RequestAudio(self.model.mfcc)
-        return audio.stream.held_bytes_after(n_samples, sample_rate)
+        audio = self.audio or self._audio_stream()
+        return audio.held_bytes_after(n_samples, sample_rate)
+
+    def _audio_stream(self) -> StreamedFeatures:
+        """The request's MFCC frames, as its audio streams in."""
+        config = self.model.mfcc
+        return StreamedFeatures(config, config.n_coefficients, mfcc)
 
     def _take_audio(self, audio: Audio | None) -> None:
         if self.options.causal:
@@ -210,7 +216,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         if self.audio_mode is None:
             self.audio_mode = audio is not None and self.model.has_audio
             if self.audio_mode:
-                self.audio = RequestAudio(self.model.mfcc)
+                self.audio = self._audio_stream()
         elif audio is not None and not self.audio_mode and self.model.has_audio:
             raise InvalidRequestError(
                 "audio must come with the first feed of a request: this request started "
@@ -245,7 +251,8 @@ class AnimeGraphSynthesizer(Synthesizer):
             self.summaries = Growable(np.float64, (self.model.summaries.shape[1],))
         have = self.summaries.count
         if stop > have:
-            curves = self.audio.curves(self.spans[stop - 1].end)
+            frames = self.audio.describing(self.spans[stop - 1].end)  # one utterance's curve
+            curves = Curves(frames, np.array([0, len(frames)]), self.model.mfcc.rate)
             starts = np.array([span.start for span in self.spans[have:stop]])
             ends = np.array([span.end for span in self.spans[have:stop]])
             self.summaries.extend(
@@ -405,7 +412,7 @@ class AnimeGraphSynthesizer(Synthesizer):
 
     def _decide(self) -> None:
         if self.finished and self.audio is not None and self.spans:
-            self.audio.curves(self.covered_until)
+            self.audio.describing(self.covered_until)
         placed = len(self.nodes)
         while len(self.nodes) < self._labels.count:
             self.guard.check()
@@ -516,7 +523,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         if self.audio is None or animes.features is None or span.phoneme == SILENCE:
             return linear_warp(span.start, span.end, *source)
         rate = self.model.mfcc.rate
-        target_curve = self.audio.curves(span.end).values
+        target_curve = self.audio.describing(span.end)
         target_frames = np.arange(math.ceil(span.start * rate), math.floor(span.end * rate) + 1)
         owner = int(animes.utterance[anime])
         source_curve = animes.features.rows(owner)
