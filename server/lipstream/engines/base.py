@@ -52,7 +52,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, ClassVar, Self, SupportsIndex, TypeVar, overload
+from typing import Any, ClassVar, Protocol, Self, SupportsIndex, TypeVar, overload
 
 import numpy as np
 
@@ -611,11 +611,21 @@ class SpanSynthesizer(Synthesizer):
         """Called with each span as it joins ``spans``; ``sent`` is its client index."""
 
 
+class LookaheadSource(Protocol):
+    """What a ``LookaheadSynthesizer`` reads of its model (an engine's own synthesizers say
+    what more they read in a protocol that extends this one)."""
+
+    @property
+    def lookahead(self) -> Lookahead: ...
+    @property
+    def uses_audio(self) -> bool: ...
+
+
 class LookaheadSynthesizer(SpanSynthesizer):
     """Streams a model's frames by its declared ``Lookahead``: a frame is emitted once it is
     final; subclasses make the frames (``_emit``)."""
 
-    def __init__(self, model: Model, request: SynthesisRequest) -> None:
+    def __init__(self, model: LookaheadSource, request: SynthesisRequest) -> None:
         super().__init__()
         self.model = model
         self.request = request

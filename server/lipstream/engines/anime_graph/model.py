@@ -33,7 +33,8 @@ from .graph import SearchGraph
 from .options import ENGINE, MAX_PQ_WINDOW, OPTION_NAMES, SearchOptions, parse_options
 from .search import LayeredMatcher, Matcher, SuffixMatcher
 from .smoothing import lowpass_kernels
-from .synthesizer import AnimeGraphSynthesizer, StreamCalls
+from .stream_calls import StreamCalls
+from .synthesizer import AnimeGraphSynthesizer
 from .track import anime_motion
 from .views import WHOLE, GraphView, load_view
 

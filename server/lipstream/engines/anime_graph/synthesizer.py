@@ -47,7 +47,7 @@ from bisect import bisect_left, bisect_right
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from itertools import groupby
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 from numba import njit
@@ -55,7 +55,6 @@ from numba import njit
 from ...audio import Audio
 from ...errors import InvalidRequestError
 from ...features import mfcc
-from ...numerics.direct_call import DirectCall
 from ...phonemes import PHONEME_INDEX, SILENCE
 from ...timeline import PhonemeSpan, SpanLike, coerce_spans
 from ..base import SynthesisRequest, Synthesizer, fill_gaps, frame_count
@@ -65,22 +64,19 @@ from ..streamed_features import StreamedFeatures
 from ..work import WorkGuard
 from .animes import Curves, summarize
 from .blending import Join, PairIndex, plan_join
-from .causal_call import causal_emit, causal_step
 from .costs import Ranking
-from .emission import CausalClock, ChannelMap, channel_frames
+from .emission import CausalClock
 from .graph import AnimeGraph, SearchGraph
 from .options import SearchOptions
 from .pq import SearchTimeout, pq_window
 from .search import Matcher, SuffixMatcher, count_jumps, missing
-from .suffix_search import GreedySearch, greedy_tiles
-from .track import AnimeMotion, MotionTrack, Placement, TrackBuffers, evaluate_track
+from .serving import AnimeGraphServing
+from .stream_calls import SNAP
+from .suffix_search import GreedySearch
+from .track import MotionTrack, Placement
 from .views import WHOLE, GraphView
 from .warp import Alignment, Warp, dtw_warps, linear_warp
 
-if TYPE_CHECKING:
-    from .model import AnimeGraphModel
-
-_SNAP = 1e-9
 _FORGET_ROWS = 64
 _Result = TypeVar("_Result")
 
@@ -102,7 +98,7 @@ class AnimeGraphSynthesizer(Synthesizer):
     """
 
     def __init__(
-        self, model: AnimeGraphModel, request: SynthesisRequest, options: SearchOptions
+        self, model: AnimeGraphServing, request: SynthesisRequest, options: SearchOptions
     ) -> None:
         self.model = model
         self.request = request
@@ -617,11 +613,11 @@ class AnimeGraphSynthesizer(Synthesizer):
             if not self.spans:  # finished with no input: no sample, and no frame, to make
                 return
             last = frame_count(self.covered_until, self.fps) - 1
-            needed = math.floor(last * fps_model / self.fps + _SNAP) + 2
+            needed = math.floor(last * fps_model / self.fps + SNAP) + 2
             self._extend_raw(needed + self.half_width)
             self._extend_smoothed(needed)
             return
-        raw_final = max(0, math.ceil(limit * fps_model - _SNAP))
+        raw_final = max(0, math.ceil(limit * fps_model - SNAP))
         self._extend_raw(raw_final)
         self._extend_smoothed(max(0, raw_final - self.half_width))
 
@@ -689,31 +685,11 @@ class AnimeGraphSynthesizer(Synthesizer):
 
 
 @njit(cache=True)
-def _grid_samples(
-    first: int,
-    stop: int,
-    fps_model: float,
-    until: float,
-    track: TrackBuffers,
-    count: int,
-    knots: int,
-    motion: AnimeMotion,
-) -> np.ndarray:
-    """The first ``count`` placements (``knots`` knots) of ``track`` at model-grid samples
-    ``first`` .. ``stop`` - 1, sample k at k / ``fps_model`` s but no later than ``until``:
-    (stop - first, n_pc)."""
-    times = np.empty(stop - first)
-    for row in range(stop - first):
-        times[row] = min((first + row) / fps_model, until)
-    return evaluate_track(times, track, count, knots, motion, False)
-
-
-@njit(cache=True)
 def _samples_needed(frame: int, fps_model: float, fps: float) -> int:
     """Smoothed samples (count) needed to interpolate output ``frame``."""
     position = frame * fps_model / fps
-    nearest = np.round(position)  # within _SNAP of position: how it rounds a tie is moot
-    if abs(position - nearest) < _SNAP:
+    nearest = np.round(position)  # within SNAP of position: how it rounds a tie is moot
+    if abs(position - nearest) < SNAP:
         return int(nearest) + 1
     return math.floor(position) + 2
 
@@ -733,45 +709,6 @@ def _emittable_stop(emitted: int, total: int, count: int, fps_model: float, fps:
 
 
 @njit(cache=True)
-def _interpolate(
-    first: int, stop: int, ratio: float, curve: np.ndarray, offset: int, count: int
-) -> np.ndarray:
-    """Output frames first .. stop - 1 interpolated linearly between the smoothed samples
-    (``curve`` holds samples offset .. offset + len - 1 of ``count``) at frame * ``ratio``,
-    a position within ``_SNAP`` of a sample taken as that sample."""
-    values = np.empty((stop - first, curve.shape[1]))
-    for row in range(stop - first):
-        position = (first + row) * ratio
-        snapped = np.round(position)
-        if abs(position - snapped) < _SNAP:
-            position = snapped
-        low = int(np.floor(position))
-        fraction = position - low
-        high = min(low + 1, count - 1)
-        for column in range(curve.shape[1]):
-            values[row, column] = (1.0 - fraction) * curve[low - offset, column] + (
-                fraction * curve[high - offset, column]
-            )
-    return values
-
-
-@njit(cache=True)
-def _interpolated_frames(
-    first: int,
-    stop: int,
-    ratio: float,
-    curve: np.ndarray,
-    offset: int,
-    count: int,
-    channels: ChannelMap,
-) -> np.ndarray:
-    """``_interpolate``'s values as channel frames (``emission.channel_frames``), in one
-    call."""
-    values = _interpolate(first, stop, ratio, curve, offset, count)
-    return channel_frames(values, channels)
-
-
-@njit(cache=True)
 def _filter(block: np.ndarray, kernels: np.ndarray) -> np.ndarray:
     """Each component of ``block`` filtered by its kernel ('valid' correlation: output i
     reads block rows i .. i + width - 1)."""
@@ -784,20 +721,6 @@ def _filter(block: np.ndarray, kernels: np.ndarray) -> np.ndarray:
                 total += block[row + tap, component] * kernels[component, tap]
             out[row, component] = total
     return out
-
-
-class StreamCalls:
-    """The kernels a model's synthesizers call on every streamed message, each through one
-    ``DirectCall`` that they share: the argument types at each call site are fixed by the
-    model's arrays and the requests' buffers, so the first request binds them and the
-    others skip the binding (a few hundred µs of typing named groups in Python)."""
-
-    def __init__(self) -> None:
-        self.causal_step = DirectCall(causal_step)
-        self.causal_emit = DirectCall(causal_emit)
-        self.greedy_tiles = DirectCall(greedy_tiles)
-        self.grid_samples = DirectCall(_grid_samples)
-        self.interpolated_frames = DirectCall(_interpolated_frames)
 
 
 def _search_timeout(spent_s: float, budget_s: float) -> SearchTimeout:

@@ -54,7 +54,6 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -76,9 +75,7 @@ from ..base import (
 from ..growable import Growable
 from ..streamed_features import StreamedFeatures
 from . import kernels
-
-if TYPE_CHECKING:
-    from .model import HmmModel
+from .serving import HmmServing
 
 PINNED = 2
 AUTO, PHONEMES, AUDIO, BOTH = "auto", "phonemes", "audio", "both"
@@ -116,7 +113,7 @@ class HmmSynthesizer(Synthesizer):
     in a buffer that grows at its end (the compiled steps in ``kernels`` read and write
     them in place, so a streamed call costs the same however long the request is)."""
 
-    def __init__(self, model: HmmModel, request: SynthesisRequest, plan: Plan) -> None:
+    def __init__(self, model: HmmServing, request: SynthesisRequest, plan: Plan) -> None:
         self.model = model
         self.request = request
         self.plan = plan
