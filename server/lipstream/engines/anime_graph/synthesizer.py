@@ -44,7 +44,7 @@ from __future__ import annotations
 import math
 import time
 from bisect import bisect_left, bisect_right
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from itertools import groupby
 from typing import Any, TypeVar
@@ -56,7 +56,7 @@ from ...audio import Audio
 from ...errors import InvalidRequestError
 from ...features import mfcc
 from ...phonemes import PHONEME_INDEX, SILENCE
-from ...timeline import PhonemeSpan, SpanLike, coerce_spans
+from ...timeline import PhonemeSpan
 from ..base import SynthesisRequest, Synthesizer, fill_gaps, frame_count
 from ..damped import FilterState
 from ..growable import Growable
@@ -148,14 +148,13 @@ class AnimeGraphSynthesizer(Synthesizer):
 
     # ---- input ---------------------------------------------------------------------------
 
-    def feed(self, spans: Iterable[SpanLike], audio: Audio | None = None) -> None:
-        if self.finished:
-            raise InvalidRequestError("input fed after finish()", code="request_finished")
+    def span_position(self) -> tuple[float, int]:
+        return self.covered_until, len(self.spans)
+
+    def take(self, spans: Sequence[PhonemeSpan], audio: Audio | None) -> None:
         if audio is not None or self.audio_mode is None:  # else taking it changes nothing
             self._take_audio(audio)
-        covered_until = self.covered_until
-        new = coerce_spans(spans, after=covered_until, first_index=len(self.spans))
-        filled = fill_gaps(new, covered_until)
+        filled = fill_gaps(spans, self.covered_until)
         self.check_more_phonemes(len(filled))
         causal = self.options.causal
         for span in filled:

@@ -52,7 +52,7 @@ gives the offline frames.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -63,7 +63,7 @@ from ...features import speech_features
 from ...numerics.banded import check_block_tridiagonal
 from ...numerics.trellis import FixedLagViterbi
 from ...phonemes import PHONEME_INDEX
-from ...timeline import PhonemeSpan, SpanLike, coerce_spans
+from ...timeline import PhonemeSpan
 from ..base import (
     AUDIO_ONLY_UNSUPPORTED,
     DEFAULT_EMOTION,
@@ -158,11 +158,11 @@ class HmmSynthesizer(Synthesizer):
         self.reading = mode in (PHONEMES, BOTH)
         self.listening = mode in (AUDIO, BOTH)
 
-    def feed(self, spans: Iterable[SpanLike], audio: Audio | None = None) -> None:
-        if self.finished:
-            raise InvalidRequestError("input fed after finish()", code="request_finished")
-        covered = self.end
-        new = coerce_spans(spans, after=covered, first_index=len(self.spans))
+    def span_position(self) -> tuple[float, int]:
+        return self.end, len(self.spans)
+
+    def take(self, spans: Sequence[PhonemeSpan], audio: Audio | None) -> None:
+        covered, new = self.end, spans
         hearing = audio is not None and self.model.vocal is not None
         if self.mode is None and (new or hearing):
             self._drive(BOTH if new and hearing else (PHONEMES if new else AUDIO))
