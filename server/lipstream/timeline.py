@@ -4,7 +4,10 @@ A span is ``(phoneme, start, end)`` in seconds on the utterance clock, with an
 optional ``emotion`` that overrides the request's for that span. Callers may
 pass tuples ``(phoneme, start, end[, emotion])`` or mappings with those keys;
 ``coerce_spans`` turns them into validated ``PhonemeSpan`` objects with
-canonical ARPAbet labels.
+canonical ARPAbet labels. Labels are normalized once, at the edge input comes in by:
+``Synthesizer.feed`` calls ``accepted_spans``, which normalizes whatever it is given,
+except ``NormalizedSpans``, which an edge that normalized them already (the server's
+request) hands on and which are only checked to follow the input so far.
 """
 
 from __future__ import annotations
@@ -93,9 +96,17 @@ def coerce_span(span: SpanLike, where: str = "span", source: str = "request") ->
     )
 
 
+class NormalizedSpans(tuple[PhonemeSpan, ...]):
+    """Spans an edge has checked and whose labels it has normalized to canonical ARPAbet
+    (as ``coerce_span`` would): ``accepted_spans`` takes them as they are."""
+
+    __slots__ = ()
+
+
 def _valid_as_is(span: SpanLike, source: str) -> TypeGuard[PhonemeSpan]:
     """Whether ``span`` is a ``PhonemeSpan`` that ``coerce_span`` would return unchanged: the
-    check costs a fraction of building a new span, and engines re-check spans they are fed."""
+    check costs a fraction of building a new span (callers of the Python API often pass
+    ``PhonemeSpan`` objects)."""
     if type(span) is not PhonemeSpan or type(span.start) is not float:
         return False
     if type(span.end) is not float or not (0.0 <= span.start < span.end < math.inf):
@@ -127,12 +138,31 @@ def coerce_spans(
             span = raw
         else:
             span = coerce_span(raw, f"spans[{first_index + offset}]", source)
-        if span.start < previous_end - 1e-9:
-            raise InvalidRequestError(
-                f"span starts at {span.start} before the previous span ends at {previous_end}",
-                where=f"spans[{first_index + offset}]",
-                code="non_monotonic_times",
-            )
+        _check_follows(span, previous_end, first_index + offset)
         result.append(span)
         previous_end = span.end
     return result
+
+
+def _check_follows(span: PhonemeSpan, previous_end: float, index: int) -> None:
+    if span.start < previous_end - 1e-9:
+        raise InvalidRequestError(
+            f"span starts at {span.start} before the previous span ends at {previous_end}",
+            where=f"spans[{index}]",
+            code="non_monotonic_times",
+        )
+
+
+def accepted_spans(
+    spans: Iterable[SpanLike], *, after: float, first_index: int
+) -> Sequence[PhonemeSpan]:
+    """Spans fed to a request whose input so far ends at ``after``, checked and their labels
+    normalized (``coerce_spans``), or, if an edge did that already (``NormalizedSpans``),
+    only checked to follow one another from ``after``."""
+    if not isinstance(spans, NormalizedSpans):
+        return coerce_spans(spans, after=after, first_index=first_index)
+    previous_end = after
+    for offset, span in enumerate(spans):
+        _check_follows(span, previous_end, first_index + offset)
+        previous_end = span.end
+    return spans

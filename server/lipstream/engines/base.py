@@ -52,7 +52,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, ClassVar, Self, SupportsIndex, TypeVar, overload
+from typing import Any, ClassVar, Protocol, Self, SupportsIndex, TypeVar, overload
 
 import numpy as np
 
@@ -71,7 +71,7 @@ from ..store import (
 from ..store import (
     MAX_FPS as MAX_FPS,  # re-exported: the request fps bound
 )
-from ..timeline import EMOTIONS, PhonemeSpan, SpanLike, coerce_spans
+from ..timeline import EMOTIONS, PhonemeSpan, SpanLike, accepted_spans
 from .work import WorkGuard
 
 MIN_FPS = 1.0  # lowest request frame rate, Hz (the highest, MAX_FPS, is the store's)
@@ -232,10 +232,29 @@ class Synthesizer(ABC):
     """One request's streaming state. Not thread-safe; one per request."""
 
     stats: dict[str, Any]
+    finished: bool
+
+    def feed(self, spans: Iterable[SpanLike], audio: Audio | None = None) -> None:
+        """Append phoneme spans (absolute seconds, in order) and optional audio.
+
+        The one entry of spans, from the server and from the Python API alike: each is
+        checked and its label normalized here, once (``timeline.accepted_spans``; spans
+        an edge normalized already come as ``NormalizedSpans``), and the engine ``take``s
+        them as they are."""
+        if self.finished:
+            raise InvalidRequestError("input fed after finish()", code="request_finished")
+        after, first_index = self.span_position()
+        self.take(accepted_spans(spans, after=after, first_index=first_index), audio)
 
     @abstractmethod
-    def feed(self, spans: Iterable[SpanLike], audio: Audio | None = None) -> None:
-        """Append phoneme spans (absolute seconds, in order) and optional audio."""
+    def span_position(self) -> tuple[float, int]:
+        """The end (s) of the spans taken so far, and the index that error locations give
+        the next span fed."""
+
+    @abstractmethod
+    def take(self, spans: Sequence[PhonemeSpan], audio: Audio | None) -> None:
+        """Append ``spans``, checked, with canonical labels and following the input so far,
+        and ``audio``."""
 
     @abstractmethod
     def frames(self) -> np.ndarray:
@@ -595,11 +614,11 @@ class SpanSynthesizer(Synthesizer):
     def covered_until(self) -> float:
         return self.spans[-1].end if self.spans else 0.0
 
-    def feed(self, spans: Iterable[SpanLike], audio: Audio | None = None) -> None:
-        if self.finished:
-            raise InvalidRequestError("input fed after finish()", code="request_finished")
-        new = coerce_spans(spans, after=self.covered_until, first_index=self.sent)
-        for span in new:
+    def span_position(self) -> tuple[float, int]:
+        return self.covered_until, self.sent
+
+    def take(self, spans: Sequence[PhonemeSpan], audio: Audio | None) -> None:
+        for span in spans:
             for piece in fill_gaps([span], self.covered_until):
                 self.spans.append(piece)
                 self._accepted(piece, self.sent if piece is span else None)
@@ -611,11 +630,21 @@ class SpanSynthesizer(Synthesizer):
         """Called with each span as it joins ``spans``; ``sent`` is its client index."""
 
 
+class LookaheadSource(Protocol):
+    """What a ``LookaheadSynthesizer`` reads of its model (an engine's own synthesizers say
+    what more they read in a protocol that extends this one)."""
+
+    @property
+    def lookahead(self) -> Lookahead: ...
+    @property
+    def uses_audio(self) -> bool: ...
+
+
 class LookaheadSynthesizer(SpanSynthesizer):
     """Streams a model's frames by its declared ``Lookahead``: a frame is emitted once it is
     final; subclasses make the frames (``_emit``)."""
 
-    def __init__(self, model: Model, request: SynthesisRequest) -> None:
+    def __init__(self, model: LookaheadSource, request: SynthesisRequest) -> None:
         super().__init__()
         self.model = model
         self.request = request

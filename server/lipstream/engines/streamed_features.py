@@ -1,4 +1,5 @@
-"""A request's audio reduced to its speech features as it arrives, holding a window of it.
+"""A request's audio reduced to its speech features as it arrives, holding a window of it:
+the one streaming audio buffer of every engine that listens.
 
 Sketch: feature frame k reads only the samples under its own window (and the one
 before it, for pre-emphasis: ``features.first_sample_read``), so when a chunk
@@ -9,11 +10,13 @@ chunk of samples, whatever its length and sample rate, where it held every
 sample before. Frames computed piecewise equal those of the whole signal
 (``features``), so the frames are the same bit for bit. Frames past the
 audio's end, whose windows the end zero-pads, are computed only when asked
-(``through``), once the input is finished.
+(``through``), once the input is finished. An engine reads the frames final so far
+(``covered``), or asks whether those describing [0, t] are (``ready``, ``describing``).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -65,6 +68,25 @@ class StreamedFeatures:
     @property
     def duration(self) -> float:
         return self.length / self.sample_rate if self.sample_rate else 0.0
+
+    def frames_describing(self, until_s: float) -> int:
+        """How many leading frames describe [0, ``until_s``]: through the one after the
+        first frame at or past ``until_s``, so that a curve through them interpolates
+        anywhere in it."""
+        return math.ceil(until_s * self.config.rate) + 2
+
+    def ready(self, until_s: float, finished: bool) -> bool:
+        """Are the frames describing [0, ``until_s``] final?"""
+        if finished:
+            return True
+        if self.sample_rate is None:
+            return False
+        return self.covered >= self.frames_describing(until_s)
+
+    def describing(self, until_s: float) -> np.ndarray:
+        """The frames describing [0, ``until_s``] and every other final one (a view, valid
+        until the next call); call only once they are ``ready``."""
+        return self.through(max(self.frames_describing(until_s), self.covered))
 
     @property
     def held_bytes(self) -> int:

@@ -63,7 +63,7 @@ from ..audio import Audio
 from ..engines.base import Synthesizer, frame_count, frames_before
 from ..errors import LipstreamError
 from ..phonemes import normalize_phoneme
-from ..timeline import EMOTIONS, PhonemeSpan
+from ..timeline import EMOTIONS, NormalizedSpans, PhonemeSpan
 from .outgoing import Outgoing, RequestClock
 from .profiles import ResolvedProfile
 
@@ -248,7 +248,8 @@ class ActiveRequest:
             for index, item in enumerate(items)
         ]
         self._check_output(spans[-1].end, session_max_values, others)
-        self._feed(spans, None, INVALID_REQUEST)
+        # Normalized here, at the edge (``_span``): the engine takes them as they are.
+        self._feed(NormalizedSpans(spans), None, INVALID_REQUEST)
         return self._took(spans, now)
 
     def add_speech(
@@ -430,7 +431,7 @@ class ActiveRequest:
                 where="phonemes",
             )
 
-    def _feed(self, spans: list[PhonemeSpan], audio: Audio | None, fallback: str) -> None:
+    def _feed(self, spans: Sequence[PhonemeSpan], audio: Audio | None, fallback: str) -> None:
         try:
             self.synthesizer.feed(spans, audio)
         except LipstreamError as error:

@@ -34,7 +34,8 @@ from .graph import SearchGraph
 from .options import ENGINE, MAX_PQ_WINDOW, OPTION_NAMES, SearchOptions, parse_options
 from .search import LayeredMatcher, Matcher, SuffixMatcher
 from .smoothing import lowpass_kernels
-from .synthesizer import AnimeGraphSynthesizer, StreamCalls
+from .stream_calls import StreamCalls
+from .synthesizer import AnimeGraphSynthesizer
 from .track import anime_motion
 from .views import WHOLE, GraphView, load_view
 
@@ -161,7 +162,7 @@ class AnimeGraphModel(RenderingModel):
     @property
     def audio_wait_s(self) -> float:
         """How far past a span's end the audio must reach before the span's MFCC frames are
-        final (``RequestAudio.ready``): two frame steps plus half a window; 0 without audio
+        final (``StreamedFeatures.ready``): two frame steps plus half a window; 0 without audio
         features."""
         if not self.has_audio:
             return 0.0

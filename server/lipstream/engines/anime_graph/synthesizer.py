@@ -44,43 +44,39 @@ from __future__ import annotations
 import math
 import time
 from bisect import bisect_left, bisect_right
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from itertools import groupby
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 from numba import njit
 
 from ...audio import Audio
 from ...errors import InvalidRequestError
-from ...numerics.direct_call import DirectCall
-from ...numerics.resample import blend_into, bracket
+from ...features import mfcc
 from ...phonemes import PHONEME_INDEX, SILENCE
-from ...timeline import PhonemeSpan, SpanLike, coerce_spans
+from ...timeline import PhonemeSpan
 from ..base import SynthesisRequest, Synthesizer, fill_gaps, frame_count
 from ..damped import FilterState
 from ..growable import Growable
+from ..streamed_features import StreamedFeatures
 from ..work import WorkGuard
-from .animes import summarize
+from .animes import Curves, summarize
 from .blending import Join, PairIndex, plan_join
-from .causal_call import causal_emit, causal_step
 from .costs import Ranking
-from .emission import CausalClock, ChannelMap, channel_frames
+from .emission import CausalClock
 from .graph import AnimeGraph, SearchGraph
 from .options import SearchOptions
 from .pq import SearchTimeout, pq_window
-from .request_audio import RequestAudio
 from .search import Matcher, SuffixMatcher, count_jumps, missing
-from .suffix_search import GreedySearch, greedy_tiles
-from .track import AnimeMotion, MotionTrack, Placement, TrackBuffers, evaluate_track
+from .serving import AnimeGraphServing
+from .stream_calls import SNAP
+from .suffix_search import GreedySearch
+from .track import MotionTrack, Placement
 from .views import WHOLE, GraphView
 from .warp import Alignment, Warp, dtw_warps, linear_warp
 
-if TYPE_CHECKING:
-    from .model import AnimeGraphModel
-
-_SNAP = 1e-9
 _FORGET_ROWS = 64
 _Result = TypeVar("_Result")
 
@@ -102,7 +98,7 @@ class AnimeGraphSynthesizer(Synthesizer):
     """
 
     def __init__(
-        self, model: AnimeGraphModel, request: SynthesisRequest, options: SearchOptions
+        self, model: AnimeGraphServing, request: SynthesisRequest, options: SearchOptions
     ) -> None:
         self.model = model
         self.request = request
@@ -118,7 +114,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         self._labels = Growable(np.int64)
         self._bounds = Growable(np.float64, (2,))  # each span's start and end (s), if causal
         self.nodes: list[int] = []
-        self.audio: RequestAudio | None = None
+        self.audio: StreamedFeatures | None = None
         self.audio_mode: bool | None = None
         self.summaries: Growable | None = None
         self.track = MotionTrack(model.anime_motion)
@@ -152,14 +148,13 @@ class AnimeGraphSynthesizer(Synthesizer):
 
     # ---- input ---------------------------------------------------------------------------
 
-    def feed(self, spans: Iterable[SpanLike], audio: Audio | None = None) -> None:
-        if self.finished:
-            raise InvalidRequestError("input fed after finish()", code="request_finished")
+    def span_position(self) -> tuple[float, int]:
+        return self.covered_until, len(self.spans)
+
+    def take(self, spans: Sequence[PhonemeSpan], audio: Audio | None) -> None:
         if audio is not None or self.audio_mode is None:  # else taking it changes nothing
             self._take_audio(audio)
-        covered_until = self.covered_until
-        new = coerce_spans(spans, after=covered_until, first_index=len(self.spans))
-        filled = fill_gaps(new, covered_until)
+        filled = fill_gaps(spans, self.covered_until)
         self.check_more_phonemes(len(filled))
         causal = self.options.causal
         for span in filled:
@@ -201,8 +196,13 @@ class AnimeGraphSynthesizer(Synthesizer):
     def held_input_bytes_after(self, n_samples: int, sample_rate: int) -> int:
         if self.audio is None and (self.audio_mode is False or not self.model.has_audio):
             return 0  # audio this request takes is not kept
-        audio = self.audio or RequestAudio(self.model.mfcc)
-        return audio.stream.held_bytes_after(n_samples, sample_rate)
+        audio = self.audio or self._audio_stream()
+        return audio.held_bytes_after(n_samples, sample_rate)
+
+    def _audio_stream(self) -> StreamedFeatures:
+        """The request's MFCC frames, as its audio streams in."""
+        config = self.model.mfcc
+        return StreamedFeatures(config, config.n_coefficients, mfcc)
 
     def _take_audio(self, audio: Audio | None) -> None:
         if self.options.causal:
@@ -211,7 +211,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         if self.audio_mode is None:
             self.audio_mode = audio is not None and self.model.has_audio
             if self.audio_mode:
-                self.audio = RequestAudio(self.model.mfcc)
+                self.audio = self._audio_stream()
         elif audio is not None and not self.audio_mode and self.model.has_audio:
             raise InvalidRequestError(
                 "audio must come with the first feed of a request: this request started "
@@ -246,7 +246,8 @@ class AnimeGraphSynthesizer(Synthesizer):
             self.summaries = Growable(np.float64, (self.model.summaries.shape[1],))
         have = self.summaries.count
         if stop > have:
-            curves = self.audio.curves(self.spans[stop - 1].end)
+            frames = self.audio.describing(self.spans[stop - 1].end)  # one utterance's curve
+            curves = Curves(frames, np.array([0, len(frames)]), self.model.mfcc.rate)
             starts = np.array([span.start for span in self.spans[have:stop]])
             ends = np.array([span.end for span in self.spans[have:stop]])
             self.summaries.extend(
@@ -406,7 +407,7 @@ class AnimeGraphSynthesizer(Synthesizer):
 
     def _decide(self) -> None:
         if self.finished and self.audio is not None and self.spans:
-            self.audio.curves(self.covered_until)
+            self.audio.describing(self.covered_until)
         placed = len(self.nodes)
         while len(self.nodes) < self._labels.count:
             self.guard.check()
@@ -517,7 +518,7 @@ class AnimeGraphSynthesizer(Synthesizer):
         if self.audio is None or animes.features is None or span.phoneme == SILENCE:
             return linear_warp(span.start, span.end, *source)
         rate = self.model.mfcc.rate
-        target_curve = self.audio.curves(span.end).values
+        target_curve = self.audio.describing(span.end)
         target_frames = np.arange(math.ceil(span.start * rate), math.floor(span.end * rate) + 1)
         owner = int(animes.utterance[anime])
         source_curve = animes.features.rows(owner)
@@ -611,11 +612,11 @@ class AnimeGraphSynthesizer(Synthesizer):
             if not self.spans:  # finished with no input: no sample, and no frame, to make
                 return
             last = frame_count(self.covered_until, self.fps) - 1
-            needed = math.floor(last * fps_model / self.fps + _SNAP) + 2
+            needed = math.floor(last * fps_model / self.fps + SNAP) + 2
             self._extend_raw(needed + self.half_width)
             self._extend_smoothed(needed)
             return
-        raw_final = max(0, math.ceil(limit * fps_model - _SNAP))
+        raw_final = max(0, math.ceil(limit * fps_model - SNAP))
         self._extend_raw(raw_final)
         self._extend_smoothed(max(0, raw_final - self.half_width))
 
@@ -683,31 +684,11 @@ class AnimeGraphSynthesizer(Synthesizer):
 
 
 @njit(cache=True)
-def _grid_samples(
-    first: int,
-    stop: int,
-    fps_model: float,
-    until: float,
-    track: TrackBuffers,
-    count: int,
-    knots: int,
-    motion: AnimeMotion,
-) -> np.ndarray:
-    """The first ``count`` placements (``knots`` knots) of ``track`` at model-grid samples
-    ``first`` .. ``stop`` - 1, sample k at k / ``fps_model`` s but no later than ``until``:
-    (stop - first, n_pc)."""
-    times = np.empty(stop - first)
-    for row in range(stop - first):
-        times[row] = min((first + row) / fps_model, until)
-    return evaluate_track(times, track, count, knots, motion, False)
-
-
-@njit(cache=True)
 def _samples_needed(frame: int, fps_model: float, fps: float) -> int:
     """Smoothed samples (count) needed to interpolate output ``frame``."""
     position = frame * fps_model / fps
-    nearest = np.round(position)  # within _SNAP of position: how it rounds a tie is moot
-    if abs(position - nearest) < _SNAP:
+    nearest = np.round(position)  # within SNAP of position: how it rounds a tie is moot
+    if abs(position - nearest) < SNAP:
         return int(nearest) + 1
     return math.floor(position) + 2
 
@@ -727,40 +708,6 @@ def _emittable_stop(emitted: int, total: int, count: int, fps_model: float, fps:
 
 
 @njit(cache=True)
-def _interpolate(
-    first: int, stop: int, ratio: float, curve: np.ndarray, offset: int, count: int
-) -> np.ndarray:
-    """Output frames first .. stop - 1 interpolated linearly between the smoothed samples
-    (``curve`` holds samples offset .. offset + len - 1 of ``count``) at frame * ``ratio``,
-    a position within ``_SNAP`` of a sample taken as that sample."""
-    values = np.empty((stop - first, curve.shape[1]))
-    for row in range(stop - first):
-        position = (first + row) * ratio
-        snapped = np.round(position)
-        if abs(position - snapped) < _SNAP:
-            position = snapped
-        low, high, fraction = bracket(position, count - 1)
-        blend_into(values[row], curve, low - offset, high - offset, fraction)
-    return values
-
-
-@njit(cache=True)
-def _interpolated_frames(
-    first: int,
-    stop: int,
-    ratio: float,
-    curve: np.ndarray,
-    offset: int,
-    count: int,
-    channels: ChannelMap,
-) -> np.ndarray:
-    """``_interpolate``'s values as channel frames (``emission.channel_frames``), in one
-    call."""
-    values = _interpolate(first, stop, ratio, curve, offset, count)
-    return channel_frames(values, channels)
-
-
-@njit(cache=True)
 def _filter(block: np.ndarray, kernels: np.ndarray) -> np.ndarray:
     """Each component of ``block`` filtered by its kernel ('valid' correlation: output i
     reads block rows i .. i + width - 1)."""
@@ -773,20 +720,6 @@ def _filter(block: np.ndarray, kernels: np.ndarray) -> np.ndarray:
                 total += block[row + tap, component] * kernels[component, tap]
             out[row, component] = total
     return out
-
-
-class StreamCalls:
-    """The kernels a model's synthesizers call on every streamed message, each through one
-    ``DirectCall`` that they share: the argument types at each call site are fixed by the
-    model's arrays and the requests' buffers, so the first request binds them and the
-    others skip the binding (a few hundred µs of typing named groups in Python)."""
-
-    def __init__(self) -> None:
-        self.causal_step = DirectCall(causal_step)
-        self.causal_emit = DirectCall(causal_emit)
-        self.greedy_tiles = DirectCall(greedy_tiles)
-        self.grid_samples = DirectCall(_grid_samples)
-        self.interpolated_frames = DirectCall(_interpolated_frames)
 
 
 def _search_timeout(spent_s: float, budget_s: float) -> SearchTimeout:

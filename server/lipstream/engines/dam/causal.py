@@ -36,7 +36,7 @@ so a call converts only the spans it brought, and handed to the kernels as
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -47,16 +47,14 @@ from ..damped_fit import RawCurve, best_following_kappa
 from ..growable import Growable
 from .kernels import SpanArrays, causal_sum, commit_modes
 from .modes import PHONEME_INDEX, emotion_index
-
-if TYPE_CHECKING:
-    from .model import DamModel
+from .serving import DamServing
 
 
 class CausalCurve:
     """The committed modes of one request and its raw curve r, by the compiled kernels
     (``kernels.commit_modes``, ``kernels.causal_sum``); ``committed`` spans have their mode."""
 
-    def __init__(self, model: DamModel, request: SynthesisRequest) -> None:
+    def __init__(self, model: DamServing, request: SynthesisRequest) -> None:
         self.model = model
         self.request = request
         self.starts = Growable(np.float64)
@@ -122,9 +120,9 @@ class CausalSynthesizer(ShiftedSynthesizer):
     """One request of a causal or lead rung: the frame at t is final once the input covers
     t + shift; the filter's state is carried from call to call."""
 
-    model: DamModel
+    model: DamServing
 
-    def __init__(self, model: DamModel, request: SynthesisRequest, shift_s: float) -> None:
+    def __init__(self, model: DamServing, request: SynthesisRequest, shift_s: float) -> None:
         super().__init__(model, request)
         self.shift_s = shift_s
         self.curve = CausalCurve(model, request)
@@ -157,7 +155,7 @@ class CausalSynthesizer(ShiftedSynthesizer):
         return frames
 
 
-def fit_causal_kappa(model: DamModel, utterances: Sequence[Any]) -> float:
+def fit_causal_kappa(model: DamServing, utterances: Sequence[Any]) -> float:
     """The κ of ``KAPPAS`` whose causal rung has the least squared error on ``utterances``
     (``damped_fit``)."""
 

@@ -45,7 +45,7 @@ constraint on a silence is one too, when the silence is fed.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -69,19 +69,17 @@ from .lag_search import LagMemory
 from .nodes import EMOTION_INDEX
 from .postprocess import RenderCache
 from .search import NO_NODE, LayerSpec, SearchSpace, one_layer, search
-
-if TYPE_CHECKING:
-    from .model import ExpressiveDpModel
+from .serving import ExpressiveDpServing
 
 
 class PathSynthesizer(LookaheadSynthesizer):
     """Committed nodes of one request, and the spans they belong to."""
 
-    model: ExpressiveDpModel
+    model: ExpressiveDpServing
 
     def __init__(
         self,
-        model: ExpressiveDpModel,
+        model: ExpressiveDpServing,
         request: SynthesisRequest,
         lag: int | None,
         constraints: Mapping[int, int],
@@ -159,7 +157,7 @@ class LagSynthesizer(PathSynthesizer):
 
     def __init__(
         self,
-        model: ExpressiveDpModel,
+        model: ExpressiveDpServing,
         request: SynthesisRequest,
         lag: int | None,
         constraints: Mapping[int, int],
@@ -192,7 +190,7 @@ class CausalSynthesizer(PathSynthesizer, ShiftedSynthesizer):
 
     def __init__(
         self,
-        model: ExpressiveDpModel,
+        model: ExpressiveDpServing,
         request: SynthesisRequest,
         shift_s: float,
         constraints: Mapping[int, int],
@@ -302,7 +300,7 @@ def _keep_rows(
 
 
 def raw_curve(
-    model: ExpressiveDpModel, spans: list[PhonemeSpan], path: list[int], at: np.ndarray
+    model: ExpressiveDpServing, spans: list[PhonemeSpan], path: list[int], at: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """r at times ``at`` (ascending) and the latest span begun at each."""
     rows, nodes = Growable(np.float64, (3,)), Growable(np.int64)
@@ -314,7 +312,7 @@ def raw_curve(
     return raw, begun
 
 
-def training_raw_curve(model: ExpressiveDpModel, utterance: Any) -> RawCurve:
+def training_raw_curve(model: ExpressiveDpServing, utterance: Any) -> RawCurve:
     """The causal rung's raw curve of a training utterance, for choosing κ
     (``damped_fit.best_following_kappa``)."""
     request = SynthesisRequest(fps=float(utterance.fps), emotion=utterance.emotion)

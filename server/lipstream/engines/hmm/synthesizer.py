@@ -52,9 +52,8 @@ gives the offline frames.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -64,7 +63,7 @@ from ...features import speech_features
 from ...numerics.banded import check_block_tridiagonal
 from ...numerics.trellis import FixedLagViterbi
 from ...phonemes import PHONEME_INDEX
-from ...timeline import PhonemeSpan, SpanLike, coerce_spans
+from ...timeline import PhonemeSpan
 from ..base import (
     AUDIO_ONLY_UNSUPPORTED,
     DEFAULT_EMOTION,
@@ -76,9 +75,7 @@ from ..base import (
 from ..growable import Growable
 from ..streamed_features import StreamedFeatures
 from . import kernels
-
-if TYPE_CHECKING:
-    from .model import HmmModel
+from .serving import HmmServing
 
 PINNED = 2
 AUTO, PHONEMES, AUDIO, BOTH = "auto", "phonemes", "audio", "both"
@@ -111,50 +108,12 @@ def hmm_frame(k: np.ndarray | int, ratio: float) -> np.ndarray:
     return np.floor(np.asarray(k, dtype=np.float64) * ratio + _EPS).astype(np.int64)
 
 
-class AudioFeatures:
-    """A request's speech features at the HMM rate, computed as the audio covers their
-    windows (``StreamedFeatures``: the request holds the features and a window of samples,
-    not its audio)."""
-
-    def __init__(self, model: HmmModel) -> None:
-        self.config = model.mfcc
-        width = model.vocal.dim if model.vocal else 0
-        self.stream = StreamedFeatures(self.config, width, speech_features, lookback=1)
-
-    def add(self, audio: Audio) -> None:
-        self.stream.add(audio)
-
-    @property
-    def length(self) -> int:
-        return self.stream.length
-
-    @property
-    def duration(self) -> float:
-        return self.stream.duration
-
-    @property
-    def held_bytes(self) -> int:
-        return self.stream.held_bytes
-
-    def final_frames(self, finished: bool) -> int:
-        """Feature frames final now (all of them once the input is finished)."""
-        if self.stream.sample_rate is None:
-            return 0
-        if finished:
-            return frame_count(self.duration, self.config.rate)
-        return self.stream.covered
-
-    def rows(self, first: int, stop: int) -> np.ndarray:
-        """Feature frames ``first`` .. ``stop`` − 1, float64 (computed once each)."""
-        return self.stream.through(stop)[first:stop].astype(np.float64)
-
-
 class HmmSynthesizer(Synthesizer):
     """One request: its observations, the decoder, and the trajectory solved so far, each
     in a buffer that grows at its end (the compiled steps in ``kernels`` read and write
     them in place, so a streamed call costs the same however long the request is)."""
 
-    def __init__(self, model: HmmModel, request: SynthesisRequest, plan: Plan) -> None:
+    def __init__(self, model: HmmServing, request: SynthesisRequest, plan: Plan) -> None:
         self.model = model
         self.request = request
         self.plan = plan
@@ -166,7 +125,8 @@ class HmmSynthesizer(Synthesizer):
         self.spans: list[PhonemeSpan] = []
         self.end = 0.0
         self.span_rows = Growable(np.float64, (3,))  # start, phoneme row, emotion row
-        self.audio = AudioFeatures(model)
+        width = model.vocal.dim if model.vocal else 0
+        self.audio = StreamedFeatures(model.mfcc, width, speech_features, lookback=1)
         self.heard = False
         self._drive(None if plan.drive == AUTO else plan.drive)
         self.decoder = FixedLagViterbi(
@@ -189,7 +149,7 @@ class HmmSynthesizer(Synthesizer):
     def held_input_bytes_after(self, n_samples: int, sample_rate: int) -> int:
         if self.model.vocal is None or self.mode == PHONEMES:
             return 0  # audio this request takes is not kept
-        return self.audio.stream.held_bytes_after(n_samples, sample_rate)
+        return self.audio.held_bytes_after(n_samples, sample_rate)
 
     # -- input ------------------------------------------------------------------------------
 
@@ -198,11 +158,11 @@ class HmmSynthesizer(Synthesizer):
         self.reading = mode in (PHONEMES, BOTH)
         self.listening = mode in (AUDIO, BOTH)
 
-    def feed(self, spans: Iterable[SpanLike], audio: Audio | None = None) -> None:
-        if self.finished:
-            raise InvalidRequestError("input fed after finish()", code="request_finished")
-        covered = self.end
-        new = coerce_spans(spans, after=covered, first_index=len(self.spans))
+    def span_position(self) -> tuple[float, int]:
+        return self.end, len(self.spans)
+
+    def take(self, spans: Sequence[PhonemeSpan], audio: Audio | None) -> None:
+        covered, new = self.end, spans
         hearing = audio is not None and self.model.vocal is not None
         if self.mode is None and (new or hearing):
             self._drive(BOTH if new and hearing else (PHONEMES if new else AUDIO))
@@ -240,7 +200,7 @@ class HmmSynthesizer(Synthesizer):
         if self.reading:
             limit = frame_count(self.end, hmm_fps) if self.spans else 0
         if self.listening:
-            heard = self.audio.final_frames(False) + self.plan.delay
+            heard = self.audio.covered + self.plan.delay
             limit = heard if limit is None else min(limit, heard)
         return 0 if limit is None else limit
 
@@ -250,7 +210,7 @@ class HmmSynthesizer(Synthesizer):
         if self.reading:
             covered = self.end if self.spans else -math.inf
         if self.listening:
-            heard = (self.audio.final_frames(False) + self.plan.delay - 1) / self.model.hmm_fps
+            heard = (self.audio.covered + self.plan.delay - 1) / self.model.hmm_fps
             covered = min(covered, heard)
         return covered
 
@@ -269,7 +229,8 @@ class HmmSynthesizer(Synthesizer):
             return self.unheard, 0
         wanted = frames[heard]
         lowest = int(wanted.min())
-        rows = self.audio.rows(lowest, int(wanted.max()) + 1)
+        past = int(wanted.max()) + 1
+        rows = self.audio.through(past)[lowest:past].astype(np.float64)  # computed once each
         vocal = model.vocal.log_density(rows[wanted - lowest])
         return model.audio_weight * vocal, first + int(np.argmax(heard))
 

@@ -1,0 +1,66 @@
+"""What a request's synthesizer reads of an anime-graph model (``AnimeGraphServing``).
+
+Sketch: the model builds its synthesizers and the synthesizer reads the model's
+tables, so the tables' type lives here, where both import it: ``model`` imports
+``synthesizer``, and neither imports the other back. ``AnimeGraphModel`` has every member
+(mypy checks it where the model passes itself to a synthesizer).
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+
+from ...features import MfccConfig
+from .animes import AnimeTable
+from .costs import Poses
+from .emission import CausalEmission, ChannelMap
+from .graph import SearchGraph
+from .options import SearchOptions
+from .search import Matcher
+from .stream_calls import StreamCalls
+from .track import AnimeMotion
+from .views import GraphView
+
+
+class AnimeGraphServing(Protocol):
+    """An anime-graph model's tables as its synthesizers read them."""
+
+    @property
+    def fps(self) -> float: ...
+    @property
+    def channels(self) -> tuple[str, ...]: ...
+    @property
+    def mfcc(self) -> MfccConfig: ...
+    @property
+    def has_audio(self) -> bool: ...
+    @property
+    def n_components(self) -> int: ...
+    @property
+    def max_candidates(self) -> int: ...
+    @property
+    def animes(self) -> AnimeTable: ...
+    @property
+    def anime_motion(self) -> AnimeMotion: ...
+    @property
+    def poses(self) -> Poses: ...
+    @property
+    def summaries(self) -> np.ndarray: ...
+    @property
+    def views(self) -> dict[str, GraphView]: ...
+    @property
+    def channel_map(self) -> ChannelMap: ...
+    @property
+    def half_width(self) -> int: ...
+    @property
+    def kernels(self) -> np.ndarray: ...
+    @property
+    def causal_emission(self) -> CausalEmission: ...
+    @property
+    def stream_calls(self) -> StreamCalls: ...
+
+    def causal_shift_s(self, lead_ms: float) -> float: ...
+    def view_for(self, emotion: str | None, options: SearchOptions) -> GraphView: ...
+    def graph_of(self, view: GraphView, name: str) -> SearchGraph: ...
+    def matcher_of(self, view: GraphView, name: str) -> Matcher: ...
