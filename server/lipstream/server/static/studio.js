@@ -210,7 +210,14 @@ function drawMap() {
     context.lineWidth = 1.5;
     context.stroke();
   }
-  $("map-legend").textContent = Object.keys(EMOTION_COLOURS).join(" · ");
+  $("map-legend").replaceChildren(
+    ...Object.entries(EMOTION_COLOURS).map(([name, rgb]) => {
+      const key = document.createElement("span");
+      key.textContent = name;
+      key.style.color = `rgb(${rgb.join(",")})`;
+      return key;
+    }),
+  );
 }
 
 function nodeById(id) {
