@@ -1,4 +1,5 @@
-"""``GET /``: the demo page, a face that speaks what you type, served from package data.
+"""``GET /``: the demo page, a face that speaks what you type, and ``GET /studio``, the
+phoneme-Isomap editor of ``expressive-dp``, served from package data.
 
 Sketch: plain HTML, CSS and JavaScript modules in ``static/`` (no build step,
 nothing loaded from elsewhere, so it works without internet). ``/`` is
@@ -7,7 +8,8 @@ among the files the package ships, so no other path can be reached, and
 ``/favicon.ico`` is the page's icon (an SVG, as browsers ask that path first). The page
 talks to the server only through the public protocol: ``GET /v1/engines`` and
 ``/v1/characters`` for its controls and the WebSocket ``/v1/stream`` (JSON
-subprotocol, ``text`` and ``phonemes`` requests) for frames and speech.
+subprotocol, ``text`` and ``phonemes`` requests) for frames and speech. The studio
+uses the phoneme-map routes (``phoneme_maps``) and ``POST /v1/synthesize``.
 """
 
 from __future__ import annotations
@@ -19,6 +21,8 @@ from fastapi.responses import FileResponse
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 PAGE_URL = "/"
+STUDIO_URL = "/studio"
+PAGES = ("index.html", "studio.html")
 ASSETS_URL = "/demo"
 MEDIA_TYPES = {
     ".js": "text/javascript",
@@ -30,7 +34,7 @@ ICON = "favicon.svg"
 ASSETS = {
     path.name: MEDIA_TYPES[path.suffix]
     for path in sorted(STATIC_DIR.iterdir())
-    if path.suffix in MEDIA_TYPES and path.name != "index.html"
+    if path.suffix in MEDIA_TYPES and path.name not in PAGES
 }
 
 
@@ -40,6 +44,10 @@ def install(app: FastAPI) -> None:
     @app.get(PAGE_URL, include_in_schema=False)
     async def page() -> FileResponse:
         return FileResponse(STATIC_DIR / "index.html", media_type="text/html")
+
+    @app.get(STUDIO_URL, include_in_schema=False)
+    async def studio() -> FileResponse:
+        return FileResponse(STATIC_DIR / "studio.html", media_type="text/html")
 
     @app.get("/favicon.ico", include_in_schema=False)
     async def icon() -> FileResponse:

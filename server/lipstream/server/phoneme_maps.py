@@ -6,6 +6,14 @@ when it has none). The work runs in the speech lane, as REST synthesis
 does, and answers JSON; errors answer ``{"error": {"code", "message"}}`` with
 the statuses of ``rest``. Routes:
 
+* ``GET .../phoneme-maps``: every phoneme that has nodes, with its frame and node counts
+  and how many of its nodes are not contaminated.
+* ``GET .../nodes/{node}``: one node's clip in channels at the frame rate it was
+  recorded at, with its phoneme, emotion, context and contamination.
+* ``POST .../phoneme-maps/utterance`` ``{"text", "lang", "voice", "rate"}`` or
+  ``{"words": {"timings", "format"}}``: the phoneme spans a sentence is synthesized from
+  (espeak-ng's for text, with its speech; the lexicon and the character's word-duration
+  model for TTS timings), so that a constraint can name a phoneme by its index.
 * ``GET .../phoneme-maps/{phoneme}``: the phoneme's map: every frame's point
   (``x``, ``y``), node and relative time, the Delaunay triangles (frame
   positions in the map), and its nodes with emotion, triphone context,
@@ -26,16 +34,22 @@ the statuses of ``rest``. Routes:
 from __future__ import annotations
 
 import asyncio
+import base64
 import json
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 from fastapi import FastAPI, Request
 from fastapi.responses import Response
 
 from ..errors import LipstreamError
+from ..frontends.formats import parse_timings
+from ..frontends.word_durations import WordDurationModel
+from ..frontends.words_to_spans import timings_to_spans
 from ..phonemes import PHONEME_INDEX, PHONEMES, SILENCE, normalize_phoneme
-from ..timeline import EMOTIONS, coerce_spans
+from ..speech.text_frontend import speak_text
+from ..timeline import EMOTIONS, PhonemeSpan, coerce_spans
 from .rest import HttpError, authorize, error_response, rest_client
 from .startup import Startup
 from .state import ServerState
@@ -157,6 +171,78 @@ def phoneme_map(model: ExpressiveDpModel, phoneme: int) -> dict[str, Any]:
     }
 
 
+def phoneme_summary(model: ExpressiveDpModel) -> dict[str, Any]:
+    nodes = model.nodes
+    clean = ~model.contamination.mask()
+    frame_counts = np.diff(nodes.offsets)
+    listed = []
+    for phoneme in np.unique(nodes.phoneme):
+        members = nodes.phoneme == phoneme
+        listed.append(
+            {
+                "phoneme": PHONEMES[int(phoneme)],
+                "frame_count": int(frame_counts[members].sum()),
+                "node_count": int(members.sum()),
+                "clean_node_count": int((members & clean).sum()),
+            }
+        )
+    return {"phonemes": listed, "node_count": nodes.size}
+
+
+def node_clip(model: ExpressiveDpModel, node: int) -> dict[str, Any]:
+    nodes = model.nodes
+    if not 0 <= node < nodes.size:
+        raise LipstreamError(
+            f"no node {node}; the model has {nodes.size}", where="node", code="invalid_request"
+        )
+    frames = model.basis.reconstruct(nodes.node_frames(node))
+    return {
+        "id": node,
+        "phoneme": PHONEMES[int(nodes.phoneme[node])],
+        "emotion": _emotion(model, node),
+        "previous": PHONEMES[int(nodes.previous[node])],
+        "next": PHONEMES[int(nodes.next[node])],
+        "contaminated": bool(model.contamination.mask()[node]),
+        "fps": nodes.fps,
+        "channels": list(model.channels),
+        "frames": np.asarray(frames, dtype=float).tolist(),
+    }
+
+
+def utterance(
+    model: ExpressiveDpModel, body: dict[str, Any], durations: Callable[[], WordDurationModel]
+) -> dict[str, Any]:
+    if "words" in body:
+        words = body["words"]
+        if not isinstance(words, dict) or "timings" not in words:
+            raise LipstreamError(
+                "must be an object {timings, format}", where="words", code="invalid_request"
+            )
+        format = words.get("format", "auto")
+        if not isinstance(format, str):
+            raise LipstreamError("must be a string", where="words.format", code="invalid_request")
+        spans = timings_to_spans(parse_timings(words["timings"], format), durations())
+        return {"items": _items(spans)}
+    text = body.get("text")
+    if not isinstance(text, str):
+        raise LipstreamError(
+            "give text (a string) or words {timings, format}", where="text", code="invalid_request"
+        )
+    options = {key: body[key] for key in ("voice", "rate", "lang") if body.get(key) is not None}
+    spoken = speak_text(text, **options)
+    return {
+        "items": _items(spoken.spans),
+        "speech": {
+            "sample_rate": spoken.sample_rate,
+            "pcm16": base64.b64encode(spoken.pcm16).decode("ascii"),
+        },
+    }
+
+
+def _items(spans: list[PhonemeSpan]) -> list[dict[str, Any]]:
+    return [{"phoneme": span.phoneme, "start": span.start, "end": span.end} for span in spans]
+
+
 def _emotion(model: ExpressiveDpModel, node: int) -> str:
     return EMOTIONS[int(model.nodes.emotion[node])]
 
@@ -246,6 +332,56 @@ IDS = {"type": "array", "items": {"type": "integer"}}
 
 def install(app: FastAPI) -> None:
     """Add the routes to ``app`` (they appear in its OpenAPI document)."""
+
+    @app.get(
+        PREFIX + "/phoneme-maps",
+        summary="The phonemes of the maps (expressive-dp)",
+        operation_id="list_phoneme_maps",
+        response_class=Response,
+        openapi_extra=_operation(None, "each phoneme's frame and node counts"),
+    )
+    async def maps_route(request: Request, character: str) -> Response:
+        """Every phoneme with nodes: frames, nodes, and nodes not contaminated."""
+        return await _answer(request, lambda model, _: phoneme_summary(model))
+
+    @app.get(
+        PREFIX + "/nodes/{node}",
+        summary="A motion node's clip (expressive-dp)",
+        operation_id="get_motion_node",
+        response_class=Response,
+        openapi_extra=_operation(None, "the node's frames in channels, at its recorded fps"),
+    )
+    async def node_route(request: Request, character: str, node: int) -> Response:
+        """One motion node: its frames in channels, phoneme, emotion and context."""
+        return await _answer(request, lambda model, _: node_clip(model, node))
+
+    @app.post(
+        PREFIX + "/phoneme-maps/utterance",
+        summary="The phoneme spans of a sentence",
+        operation_id="phoneme_map_utterance",
+        response_class=Response,
+        openapi_extra=_operation(
+            _schema(
+                {
+                    "text": {"type": "string"},
+                    "lang": {"type": "string"},
+                    "voice": {"type": "string"},
+                    "rate": {"type": "integer"},
+                    "words": {"type": "object", "description": "{timings, format}"},
+                },
+                [],
+            ),
+            "the phoneme spans (items) and, for text, espeak-ng's speech",
+        ),
+    )
+    async def utterance_route(request: Request, character: str) -> Response:
+        """A sentence's phoneme spans, numbered as constraints name them."""
+        catalog = _state(request).catalog
+
+        def durations() -> WordDurationModel:
+            return catalog.word_durations(ENGINE, character)
+
+        return await _answer(request, lambda model, body: utterance(model, body, durations))
 
     @app.get(
         PREFIX + "/phoneme-maps/{phoneme}",

@@ -26,6 +26,9 @@ OPERATIONS = {
     ("/v1/languages", "get"): "list_languages",
     ("/v1/synthesize", "post"): "synthesize",
     ("/metrics", "get"): "metrics",
+    ("/v1/characters/{character}/phoneme-maps", "get"): "list_phoneme_maps",
+    ("/v1/characters/{character}/nodes/{node}", "get"): "get_motion_node",
+    ("/v1/characters/{character}/phoneme-maps/utterance", "post"): "phoneme_map_utterance",
     ("/v1/characters/{character}/phoneme-maps/{phoneme}", "get"): "get_phoneme_map",
     ("/v1/characters/{character}/phoneme-maps/{phoneme}/pick", "post"): "pick_phoneme_map_point",
     (

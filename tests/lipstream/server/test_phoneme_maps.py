@@ -4,6 +4,7 @@ and constraints carried by /v1/synthesize."""
 
 from __future__ import annotations
 
+import base64
 import json
 from collections.abc import Iterator
 from typing import Any
@@ -15,6 +16,7 @@ import pytest
 from lipstream.corpus import Corpus
 from lipstream.engines.base import Model
 from lipstream.engines.expressive_dp import ExpressiveDpModel
+from lipstream.frontends.word_durations import WordDurationModel
 from lipstream.phonemes import PHONEME_INDEX
 from tests.live_server import LiveServer, live_server
 
@@ -30,10 +32,13 @@ def model(trained_models: dict[str, Model]) -> ExpressiveDpModel:
 
 @pytest.fixture(scope="module")
 def server(
-    model: ExpressiveDpModel, tmp_path_factory: pytest.TempPathFactory
+    model: ExpressiveDpModel,
+    word_durations: WordDurationModel,
+    tmp_path_factory: pytest.TempPathFactory,
 ) -> Iterator[LiveServer]:
     directory = tmp_path_factory.mktemp("edp-served")
     model.save(directory / "expressive-dp")
+    word_durations.save(directory / "expressive-dp")
     with live_server(directory) as running:
         yield running
 
@@ -131,3 +136,62 @@ def test_contamination_and_constraints_round_trip(
     assert bad.status_code == 422 and str(model.nodes.size) in bad.json()["error"]["message"]
     assert _post(server, "contamination", {"restore": marked}).json()["nodes"] == []
     assert _nodes(_synthesize(server, spans, {})) == first
+
+
+def test_the_summary_counts_each_phonemes_frames_and_clean_nodes(
+    server: LiveServer, model: ExpressiveDpModel
+) -> None:
+    nodes = model.nodes
+    first = int(np.flatnonzero(nodes.phoneme == PHONEME_INDEX["AA"])[0])
+    assert _post(server, "contamination", {"mark": [first]}).status_code == 200
+    try:
+        answer = httpx.get(_url(server, "phoneme-maps"), timeout=30.0).json()
+    finally:
+        _post(server, "contamination", {"restore": [first]})
+    listed = {row["phoneme"]: row for row in answer["phonemes"]}
+    lengths = nodes.offsets[1:] - nodes.offsets[:-1]
+    for label, index in PHONEME_INDEX.items():
+        members = [node for node in range(nodes.size) if nodes.phoneme[node] == index]
+        if not members:
+            assert label not in listed
+            continue
+        row = listed[label]
+        assert row["node_count"] == len(members)
+        assert row["frame_count"] == sum(int(lengths[node]) for node in members)
+        assert row["clean_node_count"] == len(members) - (label == "AA")
+    assert answer["node_count"] == nodes.size
+
+
+def test_a_node_clip_is_its_frames_in_channels(
+    server: LiveServer, model: ExpressiveDpModel
+) -> None:
+    node = int(np.flatnonzero(model.nodes.phoneme == PHONEME_INDEX["M"])[2])
+    clip = httpx.get(_url(server, f"nodes/{node}"), timeout=30.0).json()
+    coefficients = model.nodes.frames[model.nodes.offsets[node] : model.nodes.offsets[node + 1]]
+    by_hand = model.basis.mean + coefficients @ model.basis.components
+    np.testing.assert_allclose(np.array(clip["frames"]), by_hand, atol=1e-9)
+    assert (clip["phoneme"], clip["fps"], clip["contaminated"]) == ("M", model.nodes.fps, False)
+    assert clip["channels"] == list(model.channels)
+    missing = httpx.get(_url(server, f"nodes/{model.nodes.size}"), timeout=30.0)
+    assert (
+        missing.status_code == 422 and str(model.nodes.size) in missing.json()["error"]["message"]
+    )
+
+
+def test_an_utterance_gives_the_spans_constraints_are_numbered_by(server: LiveServer) -> None:
+    spoken = _post(server, "phoneme-maps/utterance", {"text": "Hello there."}).json()
+    items, speech = spoken["items"], spoken["speech"]
+    seconds = len(base64.b64decode(speech["pcm16"])) / 2 / speech["sample_rate"]
+    assert items[0]["start"] == 0.0 and items[-1]["end"] == pytest.approx(seconds, abs=1e-3)
+    assert all(a["end"] == b["start"] for a, b in zip(items, items[1:]))
+    spoken_labels = [item["phoneme"] for item in items if item["phoneme"] != "sil"]
+    assert spoken_labels[:2] == ["HH", "AH"]  # espeak-ng: h@loU
+    words = {"timings": [{"word": "mama", "start": 0.2, "end": 0.7}], "format": "words"}
+    timed = _post(server, "phoneme-maps/utterance", {"words": words}).json()["items"]
+    assert [item["phoneme"] for item in timed if item["phoneme"] != "sil"][:2] == ["M", "AA"]
+    spoken_span = [item for item in timed if item["phoneme"] != "sil"]
+    assert spoken_span[0]["start"] == pytest.approx(0.2) and spoken_span[-1][
+        "end"
+    ] == pytest.approx(0.7)
+    empty = _post(server, "phoneme-maps/utterance", {"text": 7})
+    assert empty.status_code == 422 and "text" in empty.json()["error"]["message"]
