@@ -13,19 +13,20 @@ from __future__ import annotations
 
 from .messages import Naming, VisemeSet
 
-OCULUS15_VISEMES: tuple[str, ...] = (
-    "viseme_sil", "viseme_PP", "viseme_FF", "viseme_TH", "viseme_DD",
-    "viseme_kk", "viseme_CH", "viseme_SS", "viseme_nn", "viseme_RR",
-    "viseme_aa", "viseme_E", "viseme_I", "viseme_O", "viseme_U",
-)  # fmt: skip
+_OCULUS15_VISEMES_TEXT = """
+    viseme_sil viseme_PP viseme_FF viseme_TH viseme_DD
+    viseme_kk viseme_CH viseme_SS viseme_nn viseme_RR
+    viseme_aa viseme_E viseme_I viseme_O viseme_U
+"""
+OCULUS15_VISEMES: tuple[str, ...] = tuple(_OCULUS15_VISEMES_TEXT.split())
 PRESTON_BLAIR_SHAPES: tuple[str, ...] = ("A", "B", "C", "D", "E", "F", "G", "H", "X")
 VISEME_CHANNELS: dict[VisemeSet, tuple[str, ...]] = {
     "oculus15": OCULUS15_VISEMES,
     "preston-blair": PRESTON_BLAIR_SHAPES,
 }
-RETARGET_PRESETS: tuple[str, ...] = (
-    "oculus15", "arkit52", "vrm1", "vrm0", "vroid", "rpm", "unified", "metahuman", "a2f68",
-)  # fmt: skip
+RETARGET_PRESETS: tuple[str, ...] = tuple(
+    "oculus15 arkit52 vrm1 vrm0 vroid rpm unified metahuman a2f68".split()
+)
 """The rig presets every server offers by name in ``output.retarget`` (``arkit52``,
 ``unified``, ``metahuman`` and ``a2f68`` only for a model with ARKit channel names);
 docs/how-to/retarget.md lists each one's controls and key poses."""

@@ -130,12 +130,18 @@ class Character:
 
 
 class RestClient:
-    """Blocking calls to a lipstream server's HTTP API; ``timeout`` in seconds per call."""
+    """Blocking calls to a lipstream server's HTTP API; ``timeout`` in seconds per call;
+    ``encoding`` the format of ``POST /v1/synthesize`` bodies and answers."""
 
     def __init__(
-        self, url: str, token: str | None = None, timeout: float = DEFAULT_TIMEOUT_S
+        self,
+        url: str,
+        token: str | None = None,
+        timeout: float = DEFAULT_TIMEOUT_S,
+        encoding: Encoding = "msgpack",
     ) -> None:
         self.root = http_root(url)
+        self.encoding: Encoding = encoding
         self._token = token
         self._timeout = timeout
         # A proxy can never reach this machine's own loopback interface.
@@ -181,13 +187,12 @@ class RestClient:
         options: JsonMap | None = None,
         phoneme_source: str | None = None,
         audio: tuple[bytes, int] | None = None,
-        encoding: Encoding = "msgpack",
     ) -> Synthesis:
         """``POST /v1/synthesize``: the frames of a whole utterance.
 
         Arguments as for ``AsyncClient.start``, plus the phoneme ``items`` and
-        optional ``audio`` as (PCM16 little-endian bytes, sample rate Hz).
-        ``encoding`` picks the body and answer format. EncodeError (before
+        optional ``audio`` as (PCM16 little-endian bytes, sample rate Hz), in the
+        client's ``encoding``. EncodeError (before
         sending) for input the protocol refuses; RestServerError for the
         server's refusals.
         """
@@ -206,7 +211,7 @@ class RestClient:
         parts: list[Message] = [start, Phonemes(SYNTHESIZE_ID, phoneme_items(items))]
         if audio is not None:
             parts.append(AudioChunk(SYNTHESIZE_ID, audio[1], bytes(audio[0])))
-        return self._post_synthesize(_synthesize_body(parts, encoding), encoding)
+        return self._post_synthesize(_synthesize_body(parts, self.encoding), self.encoding)
 
     def synthesize_text(
         self,
@@ -223,7 +228,6 @@ class RestClient:
         emotion: str | None = None,
         latency_budget_ms: float | None = None,
         options: JsonMap | None = None,
-        encoding: Encoding = "msgpack",
     ) -> Synthesis:
         """``POST /v1/synthesize`` with ``text`` for the server to speak (espeak-ng language
         ``lang``, ``voice``, ``rate`` as for ``Stream.send_text``): the frames and the
@@ -240,7 +244,7 @@ class RestClient:
             dict(options or {}),
         )
         parts: list[Message] = [start, Text(SYNTHESIZE_ID, text, voice, rate, lang)]
-        return self._post_synthesize(_synthesize_body(parts, encoding), encoding)
+        return self._post_synthesize(_synthesize_body(parts, self.encoding), self.encoding)
 
     def synthesize_transcript(
         self,

@@ -24,12 +24,13 @@ from types import MappingProxyType
 from .errors import LipstreamError, UnknownPhonemeError
 from .frontends.ipa_segments import UnreadableSymbol
 from .frontends.nearest_phoneme import nearest_phoneme, phonemes_by_features
+from .tables import names, pairs
 
-ARPABET: tuple[str, ...] = (
-    "AA", "AE", "AH", "AO", "AW", "AY", "B", "CH", "D", "DH", "EH", "ER", "EY", "F", "G",
-    "HH", "IH", "IY", "JH", "K", "L", "M", "N", "NG", "OW", "OY", "P", "R", "S", "SH",
-    "T", "TH", "UH", "UW", "V", "W", "Y", "Z", "ZH",
-)  # fmt: skip
+ARPABET: tuple[str, ...] = names("""
+    AA AE AH AO AW AY B CH D DH EH ER EY F G
+    HH IH IY JH K L M N NG OW OY P R S SH
+    T TH UH UW V W Y Z ZH
+""")
 SILENCE = "sil"
 PHONEMES: tuple[str, ...] = ARPABET + (SILENCE,)
 PHONEME_INDEX: dict[str, int] = {p: i for i, p in enumerate(PHONEMES)}
@@ -38,135 +39,158 @@ SOURCES: tuple[str, ...] = ("auto", "arpabet", "mfa", "timit", "mocha", "espeak"
 # "request" is what timeline.coerce_spans passes for client-sent labels.
 SOURCE_ALIASES: Mapping[str, str] = MappingProxyType({"request": "auto"})
 
-_VOWELS = frozenset({"AA", "AE", "AH", "AO", "AW", "AY", "EH", "ER", "EY", "IH", "IY",
-                     "OW", "OY", "UH", "UW", "AX", "AXR", "IX", "UX"})  # fmt: skip
+_VOWELS = frozenset(names("AA AE AH AO AW AY EH ER EY IH IY OW OY UH UW AX AXR IX UX"))
 
 # Full ARPAbet (TIMIT-derived) symbols that CMUdict folds away.
-_ARPABET_EXTENDED: dict[str, str] = {
-    "AX": "AH", "AXR": "ER", "IX": "IH", "UX": "UW", "DX": "D", "NX": "N",
-    "EL": "L", "EM": "M", "EN": "N", "ENG": "NG", "WH": "W", "Q": SILENCE,
-}  # fmt: skip
+_ARPABET_EXTENDED: dict[str, str] = pairs("""
+    AX AH  AXR ER  IX IH  UX UW  DX D  NX N
+    EL L  EM M  EN N  ENG NG  WH W  Q sil
+""")
 _ARPABET_TABLE: dict[str, str] = {p: p for p in ARPABET} | _ARPABET_EXTENDED
 _ARPABET_SPELLING = re.compile(r"([A-Z]+)([012]?)")
 
 _MFA_SILENCES = frozenset({"", "sil", "sp", "spn"})
 
 # Closures map to their stop: the closure is when a bilabial's lips are shut.
-_TIMIT_TABLE: dict[str, str] = {p.lower(): p for p in ARPABET} | {
-    "bcl": "B", "dcl": "D", "gcl": "G", "pcl": "P", "tcl": "T", "kcl": "K",
-    "dx": "D", "nx": "N", "q": SILENCE, "hv": "HH",
-    "ax": "AH", "ax-h": "AH", "axr": "ER", "ix": "IH", "ux": "UW",
-    "em": "M", "en": "N", "eng": "NG", "el": "L",
-    "h#": SILENCE, "#h": SILENCE, "pau": SILENCE, "epi": SILENCE, "sil": SILENCE,
-    "cl": SILENCE, "vcl": SILENCE,
-}  # fmt: skip
+_TIMIT_TABLE: dict[str, str] = {p.lower(): p for p in ARPABET} | pairs("""
+    bcl B  dcl D  gcl G  pcl P  tcl T  kcl K
+    dx D  nx N  q sil  hv HH
+    ax AH  ax-h AH  axr ER  ix IH  ux UW
+    em M  en N  eng NG  el L
+    h# sil  #h sil  pau sil  epi sil  sil sil
+    cl sil  vcl sil
+""")
 
 # MOCHA-TIMIT .lab files use the Edinburgh MRPA set (southern British), not TIMIT's.
-_MOCHA_TABLE: dict[str, str] = {
-    "uh": "AH", "e": "EH", "a": "AE", "o": "AA", "i": "IH", "u": "UH",
-    "ii": "IY", "uu": "UW", "oo": "AO", "aa": "AA", "@@": "ER", "@": "AH",
-    "ai": "AY", "ei": "EY", "oi": "OY", "au": "AW", "ou": "OW",
-    "e@": "EH", "i@": "IY", "u@": "UH",
-    "p": "P", "t": "T", "k": "K", "b": "B", "d": "D", "g": "G",
-    "s": "S", "z": "Z", "sh": "SH", "zh": "ZH", "f": "F", "v": "V",
-    "th": "TH", "dh": "DH", "ch": "CH", "jh": "JH", "h": "HH",
-    "m": "M", "n": "N", "ng": "NG", "l": "L", "y": "Y", "r": "R", "w": "W",
-    "#": SILENCE, "sil": SILENCE, "breath": SILENCE,
-}  # fmt: skip
+_MOCHA_TABLE: dict[str, str] = pairs("""
+    uh AH  e EH  a AE  o AA  i IH  u UH
+    ii IY  uu UW  oo AO  aa AA  @@ ER  @ AH
+    ai AY  ei EY  oi OY  au AW  ou OW
+    e@ EH  i@ IY  u@ UH
+    p P  t T  k K  b B  d D  g G
+    s S  z Z  sh SH  zh ZH  f F  v V
+    th TH  dh DH  ch CH  jh JH  h HH
+    m M  n N  ng NG  l L  y Y  r R  w W
+    # sil  sil sil  breath sil
+""")
 
 # espeak-ng mnemonics of the English phoneme tables (en, en-us and the other
 # en-* variants, with the base tables they inherit), case-sensitive.
-_ESPEAK_TABLE: dict[str, str] = {
+_ESPEAK_TABLE: dict[str, str] = (
     # pauses
-    "_": SILENCE, "_!": SILENCE, "_:": SILENCE, "_::": SILENCE, "_;_": SILENCE,
-    "_X1": SILENCE, "_^_": SILENCE, "_|": SILENCE, "||": SILENCE,
+    pairs("""
+        _ sil  _! sil  _: sil  _:: sil  _;_ sil
+        _X1 sil  _^_ sil  _| sil  || sil
+    """)
     # vowels
-    "@": "AH", "@-": "AH", "@2": "AH", "@#": "AH", "@5": "UH", "@L": "L",
-    "3": "ER", "3:": "ER", "IR": "ER", "VR": "AH", "V": "AH", "02": "AH", "a#": "AH",
-    "a": "AE", "a/": "AE", "a2": "AE", "a#2": "AE", "aa": "AE",
-    "A:": "AA", "A@": "AA", "A#": "AA", "A~": "AA", "0": "AA", "0#": "AA",
-    "O": "AO", "O:": "AO", "O2": "AO", "O@": "AO", "o@": "AO", "O~": "AO",
-    "o": "OW", "o:": "OW", "oU": "OW", "oU#": "OW", "OI": "OY",
-    "E": "EH", "E#": "EH", "E2": "EH", "e#": "EH", "e@": "EH",
-    "e": "EY", "e:": "EY", "eI": "EY",
-    "I": "IH", "I#": "IH", "I2": "IH", "I2#": "IH",
-    "i": "IY", "i:": "IY", "i@": "IY", "i@3": "IY",
-    "U": "UH", "U@": "UH", "u": "UW", "u:": "UW",
-    "aI": "AY", "aI2": "AY", "aI@": "AY", "aI3": "AY", "aU": "AW", "aU@": "AW",
-    "m-": "M", "n-": "N", "N-": "NG", "l-": "L",
+    | pairs("""
+        @ AH  @- AH  @2 AH  @# AH  @5 UH  @L L
+        3 ER  3: ER  IR ER  VR AH  V AH  02 AH  a# AH
+        a AE  a/ AE  a2 AE  a#2 AE  aa AE
+        A: AA  A@ AA  A# AA  A~ AA  0 AA  0# AA
+        O AO  O: AO  O2 AO  O@ AO  o@ AO  O~ AO
+        o OW  o: OW  oU OW  oU# OW  OI OY
+        E EH  E# EH  E2 EH  e# EH  e@ EH
+        e EY  e: EY  eI EY
+        I IH  I# IH  I2 IH  I2# IH
+        i IY  i: IY  i@ IY  i@3 IY
+        U UH  U@ UH  u UW  u: UW
+        aI AY  aI2 AY  aI@ AY  aI3 AY  aU AW  aU@ AW
+        m- M  n- N  N- NG  l- L
+    """)
     # stops and affricates
-    "p": "P", "b": "B", "t": "T", "t#": "T", "t2": "T", "t[": "T", "?": "T",
-    "d": "D", "d#": "D", "d[": "D", "*": "D", "**": "D",
-    "k": "K", "c": "K", "q": "K", "g": "G", "J": "G",
-    "tS": "CH", "tS;": "CH", "dZ": "JH", "dZ;": "JH",
+    | pairs("""
+        p P  b B  t T  t# T  t2 T  t[ T  ? T
+        d D  d# D  d[ D  * D  ** D
+        k K  c K  q K  g G  J G
+        tS CH  tS; CH  dZ JH  dZ; JH
+    """)
     # fricatives
-    "f": "F", "v": "V", "v#": "V", "B": "V", "T": "TH", "D": "DH",
-    "s": "S", "s;": "S", "z": "Z", "z#": "Z", "z/2": "Z", "z;": "Z",
-    "S": "SH", "S;": "SH", "s.": "SH", "Z": "ZH", "Z;": "ZH", "z.": "ZH",
-    "h": "HH", "C": "HH", "X": "HH", "#X1": "HH", "x": "K", "Q": "G", "Q^": "G",
+    | pairs("""
+        f F  v V  v# V  B V  T TH  D DH
+        s S  s; S  z Z  z# Z  z/2 Z  z; Z
+        S SH  S; SH  s. SH  Z ZH  Z; ZH  z. ZH
+        h HH  C HH  X HH  #X1 HH  x K  Q G  Q^ G
+    """)
     # nasals, liquids, glides
-    "m": "M", "n": "N", "n.": "N", "n^": "N", "N": "NG",
-    "l": "L", "l/": "L", "l/2": "L", "l/3": "L", "l^": "L", "l.": "L", "L": "L",
-    "L/": "L", "l#": "L",
-    "r": "R", "r-": "R", "r/": "R", "r.": "R", 'r"': "R", "R": "R", "R2": "R", "R3": "R",
-    'Q"': "R", "j": "Y", "J^": "Y", ";": "Y", "w": "W", "w#": "W",
-}  # fmt: skip
+    | pairs("""
+        m M  n N  n. N  n^ N  N NG
+        l L  l/ L  l/2 L  l/3 L  l^ L  l. L  L L
+        L/ L  l# L
+        r R  r- R  r/ R  r. R  r" R  R R  R2 R  R3 R
+        Q" R  j Y  J^ Y  ; Y  w W  w# W
+    """)
+)
 _ESPEAK_STRESS = "',%="
 
 # IPA as written by MFA's english_mfa models and by espeak-ng --ipa. Keys
 # carry no stress, tie bar, length mark or diacritic: those are removed
 # before the second lookup (see _ipa_base).
-_IPA_TABLE: dict[str, str] = {
+_IPA_TABLE: dict[str, str] = (
     # monophthongs
-    "i": "IY", "ɪ": "IH", "ᵻ": "IH", "ɨ": "IH", "e": "EY", "ɛ": "EH", "æ": "AE", "a": "AE",
-    "ɑ": "AA", "ɒ": "AA", "ɔ": "AO", "o": "OW", "ɵ": "OW", "ʊ": "UH", "u": "UW", "ʉ": "UW",
-    "ʌ": "AH", "ə": "AH", "ɐ": "AH", "ɘ": "AH", "ɜ": "ER", "ɚ": "ER", "ɝ": "ER",
-    "ə˞": "ER", "ɜ˞": "ER", "əɹ": "ER", "ɜɹ": "ER",
+    pairs("""
+        i IY  ɪ IH  ᵻ IH  ɨ IH  e EY  ɛ EH  æ AE  a AE
+        ɑ AA  ɒ AA  ɔ AO  o OW  ɵ OW  ʊ UH  u UW  ʉ UW
+        ʌ AH  ə AH  ɐ AH  ɘ AH  ɜ ER  ɚ ER  ɝ ER
+        ə˞ ER  ɜ˞ ER  əɹ ER  ɜɹ ER
+    """)
     # diphthongs and vowel + r
-    "aɪ": "AY", "aj": "AY", "ɑɪ": "AY", "ɑj": "AY", "aɪə": "AY", "aɪɚ": "AY", "aɪɹ": "AY",
-    "aʊ": "AW", "aw": "AW", "ɑʊ": "AW", "aʊə": "AW", "aʊɚ": "AW", "aʊɹ": "AW",
-    "eɪ": "EY", "ej": "EY", "ɛɪ": "EY", "oʊ": "OW", "ow": "OW", "əʊ": "OW", "əw": "OW",
-    "ɔʊ": "OW", "ɔɪ": "OY", "ɔj": "OY", "oɪ": "OY",
-    "ɪə": "IY", "iə": "IY", "ɪɹ": "IY", "ɪɚ": "IY", "iɹ": "IY",
-    "ɛə": "EH", "eə": "EH", "ɛɹ": "EH", "eɹ": "EH", "ɛɚ": "EH",
-    "ʊə": "UH", "ʊɹ": "UH", "ʊɚ": "UH", "uɹ": "UH",
-    "ɑɹ": "AA", "aɹ": "AA", "ɑɚ": "AA", "ɔɹ": "AO", "oɹ": "AO", "ɔɚ": "AO", "oɚ": "AO",
-    "ei": "EY", "əɪ": "AY", "əu": "OW", "ʌʊ": "OW", "æʊ": "AW",
-    "ɑə": "AA", "aa": "AA", "ɔə": "AO", "oə": "AO", "ʉɹ": "UH", "ʌʉ": "AW",
-    "ʌɹ": "AH", "əl": "L", "ən": "N", "əm": "M",
+    | pairs("""
+        aɪ AY  aj AY  ɑɪ AY  ɑj AY  aɪə AY  aɪɚ AY  aɪɹ AY
+        aʊ AW  aw AW  ɑʊ AW  aʊə AW  aʊɚ AW  aʊɹ AW
+        eɪ EY  ej EY  ɛɪ EY  oʊ OW  ow OW  əʊ OW  əw OW
+        ɔʊ OW  ɔɪ OY  ɔj OY  oɪ OY
+        ɪə IY  iə IY  ɪɹ IY  ɪɚ IY  iɹ IY
+        ɛə EH  eə EH  ɛɹ EH  eɹ EH  ɛɚ EH
+        ʊə UH  ʊɹ UH  ʊɚ UH  uɹ UH
+        ɑɹ AA  aɹ AA  ɑɚ AA  ɔɹ AO  oɹ AO  ɔɚ AO  oɚ AO
+        ei EY  əɪ AY  əu OW  ʌʊ OW  æʊ AW
+        ɑə AA  aa AA  ɔə AO  oə AO  ʉɹ UH  ʌʉ AW
+        ʌɹ AH  əl L  ən N  əm M
+    """)
     # consonants
-    "p": "P", "b": "B", "t": "T", "d": "D", "k": "K", "ɡ": "G", "g": "G", "c": "K",
-    "ɟ": "G", "q": "K", "ɢ": "G", "ʔ": "T", "ɾ": "D", "ɾ̃": "N",
-    "tʃ": "CH", "ʧ": "CH", "dʒ": "JH", "ʤ": "JH", "tɕ": "CH", "dʑ": "JH",
-    "f": "F", "v": "V", "ɸ": "F", "β": "V", "ʋ": "V", "θ": "TH", "ð": "DH",
-    "s": "S", "z": "Z", "ʃ": "SH", "ʒ": "ZH", "ʂ": "SH", "ʐ": "ZH", "ɕ": "SH", "ʑ": "ZH",
-    "h": "HH", "ɦ": "HH", "ç": "HH", "χ": "HH", "x": "K", "ɣ": "G", "ʁ": "R",
-    "m": "M", "ɱ": "M", "n": "N", "ɲ": "N", "ɳ": "N", "ŋ": "NG",
-    "l": "L", "ɫ": "L", "ʎ": "L", "ɭ": "L", "ɬ": "L", "ɹ̩": "ER",
-    "ɹ": "R", "r": "R", "ɻ": "R", "ʀ": "R", "j": "Y", "ʝ": "Y", "w": "W", "ʍ": "W",
-}  # fmt: skip
+    | pairs("""
+        p P  b B  t T  d D  k K  ɡ G  g G  c K
+        ɟ G  q K  ɢ G  ʔ T  ɾ D  ɾ̃ N
+        tʃ CH  ʧ CH  dʒ JH  ʤ JH  tɕ CH  dʑ JH
+        f F  v V  ɸ F  β V  ʋ V  θ TH  ð DH
+        s S  z Z  ʃ SH  ʒ ZH  ʂ SH  ʐ ZH  ɕ SH  ʑ ZH
+        h HH  ɦ HH  ç HH  χ HH  x K  ɣ G  ʁ R
+        m M  ɱ M  n N  ɲ N  ɳ N  ŋ NG
+        l L  ɫ L  ʎ L  ɭ L  ɬ L  ɹ̩ ER
+        ɹ R  r R  ɻ R  ʀ R  j Y  ʝ Y  w W  ʍ W
+    """)
+)
 # English SAMPA as WebMAUS writes it in its MAU tier (British and American
 # inventories, with the X-SAMPA spelling r\ and the rhotic `), plus the BAS
 # pause and noise markers. Case-sensitive; a length mark ":" is dropped if the
 # long form is not listed.
-_SAMPA_TABLE: dict[str, str] = {
+_SAMPA_TABLE: dict[str, str] = (
     # pauses and non-speech
-    "<p:>": SILENCE, "<p>": SILENCE, "<nib>": SILENCE, "<usb>": SILENCE, "<sil>": SILENCE,
+    pairs("""
+        <p:> sil  <p> sil  <nib> sil  <usb> sil  <sil> sil
+    """)
     # monophthongs
-    "i:": "IY", "i": "IY", "I": "IH", "e": "EH", "E": "EH", "{": "AE", "a": "AE",
-    "A:": "AA", "A": "AA", "Q": "AA", "O:": "AO", "O": "AO", "o": "OW", "U": "UH",
-    "u:": "UW", "u": "UW", "V": "AH", "@": "AH", "3:": "ER", "3": "ER", "3`": "ER",
-    "@`": "ER", "r=": "ER",
+    | pairs("""
+        i: IY  i IY  I IH  e EH  E EH  { AE  a AE
+        A: AA  A AA  Q AA  O: AO  O AO  o OW  U UH
+        u: UW  u UW  V AH  @ AH  3: ER  3 ER  3` ER
+        @` ER  r= ER
+    """)
     # diphthongs and centring diphthongs
-    "eI": "EY", "aI": "AY", "OI": "OY", "@U": "OW", "oU": "OW", "aU": "AW",
-    "I@": "IY", "e@": "EH", "E@": "EH", "U@": "UH",
+    | pairs("""
+        eI EY  aI AY  OI OY  @U OW  oU OW  aU AW
+        I@ IY  e@ EH  E@ EH  U@ UH
+    """)
     # consonants
-    "p": "P", "b": "B", "t": "T", "d": "D", "k": "K", "g": "G", "?": "T", "4": "D",
-    "tS": "CH", "dZ": "JH", "f": "F", "v": "V", "T": "TH", "D": "DH",
-    "s": "S", "z": "Z", "S": "SH", "Z": "ZH", "h": "HH", "x": "K", "C": "HH",
-    "m": "M", "n": "N", "N": "NG", "m=": "M", "n=": "N",
-    "l": "L", "5": "L", "l=": "L", "r": "R", "r\\": "R", "j": "Y", "w": "W", "W": "W",
-}  # fmt: skip
+    | pairs(r"""
+        p P  b B  t T  d D  k K  g G  ? T  4 D
+        tS CH  dZ JH  f F  v V  T TH  D DH
+        s S  z Z  S SH  Z ZH  h HH  x K  C HH
+        m M  n N  N NG  m= M  n= N
+        l L  5 L  l= L  r R  r\ R  j Y  w W  W W
+    """)
+)
 
 _IPA_IGNORED = frozenset("ˈˌ.‿\u0361\u035c")  # stress, syllable break, ties
 _IPA_MODIFIERS = frozenset("ːˑ:ʰʲʷˠˤⁿˡʱ")  # length (also ASCII ":") and secondary articulations
@@ -262,8 +286,12 @@ def ipa_phonemes(label: str, where: str | None = None) -> tuple[str, ...]:
 # In "auto", ARPAbet is read first and case-insensitively, so espeak's
 # capital consonants (D, T, S, Z, N, V) and "aa" need source="espeak".
 _AUTO_ORDER: tuple[Callable[[str], str | None], ...] = (
-    _read_arpabet, _read_mfa_silence, _read_timit, _read_espeak, _read_ipa,
-)  # fmt: skip
+    _read_arpabet,
+    _read_mfa_silence,
+    _read_timit,
+    _read_espeak,
+    _read_ipa,
+)
 
 
 def _read_auto(label: str) -> str | None:
@@ -274,10 +302,18 @@ def _read_auto(label: str) -> str | None:
     return None
 
 
-_READERS: Mapping[str, Callable[[str], str | None]] = MappingProxyType({
-    "auto": _read_auto, "arpabet": _read_arpabet, "mfa": _read_mfa, "timit": _read_timit,
-    "mocha": _read_mocha, "espeak": _read_espeak, "ipa": _read_ipa, "sampa": _read_sampa,
-})  # fmt: skip
+_READERS: Mapping[str, Callable[[str], str | None]] = MappingProxyType(
+    {
+        "auto": _read_auto,
+        "arpabet": _read_arpabet,
+        "mfa": _read_mfa,
+        "timit": _read_timit,
+        "mocha": _read_mocha,
+        "espeak": _read_espeak,
+        "ipa": _read_ipa,
+        "sampa": _read_sampa,
+    }
+)
 
 
 @lru_cache(maxsize=8192)

@@ -38,8 +38,19 @@ NEWTONSOFT = Path(
 MAX_LINES = 150
 WAIT_S = 60.0  # a bound on a busy machine, not a speed claim
 VRM1_EXPRESSIONS = (
-    "aa", "ih", "ou", "ee", "oh", "blink", "happy", "angry", "sad", "relaxed", "surprised", "neutral",
-)  # fmt: skip
+    "aa",
+    "ih",
+    "ou",
+    "ee",
+    "oh",
+    "blink",
+    "happy",
+    "angry",
+    "sad",
+    "relaxed",
+    "surprised",
+    "neutral",
+)
 TEXT = "Hello from the game engine."
 
 

@@ -57,9 +57,20 @@ def test_bridge_to_live_link_with_the_speech_written(server: LiveServer, tmp_pat
         port = receiver.getsockname()[1]
         wav = tmp_path / "speech.wav"
         done = run_cli(
-            "bridge", "--server", server.ws, "--to", f"livelink://127.0.0.1:{port}",
-            "--preset", "arkit52", "--text", TEXT, "--subject", "Ada", "--wav", str(wav),
-        )  # fmt: skip
+            "bridge",
+            "--server",
+            server.ws,
+            "--to",
+            f"livelink://127.0.0.1:{port}",
+            "--preset",
+            "arkit52",
+            "--text",
+            TEXT,
+            "--subject",
+            "Ada",
+            "--wav",
+            str(wav),
+        )
         assert done.returncode == 0, done.stderr
         frames, sent, dropped = summary(done.stderr)
         packets = [decode(receiver.recv(4096)) for _ in range(sent)]
@@ -248,10 +259,20 @@ def test_bridge_phonemes_with_their_recording_written_back_in_step(
         output.setframerate(rate)
         output.writeframes(recording)
     done = run_cli(
-        "bridge", "--server", server.ws, "--to", "stdout", "--format", "csv",
-        "--phones", str(tmp_path / "line.json"), "--audio", str(tmp_path / "line.wav"),
-        "--wav", str(tmp_path / "back.wav"),
-    )  # fmt: skip
+        "bridge",
+        "--server",
+        server.ws,
+        "--to",
+        "stdout",
+        "--format",
+        "csv",
+        "--phones",
+        str(tmp_path / "line.json"),
+        "--audio",
+        str(tmp_path / "line.wav"),
+        "--wav",
+        str(tmp_path / "back.wav"),
+    )
     assert done.returncode == 0, done.stderr
     frames, sent, dropped = summary(done.stderr)
     assert frames == len(served_phonemes(server.ws, phones, recording, rate))

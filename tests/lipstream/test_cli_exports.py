@@ -198,9 +198,16 @@ def test_a_profile_file_that_is_not_a_profile_object_is_refused(
     profile = tmp_path / "profile.json"
     profile.write_text("[1, 2]")
     result = run_cli(
-        "synth", "--model", str(lerp_model), "--phones", str(mau_grid),
-        "--out", str(tmp_path / "x.csv"), "--profile", str(profile),
-    )  # fmt: skip
+        "synth",
+        "--model",
+        str(lerp_model),
+        "--phones",
+        str(mau_grid),
+        "--out",
+        str(tmp_path / "x.csv"),
+        "--profile",
+        str(profile),
+    )
     assert result.returncode == 2
     assert "error [invalid_setting]" in result.stderr
     assert "must be a JSON object holding an output profile" in result.stderr

@@ -17,8 +17,16 @@ if TYPE_CHECKING:
 
 # The preset names the issue and the other helpers use, in the order `show` lists them.
 PRESET_NAMES = (
-    "oculus15", "arkit52", "vrm1", "vrm0", "vroid", "rpm", "unified", "metahuman", "a2f68",
-)  # fmt: skip
+    "oculus15",
+    "arkit52",
+    "vrm1",
+    "vrm0",
+    "vroid",
+    "rpm",
+    "unified",
+    "metahuman",
+    "a2f68",
+)
 PHONES = [
     {"phoneme": "sil", "start": 0.0, "end": 0.3},
     {"phoneme": "M", "start": 0.3, "end": 0.5},
@@ -82,9 +90,15 @@ def test_build_writes_a_shipped_target_and_its_pairs_and_show_lists_the_maps(
 ) -> None:
     pairs = tmp_path / "arkit.json"
     built = run_cli(
-        "retarget", "build", "--model", str(lerp_model), "--target", "arkit52",
-        "--pairs-out", str(pairs),
-    )  # fmt: skip
+        "retarget",
+        "build",
+        "--model",
+        str(lerp_model),
+        "--target",
+        "arkit52",
+        "--pairs-out",
+        str(pairs),
+    )
     assert built.returncode == 0, built.stderr
     written = json.loads(pairs.read_text())
     assert tuple(written["controls"]) == ARKIT_BLENDSHAPES

@@ -67,8 +67,10 @@ def espeak_tokens(text: str, voice: str, mode: str = "-x") -> list[str]:
     """Phoneme names espeak-ng prints for ``text`` (``-x`` mnemonics or ``--ipa``)."""
     result = subprocess.run(
         ["espeak-ng", "-q", "-v", voice, mode, "--sep= ", text],
-        capture_output=True, text=True, check=True,
-    )  # fmt: skip
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     return result.stdout.split()
 
 
@@ -88,10 +90,23 @@ def test_silence_label_is_accepted_by_every_source(source: str) -> None:
 
 @pytest.mark.parametrize(
     ("label", "expected"),
-    [("AA1", "AA"), ("aa1", "AA"), ("Er0", "ER"), ("IY2", "IY"), ("ah", "AH"), ("ZH", "ZH"),
-     (" OW1 ", "OW"), ("AX0", "AH"), ("AXR", "ER"), ("IX", "IH"), ("DX", "D"), ("EN", "N"),
-     ("WH", "W"), ("Q", "sil")],
-)  # fmt: skip
+    [
+        ("AA1", "AA"),
+        ("aa1", "AA"),
+        ("Er0", "ER"),
+        ("IY2", "IY"),
+        ("ah", "AH"),
+        ("ZH", "ZH"),
+        (" OW1 ", "OW"),
+        ("AX0", "AH"),
+        ("AXR", "ER"),
+        ("IX", "IH"),
+        ("DX", "D"),
+        ("EN", "N"),
+        ("WH", "W"),
+        ("Q", "sil"),
+    ],
+)
 def test_arpabet_strips_stress_and_folds_extended_symbols(label: str, expected: str) -> None:
     assert normalize_phoneme(label, "arpabet") == expected
 
@@ -117,11 +132,33 @@ def test_mfa_reads_arpabet_and_english_mfa_ipa_phones() -> None:
 
 @pytest.mark.parametrize(
     ("label", "expected"),
-    [("h#", "sil"), ("pau", "sil"), ("epi", "sil"), ("q", "sil"), ("bcl", "B"), ("pcl", "P"),
-     ("dcl", "D"), ("tcl", "T"), ("gcl", "G"), ("kcl", "K"), ("ax", "AH"), ("axr", "ER"),
-     ("ix", "IH"), ("ux", "UW"), ("ax-h", "AH"), ("dx", "D"), ("nx", "N"), ("en", "N"),
-     ("em", "M"), ("el", "L"), ("eng", "NG"), ("hv", "HH"), ("hh", "HH"), ("jh", "JH")],
-)  # fmt: skip
+    [
+        ("h#", "sil"),
+        ("pau", "sil"),
+        ("epi", "sil"),
+        ("q", "sil"),
+        ("bcl", "B"),
+        ("pcl", "P"),
+        ("dcl", "D"),
+        ("tcl", "T"),
+        ("gcl", "G"),
+        ("kcl", "K"),
+        ("ax", "AH"),
+        ("axr", "ER"),
+        ("ix", "IH"),
+        ("ux", "UW"),
+        ("ax-h", "AH"),
+        ("dx", "D"),
+        ("nx", "N"),
+        ("en", "N"),
+        ("em", "M"),
+        ("el", "L"),
+        ("eng", "NG"),
+        ("hv", "HH"),
+        ("hh", "HH"),
+        ("jh", "JH"),
+    ],
+)
 def test_timit_labels(label: str, expected: str) -> None:
     assert normalize_phoneme(label, "timit") == expected
 
@@ -165,12 +202,38 @@ def test_auto_order_resolves_collisions_as_documented() -> None:
 
 @pytest.mark.parametrize(
     ("name", "expected"),
-    [("'a", "AE"), (",aU", "AW"), ("%oU", "OW"), ("=n", "N"), ("aI@", "AY"), ("e@", "EH"),
-     ("i@", "IY"), ("A@", "AA"), ("O@", "AO"), ("U@", "UH"), ("@L", "L"), ("n-", "N"),
-     ("r-", "R"), ("t#", "T"), ("?", "T"), ("3:", "ER"), ("V", "AH"), ("N", "NG"),
-     ("T", "TH"), ("S", "SH"), ("Z", "ZH"), ("tS", "CH"), ("dZ", "JH"), ("j", "Y"),
-     ("_:", "sil"), ("_", "sil"), ("_!", "sil"), ("||", "sil"), ("_|", "sil")],
-)  # fmt: skip
+    [
+        ("'a", "AE"),
+        (",aU", "AW"),
+        ("%oU", "OW"),
+        ("=n", "N"),
+        ("aI@", "AY"),
+        ("e@", "EH"),
+        ("i@", "IY"),
+        ("A@", "AA"),
+        ("O@", "AO"),
+        ("U@", "UH"),
+        ("@L", "L"),
+        ("n-", "N"),
+        ("r-", "R"),
+        ("t#", "T"),
+        ("?", "T"),
+        ("3:", "ER"),
+        ("V", "AH"),
+        ("N", "NG"),
+        ("T", "TH"),
+        ("S", "SH"),
+        ("Z", "ZH"),
+        ("tS", "CH"),
+        ("dZ", "JH"),
+        ("j", "Y"),
+        ("_:", "sil"),
+        ("_", "sil"),
+        ("_!", "sil"),
+        ("||", "sil"),
+        ("_|", "sil"),
+    ],
+)
 def test_espeak_names(name: str, expected: str) -> None:
     assert normalize_phoneme(name, "espeak") == expected
 
@@ -178,13 +241,30 @@ def test_espeak_names(name: str, expected: str) -> None:
 @needs_espeak
 @pytest.mark.parametrize(
     ("word", "expected"),
-    [("cat", "K AE T"), ("thought", "TH AO T"), ("judge", "JH AH JH"),
-     ("measure", "M EH ZH ER"), ("sing", "S IH NG"), ("yes", "Y EH S"), ("boy", "B OY"),
-     ("go", "G OW"), ("book", "B UH K"), ("food", "F UW D"), ("bird", "B ER D"),
-     ("father", "F AA DH ER"), ("see", "S IY"), ("say", "S EY"), ("hat", "HH AE T"),
-     ("about", "AH B AW T"), ("church", "CH ER CH"), ("this", "DH IH S"),
-     ("vision", "V IH ZH AH N"), ("button", "B AH T N"), ("where", "W EH")],
-)  # fmt: skip
+    [
+        ("cat", "K AE T"),
+        ("thought", "TH AO T"),
+        ("judge", "JH AH JH"),
+        ("measure", "M EH ZH ER"),
+        ("sing", "S IH NG"),
+        ("yes", "Y EH S"),
+        ("boy", "B OY"),
+        ("go", "G OW"),
+        ("book", "B UH K"),
+        ("food", "F UW D"),
+        ("bird", "B ER D"),
+        ("father", "F AA DH ER"),
+        ("see", "S IY"),
+        ("say", "S EY"),
+        ("hat", "HH AE T"),
+        ("about", "AH B AW T"),
+        ("church", "CH ER CH"),
+        ("this", "DH IH S"),
+        ("vision", "V IH ZH AH N"),
+        ("button", "B AH T N"),
+        ("where", "W EH"),
+    ],
+)
 def test_espeak_words_give_cmudict_sequences(word: str, expected: str) -> None:
     names = espeak_tokens(word, "en-us")
     assert normalize_phonemes(names, "espeak") == labels(expected)
@@ -263,13 +343,22 @@ def test_every_phoneme_of_the_installed_english_tables_is_mapped() -> None:
 
 class _EspeakEvent(ctypes.Structure):
     class _Id(ctypes.Union):
-        _fields_ = [("number", ctypes.c_int), ("name", ctypes.c_char_p),
-                    ("string", ctypes.c_char * 8)]  # fmt: skip
+        _fields_ = [
+            ("number", ctypes.c_int),
+            ("name", ctypes.c_char_p),
+            ("string", ctypes.c_char * 8),
+        ]
 
-    _fields_ = [("type", ctypes.c_int), ("unique_identifier", ctypes.c_uint),
-                ("text_position", ctypes.c_int), ("length", ctypes.c_int),
-                ("audio_position", ctypes.c_int), ("sample", ctypes.c_int),
-                ("user_data", ctypes.c_void_p), ("id", _Id)]  # fmt: skip
+    _fields_ = [
+        ("type", ctypes.c_int),
+        ("unique_identifier", ctypes.c_uint),
+        ("text_position", ctypes.c_int),
+        ("length", ctypes.c_int),
+        ("audio_position", ctypes.c_int),
+        ("sample", ctypes.c_int),
+        ("user_data", ctypes.c_void_p),
+        ("id", _Id),
+    ]
 
 
 def _phoneme_event_names(text: str, voice: str) -> list[str]:
@@ -280,9 +369,11 @@ def _phoneme_event_names(text: str, voice: str) -> list[str]:
     lib = ctypes.CDLL(library)
     names: list[str] = []
     callback_type = ctypes.CFUNCTYPE(
-        ctypes.c_int, ctypes.POINTER(ctypes.c_short), ctypes.c_int,
+        ctypes.c_int,
+        ctypes.POINTER(ctypes.c_short),
+        ctypes.c_int,
         ctypes.POINTER(_EspeakEvent),
-    )  # fmt: skip
+    )
 
     def collect(_wav: object, _count: int, events: ctypes.Array[_EspeakEvent]) -> int:
         index = 0
@@ -354,15 +445,54 @@ def test_detect_source_reads_a_whole_file_of_labels() -> None:
 
 @pytest.mark.parametrize(
     ("label", "expected"),
-    [("{", "AE"), ("@U", "OW"), ("oU", "OW"), ("aI", "AY"), ("eI", "EY"), ("OI", "OY"),
-     ("aU", "AW"), ("I@", "IY"), ("e@", "EH"), ("U@", "UH"), ("i:", "IY"), ("I", "IH"),
-     ("E", "EH"), ("A:", "AA"), ("Q", "AA"), ("O:", "AO"), ("V", "AH"), ("@", "AH"),
-     ("3:", "ER"), ("@`", "ER"), ("u:", "UW"), ("U", "UH"), ("E:", "EH"),
-     ("tS", "CH"), ("dZ", "JH"), ("T", "TH"), ("D", "DH"), ("S", "SH"), ("Z", "ZH"),
-     ("s", "S"), ("z", "Z"), ("t", "T"), ("d", "D"), ("N", "NG"), ("n", "N"), ("h", "HH"),
-     ("j", "Y"), ("r\\", "R"), ("r", "R"), ("?", "T"), ("4", "D"), ("5", "L"),
-     ("<p:>", "sil"), ("<p>", "sil"), ("<nib>", "sil")],
-)  # fmt: skip
+    [
+        ("{", "AE"),
+        ("@U", "OW"),
+        ("oU", "OW"),
+        ("aI", "AY"),
+        ("eI", "EY"),
+        ("OI", "OY"),
+        ("aU", "AW"),
+        ("I@", "IY"),
+        ("e@", "EH"),
+        ("U@", "UH"),
+        ("i:", "IY"),
+        ("I", "IH"),
+        ("E", "EH"),
+        ("A:", "AA"),
+        ("Q", "AA"),
+        ("O:", "AO"),
+        ("V", "AH"),
+        ("@", "AH"),
+        ("3:", "ER"),
+        ("@`", "ER"),
+        ("u:", "UW"),
+        ("U", "UH"),
+        ("E:", "EH"),
+        ("tS", "CH"),
+        ("dZ", "JH"),
+        ("T", "TH"),
+        ("D", "DH"),
+        ("S", "SH"),
+        ("Z", "ZH"),
+        ("s", "S"),
+        ("z", "Z"),
+        ("t", "T"),
+        ("d", "D"),
+        ("N", "NG"),
+        ("n", "N"),
+        ("h", "HH"),
+        ("j", "Y"),
+        ("r\\", "R"),
+        ("r", "R"),
+        ("?", "T"),
+        ("4", "D"),
+        ("5", "L"),
+        ("<p:>", "sil"),
+        ("<p>", "sil"),
+        ("<nib>", "sil"),
+    ],
+)
 def test_sampa_as_webmaus_writes_it(label: str, expected: str) -> None:
     assert normalize_phoneme(label, "sampa") == expected
 

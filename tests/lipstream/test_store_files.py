@@ -119,9 +119,25 @@ def _stored_zip(path: Path, name: str, header: bytes, data_bytes: int) -> None:
     size = len(header) + data_bytes
     local = struct.pack("<IHHHHHIIIHH", 0x04034B50, 20, 0, 0, 0, 0, 0, size, size, len(member), 0)
     central = struct.pack(
-        "<IHHHHHHIIIHHHHHII", 0x02014B50, 20, 20, 0, 0, 0, 0, 0, size, size, len(member),
-        0, 0, 0, 0, 0, 0,
-    )  # fmt: skip
+        "<IHHHHHHIIIHHHHHII",
+        0x02014B50,
+        20,
+        20,
+        0,
+        0,
+        0,
+        0,
+        0,
+        size,
+        size,
+        len(member),
+        0,
+        0,
+        0,
+        0,
+        0,
+        0,
+    )
     with open(path, "wb") as handle:
         handle.write(local + member + header)
         handle.seek(data_bytes, os.SEEK_CUR)

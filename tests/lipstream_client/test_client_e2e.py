@@ -211,8 +211,8 @@ def test_loadtest_against_the_real_server(served: LiveServer, tmp_path: Path) ->
 
 @pytest.mark.parametrize("encoding", ["msgpack", "json"])
 def test_rest_synthesize_equals_the_stream(served: LiveServer, encoding: Encoding) -> None:
-    rest = RestClient(served.ws)
-    answer = rest.synthesize("viseme-lerp", "demo", LINE, fps=FPS, encoding=encoding)
+    rest = RestClient(served.ws, encoding=encoding)
+    answer = rest.synthesize("viseme-lerp", "demo", LINE, fps=FPS)
     stream = asyncio.run(request(served.ws, "viseme-lerp", LINE))
     assert answer.channels == stream.channels and answer.ready.fps == FPS
     assert answer.stats.frames == stream.done.stats.frames == answer.frames.n_frames
@@ -225,7 +225,9 @@ def test_rest_synthesize_errors_are_typed(served: LiveServer) -> None:
         rest.synthesize("no-such-engine", "demo", LINE)
     assert (no_engine.value.status, no_engine.value.code) == (404, "unknown_engine")
     with pytest.raises(RestServerError) as bad_label:
-        rest.synthesize("viseme-lerp", "demo", [("QQQ", 0.0, 0.1)], encoding="json")
+        RestClient(served.ws, encoding="json").synthesize(
+            "viseme-lerp", "demo", [("QQQ", 0.0, 0.1)]
+        )
     assert bad_label.value.code == "unknown_phoneme" and bad_label.value.status >= 400
     with pytest.raises(EncodeError):  # refused before sending
         rest.synthesize("viseme-lerp", "demo", [("AA", 0.2, 0.1)])

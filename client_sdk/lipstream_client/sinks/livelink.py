@@ -43,27 +43,29 @@ from .udp import UdpSender
 
 FORMAT_VERSION = 6
 SUBJECT_MAX_BYTES = 256
-LIVELINK_BLENDSHAPES: tuple[str, ...] = (
-    "eyeBlinkLeft", "eyeLookDownLeft", "eyeLookInLeft", "eyeLookOutLeft", "eyeLookUpLeft",
-    "eyeSquintLeft", "eyeWideLeft", "eyeBlinkRight", "eyeLookDownRight", "eyeLookInRight",
-    "eyeLookOutRight", "eyeLookUpRight", "eyeSquintRight", "eyeWideRight",
-    "jawForward", "jawLeft", "jawRight", "jawOpen",
-    "mouthClose", "mouthFunnel", "mouthPucker", "mouthLeft", "mouthRight",
-    "mouthSmileLeft", "mouthSmileRight", "mouthFrownLeft", "mouthFrownRight",
-    "mouthDimpleLeft", "mouthDimpleRight", "mouthStretchLeft", "mouthStretchRight",
-    "mouthRollLower", "mouthRollUpper", "mouthShrugLower", "mouthShrugUpper",
-    "mouthPressLeft", "mouthPressRight", "mouthLowerDownLeft", "mouthLowerDownRight",
-    "mouthUpperUpLeft", "mouthUpperUpRight",
-    "browDownLeft", "browDownRight", "browInnerUp", "browOuterUpLeft", "browOuterUpRight",
-    "cheekPuff", "cheekSquintLeft", "cheekSquintRight", "noseSneerLeft", "noseSneerRight",
-    "tongueOut",
-)  # fmt: skip
+_LIVELINK_BLENDSHAPES_TEXT = """
+    eyeBlinkLeft eyeLookDownLeft eyeLookInLeft eyeLookOutLeft eyeLookUpLeft
+    eyeSquintLeft eyeWideLeft eyeBlinkRight eyeLookDownRight eyeLookInRight
+    eyeLookOutRight eyeLookUpRight eyeSquintRight eyeWideRight
+    jawForward jawLeft jawRight jawOpen
+    mouthClose mouthFunnel mouthPucker mouthLeft mouthRight
+    mouthSmileLeft mouthSmileRight mouthFrownLeft mouthFrownRight
+    mouthDimpleLeft mouthDimpleRight mouthStretchLeft mouthStretchRight
+    mouthRollLower mouthRollUpper mouthShrugLower mouthShrugUpper
+    mouthPressLeft mouthPressRight mouthLowerDownLeft mouthLowerDownRight
+    mouthUpperUpLeft mouthUpperUpRight
+    browDownLeft browDownRight browInnerUp browOuterUpLeft browOuterUpRight
+    cheekPuff cheekSquintLeft cheekSquintRight noseSneerLeft noseSneerRight
+    tongueOut
+"""
+LIVELINK_BLENDSHAPES: tuple[str, ...] = tuple(_LIVELINK_BLENDSHAPES_TEXT.split())
 """The 52 ARKit blendshapes in the packet's order (Unreal's ``EARFaceBlendShape``)."""
-LIVELINK_ROTATIONS: tuple[str, ...] = (
-    "headYaw", "headPitch", "headRoll",
-    "leftEyeYaw", "leftEyePitch", "leftEyeRoll",
-    "rightEyeYaw", "rightEyePitch", "rightEyeRoll",
-)  # fmt: skip
+_LIVELINK_ROTATIONS_TEXT = """
+    headYaw headPitch headRoll
+    leftEyeYaw leftEyePitch leftEyeRoll
+    rightEyeYaw rightEyePitch rightEyeRoll
+"""
+LIVELINK_ROTATIONS: tuple[str, ...] = tuple(_LIVELINK_ROTATIONS_TEXT.split())
 LIVELINK_CURVES: tuple[str, ...] = LIVELINK_BLENDSHAPES + LIVELINK_ROTATIONS
 """The packet's 61 curves, in order; the app (and Unreal) spell them PascalCase."""
 _CURVES = struct.Struct(f">B{len(LIVELINK_CURVES)}f")

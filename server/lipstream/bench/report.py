@@ -927,14 +927,16 @@ def languages(bench: Bench) -> str:
             )
             continue
         unmapped = ", ".join(f"`{name}`" for name in row["unmapped"])
-        rows.append([
-            f"`{row['code']}`",
-            row["title"] + (" (sentence)" if row["sample"] else ""),
-            f"`{row['file']}`",
-            str(len(row["phonemes"]) + len(row["unmapped"])),
-            "yes" if row["maps_fully"] else f"no: {unmapped}",
-            "tested" if row["code"] in served else "",
-        ])  # fmt: skip
+        rows.append(
+            [
+                f"`{row['code']}`",
+                row["title"] + (" (sentence)" if row["sample"] else ""),
+                f"`{row['file']}`",
+                str(len(row["phonemes"]) + len(row["unmapped"])),
+                "yes" if row["maps_fully"] else f"no: {unmapped}",
+                "tested" if row["code"] in served else "",
+            ]
+        )
     fully = sum(1 for row in doc["languages"] if row.get("maps_fully"))
     header = (
         f"{doc.get('espeak_ng', 'espeak-ng')}: {fully} of {len(doc['languages'])} languages "

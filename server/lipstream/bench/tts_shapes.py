@@ -22,33 +22,35 @@ from typing import Any
 
 from ..phonemes import SILENCE
 from ..speech.spoken_words import SpokenUtterance, SpokenWord
+from ..tables import pairs
 from ..timeline import PhonemeSpan
 
 PUNCTUATION = ".,;:!?\"'()"
 TICKS_PER_S = 10_000_000
-AZURE_VISEME_OF = {
-    "AE": 1, "AH": 1, "AA": 2, "AO": 3, "EH": 4, "UH": 4, "EY": 4, "ER": 5, "Y": 6, "IY": 6,
-    "IH": 6, "W": 7, "UW": 7, "OW": 8, "AW": 9, "OY": 10, "AY": 11, "HH": 12, "R": 13,
-    "L": 14, "S": 15, "Z": 15, "SH": 16, "CH": 16, "JH": 16, "ZH": 16, "TH": 17, "DH": 17,
-    "F": 18, "V": 18, "D": 19, "T": 19, "N": 19, "K": 20, "G": 20, "NG": 20, "P": 21,
-    "B": 21, "M": 21, SILENCE: 0,
-}  # fmt: skip
-POLLY_VISEME_OF = {
-    "P": "p", "B": "p", "M": "p", "F": "f", "V": "f", "TH": "T", "DH": "T", "T": "t",
-    "D": "t", "N": "t", "L": "t", "K": "k", "G": "k", "NG": "k", "HH": "k", "S": "s",
-    "Z": "s", "SH": "S", "ZH": "S", "CH": "S", "JH": "S", "R": "r", "IY": "i", "IH": "i",
-    "Y": "i", "UW": "u", "UH": "u", "W": "u", "AH": "@", "AA": "a", "AE": "a", "AY": "a",
-    "AW": "a", "EY": "e", "EH": "e", "ER": "E", "OW": "o", "AO": "O", "OY": "O",
-    SILENCE: "sil",
-}  # fmt: skip
+_AZURE_VISEME_IDS = pairs("""
+    AE 1  AH 1  AA 2  AO 3  EH 4  UH 4  EY 4  ER 5  Y 6  IY 6
+    IH 6  W 7  UW 7  OW 8  AW 9  OY 10  AY 11  HH 12  R 13
+    L 14  S 15  Z 15  SH 16  CH 16  JH 16  ZH 16  TH 17  DH 17
+    F 18  V 18  D 19  T 19  N 19  K 20  G 20  NG 20  P 21
+    B 21  M 21  sil 0
+""")
+AZURE_VISEME_OF: dict[str, int] = {p: int(viseme) for p, viseme in _AZURE_VISEME_IDS.items()}
+POLLY_VISEME_OF: dict[str, str] = pairs("""
+    P p  B p  M p  F f  V f  TH T  DH T  T t
+    D t  N t  L t  K k  G k  NG k  HH k  S s
+    Z s  SH S  ZH S  CH S  JH S  R r  IY i  IH i
+    Y i  UW u  UH u  W u  AH @  AA a  AE a  AY a
+    AW a  EY e  EH e  ER E  OW o  AO O  OY O
+    sil sil
+""")
 VOWEL_PHONEMES = frozenset("AA AE AH AO AW AY EH ER EY IH IY OW OY UH UW".split())
-IPA_OF = {
-    "AA": "ɑ", "AE": "æ", "AH": "ʌ", "AO": "ɔ", "AW": "aʊ", "AY": "aɪ", "B": "b", "CH": "tʃ",
-    "D": "d", "DH": "ð", "EH": "ɛ", "ER": "ɝ", "EY": "eɪ", "F": "f", "G": "ɡ", "HH": "h",
-    "IH": "ɪ", "IY": "i", "JH": "dʒ", "K": "k", "L": "l", "M": "m", "N": "n", "NG": "ŋ",
-    "OW": "oʊ", "OY": "ɔɪ", "P": "p", "R": "ɹ", "S": "s", "SH": "ʃ", "T": "t", "TH": "θ",
-    "UH": "ʊ", "UW": "u", "V": "v", "W": "w", "Y": "j", "Z": "z", "ZH": "ʒ",
-}  # fmt: skip
+IPA_OF: dict[str, str] = pairs("""
+    AA ɑ  AE æ  AH ʌ  AO ɔ  AW aʊ  AY aɪ  B b  CH tʃ
+    D d  DH ð  EH ɛ  ER ɝ  EY eɪ  F f  G ɡ  HH h
+    IH ɪ  IY i  JH dʒ  K k  L l  M m  N n  NG ŋ
+    OW oʊ  OY ɔɪ  P p  R ɹ  S s  SH ʃ  T t  TH θ
+    UH ʊ  UW u  V v  W w  Y j  Z z  ZH ʒ
+""")
 
 
 def _ms(seconds: float) -> float:
@@ -157,21 +159,28 @@ def azure_input(utterance: SpokenUtterance, *, visemes: bool = True) -> list[dic
     for word in utterance.words:
         bare = word.text.strip(PUNCTUATION) or word.text
         start = round(word.start * TICKS_PER_S)
-        events.append({
-            "audioOffset": start,
-            "duration": round(word.end * TICKS_PER_S) - start,
-            "text": bare,
-            "textOffset": utterance.text.index(bare, offset),
-            "wordLength": len(bare),
-            "boundaryType": "WordBoundary",
-        })  # fmt: skip
+        events.append(
+            {
+                "audioOffset": start,
+                "duration": round(word.end * TICKS_PER_S) - start,
+                "text": bare,
+                "textOffset": utterance.text.index(bare, offset),
+                "wordLength": len(bare),
+                "boundaryType": "WordBoundary",
+            }
+        )
         offset = events[-1]["textOffset"] + len(bare)
         if bare != word.text and word.text[-1] in PUNCTUATION:
-            events.append({
-                "audioOffset": round(word.end * TICKS_PER_S), "duration": 0,
-                "text": word.text[-1], "textOffset": offset, "wordLength": 1,
-                "boundaryType": "PunctuationBoundary",
-            })  # fmt: skip
+            events.append(
+                {
+                    "audioOffset": round(word.end * TICKS_PER_S),
+                    "duration": 0,
+                    "text": word.text[-1],
+                    "textOffset": offset,
+                    "wordLength": 1,
+                    "boundaryType": "PunctuationBoundary",
+                }
+            )
     if visemes:
         events += azure_visemes(utterance)
     return events
@@ -193,10 +202,15 @@ def polly_input(utterance: SpokenUtterance, *, words: bool = True) -> str:
             bare = word.text.strip(PUNCTUATION) or word.text
             at = text.index(bare, encoded_offset)
             first = len(text[:at].encode("utf-8"))
-            marks.append({
-                "time": round(word.start * 1000), "type": "word", "start": first,
-                "end": first + len(bare.encode("utf-8")), "value": bare,
-            })  # fmt: skip
+            marks.append(
+                {
+                    "time": round(word.start * 1000),
+                    "type": "word",
+                    "start": first,
+                    "end": first + len(bare.encode("utf-8")),
+                    "value": bare,
+                }
+            )
             encoded_offset = at + len(bare)
     for span in utterance.spans:
         viseme = POLLY_VISEME_OF[span.phoneme]

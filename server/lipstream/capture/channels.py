@@ -34,6 +34,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ..tables import names
+
 CHIN = 152
 UPPER_LIP_TOP, UPPER_LIP_INNER, LOWER_LIP_INNER, LOWER_LIP_BOTTOM = 0, 13, 14, 17
 RIGHT_CORNER, LEFT_CORNER = 61, 291
@@ -41,12 +43,12 @@ RIGHT_UPPER_LIP, LEFT_UPPER_LIP = 37, 267
 RIGHT_LOWER_LIP, LEFT_LOWER_LIP = 84, 314
 X, Y, Z = 0, 1, 2
 
-CHANNELS: tuple[str, ...] = (
-    "jawOpen", "mouthClose", "mouthFunnel", "mouthPucker",
-    "mouthStretchLeft", "mouthStretchRight", "mouthSmileLeft", "mouthSmileRight",
-    "mouthRollLower", "mouthRollUpper", "mouthLowerDownLeft", "mouthLowerDownRight",
-    "mouthUpperUpLeft", "mouthUpperUpRight",
-)  # fmt: skip
+CHANNELS: tuple[str, ...] = names("""
+    jawOpen mouthClose mouthFunnel mouthPucker
+    mouthStretchLeft mouthStretchRight mouthSmileLeft mouthSmileRight
+    mouthRollLower mouthRollUpper mouthLowerDownLeft mouthLowerDownRight
+    mouthUpperUpLeft mouthUpperUpRight
+""")
 RANGE_PERCENTILE = 99.0
 REST_SHARE = 0.2
 MIN_REST_FRAMES = 3

@@ -16,9 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 
-RIGID: tuple[int, ...] = (
-    10, 151, 9, 8, 168, 6, 197, 195, 33, 133, 362, 263, 127, 356, 234, 454, 226, 446, 116, 345,
-)  # fmt: skip
+RIGID: tuple[int, ...] = tuple(
+    map(int, "10 151 9 8 168 6 197 195 33 133 362 263 127 356 234 454 226 446 116 345".split())
+)
 RIGHT_EYE_OUTER = 33
 LEFT_EYE_OUTER = 263
 FOREHEAD = 10

@@ -26,6 +26,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..errors import InvalidRequestError
+from ..tables import names
 from ..timeline import PhonemeSpan
 from .blinks import blink_track
 from .dynamics import track_targets
@@ -44,15 +45,15 @@ __all__ = [
     "generate_face",
 ]
 
-DEMO_CHANNELS: tuple[str, ...] = (
-    "jawOpen", "mouthClose", "mouthFunnel", "mouthPucker",
-    "mouthStretchLeft", "mouthStretchRight", "mouthSmileLeft", "mouthSmileRight",
-    "mouthPressLeft", "mouthPressRight", "mouthRollLower", "mouthRollUpper",
-    "mouthLowerDownLeft", "mouthLowerDownRight", "mouthUpperUpLeft", "mouthUpperUpRight",
-    "mouthShrugLower", "mouthShrugUpper", "cheekPuff", "browInnerUp",
-    "browDownLeft", "browDownRight", "browOuterUpLeft", "browOuterUpRight",
-    "eyeBlinkLeft", "eyeBlinkRight", "eyeSquintLeft", "eyeSquintRight",
-)  # fmt: skip
+DEMO_CHANNELS: tuple[str, ...] = names("""
+    jawOpen mouthClose mouthFunnel mouthPucker
+    mouthStretchLeft mouthStretchRight mouthSmileLeft mouthSmileRight
+    mouthPressLeft mouthPressRight mouthRollLower mouthRollUpper
+    mouthLowerDownLeft mouthLowerDownRight mouthUpperUpLeft mouthUpperUpRight
+    mouthShrugLower mouthShrugUpper cheekPuff browInnerUp
+    browDownLeft browDownRight browOuterUpLeft browOuterUpRight
+    eyeBlinkLeft eyeBlinkRight eyeSquintLeft eyeSquintRight
+""")
 
 ARTICULATOR_MAX_SPEED = np.array([4.5, 11.0, 3.5, 3.5, 20.0])
 """Fastest motion of (jaw, lips, round, spread, tuck) in units per second."""

@@ -10,11 +10,21 @@ from pathlib import Path
 from ..errors import InvalidRequestError
 
 FORMATS: tuple[str, ...] = (
-    "csv", "json", "livelink", "rhubarb-tsv", "rhubarb-xml", "rhubarb-json", "moho",
-)  # fmt: skip
+    "csv",
+    "json",
+    "livelink",
+    "rhubarb-tsv",
+    "rhubarb-xml",
+    "rhubarb-json",
+    "moho",
+)
 EXTENSIONS: dict[str, str] = {
-    ".csv": "csv", ".json": "json", ".tsv": "rhubarb-tsv", ".xml": "rhubarb-xml", ".dat": "moho",
-}  # fmt: skip
+    ".csv": "csv",
+    ".json": "json",
+    ".tsv": "rhubarb-tsv",
+    ".xml": "rhubarb-xml",
+    ".dat": "moho",
+}
 # Formats made from mouth shapes: they need output visemes "preston-blair".
 SHAPE_FORMATS = frozenset({"rhubarb-tsv", "rhubarb-xml", "rhubarb-json", "moho"})
 MOHO_FPS = 24.0  # Rhubarb's default --datFrameRate

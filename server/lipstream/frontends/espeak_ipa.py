@@ -21,16 +21,19 @@ from types import MappingProxyType
 
 from ..errors import UnknownPhonemeError, UnmappedPhonemeError
 from ..phonemes import SILENCE, ipa_phonemes
+from ..tables import pairs
 
 _RETROFLEX: Mapping[str, str] = MappingProxyType(
     {"s": "ʂ", "z": "ʐ", "t": "ʈ", "d": "ɖ", "n": "ɳ", "l": "ɭ", "r": "ɽ", "i": "ɨ"}
 )
 _PALATAL: Mapping[str, str] = MappingProxyType({"n": "ɲ", "l": "ʎ"})
-_KIRSHENBAUM: Mapping[str, str] = MappingProxyType({
-    "A": "ɑ", "E": "ɛ", "I": "ɪ", "O": "ɔ", "U": "ʊ", "V": "ʌ", "N": "ŋ", "S": "ʃ", "Z": "ʒ",
-    "T": "θ", "D": "ð", "C": "ç", "X": "χ", "Q": "ɒ", "@": "ə", "3": "ɜ", "0": "ɒ", "?": "ʔ",
-    "Φ": "ɸ", "ε": "ɛ", "R": "ʁ", "L": "ɫ", "B": "β", "G": "ɣ", "J": "ɟ", "W": "ʍ",
-})  # fmt: skip
+_KIRSHENBAUM: Mapping[str, str] = MappingProxyType(
+    pairs("""
+        A ɑ  E ɛ  I ɪ  O ɔ  U ʊ  V ʌ  N ŋ  S ʃ  Z ʒ
+        T θ  D ð  C ç  X χ  Q ɒ  @ ə  3 ɜ  0 ɒ  ? ʔ
+        Φ ɸ  ε ɛ  R ʁ  L ɫ  B β  G ɣ  J ɟ  W ʍ
+    """)
+)
 _WHOLE: Mapping[str, str] = MappingProxyType({"sx": "ɧ"})  # Swedish sj-sound
 _ASPIRATED_AFTER = frozenset("ptkcqbdgʈɖɕʂʃ")
 _DROPPED = frozenset("#-`'\",%=;_!|")

@@ -93,81 +93,144 @@ _NASAL = {"nasal": True}
 _LATERAL = {"lateral": True}
 _RHOTIC = {"rhotic": True}
 
-CONSONANTS: Mapping[str, Consonant] = MappingProxyType({
-    # stops
-    "p": _c(BILABIAL, STOP, False), "b": _c(BILABIAL, STOP, True),
-    "t": _c(ALVEOLAR, STOP, False), "d": _c(ALVEOLAR, STOP, True),
-    "ʈ": _c(RETROFLEX, STOP, False), "ɖ": _c(RETROFLEX, STOP, True),
-    "c": _c(PALATAL, STOP, False), "ɟ": _c(PALATAL, STOP, True),
-    "k": _c(VELAR, STOP, False), "ɡ": _c(VELAR, STOP, True), "g": _c(VELAR, STOP, True),
-    "q": _c(UVULAR, STOP, False), "ɢ": _c(UVULAR, STOP, True),
-    "ʡ": _c(PHARYNGEAL, STOP, False), "ʔ": _c(GLOTTAL, STOP, False),
-    # implosives and clicks: stops at their place
-    "ɓ": _c(BILABIAL, STOP, True), "ɗ": _c(ALVEOLAR, STOP, True), "ᶑ": _c(RETROFLEX, STOP, True),
-    "ʄ": _c(PALATAL, STOP, True), "ɠ": _c(VELAR, STOP, True), "ʛ": _c(UVULAR, STOP, True),
-    "ʘ": _c(BILABIAL, STOP, False), "ǀ": _c(DENTAL, STOP, False),
-    "ǃ": _c(POSTALVEOLAR, STOP, False), "ǂ": _c(PALATAL, STOP, False),
-    "ǁ": _c(ALVEOLAR, STOP, False, lateral=True),
-    # nasals
-    "m": _c(BILABIAL, STOP, True, **_NASAL), "ɱ": _c(LABIODENTAL, STOP, True, **_NASAL),
-    "n": _c(ALVEOLAR, STOP, True, **_NASAL), "ɳ": _c(RETROFLEX, STOP, True, **_NASAL),
-    "ɲ": _c(PALATAL, STOP, True, **_NASAL), "ŋ": _c(VELAR, STOP, True, **_NASAL),
-    "ɴ": _c(UVULAR, STOP, True, **_NASAL),
-    # trills, taps and flaps
-    "ʙ": _c(BILABIAL, TRILL, True), "r": _c(ALVEOLAR, TRILL, True, **_RHOTIC),
-    "ʀ": _c(UVULAR, TRILL, True, **_RHOTIC), "ⱱ": _c(LABIODENTAL, TAP, True),
-    "ɾ": _c(ALVEOLAR, TAP, True, **_RHOTIC), "ɽ": _c(RETROFLEX, TAP, True, **_RHOTIC),
-    "ɺ": _c(ALVEOLAR, TAP, True, lateral=True),
-    # fricatives
-    "ɸ": _c(BILABIAL, FRICATIVE, False), "β": _c(BILABIAL, FRICATIVE, True),
-    "f": _c(LABIODENTAL, FRICATIVE, False), "v": _c(LABIODENTAL, FRICATIVE, True),
-    "θ": _c(DENTAL, FRICATIVE, False), "ð": _c(DENTAL, FRICATIVE, True),
-    "s": _c(ALVEOLAR, FRICATIVE, False), "z": _c(ALVEOLAR, FRICATIVE, True),
-    "ʃ": _c(POSTALVEOLAR, FRICATIVE, False), "ʒ": _c(POSTALVEOLAR, FRICATIVE, True),
-    "ʂ": _c(RETROFLEX, FRICATIVE, False), "ʐ": _c(RETROFLEX, FRICATIVE, True),
-    "ɕ": _c(ALVEOLO_PALATAL, FRICATIVE, False), "ʑ": _c(ALVEOLO_PALATAL, FRICATIVE, True),
-    "ç": _c(PALATAL, FRICATIVE, False), "ʝ": _c(PALATAL, FRICATIVE, True),
-    "x": _c(VELAR, FRICATIVE, False), "ɣ": _c(VELAR, FRICATIVE, True),
-    "χ": _c(UVULAR, FRICATIVE, False), "ʁ": _c(UVULAR, FRICATIVE, True, **_RHOTIC),
-    "ħ": _c(PHARYNGEAL, FRICATIVE, False), "ʕ": _c(PHARYNGEAL, FRICATIVE, True),
-    "ʜ": _c(PHARYNGEAL, FRICATIVE, False), "ʢ": _c(PHARYNGEAL, FRICATIVE, True),
-    "h": _c(GLOTTAL, FRICATIVE, False), "ɦ": _c(GLOTTAL, FRICATIVE, True),
-    "ɧ": _c(POSTALVEOLAR, FRICATIVE, False, rounded=0.5),
-    "ɬ": _c(ALVEOLAR, FRICATIVE, False, **_LATERAL), "ɮ": _c(ALVEOLAR, FRICATIVE, True, **_LATERAL),
-    # approximants
-    "ʋ": _c(LABIODENTAL, APPROXIMANT, True), "ɹ": _c(POSTALVEOLAR, APPROXIMANT, True, **_RHOTIC),
-    "ɻ": _c(RETROFLEX, APPROXIMANT, True, **_RHOTIC), "j": _c(PALATAL, APPROXIMANT, True),
-    "ɰ": _c(VELAR, APPROXIMANT, True), "w": _c(VELAR, APPROXIMANT, True, rounded=1.0),
-    "ʍ": _c(VELAR, APPROXIMANT, False, rounded=1.0),
-    "ɥ": _c(PALATAL, APPROXIMANT, True, rounded=1.0),
-    "l": _c(ALVEOLAR, APPROXIMANT, True, **_LATERAL),
-    "ɫ": _c(ALVEOLAR, APPROXIMANT, True, **_LATERAL),
-    "ɭ": _c(RETROFLEX, APPROXIMANT, True, **_LATERAL),
-    "ʎ": _c(PALATAL, APPROXIMANT, True, **_LATERAL),
-    "ʟ": _c(VELAR, APPROXIMANT, True, **_LATERAL),
-    # precomposed affricates
-    "ʦ": _c(ALVEOLAR, AFFRICATE, False), "ʣ": _c(ALVEOLAR, AFFRICATE, True),
-    "ʧ": _c(POSTALVEOLAR, AFFRICATE, False), "ʤ": _c(POSTALVEOLAR, AFFRICATE, True),
-    "ʨ": _c(ALVEOLO_PALATAL, AFFRICATE, False), "ʥ": _c(ALVEOLO_PALATAL, AFFRICATE, True),
-})  # fmt: skip
+CONSONANTS: Mapping[str, Consonant] = MappingProxyType(
+    {
+        # stops
+        "p": _c(BILABIAL, STOP, False),
+        "b": _c(BILABIAL, STOP, True),
+        "t": _c(ALVEOLAR, STOP, False),
+        "d": _c(ALVEOLAR, STOP, True),
+        "ʈ": _c(RETROFLEX, STOP, False),
+        "ɖ": _c(RETROFLEX, STOP, True),
+        "c": _c(PALATAL, STOP, False),
+        "ɟ": _c(PALATAL, STOP, True),
+        "k": _c(VELAR, STOP, False),
+        "ɡ": _c(VELAR, STOP, True),
+        "g": _c(VELAR, STOP, True),
+        "q": _c(UVULAR, STOP, False),
+        "ɢ": _c(UVULAR, STOP, True),
+        "ʡ": _c(PHARYNGEAL, STOP, False),
+        "ʔ": _c(GLOTTAL, STOP, False),
+        # implosives and clicks: stops at their place
+        "ɓ": _c(BILABIAL, STOP, True),
+        "ɗ": _c(ALVEOLAR, STOP, True),
+        "ᶑ": _c(RETROFLEX, STOP, True),
+        "ʄ": _c(PALATAL, STOP, True),
+        "ɠ": _c(VELAR, STOP, True),
+        "ʛ": _c(UVULAR, STOP, True),
+        "ʘ": _c(BILABIAL, STOP, False),
+        "ǀ": _c(DENTAL, STOP, False),
+        "ǃ": _c(POSTALVEOLAR, STOP, False),
+        "ǂ": _c(PALATAL, STOP, False),
+        "ǁ": _c(ALVEOLAR, STOP, False, lateral=True),
+        # nasals
+        "m": _c(BILABIAL, STOP, True, **_NASAL),
+        "ɱ": _c(LABIODENTAL, STOP, True, **_NASAL),
+        "n": _c(ALVEOLAR, STOP, True, **_NASAL),
+        "ɳ": _c(RETROFLEX, STOP, True, **_NASAL),
+        "ɲ": _c(PALATAL, STOP, True, **_NASAL),
+        "ŋ": _c(VELAR, STOP, True, **_NASAL),
+        "ɴ": _c(UVULAR, STOP, True, **_NASAL),
+        # trills, taps and flaps
+        "ʙ": _c(BILABIAL, TRILL, True),
+        "r": _c(ALVEOLAR, TRILL, True, **_RHOTIC),
+        "ʀ": _c(UVULAR, TRILL, True, **_RHOTIC),
+        "ⱱ": _c(LABIODENTAL, TAP, True),
+        "ɾ": _c(ALVEOLAR, TAP, True, **_RHOTIC),
+        "ɽ": _c(RETROFLEX, TAP, True, **_RHOTIC),
+        "ɺ": _c(ALVEOLAR, TAP, True, lateral=True),
+        # fricatives
+        "ɸ": _c(BILABIAL, FRICATIVE, False),
+        "β": _c(BILABIAL, FRICATIVE, True),
+        "f": _c(LABIODENTAL, FRICATIVE, False),
+        "v": _c(LABIODENTAL, FRICATIVE, True),
+        "θ": _c(DENTAL, FRICATIVE, False),
+        "ð": _c(DENTAL, FRICATIVE, True),
+        "s": _c(ALVEOLAR, FRICATIVE, False),
+        "z": _c(ALVEOLAR, FRICATIVE, True),
+        "ʃ": _c(POSTALVEOLAR, FRICATIVE, False),
+        "ʒ": _c(POSTALVEOLAR, FRICATIVE, True),
+        "ʂ": _c(RETROFLEX, FRICATIVE, False),
+        "ʐ": _c(RETROFLEX, FRICATIVE, True),
+        "ɕ": _c(ALVEOLO_PALATAL, FRICATIVE, False),
+        "ʑ": _c(ALVEOLO_PALATAL, FRICATIVE, True),
+        "ç": _c(PALATAL, FRICATIVE, False),
+        "ʝ": _c(PALATAL, FRICATIVE, True),
+        "x": _c(VELAR, FRICATIVE, False),
+        "ɣ": _c(VELAR, FRICATIVE, True),
+        "χ": _c(UVULAR, FRICATIVE, False),
+        "ʁ": _c(UVULAR, FRICATIVE, True, **_RHOTIC),
+        "ħ": _c(PHARYNGEAL, FRICATIVE, False),
+        "ʕ": _c(PHARYNGEAL, FRICATIVE, True),
+        "ʜ": _c(PHARYNGEAL, FRICATIVE, False),
+        "ʢ": _c(PHARYNGEAL, FRICATIVE, True),
+        "h": _c(GLOTTAL, FRICATIVE, False),
+        "ɦ": _c(GLOTTAL, FRICATIVE, True),
+        "ɧ": _c(POSTALVEOLAR, FRICATIVE, False, rounded=0.5),
+        "ɬ": _c(ALVEOLAR, FRICATIVE, False, **_LATERAL),
+        "ɮ": _c(ALVEOLAR, FRICATIVE, True, **_LATERAL),
+        # approximants
+        "ʋ": _c(LABIODENTAL, APPROXIMANT, True),
+        "ɹ": _c(POSTALVEOLAR, APPROXIMANT, True, **_RHOTIC),
+        "ɻ": _c(RETROFLEX, APPROXIMANT, True, **_RHOTIC),
+        "j": _c(PALATAL, APPROXIMANT, True),
+        "ɰ": _c(VELAR, APPROXIMANT, True),
+        "w": _c(VELAR, APPROXIMANT, True, rounded=1.0),
+        "ʍ": _c(VELAR, APPROXIMANT, False, rounded=1.0),
+        "ɥ": _c(PALATAL, APPROXIMANT, True, rounded=1.0),
+        "l": _c(ALVEOLAR, APPROXIMANT, True, **_LATERAL),
+        "ɫ": _c(ALVEOLAR, APPROXIMANT, True, **_LATERAL),
+        "ɭ": _c(RETROFLEX, APPROXIMANT, True, **_LATERAL),
+        "ʎ": _c(PALATAL, APPROXIMANT, True, **_LATERAL),
+        "ʟ": _c(VELAR, APPROXIMANT, True, **_LATERAL),
+        # precomposed affricates
+        "ʦ": _c(ALVEOLAR, AFFRICATE, False),
+        "ʣ": _c(ALVEOLAR, AFFRICATE, True),
+        "ʧ": _c(POSTALVEOLAR, AFFRICATE, False),
+        "ʤ": _c(POSTALVEOLAR, AFFRICATE, True),
+        "ʨ": _c(ALVEOLO_PALATAL, AFFRICATE, False),
+        "ʥ": _c(ALVEOLO_PALATAL, AFFRICATE, True),
+    }
+)
 
-VOWELS: Mapping[str, Vowel] = MappingProxyType({
-    "i": _v(CLOSE, FRONT, 0), "y": _v(CLOSE, FRONT, 1), "ɨ": _v(CLOSE, CENTRAL, 0),
-    "ʉ": _v(CLOSE, CENTRAL, 1), "ɯ": _v(CLOSE, BACK, 0), "u": _v(CLOSE, BACK, 1),
-    "ɪ": _v(NEAR_CLOSE, NEAR_FRONT, 0), "ʏ": _v(NEAR_CLOSE, NEAR_FRONT, 1),
-    "ᵻ": _v(NEAR_CLOSE, CENTRAL, 0), "ᵿ": _v(NEAR_CLOSE, CENTRAL, 1),
-    "ʊ": _v(NEAR_CLOSE, NEAR_BACK, 1), "ɩ": _v(NEAR_CLOSE, NEAR_FRONT, 0),
-    "ɷ": _v(NEAR_CLOSE, NEAR_BACK, 1),
-    "e": _v(CLOSE_MID, FRONT, 0), "ø": _v(CLOSE_MID, FRONT, 1), "ɘ": _v(CLOSE_MID, CENTRAL, 0),
-    "ɵ": _v(CLOSE_MID, CENTRAL, 1), "ɤ": _v(CLOSE_MID, BACK, 0), "o": _v(CLOSE_MID, BACK, 1),
-    "ə": _v(MID, CENTRAL, 0), "ɚ": _v(MID, CENTRAL, 0, **_RHOTIC),
-    "ɛ": _v(OPEN_MID, FRONT, 0), "œ": _v(OPEN_MID, FRONT, 1), "ɜ": _v(OPEN_MID, CENTRAL, 0),
-    "ɞ": _v(OPEN_MID, CENTRAL, 1), "ʌ": _v(OPEN_MID, BACK, 0), "ɔ": _v(OPEN_MID, BACK, 1),
-    "ɝ": _v(OPEN_MID, CENTRAL, 0, **_RHOTIC),
-    "æ": _v(NEAR_OPEN, FRONT, 0), "ɐ": _v(NEAR_OPEN, CENTRAL, 0),
-    "a": _v(OPEN, FRONT, 0), "ɶ": _v(OPEN, FRONT, 1), "ɑ": _v(OPEN, BACK, 0),
-    "ɒ": _v(OPEN, BACK, 1),
-})  # fmt: skip
+VOWELS: Mapping[str, Vowel] = MappingProxyType(
+    {
+        "i": _v(CLOSE, FRONT, 0),
+        "y": _v(CLOSE, FRONT, 1),
+        "ɨ": _v(CLOSE, CENTRAL, 0),
+        "ʉ": _v(CLOSE, CENTRAL, 1),
+        "ɯ": _v(CLOSE, BACK, 0),
+        "u": _v(CLOSE, BACK, 1),
+        "ɪ": _v(NEAR_CLOSE, NEAR_FRONT, 0),
+        "ʏ": _v(NEAR_CLOSE, NEAR_FRONT, 1),
+        "ᵻ": _v(NEAR_CLOSE, CENTRAL, 0),
+        "ᵿ": _v(NEAR_CLOSE, CENTRAL, 1),
+        "ʊ": _v(NEAR_CLOSE, NEAR_BACK, 1),
+        "ɩ": _v(NEAR_CLOSE, NEAR_FRONT, 0),
+        "ɷ": _v(NEAR_CLOSE, NEAR_BACK, 1),
+        "e": _v(CLOSE_MID, FRONT, 0),
+        "ø": _v(CLOSE_MID, FRONT, 1),
+        "ɘ": _v(CLOSE_MID, CENTRAL, 0),
+        "ɵ": _v(CLOSE_MID, CENTRAL, 1),
+        "ɤ": _v(CLOSE_MID, BACK, 0),
+        "o": _v(CLOSE_MID, BACK, 1),
+        "ə": _v(MID, CENTRAL, 0),
+        "ɚ": _v(MID, CENTRAL, 0, **_RHOTIC),
+        "ɛ": _v(OPEN_MID, FRONT, 0),
+        "œ": _v(OPEN_MID, FRONT, 1),
+        "ɜ": _v(OPEN_MID, CENTRAL, 0),
+        "ɞ": _v(OPEN_MID, CENTRAL, 1),
+        "ʌ": _v(OPEN_MID, BACK, 0),
+        "ɔ": _v(OPEN_MID, BACK, 1),
+        "ɝ": _v(OPEN_MID, CENTRAL, 0, **_RHOTIC),
+        "æ": _v(NEAR_OPEN, FRONT, 0),
+        "ɐ": _v(NEAR_OPEN, CENTRAL, 0),
+        "a": _v(OPEN, FRONT, 0),
+        "ɶ": _v(OPEN, FRONT, 1),
+        "ɑ": _v(OPEN, BACK, 0),
+        "ɒ": _v(OPEN, BACK, 1),
+    }
+)
 
 BASE_SYMBOLS: Mapping[str, Segment] = MappingProxyType({**CONSONANTS, **VOWELS})
 
@@ -253,18 +316,31 @@ def _rhotic(segment: Segment) -> Segment:
     return replace(segment, rhotic=True)
 
 
-DIACRITICS: Mapping[str, Callable[[Segment], Segment]] = MappingProxyType({
-    "\u0303": _nasalized,  # combining tilde
-    "\u0325": _voiceless, "\u030a": _voiceless,  # ring below, ring above
-    "\u032c": _voiced,  # caron below
-    "ʷ": _labialized, "ᵝ": _compressed,
-    "\u0339": _rounding(0.25), "\u031c": _rounding(-0.25),  # more, less rounded
-    "\u031e": _lowered, "\u031d": _raised, "˕": _lowered, "˔": _raised,
-    "\u0308": _centralized, "\u033d": _mid_centralized,
-    "\u031f": _advanced, "\u0320": _retracted, "˖": _advanced, "˗": _retracted,
-    "\u032a": _dental, "\u0346": _dental,
-    "˞": _rhotic,
-})  # fmt: skip
+DIACRITICS: Mapping[str, Callable[[Segment], Segment]] = MappingProxyType(
+    {
+        "\u0303": _nasalized,  # combining tilde
+        "\u0325": _voiceless,  # ring below
+        "\u030a": _voiceless,  # ring above
+        "\u032c": _voiced,  # caron below
+        "ʷ": _labialized,
+        "ᵝ": _compressed,
+        "\u0339": _rounding(0.25),  # more rounded
+        "\u031c": _rounding(-0.25),  # less rounded
+        "\u031e": _lowered,
+        "\u031d": _raised,
+        "˕": _lowered,
+        "˔": _raised,
+        "\u0308": _centralized,
+        "\u033d": _mid_centralized,
+        "\u031f": _advanced,
+        "\u0320": _retracted,
+        "˖": _advanced,
+        "˗": _retracted,
+        "\u032a": _dental,
+        "\u0346": _dental,
+        "˞": _rhotic,
+    }
+)
 
 IGNORED_MARKS = frozenset(
     "ˈˌ.‿"  # stress, syllable break, linking

@@ -30,13 +30,26 @@ from .phoneme_prototypes import (
     MONOPHTHONG_PROTOTYPES,
 )
 
-CONSONANT_WEIGHTS: Mapping[str, float] = MappingProxyType({
-    "place": 1.0, "stricture": 1.0, "voiced": 0.3, "nasal": 3.0, "lateral": 2.0,
-    "rhotic": 2.0, "rounded": 1.5,
-})  # fmt: skip
-VOWEL_WEIGHTS: Mapping[str, float] = MappingProxyType({
-    "height": 2.0, "backness": 0.6, "rounded": 1.5, "rhotic": 2.0, "nasal": 0.0,
-})  # fmt: skip
+CONSONANT_WEIGHTS: Mapping[str, float] = MappingProxyType(
+    {
+        "place": 1.0,
+        "stricture": 1.0,
+        "voiced": 0.3,
+        "nasal": 3.0,
+        "lateral": 2.0,
+        "rhotic": 2.0,
+        "rounded": 1.5,
+    }
+)
+VOWEL_WEIGHTS: Mapping[str, float] = MappingProxyType(
+    {
+        "height": 2.0,
+        "backness": 0.6,
+        "rounded": 1.5,
+        "rhotic": 2.0,
+        "nasal": 0.0,
+    }
+)
 DIPHTHONG_TOLERANCE = 1.2
 
 

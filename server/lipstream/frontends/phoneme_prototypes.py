@@ -15,19 +15,58 @@ from __future__ import annotations
 from collections.abc import Mapping
 from types import MappingProxyType
 
-CONSONANT_PROTOTYPES: Mapping[str, tuple[str, ...]] = MappingProxyType({
-    "P": ("p",), "B": ("b",), "T": ("t",), "D": ("d",), "K": ("k",), "G": ("ɡ",),
-    "CH": ("t͡ʃ",), "JH": ("d͡ʒ",), "F": ("f",), "V": ("v",), "TH": ("θ",), "DH": ("ð",),
-    "S": ("s",), "Z": ("z",), "SH": ("ʃ",), "ZH": ("ʒ",), "HH": ("h",),
-    "M": ("m",), "N": ("n",), "NG": ("ŋ",), "L": ("l",), "R": ("ɹ",), "Y": ("j",), "W": ("w",),
-})  # fmt: skip
+CONSONANT_PROTOTYPES: Mapping[str, tuple[str, ...]] = MappingProxyType(
+    {
+        "P": ("p",),
+        "B": ("b",),
+        "T": ("t",),
+        "D": ("d",),
+        "K": ("k",),
+        "G": ("ɡ",),
+        "CH": ("t͡ʃ",),
+        "JH": ("d͡ʒ",),
+        "F": ("f",),
+        "V": ("v",),
+        "TH": ("θ",),
+        "DH": ("ð",),
+        "S": ("s",),
+        "Z": ("z",),
+        "SH": ("ʃ",),
+        "ZH": ("ʒ",),
+        "HH": ("h",),
+        "M": ("m",),
+        "N": ("n",),
+        "NG": ("ŋ",),
+        "L": ("l",),
+        "R": ("ɹ",),
+        "Y": ("j",),
+        "W": ("w",),
+    }
+)
 
-MONOPHTHONG_PROTOTYPES: Mapping[str, tuple[str, ...]] = MappingProxyType({
-    "IY": ("i",), "IH": ("ɪ",), "EH": ("ɛ",), "AE": ("æ", "a"), "AA": ("ɑ", "ä"),
-    "AO": ("ɔ",), "AH": ("ʌ", "ə", "ɐ"), "UH": ("ʊ",), "UW": ("u",), "ER": ("ɝ", "ɚ"),
-    "EY": ("e",), "OW": ("o",),
-})  # fmt: skip
+MONOPHTHONG_PROTOTYPES: Mapping[str, tuple[str, ...]] = MappingProxyType(
+    {
+        "IY": ("i",),
+        "IH": ("ɪ",),
+        "EH": ("ɛ",),
+        "AE": ("æ", "a"),
+        "AA": ("ɑ", "ä"),
+        "AO": ("ɔ",),
+        "AH": ("ʌ", "ə", "ɐ"),
+        "UH": ("ʊ",),
+        "UW": ("u",),
+        "ER": ("ɝ", "ɚ"),
+        "EY": ("e",),
+        "OW": ("o",),
+    }
+)
 
-DIPHTHONG_PROTOTYPES: Mapping[str, tuple[str, str]] = MappingProxyType({
-    "EY": ("e", "ɪ"), "AY": ("a", "ɪ"), "AW": ("a", "ʊ"), "OY": ("ɔ", "ɪ"), "OW": ("o", "ʊ"),
-})  # fmt: skip
+DIPHTHONG_PROTOTYPES: Mapping[str, tuple[str, str]] = MappingProxyType(
+    {
+        "EY": ("e", "ɪ"),
+        "AY": ("a", "ɪ"),
+        "AW": ("a", "ʊ"),
+        "OY": ("ɔ", "ɪ"),
+        "OW": ("o", "ʊ"),
+    }
+)

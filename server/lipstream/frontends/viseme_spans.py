@@ -18,21 +18,26 @@ from types import MappingProxyType
 import numpy as np
 
 from ..phonemes import PHONEME_INDEX, SILENCE
+from ..tables import pairs
 from ..timeline import PhonemeSpan
 from .timings import TimedViseme
 from .word_durations import WordDurationModel
 
-AZURE_VISEMES = MappingProxyType({
-    "0": SILENCE, "1": "AH", "2": "AA", "3": "AO", "4": "EH", "5": "ER", "6": "IY",
-    "7": "UW", "8": "OW", "9": "AW", "10": "OY", "11": "AY", "12": "HH", "13": "R",
-    "14": "L", "15": "S", "16": "SH", "17": "DH", "18": "F", "19": "T", "20": "K", "21": "P",
-})  # fmt: skip
+AZURE_VISEMES = MappingProxyType(
+    pairs("""
+        0 sil  1 AH  2 AA  3 AO  4 EH  5 ER  6 IY
+        7 UW  8 OW  9 AW  10 OY  11 AY  12 HH  13 R
+        14 L  15 S  16 SH  17 DH  18 F  19 T  20 K  21 P
+    """)
+)
 """Azure viseme ID (SAPI classes: 1 æ ə ʌ, 6 j i ɪ, 7 w u, 19 d t n θ, 21 p b m, ...)."""
-POLLY_VISEMES = MappingProxyType({
-    "sil": SILENCE, "p": "P", "t": "T", "S": "SH", "T": "TH", "f": "F", "k": "K",
-    "i": "IY", "r": "R", "s": "S", "u": "UW", "@": "AH", "a": "AA", "e": "EH",
-    "E": "ER", "o": "OW", "O": "AO",
-})  # fmt: skip
+POLLY_VISEMES = MappingProxyType(
+    pairs("""
+        sil sil  p P  t T  S SH  T TH  f F  k K
+        i IY  r R  s S  u UW  @ AH  a AA  e EH
+        E ER  o OW  O AO
+    """)
+)
 """Polly viseme letter (p: p b m; t: t d; S: ʃ ʒ tʃ dʒ; T: θ ð; k: k g ŋ; ...)."""
 TABLES = {"azure": AZURE_VISEMES, "polly": POLLY_VISEMES}
 

@@ -18,12 +18,24 @@ from collections.abc import Iterable, Mapping, Sequence
 
 # (key in the results, percentile); None marks the mean.
 A2F_STATISTICS: tuple[tuple[str, float | None], ...] = (
-    ("min", 0.0), ("p1", 1.0), ("p5", 5.0), ("p10", 10.0), ("p50", 50.0), ("mean", None),
-    ("p90", 90.0), ("p95", 95.0), ("p99", 99.0), ("max", 100.0),
-)  # fmt: skip
+    ("min", 0.0),
+    ("p1", 1.0),
+    ("p5", 5.0),
+    ("p10", 10.0),
+    ("p50", 50.0),
+    ("mean", None),
+    ("p90", 90.0),
+    ("p95", 95.0),
+    ("p99", 99.0),
+    ("max", 100.0),
+)
 LAG_STATISTICS: tuple[tuple[str, float | None], ...] = (
-    ("p50", 50.0), ("mean", None), ("p95", 95.0), ("p99", 99.0), ("max", 100.0),
-)  # fmt: skip
+    ("p50", 50.0),
+    ("mean", None),
+    ("p95", 95.0),
+    ("p99", 99.0),
+    ("max", 100.0),
+)
 
 Summary = dict[str, float | None]
 

@@ -21,6 +21,7 @@ from lipstream_client.channels import rename_channel
 from lipstream_client.sinks.livelink import LIVELINK_BLENDSHAPES as PACKET_BLENDSHAPES
 
 from ..corpus.livelink import ARKIT_BLENDSHAPES
+from ..tables import names
 
 VRM1_MOUTH: tuple[str, ...] = ("aa", "ih", "ou", "ee", "oh")
 VRM1_EMOTIONS: tuple[str, ...] = ("happy", "angry", "sad", "relaxed", "surprised")
@@ -31,25 +32,28 @@ VRM0_EMOTIONS: tuple[str, ...] = ("Joy", "Angry", "Sorrow", "Fun")
 VRM0_CONTROLS: tuple[str, ...] = (*VRM0_MOUTH, "Blink", *VRM0_EMOTIONS, "Neutral")
 
 VROID_MOUTH: tuple[str, ...] = ("Fcl_MTH_A", "Fcl_MTH_I", "Fcl_MTH_U", "Fcl_MTH_E", "Fcl_MTH_O")
-VROID_EMOTIONS: tuple[str, ...] = (
-    "Fcl_ALL_Joy", "Fcl_ALL_Angry", "Fcl_ALL_Sorrow", "Fcl_ALL_Fun", "Fcl_ALL_Surprised",
-)  # fmt: skip
+VROID_EMOTIONS: tuple[str, ...] = names(
+    "Fcl_ALL_Joy Fcl_ALL_Angry Fcl_ALL_Sorrow Fcl_ALL_Fun Fcl_ALL_Surprised"
+)
 VROID_CONTROLS: tuple[str, ...] = (
-    *VROID_MOUTH, "Fcl_EYE_Close", *VROID_EMOTIONS, "Fcl_ALL_Neutral",
-)  # fmt: skip
+    *VROID_MOUTH,
+    "Fcl_EYE_Close",
+    *VROID_EMOTIONS,
+    "Fcl_ALL_Neutral",
+)
 
-UNIFIED_LIP_JAW: tuple[str, ...] = (
-    "JawOpen", "JawRight", "JawLeft", "JawForward", "MouthClosed",
-    "LipSuckUpperRight", "LipSuckUpperLeft", "LipSuckLowerRight", "LipSuckLowerLeft",
-    "LipFunnelUpperRight", "LipFunnelUpperLeft", "LipFunnelLowerRight", "LipFunnelLowerLeft",
-    "LipPuckerUpperRight", "LipPuckerUpperLeft", "LipPuckerLowerRight", "LipPuckerLowerLeft",
-    "MouthUpperUpRight", "MouthUpperUpLeft", "MouthLowerDownRight", "MouthLowerDownLeft",
-    "MouthUpperRight", "MouthUpperLeft", "MouthLowerRight", "MouthLowerLeft",
-    "MouthCornerPullRight", "MouthCornerPullLeft", "MouthCornerSlantRight", "MouthCornerSlantLeft",
-    "MouthFrownRight", "MouthFrownLeft", "MouthStretchRight", "MouthStretchLeft",
-    "MouthDimpleRight", "MouthDimpleLeft", "MouthRaiserUpper", "MouthRaiserLower",
-    "MouthPressRight", "MouthPressLeft", "MouthTightenerRight", "MouthTightenerLeft",
-)  # fmt: skip
+UNIFIED_LIP_JAW: tuple[str, ...] = names("""
+    JawOpen JawRight JawLeft JawForward MouthClosed
+    LipSuckUpperRight LipSuckUpperLeft LipSuckLowerRight LipSuckLowerLeft
+    LipFunnelUpperRight LipFunnelUpperLeft LipFunnelLowerRight LipFunnelLowerLeft
+    LipPuckerUpperRight LipPuckerUpperLeft LipPuckerLowerRight LipPuckerLowerLeft
+    MouthUpperUpRight MouthUpperUpLeft MouthLowerDownRight MouthLowerDownLeft
+    MouthUpperRight MouthUpperLeft MouthLowerRight MouthLowerLeft
+    MouthCornerPullRight MouthCornerPullLeft MouthCornerSlantRight MouthCornerSlantLeft
+    MouthFrownRight MouthFrownLeft MouthStretchRight MouthStretchLeft
+    MouthDimpleRight MouthDimpleLeft MouthRaiserUpper MouthRaiserLower
+    MouthPressRight MouthPressLeft MouthTightenerRight MouthTightenerLeft
+""")
 
 UNIFIED_FROM_ARKIT: dict[str, tuple[str, ...]] = {
     "jawOpen": ("JawOpen",),
@@ -60,10 +64,16 @@ UNIFIED_FROM_ARKIT: dict[str, tuple[str, ...]] = {
     "mouthRollUpper": ("LipSuckUpperRight", "LipSuckUpperLeft"),
     "mouthRollLower": ("LipSuckLowerRight", "LipSuckLowerLeft"),
     "mouthFunnel": (
-        "LipFunnelUpperRight", "LipFunnelUpperLeft", "LipFunnelLowerRight", "LipFunnelLowerLeft",
+        "LipFunnelUpperRight",
+        "LipFunnelUpperLeft",
+        "LipFunnelLowerRight",
+        "LipFunnelLowerLeft",
     ),
     "mouthPucker": (
-        "LipPuckerUpperRight", "LipPuckerUpperLeft", "LipPuckerLowerRight", "LipPuckerLowerLeft",
+        "LipPuckerUpperRight",
+        "LipPuckerUpperLeft",
+        "LipPuckerLowerRight",
+        "LipPuckerLowerLeft",
     ),
     "mouthUpperUpRight": ("MouthUpperUpRight",),
     "mouthUpperUpLeft": ("MouthUpperUpLeft",),
@@ -83,7 +93,7 @@ UNIFIED_FROM_ARKIT: dict[str, tuple[str, ...]] = {
     "mouthShrugLower": ("MouthRaiserLower",),
     "mouthPressRight": ("MouthPressRight",),
     "mouthPressLeft": ("MouthPressLeft",),
-}  # fmt: skip
+}
 """Each ARKit mouth or jaw shape as Unified Expressions shapes (VRCFaceTracking's ARKit
 transform): a symmetric ARKit shape drives each side's part at the same value. The
 ``MouthTightener`` shapes have no ARKit source."""
@@ -94,10 +104,10 @@ LIVELINK_BLENDSHAPES: tuple[str, ...] = tuple(
 
 A2F_FACE: tuple[str, ...] = tuple(rename_channel(name, "livelink") for name in PACKET_BLENDSHAPES)
 """Audio2Face-3D's 52 face shapes: ARKit's in the Live Link packet's order, PascalCase."""
-A2F_TONGUE: tuple[str, ...] = (
-    "TongueTipUp", "TongueTipDown", "TongueTipLeft", "TongueTipRight",
-    "TongueRollUp", "TongueRollDown", "TongueRollLeft", "TongueRollRight",
-    "TongueUp", "TongueDown", "TongueLeft", "TongueRight",
-    "TongueIn", "TongueStretch", "TongueWide", "TongueNarrow",
-)  # fmt: skip
+A2F_TONGUE: tuple[str, ...] = names("""
+    TongueTipUp TongueTipDown TongueTipLeft TongueTipRight
+    TongueRollUp TongueRollDown TongueRollLeft TongueRollRight
+    TongueUp TongueDown TongueLeft TongueRight
+    TongueIn TongueStretch TongueWide TongueNarrow
+""")
 A2F68: tuple[str, ...] = A2F_FACE + A2F_TONGUE

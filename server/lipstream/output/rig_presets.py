@@ -67,26 +67,67 @@ def _probed(pairs: Callable[[RigProbe, np.ndarray], KeyPosePairs]) -> Builder:
 PRESETS: Mapping[str, RigPreset] = {
     preset.name: preset
     for preset in (
-        RigPreset("oculus15", "the 15 Oculus visemes (OVR LipSync, XR_META_face_tracking_visemes)",
-                  OCULUS15_VISEMES, False, _probed(oculus15_pairs)),
-        RigPreset("arkit52", "Apple's 52 ARKit blendshapes", ARKIT_BLENDSHAPES, True,
-                  _blendshape("arkit52")),
-        RigPreset("vrm1", "VRM 1.0 expression presets", VOWEL_RIGS["vrm1"].controls, False,
-                  _vowel("vrm1")),
-        RigPreset("vrm0", "VRM 0.x blend shape presets", VOWEL_RIGS["vrm0"].controls, False,
-                  _vowel("vrm0")),
-        RigPreset("vroid", "VRoid Studio Fcl_* face morphs", VOWEL_RIGS["vroid"].controls, False,
-                  _vowel("vroid")),
-        RigPreset("rpm", "Ready Player Me / Avaturn: viseme_* and ARKit morphs", RPM_CONTROLS,
-                  False, _probed(rpm_pairs)),
-        RigPreset("unified", "Unified Expressions (VRCFaceTracking) jaw, lip and mouth shapes",
-                  BLENDSHAPE_RIGS["unified"][0], True, _blendshape("unified")),
-        RigPreset("metahuman", "MetaHuman through Live Link Face's ARKit curves (PascalCase)",
-                  BLENDSHAPE_RIGS["metahuman"][0], True, _blendshape("metahuman")),
-        RigPreset("a2f68", "Audio2Face-3D's 52 face and 16 tongue blendshapes",
-                  BLENDSHAPE_RIGS["a2f68"][0], True, _blendshape("a2f68")),
+        RigPreset(
+            "oculus15",
+            "the 15 Oculus visemes (OVR LipSync, XR_META_face_tracking_visemes)",
+            OCULUS15_VISEMES,
+            False,
+            _probed(oculus15_pairs),
+        ),
+        RigPreset(
+            "arkit52",
+            "Apple's 52 ARKit blendshapes",
+            ARKIT_BLENDSHAPES,
+            True,
+            _blendshape("arkit52"),
+        ),
+        RigPreset(
+            "vrm1", "VRM 1.0 expression presets", VOWEL_RIGS["vrm1"].controls, False, _vowel("vrm1")
+        ),
+        RigPreset(
+            "vrm0",
+            "VRM 0.x blend shape presets",
+            VOWEL_RIGS["vrm0"].controls,
+            False,
+            _vowel("vrm0"),
+        ),
+        RigPreset(
+            "vroid",
+            "VRoid Studio Fcl_* face morphs",
+            VOWEL_RIGS["vroid"].controls,
+            False,
+            _vowel("vroid"),
+        ),
+        RigPreset(
+            "rpm",
+            "Ready Player Me / Avaturn: viseme_* and ARKit morphs",
+            RPM_CONTROLS,
+            False,
+            _probed(rpm_pairs),
+        ),
+        RigPreset(
+            "unified",
+            "Unified Expressions (VRCFaceTracking) jaw, lip and mouth shapes",
+            BLENDSHAPE_RIGS["unified"][0],
+            True,
+            _blendshape("unified"),
+        ),
+        RigPreset(
+            "metahuman",
+            "MetaHuman through Live Link Face's ARKit curves (PascalCase)",
+            BLENDSHAPE_RIGS["metahuman"][0],
+            True,
+            _blendshape("metahuman"),
+        ),
+        RigPreset(
+            "a2f68",
+            "Audio2Face-3D's 52 face and 16 tongue blendshapes",
+            BLENDSHAPE_RIGS["a2f68"][0],
+            True,
+            _blendshape("a2f68"),
+        ),
     )
-}  # fmt: skip
+}
 
 
 def offered_presets(channels: Sequence[str]) -> tuple[str, ...]:

@@ -20,6 +20,7 @@ from types import MappingProxyType
 
 from ..errors import LipstreamError
 from ..phonemes import PHONEMES, normalize_phoneme
+from ..tables import names
 
 
 @dataclass(frozen=True, eq=False)
@@ -111,9 +112,7 @@ DENG15 = _scheme(
 )
 
 # OVRLipSync's Viseme enum order; blend shapes are named "viseme_<name>".
-OCULUS_VISEMES: tuple[str, ...] = (
-    "sil", "PP", "FF", "TH", "DD", "kk", "CH", "SS", "nn", "RR", "aa", "E", "I", "O", "U",
-)  # fmt: skip
+OCULUS_VISEMES: tuple[str, ...] = names("sil PP FF TH DD kk CH SS nn RR aa E I O U")
 OCULUS15 = _scheme(
     "oculus15",
     {

@@ -58,8 +58,21 @@ def test_every_rung_gets_a_row_with_all_rungs(
 ) -> None:
     out = tmp_path / "rungs.json"
     model = trained_models["viseme-lerp"]
-    main(["--models", str(lerp_dir), "--character", model.name, "--calls", "4", "--passes", "1",
-          "--all-rungs", "--json", str(out)])  # fmt: skip
+    main(
+        [
+            "--models",
+            str(lerp_dir),
+            "--character",
+            model.name,
+            "--calls",
+            "4",
+            "--passes",
+            "1",
+            "--all-rungs",
+            "--json",
+            str(out),
+        ]
+    )
     rows = json.loads(out.read_text())["rows"]
     assert [row["rung"] for row in rows] == [rung.name for rung in model.fidelity_ladder()]
     assert all(row["calls"] == 4 for row in rows)

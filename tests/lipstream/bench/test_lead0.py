@@ -24,8 +24,24 @@ def test_each_rung_is_served_with_its_own_lookahead_and_every_frame_is_timed(
     model = trained_models["viseme-lerp"]
     out = tmp_path / "lead0.json"
     with live_server(lerp_dir) as server:
-        main(["--url", server.ws, "--models", str(lerp_dir), "--character", model.name,
-              "--clip", "1.5", "--requests", "2", "--probes", "2", "--json", str(out)])  # fmt: skip
+        main(
+            [
+                "--url",
+                server.ws,
+                "--models",
+                str(lerp_dir),
+                "--character",
+                model.name,
+                "--clip",
+                "1.5",
+                "--requests",
+                "2",
+                "--probes",
+                "2",
+                "--json",
+                str(out),
+            ]
+        )
     written = json.loads(out.read_text())
     assert written["command"].startswith(f"python -m lipstream.bench.lead0 --url {server.ws} ")
     assert written["date"].startswith("20") and written["machine"]["cores"] >= 1

@@ -49,20 +49,31 @@ def textgrid_long(tiers: dict[str, Sequence[Interval]]) -> str:
     """A long-format TextGrid as Praat and MFA write it (several tiers allowed)."""
     xmax = max(tier[-1][1] for tier in tiers.values())
     lines = [
-        'File type = "ooTextFile"', 'Object class = "TextGrid"', "",
-        "xmin = 0 ", f"xmax = {xmax} ", "tiers? <exists> ", f"size = {len(tiers)} ", "item []: ",
-    ]  # fmt: skip
+        'File type = "ooTextFile"',
+        'Object class = "TextGrid"',
+        "",
+        "xmin = 0 ",
+        f"xmax = {xmax} ",
+        "tiers? <exists> ",
+        f"size = {len(tiers)} ",
+        "item []: ",
+    ]
     for number, (name, intervals) in enumerate(tiers.items(), start=1):
         lines += [
-            f"    item [{number}]:", '        class = "IntervalTier" ', f'        name = "{name}" ',
-            "        xmin = 0 ", f"        xmax = {xmax} ",
+            f"    item [{number}]:",
+            '        class = "IntervalTier" ',
+            f'        name = "{name}" ',
+            "        xmin = 0 ",
+            f"        xmax = {xmax} ",
             f"        intervals: size = {len(intervals)} ",
-        ]  # fmt: skip
+        ]
         for index, (start, end, label) in enumerate(intervals, start=1):
             lines += [
-                f"        intervals [{index}]:", f"            xmin = {start} ",
-                f"            xmax = {end} ", f'            text = "{label}" ',
-            ]  # fmt: skip
+                f"        intervals [{index}]:",
+                f"            xmin = {start} ",
+                f"            xmax = {end} ",
+                f'            text = "{label}" ',
+            ]
     return "\n".join(lines) + "\n"
 
 

@@ -143,8 +143,9 @@ def test_take_loads_as_a_corpus_at_60_fps(take: Path, tmp_path: Path) -> None:
 def test_midnight_wrap_and_bad_timecode(tmp_path: Path) -> None:
     header = "Timecode,BlendshapeCount,JawOpen,HeadYaw\n"
     path = tmp_path / "late.csv"
-    path.write_text(header + "23:59:59:58.500,2,0.1,0.0\n23:59:59:59.500,2,0.2,0.0\n"
-                    "00:00:00:00.500,2,0.3,0.0\n")  # fmt: skip
+    path.write_text(
+        header + "23:59:59:58.500,2,0.1,0.0\n23:59:59:59.500,2,0.2,0.0\n00:00:00:00.500,2,0.3,0.0\n"
+    )
     times, frames, channels = read_livelink_csv(path)
     np.testing.assert_allclose(times, [0.0, 1 / 60, 2 / 60], atol=1e-9)
     np.testing.assert_array_equal(frames[:, 0], np.array([0.1, 0.2, 0.3], dtype=np.float32))

@@ -98,9 +98,18 @@ def test_written_files(tmp_path: Path) -> None:
     write_corpus(exact_corpus(audio=True), tmp_path)
     names = sorted(path.name for path in tmp_path.iterdir())
     assert names == [
-        "corpus.json", "utt00.TextGrid", "utt00.csv", "utt00.json", "utt00.wav",
-        "utt01.TextGrid", "utt01.csv", "utt01.json", "utt02.TextGrid", "utt02.csv", "utt02.json",
-    ]  # fmt: skip
+        "corpus.json",
+        "utt00.TextGrid",
+        "utt00.csv",
+        "utt00.json",
+        "utt00.wav",
+        "utt01.TextGrid",
+        "utt01.csv",
+        "utt01.json",
+        "utt02.TextGrid",
+        "utt02.csv",
+        "utt02.json",
+    ]
     csv_lines = (tmp_path / "utt00.csv").read_text().splitlines()
     assert csv_lines[0] == "time,jawOpen,mouthClose,headYaw"
     assert csv_lines[2].startswith("0.020000,")

@@ -173,13 +173,25 @@ def test_unknown_options_get_one_coded_error_listing_the_known_ones(
 def test_each_engine_declares_the_options_it_reads(trained_models: dict[str, Model]) -> None:
     assert trained_models["viseme-lerp"].option_names == ("mode", "lead_ms")
     assert set(trained_models["anime-graph"].option_names) == {
-        "graph", "search", "pq_window", "pq_advance", "blend", "smooth", "match_emotion",
-        "max_tile", "pq_budget_s", "causal", "lead_ms",
-    }  # fmt: skip
+        "graph",
+        "search",
+        "pq_window",
+        "pq_advance",
+        "blend",
+        "smooth",
+        "match_emotion",
+        "max_tile",
+        "pq_budget_s",
+        "causal",
+        "lead_ms",
+    }
     for name in ("dam", "cohen-massaro"):
         assert trained_models[name].option_names == (
-            "search_ahead", "tail_ahead", "causal", "lead_ms",
-        )  # fmt: skip
+            "search_ahead",
+            "tail_ahead",
+            "causal",
+            "lead_ms",
+        )
     anime = trained_models["anime-graph"]
     assert anime.start(fps=60, smooth=False, max_tile=4) is not None
 

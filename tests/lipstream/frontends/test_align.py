@@ -61,8 +61,17 @@ def test_words_come_back_in_order_with_times_inside_the_audio() -> None:
     spoken = speak_text(SENTENCES[2])
     alignment = align(spoken.audio, SENTENCES[2], where="x")
     assert [w.word for w in alignment.words] == [
-        "my", "name", "is", "zorblax", "and", "i", "am", "42", "years", "old",
-    ]  # fmt: skip
+        "my",
+        "name",
+        "is",
+        "zorblax",
+        "and",
+        "i",
+        "am",
+        "42",
+        "years",
+        "old",
+    ]
     starts = [w.start for w in alignment.words]
     assert starts == sorted(starts) and alignment.words[-1].end <= spoken.audio.duration
     assert alignment.phones[0].start == 0.0
@@ -104,8 +113,12 @@ def test_the_align_command_writes_phones_and_words_tiers(
     assert [s.phoneme for s in phones if s.phoneme != "sil"][:3] == ["HH", "AH", "L"]
     grid = textgrid.openTextgrid(str(out), includeEmptyIntervals=False)
     assert [entry.label for entry in grid.getTier("words").entries] == [
-        "hello", "there", "how", "are", "you",
-    ]  # fmt: skip
+        "hello",
+        "there",
+        "how",
+        "are",
+        "you",
+    ]
 
 
 def test_the_align_command_refuses_a_wrong_transcript_with_a_coded_line(

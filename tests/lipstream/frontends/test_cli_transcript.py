@@ -48,9 +48,20 @@ def test_aligned_frames_are_within_the_aligners_error_of_espeak_ngs_own(
     transcript.write_text(TEXT, encoding="utf-8")
     out = tmp_path / "frames.json"
     status = main(
-        ["synth", "--model", str(lerp_model_dir), "--audio", str(wav), "--transcript", str(transcript),
-         "--out", str(out), "--fps", str(FPS)]
-    )  # fmt: skip
+        [
+            "synth",
+            "--model",
+            str(lerp_model_dir),
+            "--audio",
+            str(wav),
+            "--transcript",
+            str(transcript),
+            "--out",
+            str(out),
+            "--fps",
+            str(FPS),
+        ]
+    )
     assert status in (0, None)
     err = capsys.readouterr().err
     confidence = float(err.split("alignment confidence ")[1].split()[0])
@@ -89,9 +100,18 @@ def test_each_aligner_error_is_one_coded_line_naming_the_audio(
         write_wav(wav, Audio(np.zeros(16000, np.float32), 16000))
     out = tmp_path / "f.json"
     status = main(
-        ["synth", "--model", str(lerp_model_dir), "--audio", str(wav), "--transcript", transcript,
-         "--out", str(out)]
-    )  # fmt: skip
+        [
+            "synth",
+            "--model",
+            str(lerp_model_dir),
+            "--audio",
+            str(wav),
+            "--transcript",
+            transcript,
+            "--out",
+            str(out),
+        ]
+    )
     assert status == 2
     assert capsys.readouterr().err.startswith(f"error [{code}]: {wav}:")
     assert not out.exists()
@@ -109,9 +129,17 @@ def test_a_transcript_without_audio_or_with_text_options_is_refused(
     where: str,
 ) -> None:
     status = main(
-        ["synth", "--model", str(lerp_model_dir), "--transcript", "hello", *extra,
-         "--out", str(tmp_path / "f.json")]
-    )  # fmt: skip
+        [
+            "synth",
+            "--model",
+            str(lerp_model_dir),
+            "--transcript",
+            "hello",
+            *extra,
+            "--out",
+            str(tmp_path / "f.json"),
+        ]
+    )
     assert status == 2
     assert capsys.readouterr().err.startswith(f"error [invalid_request]: {where}:")
 

@@ -33,8 +33,18 @@ def test_synth_words_writes_frames_to_the_last_word(
     timings.write_text(POLLY, encoding="utf-8")
     out = tmp_path / "frames.json"
     status = main(
-        ["synth", "--model", str(lerp_model_dir), "--words", str(timings), "--out", str(out), "--fps", "50"]
-    )  # fmt: skip
+        [
+            "synth",
+            "--model",
+            str(lerp_model_dir),
+            "--words",
+            str(timings),
+            "--out",
+            str(out),
+            "--fps",
+            "50",
+        ]
+    )
     assert status in (0, None)
     frames = json.loads(out.read_text(encoding="utf-8"))
     assert len(frames["frames"]) == round(0.8 * 50) + 1
@@ -59,8 +69,16 @@ def test_a_bad_timing_file_is_one_coded_line(
     timings = tmp_path / "bad.json"
     timings.write_text(content, encoding="utf-8")
     status = main(
-        ["synth", "--model", str(lerp_model_dir), "--words", str(timings), "--out", str(tmp_path / "f.json")]
-    )  # fmt: skip
+        [
+            "synth",
+            "--model",
+            str(lerp_model_dir),
+            "--words",
+            str(timings),
+            "--out",
+            str(tmp_path / "f.json"),
+        ]
+    )
     assert status == 2
     assert capsys.readouterr().err.startswith(expected.format(path=timings))
 

@@ -24,7 +24,7 @@ LISTING = [
     " 5  cmn             --/M      Chinese_(Mandarin,_latin_as_English) sit/cmn              (zh-cmn 5)(zh 5)",
     " 5  de              --/M      German             gmw/de               ",
     " 2  en-gb           --/M      English_(Great_Britain) gmw/en               (en 2)",
-]  # fmt: skip
+]
 
 
 def test_the_listing_is_read_field_by_field() -> None:
@@ -40,9 +40,15 @@ def test_the_listing_is_read_field_by_field() -> None:
 
 @pytest.mark.parametrize(
     ("lang", "code", "file"),
-    [("de", "de", "gmw/de"), ("FR", "fr-fr", "roa/fr"), ("fr-fr", "fr-fr", "roa/fr"),
-     ("zh", "cmn", "sit/cmn"), ("en", "en-gb", "gmw/en"), ("pt-BR", "pt-br", "roa/pt-BR")],
-)  # fmt: skip
+    [
+        ("de", "de", "gmw/de"),
+        ("FR", "fr-fr", "roa/fr"),
+        ("fr-fr", "fr-fr", "roa/fr"),
+        ("zh", "cmn", "sit/cmn"),
+        ("en", "en-gb", "gmw/en"),
+        ("pt-BR", "pt-br", "roa/pt-BR"),
+    ],
+)
 def test_a_language_or_one_a_voice_serves_resolves_to_its_voice(
     lang: str, code: str, file: str
 ) -> None:

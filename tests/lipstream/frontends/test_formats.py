@@ -17,19 +17,57 @@ ELEVENLABS = {
     "audio_base64": "",
     "alignment": {
         "characters": ["H", "i", " ", "t", "h", "e", "r", "e", "!"],
-        "character_start_times_seconds": [0.0, 0.116, 0.186, 0.232, 0.279, 0.325, 0.371, 0.418, 0.464],
-        "character_end_times_seconds": [0.116, 0.186, 0.232, 0.279, 0.325, 0.371, 0.418, 0.464, 0.557],
+        "character_start_times_seconds": [
+            0.0,
+            0.116,
+            0.186,
+            0.232,
+            0.279,
+            0.325,
+            0.371,
+            0.418,
+            0.464,
+        ],
+        "character_end_times_seconds": [
+            0.116,
+            0.186,
+            0.232,
+            0.279,
+            0.325,
+            0.371,
+            0.418,
+            0.464,
+            0.557,
+        ],
     },
-}  # fmt: skip
+}
 AZURE: list[dict[str, int | str]] = [
-    {"audioOffset": 500000, "duration": 3125000, "text": "Hello", "textOffset": 0,
-     "wordLength": 5, "boundaryType": "WordBoundary"},
-    {"audioOffset": 3625000, "duration": 0, "text": ",", "textOffset": 5, "wordLength": 1,
-     "boundaryType": "PunctuationBoundary"},
-    {"audioOffset": 5000000, "duration": 4000000, "text": "world", "textOffset": 7,
-     "wordLength": 5, "boundaryType": "WordBoundary"},
+    {
+        "audioOffset": 500000,
+        "duration": 3125000,
+        "text": "Hello",
+        "textOffset": 0,
+        "wordLength": 5,
+        "boundaryType": "WordBoundary",
+    },
+    {
+        "audioOffset": 3625000,
+        "duration": 0,
+        "text": ",",
+        "textOffset": 5,
+        "wordLength": 1,
+        "boundaryType": "PunctuationBoundary",
+    },
+    {
+        "audioOffset": 5000000,
+        "duration": 4000000,
+        "text": "world",
+        "textOffset": 7,
+        "wordLength": 5,
+        "boundaryType": "WordBoundary",
+    },
     {"audioOffset": 500000, "visemeId": 12},
-]  # fmt: skip
+]
 POLLY = (
     '{"time":6,"type":"sentence","start":0,"end":23,"value":"Mary had a little lamb."}\n'
     '{"time":6,"type":"word","start":0,"end":4,"value":"Mary"}\n'
@@ -53,10 +91,19 @@ CARTESIA = {
     },
 }
 HUME = [
-    {"type": "timestamp", "timestamp": {"type": "word", "text": "Hi", "time": {"begin": 0, "end": 240}}},
-    {"type": "timestamp", "timestamp": {"type": "phoneme", "text": "h", "time": {"begin": 0, "end": 90}}},
-    {"type": "timestamp", "timestamp": {"type": "phoneme", "text": "aɪ", "time": {"begin": 90, "end": 240}}},
-]  # fmt: skip
+    {
+        "type": "timestamp",
+        "timestamp": {"type": "word", "text": "Hi", "time": {"begin": 0, "end": 240}},
+    },
+    {
+        "type": "timestamp",
+        "timestamp": {"type": "phoneme", "text": "h", "time": {"begin": 0, "end": 90}},
+    },
+    {
+        "type": "timestamp",
+        "timestamp": {"type": "phoneme", "text": "aɪ", "time": {"begin": 90, "end": 240}},
+    },
+]
 WORDS = [{"word": "Hello", "start": 0.05, "end": 0.36}, {"word": "world", "start": 0.5, "end": 0.9}]
 
 
@@ -83,9 +130,12 @@ def test_elevenlabs_prefers_the_normalized_alignment_and_reads_streamed_chunks()
         "character_end_times_seconds": [0.5, 0.6, 0.7],
     }
     chunks = [
-        {"alignment": {**normalized, "characters": list("4") + ["", "", ""]}, "normalized_alignment": normalized},
+        {
+            "alignment": {**normalized, "characters": list("4") + ["", "", ""]},
+            "normalized_alignment": normalized,
+        },
         {"alignment": later},
-    ]  # fmt: skip
+    ]
     assert [(w.text, w.start, w.end) for w in parse_timings(chunks).words] == [
         ("four", 0.0, 0.4),
         ("it", 0.5, 0.7),

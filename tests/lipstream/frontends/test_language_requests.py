@@ -159,9 +159,20 @@ def test_cli_synth_speaks_a_language(models: Path, lerp: Model, tmp_path: Path) 
     out = tmp_path / "de.csv"
     wav = tmp_path / "de.wav"
     ran = run_cli(
-        "synth", "--model", str(models / "viseme-lerp"), "--text", GERMAN, "--lang", "de",
-        "--fps", str(FPS), "--wav", str(wav), "--out", str(out),
-    )  # fmt: skip
+        "synth",
+        "--model",
+        str(models / "viseme-lerp"),
+        "--text",
+        GERMAN,
+        "--lang",
+        "de",
+        "--fps",
+        str(FPS),
+        "--wav",
+        str(wav),
+        "--out",
+        str(out),
+    )
     assert ran.returncode == 0, ran.stderr
     spoken = speak_text(GERMAN, lang="de")
     with out.open(newline="") as handle:
@@ -171,13 +182,27 @@ def test_cli_synth_speaks_a_language(models: Path, lerp: Model, tmp_path: Path) 
         assert saved.getnframes() == len(spoken.pcm16) // 2
         assert saved.getframerate() == spoken.sample_rate
     unknown = run_cli(
-        "synth", "--model", str(models / "viseme-lerp"), "--text", GERMAN, "--lang", "xx-none",
-        "--out", str(tmp_path / "x.csv"),
-    )  # fmt: skip
+        "synth",
+        "--model",
+        str(models / "viseme-lerp"),
+        "--text",
+        GERMAN,
+        "--lang",
+        "xx-none",
+        "--out",
+        str(tmp_path / "x.csv"),
+    )
     assert unknown.returncode != 0 and "unknown_language" in unknown.stderr
     assert "lang: " in unknown.stderr
     stray = run_cli(
-        "synth", "--model", str(models / "viseme-lerp"), "--phones", str(tmp_path / "p.lab"),
-        "--lang", "de", "--out", str(tmp_path / "y.csv"),
-    )  # fmt: skip
+        "synth",
+        "--model",
+        str(models / "viseme-lerp"),
+        "--phones",
+        str(tmp_path / "p.lab"),
+        "--lang",
+        "de",
+        "--out",
+        str(tmp_path / "y.csv"),
+    )
     assert stray.returncode != 0 and "--lang goes with --text" in stray.stderr

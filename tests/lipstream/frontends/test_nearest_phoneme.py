@@ -107,8 +107,12 @@ def test_diacritics_change_the_features_they_name() -> None:
 
 
 def test_a_stop_then_a_fricative_is_one_affricate_at_the_fricatives_place() -> None:
-    for label, place, voiced in [("ts", ALVEOLAR, False), ("dʒ", POSTALVEOLAR, True),
-                                 ("t͡ʃ", POSTALVEOLAR, False), ("ʈʂ", RETROFLEX, False)]:  # fmt: skip
+    for label, place, voiced in [
+        ("ts", ALVEOLAR, False),
+        ("dʒ", POSTALVEOLAR, True),
+        ("t͡ʃ", POSTALVEOLAR, False),
+        ("ʈʂ", RETROFLEX, False),
+    ]:
         (segment,) = ipa_segments(label)
         assert isinstance(segment, Consonant)
         assert (segment.place, segment.stricture, segment.voiced) == (place, AFFRICATE, voiced)
@@ -161,10 +165,18 @@ def test_a_symbol_no_table_knows_is_named_with_its_language() -> None:
 # Where the English table's judgement (docs/reference/phonemes.md) overrides the features:
 # the table holds English speakers' readings of these sounds, kept as they were.
 TABLE_OVER_FEATURES = {
-    "ç": ("HH", "SH"), "x": ("K", "HH"), "ɣ": ("G", "HH"), "ʔ": ("T", "K"), "ɲ": ("N", "NG"),
-    "ɒ": ("AA", "AO"), "ɨ": ("IH", "IY"), "ɜ": ("ER", "EH"), "ɘ": ("AH", "EY"),
-    "ʝ": ("Y", "ZH"), "ɹ̩": ("ER", "R"),
-}  # fmt: skip
+    "ç": ("HH", "SH"),
+    "x": ("K", "HH"),
+    "ɣ": ("G", "HH"),
+    "ʔ": ("T", "K"),
+    "ɲ": ("N", "NG"),
+    "ɒ": ("AA", "AO"),
+    "ɨ": ("IH", "IY"),
+    "ɜ": ("ER", "EH"),
+    "ɘ": ("AH", "EY"),
+    "ʝ": ("Y", "ZH"),
+    "ɹ̩": ("ER", "R"),
+}
 
 
 def test_the_features_agree_with_the_english_table_on_its_single_sounds() -> None:
@@ -180,7 +192,8 @@ def test_the_features_agree_with_the_english_table_on_its_single_sounds() -> Non
 
 
 def test_every_phoneme_of_the_set_is_some_sounds_nearest() -> None:
-    reached = {nearest_phoneme(ipa) for ipa in ["i", "ɪ", "ɛ", "æ", "ɑ", "ɔ", "ʌ", "ʊ", "u",
-               "ɝ", "e", "o"]} | {nearest_phoneme(c) for c in "pbtdkɡfvθðszʃʒhmnŋlɹjw"}  # fmt: skip
+    reached = {
+        nearest_phoneme(ipa) for ipa in ["i", "ɪ", "ɛ", "æ", "ɑ", "ɔ", "ʌ", "ʊ", "u", "ɝ", "e", "o"]
+    } | {nearest_phoneme(c) for c in "pbtdkɡfvθðszʃʒhmnŋlɹjw"}
     reached |= {nearest_phoneme(label) for label in ["tʃ", "dʒ", "aɪ", "aʊ", "ɔɪ"]}
     assert reached == set(ARPABET)

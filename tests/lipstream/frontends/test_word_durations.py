@@ -88,11 +88,13 @@ def test_saved_and_loaded_it_spreads_the_same(
         (lambda d: (d / MANIFEST_FILE).write_text("{", encoding="utf-8"), MANIFEST_FILE),
         (lambda d: (d / MANIFEST_FILE).unlink(), MANIFEST_FILE),
         (
-            lambda d: np.savez(d / ARRAYS_FILE, log_mean=np.full(40, np.nan), coef=np.zeros(58), spread=np.ones(40)),
+            lambda d: np.savez(
+                d / ARRAYS_FILE, log_mean=np.full(40, np.nan), coef=np.zeros(58), spread=np.ones(40)
+            ),
             ARRAYS_FILE,
         ),
     ],
-)  # fmt: skip
+)
 def test_a_damaged_duration_model_is_model_invalid_naming_the_file(
     espeak_durations: WordDurationModel, tmp_path: Path, damage: Callable[[Path], object], file: str
 ) -> None:

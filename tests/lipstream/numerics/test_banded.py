@@ -162,8 +162,9 @@ def block_tridiagonal_system(
     for t in range(frames - 1):
         rows = rng.normal(size=(dims, 2 * dims))
         dense[t * dims : (t + 2) * dims, t * dims : (t + 2) * dims] += rows.T @ rows
-    diagonal = np.array([dense[t * dims : (t + 1) * dims, t * dims : (t + 1) * dims]
-                         for t in range(frames)])  # fmt: skip
+    diagonal = np.array(
+        [dense[t * dims : (t + 1) * dims, t * dims : (t + 1) * dims] for t in range(frames)]
+    )
     below = np.zeros((frames - 1, dims, dims))
     for t in range(frames - 1):
         below[t] = dense[(t + 1) * dims : (t + 2) * dims, t * dims : (t + 1) * dims]

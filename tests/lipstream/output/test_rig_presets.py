@@ -26,10 +26,25 @@ FPS = 60.0
 # dominance functions, and an expressive search; each must close and round on every rig.
 ENGINES = ("viseme-lerp", "dam", "cohen-massaro", "expressive-dp")
 SPOKEN = (
-    ("sil", 0.3), ("AA", 0.2), ("M", 0.12), ("AA", 0.2), ("B", 0.1), ("UW", 0.25), ("P", 0.1),
-    ("IY", 0.2), ("M", 0.12), ("IY", 0.2), ("sil", 0.3), ("W", 0.1), ("UW", 0.25), ("B", 0.1),
-    ("UW", 0.25), ("M", 0.12), ("AA", 0.2), ("sil", 0.3),
-)  # fmt: skip
+    ("sil", 0.3),
+    ("AA", 0.2),
+    ("M", 0.12),
+    ("AA", 0.2),
+    ("B", 0.1),
+    ("UW", 0.25),
+    ("P", 0.1),
+    ("IY", 0.2),
+    ("M", 0.12),
+    ("IY", 0.2),
+    ("sil", 0.3),
+    ("W", 0.1),
+    ("UW", 0.25),
+    ("B", 0.1),
+    ("UW", 0.25),
+    ("M", 0.12),
+    ("AA", 0.2),
+    ("sil", 0.3),
+)
 VOWEL_RIGS = {
     "vrm1": (("aa", "ih", "ou", "ee", "oh"), "ou"),
     "vrm0": (("A", "I", "U", "E", "O"), "U"),
@@ -129,11 +144,23 @@ def test_metahuman_and_a2f68_name_the_arkit_curves_in_pascal_case_with_the_tongu
     maps = model_maps(model, None)
     frames = arkit_frames(model)
     tongue = (
-        "TongueTipUp", "TongueTipDown", "TongueTipLeft", "TongueTipRight",
-        "TongueRollUp", "TongueRollDown", "TongueRollLeft", "TongueRollRight",
-        "TongueUp", "TongueDown", "TongueLeft", "TongueRight",
-        "TongueIn", "TongueStretch", "TongueWide", "TongueNarrow",
-    )  # fmt: skip
+        "TongueTipUp",
+        "TongueTipDown",
+        "TongueTipLeft",
+        "TongueTipRight",
+        "TongueRollUp",
+        "TongueRollDown",
+        "TongueRollLeft",
+        "TongueRollRight",
+        "TongueUp",
+        "TongueDown",
+        "TongueLeft",
+        "TongueRight",
+        "TongueIn",
+        "TongueStretch",
+        "TongueWide",
+        "TongueNarrow",
+    )
     a2f = maps["a2f68"]
     assert len(a2f.controls) == 68 and a2f.controls[52:] == tongue
     assert a2f.controls[14:18] == ("JawForward", "JawLeft", "JawRight", "JawOpen")
@@ -179,15 +206,19 @@ def test_unified_drives_each_part_of_an_arkit_mouth_shape(trained_models: dict[s
     parts = {
         "jawOpen": ["JawOpen"],
         "mouthClose": ["MouthClosed"],
-        "mouthFunnel": [f"LipFunnel{part}" for part in ("UpperRight", "UpperLeft", "LowerRight", "LowerLeft")],
-        "mouthPucker": [f"LipPucker{part}" for part in ("UpperRight", "UpperLeft", "LowerRight", "LowerLeft")],
+        "mouthFunnel": [
+            f"LipFunnel{part}" for part in ("UpperRight", "UpperLeft", "LowerRight", "LowerLeft")
+        ],
+        "mouthPucker": [
+            f"LipPucker{part}" for part in ("UpperRight", "UpperLeft", "LowerRight", "LowerLeft")
+        ],
         "mouthRollUpper": ["LipSuckUpperRight", "LipSuckUpperLeft"],
         "mouthRollLower": ["LipSuckLowerRight", "LipSuckLowerLeft"],
         "mouthSmileLeft": ["MouthCornerPullLeft", "MouthCornerSlantLeft"],
         "mouthShrugLower": ["MouthRaiserLower"],
         "mouthPressRight": ["MouthPressRight"],
         "mouthLowerDownLeft": ["MouthLowerDownLeft"],
-    }  # fmt: skip
+    }
     for channel, shapes in parts.items():
         expected = np.clip(frames[:, model.channels.index(channel)], 0.0, 1.0)
         for shape in shapes:
@@ -273,8 +304,16 @@ def test_a_blink_closes_the_rigs_eyes_and_nothing_else(
 
 def test_the_presets_are_named_as_clients_name_them() -> None:
     assert RETARGET_PRESETS == (
-        "oculus15", "arkit52", "vrm1", "vrm0", "vroid", "rpm", "unified", "metahuman", "a2f68",
-    )  # fmt: skip
+        "oculus15",
+        "arkit52",
+        "vrm1",
+        "vrm0",
+        "vroid",
+        "rpm",
+        "unified",
+        "metahuman",
+        "a2f68",
+    )
     assert tuple(PRESETS) == RETARGET_PRESETS
     without_arkit = offered_presets(("lipsOpen", "lipsRound"))
     assert without_arkit == ("oculus15", "vrm1", "vrm0", "vroid", "rpm")

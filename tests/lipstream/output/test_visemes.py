@@ -13,13 +13,41 @@ from lipstream.phonemes import PHONEMES
 # Deng & Neumann 2008, Appendix A, Table VI, in lower case as printed ("yl" is
 # the extracted text's spelling of /y/). /ax/ /el/ /em/ /en/ fold into AH L M N.
 DENG_TABLE_VI = [
-    "pau", "r", "k g ng", "ae ax ah aa", "f v", "ch sh jh", "ao yl iy ih ay aw", "ow oy",
-    "n d t l", "ey eh el em en er", "th dh", "s z zh", "b p m", "hh", "w uw uh",
-]  # fmt: skip
+    "pau",
+    "r",
+    "k g ng",
+    "ae ax ah aa",
+    "f v",
+    "ch sh jh",
+    "ao yl iy ih ay aw",
+    "ow oy",
+    "n d t l",
+    "ey eh el em en er",
+    "th dh",
+    "s z zh",
+    "b p m",
+    "hh",
+    "w uw uh",
+]
 PAPER_TO_CANONICAL = {"pau": "sil", "yl": "Y", "ax": None, "el": None, "em": None, "en": None}
 
-OCULUS_ORDER = ["sil", "PP", "FF", "TH", "DD", "kk", "CH", "SS", "nn", "RR", "aa", "E", "I",
-                "O", "U"]  # fmt: skip
+OCULUS_ORDER = [
+    "sil",
+    "PP",
+    "FF",
+    "TH",
+    "DD",
+    "kk",
+    "CH",
+    "SS",
+    "nn",
+    "RR",
+    "aa",
+    "E",
+    "I",
+    "O",
+    "U",
+]
 
 
 @pytest.mark.parametrize("name", ["deng15", "oculus15", "preston-blair"])
@@ -49,10 +77,21 @@ def test_deng15_reproduces_table_vi() -> None:
 
 @pytest.mark.parametrize(
     ("together", "apart"),
-    [("P B M", "F"), ("F V", "TH"), ("TH DH", "S"), ("S Z ZH", "SH"), ("CH SH JH", "ZH"),
-     ("K G NG", "HH"), ("N D T L", "R"), ("W UW UH", "OW"), ("OW OY", "AO"),
-     ("AO Y IY IH AY AW", "EY"), ("EY EH ER", "AE"), ("AE AH AA", "sil")],
-)  # fmt: skip
+    [
+        ("P B M", "F"),
+        ("F V", "TH"),
+        ("TH DH", "S"),
+        ("S Z ZH", "SH"),
+        ("CH SH JH", "ZH"),
+        ("K G NG", "HH"),
+        ("N D T L", "R"),
+        ("W UW UH", "OW"),
+        ("OW OY", "AO"),
+        ("AO Y IY IH AY AW", "EY"),
+        ("EY EH ER", "AE"),
+        ("AE AH AA", "sil"),
+    ],
+)
 def test_deng15_pairs(together: str, apart: str) -> None:
     scheme = get_scheme("deng15")
     classes = {scheme.viseme_of(p) for p in together.split()}
@@ -68,17 +107,36 @@ def test_oculus_order_and_names() -> None:
         assert oculus_viseme_name(name) == name
         assert scheme.classes.index(oculus_viseme_name(f"viseme_{name}")) == index
     assert [oculus_viseme_name(n) for n in ("ih", "oh", "ou", "viseme_I", "IH", "OU")] == [
-        "I", "O", "U", "I", "I", "U"
-    ]  # fmt: skip
+        "I",
+        "O",
+        "U",
+        "I",
+        "I",
+        "U",
+    ]
 
 
 @pytest.mark.parametrize(
     ("phonemes", "viseme"),
     # The Oculus viseme reference: example phonemes and words for each viseme.
-    [("P B M", "PP"), ("F V", "FF"), ("TH DH", "TH"), ("T D", "DD"), ("K G", "kk"),
-     ("CH JH SH", "CH"), ("S Z", "SS"), ("N L", "nn"), ("R", "RR"), ("AA", "aa"),
-     ("EH", "E"), ("IH", "I"), ("OW", "O"), ("UH", "U"), ("sil", "sil")],
-)  # fmt: skip
+    [
+        ("P B M", "PP"),
+        ("F V", "FF"),
+        ("TH DH", "TH"),
+        ("T D", "DD"),
+        ("K G", "kk"),
+        ("CH JH SH", "CH"),
+        ("S Z", "SS"),
+        ("N L", "nn"),
+        ("R", "RR"),
+        ("AA", "aa"),
+        ("EH", "E"),
+        ("IH", "I"),
+        ("OW", "O"),
+        ("UH", "U"),
+        ("sil", "sil"),
+    ],
+)
 def test_oculus_reference_examples(phonemes: str, viseme: str) -> None:
     scheme = get_scheme("oculus15")
     assert {scheme.viseme_of(p) for p in phonemes.split()} == {viseme}
@@ -87,9 +145,18 @@ def test_oculus_reference_examples(phonemes: str, viseme: str) -> None:
 @pytest.mark.parametrize(
     ("phonemes", "shape"),
     # Rhubarb Lip Sync's shape descriptions.
-    [("P B M", "A"), ("K S T IY", "B"), ("EH AE", "C"), ("AA", "D"), ("AO ER", "E"),
-     ("UW OW W", "F"), ("F V", "G"), ("L", "H"), ("sil", "X")],
-)  # fmt: skip
+    [
+        ("P B M", "A"),
+        ("K S T IY", "B"),
+        ("EH AE", "C"),
+        ("AA", "D"),
+        ("AO ER", "E"),
+        ("UW OW W", "F"),
+        ("F V", "G"),
+        ("L", "H"),
+        ("sil", "X"),
+    ],
+)
 def test_preston_blair_rhubarb_shapes(phonemes: str, shape: str) -> None:
     scheme = get_scheme("preston-blair")
     assert {scheme.viseme_of(p) for p in phonemes.split()} == {shape}

@@ -188,6 +188,9 @@ def test_a_budget_that_takes_a_causal_rung_overrides_a_clients_tile_cap(served: 
     assert isinstance(ready, Ready) and ready.fidelity == "causal_lead"
     assert 0.0 < ready.lookahead_ms <= 120.0
     assert dict(ready.options) == {
-        "max_tile": 1, "search": "greedy", "causal": True, "lead_ms": 120.0,
-    }  # fmt: skip
+        "max_tile": 1,
+        "search": "greedy",
+        "causal": True,
+        "lead_ms": 120.0,
+    }
     assert len(frame_rows(messages)) == frame_count(SPANS[-1][2], 60.0) + return_frames(60.0)

@@ -87,7 +87,7 @@ def test_a_timing_file_with_its_wav_plays_in_step(
                 "fps": FPS,
                 "words": {"timings": POLLY, "format": "polly"},
             }
-        ),  # fmt: skip
+        ),
         headers={"Content-Type": "application/json"},
         timeout=30,
     )

@@ -128,10 +128,13 @@ def test_offset_moves_a_chunk_onto_the_utterance_clock(words_catalog: Catalog) -
     [
         ([{"word": "a", "start": 0.1, "end": 0.05}], "invalid_times", "timings: words[0]"),
         ({"nothing": []}, "unknown_timing_format", "timings: input"),
-        ([{"word": "—", "start": 0.0, "end": 0.2}, {"word": "b", "start": 0.1, "end": 0.3}],
-         "non_monotonic_times", "timings: words[1]"),
+        (
+            [{"word": "—", "start": 0.0, "end": 0.2}, {"word": "b", "start": 0.1, "end": 0.3}],
+            "non_monotonic_times",
+            "timings: words[1]",
+        ),
     ],
-)  # fmt: skip
+)
 def test_bad_timings_end_only_their_request(
     words_catalog: Catalog, timings: Any, code: str, where: str
 ) -> None:

@@ -39,6 +39,7 @@ class DamEngine(Engine):
 
     def __init__(
         self,
+        *,
         degree: int = 4,
         variance: float = 0.99,
         points: int = 8,
@@ -168,9 +169,8 @@ class CohenMassaroEngine(DamEngine):
 
 
 def _without_degree(signature: inspect.Signature) -> inspect.Signature:
-    kept = [p for p in signature.parameters.values() if p.name != "degree"]
     return signature.replace(
-        parameters=[p.replace(kind=p.KEYWORD_ONLY) if p.name != "self" else p for p in kept]
+        parameters=[p for p in signature.parameters.values() if p.name != "degree"]
     )
 
 

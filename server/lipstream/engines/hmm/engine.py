@@ -66,6 +66,7 @@ class HmmEngine(Engine):
 
     def __init__(
         self,
+        *,
         n_states: int = 40,
         hmm_fps: float = 40.0,
         variance: float = 0.95,

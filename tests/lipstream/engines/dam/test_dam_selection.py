@@ -52,9 +52,14 @@ def test_dp_finds_the_exhaustive_optimum(seed: int) -> None:
     for _ in range(int(rng.integers(1, 6))):
         candidates = np.sort(rng.choice(12, size=int(rng.integers(1, 5)), replace=False))
         layers.append(
-            Layer(candidates, float(rng.uniform(0.05, 0.2)), int(rng.integers(-1, 6)),
-                  int(rng.integers(-1, 6)), int(rng.integers(-1, 4)))
-        )  # fmt: skip
+            Layer(
+                candidates,
+                float(rng.uniform(0.05, 0.2)),
+                int(rng.integers(-1, 6)),
+                int(rng.integers(-1, 6)),
+                int(rng.integers(-1, 4)),
+            )
+        )
     found = tuple(int(p) for p in best_path(costs, layers))
     every = itertools.product(*(range(len(layer.candidates)) for layer in layers))
     best = min(every, key=lambda path: _exhaustive_cost(costs, layers, path))
@@ -82,9 +87,16 @@ def test_smooth_cost_is_the_c2_jump_at_the_join() -> None:
     coefficients = np.array([[[0.0], [0.0], [1.0]], [[1.0], [0.0], [0.0]]])
     zeros = np.zeros((2, 6), dtype=np.int64)
     costs = Costs(
-        zeros, zeros, zeros[:, :4], end_derivatives(coefficients, 0.0),
-        end_derivatives(coefficients, 1.0), 0.1, 1.0, 1.0, 1.0,
-    )  # fmt: skip
+        zeros,
+        zeros,
+        zeros[:, :4],
+        end_derivatives(coefficients, 0.0),
+        end_derivatives(coefficients, 1.0),
+        0.1,
+        1.0,
+        1.0,
+        1.0,
+    )
     left = Layer(np.array([0]), 0.2, -1, -1, -1)
     right = Layer(np.array([1]), 0.1, -1, -1, -1)
     # slope 2 per local time over 0.2 s = 10/s, times 0.1 s = 1; curvature 2/0.04*0.01 = 0.5

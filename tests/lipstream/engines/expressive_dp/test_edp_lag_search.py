@@ -65,9 +65,14 @@ def _chunks(rng: np.random.Generator, count: int, chunking: str) -> Iterator[int
 
 
 def _stream(
-    space: SearchSpace, layers: list[LayerSpec], excluded: np.ndarray, lag: int | None,
-    chunking: str, memory: LagMemory | None, seed: int,
-) -> list[int]:  # fmt: skip
+    space: SearchSpace,
+    layers: list[LayerSpec],
+    excluded: np.ndarray,
+    lag: int | None,
+    chunking: str,
+    memory: LagMemory | None,
+    seed: int,
+) -> list[int]:
     path: list[int] = []
     rng = np.random.default_rng(seed)
     for known in _chunks(rng, len(layers), chunking):
@@ -87,9 +92,14 @@ def _stream(
     chunking=st.sampled_from(["one", "few", "all"]),
 )
 def test_the_reusing_search_commits_the_nodes_of_the_full_re_search(
-    seed: int, lag: int, dims: int, frames: str, constrain: bool, contaminate: bool,
+    seed: int,
+    lag: int,
+    dims: int,
+    frames: str,
+    constrain: bool,
+    contaminate: bool,
     chunking: str,
-) -> None:  # fmt: skip
+) -> None:
     rng = np.random.default_rng(seed)
     n = 60
     space = _space(rng, n, dims, frames)
@@ -150,9 +160,12 @@ def _spans(seed: int, count: int) -> list[tuple[Any, ...]]:
 
 
 def _synthesize(
-    model: ExpressiveDpModel, spans: list[tuple[Any, ...]], chunk: int, reuse: bool,
+    model: ExpressiveDpModel,
+    spans: list[tuple[Any, ...]],
+    chunk: int,
+    reuse: bool,
     **options: Any,
-) -> tuple[str, float, np.ndarray]:  # fmt: skip
+) -> tuple[str, float, np.ndarray]:
     synthesizer = model.start(fps=60, emotion="happy", **options)
     assert isinstance(synthesizer, PathSynthesizer)
     if not reuse:

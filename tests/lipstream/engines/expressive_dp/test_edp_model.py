@@ -60,7 +60,13 @@ def test_hard_constraints_are_satisfied_on_every_rung(
     )
     chosen = {first: int(other[0]), second: int(other[-1])}
     for options in ({}, {"lag": 0}, {"lag": "full"}, {"causal": True}):
-        path = _path(model, spans, emotion="neutral", constraints={str(k): v for k, v in chosen.items()}, **options)  # fmt: skip
+        path = _path(
+            model,
+            spans,
+            emotion="neutral",
+            constraints={str(k): v for k, v in chosen.items()},
+            **options,
+        )
         assert path[first] == chosen[first] and path[second] == chosen[second], options
         unconstrained = _path(model, spans, emotion="neutral", **options)
         assert unconstrained[first] != chosen[first]

@@ -114,8 +114,18 @@ def test_the_trajectory_is_solved_at_the_output_rate_below_the_synthesis_rate(
 ) -> None:
     """The smallest whole multiple of fps at or above hmm_fps (40 Hz), at most R_s (120)."""
     assert (model.hmm_fps, model.synthesis_fps) == (40.0, 120.0)
-    expected = {240.0: 120.0, 120.0: 120.0, 100.0: 100.0, 60.0: 60.0, 50.0: 50.0,
-                30.0: 60.0, 25.0: 50.0, 24.0: 48.0, 10.0: 40.0, 7.0: 42.0}  # fmt: skip
+    expected = {
+        240.0: 120.0,
+        120.0: 120.0,
+        100.0: 100.0,
+        60.0: 60.0,
+        50.0: 50.0,
+        30.0: 60.0,
+        25.0: 50.0,
+        24.0: 48.0,
+        10.0: 40.0,
+        7.0: 42.0,
+    }
     assert {fps: model.solve_fps(fps) for fps in expected} == expected
     for name, lag_ms, window_ms in RUNGS:
         options = {"lag_ms": lag_ms, "window_ms": window_ms}
