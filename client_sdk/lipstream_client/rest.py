@@ -259,7 +259,6 @@ class RestClient:
         emotion: str | None = None,
         latency_budget_ms: float | None = None,
         options: JsonMap | None = None,
-        encoding: Encoding = "msgpack",
     ) -> Synthesis:
         """``POST /v1/synthesize`` with recorded ``audio`` (PCM16 little-endian mono bytes,
         sample rate Hz) and its ``transcript``: the server aligns the words to the audio and
@@ -282,8 +281,8 @@ class RestClient:
             dict(options or {}),
         )
         parts: list[Message] = [start, AudioChunk(SYNTHESIZE_ID, audio[1], bytes(audio[0]))]
-        body = _synthesize_body(parts, encoding, {"transcript": transcript})
-        return self._post_synthesize(body, encoding)
+        body = _synthesize_body(parts, self.encoding, {"transcript": transcript})
+        return self._post_synthesize(body, self.encoding)
 
     def _post_synthesize(self, body: bytes, encoding: Encoding) -> Synthesis:
         media = _MEDIA_TYPES[encoding]

@@ -125,13 +125,8 @@ def test_the_sdk_sends_audio_and_transcript_and_gets_the_rest_answer(
     served: Served, spoken: SpokenText, encoding: Encoding
 ) -> None:
     raw = post(served, {**BODY, "audio": audio_field(spoken), "transcript": TEXT}).json()
-    result = RestClient(served.http).synthesize_transcript(
-        "viseme-lerp",
-        "demo",
-        (spoken.pcm16, spoken.sample_rate),
-        TEXT,
-        fps=FPS,
-        encoding=encoding,
+    result = RestClient(served.http, encoding=encoding).synthesize_transcript(
+        "viseme-lerp", "demo", (spoken.pcm16, spoken.sample_rate), TEXT, fps=FPS
     )
     assert result.alignment_confidence == raw["alignment"]["confidence"]
     assert (result.channels, result.ready.fps) == (tuple(raw["channels"]), FPS)
