@@ -4,6 +4,9 @@
 - ``banded``: banded and block-tridiagonal solves;
 - ``trellis``: the Viterbi trellis and the fixed-lag decoder (``FixedLagViterbi``,
   ``ViterbiState``);
+- ``layered``: the cheapest path through layers of candidates (min-plus dynamic
+  programme: ``Trellis``, ``forward``, ``cheapest_path``), for DAM's mode search and
+  expressive-dp's exact search;
 - ``direct_call``: calling a compiled kernel without numba's per-call typing
   (``DirectCall``), for kernels that take named groups of arrays.
 """
