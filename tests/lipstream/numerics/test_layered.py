@@ -9,11 +9,11 @@ import pytest
 
 from lipstream.numerics.layered import (
     Trellis,
+    Windows,
     cheapest_path,
     first_min_plus,
-    forward,
     survivors,
-    trace,
+    window_positions,
 )
 
 
@@ -57,7 +57,7 @@ def _paths(sizes: np.ndarray) -> list[tuple[int, ...]]:
 @pytest.mark.parametrize("seed", range(16))
 def test_cheapest_path_is_the_enumerated_optimum(seed: int) -> None:
     trellis = _trellis(seed, integers=False)
-    found = tuple(int(p) for p in cheapest_path(trellis, survivors(trellis)))
+    found = tuple(int(p) for p in cheapest_path(trellis))
     best = min(_cost(trellis, path) for path in _paths(trellis.sizes))
     assert np.isclose(_cost(trellis, found), best, rtol=1e-12, atol=1e-12)
 
@@ -67,7 +67,7 @@ def test_ties_go_to_the_lowest_positions_read_from_the_last_layer(seed: int) -> 
     """Integer costs sum exactly, so every optimal path ties; the search takes the one whose
     positions, last layer first, are least."""
     trellis = _trellis(seed, integers=True)
-    found = tuple(int(p) for p in cheapest_path(trellis, survivors(trellis)))
+    found = tuple(int(p) for p in cheapest_path(trellis))
     paths = _paths(trellis.sizes)
     best = min(_cost(trellis, path) for path in paths)
     optimal = [path for path in paths if _cost(trellis, path) == best]
@@ -75,23 +75,27 @@ def test_ties_go_to_the_lowest_positions_read_from_the_last_layer(seed: int) -> 
 
 
 @pytest.mark.parametrize("seed", range(12))
-def test_a_window_with_its_last_layer_priced_apart(seed: int) -> None:
+def test_windows_with_their_last_layer_priced_apart(seed: int) -> None:
     rng = np.random.default_rng(100 + seed)
     trellis = _trellis(seed, integers=True)
-    layers = len(trellis.sizes)
-    first = int(rng.integers(0, layers))
-    stop = int(rng.integers(first, layers))
-    until = int(rng.integers(first, stop + 1))
-    ending = np.asarray(rng.integers(0, 3, size=trellis.nodes.shape[1]), dtype=np.float64)
-    work = survivors(trellis)
-    position = trace(work.backs, stop, until, forward(trellis, first, stop, ending, work))
-    window = Trellis(
-        trellis.nodes[first : stop + 1], trellis.sizes[first : stop + 1], trellis.edges[first:stop]
-    )
-    paths = _paths(window.sizes)
-    best = min(_cost(window, path, ending) for path in paths)
-    optimal = [path for path in paths if _cost(window, path, ending) == best]
-    assert position == min(optimal, key=lambda path: path[::-1])[until - first]
+    layers, width = trellis.nodes.shape
+    endings = np.asarray(rng.integers(0, 3, size=(layers, width)), dtype=np.float64)
+    first = rng.integers(0, layers, size=6)
+    stop = np.asarray([int(rng.integers(low, layers)) for low in first], dtype=np.int64)
+    until = np.asarray([int(rng.integers(low, high + 1)) for low, high in zip(first, stop)])
+    apart = rng.integers(0, 2, size=6).astype(bool)
+    windows = Windows(first, stop, until, apart)
+    found = window_positions(trellis, endings, windows, survivors(trellis))
+    for w in range(6):
+        low, high = int(first[w]), int(stop[w])
+        window = Trellis(
+            trellis.nodes[low : high + 1], trellis.sizes[low : high + 1], trellis.edges[low:high]
+        )
+        ending = endings[high] if apart[w] else None
+        paths = _paths(window.sizes)
+        best = min(_cost(window, path, ending) for path in paths)
+        optimal = [path for path in paths if _cost(window, path, ending) == best]
+        assert found[w] == min(optimal, key=lambda path: path[::-1])[until[w] - low]
 
 
 def test_first_min_plus_takes_the_first_of_equal_sums_within_count() -> None:

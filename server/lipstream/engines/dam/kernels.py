@@ -15,8 +15,8 @@ few integer arrays per span, and two kernels do the rest:
   its window k - search_behind .. k + ahead exactly as the reference's
   ``cheapest_path`` runs it (E_c with the next phoneme unknown on the
   window's last layer, E_s per join, first minimum on ties): the shared
-  layered search (``numerics.layered.forward``, one window a call) over a
-  trellis built once per call, E_c and the joins' E_s computed once per span
+  layered search (``numerics.layered.window_positions``, every window in one
+  call) over a trellis built once per call, E_c and the joins' E_s computed once per span
   and per pair of neighbouring spans and weighed by w_c and w_s there (the
   products the reference adds);
 - ``dam_sum``: for each frame, Eq. 2 over the spans owner - tail .. owner +
@@ -57,7 +57,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ...numerics.layered import Survivors, Trellis, forward, trace
+from ...numerics.layered import Survivors, Trellis, Windows, window_positions
 from ...phonemes import PHONEMES
 from ...timeline import EMOTIONS
 from ..damped import FilterState, follow_frame_rates
@@ -271,30 +271,27 @@ def choose_modes(
         start, stop = flat_start[span_set[j]], flat_stop[span_set[j]]
         _node(start, stop, previous[j], following[j], emotion[j], search, open_nodes[j])
         _node(start, stop, previous[j], -1, emotion[j], search, cut_nodes[j])
+        for a in range(size[j]):  # weighed once here, the products the reference adds
+            open_nodes[j, a] = w_context * open_nodes[j, a]
+            cut_nodes[j, a] = w_context * cut_nodes[j, a]
     joins = np.zeros((max(n - 1, 0), width, width))
     for j in range(n - 1):
         left = modes[flat_start[span_set[j]] : flat_stop[span_set[j]]]
         right = modes[flat_start[span_set[j + 1]] : flat_stop[span_set[j + 1]]]
         _joins(left, right, durations[j], durations[j + 1], search, joins[j])
-    for j in range(n):
-        for a in range(size[j]):
-            open_nodes[j, a] = w_context * open_nodes[j, a]
-            cut_nodes[j, a] = w_context * cut_nodes[j, a]
-    for j in range(n - 1):
         for a in range(size[j]):
             for b in range(size[j + 1]):
                 joins[j, a, b] = w_smooth * joins[j, a, b]
-    trellis = Trellis(open_nodes, size, joins)
+    count = chosen_last - chosen_first + 1
+    until = np.arange(chosen_first, chosen_last + 1)
+    last = until + ahead
+    stop = np.minimum(last, n - 1)
+    windows = Windows(np.maximum(until - search_behind, 0), stop, until, stop == last)
     work = Survivors(np.empty(width), np.empty(width), np.zeros((n, width), dtype=np.int64))
-    chosen = np.empty(chosen_last - chosen_first + 1, dtype=np.int64)
+    positions = window_positions(Trellis(open_nodes, size, joins), cut_nodes, windows, work)
+    chosen = np.empty(count, dtype=np.int64)
     for k in range(chosen_first, chosen_last + 1):
-        first = max(0, k - search_behind)
-        last = k + ahead
-        stop = min(last, n - 1)
-        ending = cut_nodes[stop] if stop == last else open_nodes[stop]
-        position = forward(trellis, first, stop, ending, work)
-        position = trace(work.backs, stop, k, position)
-        chosen[k - chosen_first] = modes[flat_start[span_set[k]] + position]
+        chosen[k - chosen_first] = modes[flat_start[span_set[k]] + positions[k - chosen_first]]
     return chosen
 
 
