@@ -5,7 +5,7 @@
 - ``trellis``: the Viterbi trellis and the fixed-lag decoder (``FixedLagViterbi``,
   ``ViterbiState``);
 - ``layered``: the cheapest path through layers of candidates (min-plus dynamic
-  programme: ``Trellis``, ``window_positions``, ``cheapest_path``), for DAM's mode search and
+  programme: ``Trellis``, ``sliding_positions``), for DAM's mode search and
   expressive-dp's exact search;
 - ``direct_call``: calling a compiled kernel without numba's per-call typing
   (``DirectCall``), for kernels that take named groups of arrays.

@@ -13,10 +13,12 @@ search returns, in exact arithmetic, the one whose positions read from the last 
 are lowest. The sums are added in that order (path total + join, then + node), so a caller
 that adds its own terms in that order gets its own results to the bit.
 
-``window_positions`` searches windows first .. stop of one ``Trellis`` (``Windows``), a
-window's last layer priced apart when asked (DAM's window prices its last phoneme with
-the next one unknown), all in one call: called once per window, the search cost about a
-tenth more in DAM's calls. ``cheapest_path`` is the window of the whole trellis.
+``sliding_positions`` searches a window around each layer k of a range of one ``Trellis``,
+k − behind .. k + ahead, and keeps the window's choice at k; a window that ends before
+the trellis does prices its last layer apart (DAM prices a window's last phoneme with the
+next one unknown). Every window runs in one call: with a call per window, DAM's mode
+search cost a tenth more. With behind and ahead ≥ L every window is the whole trellis
+and the positions are its cheapest path.
 ``first_min_plus`` is one node's step on a column of join costs, for a caller that prices
 joins as it goes (expressive-dp's exact search, whose N × N joins per layer are too many
 to hold).
@@ -77,33 +79,30 @@ def first_min_plus(total: np.ndarray, column: np.ndarray, count: int) -> tuple[f
     return best_cost, best
 
 
-class Windows(NamedTuple):
-    """Searches over parts of one trellis, one per row: layers ``first`` .. ``stop``, the
-    position wanted at layer ``until`` (first ≤ until ≤ stop), and ``apart``: whether layer
-    ``stop``'s node costs are read from its row of the endings instead (int64 arrays, bool
-    ``apart``)."""
-
-    first: np.ndarray
-    stop: np.ndarray
-    until: np.ndarray
-    apart: np.ndarray
-
-
 @njit(cache=True)
-def window_positions(
-    trellis: Trellis, endings: np.ndarray, windows: Windows, work: Survivors
+def sliding_positions(
+    trellis: Trellis,
+    endings: np.ndarray,
+    low: int,
+    high: int,
+    behind: int,
+    ahead: int,
+    work: Survivors,
 ) -> np.ndarray:
-    """For each window, the position at layer ``until`` of its cheapest path: the forward
-    pass over its layers (each node's step ``first_min_plus``'s, written out), then the
-    first cheapest node of its last layer traced back. ``endings`` (L, W) holds the node
-    costs a window's last layer may be priced by apart; work.backs is scratch. One call
-    runs every window, so a window costs no call."""
+    """For each layer k of ``low`` .. ``high``, the position at k of the cheapest path over
+    the window max(0, k − ``behind``) .. min(k + ``ahead``, L − 1): the forward pass over
+    its layers (each node's step ``first_min_plus``'s, written out), then the first
+    cheapest node of its last layer traced back to k. A window that ends before the
+    trellis does (k + ahead < L) prices its last layer by its row of ``endings`` (L, W)
+    instead. work.backs is scratch. One call runs every window, so a window costs no call.
+    """
     nodes, sizes, edges = trellis.nodes, trellis.sizes, trellis.edges
     total, fresh, backs = work.total, work.fresh, work.backs
-    positions = np.empty(len(windows.first), dtype=np.int64)
-    for w in range(len(windows.first)):
-        first, stop, until = windows.first[w], windows.stop[w], windows.until[w]
-        ending = endings[stop] if windows.apart[w] else nodes[stop]
+    layers = len(sizes)
+    positions = np.empty(max(high - low + 1, 0), dtype=np.int64)
+    for until in range(low, high + 1):
+        first, stop = max(0, until - behind), min(until + ahead, layers - 1)
+        ending = endings[stop] if stop == until + ahead else nodes[stop]
         start = ending if first == stop else nodes[first]
         for a in range(sizes[first]):
             total[a] = start[a]
@@ -126,14 +125,5 @@ def window_positions(
                 position = a
         for j in range(stop, until, -1):
             position = backs[j, position]
-        positions[w] = position
+        positions[until - low] = position
     return positions
-
-
-def cheapest_path(trellis: Trellis) -> np.ndarray:
-    """The position in each layer (L,) of the cheapest path through the whole ``trellis``:
-    the window of all its layers, its position wanted at each."""
-    layers = len(trellis.sizes)
-    every = np.arange(layers, dtype=np.int64)
-    whole = Windows(np.zeros(layers, np.int64), np.full(layers, layers - 1), every, every < 0)
-    return np.asarray(window_positions(trellis, trellis.nodes, whole, survivors(trellis)))

@@ -7,14 +7,7 @@ import itertools
 import numpy as np
 import pytest
 
-from lipstream.numerics.layered import (
-    Trellis,
-    Windows,
-    cheapest_path,
-    first_min_plus,
-    survivors,
-    window_positions,
-)
+from lipstream.numerics.layered import Trellis, first_min_plus, sliding_positions, survivors
 
 
 def _trellis(seed: int, integers: bool) -> Trellis:
@@ -54,10 +47,19 @@ def _paths(sizes: np.ndarray) -> list[tuple[int, ...]]:
     return list(itertools.product(*(range(int(size)) for size in sizes)))
 
 
+def _whole_path(trellis: Trellis) -> tuple[int, ...]:
+    """Every layer's window is the whole trellis: the positions of its cheapest path."""
+    layers = len(trellis.sizes)
+    found = sliding_positions(
+        trellis, trellis.nodes, 0, layers - 1, layers, layers, survivors(trellis)
+    )
+    return tuple(int(p) for p in found)
+
+
 @pytest.mark.parametrize("seed", range(16))
-def test_cheapest_path_is_the_enumerated_optimum(seed: int) -> None:
+def test_the_whole_window_is_the_enumerated_optimum(seed: int) -> None:
     trellis = _trellis(seed, integers=False)
-    found = tuple(int(p) for p in cheapest_path(trellis))
+    found = _whole_path(trellis)
     best = min(_cost(trellis, path) for path in _paths(trellis.sizes))
     assert np.isclose(_cost(trellis, found), best, rtol=1e-12, atol=1e-12)
 
@@ -67,35 +69,35 @@ def test_ties_go_to_the_lowest_positions_read_from_the_last_layer(seed: int) -> 
     """Integer costs sum exactly, so every optimal path ties; the search takes the one whose
     positions, last layer first, are least."""
     trellis = _trellis(seed, integers=True)
-    found = tuple(int(p) for p in cheapest_path(trellis))
     paths = _paths(trellis.sizes)
     best = min(_cost(trellis, path) for path in paths)
     optimal = [path for path in paths if _cost(trellis, path) == best]
-    assert found == min(optimal, key=lambda path: path[::-1])
+    assert _whole_path(trellis) == min(optimal, key=lambda path: path[::-1])
 
 
-@pytest.mark.parametrize("seed", range(12))
-def test_windows_with_their_last_layer_priced_apart(seed: int) -> None:
+@pytest.mark.parametrize("seed", range(16))
+def test_sliding_windows_price_a_last_layer_short_of_the_end_apart(seed: int) -> None:
     rng = np.random.default_rng(100 + seed)
     trellis = _trellis(seed, integers=True)
     layers, width = trellis.nodes.shape
     endings = np.asarray(rng.integers(0, 3, size=(layers, width)), dtype=np.float64)
-    first = rng.integers(0, layers, size=6)
-    stop = np.asarray([int(rng.integers(low, layers)) for low in first], dtype=np.int64)
-    until = np.asarray([int(rng.integers(low, high + 1)) for low, high in zip(first, stop)])
-    apart = rng.integers(0, 2, size=6).astype(bool)
-    windows = Windows(first, stop, until, apart)
-    found = window_positions(trellis, endings, windows, survivors(trellis))
-    for w in range(6):
-        low, high = int(first[w]), int(stop[w])
+    low = int(rng.integers(0, layers))
+    high = int(rng.integers(low, layers))
+    behind, ahead = int(rng.integers(0, 4)), int(rng.integers(0, 4))
+    found = sliding_positions(trellis, endings, low, high, behind, ahead, survivors(trellis))
+    assert len(found) == high - low + 1
+    for k in range(low, high + 1):
+        first, stop = max(0, k - behind), min(k + ahead, layers - 1)
         window = Trellis(
-            trellis.nodes[low : high + 1], trellis.sizes[low : high + 1], trellis.edges[low:high]
+            trellis.nodes[first : stop + 1],
+            trellis.sizes[first : stop + 1],
+            trellis.edges[first:stop],
         )
-        ending = endings[high] if apart[w] else None
+        ending = endings[stop] if stop == k + ahead else None
         paths = _paths(window.sizes)
         best = min(_cost(window, path, ending) for path in paths)
         optimal = [path for path in paths if _cost(window, path, ending) == best]
-        assert found[w] == min(optimal, key=lambda path: path[::-1])[until[w] - low]
+        assert found[k - low] == min(optimal, key=lambda path: path[::-1])[k - first]
 
 
 def test_first_min_plus_takes_the_first_of_equal_sums_within_count() -> None:

@@ -15,7 +15,7 @@ few integer arrays per span, and two kernels do the rest:
   its window k - search_behind .. k + ahead exactly as the reference's
   ``cheapest_path`` runs it (E_c with the next phoneme unknown on the
   window's last layer, E_s per join, first minimum on ties): the shared
-  layered search (``numerics.layered.window_positions``, every window in one
+  layered search (``numerics.layered.sliding_positions``, every window in one
   call) over a trellis built once per call, E_c and the joins' E_s computed once per span
   and per pair of neighbouring spans and weighed by w_c and w_s there (the
   products the reference adds);
@@ -57,7 +57,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ...numerics.layered import Survivors, Trellis, Windows, window_positions
+from ...numerics.layered import Survivors, Trellis, sliding_positions
 from ...phonemes import PHONEMES
 from ...timeline import EMOTIONS
 from ..damped import FilterState, follow_frame_rates
@@ -282,14 +282,12 @@ def choose_modes(
         for a in range(size[j]):
             for b in range(size[j + 1]):
                 joins[j, a, b] = w_smooth * joins[j, a, b]
-    count = chosen_last - chosen_first + 1
-    until = np.arange(chosen_first, chosen_last + 1)
-    last = until + ahead
-    stop = np.minimum(last, n - 1)
-    windows = Windows(np.maximum(until - search_behind, 0), stop, until, stop == last)
     work = Survivors(np.empty(width), np.empty(width), np.zeros((n, width), dtype=np.int64))
-    positions = window_positions(Trellis(open_nodes, size, joins), cut_nodes, windows, work)
-    chosen = np.empty(count, dtype=np.int64)
+    trellis = Trellis(open_nodes, size, joins)
+    positions = sliding_positions(
+        trellis, cut_nodes, chosen_first, chosen_last, search_behind, ahead, work
+    )
+    chosen = np.empty(chosen_last - chosen_first + 1, dtype=np.int64)
     for k in range(chosen_first, chosen_last + 1):
         chosen[k - chosen_first] = modes[flat_start[span_set[k]] + positions[k - chosen_first]]
     return chosen
