@@ -17,8 +17,8 @@ that adds its own terms in that order gets its own results to the bit.
 k − behind .. k + ahead, and keeps the window's choice at k; a window that ends before
 the trellis does prices its last layer apart (DAM prices a window's last phoneme with the
 next one unknown). Every window runs in one call: with a call per window, DAM's mode
-search cost a tenth more (measured on 400 spans). With behind and ahead ≥ L every window is the whole trellis
-and the positions are its cheapest path.
+search over 400 spans cost a tenth more. With behind and ahead ≥ L every window is the
+whole trellis and the positions are its cheapest path.
 
 ``first_min_plus`` is one node's step on a column of join costs, for a caller that prices
 joins as it goes (expressive-dp's exact search, whose N × N joins per layer are too many
