@@ -14,6 +14,9 @@
 - ``nnls``: Lawson–Hanson non-negative least squares for a fixed design matrix, its Gram
   matrix precomputed and each solve warm-started from an active set (``NnlsSystem``,
   ``solve_nnls``, ``solve_nnls_rows``);
+- ``layered``: the cheapest path through layers of candidates (min-plus dynamic
+  programme: ``Trellis``, ``sliding_positions``), for DAM's mode search and
+  expressive-dp's exact search;
 - ``direct_call``: calling a compiled kernel without numba's per-call typing
   (``DirectCall``), for kernels that take named groups of arrays.
 """

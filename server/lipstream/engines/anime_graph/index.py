@@ -9,11 +9,12 @@ O(match length) lookups, whatever the corpus size. Every automaton state is
 a set of substrings sharing their end positions; those end positions are the
 state's subtree in the suffix-link tree, laid out contiguously by one
 depth-first walk, so a match's occurrences are one slice ``ends[low:high]``.
+The compiled search (``suffix_search``) reads these arrays itself; the same reads in
+numpy are the tests' oracle (``tests/lipstream/engines/anime_graph/reference.py``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -54,35 +55,6 @@ class SuffixIndex:
     @property
     def n_states(self) -> int:
         return int(self.transitions.shape[0])
-
-    def match(
-        self, query: Sequence[int] | np.ndarray, start: int, stop: int, cap: int | None = None
-    ) -> tuple[int, int]:
-        """Longest prefix of ``query[start:stop]`` (at most ``cap`` long) that occurs in the
-        corpus: (length, automaton state after reading it)."""
-        table = self.transitions
-        state = length = 0
-        while start + length < stop and (cap is None or length < cap):
-            following = int(table[state, query[start + length]])
-            if following < 0:
-                break
-            state, length = following, length + 1
-        return length, state
-
-    def occurrence_count(self, state: int) -> int:
-        return int(self.high[state] - self.low[state])
-
-    def occurrences(self, state: int, length: int, limit: int | None = None) -> np.ndarray:
-        """First animes of the occurrences of the ``length``-long match ending in ``state``,
-        ascending; at most ``limit``, then evenly spread over the occurrence list."""
-        low, high = int(self.low[state]), int(self.high[state])
-        count = high - low
-        if limit is not None and count > limit:
-            picks = low + (np.arange(limit, dtype=np.int64) * count) // limit
-            ends = self.ends[picks]
-        else:
-            ends = self.ends[low:high]
-        return np.sort(self.text_anime[np.asarray(ends, dtype=np.int64) - length + 1])
 
 
 def join_text(

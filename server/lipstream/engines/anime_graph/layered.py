@@ -13,6 +13,13 @@ dynamic programming over the run's trellis, exactly the cheapest of the
 longest paths. Ties go to the lowest predecessor id, then to the lowest last
 node id. A query costs O(states + edges stepped), whatever the graph's size.
 
+Why not the shared layered search (``numerics.layered``): that one runs over dense
+layers, every node of a layer joined to every node of the next, and breaks ties by
+position. Here a layer's states join only along the graph edges ``reach`` recorded
+(a dense trellis would price mostly absent joins), only the survivors are priced at
+all, and ties go to the lowest node id, which is not the order of states in a
+layer, so the relaxation walks the recorded edges instead.
+
 Arrays, CSR keyed by node * n_labels + label: ``step_offsets`` over
 ``step_targets``, the successors of the node that carry the label (so a
 step touches only edges it keeps), and ``NodeMembers``: ``entry_offsets`` over

@@ -80,7 +80,8 @@ def _occurrences(
     ends: np.ndarray,
     text_anime: np.ndarray,
 ) -> np.ndarray:
-    """``SuffixIndex.occurrences``: first animes of the run's occurrences, ascending."""
+    """First animes of the run's occurrences (``SuffixIndex.ends`` of state ``state``), at
+    most ``limit`` (<= 0: all) spread evenly over them, ascending."""
     first, count = low[state], high[state] - low[state]
     taken = count if limit <= 0 or count <= limit else limit
     starts = np.empty(taken, dtype=np.int64)

@@ -1,20 +1,24 @@
 """Compiled synthesis of a DAM (numba): the windowed mode searches and the sum of Eq. 2.
 
-Sketch: interpreting ``selection`` and ``model.render`` phoneme by phoneme
+Sketch: interpreting the mode search (the tests' numpy reference,
+``tests/lipstream/engines/dam/reference.py``) and ``model.render`` phoneme by phoneme
 cost about 0.4 ms per phoneme, nearly all of it Python and small-array
 overhead. Everything that does not depend on a request is tabulated when the
 model loads (``SearchTables``): for each phoneme (after its stand-in) and
 emotion, the candidate modes in one flat array, and for each candidate and
-each previous phoneme, next phoneme and emotion, the log share of
-``selection._log_share``, computed by the same numpy expression, so the
+each previous phoneme, next phoneme and emotion, the log share of the
+reference's ``_log_share``, computed by the same numpy expression, so the
 context costs E_c are the reference's to the bit. A request then reduces to a
 few integer arrays per span, and two kernels do the rest:
 
 - ``choose_modes``: for each span k of a range, the min-plus programme over
-  its window k - search_behind .. k + ahead exactly as
-  ``selection.cheapest_path`` runs it (E_c with the next phoneme unknown on
-  the window's last layer, E_s per join, first minimum on ties), with the
-  joins' E_s computed once per pair of neighbouring spans;
+  its window k - search_behind .. k + ahead exactly as the reference's
+  ``cheapest_path`` runs it (E_c with the next phoneme unknown on the
+  window's last layer, E_s per join, first minimum on ties): the shared
+  layered search (``numerics.layered.sliding_positions``, every window in one
+  call) over a trellis built once per call, E_c and the joins' E_s computed once per span
+  and per pair of neighbouring spans and weighed by w_c and w_s there (the
+  products the reference adds);
 - ``dam_sum``: for each frame, Eq. 2 over the spans owner - tail .. owner +
   ahead whose dominance reaches it, each term D·A with A on the clamped local
   time, in the order ``model.render`` adds them.
@@ -54,6 +58,7 @@ import numpy as np
 from numba import njit
 
 from ...numerics.basis import IN_ORDER, basis_frames
+from ...numerics.layered import Survivors, Trellis, sliding_positions
 from ...phonemes import PHONEMES
 from ...timeline import EMOTIONS
 from ..damped import FilterState, follow_frame_rates
@@ -128,7 +133,7 @@ class SpanArrays(NamedTuple):
 
 def _log_shares(table: np.ndarray, candidates: np.ndarray, alpha: float) -> np.ndarray:
     """log(share) of each candidate (rows) for every context (columns), each column as
-    ``selection._log_share`` computes it."""
+    the reference's ``_log_share`` computes it."""
     counts = np.ascontiguousarray(table[candidates].astype(np.float64).T) + alpha
     return np.asarray(np.log(counts / counts.sum(axis=1)[:, None]).T)
 
@@ -191,7 +196,7 @@ def _node(
     out: np.ndarray,
 ) -> None:
     """E_c of one layer's candidates into ``out``, term by term as
-    ``selection.context_cost``."""
+    the reference's ``context_cost``."""
     log_previous, log_following = search.log_previous, search.log_following
     log_emotion = search.log_emotion
     for position in range(start, stop):
@@ -214,7 +219,7 @@ def _joins(
     search: SearchTables,
     out: np.ndarray,
 ) -> None:
-    """E_s of each (left, right) candidate pair into ``out``, as ``selection.smooth_cost``."""
+    """E_s of each (left, right) candidate pair into ``out``, as the reference's ``smooth_cost``."""
     ends, starts, reference_duration = search.ends, search.starts, search.reference_duration
     scale = np.array([1.0, reference_duration, reference_duration**2])
     left_factor = np.empty(3)
@@ -267,42 +272,25 @@ def choose_modes(
         start, stop = flat_start[span_set[j]], flat_stop[span_set[j]]
         _node(start, stop, previous[j], following[j], emotion[j], search, open_nodes[j])
         _node(start, stop, previous[j], -1, emotion[j], search, cut_nodes[j])
+        for a in range(size[j]):  # weighed once here, the products the reference adds
+            open_nodes[j, a] = w_context * open_nodes[j, a]
+            cut_nodes[j, a] = w_context * cut_nodes[j, a]
     joins = np.zeros((max(n - 1, 0), width, width))
     for j in range(n - 1):
         left = modes[flat_start[span_set[j]] : flat_stop[span_set[j]]]
         right = modes[flat_start[span_set[j + 1]] : flat_stop[span_set[j + 1]]]
         _joins(left, right, durations[j], durations[j + 1], search, joins[j])
+        for a in range(size[j]):
+            for b in range(size[j + 1]):
+                joins[j, a, b] = w_smooth * joins[j, a, b]
+    work = Survivors(np.empty(width), np.empty(width), np.zeros((n, width), dtype=np.int64))
+    trellis = Trellis(open_nodes, size, joins)
+    positions = sliding_positions(
+        trellis, cut_nodes, chosen_first, chosen_last, search_behind, ahead, work
+    )
     chosen = np.empty(chosen_last - chosen_first + 1, dtype=np.int64)
-    total = np.empty(width)
-    following_total = np.empty(width)
-    backs = np.zeros((n, width), dtype=np.int64)
     for k in range(chosen_first, chosen_last + 1):
-        first = max(0, k - search_behind)
-        last = k + ahead
-        stop = min(last, n - 1)
-        node = cut_nodes[first] if first == last else open_nodes[first]
-        for a in range(size[first]):
-            total[a] = w_context * node[a]
-        for j in range(first + 1, stop + 1):
-            node = cut_nodes[j] if j == last else open_nodes[j]
-            join = joins[j - 1]
-            for b in range(size[j]):
-                best = 0
-                best_step = total[0] + w_smooth * join[0, b]
-                for a in range(1, size[j - 1]):
-                    step = total[a] + w_smooth * join[a, b]
-                    if step < best_step:
-                        best, best_step = a, step
-                backs[j, b] = best
-                following_total[b] = best_step + w_context * node[b]
-            total[: size[j]] = following_total[: size[j]]
-        position = 0
-        for a in range(1, size[stop]):
-            if total[a] < total[position]:
-                position = a
-        for j in range(stop, k, -1):
-            position = backs[j, position]
-        chosen[k - chosen_first] = modes[flat_start[span_set[k]] + position]
+        chosen[k - chosen_first] = modes[flat_start[span_set[k]] + positions[k - chosen_first]]
     return chosen
 
 

@@ -39,6 +39,14 @@ node's leaving side (last velocity reordered, last position, DSC's leaving half)
 arriving side (first velocity reordered, first position, the arriving half of its
 predecessor) as one contiguous row each, so a pair reads two rows front to back and a
 scan touches only their first cache line.
+
+Why not the shared layered search (``numerics.layered``, which the exact search
+``search._exact_kernel`` steps with): that one prices every pair of a layer and its
+predecessor, in position order. This step never prices most pairs: it needs the
+previous layer sorted by φ and grouped by viseme to stop each scan early, joins priced
+term by term against the best so far, and Rules 1 and 4 taken without a scan, so its
+loop is its own; what it keeps of the shared one is the answer, the exact step's
+optimum.
 """
 
 from __future__ import annotations

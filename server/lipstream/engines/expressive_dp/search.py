@@ -3,8 +3,11 @@
 Method. Each layer i (an input phoneme) admits the nodes that are not
 contaminated, or only its constrained node (B of Eq. 10), with unary cost
 U_i(o) = OC + EMP. Alg. 1 computes φ_i(b) = U_i(b) + min_a [φ_{i−1}(a) + TC(a, b)]
-over every pair, Θ(N²·T) (``exact_path``). ``fast_path`` reaches the same
-minimum with three exact reductions:
+over every pair, Θ(N²·T) (``search`` with ``fast=False``): each node's step is the
+shared layered search's (``numerics.layered.first_min_plus``, first minimum on ties)
+over the column of TC(a, b) priced for it, since the N × N joins of a layer are too
+many to hold as a matrix. The fast search (``fast=True``) reaches the same
+minimum with three exact reductions, and so keeps its own step (``fast_step``):
 
 1. Dominance pruning, before any transition is priced: with b* the admitted
    node of least U_i(b*) + into[b*] + out_of[b*] (``costs.NodeBounds``; only
@@ -65,6 +68,7 @@ from numba import njit
 
 from ...errors import InvalidRequestError
 from ...numerics.direct_call import DirectCall
+from ...numerics.layered import first_min_plus
 from .costs import NodeBounds, TableOne, transition_cost, unary_costs
 from .fast_step import (
     JoinRecords,
@@ -219,15 +223,12 @@ def _exact_kernel(
     next_nodes, next_u = candidates.nodes, candidates.costs
     f = np.empty(len(next_nodes))
     back = np.empty(len(next_nodes), dtype=np.int64)
+    column = np.empty(len(prev_nodes))
     for j in range(len(next_nodes)):
         b = next_nodes[j]
-        best = np.inf
-        arg = 0
         for i in range(len(prev_nodes)):
-            cost = prev_f[i] + transition_cost(prev_nodes[i], b, table)
-            if cost < best:
-                best = cost
-                arg = i
+            column[i] = transition_cost(prev_nodes[i], b, table)
+        best, arg = first_min_plus(prev_f, column, len(prev_nodes))
         f[j] = best + next_u[j]
         back[j] = arg
     return f, back

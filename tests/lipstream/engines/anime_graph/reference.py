@@ -3,17 +3,20 @@ compiled ``SuffixMatcher.tiles`` is tested against.
 
 Sketch: ``SuffixReference.match`` first continues the previous node's recording along its
 successors for as long as it spells the query; failing that, the automaton reads the longest
-run (``SuffixIndex.match``). ``choose`` ranks every occurrence of that run (at most the
-matcher's ``limit``) by its node costs plus the join from the previous node, lowest first;
+run (``index_match``). ``choose`` ranks every occurrence of that run (``index_occurrences``,
+at most the matcher's ``limit``) by its node costs plus the join from the previous node, lowest first;
 ``search.tiles_by_matches`` loops the two.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from lipstream.engines.anime_graph.costs import Labels, Ranking
 from lipstream.engines.anime_graph.graph import AnimeGraph
+from lipstream.engines.anime_graph.index import SuffixIndex
 from lipstream.engines.anime_graph.search import Match, SuffixMatcher
 
 
@@ -32,7 +35,7 @@ class SuffixReference:
             length = _spelled(graph, following, query, start, stop, cap)
             if length:
                 return Match(start, length, continuation=following)
-        length, state = self.matcher.index.match(query, start, stop, cap)
+        length, state = index_match(self.matcher.index, query, start, stop, cap)
         return Match(start, length, state)
 
     def choose(
@@ -42,7 +45,7 @@ class SuffixReference:
         if match.continuation >= 0:
             return match.continuation + steps
         index = self.matcher.index
-        starts = index.occurrences(match.state, match.length, self.matcher.limit)
+        starts = index_occurrences(index, match.state, match.length, self.matcher.limit)
         costs = np.zeros(len(starts))
         for offset in range(match.length):
             position = match.start + offset
@@ -62,3 +65,37 @@ def _spelled(
             break
         anime, length = int(graph.successor[anime]), length + 1
     return length
+
+
+def index_match(
+    index: SuffixIndex,
+    query: Sequence[int] | np.ndarray,
+    start: int,
+    stop: int,
+    cap: int | None = None,
+) -> tuple[int, int]:
+    """Longest prefix of ``query[start:stop]`` (at most ``cap`` long) that occurs in the
+    corpus: (length, automaton state after reading it)."""
+    table = index.transitions
+    state = length = 0
+    while start + length < stop and (cap is None or length < cap):
+        following = int(table[state, query[start + length]])
+        if following < 0:
+            break
+        state, length = following, length + 1
+    return length, state
+
+
+def index_occurrences(
+    index: SuffixIndex, state: int, length: int, limit: int | None = None
+) -> np.ndarray:
+    """First animes of the occurrences of the ``length``-long match ending in ``state``,
+    ascending; at most ``limit``, then evenly spread over the occurrence list."""
+    low, high = int(index.low[state]), int(index.high[state])
+    count = high - low
+    if limit is not None and count > limit:
+        picks = low + (np.arange(limit, dtype=np.int64) * count) // limit
+        ends = index.ends[picks]
+    else:
+        ends = index.ends[low:high]
+    return np.sort(index.text_anime[np.asarray(ends, dtype=np.int64) - length + 1])

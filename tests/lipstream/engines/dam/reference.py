@@ -1,9 +1,12 @@
 """The mode search written plainly in numpy, the oracle the compiled search is tested against.
 
-Sketch: ``select_mode`` runs the exact search of ``selection`` (``cheapest_path`` over E_c and
-E_s) over the window of spans k - search_behind .. k + ahead and takes its choice at k;
-``ModeMemo`` keeps the layers and costs that one call's overlapping windows share;
-``path_cost`` sums E of one path term by term, for enumerating every path.
+Sketch: ``context_cost`` (E_c) and ``smooth_cost`` (E_s) price a layer's candidates and the
+joins between two layers as ``selection`` defines them; ``cheapest_path`` is the min-plus
+programme over them (first minimum on ties, as ``numerics.layered``), ``best_path`` the
+same from the layers. ``select_mode`` runs it over the window of spans
+k - search_behind .. k + ahead and takes its choice at k; ``ModeMemo`` keeps the layers
+and costs that one call's overlapping windows share; ``path_cost`` sums E of one path term
+by term, for enumerating every path.
 """
 
 from __future__ import annotations
@@ -14,14 +17,59 @@ import numpy as np
 
 from lipstream.engines.base import SynthesisRequest
 from lipstream.engines.dam import DamModel
-from lipstream.engines.dam.selection import (
-    Costs,
-    Layer,
-    cheapest_path,
-    context_cost,
-    smooth_cost,
-)
+from lipstream.engines.dam.selection import Costs, Layer
 from lipstream.timeline import PhonemeSpan
+
+
+def _log_share(table: np.ndarray, candidates: np.ndarray, context: int, alpha: float) -> np.ndarray:
+    counts = table[candidates, context].astype(np.float64) + alpha
+    return np.asarray(np.log(counts / counts.sum()))
+
+
+def context_cost(costs: Costs, layer: Layer) -> np.ndarray:
+    """E_c of each candidate of ``layer``."""
+    total = np.zeros(len(layer.candidates))
+    for table, context in (
+        (costs.previous, layer.previous),
+        (costs.following, layer.following),
+        (costs.emotion, layer.emotion),
+    ):
+        if context >= 0:
+            total -= _log_share(table, layer.candidates, context, costs.alpha)
+    return total
+
+
+def smooth_cost(costs: Costs, left: Layer, right: Layer) -> np.ndarray:
+    """E_s of each (left candidate, right candidate) join."""
+    scale = np.array([1.0, costs.reference_duration, costs.reference_duration**2])
+    left_end = costs.ends[left.candidates] * (scale / left.duration ** np.arange(3))[:, None]
+    right_start = costs.starts[right.candidates] * (scale / right.duration ** np.arange(3))[:, None]
+    jump = left_end[:, None] - right_start[None, :]
+    return np.asarray(np.sum(jump * jump, axis=(2, 3)))
+
+
+def best_path(costs: Costs, layers: Sequence[Layer]) -> np.ndarray:
+    """The candidate position chosen in each layer, minimizing w_c·E_c + w_s·E_s."""
+    nodes = [context_cost(costs, layer) for layer in layers]
+    edges = [smooth_cost(costs, a, b) for a, b in zip(layers, layers[1:], strict=False)]
+    return cheapest_path(costs, nodes, edges)
+
+
+def cheapest_path(
+    costs: Costs, nodes: Sequence[np.ndarray], edges: Sequence[np.ndarray]
+) -> np.ndarray:
+    """The min-plus programme over E_c of each layer's nodes and E_s of each join."""
+    total = costs.w_context * nodes[0]
+    back: list[np.ndarray] = []
+    for node, edge in zip(nodes[1:], edges, strict=True):
+        step = total[:, None] + costs.w_smooth * edge
+        choice = np.argmin(step, axis=0)
+        back.append(choice)
+        total = step[choice, np.arange(step.shape[1])] + costs.w_context * node
+    path = [int(np.argmin(total))]
+    for choice in reversed(back):
+        path.append(int(choice[path[-1]]))
+    return np.asarray(path[::-1], dtype=np.int64)
 
 
 class ModeMemo:

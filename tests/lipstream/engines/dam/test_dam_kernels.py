@@ -13,10 +13,9 @@ from lipstream.engines.base import Model, SynthesisRequest, fill_gaps, frame_cou
 from lipstream.engines.dam import DamModel
 from lipstream.engines.dam.causal import CausalCurve
 from lipstream.engines.dam.dominance import dominance, powers
-from lipstream.engines.dam.selection import context_cost, smooth_cost
 from lipstream.phonemes import PHONEMES
 from lipstream.timeline import EMOTIONS, PhonemeSpan
-from tests.lipstream.engines.dam.reference import ModeMemo, select_mode
+from tests.lipstream.engines.dam.reference import ModeMemo, context_cost, select_mode, smooth_cost
 
 FPS = 60.0
 CASES = 12

@@ -8,14 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from lipstream.engines.dam.selection import (
-    Costs,
-    Layer,
-    best_path,
-    context_cost,
-    end_derivatives,
-    smooth_cost,
-)
+from lipstream.engines.dam.selection import Costs, Layer, end_derivatives
+from tests.lipstream.engines.dam.reference import best_path, context_cost, smooth_cost
 
 
 def _costs(rng: np.random.Generator, n_modes: int, degree: int) -> Costs:
