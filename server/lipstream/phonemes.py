@@ -7,7 +7,7 @@ notation's own clean-up (stress digits for ARPAbet, glued stress marks for
 espeak-ng, diacritics for IPA). Allophones with no ARPAbet symbol go to the
 phoneme whose mouth shape they share (a flap to D, a closure to its stop).
 IPA the English table lacks (any language's) goes to the phoneme nearest by
-articulatory features (``frontends.nearest_phoneme``).
+articulatory features (``phonetics.nearest_phoneme``).
 ``source="auto"`` tries readers in a fixed order and takes the first match.
 The tables, with the reasons for every judgement call, are in
 ``docs/reference/phonemes.md``.
@@ -22,8 +22,8 @@ from functools import cache, lru_cache
 from types import MappingProxyType
 
 from .errors import LipstreamError, UnknownPhonemeError
-from .frontends.ipa_segments import UnreadableSymbol
-from .frontends.nearest_phoneme import nearest_phoneme, phonemes_by_features
+from .phonetics.ipa_segments import UnreadableSymbol
+from .phonetics.nearest_phoneme import nearest_phoneme, phonemes_by_features
 from .tables import names, pairs
 
 ARPABET: tuple[str, ...] = names("""

@@ -7,12 +7,11 @@ once (``timing_checks``). Words get their phonemes from a lexicon (``lexicon``: 
 espeak-ng for the rest), a duration model trained on a corpus's phone alignments
 (``word_durations``) spreads them over each word's time (``spreading``), pauses between
 words become silence, and viseme-only input becomes spans of a representative phoneme
-(``viseme_spans``); ``words_to_spans.timings_to_spans`` runs the steps. Languages:
-``ipa_features`` describes IPA symbols by their articulation, ``phoneme_prototypes``
-describes the phoneme set the same way, ``ipa_segments`` reads a label into segments,
-``nearest_phoneme`` maps each segment to the phoneme nearest by features, ``espeak_ipa``
-reads espeak-ng's phoneme names as IPA, and ``espeak_languages`` names the languages and
-voice variants espeak-ng speaks (``lipstream.bench.languages`` surveys which of them map
-fully). Recordings: ``align`` finds a recording's phoneme spans from its transcript by
-forced alignment (pocketsphinx), the one aligner of the code base.
+(``viseme_spans``); ``words_to_spans.timings_to_spans`` runs the steps. Languages: any
+IPA maps to the phoneme set through ``lipstream.phonetics`` (articulatory features, below
+``phonemes``), ``espeak_ipa`` reads espeak-ng's phoneme names as IPA, and
+``espeak_languages`` names the languages and voice variants espeak-ng speaks
+(``lipstream.bench.languages`` surveys which of them map fully). Recordings: ``align``
+finds a recording's phoneme spans from its transcript by forced alignment (pocketsphinx),
+the one aligner of the code base.
 """

@@ -18,7 +18,7 @@ import pytest
 from lipstream import phonemes
 from lipstream.corpus import Corpus
 from lipstream.engines.base import Model, frame_count
-from lipstream.frontends import ipa_features, ipa_segments, nearest_phoneme
+from lipstream.phonetics import ipa_features, ipa_segments, nearest_phoneme
 from lipstream.speech.text_frontend import speak_text
 from lipstream.training import train_engine
 from lipstream_client import Client, LipstreamServerError

@@ -7,7 +7,8 @@ import pytest
 
 from lipstream.errors import UnknownPhonemeError
 from lipstream.frontends.espeak_ipa import as_ipa, ipa_event_phonemes
-from lipstream.frontends.ipa_features import (
+from lipstream.phonemes import _IPA_TABLE, ARPABET, ipa_phonemes, normalize_phoneme
+from lipstream.phonetics.ipa_features import (
     AFFRICATE,
     ALVEOLAR,
     DENTAL,
@@ -17,9 +18,8 @@ from lipstream.frontends.ipa_features import (
     Consonant,
     Vowel,
 )
-from lipstream.frontends.ipa_segments import UnreadableSymbol, ipa_segments
-from lipstream.frontends.nearest_phoneme import nearest_phoneme, phonemes_by_features
-from lipstream.phonemes import _IPA_TABLE, ARPABET, ipa_phonemes, normalize_phoneme
+from lipstream.phonetics.ipa_segments import UnreadableSymbol, ipa_segments
+from lipstream.phonetics.nearest_phoneme import nearest_phoneme, phonemes_by_features
 
 
 @pytest.mark.parametrize(
