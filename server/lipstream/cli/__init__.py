@@ -5,7 +5,7 @@ capture, align, path. Each command's parser and handler are one module,
 ``add_<command>_parser`` adding the command to the subcommands with its handler as ``run``:
 here in ``lipstream.cli``, except for a command whose work is a package of its own, which
 keeps its command module beside that work (``lipstream.loadtest.command``,
-``lipstream.capture.command``, ``lipstream.frontends.command``). Every option has a help line
+``lipstream.capture.command``). Every option has a help line
 (``lipstream <command> --help``); ``--version`` prints the version. A user-facing failure
 prints one line (``error [code]: where: message``) and exits 2.
 """
@@ -21,8 +21,8 @@ from .._version import __version__
 from ..capture.command import add_capture_parser
 from ..config import load_settings
 from ..errors import LipstreamError
-from ..frontends.command import add_align_parser
 from ..loadtest.command import add_loadtest_parser
+from .align import add_align_parser
 from .bench import add_bench_parser
 from .bridge import add_bridge_parser
 from .build_demo import add_build_demo_parser

@@ -85,7 +85,7 @@ def _aligned_spans(args: argparse.Namespace) -> tuple[list[PhonemeSpan], Audio]:
     confidence reported on stderr; the aligner's errors name the audio file."""
     from ..audio import read_wav
     from ..frontends.align import align
-    from ..frontends.command import read_transcript
+    from .align import read_transcript
 
     if not args.audio:
         raise LipstreamError(

@@ -31,7 +31,7 @@ def add_align_parser(commands: argparse._SubParsersAction[argparse.ArgumentParse
 
 
 def run_align(args: argparse.Namespace, settings: Settings) -> None:
-    from .align import align, write_alignment_textgrid
+    from ..frontends.align import align, write_alignment_textgrid
 
     source = Path(args.audio)
     alignment = align(_audio(source), read_transcript(args.transcript), where=str(source))
