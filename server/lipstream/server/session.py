@@ -87,6 +87,7 @@ from ..frontends.formats import parse_timings
 from ..frontends.timings import SpeechTimings
 from ..frontends.word_stream import WordStream
 from ..frontends.words_to_spans import timings_to_spans
+from ..output.profiles import requested_profile, resolve_profile
 from ..phonemes import SOURCES
 from ..timeline import EMOTIONS
 from .budget import (
@@ -101,7 +102,6 @@ from .catalog import Catalog
 from .held_input import UNLIMITED_INPUT, InputLedger
 from .outgoing import Outgoing, RequestClock
 from .overload import Refusal
-from .profiles import requested_profile, resolve_profile
 from .request import (
     ActiveRequest,
     RequestError,
