@@ -329,7 +329,7 @@ class Session:
         state = self.requests.get(error.id) if error.id is not None and error.fatal else None
         if state is None:
             return [Outgoing(error.to_message())]
-        self._forget(error.id)
+        self._forget(state.active.id)
         return [Outgoing(error.to_message(), state.active.spec.clock)]
 
     def _dispatch(
