@@ -34,6 +34,7 @@ from lipstream_client import (
     End,
     ErrorMessage,
     Message,
+    ProtocolError,
     Ready,
     ServerMessage,
     Start,
@@ -72,7 +73,7 @@ class ScriptedClient:
 
     async def send_text(self, text: str) -> None:
         message = decode(text, "json", sender="server")
-        assert not isinstance(message, Exception), message
+        assert not isinstance(message, ProtocolError), message
         self.received.append((self.loop.time(), cast(ServerMessage, message)))
 
     async def send_bytes(self, payload: bytes) -> None:
@@ -120,8 +121,12 @@ def serve_script(
         loop = asyncio.get_running_loop()
         socket = ScriptedClient(loop, script)
         open_at: dict[float, bool] = {}
+
+        def probe(at: float) -> None:
+            open_at[at] = socket.closed is None
+
         for at in probes:
-            loop.call_at(at, lambda at=at: open_at.__setitem__(at, socket.closed is None))
+            loop.call_at(at, probe, at)
         connection = Connection(cast(WebSocket, socket), "json", state)
         await connection.run()
         await asyncio.sleep(max(0.0, max(probes) - loop.time()) + JUST)  # the probes after
