@@ -29,8 +29,8 @@ def _synth(args: argparse.Namespace, settings: Settings) -> None:
     from ..engines import load_model
     from ..exports import SHAPE_FORMATS, format_for
     from ..exports.writer import ExportSettings
+    from ..output.profiles import apply_to_result
     from ..phones_io import read_phones, write_frames
-    from ..server.profiles import apply_to_result
 
     out = Path(args.out)
     format_name = format_for(out, args.format)
@@ -123,7 +123,7 @@ def _output_profile(args: argparse.Namespace, *, shapes: bool) -> OutputProfile 
     """The output profile of ``--profile`` with ``--naming``, ``--channels``, ``--visemes`` and
     ``--retarget`` laid over it, validated as the server validates ``start.output``; Rhubarb
     and Moho formats (``shapes``) default to the Preston Blair visemes."""
-    from ..server.profiles import parse_profile, profile_fields
+    from ..output.profiles import parse_profile, profile_fields
 
     fields = profile_fields(Path(args.profile)) if args.profile else {}
     for key in ("naming", "channels", "visemes", "retarget"):

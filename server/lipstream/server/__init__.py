@@ -5,8 +5,8 @@ under uvicorn. Streaming is split into a sans-I/O core, ``session`` (the
 per-connection state machine) and ``request`` (one request's frames and
 endings), and its only asynchronous shell, ``websocket``. Around them:
 ``catalog`` (resident models, ``calibration`` and ``budget`` for latency
-ladders), ``profiles`` and ``viseme_projection`` (output profiles),
-``outgoing`` (send-side timing), ``admission`` (tokens, Origin, rate),
+ladders, the output profiles of ``lipstream.output``), ``request_state`` (what a
+session keeps per request), ``outgoing`` (send-side timing), ``admission`` (tokens, Origin, rate),
 ``lifecycle`` (session cap, drain on SIGTERM), ``load`` and ``overload``
 (the load monitor and the admission that follows it), ``handshake`` (the
 request-head deadline, the connection cap, ``/healthz`` before the app),

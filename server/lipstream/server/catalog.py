@@ -41,14 +41,7 @@ from ..frontends.word_durations import WordDurationModel
 from ..models import ModelRegistry
 from ..numerics.nnls import warm_nnls
 from ..output.probes import RigProbe, probe_closures, probe_phoneme_poses, probe_rest_poses
-from ..output.retarget import RetargetMap
-from ..output.rig_presets import model_maps
-from ..status import Report, phase
-from ..store import MANIFEST_NAME
-from ..timeline import EMOTIONS
-from .budget import RungEstimate, estimate
-from .calibration import calibration_guard, measure, warm_up
-from .profiles import (
+from ..output.profiles import (
     ProfileError,
     ProfileRequest,
     load_default_emotions,
@@ -56,7 +49,14 @@ from .profiles import (
     parse_profile,
     resolve_profile,
 )
-from .viseme_projection import VisemeProjector, projectors_from
+from ..output.retarget import RetargetMap
+from ..output.rig_presets import model_maps
+from ..output.viseme_projection import VisemeProjector, projectors_from
+from ..status import Report, phase
+from ..store import MANIFEST_NAME
+from ..timeline import EMOTIONS
+from .budget import RungEstimate, estimate
+from .calibration import calibration_guard, measure, warm_up
 
 logger = logging.getLogger("lipstream.server")
 

@@ -62,10 +62,10 @@ from lipstream_client.messages import MAX_FPS, MAX_RETURN_MS, MAX_SEQ, DoneReaso
 from ..audio import Audio
 from ..engines.base import Synthesizer, frame_count, frames_before
 from ..errors import LipstreamError
+from ..output.profiles import ResolvedProfile
 from ..phonemes import normalize_phoneme
 from ..timeline import EMOTIONS, NormalizedSpans, PhonemeSpan
 from .outgoing import Outgoing, RequestClock
-from .profiles import ResolvedProfile
 
 TIME_TOLERANCE_S = 1e-9
 VALUES_PER_MESSAGE = 16_384

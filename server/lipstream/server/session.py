@@ -4,7 +4,9 @@ Sketch (in the manner of h11's and websockets' sans-I/O cores): ``handle``
 takes one decoded client message, or the ``ProtocolError`` the codec
 returned instead, with the monotonic time it arrived, and returns the
 ``Outgoing`` messages to send, in order. Requests are multiplexed by id;
-each active one is an ``ActiveRequest``. A ``words`` message (a TTS's timings) goes
+each active one is a ``RequestState``: its ``ActiveRequest`` with the cost, work
+guard, resume cursor, word stream and held input the session keeps for it, so ending
+a request forgets it with one ``pop``. A ``words`` message (a TTS's timings) goes
 through the front ends (``frontends``): each request keeps a ``WordStream`` that holds a
 word cut at a chunk's edge, and the spans of the words completed are fed like phonemes.
 ``start`` is validated against the ``Catalog`` (engine, character, phoneme notation,
@@ -78,13 +80,14 @@ from lipstream_client.errors import (
 from lipstream_client.float32 import FLOAT32_BYTES
 from lipstream_client.messages import DoneReason, JsonValue
 
-from ..engines.base import CallCost, Model, Rung, SynthesisRequest, frame_count
+from ..engines.base import Model, Rung, SynthesisRequest, frame_count
 from ..engines.work import WorkGuard
 from ..errors import LipstreamError
 from ..frontends.formats import parse_timings
 from ..frontends.timings import SpeechTimings
 from ..frontends.word_stream import WordStream
 from ..frontends.words_to_spans import timings_to_spans
+from ..output.profiles import requested_profile, resolve_profile
 from ..phonemes import SOURCES
 from ..timeline import EMOTIONS
 from .budget import (
@@ -96,10 +99,9 @@ from .budget import (
 )
 from .calibration import PHONEME_S
 from .catalog import Catalog
-from .held_input import UNLIMITED_INPUT, Holding, InputLedger
+from .held_input import UNLIMITED_INPUT, InputLedger
 from .outgoing import Outgoing, RequestClock
 from .overload import Refusal
-from .profiles import requested_profile, resolve_profile
 from .request import (
     ActiveRequest,
     RequestError,
@@ -109,6 +111,7 @@ from .request import (
     protocol_code,
     settle_frames,
 )
+from .request_state import RequestState
 from .resume import ResumeCursor, check_seq_room, pinned_rung
 from .text_input import (
     engine_audio,
@@ -166,13 +169,7 @@ class Session:
         self.limits = limits
         self.refuse_start = refuse_start
         self.input_ledger = input_ledger or InputLedger(UNLIMITED_INPUT)
-        self.holdings: dict[str, Holding] = {}
-        self.too_large: dict[str, LipstreamError] = {}
-        self.requests: dict[str, ActiveRequest] = {}
-        self.costs: dict[str, CallCost] = {}
-        self.guards: dict[str, WorkGuard] = {}
-        self.resumes: dict[str, ResumeCursor] = {}
-        self.word_streams: dict[str, WordStream] = {}
+        self.requests: dict[str, RequestState] = {}
         self.ended: OrderedDict[str, DoneReason] = OrderedDict()
         self.draining = False
         self.stopped_work = 0
@@ -191,15 +188,9 @@ class Session:
         dropped."""
         self.stop_all_work()
         dropped = len(self.requests)
+        for state in self.requests.values():
+            state.release()
         self.requests.clear()
-        self.costs.clear()
-        self.guards.clear()
-        self.resumes.clear()
-        self.word_streams.clear()
-        for holding in self.holdings.values():
-            holding.release()
-        self.holdings.clear()
-        self.too_large.clear()
         self.output_values = 0
         return dropped
 
@@ -209,9 +200,10 @@ class Session:
         decides and the frames it may release (``math.inf`` when the engine knows no bound)."""
         if not isinstance(received, (Phonemes, AudioChunk, Text, Words, End, Interrupt)):
             return 0.0
-        request = self.requests.get(received.id)
-        if request is None:
+        state = self.requests.get(received.id)
+        if state is None:
             return 0.0
+        request = state.active
         if isinstance(received, (Text, Words)):
             return math.inf  # espeak-ng in a worker process (words CMUdict lacks): heavy lane
         fps = request.spec.fps
@@ -233,7 +225,7 @@ class Session:
                 extra_frames = max(1, settle_frames(default_ms, fps))
         released = min(frame_count(until, fps), self.limits.request.max_frames)
         frames = max(0, released - request.next_frame) + extra_frames
-        return self.costs[received.id].ms(phonemes, frames)
+        return state.cost.ms(phonemes, frames)
 
     def check_queued(self, identifier: str, phonemes: int) -> None:
         """Active request ``identifier`` has ``phonemes`` more phonemes received and waiting
@@ -242,26 +234,26 @@ class Session:
         work now; its next message handled ends it with that error. (The count is a lower
         bound, since the message being handled is no longer waiting and the engine may not
         have taken it yet, so no request is refused that would have been taken.)"""
-        request = self.requests.get(identifier)
-        if request is None or identifier in self.too_large:
+        state = self.requests.get(identifier)
+        if state is None or state.too_large is not None:
             return
         try:
-            request.synthesizer.check_more_phonemes(phonemes)
+            state.active.synthesizer.check_more_phonemes(phonemes)
         except LipstreamError as error:
-            self.too_large[identifier] = error
-            self.stop_work(identifier)
+            state.too_large = error
+            state.guard.cancel()
 
     def stop_work(self, identifier: str) -> None:
         """Stop the work of active request ``identifier`` at its next step (the client sent
         ``cancel`` for it); its messages then answer nothing until that ``cancel``."""
-        guard = self.guards.get(identifier)
-        if guard is not None:
-            guard.cancel()
+        state = self.requests.get(identifier)
+        if state is not None:
+            state.guard.cancel()
 
     def stop_all_work(self) -> None:
         """Stop the work of every active request at its next step (the connection is over)."""
-        for guard in list(self.guards.values()):
-            guard.cancel()
+        for state in list(self.requests.values()):
+            state.guard.cancel()
 
     def next_expiry(self) -> float | None:
         """The monotonic time at which the longest-silent active request times out; None
@@ -270,7 +262,7 @@ class Session:
         timeout = self.limits.request_timeout_s
         if timeout is None or not self.requests:
             return None
-        return next(iter(self.requests.values())).last_input + timeout
+        return next(iter(self.requests.values())).active.last_input + timeout
 
     def expire(self, now: float) -> list[Outgoing]:
         """End every request that has had no message for the request timeout by ``now``:
@@ -278,9 +270,14 @@ class Session:
         timeout = self.limits.request_timeout_s
         if timeout is None or not self.requests:
             return []
-        if now - next(iter(self.requests.values())).last_input < timeout:
+        if now - next(iter(self.requests.values())).active.last_input < timeout:
             return []  # the longest-silent request is within its timeout: every message but few
-        expired = list(takewhile(lambda r: now - r.last_input >= timeout, self.requests.values()))
+        expired = list(
+            takewhile(
+                lambda r: now - r.last_input >= timeout,
+                (state.active for state in self.requests.values()),
+            )
+        )
         for request in expired:
             self._forget(request.id)
         return [
@@ -310,7 +307,8 @@ class Session:
             logger.exception(
                 "unexpected fault handling %s for request %r", type(received).__name__, identifier
             )
-            request = self.requests.get(identifier) if isinstance(identifier, str) else None
+            state = self.requests.get(identifier) if isinstance(identifier, str) else None
+            request = state.active if state is not None else None
             if request is not None:
                 self._forget(request.id)
             return [
@@ -328,11 +326,11 @@ class Session:
     # ---- dispatch -------------------------------------------------------------------------
 
     def _rejected(self, error: ProtocolError) -> list[Outgoing]:
-        request = self.requests.get(error.id) if error.id is not None and error.fatal else None
-        if request is None:
+        state = self.requests.get(error.id) if error.id is not None and error.fatal else None
+        if state is None:
             return [Outgoing(error.to_message())]
-        self._forget(request.id)
-        return [Outgoing(error.to_message(), request.spec.clock)]
+        self._forget(state.active.id)
+        return [Outgoing(error.to_message(), state.active.spec.clock)]
 
     def _dispatch(
         self, received: Message, now: float, meter_clock: Callable[[], float] | None
@@ -341,25 +339,22 @@ class Session:
             return self._start(received, now)
         if not isinstance(received, (Phonemes, AudioChunk, Text, Words, End, Cancel, Interrupt)):
             return [_error(UNKNOWN_TYPE, f"a client may not send {received.type!r}", None)]
-        request = self.requests.get(received.id)
-        if request is None:
+        state = self.requests.get(received.id)
+        if state is None:
             return self._orphan(received)
-        guard = self.guards[request.id]
+        request = state.active
         request.last_input = now
         self.requests[request.id] = self.requests.pop(request.id)
-        cursor = self.resumes.get(request.id)
-        too_large = self.too_large.get(request.id)
-        if too_large is not None and not isinstance(received, Cancel):
-            return self._end_with(request, too_large)
+        if state.too_large is not None and not isinstance(received, Cancel):
+            return self._end_with(request, state.too_large)
         try:
-            outgoing = self._metered(guard, request, received, now, meter_clock)
-            if cursor is not None:
-                outgoing = cursor.filter(outgoing)
+            outgoing = self._metered(state, received, now, meter_clock)
+            if state.resume is not None:
+                outgoing = state.resume.filter(outgoing)
         except LipstreamError as error:
-            too_large = self.too_large.get(request.id)
-            if too_large is not None and not isinstance(received, Cancel):
-                return self._end_with(request, too_large)
-            if guard.cancelled and not isinstance(received, Cancel):
+            if state.too_large is not None and not isinstance(received, Cancel):
+                return self._end_with(request, state.too_large)
+            if state.guard.cancelled and not isinstance(received, Cancel):
                 # Stopped by the client's cancel, which follows in order and ends it, or by
                 # the end of the connection.
                 self.stopped_work += 1
@@ -369,7 +364,7 @@ class Session:
             self._forget(request.id)
             self._remember(request.id, _REASONS[type(received)])
         else:
-            self._hold(request)
+            self._hold(state)
         return outgoing
 
     def _end_with(self, request: ActiveRequest, error: LipstreamError) -> list[Outgoing]:
@@ -388,33 +383,28 @@ class Session:
             )
         ]
 
-    def _hold(self, request: ActiveRequest) -> None:
-        """Count what ``request`` holds of its input now (only an engine that reads audio
+    def _hold(self, state: RequestState) -> None:
+        """Count what the request holds of its input now (only an engine that reads audio
         holds any)."""
+        request = state.active
         if not request.spec.uses_audio:
             return
-        holding = self.holdings.get(request.id)
-        if holding is None:
-            holding = self.holdings[request.id] = self.input_ledger.holding()
-        holding.update(request.synthesizer.held_input_bytes)
+        state.holding_in(self.input_ledger).update(request.synthesizer.held_input_bytes)
 
-    def _admit_input(self, request: ActiveRequest, n_samples: int, sample_rate: int) -> None:
-        """``input_too_large`` unless the process may hold what ``request`` holds while it
+    def _admit_input(self, state: RequestState, n_samples: int, sample_rate: int) -> None:
+        """``input_too_large`` unless the process may hold what the request holds while it
         takes in ``n_samples`` more at ``sample_rate`` Hz (its engine's bound, and the new
         samples as float32); that much is counted until the request reports what it holds
         after."""
+        request = state.active
         if not request.spec.uses_audio:
             return
-        holding = self.holdings.get(request.id)
-        if holding is None:
-            holding = self.holdings[request.id] = self.input_ledger.holding()
         bound = request.synthesizer.held_input_bytes_after(n_samples, sample_rate)
-        holding.admit(bound + n_samples * FLOAT32_BYTES)
+        state.holding_in(self.input_ledger).admit(bound + n_samples * FLOAT32_BYTES)
 
     def _metered(
         self,
-        guard: WorkGuard,
-        request: ActiveRequest,
+        state: RequestState,
         received: RequestInput,
         now: float,
         meter_clock: Callable[[], float] | None,
@@ -422,11 +412,12 @@ class Session:
         """``_apply`` with the engine's time counted against the request's CPU budget
         (``cancel`` does no engine work, so it runs even when the work was stopped)."""
         if isinstance(received, Cancel):
-            return self._apply(request, received, now)
-        with guard.metering(meter_clock):
-            return self._apply(request, received, now)
+            return self._apply(state, received, now)
+        with state.guard.metering(meter_clock):
+            return self._apply(state, received, now)
 
-    def _apply(self, request: ActiveRequest, received: RequestInput, now: float) -> list[Outgoing]:
+    def _apply(self, state: RequestState, received: RequestInput, now: float) -> list[Outgoing]:
+        request = state.active
         if isinstance(received, Phonemes):
             before = request.output_values
             try:
@@ -437,25 +428,26 @@ class Session:
                 self.output_values += request.output_values - before
         if isinstance(received, AudioChunk):
             _check_audio_start(request, received)
-            self._admit_input(request, received.n_samples, received.sample_rate)
+            self._admit_input(state, received.n_samples, received.sample_rate)
             return request.add_audio(received, now)
         if isinstance(received, Text):
-            return self._speak(request, received, now)
+            return self._speak(state, received, now)
         if isinstance(received, Words):
-            return self._take_words(request, received, now)
+            return self._take_words(request, state.words(), received, now)
         if isinstance(received, End):
-            stream = self.word_streams.get(request.id)
+            stream = state.word_stream
             held = self._feed_timings(request, stream, stream.finish(), now) if stream else []
             return held + request.end(now)
         if isinstance(received, Cancel):
             return request.cancel()
         return request.interrupt(received.at, received.return_ms, now)
 
-    def _speak(self, request: ActiveRequest, received: Text, now: float) -> list[Outgoing]:
+    def _speak(self, state: RequestState, received: Text, now: float) -> list[Outgoing]:
         """Speak ``received`` (``text_input``): its ``audio`` messages, then the frames of the
         speech and spans it hands the engine together. The speech was ready the synthesis
         time after ``now``: its frames' lag counts from then, and the synthesis time is
         reported apart (``done.stats.speech_synthesis_ms``)."""
+        request = state.active
         began = self.timer()
         speech = speak(received)
         synthesis_s = max(0.0, self.timer() - began)
@@ -464,7 +456,7 @@ class Session:
         start = speech_start(request)
         outgoing = speech_messages(request, speech, start)
         chunk = engine_audio(request, speech, start)
-        self._admit_input(request, len(chunk.samples), chunk.sample_rate)
+        self._admit_input(state, len(chunk.samples), chunk.sample_rate)
         before = request.output_values
         try:
             outgoing += request.add_speech(
@@ -478,10 +470,12 @@ class Session:
             self.output_values += request.output_values - before
         return outgoing
 
-    def _take_words(self, request: ActiveRequest, received: Words, now: float) -> list[Outgoing]:
+    def _take_words(
+        self, request: ActiveRequest, stream: WordStream, received: Words, now: float
+    ) -> list[Outgoing]:
         """A TTS's timings (``frontends``): the words they complete become spans, from the
-        end of the input so far; a word that may go on in the next message is held."""
-        stream = self.word_streams.setdefault(request.id, WordStream())
+        end of the input so far; a word that may go on in ``stream``, the request's, is
+        held."""
         if received.voice is not None:
             stream.voice = received.voice
         try:
@@ -543,17 +537,10 @@ class Session:
         ]
 
     def _forget(self, identifier: str) -> None:
-        request = self.requests.pop(identifier, None)
-        if request is not None:
-            self.output_values -= request.output_values
-        self.costs.pop(identifier, None)
-        self.guards.pop(identifier, None)
-        self.resumes.pop(identifier, None)
-        self.word_streams.pop(identifier, None)
-        holding = self.holdings.pop(identifier, None)
-        if holding is not None:
-            holding.release()
-        self.too_large.pop(identifier, None)
+        state = self.requests.pop(identifier, None)
+        if state is not None:
+            self.output_values -= state.active.output_values
+            state.release()
 
     def _remember(self, identifier: str, reason: DoneReason) -> None:
         self.ended[identifier] = reason
@@ -600,7 +587,7 @@ class Session:
                 )
             ]
         try:
-            request, ready, cost, guard = self._open(start, now)
+            state, ready = self._open(start, now)
         except BudgetInfeasible as error:
             return [
                 _error(
@@ -615,18 +602,11 @@ class Session:
             return [
                 _error(protocol_code(error, INVALID_REQUEST), _located(error), start.id, fatal=True)
             ]
-        self.requests[start.id] = request
-        self.costs[start.id] = cost
-        self.guards[start.id] = guard
-        # A count of waiting phonemes may have landed on this id's previous request (in
-        # another thread) just as it ended.
-        self.too_large.pop(start.id, None)
-        if start.resume is not None:
-            self.resumes[start.id] = ResumeCursor.of(start.resume)
+        self.requests[start.id] = state
         self.ended.pop(start.id, None)
-        return [Outgoing(ready, request.spec.clock)]
+        return [Outgoing(ready, state.active.spec.clock)]
 
-    def _open(self, start: Start, now: float) -> tuple[ActiveRequest, Ready, CallCost, WorkGuard]:
+    def _open(self, start: Start, now: float) -> tuple[RequestState, Ready]:
         catalog = self.catalog
         model = catalog.model(start.engine, start.character)
         source = _phoneme_source(start.phoneme_source)
@@ -679,8 +659,13 @@ class Session:
             options=options,
             phoneme_source=source,
         )
-        request = ActiveRequest(spec, synthesizer, self.limits.request)
-        return request, ready, catalog.call_cost(model, options), guard
+        state = RequestState(
+            ActiveRequest(spec, synthesizer, self.limits.request),
+            catalog.call_cost(model, options),
+            guard,
+            ResumeCursor.of(start.resume) if start.resume is not None else None,
+        )
+        return state, ready
 
     def _fidelity(
         self, model: Model, estimate: RungEstimate, options: Mapping[str, JsonValue]

@@ -13,7 +13,7 @@ from lipstream.engines.base import Model, frame_count
 from lipstream.loadtest.load import LoadTestConfig, loadtest
 from lipstream.loadtest.reference import ReferenceTraffic, engine_traffic, reference_server
 from lipstream_client.client import AsyncClient
-from tests.lipstream.server.harness import Served, fixed_calibration, serving
+from tests.lipstream.server.harness import Served, serving
 
 FPS = 60.0
 # viseme-lerp's causal rung at a fixed calibration (tests/lipstream/server/test_causal_serving)
@@ -27,7 +27,7 @@ Block = tuple[int, int, int]  # first frame, frames, data bytes
 @pytest.fixture(scope="module")
 def served(trained_models: dict[str, Model], tmp_path: Path) -> Iterator[Served]:
     trained_models["viseme-lerp"].save(tmp_path / "viseme-lerp")
-    with fixed_calibration(), serving(tmp_path, ServerSettings()) as running:
+    with serving(tmp_path, ServerSettings()) as running:  # at the fixed calibration
         yield running
 
 

@@ -13,7 +13,7 @@ import threading
 from collections import deque
 from collections.abc import Coroutine, Iterator
 from concurrent.futures import Future
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
@@ -72,10 +72,26 @@ class Served:
 
 @contextmanager
 def serving(
-    models: Path, settings: ServerSettings | None = None, app: FastAPI | None = None
+    models: Path,
+    settings: ServerSettings | None = None,
+    app: FastAPI | None = None,
+    *,
+    measured_calibration: bool = False,
 ) -> Iterator[Served]:
     """Serve ``models`` (or ``app``, built from them) on a free loopback port until the
-    block ends."""
+    block ends. Its catalog is calibrated by ``fixed_calibration`` (a loaded machine's
+    measurement could refuse a model as too costly, or choose other rungs) unless
+    ``measured_calibration``, for the tests of calibration itself."""
+    with ExitStack() as stack:
+        if not measured_calibration:
+            stack.enter_context(fixed_calibration())
+        yield stack.enter_context(_serving(models, settings, app))
+
+
+@contextmanager
+def _serving(
+    models: Path, settings: ServerSettings | None, app: FastAPI | None
+) -> Iterator[Served]:
     settings = (settings or ServerSettings()).with_changes(log_level="warning")
     app = app or create_app(models, settings)
     port = free_port()

@@ -20,7 +20,6 @@ from tests.lipstream.server.harness import (
     FIXED_COMPUTE_MS,
     Served,
     client,
-    fixed_calibration,
     frame_rows,
     serving,
 )
@@ -46,7 +45,7 @@ def catalog(fixed_cost_catalog: Catalog) -> Catalog:
 
 @pytest.fixture(scope="module")
 def served(all_models_dir: Path) -> Iterator[Served]:
-    with fixed_calibration(), serving(all_models_dir, ServerSettings()) as running:
+    with serving(all_models_dir, ServerSettings()) as running:  # at the fixed calibration
         yield running
 
 

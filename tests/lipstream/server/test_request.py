@@ -72,7 +72,7 @@ def streamed(catalog: Catalog, phonemes: int) -> tuple[Session, ActiveRequest, n
         label = "AA" if index % 2 else "M"
         item = PhonemeItem(label, index * PHONEME_S, (index + 1) * PHONEME_S)
         sent += handle(session, Phonemes("a", (item,)))
-    return session, session.requests["a"], rows_of(sent), len(ready.channels)
+    return session, session.requests["a"].active, rows_of(sent), len(ready.channels)
 
 
 def test_a_request_keeps_a_bounded_tail_of_what_it_sent(catalog: Catalog) -> None:

@@ -18,7 +18,7 @@ import pytest
 from lipstream.config import ServerSettings
 from lipstream.engines import engine_names
 from lipstream.server.catalog import Catalog
-from tests.lipstream.server.harness import Served, fixed_calibration, serving
+from tests.lipstream.server.harness import Served, serving
 
 ITEMS = [{"phoneme": "HH", "start": 0.0, "end": 0.1}, {"phoneme": "AY1", "start": 0.1, "end": 0.3}]
 BODY = {"engine": "viseme-lerp", "character": "demo", "fps": 50, "items": ITEMS}
@@ -27,11 +27,7 @@ FRAMES = 16 + 8  # frames i / 50 <= 0.3 s, then the return to rest: 150 ms at 50
 
 @pytest.fixture(scope="module")
 def served(all_models_dir: Path) -> Iterator[Served]:
-    # calibration measured on a loaded machine could refuse a model as too costly at load
-    with (
-        fixed_calibration(),
-        serving(all_models_dir, ServerSettings(max_body_bytes=4096)) as running,
-    ):
+    with serving(all_models_dir, ServerSettings(max_body_bytes=4096)) as running:
         yield running
 
 

@@ -213,7 +213,9 @@ def test_the_server_never_numbers_a_block_past_the_bound(catalog: Catalog) -> No
     session = new_session(catalog)
     start = Start("a", "viseme-lerp", "demo", fps=FPS, resume=Resume(0, 0))
     assert isinstance(play(session, [start])[0], Ready)
-    session.resumes["a"].seq = MAX_SEQ  # as if the request had sent that many blocks
+    cursor = session.requests["a"].resume
+    assert cursor is not None
+    cursor.seq = MAX_SEQ  # as if the request had sent that many blocks
     answers = play(session, [Phonemes("a", ITEMS[:6]), Phonemes("a", ITEMS[6:])])
     seqs = [b.seq for b in blocks(answers)]
     assert seqs == [MAX_SEQ]
@@ -222,7 +224,7 @@ def test_the_server_never_numbers_a_block_past_the_bound(catalog: Catalog) -> No
     assert session.active_requests == 0
     request = Start("b", "viseme-lerp", "demo", fps=FPS)
     assert isinstance(play(session, [request])[0], Ready)
-    session.requests["b"].seq = MAX_SEQ
+    session.requests["b"].active.seq = MAX_SEQ
     answers = play(session, [Phonemes("b", ITEMS[:6]), Phonemes("b", ITEMS[6:])])
     assert [b.seq for b in blocks(answers)] == [MAX_SEQ]
     [error] = [m for m in answers if isinstance(m, ErrorMessage)]

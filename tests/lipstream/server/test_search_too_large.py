@@ -116,9 +116,9 @@ def test_phonemes_waiting_past_the_cap_end_the_request_at_its_next_message(
     for message in messages[:3]:  # fewer than a window: nothing searched yet
         session.handle(message, 0.0)
     session.check_queued("a", ALLOWED - 3)  # at the cap: nothing happens
-    assert not session.guards["a"].cancelled
+    assert not session.requests["a"].guard.cancelled
     session.check_queued("a", ALLOWED - 2)
-    assert session.guards["a"].cancelled  # the running work stops at its next step
+    assert session.requests["a"].guard.cancelled  # the running work stops at its next step
     [answer] = session.handle(messages[3], 0.0)
     error = answer.message
     assert isinstance(error, ErrorMessage)

@@ -413,7 +413,7 @@ def test_an_engine_fault_ends_only_its_request(catalog: Catalog) -> None:
     def broken(*_args: object, **_kwargs: object) -> None:
         raise RuntimeError("engine bug")
 
-    session.requests["a"].synthesizer.feed = broken  # type: ignore[method-assign]  # an engine that fails
+    session.requests["a"].active.synthesizer.feed = broken  # type: ignore[method-assign]  # an engine that fails
     out = play(session, Phonemes("a", ITEMS))
     assert errors(out) == [("internal_error", "a", True)]
     fault = out[0]
@@ -435,7 +435,7 @@ def test_work_estimate_prices_phonemes_and_frames_at_the_calibrated_cost(
     play(session, Phonemes("a", ITEMS))
     # viseme-lerp waits one phoneme: frames before 0.4 s (24) are out; end decides the last
     # phoneme and releases frames 24..36, then the 6 frames of the return to rest.
-    assert session.requests["a"].next_frame == 24
+    assert session.requests["a"].active.next_frame == 24
     assert session.estimated_work_ms(End("a")) == pytest.approx(
         measured.per_phoneme_ms + (13 + 6) * measured.per_frame_ms
     )

@@ -99,7 +99,7 @@ def test_a_word_cut_at_a_chunk_edge_waits_and_earlier_words_play_at_once(
     session = _session(words_catalog)
     _start(session, "c")
     first = _play(session, Words("c", {"alignment": _chars("Hello wo", 0.0)}, "elevenlabs"))
-    request = session.requests["c"]
+    request = session.requests["c"].active
     assert request.phonemes_end == pytest.approx(0.4)  # "Hello": 5 characters of 80 ms
     sent = len(_frames(first))
     assert 0 < sent <= frame_count(0.4, FPS)
@@ -120,7 +120,7 @@ def test_offset_moves_a_chunk_onto_the_utterance_clock(words_catalog: Catalog) -
     _start(session, "o")
     _play(session, Words("o", [{"word": "hi", "start": 0.0, "end": 0.3}]))
     _play(session, Words("o", [{"word": "there", "start": 0.1, "end": 0.5}], offset=0.5))
-    assert session.requests["o"].phonemes_end == pytest.approx(1.0)
+    assert session.requests["o"].active.phonemes_end == pytest.approx(1.0)
 
 
 @pytest.mark.parametrize(

@@ -13,9 +13,7 @@ import pytest
 from lipstream.engines.viseme_lerp import VisemeLerpModel
 from lipstream.errors import LipstreamError
 from lipstream.output.probes import mouth_channels, probe_key_poses
-from lipstream.output.visemes import OCULUS15, PRESTON_BLAIR
-from lipstream.server.catalog import Catalog
-from lipstream.server.profiles import (
+from lipstream.output.profiles import (
     ProfileError,
     ProfileRequest,
     ResolvedProfile,
@@ -24,7 +22,8 @@ from lipstream.server.profiles import (
     requested_profile,
     resolve_profile,
 )
-from lipstream.server.viseme_projection import VisemeProjector
+from lipstream.output.viseme_projection import VisemeProjector
+from lipstream.output.visemes import OCULUS15, PRESTON_BLAIR
 from lipstream_client import ChannelTransform, OutputProfile, Start
 from lipstream_client.channels import OCULUS15_VISEMES, PRESTON_BLAIR_SHAPES
 from lipstream_client.messages import Naming
@@ -275,20 +274,6 @@ def test_preston_blair_key_poses_of_viseme_lerp_average_its_oculus_poses(
     np.testing.assert_allclose(probe_key_poses(model, PRESTON_BLAIR), expected, atol=1e-6)
 
 
-def test_a_viseme_lerp_frame_projects_onto_mouth_shapes(catalog: Catalog) -> None:
-    model = catalog.model("viseme-lerp", "demo")
-    assert isinstance(model, VisemeLerpModel)
-    projector = catalog.projector(model, "preston-blair")
-    poses = model.poses.astype(np.float64)
-    # Shape A is P B M (all Oculus PP); shape D is AA AY AW (all Oculus aa).
-    frame = 0.7 * poses[OCULUS15.classes.index("PP")] + 0.3 * poses[OCULUS15.classes.index("aa")]
-    expected = np.zeros(9)
-    expected[[0, 3]] = (0.7, 0.3)
-    np.testing.assert_allclose(projector.weights(frame[None])[0], expected, atol=1e-4)
-    rest = catalog.rest_pose(model, None)
-    assert projector.weights(rest[None])[0, 8] == pytest.approx(1.0, abs=1e-6)
-
-
 # ---- presets -----------------------------------------------------------------------------
 
 
@@ -329,17 +314,3 @@ def test_presets_file_is_validated_by_the_codec(tmp_path: Path) -> None:
     assert error.value.code == "invalid_setting" and "output.naming" in error.value.message
     with pytest.raises(LipstreamError, match="invalid output profile"):
         parse_profile({"visemes": "oculus15", "naming": "arkit"}, "model.json")
-
-
-def test_a_viseme_lerp_frame_projects_onto_the_two_visemes_it_blends(catalog: Catalog) -> None:
-    model = catalog.model("viseme-lerp", "demo")
-    assert isinstance(model, VisemeLerpModel)
-    projector = catalog.projector(model)
-    poses = model.poses.astype(np.float64)
-    pp, aa = OCULUS15_VISEMES.index("viseme_PP"), OCULUS15_VISEMES.index("viseme_aa")
-    frame = 0.7 * poses[pp] + 0.3 * poses[aa]
-    expected = np.zeros(15)
-    expected[[pp, aa]] = (0.7, 0.3)
-    np.testing.assert_allclose(projector.weights(frame[None])[0], expected, atol=1e-4)
-    rest = catalog.rest_pose(model, None)
-    assert projector.weights(rest[None])[0, 0] == pytest.approx(1.0, abs=1e-6)

@@ -33,10 +33,10 @@ from lipstream_client.messages import VisemeSet
 
 from ..engines.base import DEFAULT_EMOTION_KEY, Model, SynthesisResult
 from ..errors import LipstreamError
-from ..output.probes import mouth_channels, probe_key_poses
-from ..output.retarget import RetargetMap, RetargetStream
-from ..output.rig_presets import model_maps
 from ..timeline import EMOTIONS
+from .probes import mouth_channels, probe_key_poses
+from .retarget import RetargetMap, RetargetStream
+from .rig_presets import model_maps
 from .viseme_projection import VISEME_SCHEMES, VisemeProjector
 
 _FLOAT32_MAX = float(np.finfo(np.float32).max)

@@ -32,8 +32,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import nnls
 
-from ..output.probes import key_poses, mouth_channels
-from ..output.visemes import OCULUS15, PRESTON_BLAIR, VisemeScheme
+from .probes import key_poses, mouth_channels
+from .visemes import OCULUS15, PRESTON_BLAIR, VisemeScheme
 
 # Output viseme sets (``output.visemes``) and their schemes; each scheme's class order is the
 # set's channel order (lipstream_client.channels.VISEME_CHANNELS).
