@@ -36,10 +36,10 @@ import numpy as np
 from ..audio import Audio
 from ..errors import CorpusError, InvalidRequestError, LipstreamError
 from ..model_checks import ArrayReader, FieldReader
-from ..output.visemes import get_scheme
 from ..phonemes import PHONEMES, SILENCE
 from ..store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
 from ..timeline import PhonemeSpan
+from ..visemes import get_scheme
 from .base import (
     MAX_LEAD_MS,
     Engine,
@@ -193,7 +193,7 @@ class LerpSynthesizer(RenderingSynthesizer):
 
 
 class VisemeLerpEngine(Engine):
-    """Fits one mean pose per viseme class of ``scheme`` (see ``lipstream.output.visemes``)."""
+    """Fits one mean pose per viseme class of ``scheme`` (see ``lipstream.visemes``)."""
 
     name = "viseme-lerp"
     model_class = VisemeLerpModel

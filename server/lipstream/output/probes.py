@@ -25,7 +25,7 @@ from ..engines.work import WorkGuard
 from ..errors import ModelStoreError
 from ..phonemes import PHONEMES, SILENCE
 from ..timeline import EMOTIONS, PhonemeSpan
-from .visemes import OCULUS15, VisemeScheme
+from ..visemes import OCULUS15, VisemeScheme
 
 NEUTRAL = "neutral"
 BILABIALS = ("P", "B", "M")

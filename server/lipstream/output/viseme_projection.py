@@ -17,7 +17,7 @@ channel.
 Key poses are probed from a model (``lipstream.output.probes``): every
 canonical phoneme is synthesized held for 200 ms between silences, the frame
 at its centre is taken, and the frames are averaged over the phonemes of each
-class of the set's scheme (``lipstream.output.visemes.OCULUS15``,
+class of the set's scheme (``lipstream.visemes.OCULUS15``,
 ``PRESTON_BLAIR``); silence's pose is the frame at the centre of a silence.
 One probe serves every set. The server
 probes the character's ``viseme-lerp`` model when one with the same channels
@@ -32,10 +32,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import nnls
 
+from ..visemes import OCULUS15, PRESTON_BLAIR, VisemeScheme
 from .probes import key_poses, mouth_channels
-from .visemes import OCULUS15, PRESTON_BLAIR, VisemeScheme
 
-# Output viseme sets (``output.visemes``) and their schemes; each scheme's class order is the
+# Output viseme sets (``lipstream.visemes``) and their schemes; each scheme's class order is the
 # set's channel order (lipstream_client.channels.VISEME_CHANNELS).
 VISEME_SCHEMES: dict[str, VisemeScheme] = {"oculus15": OCULUS15, "preston-blair": PRESTON_BLAIR}
 

@@ -28,9 +28,9 @@ from lipstream_client.channels import OCULUS15_VISEMES
 
 from ..corpus.livelink import ARKIT_BLENDSHAPES
 from ..errors import ModelStoreError
+from ..visemes import OCULUS15
 from .probes import CLOSURE_CONTEXTS, RigProbe
 from .retarget import KeyPosePairs, fit_controls
-from .visemes import OCULUS15
 
 RPM_CONTROLS: tuple[str, ...] = OCULUS15_VISEMES + ARKIT_BLENDSHAPES
 

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ModelStoreError
+from ..visemes import OCULUS15
 from .probes import CLOSURE_CONTEXTS, RigProbe
 from .retarget import KeyPosePairs
 from .rig_names import (
@@ -46,7 +47,6 @@ from .rig_names import (
     VROID_CONTROLS,
     VROID_MOUTH,
 )
-from .visemes import OCULUS15
 
 VOWELS = ("A", "I", "U", "E", "O")
 VOWEL_KEYS: Mapping[str, Mapping[str, float]] = {
@@ -65,7 +65,7 @@ VOWEL_KEYS: Mapping[str, Mapping[str, float]] = {
     "O": {"O": 1.0},
     "U": {"U": 1.0},
 }
-"""Each Oculus viseme class (its phonemes: ``lipstream.output.visemes.OCULUS15``) as vowel
+"""Each Oculus viseme class (its phonemes: ``lipstream.visemes.OCULUS15``) as vowel
 controls; a vowel not named is 0. ``PP`` (/p b m/) closes the mouth: every vowel 0."""
 BLINK_CHANNELS = ("eyeBlinkLeft", "eyeBlinkRight")
 _NEGLIGIBLE = 1e-6  # an emotion that moves no channel more than this is not shown

@@ -16,9 +16,9 @@ from lipstream.engines.base import SynthesisRequest
 from lipstream.engines.damped_fit import KAPPAS
 from lipstream.engines.viseme_lerp import VisemeLerpEngine, VisemeLerpModel
 from lipstream.errors import InvalidRequestError, ModelStoreError
-from lipstream.output.visemes import get_scheme
 from lipstream.store import save_model_dir
 from lipstream.timeline import PhonemeSpan
+from lipstream.visemes import get_scheme
 
 FPS = 100.0
 

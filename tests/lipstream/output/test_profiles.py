@@ -23,7 +23,7 @@ from lipstream.output.profiles import (
     resolve_profile,
 )
 from lipstream.output.viseme_projection import VisemeProjector
-from lipstream.output.visemes import OCULUS15, PRESTON_BLAIR
+from lipstream.visemes import OCULUS15, PRESTON_BLAIR
 from lipstream_client import ChannelTransform, OutputProfile, Start
 from lipstream_client.channels import OCULUS15_VISEMES, PRESTON_BLAIR_SHAPES
 from lipstream_client.messages import Naming

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from lipstream.engines.viseme_lerp import VisemeLerpModel
-from lipstream.output.visemes import OCULUS15
 from lipstream.server.catalog import Catalog
+from lipstream.visemes import OCULUS15
 from lipstream_client.channels import OCULUS15_VISEMES
 
 

@@ -27,8 +27,8 @@ from functools import cached_property
 import numpy as np
 
 from ...errors import ModelStoreError
-from ...output.visemes import get_scheme
 from ...phonemes import PHONEME_INDEX, PHONEMES, SILENCE
+from ...visemes import get_scheme
 from .blending import PairIndex
 from .clustering import cluster_animes
 from .graph import AnimeGraph, ClusterGraph, SearchGraph

@@ -28,9 +28,9 @@ from sklearn.cluster import AffinityPropagation
 from sklearn.exceptions import ConvergenceWarning
 
 from ...errors import CorpusError
-from ...output.visemes import get_scheme
 from ...phonemes import PHONEMES, SILENCE
 from ...timeline import EMOTIONS, PhonemeSpan
+from ...visemes import get_scheme
 from ..base import SynthesisRequest
 
 PHONEME_INDEX = {phoneme: index for index, phoneme in enumerate(PHONEMES)}

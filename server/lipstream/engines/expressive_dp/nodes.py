@@ -28,9 +28,9 @@ import numpy as np
 from ...model_checks import ArrayReader
 from ...numerics.basis import MotionBasis
 from ...numerics.resample import sample_curves
-from ...output.visemes import DENG15
 from ...phonemes import PHONEME_INDEX, PHONEMES, SILENCE
 from ...timeline import EMOTIONS
+from ...visemes import DENG15
 
 SHAPE_POINTS = 6
 SILENCE_INDEX = PHONEME_INDEX[SILENCE]

@@ -18,9 +18,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
 
-from ..errors import LipstreamError
-from ..phonemes import PHONEMES, normalize_phoneme
-from ..tables import names
+from .errors import LipstreamError
+from .phonemes import PHONEMES, normalize_phoneme
+from .tables import names
 
 
 @dataclass(frozen=True, eq=False)

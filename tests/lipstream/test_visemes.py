@@ -7,8 +7,8 @@ from typing import Any
 import pytest
 
 from lipstream.errors import LipstreamError, UnknownPhonemeError
-from lipstream.output.visemes import SCHEMES, get_scheme, oculus_viseme_name
 from lipstream.phonemes import PHONEMES
+from lipstream.visemes import SCHEMES, get_scheme, oculus_viseme_name
 
 # Deng & Neumann 2008, Appendix A, Table VI, in lower case as printed ("yl" is
 # the extracted text's spelling of /y/). /ax/ /el/ /em/ /en/ fold into AH L M N.
