@@ -3,10 +3,13 @@ demo character's model of each engine; the same short utterance ("map the bay", 
 at ``END_S``), written by hand in each TTS's shape, goes in over REST (``words``) and over
 the WebSocket (the SDK's ``send_words``), and ``lipstream synth --words`` reads each as a
 file. The frames are finite and as many as the protocol says: one at every ``i / fps``
-up to the last time in the input, then the return to rest (REST and WebSocket)."""
+up to the last time in the input, then the return to rest (REST and WebSocket). A text
+in each of the issue's twelve languages goes to every engine over REST, and its frames
+span no more than the speech that comes back with them."""
 
 from __future__ import annotations
 
+import base64
 import json
 import math
 import shutil
@@ -22,6 +25,7 @@ from lipstream.cli import main
 from lipstream.engines import engine_names
 from lipstream_client import Client
 from tests.helpers import return_frames
+from tests.lipstream.frontends.test_languages import LANGUAGES
 from tests.lipstream.server.harness import Served, fixed_calibration, serving
 
 pytestmark = pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng missing")
@@ -194,3 +198,23 @@ def test_synth_reads_every_format_from_a_file(
     frames = np.array(json.loads(out.read_text(encoding="utf-8"))["frames"], dtype=np.float64)
     assert len(frames) == INPUT_FRAMES
     assert np.isfinite(frames).all()
+
+
+@pytest.mark.parametrize("engine", engine_names())
+def test_every_language_speaks_through_every_engine_over_rest(served: Served, engine: str) -> None:
+    for lang, text, _ in LANGUAGES:
+        body = {"engine": engine, "character": "demo", "fps": FPS, "text": text, "lang": lang}
+        answer = httpx.post(f"{served.http}/v1/synthesize", json=body, timeout=120)
+        assert answer.status_code == 200, (lang, answer.text)
+        result = answer.json()
+        frames = np.array(result["data"], dtype=np.float32)
+        speech_s = len(base64.b64decode(result["speech"]["pcm16"])) / 2
+        speech_s /= result["speech"]["sample_rate"]
+        assert len(frames) == result["stats"]["frames"]
+        assert (
+            return_frames(FPS) + 1
+            < len(frames)
+            <= math.floor(speech_s * FPS) + 1 + return_frames(FPS)
+        )
+        assert np.isfinite(frames).all(), lang
+        assert np.ptp(frames, axis=0).max() > 0.0, lang
