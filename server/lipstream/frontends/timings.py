@@ -3,7 +3,8 @@ with times in seconds on the utterance clock.
 
 Sketch: a format yields what it carries and nothing more. Word formats give
 ``TimedWord``s (an end may be unknown: Polly's word marks have only a start), character
-formats give words whose ``characters`` carry their own times, phoneme formats give
+formats give words whose ``characters`` carry their own times (and word formats with
+visemes, words whose ``visemes`` are those said within them), phoneme formats give
 ``PhonemeSpan``s directly and viseme-only formats give ``TimedViseme``s. ``where`` on
 each item names its place in the input ("alignment.characters[12]"), so a later step's
 error points back into the user's file.
@@ -29,18 +30,6 @@ class TimedCharacter:
 
 
 @dataclass(frozen=True, slots=True)
-class TimedWord:
-    """One written word spoken over [start, end] seconds; ``end`` None: not given (a later
-    step estimates it); ``characters``: each character's own time, when the format has it."""
-
-    text: str
-    start: float
-    end: float | None
-    where: str
-    characters: tuple[TimedCharacter, ...] = ()
-
-
-@dataclass(frozen=True, slots=True)
 class TimedViseme:
     """A viseme of ``scheme`` ("azure": IDs 0-21, "polly": Polly's viseme letters) that
     starts at ``start`` seconds and lasts until the next one."""
@@ -49,6 +38,21 @@ class TimedViseme:
     viseme: str
     start: float
     where: str
+
+
+@dataclass(frozen=True, slots=True)
+class TimedWord:
+    """One written word spoken over [start, end] seconds; ``end`` None: not given (a later
+    step estimates it); ``characters``: each character's own time, when the format has it;
+    ``visemes``: the viseme events said within the word, when the format gives them
+    beside its words (Azure, Polly)."""
+
+    text: str
+    start: float
+    end: float | None
+    where: str
+    characters: tuple[TimedCharacter, ...] = ()
+    visemes: tuple[TimedViseme, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -105,4 +109,5 @@ def _shifted_word(word: TimedWord, offset_s: float) -> TimedWord:
         characters=tuple(
             TimedCharacter(c.char, c.start + offset_s, c.end + offset_s) for c in word.characters
         ),
+        visemes=tuple(replace(v, start=v.start + offset_s) for v in word.visemes),
     )

@@ -6,8 +6,9 @@ character timings get each word's phonemes from the lexicon (``lexicon``, all wo
 the input at once, so espeak-ng reads them in context) and the duration model spreads
 them over the word (``spreading``), between the onsets that an English word's character
 times fix where its letters align with its phonemes with confidence
-(``letter_alignment``). The result runs contiguously from 0 s, or from where earlier
-input ended (a stream of timings, ``word_stream``).
+(``letter_alignment``), or that the viseme events said within a word fix where they
+pair with its phonemes (``viseme_anchors``). The result runs contiguously from 0 s, or
+from where earlier input ended (a stream of timings, ``word_stream``).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from .lexicon import pronounce
 from .spreading import PronouncedWord, spread_words
 from .timing_checks import OVERLAP_TOLERANCE_S
 from .timings import SpeechTimings
+from .viseme_anchors import viseme_onsets
 from .viseme_spans import viseme_spans
 from .word_durations import WordDurationModel
 
@@ -49,7 +51,7 @@ def timings_to_spans(
         )
     if timings.phonemes:
         spans = _with_silences(list(timings.phonemes), after)
-    elif timings.visemes:
+    elif timings.visemes and not timings.words:
         spans = viseme_spans(durations, timings.visemes, after)
     else:
         texts = [word.text for word in timings.words]
@@ -60,7 +62,8 @@ def timings_to_spans(
                 pronunciation,
                 word.start,
                 word.end,
-                letter_onsets(word.characters, pronunciation) if english else (),
+                (letter_onsets(word.characters, pronunciation) if english else ())
+                or viseme_onsets(word.visemes, pronunciation, word.start, word.end),
             )
             for word, pronunciation in zip(timings.words, pronunciations)
         ]

@@ -7,8 +7,9 @@ snake_case spellings read too), in JSON or one event per line. A word boundary b
 word over [audioOffset, audioOffset + duration] (without ``duration``, until the next
 word starts; the last such word is left open for the next chunk or the duration model);
 punctuation and sentence boundaries are skipped; a ``wordLength`` other than the text's
-length is ``mismatched_words``. A viseme event (ID 0-21) starts that viseme; visemes are
-used only when no word boundary is given (``viseme_spans``).
+length is ``mismatched_words``. A viseme event (ID 0-21) starts that viseme; beside word
+boundaries, the visemes said within a word anchor its phonemes' onsets
+(``viseme_anchors``), and alone they become spans (``viseme_spans``).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from lipstream_client.errors import MISMATCHED_WORDS
 from ...errors import LipstreamError
 from ..timing_checks import check_order, check_span, seconds
 from ..timings import SpeechTimings, TimedViseme, TimedWord
+from ..viseme_anchors import within_words
 from .fields import array, first_key, mapping, member, misfit, text
 
 TICK_S = 1e-7
@@ -54,6 +56,8 @@ def parse_azure(data: Any) -> SpeechTimings:
             for word, following in zip(words, words[1:])
         ]
         words = closed + words[-1:]
+        said = within_words([w.start for w in words], [w.end for w in words], visemes)
+        words = [replace(word, visemes=group) for word, group in zip(words, said)]
         return SpeechTimings("azure", words=tuple(words), last_word_open=words[-1].end is None)
     check_order([(v.start, None, v.where) for v in visemes], "words or visemes")
     return SpeechTimings("azure", visemes=tuple(visemes))

@@ -4,14 +4,16 @@
 Sketch: a word mark starts a word at ``time``; Polly gives no end, so a word ends where
 the next word or a ``sil`` viseme starts, whichever is first; a last word with no
 ``sil`` after it is left open (the duration model closes it). Sentence and
-SSML marks are skipped. Viseme marks are used as spans only when no word mark is given
-(``viseme_spans``). The ``start``/``end`` byte offsets must be ordered (``end`` after
+SSML marks are skipped. Beside word marks, the viseme marks said within a word anchor its
+phonemes' onsets (``viseme_anchors``); alone they become spans (``viseme_spans``). The
+``start``/``end`` byte offsets must be ordered (``end`` after
 ``start``), else ``mismatched_words``.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
 from typing import Any
 
 from lipstream_client.errors import MISMATCHED_WORDS
@@ -19,6 +21,7 @@ from lipstream_client.errors import MISMATCHED_WORDS
 from ...errors import LipstreamError
 from ..timing_checks import check_order, seconds
 from ..timings import SpeechTimings, TimedViseme, TimedWord
+from ..viseme_anchors import within_words
 from .fields import array, mapping, member, misfit, text
 
 MS = 1e-3
@@ -51,6 +54,8 @@ def parse_polly(data: Any) -> SpeechTimings:
         return SpeechTimings("polly", visemes=tuple(visemes))
     check_order([(start, None, where) for _, start, where in starts], "words")
     words = _words(starts, visemes)
+    said = within_words([w.start for w in words], [w.end for w in words], visemes)
+    words = [replace(word, visemes=group) for word, group in zip(words, said)]
     return SpeechTimings("polly", words=tuple(words), last_word_open=words[-1].end is None)
 
 
