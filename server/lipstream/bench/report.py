@@ -1095,6 +1095,8 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "retarget-cost": retarget_cost,
     "call-pairs": call_pairs("call_pairs.json"),
     "call-pairs-expressive-dp": call_pairs("call_pairs_expressive_dp.json"),
+    "call-pairs-search": call_pairs("call_pairs_search.json"),
+    "call-pairs-numerics": call_pairs("call_pairs_numerics.json"),
     "lead0": lead0,
     "hmm-first-frame": hmm_first_frame,
     "word-timings": word_timings,
