@@ -22,7 +22,9 @@ pages are shared. The serving process's models path and settings reach the
 workers whole, as JSON in one private variable (``WORKER_APP_ENV``) that is
 set only while uvicorn runs, so serving leaves ``os.environ`` as it found it.
 Either way the app is told it owns its process (``serving_process``), so it
-freezes the collector's view of its models once they load.
+freezes the collector's view of its models once they load, and the event loop is
+``accept_loop.BoundedAcceptLoop``, which takes a bounded number of new connections per
+turn.
 
 With several workers, SIGTERM reaches the supervisor, which uvicorn's loop looks at only
 every half second before it signals the workers: until then each worker's ``/readyz``
@@ -55,6 +57,7 @@ from uvicorn.supervisors import Multiprocess
 from ..config import ServerSettings, load_settings
 from ..models import ModelRegistry
 from ..status import Report
+from .accept_loop import LOOP as ACCEPT_LOOP
 from .app import create_app
 from .closing import BoundedCloseProtocol
 from .handshake import GuardedHTTPProtocol
@@ -155,6 +158,7 @@ def uvicorn_options(server: ServerSettings) -> dict[str, Any]:
         # uvicorn's default 5 s to answer the supervisor's first health check
         "timeout_worker_healthcheck": WORKER_HEALTHCHECK_S,
         "lifespan": "on",
+        "loop": ACCEPT_LOOP,
     }
 
 
