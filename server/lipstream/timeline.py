@@ -5,9 +5,10 @@ optional ``emotion`` that overrides the request's for that span. Callers may
 pass tuples ``(phoneme, start, end[, emotion])`` or mappings with those keys;
 ``coerce_spans`` turns them into validated ``PhonemeSpan`` objects with
 canonical ARPAbet labels. Labels are normalized once, at the edge input comes in by:
-``Synthesizer.feed`` calls ``accepted_spans``, which normalizes whatever it is given,
-except ``NormalizedSpans``, which an edge that normalized them already (the server's
-request) hands on and which are only checked to follow the input so far.
+``Synthesizer.feed`` normalizes whatever it is given (``coerce_spans``), except
+``NormalizedSpans``, which an edge that normalized them already (the server's request)
+hands on and which are only checked to follow the input so far (``follow_checked``);
+``accepted_spans`` does the same for other callers.
 """
 
 from __future__ import annotations
@@ -161,6 +162,12 @@ def accepted_spans(
     only checked to follow one another from ``after``."""
     if not isinstance(spans, NormalizedSpans):
         return coerce_spans(spans, after=after, first_index=first_index)
+    return follow_checked(spans, after, first_index)
+
+
+def follow_checked(spans: NormalizedSpans, after: float, first_index: int) -> NormalizedSpans:
+    """``spans``, once checked to follow one another from ``after`` (``first_index``: the
+    index error locations give the first)."""
     previous_end = after
     for offset, span in enumerate(spans):
         _check_follows(span, previous_end, first_index + offset)

@@ -71,7 +71,14 @@ from ..store import (
 from ..store import (
     MAX_FPS as MAX_FPS,  # re-exported: the request fps bound
 )
-from ..timeline import EMOTIONS, PhonemeSpan, SpanLike, accepted_spans
+from ..timeline import (
+    EMOTIONS,
+    NormalizedSpans,
+    PhonemeSpan,
+    SpanLike,
+    coerce_spans,
+    follow_checked,
+)
 from .work import WorkGuard
 
 MIN_FPS = 1.0  # lowest request frame rate, Hz (the highest, MAX_FPS, is the store's)
@@ -238,13 +245,16 @@ class Synthesizer(ABC):
         """Append phoneme spans (absolute seconds, in order) and optional audio.
 
         The one entry of spans, from the server and from the Python API alike: each is
-        checked and its label normalized here, once (``timeline.accepted_spans``; spans
-        an edge normalized already come as ``NormalizedSpans``), and the engine ``take``s
-        them as they are."""
+        checked and its label normalized here, once (``timeline.coerce_spans``; spans an
+        edge normalized already come as ``NormalizedSpans`` and are only checked to follow
+        on, ``timeline.follow_checked``), and the engine ``take``s them as they are."""
         if self.finished:
             raise InvalidRequestError("input fed after finish()", code="request_finished")
         after, first_index = self.span_position()
-        self.take(accepted_spans(spans, after=after, first_index=first_index), audio)
+        if type(spans) is NormalizedSpans:
+            self.take(follow_checked(spans, after, first_index), audio)
+        else:
+            self.take(coerce_spans(spans, after=after, first_index=first_index), audio)
 
     @abstractmethod
     def span_position(self) -> tuple[float, int]:
