@@ -7,8 +7,7 @@ pass tuples ``(phoneme, start, end[, emotion])`` or mappings with those keys;
 canonical ARPAbet labels. Labels are normalized once, at the edge input comes in by:
 ``Synthesizer.feed`` normalizes whatever it is given (``coerce_spans``), except
 ``NormalizedSpans``, which an edge that normalized them already (the server's request)
-hands on and which are only checked to follow the input so far (``follow_checked``);
-``accepted_spans`` does the same for other callers.
+hands on and which are only checked to follow the input so far (``follow_checked``).
 """
 
 from __future__ import annotations
@@ -99,7 +98,7 @@ def coerce_span(span: SpanLike, where: str = "span", source: str = "request") ->
 
 class NormalizedSpans(tuple[PhonemeSpan, ...]):
     """Spans an edge has checked and whose labels it has normalized to canonical ARPAbet
-    (as ``coerce_span`` would): ``accepted_spans`` takes them as they are."""
+    (as ``coerce_span`` would): ``Synthesizer.feed`` takes them as they are."""
 
     __slots__ = ()
 
@@ -152,17 +151,6 @@ def _check_follows(span: PhonemeSpan, previous_end: float, index: int) -> None:
             where=f"spans[{index}]",
             code="non_monotonic_times",
         )
-
-
-def accepted_spans(
-    spans: Iterable[SpanLike], *, after: float, first_index: int
-) -> Sequence[PhonemeSpan]:
-    """Spans fed to a request whose input so far ends at ``after``, checked and their labels
-    normalized (``coerce_spans``), or, if an edge did that already (``NormalizedSpans``),
-    only checked to follow one another from ``after``."""
-    if not isinstance(spans, NormalizedSpans):
-        return coerce_spans(spans, after=after, first_index=first_index)
-    return follow_checked(spans, after, first_index)
 
 
 def follow_checked(spans: NormalizedSpans, after: float, first_index: int) -> NormalizedSpans:
