@@ -196,16 +196,15 @@ class RestClient:
         sending) for input the protocol refuses; RestServerError for the
         server's refusals.
         """
-        start = Start(
-            SYNTHESIZE_ID,
+        start = _start(
             engine,
             character,
             fps,
-            tuple(channels) if channels is not None else None,
+            channels,
             output,
             emotion,
             latency_budget_ms,
-            dict(options or {}),
+            options,
             phoneme_source,
         )
         parts: list[Message] = [start, Phonemes(SYNTHESIZE_ID, phoneme_items(items))]
@@ -232,16 +231,8 @@ class RestClient:
         """``POST /v1/synthesize`` with ``text`` for the server to speak (espeak-ng language
         ``lang``, ``voice``, ``rate`` as for ``Stream.send_text``): the frames and the
         speech (``Synthesis.speech``). Errors as for ``synthesize``."""
-        start = Start(
-            SYNTHESIZE_ID,
-            engine,
-            character,
-            fps,
-            tuple(channels) if channels is not None else None,
-            output,
-            emotion,
-            latency_budget_ms,
-            dict(options or {}),
+        start = _start(
+            engine, character, fps, channels, output, emotion, latency_budget_ms, options
         )
         parts: list[Message] = [start, Text(SYNTHESIZE_ID, text, voice, rate, lang)]
         return self._post_synthesize(_synthesize_body(parts, self.encoding), self.encoding)
@@ -269,16 +260,8 @@ class RestClient:
         if not isinstance(transcript, str):
             reason = "must be a string, what the audio says"
             raise EncodeError(ProtocolError(INVALID_MESSAGE, reason, where="transcript"))
-        start = Start(
-            SYNTHESIZE_ID,
-            engine,
-            character,
-            fps,
-            tuple(channels) if channels is not None else None,
-            output,
-            emotion,
-            latency_budget_ms,
-            dict(options or {}),
+        start = _start(
+            engine, character, fps, channels, output, emotion, latency_budget_ms, options
         )
         parts: list[Message] = [start, AudioChunk(SYNTHESIZE_ID, audio[1], bytes(audio[0]))]
         body = _synthesize_body(parts, self.encoding, {"transcript": transcript})
@@ -331,6 +314,32 @@ class RestClient:
                 error.read(),
                 error.headers.get("Retry-After"),
             ) from None
+
+
+def _start(
+    engine: str,
+    character: str,
+    fps: float,
+    channels: Sequence[str] | None,
+    output: OutputProfile | None,
+    emotion: str | None,
+    latency_budget_ms: float | None,
+    options: JsonMap | None,
+    phoneme_source: str | None = None,
+) -> Start:
+    """The ``start`` of a synthesis request (its id ``SYNTHESIZE_ID``)."""
+    return Start(
+        SYNTHESIZE_ID,
+        engine,
+        character,
+        fps,
+        tuple(channels) if channels is not None else None,
+        output,
+        emotion,
+        latency_budget_ms,
+        dict(options or {}),
+        phoneme_source,
+    )
 
 
 def _synthesize_body(

@@ -9,6 +9,9 @@ from typing import TYPE_CHECKING, Any
 import pytest
 
 from lipstream.config import ServerSettings
+from lipstream.engines.base import Model
+from lipstream.engines.expressive_dp import ExpressiveDpModel
+from lipstream.frontends.word_durations import WordDurationModel
 from lipstream.models import ModelRegistry
 from lipstream.server.catalog import Catalog
 from tests.lipstream.server.browser import CHROMIUM, LAUNCH_ARGS
@@ -50,4 +53,25 @@ def words_models(small_demo_corpus: Corpus, tmp_path_factory: pytest.TempPathFac
 
     directory = tmp_path_factory.mktemp("words-models")
     train_engine(small_demo_corpus.split()[0], "viseme-lerp", directory / "viseme-lerp")
+    return directory
+
+
+@pytest.fixture(scope="session")
+def expressive_dp_model(trained_models: dict[str, Model]) -> ExpressiveDpModel:
+    found = trained_models["expressive-dp"]
+    assert isinstance(found, ExpressiveDpModel)
+    return found
+
+
+@pytest.fixture(scope="module")
+def expressive_dp_dir(
+    expressive_dp_model: ExpressiveDpModel,
+    word_durations: WordDurationModel,
+    tmp_path_factory: pytest.TempPathFactory,
+) -> Path:
+    """A models directory of its own per test module (its contamination file is the
+    module's): the expressive-dp model with its word-duration model."""
+    directory = tmp_path_factory.mktemp("expressive-dp-served")
+    expressive_dp_model.save(directory / "expressive-dp")
+    word_durations.save(directory / "expressive-dp")
     return directory

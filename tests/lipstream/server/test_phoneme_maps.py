@@ -7,6 +7,7 @@ from __future__ import annotations
 import base64
 import json
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import httpx
@@ -14,9 +15,7 @@ import numpy as np
 import pytest
 
 from lipstream.corpus import Corpus
-from lipstream.engines.base import Model
 from lipstream.engines.expressive_dp import ExpressiveDpModel
-from lipstream.frontends.word_durations import WordDurationModel
 from lipstream.phonemes import PHONEME_INDEX
 from tests.live_server import LiveServer, live_server
 
@@ -24,22 +23,13 @@ CHARACTER = "demo"
 
 
 @pytest.fixture(scope="module")
-def model(trained_models: dict[str, Model]) -> ExpressiveDpModel:
-    found = trained_models["expressive-dp"]
-    assert isinstance(found, ExpressiveDpModel)
-    return found
+def model(expressive_dp_model: ExpressiveDpModel) -> ExpressiveDpModel:
+    return expressive_dp_model
 
 
 @pytest.fixture(scope="module")
-def server(
-    model: ExpressiveDpModel,
-    word_durations: WordDurationModel,
-    tmp_path_factory: pytest.TempPathFactory,
-) -> Iterator[LiveServer]:
-    directory = tmp_path_factory.mktemp("edp-served")
-    model.save(directory / "expressive-dp")
-    word_durations.save(directory / "expressive-dp")
-    with live_server(directory) as running:
+def server(expressive_dp_dir: Path) -> Iterator[LiveServer]:
+    with live_server(expressive_dp_dir) as running:
         yield running
 
 

@@ -14,9 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from lipstream.engines.base import Model
 from lipstream.engines.expressive_dp import ExpressiveDpModel
-from lipstream.frontends.word_durations import WordDurationModel
 from lipstream.phonemes import PHONEMES
 from tests.lipstream.server.browser import CHROMIUM, WAIT_MS, opened_page
 from tests.live_server import LiveServer, live_server
@@ -29,23 +27,14 @@ SENTENCE = "Maybe the bees bumped the map."
 
 
 @pytest.fixture(scope="module")
-def model(trained_models: dict[str, Model]) -> ExpressiveDpModel:
-    found = trained_models["expressive-dp"]
-    assert isinstance(found, ExpressiveDpModel)
-    return found
+def model(expressive_dp_model: ExpressiveDpModel) -> ExpressiveDpModel:
+    return expressive_dp_model
 
 
 @pytest.fixture(scope="module")
-def served(
-    model: ExpressiveDpModel,
-    word_durations: WordDurationModel,
-    tmp_path_factory: pytest.TempPathFactory,
-) -> Iterator[LiveServer]:
-    directory = tmp_path_factory.mktemp("studio-served")
-    model.save(directory / "expressive-dp")
-    word_durations.save(directory / "expressive-dp")
-    with live_server(directory) as server:
-        yield server
+def served(expressive_dp_dir: Path) -> Iterator[LiveServer]:
+    with live_server(expressive_dp_dir) as running:
+        yield running
 
 
 @pytest.fixture()
