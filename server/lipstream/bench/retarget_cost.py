@@ -58,12 +58,12 @@ class RetargetCost:
 def scipy_apply(retarget: RetargetMap, frames: np.ndarray) -> np.ndarray:
     """The map's controls as computed before issue 27: ``scipy.optimize.nnls`` per frame (a
     diagonal map's closed form is unchanged)."""
-    if retarget._diagonal is not None:
+    if retarget.diagonal is not None:
         return retarget.apply(frames)
     pairs = retarget.pairs
     fitted = pairs.channel_weights > 0
     targets = (frames - pairs.source_rest)[:, fitted] * pairs.channel_weights[fitted]
-    system = retarget._system
+    system = retarget.system
     weights: np.ndarray = targets @ retarget._pseudo_inverse.T
     for index in np.flatnonzero((weights < 0).any(axis=1)):
         weights[index], _ = nnls(system, targets[index])
@@ -109,7 +109,7 @@ def measure(
     fitted = pairs.channel_weights > 0
     targets = (frames - pairs.source_rest)[:, fitted] * pairs.channel_weights[fitted]
     bounded = ((targets @ retarget._pseudo_inverse.T) < 0).any(axis=1)
-    diagonal = retarget._diagonal is not None
+    diagonal = retarget.diagonal is not None
     return RetargetCost(
         engine,
         name,

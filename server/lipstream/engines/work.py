@@ -54,8 +54,8 @@ class WorkGuard:
         self.exceeded = exceeded or _cpu_budget_exceeded
         self.cancelled = False
         self.spent_s = 0.0
-        self._since: float | None = None
-        self._block_clock = clock
+        self.block_since: float | None = None
+        self.block_clock = clock
 
     def cancel(self) -> None:
         """Stop the work at its next ``check`` (safe from any thread)."""
@@ -63,7 +63,7 @@ class WorkGuard:
 
     def used_s(self) -> float:
         """Seconds spent so far, including the call being metered."""
-        running = 0.0 if self._since is None else self._block_clock() - self._since
+        running = 0.0 if self.block_since is None else self.block_clock() - self.block_since
         return self.spent_s + running
 
     def check(self) -> None:
@@ -94,8 +94,8 @@ class Metering:
     def __enter__(self) -> None:
         guard = self.guard
         guard.check()
-        guard._block_clock = self.clock
-        guard._since = self.clock()
+        guard.block_clock = self.clock
+        guard.block_since = self.clock()
 
     def __exit__(
         self,
@@ -104,9 +104,9 @@ class Metering:
         traceback: TracebackType | None,
     ) -> None:
         guard = self.guard
-        if guard._since is not None:
-            guard.spent_s += self.clock() - guard._since
-        guard._since = None
+        if guard.block_since is not None:
+            guard.spent_s += self.clock() - guard.block_since
+        guard.block_since = None
 
 
 def _cpu_budget_exceeded(spent_s: float, budget_s: float) -> LipstreamError:

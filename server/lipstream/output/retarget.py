@@ -105,7 +105,7 @@ class RetargetMap:
         return self.pairs.controls
 
     @cached_property
-    def _system(self) -> np.ndarray:
+    def system(self) -> np.ndarray:
         """Stage-1 matrix (fitted channels, K): weighted key deltas."""
         pairs = self.pairs
         fitted = pairs.channel_weights > 0
@@ -115,17 +115,17 @@ class RetargetMap:
     @cached_property
     def _nnls(self) -> NnlsSystem:
         """The stage-1 system with its Gram matrix, for the compiled NNLS."""
-        return nnls_system(self._system)
+        return nnls_system(self.system)
 
     @cached_property
     def _pseudo_inverse(self) -> np.ndarray:
         """(K, fitted channels): the unconstrained least-squares solve of stage 1."""
-        return np.linalg.pinv(self._system)
+        return np.linalg.pinv(self.system)
 
     @cached_property
-    def _diagonal(self) -> tuple[np.ndarray, np.ndarray] | None:
+    def diagonal(self) -> tuple[np.ndarray, np.ndarray] | None:
         """(row of each key, its delta) when every key moves one fitted channel of its own."""
-        system = self._system
+        system = self.system
         nonzero = system != 0
         if not (nonzero.sum(axis=0) == 1).all():
             return None
@@ -147,8 +147,8 @@ class RetargetMap:
         fitted = pairs.channel_weights > 0
         residual = np.asarray(frames, dtype=np.float64) - pairs.source_rest
         targets = residual[:, fitted] * pairs.channel_weights[fitted]
-        if self._diagonal is not None:
-            rows, scale = self._diagonal
+        if self.diagonal is not None:
+            rows, scale = self.diagonal
             diagonal: np.ndarray = np.maximum(targets[:, rows] / scale, 0.0)
             return diagonal
         weights: np.ndarray = targets @ self._pseudo_inverse.T

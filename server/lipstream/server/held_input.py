@@ -40,16 +40,16 @@ class InputLedger:
         self.held = 0
         self.peak = 0
         self.refused = 0
-        self._lock = threading.Lock()
+        self.lock = threading.Lock()
 
     def holding(self) -> Holding:
         return Holding(self)
 
-    def _change(self, delta: int) -> None:
-        with self._lock:
-            self._add(delta)
+    def change(self, delta: int) -> None:
+        with self.lock:
+            self.add(delta)
 
-    def _add(self, delta: int) -> None:
+    def add(self, delta: int) -> None:
         """Under the lock."""
         self.held += delta
         self.peak = max(self.peak, self.held)
@@ -68,11 +68,11 @@ class Holding:
         """Count ``needed`` bytes as this request's if the process may hold them, else
         ``RequestError`` (``input_too_large``)."""
         ledger = self.ledger
-        with ledger._lock:
+        with ledger.lock:
             others = ledger.held - self.bytes
             fits = others + needed <= ledger.budget_bytes
             if fits:
-                ledger._add(needed - self.bytes)
+                ledger.add(needed - self.bytes)
                 self.bytes = needed
             else:
                 ledger.refused += 1
@@ -94,7 +94,7 @@ class Holding:
     def update(self, held: int) -> None:
         """The request now holds ``held`` bytes."""
         if held != self.bytes:
-            self.ledger._change(held - self.bytes)
+            self.ledger.change(held - self.bytes)
             self.bytes = held
 
     def release(self) -> None:
