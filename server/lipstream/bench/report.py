@@ -726,12 +726,12 @@ def scale_out(bench: Bench) -> str:
     )
 
 
-def soak(bench: Bench) -> str:
-    doc = bench.load("soak.json")
+def soak(bench: Bench, name: str = "soak.json") -> str:
+    doc = bench.load(name)
     config = doc["config"]
     valid = doc["valid"]
     healthz = doc["healthz"]
-    text = bench.source("soak.json", doc)
+    text = bench.source(name, doc)
     text += (
         f"{config['duration_s']:g} s; {config['valid_sessions']} valid `{config['engine']}` "
         f"sessions at a time ({config['clip_s']:g} s clips, {config['fps']:g} fps, phonemes "
@@ -1110,6 +1110,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "loadtest": loadtest,
     "scale-out": scale_out,
     "soak": soak,
+    "soak-before": lambda bench: soak(bench, "soak_before.json"),
     "storm": storm,
 }
 
