@@ -43,7 +43,8 @@ a short request; in a storm of connections those refusals alone keep the loop be
 the HTTP protocol decides admission itself, when a WebSocket upgrade's head is parsed and
 before any WebSocket work (``handshake``): a refused upgrade gets HTTP 503 with the
 ``server_busy`` error as its JSON body and ``Retry-After``; an admitted one is pending from
-that moment, under the key ``Upgrade(client)``, so the next head of the same burst already
+that moment, under the key ``Upgrade(client)`` (kept apart, in the order admitted, so the
+stale ones are dropped from the front), so the next head of the same burst already
 counts it, and the WebSocket endpoint ``adopt``s it under its connection. An upgrade the
 endpoint never adopts (the client left during the handshake) stops counting after
 ``UPGRADE_TTL_S``. While the lag exceeds ``SHED_FACTOR`` times its limit (``shedding``),
@@ -140,6 +141,7 @@ class OverloadPolicy:
     rng: random.Random = field(default_factory=random.Random)
     learned_cost: float = 0.0
     pending: dict[Hashable, float] = field(default_factory=dict)
+    upgrades: dict[Upgrade, float] = field(default_factory=dict)
     priced: set[Hashable] = field(default_factory=set)
     streaming: set[Hashable] = field(default_factory=set)
     recent: deque[tuple[float, float]] = field(default_factory=deque)
@@ -179,7 +181,11 @@ class OverloadPolicy:
             if refusal is None:
                 refusal = self._busy_refusal(load, now, self.session_cost, "another session")
             if refusal is None:
-                self.pending[key] = now
+                if isinstance(key, Upgrade):
+                    self.upgrades.pop(key, None)
+                    self.upgrades[key] = now
+                else:
+                    self.pending[key] = now
             return refusal
 
     def start_refusal(
@@ -209,7 +215,7 @@ class OverloadPolicy:
         under ``key`` from when the upgrade was admitted. False when no such upgrade is
         pending (admitted too long ago, or never)."""
         with self.lock:
-            admitted = self.pending.pop(upgrade, None)
+            admitted = self.upgrades.pop(upgrade, None)
             if admitted is None:
                 return False
             self.pending[key] = admitted
@@ -251,15 +257,13 @@ class OverloadPolicy:
         window."""
         while self.recent and now - self.recent[0][0] >= RECENT_S:
             self.recent.popleft()
-        stale = [
-            key
-            for key, at in self.pending.items()
-            if isinstance(key, Upgrade) and now - at >= UPGRADE_TTL_S
-        ]
-        for key in stale:
-            del self.pending[key]
+        while self.upgrades:  # in the order admitted: the stale ones come first
+            oldest = next(iter(self.upgrades))
+            if now - self.upgrades[oldest] < UPGRADE_TTL_S:
+                break
+            del self.upgrades[oldest]
         started = sum(cost * (1.0 - (now - at) / RECENT_S) for at, cost in self.recent)
-        return started + len(self.pending) * self.session_cost
+        return started + (len(self.pending) + len(self.upgrades)) * self.session_cost
 
     def _lag_refusal(self, load: LoadSample, sessions: int) -> Refusal | None:
         limit = self.limits.max_lag_ms

@@ -329,6 +329,24 @@ def test_upgrades_of_a_burst_count_against_each_other_at_once() -> None:
     assert not fresh.adopt(upgrades[2], "too late")
 
 
+def test_only_the_upgrades_admitted_a_ttl_ago_stop_counting() -> None:
+    """Upgrades admitted at different times expire each at its own TTL: two admitted at
+    0 s stop counting at UPGRADE_TTL_S, the two admitted 5 s later still count then, and
+    a re-admitted client counts from its later admission."""
+    overload = policy()
+    early = [Upgrade(("127.0.0.1", 41000 + index)) for index in range(2)]
+    late = [Upgrade(("127.0.0.1", 42000 + index)) for index in range(2)]
+    for upgrade in early:
+        assert overload.session_refusal(QUIET, 0, 0.0, upgrade) is None
+    for upgrade in late:
+        assert overload.session_refusal(QUIET, 0, 5.0, upgrade) is None
+    assert overload.session_refusal(QUIET, 0, 5.0, early[0]) is None  # re-admitted at 5 s
+    # 0.75 / 0.125 = 6 sessions fit: three upgrades still count at the TTL, so three more.
+    assert admitted_in_a_burst(overload, QUIET, now=UPGRADE_TTL_S) == 3
+    assert not overload.adopt(early[1], "expired") and overload.adopt(early[0], "readmitted")
+    assert overload.adopt(late[1], "late") and not overload.adopt(late[1], "twice")
+
+
 def test_shedding_needs_a_far_lagging_loop_and_enough_sessions() -> None:
     overload = policy()  # max_lag_ms 50: shedding beyond 4 x 50 ms
     assert overload.shedding(LoadSample(200.5, 0.0, 1.0), LAG_FROM_SESSIONS)
