@@ -42,6 +42,7 @@ from ..status import Heartbeat, Report, phase
 from . import demo_page, docs_page, openapi, phoneme_maps, vrm_page
 from .catalog import Catalog
 from .client_limits import ClientLimits
+from .flood_gate import install_flood_gate
 from .handshake import head_limits
 from .held_input import InputLedger, input_budget_bytes
 from .lanes import FairLane
@@ -182,6 +183,7 @@ def create_app(
             _log_limits(server)
             server.overload.monitor.start()
             running.append(server.overload.monitor.stop)
+            running.append(install_flood_gate(server))
             liveness = _liveness(settings, server.overload.monitor.last_tick)
             if liveness is not None:
                 running.append(liveness.stop)

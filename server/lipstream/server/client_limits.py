@@ -99,6 +99,17 @@ class ClientLimits:
         if client is not None:
             client.waiting -= 1
 
+    def saturated(self, address: str, probe_lane: int) -> bool:
+        """Whether a new connection from ``address`` would be refused at once: the address
+        is at its connection cap with ``probe_lane`` of its connections already waiting."""
+        client = self.clients.get(address)
+        return (
+            client is not None
+            and bool(self.max_connections)
+            and client.open >= self.max_connections
+            and client.waiting >= probe_lane
+        )
+
     def open_connections(self, address: str) -> int:
         client = self.clients.get(address)
         return 0 if client is None else client.open
@@ -160,3 +171,12 @@ def refusal_headers(limits: ClientLimits, reason: str, body: bytes) -> list[tupl
         (b"retry-after", str(limits.retry_after_s(reason)).encode()),
         (b"connection", b"close"),
     ]
+
+
+def refusal_response(limits: ClientLimits, address: str, reason: str) -> bytes:
+    """The whole HTTP 503 ``too_many_client_connections`` answer, head and body."""
+    body = refusal_body(limits, address, reason)
+    head = b"".join(
+        name + b": " + value + b"\r\n" for name, value in refusal_headers(limits, reason, body)
+    )
+    return b"HTTP/1.1 503 Service Unavailable\r\n" + head + b"\r\n" + body

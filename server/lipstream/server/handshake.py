@@ -75,7 +75,14 @@ from uvicorn.server import ServerState as UvicornState
 
 from lipstream_client.errors import SERVER_BUSY
 
-from .client_limits import CONNECTIONS, UPGRADE_RATE, ClientLimits, refusal_body, refusal_headers
+from .client_limits import (
+    CONNECTIONS,
+    UPGRADE_RATE,
+    ClientLimits,
+    refusal_body,
+    refusal_headers,
+    refusal_response,
+)
 from .http_flush import BoundedFlushHTTPProtocol
 from .open_files import connection_cap, open_file_limit
 from .overload import Refusal, Upgrade
@@ -391,16 +398,7 @@ class GuardedHTTPProtocol(BoundedFlushHTTPProtocol):
         if self.limits is None or self.transport.is_closing():
             return
         refused_client(self.app_state, reason)
-        body = refusal_body(self.limits, self.address, reason)
-        self.transport.write(
-            b"HTTP/1.1 503 Service Unavailable\r\n"
-            + b"".join(
-                name + b": " + value + b"\r\n"
-                for name, value in refusal_headers(self.limits, reason, body)
-            )
-            + b"\r\n"
-            + body
-        )
+        self.transport.write(refusal_response(self.limits, self.address, reason))
         self.transport.close()
 
     def _refuse_busy(self, refusal: Refusal) -> None:

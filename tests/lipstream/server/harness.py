@@ -26,6 +26,7 @@ from websockets.sync.client import ClientConnection, connect
 
 from lipstream.config import ServerSettings
 from lipstream.engines.base import Model, Rung
+from lipstream.server.accept_loop import BoundedAcceptLoop
 from lipstream.server.app import create_app
 from lipstream.server.calibration import ComputeCost
 from lipstream.server.runner import uvicorn_options
@@ -97,7 +98,7 @@ def _serving(
     port = free_port()
     config = uvicorn.Config(app, host="127.0.0.1", port=port, **uvicorn_options(settings))
     server = uvicorn.Server(config)
-    loop = asyncio.new_event_loop()
+    loop = BoundedAcceptLoop()  # the loop uvicorn_options names, which uvicorn.run would build
     thread = threading.Thread(target=loop.run_until_complete, args=(server.serve(),), daemon=True)
     thread.start()
     eventually(lambda: server.started or not thread.is_alive(), "the test server starts")
