@@ -26,6 +26,22 @@ LIVELINK_DIR_VARIABLE = "LIPSTREAM_LIVELINK_DIR"
 EVENTUALLY_POLLS = 3000
 EVENTUALLY_PAUSE_S = 0.02
 T = TypeVar("T")
+# VRM 1.0's preset expressions that the `vrm1` rig preset drives, in its order (VRMC_vrm
+# expressions.md); written out here, not read from lipstream.output, so tests check it.
+VRM1_EXPRESSIONS = (
+    "aa",
+    "ih",
+    "ou",
+    "ee",
+    "oh",
+    "blink",
+    "happy",
+    "angry",
+    "sad",
+    "relaxed",
+    "surprised",
+    "neutral",
+)
 
 
 def eventually(

@@ -26,7 +26,7 @@ from typing import Any
 
 import pytest
 
-from tests.helpers import REPO
+from tests.helpers import REPO, VRM1_EXPRESSIONS
 from tests.live_server import LiveServer, live_server
 
 GODOT = REPO / "examples" / "godot" / "lipstream_client.gd"
@@ -37,20 +37,6 @@ NEWTONSOFT = Path(
 )  # Debian's libnewtonsoft-json5.0-cil
 MAX_LINES = 150
 WAIT_S = 60.0  # a bound on a busy machine, not a speed claim
-VRM1_EXPRESSIONS = (
-    "aa",
-    "ih",
-    "ou",
-    "ee",
-    "oh",
-    "blink",
-    "happy",
-    "angry",
-    "sad",
-    "relaxed",
-    "surprised",
-    "neutral",
-)
 TEXT = "Hello from the game engine."
 
 

@@ -21,7 +21,7 @@ from lipstream.output.retarget import KeyPosePairs, fit_map, save_map
 from lipstream.server.catalog import Catalog
 from lipstream_client import AsyncClient, LipstreamServerError, OutputProfile, StreamResult
 from lipstream_client.channels import OCULUS15_VISEMES
-from tests.helpers import return_frames
+from tests.helpers import VRM1_EXPRESSIONS, return_frames
 from tests.live_server import LiveServer, live_server
 
 FPS = 60.0
@@ -128,20 +128,7 @@ def test_an_unknown_map_is_unknown_retarget_listing_the_presets_and_maps(
 
 def test_a_request_picks_the_vrm1_preset_by_name(served: LiveServer) -> None:
     result = asyncio.run(request(served.ws, OutputProfile(retarget="vrm1")))
-    assert result.ready.channels == (
-        "aa",
-        "ih",
-        "ou",
-        "ee",
-        "oh",
-        "blink",
-        "happy",
-        "angry",
-        "sad",
-        "relaxed",
-        "surprised",
-        "neutral",
-    )
+    assert result.ready.channels == VRM1_EXPRESSIONS
     rows = np.asarray(result.rows())
     mouth = rows[:, :5]
     # LINE: AA over 0.2-0.5 s opens the mouth in aa; M (0.1-0.2) and P (0.5-0.6) close it.

@@ -20,25 +20,11 @@ import numpy as np
 import pytest
 
 from lipstream.corpus.livelink import ARKIT_BLENDSHAPES
+from tests.helpers import VRM1_EXPRESSIONS
 from tests.lipstream.server.browser import CHROMIUM, WAIT_MS, opened_page
 from tests.lipstream.server.vrm_model import FACE_MESH, UNBOUND_TARGET, build_vrm, glb
 from tests.live_server import LiveServer, live_server
 
-# VRM 1.0's preset expressions that the `vrm1` rig preset drives (VRMC_vrm expressions.md).
-VRM1_EXPRESSIONS = (
-    "aa",
-    "ih",
-    "ou",
-    "ee",
-    "oh",
-    "blink",
-    "happy",
-    "angry",
-    "sad",
-    "relaxed",
-    "surprised",
-    "neutral",
-)
 RIGS = {"vrm1": VRM1_EXPRESSIONS, "arkit52": tuple(ARKIT_BLENDSHAPES)}
 MOUTH_OPENING = {"vrm1": "aa", "arkit52": "jawOpen"}
 SENTENCE = "Hello there, how are you?"
