@@ -430,6 +430,49 @@ def word_timings(bench: Bench) -> str:
     )
 
 
+ALIGNER_REAL = "aligner_real.json"
+
+
+def _errors(summary: dict[str, Any]) -> str:
+    return (
+        f"{number(summary['median_ms'])} / {number(summary['p90_ms'])} / "
+        f"{number(summary['max_ms'])} ({summary['mean_signed_ms']:+.1f})"
+    )
+
+
+def aligner_real(bench: Bench) -> str:
+    """The forced aligner's word times against GRID's (``lipstream.bench.aligner_real``)."""
+    if not bench.exists(ALIGNER_REAL):
+        return (
+            f"Not measured yet: no `bench/{ALIGNER_REAL}` "
+            "(`python -m lipstream.bench.aligner_real`).\n"
+        )
+    doc = bench.load(ALIGNER_REAL)
+    every = doc["all"]
+    text = bench.source(ALIGNER_REAL, doc)
+    text += (
+        f"{every['clips']} clip(s) with GRID's word times, {every['words']} words. Errors are "
+        "|aligned − GRID's| in ms, median / p90 / max, with the mean signed error (aligned "
+        "minus GRID's) in brackets:\n\n"
+    )
+    rows = [
+        [
+            f"`{clip['clip']}` ({clip['audio_s']:.2f} s)",
+            str(len(clip["words"])),
+            _errors(clip["onset"]),
+            _errors(clip["offset"]),
+            number(clip["confidence"], 2),
+            number(clip["real_time_factor"], 2),
+        ]
+        for clip in doc["clips"]
+    ]
+    if len(doc["clips"]) > 1:
+        rows.append(["all", str(every["words"]), _errors(every["onset"]), _errors(every["offset"])])
+        rows[-1] += ["", ""]
+    header = ["clip", "words", "word onsets", "word offsets", "confidence", "real-time factor"]
+    return text + table(header, rows)
+
+
 def _pair(stats: dict[str, Any] | None, key: str, digits: int = 0) -> str:
     values = stats.get(key) if stats else None
     if not values:
@@ -1100,6 +1143,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "lead0": lead0,
     "hmm-first-frame": hmm_first_frame,
     "word-timings": word_timings,
+    "aligner-real": aligner_real,
     "capacity-floor": _capacity("capacity_floor.json"),
     "capacity-best": _capacity("capacity_best.json"),
     "capacity-best-two-workers": _capacity("capacity_best_two_workers.json"),

@@ -4,8 +4,9 @@ with times in seconds on the utterance clock.
 Sketch: a format yields what it carries and nothing more. Word formats give
 ``TimedWord``s (an end may be unknown: Polly's word marks have only a start), character
 formats give words whose ``characters`` carry their own times (and word formats with
-visemes, words whose ``visemes`` are those said within them), phoneme formats give
-``PhonemeSpan``s directly and viseme-only formats give ``TimedViseme``s. ``where`` on
+visemes, words whose ``visemes`` are those said within them, and every viseme besides),
+phoneme formats give ``PhonemeSpan``s directly and viseme-only formats give
+``TimedViseme``s. ``where`` on
 each item names its place in the input ("alignment.characters[12]"), so a later step's
 error points back into the user's file.
 """

@@ -377,3 +377,43 @@ def test_real_faces_render_every_engine_and_the_readme_line(tmp_path: Path) -> N
     assert "aperture r up to 0.57 (`dam`; `viseme-lerp` 0.50)" in summary
     assert "closure lag +16 to +29 ms (`viseme-lerp` +17;" in summary
     assert "Not measured yet" in BLOCKS["real-faces"](Bench(tmp_path / "empty"))
+
+
+def _aligner_summary(median: float, p90: float, largest: float, bias: float) -> dict[str, float]:
+    return {"median_ms": median, "p90_ms": p90, "max_ms": largest, "mean_signed_ms": bias}
+
+
+def test_the_aligner_against_grid_renders_each_clip_and_all(tmp_path: Path) -> None:
+    clip = {
+        "clip": "swwp2s",
+        "audio_s": 2.995,
+        "confidence": 0.574,
+        "real_time_factor": 0.845,
+        "words": [{"word": "set"}, {"word": "white"}],
+        "onset": _aligner_summary(25.0, 40.0, 50.0, 15.0),
+        "offset": _aligner_summary(25.0, 35.0, 40.0, -3.3),
+    }
+    doc = {
+        "date": "2030-01-02T03:04:05+00:00",
+        "machine": {"python": "3.11.7"},
+        "command": "python -m lipstream.bench.aligner_real",
+        "clips": [clip, {**clip, "clip": "other"}],
+        "all": {
+            "clips": 2,
+            "words": 4,
+            "onset": _aligner_summary(20.0, 30.0, 50.0, 5.0),
+            "offset": _aligner_summary(10.0, 20.0, 40.0, 0.0),
+        },
+    }
+    (tmp_path / "aligner_real.json").write_text(json.dumps(doc))
+    rendered = BLOCKS["aligner-real"](Bench(tmp_path))
+    rows = [line for line in rendered.splitlines() if line.startswith("| `") or "| all" in line]
+    assert rows == [
+        "| `swwp2s` (3.00 s) | 2 | 25.0 / 40.0 / 50.0 (+15.0) | 25.0 / 35.0 / 40.0 (-3.3) "
+        "| 0.57 | 0.84 |",
+        "| `other` (3.00 s) | 2 | 25.0 / 40.0 / 50.0 (+15.0) | 25.0 / 35.0 / 40.0 (-3.3) "
+        "| 0.57 | 0.84 |",
+        "| all | 4 | 20.0 / 30.0 / 50.0 (+5.0) | 10.0 / 20.0 / 40.0 (+0.0) |  |  |",
+    ]
+    assert "2 clip(s) with GRID's word times, 4 words" in rendered
+    assert "Not measured yet" in BLOCKS["aligner-real"](Bench(tmp_path / "empty"))

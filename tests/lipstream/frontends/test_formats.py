@@ -148,7 +148,10 @@ def test_azure_word_boundaries_in_ticks_skip_punctuation_and_keep_words() -> Non
         ("Hello", 0.05, 0.3625),
         ("world", 0.5, 0.9),
     ]
-    assert timings.visemes == ()
+    # The viseme event is Hello's, and kept beside the words too (for a stream's later
+    # chunks to join).
+    assert [[v.viseme for v in w.visemes] for w in timings.words] == [["12"], []]
+    assert [(v.viseme, v.where) for v in timings.visemes] == [("12", "events[3]")]
 
 
 def test_azure_visemes_alone_are_read_by_id() -> None:

@@ -9,7 +9,9 @@ word starts; the last such word is left open for the next chunk or the duration 
 punctuation and sentence boundaries are skipped; a ``wordLength`` other than the text's
 length is ``mismatched_words``. A viseme event (ID 0-21) starts that viseme; beside word
 boundaries, the visemes said within a word anchor its phonemes' onsets
-(``viseme_anchors``), and alone they become spans (``viseme_spans``).
+(``viseme_anchors``; the visemes are kept beside the words too, for a stream to give a
+word the visemes of a later chunk, ``word_stream``), and alone they become spans
+(``viseme_spans``).
 """
 
 from __future__ import annotations
@@ -58,7 +60,12 @@ def parse_azure(data: Any) -> SpeechTimings:
         words = closed + words[-1:]
         said = within_words([w.start for w in words], [w.end for w in words], visemes)
         words = [replace(word, visemes=group) for word, group in zip(words, said)]
-        return SpeechTimings("azure", words=tuple(words), last_word_open=words[-1].end is None)
+        return SpeechTimings(
+            "azure",
+            words=tuple(words),
+            visemes=tuple(visemes),
+            last_word_open=words[-1].end is None,
+        )
     check_order([(v.start, None, v.where) for v in visemes], "words or visemes")
     return SpeechTimings("azure", visemes=tuple(visemes))
 

@@ -7,12 +7,14 @@ the next word or a ``sil`` viseme starts, whichever is first; a last word with n
 SSML marks are skipped. Beside word marks, the viseme marks said within a word anchor its
 phonemes' onsets (``viseme_anchors``); alone they become spans (``viseme_spans``). The
 ``start``/``end`` byte offsets must be ordered (``end`` after
-``start``), else ``mismatched_words``.
+``start``), else ``mismatched_words``. Word marks with viseme marks keep the viseme marks
+too (``SpeechTimings.visemes``), so that a stream can give a word the visemes of a later
+chunk (``word_stream``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -56,7 +58,9 @@ def parse_polly(data: Any) -> SpeechTimings:
     words = _words(starts, visemes)
     said = within_words([w.start for w in words], [w.end for w in words], visemes)
     words = [replace(word, visemes=group) for word, group in zip(words, said)]
-    return SpeechTimings("polly", words=tuple(words), last_word_open=words[-1].end is None)
+    return SpeechTimings(
+        "polly", words=tuple(words), visemes=tuple(visemes), last_word_open=words[-1].end is None
+    )
 
 
 def _check_offsets(mark: Mapping[str, Any], where: str) -> None:
@@ -74,15 +78,19 @@ def _check_offsets(mark: Mapping[str, Any], where: str) -> None:
 
 
 def _words(starts: list[tuple[str, float, str]], visemes: list[TimedViseme]) -> list[TimedWord]:
-    silences = [viseme.start for viseme in visemes if viseme.viseme == "sil"]
     words = []
     for index, (value, start, where) in enumerate(starts):
         following = starts[index + 1][1] if index + 1 < len(starts) else None
-        pause = next((time for time in silences if time > start), None)
-        candidates = [time for time in (following, pause) if time is not None]
-        end = min(candidates) if candidates else None
-        words.append(TimedWord(value, start, end, where))
+        words.append(TimedWord(value, start, word_end(start, following, visemes), where))
     return words
+
+
+def word_end(start: float, following: float | None, visemes: Sequence[TimedViseme]) -> float | None:
+    """Where a word mark at ``start`` ends: at the ``following`` word's start or the first
+    ``sil`` viseme after it, whichever comes first; None when neither is known yet."""
+    pause = next((v.start for v in visemes if v.viseme == "sil" and v.start > start), None)
+    candidates = [time for time in (following, pause) if time is not None]
+    return min(candidates) if candidates else None
 
 
 def _is_mark(data: Any) -> bool:
