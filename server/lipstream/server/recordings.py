@@ -321,8 +321,7 @@ async def _status(state: ServerState, session_id: str) -> tuple[int, dict[str, A
 def _job(state: ServerState, session: Session, document: dict[str, Any]) -> dict[str, Any]:
     document = lost(document)
     job = {
-        key: document.get(key)
-        for key in ("job", "state", "step", "progress", "error", "character")
+        key: document.get(key) for key in ("job", "state", "step", "progress", "error", "character")
     }
     if job["state"] == DONE and session.name not in state.registry.characters():
         job.update(state=LOADING, step="loading the character into this worker", progress=0.0)
