@@ -85,7 +85,8 @@ def faceless_clip(tmp_path_factory: pytest.TempPathFactory) -> bytes:
 
 
 def open_session(served: Served, body: dict[str, Any], **headers: str) -> httpx.Response:
-    return httpx.post(f"{served.http}/v1/recordings", json=body, headers=headers)
+    # The first session without sentences has espeak-ng speak the whole script: seconds.
+    return httpx.post(f"{served.http}/v1/recordings", json=body, headers=headers, timeout=120)
 
 
 def recording(served: Served, name: str, sentences: list[str]) -> Recording:
