@@ -20,6 +20,7 @@ from ..errors import LipstreamError
 from ..phonemes import SILENCE
 from ..speech.espeak import read_mnemonic
 from ..speech.worker import SpeechRequest, speak_in_worker
+from .errors import TOO_MANY_TAKES
 
 SPEECH_TIMEOUT_S = 120.0
 MAX_SENTENCE_CHARS = 300
@@ -80,8 +81,6 @@ def checked_sentences(value: object, max_count: int) -> list[str]:
     """A client's own prompt sentences: a non-empty list of at most ``max_count`` printable
     strings of at most ``MAX_SENTENCE_CHARS``; ``invalid_request`` or ``too_many_takes``
     naming the item."""
-    from .errors import TOO_MANY_TAKES
-
     if not isinstance(value, list) or not value:
         raise LipstreamError(
             "must be a non-empty list of sentences", where="sentences", code="invalid_request"

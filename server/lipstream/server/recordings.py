@@ -107,8 +107,8 @@ def _operation(
 SESSION_ERRORS = {"401": "a token is required", "404": "no such session, or recording is off"}
 
 
-def store_of(settings_owner: ServerState) -> SessionStore:
-    return SessionStore(recordings_root(settings_owner.settings))
+def store_of(state: ServerState) -> SessionStore:
+    return SessionStore(recordings_root(state.settings))
 
 
 def min_takes(state: ServerState) -> int:
