@@ -1087,14 +1087,19 @@ SENTENCES_CURVE = "sentences_curve.json"
 def _median_range(cell: dict[str, float] | None, digits: int, scale: float = 1.0) -> str:
     if cell is None:
         return "–"
-    low, mid, high = (scale * cell[key] for key in ("min", "median", "max"))
+    low, mid, high = (round(scale * cell[key], digits) + 0.0 for key in ("min", "median", "max"))
     return f"{mid:.{digits}f} ({low:.{digits}f}–{high:.{digits}f})"
 
 
-def _first_size_beating(
-    rows: Sequence[dict[str, Any]], engine: str, better: Callable[[dict[str, Any]], bool]
+def _smallest_size_below(
+    rows: Sequence[dict[str, Any]], engine: str, figure: str, bound: float
 ) -> str:
-    sizes = [row["n"] for row in rows if row["engine"] == engine and better(row)]
+    """The smallest N at which ``engine``'s median ``figure`` falls below ``bound``."""
+    sizes = [
+        row["n"]
+        for row in rows
+        if row["engine"] == engine and row[figure] is not None and row[figure]["median"] < bound
+    ]
     return str(min(sizes)) if sizes else "none measured"
 
 
@@ -1156,14 +1161,10 @@ def sentences_curve(bench: Bench) -> str:
                     "–" if row["aperture_r"] is None else number(row["aperture_r"], 3),
                     "–" if row["closure_rate"] is None else percent(row["closure_rate"]),
                     _signed(row["closure_lag_ms"]),
-                    _first_size_beating(
-                        curve, engine, lambda r, d=row: r["rms_error"]["median"] < d["rms_error"]
-                    ),
-                    _first_size_beating(
-                        curve,
-                        engine,
-                        lambda r: r["rms_ratio"] is not None and r["rms_ratio"]["median"] < 1.0,
-                    ),
+                    _smallest_size_below(curve, engine, "rms_error", row["rms_error"]),
+                    "(the base)"
+                    if engine == "viseme-lerp"
+                    else _smallest_size_below(curve, engine, "rms_ratio", 1.0),
                 ]
             )
         demo_header = ["engine", "demo RMS", "demo aperture r", "demo /p b m/ closed"]
