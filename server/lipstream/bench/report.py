@@ -1124,7 +1124,128 @@ def real_faces(bench: Bench) -> str:
     return text + table(header, rows)
 
 
+SENTENCES_CURVE = "sentences_curve.json"
+
+
+def _median_range(cell: dict[str, float] | None, digits: int, scale: float = 1.0) -> str:
+    if cell is None:
+        return "–"
+    low, mid, high = (round(scale * cell[key], digits) + 0.0 for key in ("min", "median", "max"))
+    return f"{mid:.{digits}f} ({low:.{digits}f}–{high:.{digits}f})"
+
+
+def _smallest_size_below(
+    rows: Sequence[dict[str, Any]], engine: str, figure: str, bound: float
+) -> str:
+    """The smallest N at which ``engine``'s median ``figure`` falls below ``bound``."""
+    sizes = [
+        row["n"]
+        for row in rows
+        if row["engine"] == engine and row[figure] is not None and row[figure]["median"] < bound
+    ]
+    return str(min(sizes)) if sizes else "none measured"
+
+
+def sentences_curve(bench: Bench) -> str:
+    """``python -m lipstream.bench.sentences``: held-out quality against the number of
+    sentences a person records, every engine beside ``viseme-lerp`` and the demo models."""
+    if not bench.exists(SENTENCES_CURVE):
+        return (
+            f"Not measured yet: no `bench/{SENTENCES_CURVE}` "
+            "(`python -m lipstream.bench.sentences`).\n"
+        )
+    doc = bench.load(SENTENCES_CURVE)
+    held = doc["heldout"]
+    text = bench.source(SENTENCES_CURVE, doc)
+    text += (
+        f"Speaker `{doc['speaker']['name']}` (not one of the demo character's), "
+        f"{doc['emotion']}, {doc['fps']:g} fps; {doc['draws']} seeded draws (seed {doc['seed']}) "
+        f"of N sentences from a pool of {len(doc['pool_stems'])}; held-out set of "
+        f"{len(held['stems'])} sentences (digest `{held['digest'][:12]}`), whose recorded lips "
+        f"close on {percent(held['recorded_closure_rate'])} of /p b m/. Each cell: median "
+        "(lowest–highest) over the draws; RMS ÷ base is against `viseme-lerp` trained on "
+        "the same draw.\n\n"
+    )
+    rows = []
+    curve = sorted(doc["curve"], key=lambda row: (ENGINE_ORDER.index(row["engine"]), row["n"]))
+    for row in curve:
+        rows.append(
+            [
+                f"`{row['engine']}`",
+                str(row["n"]),
+                _median_range(row["rms_error"], 4),
+                _median_range(row["rms_ratio"], 3),
+                _median_range(row["aperture_r"], 3),
+                _median_range(row["closure_rate"], 0, 100.0),
+                _median_range(row["closure_lag_ms"], 0),
+                _median_range(row["train_cpu_s"], 2),
+                f"{row['failed']} of {row['draws']}" if row["failed"] else "–",
+            ]
+        )
+    header = ["engine", "N", "RMS", "RMS ÷ base", "aperture r", "/p b m/ closed %"]
+    header += ["closure lag ms", "train CPU s", "failed"]
+    text += table(header, rows)
+    demo = {row["engine"]: row for row in doc["demo"]}
+    if demo:
+        text += (
+            "\nThe demo character's shipped models, trained on "
+            f"{next(iter(demo.values()))['train_utterances']} utterances of three other "
+            "speakers, on the same held-out set, and the smallest N whose median beats them:\n\n"
+        )
+        demo_rows = []
+        for engine in ENGINE_ORDER:
+            if engine not in demo:
+                continue
+            row = demo[engine]
+            demo_rows.append(
+                [
+                    f"`{engine}`",
+                    number(row["rms_error"], 4),
+                    "–" if row["aperture_r"] is None else number(row["aperture_r"], 3),
+                    "–" if row["closure_rate"] is None else percent(row["closure_rate"]),
+                    _signed(row["closure_lag_ms"]),
+                    _smallest_size_below(curve, engine, "rms_error", row["rms_error"]),
+                    "(the base)"
+                    if engine == "viseme-lerp"
+                    else _smallest_size_below(curve, engine, "rms_ratio", 1.0),
+                ]
+            )
+        demo_header = ["engine", "demo RMS", "demo aperture r", "demo /p b m/ closed"]
+        demo_header += ["demo closure lag ms", "N beating its demo model (RMS)"]
+        demo_header += ["N beating personal `viseme-lerp` (RMS)"]
+        text += table(demo_header, demo_rows)
+    real = doc.get("real_faces")
+    if real:
+        text += (
+            f"\nReal faces: `{real['corpus']}` holds {real['clips']} clips under "
+            f"{real['speakers']} speaker labels, at most {real['most_clips_of_one_speaker']} "
+            "under one, so "
+            + (
+                "a curve can be drawn from it.\n"
+                if real["curve_possible"]
+                else "no speaker's curve can be drawn from it.\n"
+            )
+        )
+    return text
+
+
+def sentences_curve_summary(bench: Bench) -> str:
+    """One line: where the curve is and how many draws and sizes it spans."""
+    if not bench.exists(SENTENCES_CURVE):
+        return f"Not measured yet: no `bench/{SENTENCES_CURVE}`.\n"
+    doc = bench.load(SENTENCES_CURVE)
+    sizes = ", ".join(str(n) for n in doc["sizes"])
+    return (
+        f"`bench/{SENTENCES_CURVE}` ({doc['date']}): {len(doc['engines'])} engines trained on "
+        f"N = {sizes} sentences of one generated speaker, {doc['draws']} draws each, scored on "
+        f"{len(doc['heldout']['stems'])} held-out sentences; "
+        "[how-to/record-your-face.md](../how-to/record-your-face.md#how-much-speech-is-enough).\n"
+    )
+
+
 BLOCKS: dict[str, Callable[[Bench], str]] = {
+    "sentences-curve": sentences_curve,
+    "sentences-curve-summary": sentences_curve_summary,
     "real-faces-summary": real_faces_summary,
     "real-faces": real_faces,
     "languages": languages,
