@@ -88,6 +88,12 @@ class ServerSettings:
     strict_models: bool = False
     health_port: int = 0
     liveness_stall_s: float = 30.0
+    recordings_enabled: bool = True
+    recordings_dir: Path | None = None
+    max_take_bytes: int = 64 << 20
+    max_takes: int = 40
+    max_recording_jobs: int = 1
+    recording_min_takes: int = 0
 
     def with_changes(self, **changes: Any) -> ServerSettings:
         """A copy with some fields replaced (tests and the CLI use it)."""
@@ -472,6 +478,45 @@ ENV_SETTINGS: tuple[EnvSetting, ...] = (
         "the health port answers 503 once the event loop has not run its load monitor for "
         "this long",
     ),
+    EnvSetting(
+        "LIPSTREAM_RECORDINGS_ENABLED",
+        "recordings_enabled",
+        _flag,
+        "serve the `/v1/recordings` routes (record a face, train a character, serve it); "
+        "off: they answer 404 `recordings_disabled`",
+    ),
+    EnvSetting(
+        "LIPSTREAM_RECORDINGS_DIR",
+        "recordings_dir",
+        _path,
+        "where recording sessions, their takes and jobs, and the characters trained from "
+        "them are kept (shared by every worker); default `$LIPSTREAM_HOME/recordings`",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MAX_TAKE_BYTES",
+        "max_take_bytes",
+        _integer(1024, 1 << 34),
+        "largest upload of one recording (`take_too_large`, HTTP 413)",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MAX_TAKES",
+        "max_takes",
+        _integer(1, 1000),
+        "recordings (prompt sentences) per recording session (`too_many_takes`)",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MAX_RECORDING_JOBS",
+        "max_recording_jobs",
+        _integer(1, 256),
+        "training jobs running at once over all workers (`server_busy`, HTTP 503)",
+    ),
+    EnvSetting(
+        "LIPSTREAM_RECORDING_MIN_TAKES",
+        "recording_min_takes",
+        _integer(0, 1000),
+        "good recordings a training job needs; 0 = the recipe's "
+        "(`lipstream.recording.recipe.MIN_GOOD_TAKES`)",
+    ),
 )
 
 
@@ -511,6 +556,17 @@ def demo_model_path(engine: str = "viseme-lerp", settings: Settings | None = Non
             f"unknown engine {engine!r}; available: {', '.join(engine_names())}", where="engine"
         )
     return (settings or load_settings()).demo_models_dir / engine
+
+
+RECORDINGS_DIR = "recordings"
+
+
+def recordings_root(settings: ServerSettings, environ: Mapping[str, str] | None = None) -> Path:
+    """Where recording sessions and the characters trained from them live:
+    ``LIPSTREAM_RECORDINGS_DIR``, else ``$LIPSTREAM_HOME/recordings``."""
+    if settings.recordings_dir is not None:
+        return settings.recordings_dir
+    return _home(os.environ if environ is None else environ) / RECORDINGS_DIR
 
 
 def kernel_cache_dir(environ: Mapping[str, str] | None = None) -> Path:

@@ -64,7 +64,8 @@ class ModelFailure:
         }
 
 
-def _failure(directory: Path, error: LipstreamError) -> ModelFailure:
+def model_failure(directory: Path, error: LipstreamError) -> ModelFailure:
+    """The failure of ``directory`` with what its manifest names (if it reads)."""
     try:
         manifest = read_manifest(directory)
     except LipstreamError:
@@ -104,7 +105,7 @@ class ModelRegistry:
 
     def _fail(self, directory: Path, error: LipstreamError) -> None:
         logger.error("model %s is not served: %s", directory, error)
-        self.failures[directory.name] = _failure(directory, error)
+        self.failures[directory.name] = model_failure(directory, error)
 
     def require_models(self, *, strict: bool) -> None:
         """Raise the first failure when ``strict``, and an error when no model is left."""

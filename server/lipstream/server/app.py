@@ -12,8 +12,9 @@ the limits in force. Routes:
 ``/healthz``, ``/readyz``, ``/v1/engines``, ``/v1/characters``, ``/v1/languages``,
 ``POST /v1/synthesize``, ``GET /metrics``, the WebSocket ``/v1/stream``, the
 ``expressive-dp`` phoneme-map and contamination routes (``phoneme_maps``) and
-the OpenAPI docs (``/docs``, served with its assets so it works offline,
-and ``/openapi.json``), the demo page ``/`` (``demo_page``) and the VRM page
+the recording routes ``/v1/recordings`` (``recordings``: a visitor's recordings
+become a character, served without a restart), the OpenAPI docs (``/docs``, served
+with its assets so it works offline, and ``/openapi.json``), the demo page ``/`` (``demo_page``) and the VRM page
 ``/vrm`` (``vrm_page``).
 """
 
@@ -39,7 +40,7 @@ from ..errors import LipstreamError
 from ..frontends.espeak_languages import espeak_languages, espeak_variants
 from ..models import ModelRegistry
 from ..status import Heartbeat, Report, phase
-from . import demo_page, docs_page, openapi, phoneme_maps, vrm_page
+from . import demo_page, docs_page, openapi, phoneme_maps, recordings, vrm_page
 from .catalog import Catalog
 from .client_limits import ClientLimits
 from .handshake import head_limits
@@ -185,6 +186,8 @@ def create_app(
             liveness = _liveness(settings, server.overload.monitor.last_tick)
             if liveness is not None:
                 running.append(liveness.stop)
+            if settings.recordings_enabled:
+                running.append(recordings.watch(server))
             if serving_process:
                 freeze_long_lived_objects()
             startup.ready(server)
@@ -320,6 +323,7 @@ def create_app(
         await stream_endpoint(websocket)
 
     phoneme_maps.install(app)
+    recordings.install(app)
 
     return app
 

@@ -151,6 +151,27 @@ class Metrics:
             ["reason"],
             registry=registry,
         )
+        self.recording_takes = Counter(
+            "lipstream_recording_takes",
+            "Recordings uploaded to /v1/recordings sessions.",
+            registry=registry,
+        )
+        self.recording_take_bytes = Counter(
+            "lipstream_recording_take_bytes",
+            "Bytes of the recordings uploaded to /v1/recordings sessions.",
+            registry=registry,
+        )
+        self.recording_jobs = Counter(
+            "lipstream_recording_jobs",
+            "Training jobs started for recording sessions.",
+            registry=registry,
+        )
+        self.characters_hot_loaded = Counter(
+            "lipstream_characters_hot_loaded",
+            "Characters trained while serving, by outcome: served or refused.",
+            ["outcome"],
+            registry=registry,
+        )
         self.busy_refusals = Counter(
             "lipstream_busy_refusals",
             "WebSocket sessions refused with server_busy, by reason: memory, loop_lag, "

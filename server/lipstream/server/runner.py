@@ -96,6 +96,7 @@ def encode_worker_app(models: Path, server: ServerSettings, drain_flag: Path | N
     the drain, for its workers."""
     fields = asdict(server)
     fields["profiles"] = None if server.profiles is None else str(server.profiles)
+    fields["recordings_dir"] = None if server.recordings_dir is None else str(server.recordings_dir)
     flag = None if drain_flag is None else str(drain_flag)
     return json.dumps({"models": str(models), "server": fields, "drain_flag": flag})
 
@@ -113,6 +114,8 @@ def decode_worker_app(text: str) -> tuple[Path, ServerSettings]:
     fields["auth_tokens"] = tuple(fields["auth_tokens"])
     fields["allowed_origins"] = tuple(fields["allowed_origins"])
     fields["profiles"] = None if fields["profiles"] is None else Path(fields["profiles"])
+    recordings = fields["recordings_dir"]
+    fields["recordings_dir"] = None if recordings is None else Path(recordings)
     return Path(document["models"]), ServerSettings(**fields)
 
 
