@@ -42,6 +42,7 @@ SHORT_TAKE_MS = 300  # the clip's first 0.3 s: a face, and no speech yet
 MARGIN_MS = 600  # recorded beyond the clip's end, so its last word is whole
 TRAINING_MS = 900_000  # capture and training on a busy machine: a bound, not a speed claim
 SMALL_LIMIT = 4096  # bytes: less than a quarter second of recording
+TOKEN = "record-page-token"
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 GRANTED = ["camera", "microphone"]
 
@@ -81,16 +82,21 @@ def served(words_models: Path, tmp_path_factory: pytest.TempPathFactory) -> Iter
 
 
 @pytest.fixture(scope="module")
-def strict(words_models: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
-    """A server that takes recordings of at most SMALL_LIMIT bytes."""
-    recordings = tmp_path_factory.mktemp("recordings-small")
-    yield from recording_server(words_models, recordings, LIPSTREAM_MAX_TAKE_BYTES=str(SMALL_LIMIT))
+def guarded(words_models: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveServer]:
+    """A server that wants a token and takes recordings of at most SMALL_LIMIT bytes."""
+    recordings = tmp_path_factory.mktemp("recordings-guarded")
+    yield from recording_server(
+        words_models,
+        recordings,
+        LIPSTREAM_MAX_TAKE_BYTES=str(SMALL_LIMIT),
+        LIPSTREAM_AUTH_TOKENS=TOKEN,
+    )
 
 
-def record_page(browser: Any, server: LiveServer, permissions: list[str]) -> Any:
+def record_page(browser: Any, server: LiveServer, permissions: list[str], query: str = "") -> Any:
     context = browser.new_context(viewport={"width": 1400, "height": 900}, permissions=permissions)
     page = context.new_page()
-    page.goto(server.http + "/record")
+    page.goto(server.http + "/record" + query)
     page.wait_for_selector("body[data-ready=true]", timeout=WAIT_MS)
     return page
 
@@ -111,8 +117,9 @@ def record_take(page: Any, milliseconds: int, screenshot: Path | None = None) ->
     """Record the current sentence for ``milliseconds`` (or until the page stops at the
     size limit) and wait for its upload to end."""
     ended = recorder(page, "log.uploads.length") + len(recorder(page, "log.errors"))
+    recorded = recorder(page, "log.recorded")
     page.click("#record-take")
-    page.wait_for_selector("#stop:enabled", timeout=WAIT_MS)
+    page.wait_for_function(f"window.lipstreamRecord.log.recorded > {recorded}", timeout=WAIT_MS)
     if screenshot is not None:
         page.wait_for_timeout(milliseconds // 2)
         page.screenshot(path=str(screenshot))
@@ -128,8 +135,10 @@ def record_take(page: Any, milliseconds: int, screenshot: Path | None = None) ->
 
 
 def row_status(page: Any, index: int) -> tuple[str, str]:
+    """The take's kind (its row's class that is not ``chosen``) and status text."""
     row = page.locator(f"#takes tbody tr[data-index='{index}']")
-    return str(row.get_attribute("class")), str(row.locator(".status").inner_text())
+    kinds = str(row.get_attribute("class")).split()
+    return " ".join(k for k in kinds if k != "chosen"), str(row.locator(".status").inner_text())
 
 
 def test_a_recorded_clip_becomes_a_character_that_speaks_a_typed_sentence(
@@ -226,30 +235,47 @@ def test_a_browser_without_media_recorder_is_told_so(
 
 
 def test_a_taken_name_is_said_plainly(camera_browser: Any, served: LiveServer) -> None:
-    answer = httpx.post(
-        f"{served.http}/v1/recordings", json={"name": "taken-name"}, trust_env=False
-    )
-    assert answer.status_code == 201
+    characters = httpx.get(f"{served.http}/v1/characters", trust_env=False).json()["characters"]
+    taken = characters[0]["name"]  # a character the server serves already
     page = record_page(camera_browser, served, GRANTED)
-    page.fill("#name", "taken-name")
+    page.fill("#name", taken)
     page.click("#create")
     page.wait_for_function("window.lipstreamRecord.log.errors.length > 0", timeout=WAIT_MS)
-    assert 'the name "taken-name" is taken' in page.inner_text("#errors")
+    assert f'the name "{taken}" is taken' in page.inner_text("#errors")
     assert recorder(page, "state.session") is None and page.is_enabled("#create")
     page.context.close()
 
 
-def test_a_take_over_the_limit_and_a_cut_connection_are_said_plainly(
-    camera_browser: Any, strict: LiveServer
+def test_with_tokens_the_page_needs_one_and_passes_it_on(
+    camera_browser: Any, guarded: LiveServer
 ) -> None:
-    page = record_page(camera_browser, strict, GRANTED)
+    page = record_page(camera_browser, guarded, GRANTED)
+    page.fill("#name", "no-token")
+    page.click("#create")
+    page.wait_for_function("window.lipstreamRecord.log.errors.length > 0", timeout=WAIT_MS)
+    assert "unauthorized" in page.inner_text("#errors")
+    page.context.close()
+
+    page = record_page(camera_browser, guarded, GRANTED, f"?access_token={TOKEN}")
+    start_session(page, "with-token", [TRANSCRIPT])
+    links = page.eval_on_selector_all("a.keeps-token", "links => links.map(a => a.href)")
+    assert links == [f"{guarded.http}/?access_token={TOKEN}"]
+    page.context.close()
+
+
+def test_a_take_over_the_limit_and_a_cut_connection_are_said_plainly(
+    camera_browser: Any, guarded: LiveServer
+) -> None:
+    page = record_page(camera_browser, guarded, GRANTED, f"?access_token={TOKEN}")
     start_session(page, "too-big", [TRANSCRIPT])
     assert recorder(page, "state.limits.max_bytes") == SMALL_LIMIT
     record_take(page, 1000)
     assert "take 1 is too big" in page.inner_text("#errors")
     assert row_status(page, 0)[0] == "failed"
     status = httpx.get(
-        f"{strict.http}/v1/recordings/{recorder(page, 'state.session')}", trust_env=False
+        f"{guarded.http}/v1/recordings/{recorder(page, 'state.session')}",
+        headers={"authorization": f"Bearer {TOKEN}"},
+        trust_env=False,
     ).json()
     assert status["takes"] == []  # the server kept nothing of it
 

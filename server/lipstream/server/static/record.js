@@ -57,7 +57,7 @@ const state = {
   uploading: false,
   training: false,
 };
-const log = { errors, uploads: [], polls: 0, peakLevel: 0 };
+const log = { errors, recorded: 0, uploads: [], polls: 0, peakLevel: 0 };
 window.lipstreamRecord = { state, log };
 
 // ---- server --------------------------------------------------------------------------
@@ -157,12 +157,13 @@ async function createSession(event) {
   $("session-info").textContent =
     `Session ${state.session}: ${state.sentences.length} sentences; ` +
     `at most ${count} recordings of ${megabytes(bytes)} each; ` +
-    `training needs at least ${neededTakes()} good ones.`;
+    `training needs at least ${neededTakes()} good one${neededTakes() > 1 ? "s" : ""}.`;
   $("session-info").hidden = false;
   showSentence(0);
 }
 
 function megabytes(bytes) {
+  if (bytes < 1e6) return `${Math.ceil(bytes / 1e3)} kB`;
   return `${(bytes / 1e6).toFixed(bytes < 1e7 ? 1 : 0)} MB`;
 }
 
@@ -299,6 +300,7 @@ async function startTake() {
   recorder.onerror = (event) => showError(`recording failed: ${event.error?.message ?? "the recorder stopped"}`);
   recorder.onstop = () => finishTake(take, recorder.mimeType);
   recorder.start(TIMESLICE_MS);
+  log.recorded += 1;
   take.timer = setTimeout(() => {
     if (recorder.state === "recording") {
       take.note = `stopped after ${MAX_TAKE_S} s`;
