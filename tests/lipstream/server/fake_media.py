@@ -38,17 +38,19 @@ def fake_devices(video: Path, directory: Path) -> FakeDevices:
     and sound; ``seconds`` is the picture's length."""
     camera = directory / "camera.y4m"
     microphone = directory / "microphone.wav"
-    frames = _write_y4m(video, camera)
+    frames, rate = _write_y4m(video, camera)
     _write_wav(video, microphone)
-    with av.open(str(video)) as source:
-        rate = source.streams.video[0].average_rate
-    return FakeDevices(camera, microphone, frames / float(rate))
+    return FakeDevices(camera, microphone, frames / rate)
 
 
-def _write_y4m(video: Path, target: Path) -> int:
+def _write_y4m(video: Path, target: Path) -> tuple[int, float]:
+    """Write the picture; its frame count and frame rate."""
     with av.open(str(video)) as source, av.open(str(target), "w", format="yuv4mpegpipe") as out:
         picture = source.streams.video[0]
-        stream = out.add_stream("rawvideo", rate=picture.average_rate)
+        rate = picture.average_rate
+        if rate is None:
+            raise ValueError(f"{video}: the video track declares no frame rate")
+        stream = out.add_stream("rawvideo", rate=rate)
         stream.width = picture.codec_context.width
         stream.height = picture.codec_context.height
         stream.pix_fmt = "yuv420p"
@@ -57,7 +59,7 @@ def _write_y4m(video: Path, target: Path) -> int:
             out.mux(stream.encode(frame.reformat(format="yuv420p")))
             count += 1
         out.mux(stream.encode(None))
-    return count
+    return count, float(rate)
 
 
 def _write_wav(video: Path, target: Path) -> None:

@@ -284,7 +284,16 @@ async function startTake() {
     return;
   }
   const mimeType = MIME_TYPES.find((type) => MediaRecorder.isTypeSupported(type));
-  const recorder = new MediaRecorder(stream, mimeType ? { mimeType } : {});
+  let recorder;
+  try {
+    recorder = new MediaRecorder(stream, mimeType ? { mimeType } : {});
+  } catch (error) {
+    closeDevices();
+    state.take = null;
+    showError(`this browser cannot record the camera and microphone (${error.name}: ${error.message})`);
+    render();
+    return;
+  }
   const take = state.take;
   take.recorder = recorder;
   take.startedAt = performance.now();
