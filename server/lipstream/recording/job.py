@@ -99,9 +99,7 @@ def run(session: Session, models_dir: Path, min_takes: int, job: Job) -> None:
     try:
         trained = _train(session, clips, job)
     except Exception as error:  # a fault in training fails this job, and says why
-        job.fail(
-            {**error_json(error, "training"), "code": TRAINING_FAILED, "message": str(error)}
-        )
+        job.fail({**error_json(error, "training"), "code": TRAINING_FAILED, "message": str(error)})
         return
     target = models_dir / session.name
     if target.exists():
@@ -170,7 +168,9 @@ def _too_few(good: int, needed: int, job: Job) -> dict[str, Any]:
         for index, take in sorted(job.takes.items(), key=lambda item: int(item[0]))
         if take["error"] is not None
     ]
-    listed = "; ".join(f"take {item['take']}: {item['code']} ({item['message']})" for item in failed)
+    listed = "; ".join(
+        f"take {item['take']}: {item['code']} ({item['message']})" for item in failed
+    )
     return {
         "code": TOO_FEW_TAKES,
         "message": f"{good} good recording(s), at least {needed} needed"

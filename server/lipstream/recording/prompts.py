@@ -54,16 +54,20 @@ def cover(table: Sequence[tuple[str, frozenset[str]]], count: int) -> list[str]:
             level += 1
             continue
 
-        def gain(index: int) -> tuple[int, int, int]:
-            phonemes = table[index][1]
-            short = sum(1 for phoneme in phonemes if seen[phoneme] < level)
-            return (-short, len(phonemes), index)
-
-        best = min(left, key=gain)
+        best = min(left, key=lambda index: _rank(table[index][1], seen, level, index))
         left.remove(best)
         chosen.append(table[best][0])
         seen.update(table[best][1])
     return chosen
+
+
+def _rank(
+    phonemes: frozenset[str], seen: Counter[str], level: int, index: int
+) -> tuple[int, int, int]:
+    """The pick goes to the smallest rank: most phonemes short of ``level``, then fewest
+    phonemes, then first."""
+    short = sum(1 for phoneme in phonemes if seen[phoneme] < level)
+    return (-short, len(phonemes), index)
 
 
 def choose_prompts(count: int) -> list[str]:

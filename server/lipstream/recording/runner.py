@@ -71,8 +71,7 @@ def lost(document: dict[str, Any]) -> dict[str, Any]:
         return document
     error = {
         "code": JOB_LOST,
-        "message": "the training process ended without finishing (killed or crashed); "
-        "train again",
+        "message": "the training process ended without finishing (killed or crashed); train again",
         "where": None,
     }
     return {**document, "state": FAILED, "step": "failed", "error": error}

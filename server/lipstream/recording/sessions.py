@@ -142,9 +142,7 @@ class SessionStore:
         """The session ``session_id``; ``unknown_recording`` when there is none."""
         directory = self.sessions_dir / session_id
         document = (
-            read_json(directory / SESSION_FILE)
-            if SESSION_PATTERN.fullmatch(session_id)
-            else None
+            read_json(directory / SESSION_FILE) if SESSION_PATTERN.fullmatch(session_id) else None
         )
         if document is None:
             raise LipstreamError(

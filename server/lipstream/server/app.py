@@ -14,8 +14,8 @@ the limits in force. Routes:
 ``expressive-dp`` phoneme-map and contamination routes (``phoneme_maps``) and
 the recording routes ``/v1/recordings`` (``recordings``: a visitor's recordings
 become a character, served without a restart), the OpenAPI docs (``/docs``, served
-with its assets so it works offline, and ``/openapi.json``), the demo page ``/`` (``demo_page``) and the VRM page
-``/vrm`` (``vrm_page``).
+with its assets so it works offline, and ``/openapi.json``), the demo page ``/``
+(``demo_page``) and the VRM page ``/vrm`` (``vrm_page``).
 """
 
 from __future__ import annotations

@@ -46,7 +46,7 @@ def load_character(served: Catalog, directory: Path) -> LipstreamError | None:
         return error
     except Exception as error:  # a fault in one character must not stop the server
         logger.exception("loading the character %s failed", directory)
-        return ModelStoreError(f"could not be loaded: {type(error).__name__}: {error}", name)
+        return ModelStoreError(f"could not be loaded: {type(error).__name__}: {error}", where=name)
     _merge(served, catalog)
     logger.info(
         "serving the new character %s (%s)", name, ", ".join(sorted(registry.characters()[name]))

@@ -72,6 +72,41 @@ STATUS = {
 VIDEO_TYPES = ("video/", "application/octet-stream")
 
 
+ERROR = {"$ref": "#/components/schemas/lipstream_Error"}
+CREATE_BODY = {
+    "type": "object",
+    "properties": {
+        "name": {"type": "string", "pattern": "^[a-z0-9-]{1,32}$"},
+        "sentences": {
+            "type": "array",
+            "items": {"type": "string"},
+            "description": "your own prompt sentences (default: chosen to cover the phonemes)",
+        },
+    },
+    "required": ["name"],
+}
+TAKE_BODY = {"video/*": {"schema": {"type": "string", "format": "binary"}}}
+
+
+def _operation(
+    answer: tuple[str, str], errors: dict[str, str], body: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """``openapi_extra`` of a route: its answer (status, what), errors and request body."""
+    responses: dict[str, Any] = {answer[0]: {"description": answer[1]}}
+    for status, what in errors.items():
+        responses[status] = {
+            "description": what,
+            "content": {"application/json": {"schema": ERROR}},
+        }
+    operation: dict[str, Any] = {"responses": responses}
+    if body is not None:
+        operation["requestBody"] = {"required": True, "content": body}
+    return operation
+
+
+SESSION_ERRORS = {"401": "a token is required", "404": "no such session, or recording is off"}
+
+
 def store_of(settings_owner: ServerState) -> SessionStore:
     return SessionStore(recordings_root(settings_owner.settings))
 
@@ -115,6 +150,11 @@ def install(app: FastAPI) -> None:
         operation_id="create_recording",
         status_code=201,
         response_class=Response,
+        openapi_extra=_operation(
+            ("201", "the session id, its sentences and its limits"),
+            {"400": "invalid name or sentences", "409": "the name is taken", **SESSION_ERRORS},
+            {"application/json": {"schema": CREATE_BODY}},
+        ),
     )
     async def create(request: Request) -> Response:
         """``{"name", "sentences"?}``: the session, its prompt sentences and its limits."""
@@ -125,6 +165,17 @@ def install(app: FastAPI) -> None:
         summary="Upload one recording",
         operation_id="upload_take",
         response_class=Response,
+        openapi_extra=_operation(
+            ("200", "the take's index and size"),
+            {
+                "409": "the training job is running",
+                "413": "over the size limit",
+                "415": "not video/*",
+                "422": "over the count limit",
+                **SESSION_ERRORS,
+            },
+            TAKE_BODY,
+        ),
     )
     async def upload(request: Request, session: str, index: str) -> Response:
         """The raw body is one recording (video and audio, any format PyAV decodes)."""
@@ -136,6 +187,15 @@ def install(app: FastAPI) -> None:
         operation_id="train_recording",
         status_code=202,
         response_class=Response,
+        openapi_extra=_operation(
+            ("202", "the job id; follow it with GET /v1/recordings/{session}"),
+            {
+                "409": "a job runs already, or the name was taken meanwhile",
+                "422": "too few recordings uploaded",
+                "503": "as many jobs as allowed are running",
+                **SESSION_ERRORS,
+            },
+        ),
     )
     async def train(request: Request, session: str) -> Response:
         """Start the training job (capture, then the recipe's engines) in its own process."""
@@ -146,6 +206,7 @@ def install(app: FastAPI) -> None:
         summary="A recording session's takes and job",
         operation_id="get_recording",
         response_class=Response,
+        openapi_extra=_operation(("200", "the session's takes and job"), SESSION_ERRORS),
     )
     async def status(request: Request, session: str) -> Response:
         """Each take's status and error, and the job's state, step and progress."""
@@ -321,8 +382,7 @@ async def _status(state: ServerState, session_id: str) -> tuple[int, dict[str, A
 def _job(state: ServerState, session: Session, document: dict[str, Any]) -> dict[str, Any]:
     document = lost(document)
     job = {
-        key: document.get(key)
-        for key in ("job", "state", "step", "progress", "error", "character")
+        key: document.get(key) for key in ("job", "state", "step", "progress", "error", "character")
     }
     if job["state"] == DONE and session.name not in state.registry.characters():
         job.update(state=LOADING, step="loading the character into this worker", progress=0.0)

@@ -37,6 +37,10 @@ OPERATIONS = {
     ): "phoneme_constraint_candidates",
     ("/v1/characters/{character}/contamination", "get"): "get_contamination",
     ("/v1/characters/{character}/contamination", "post"): "change_contamination",
+    ("/v1/recordings", "post"): "create_recording",
+    ("/v1/recordings/{session}/takes/{index}", "put"): "upload_take",
+    ("/v1/recordings/{session}/train", "post"): "train_recording",
+    ("/v1/recordings/{session}", "get"): "get_recording",
 }
 
 

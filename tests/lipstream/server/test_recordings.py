@@ -45,12 +45,11 @@ class Recording:
         return document
 
     def finished_job(self) -> dict[str, Any]:
-        def finished() -> dict[str, Any] | None:
-            job = self.status()["job"]
-            return job if job is not None and job["state"] in ("done", "failed") else None
+        def finished() -> dict[str, Any]:
+            job: dict[str, Any] | None = self.status()["job"]
+            return job if job is not None and job["state"] in ("done", "failed") else {}
 
-        job: dict[str, Any] = eventually(finished, "the training job ends", JOB_POLLS, JOB_PAUSE_S)
-        return job
+        return eventually(finished, "the training job ends", JOB_POLLS, JOB_PAUSE_S)
 
 
 def settings(recordings: Path, **changes: Any) -> ServerSettings:
@@ -79,7 +78,9 @@ def faceless_clip(tmp_path_factory: pytest.TempPathFactory) -> bytes:
     """The GRID clip's sound under black pictures: speech, but no face."""
     clip = read_clip()
     black = [np.zeros_like(picture) for picture in clip.pictures]
-    path = write_clip(tmp_path_factory.mktemp("faceless") / "black.mp4", black, clip.sound, clip.rate)
+    path = write_clip(
+        tmp_path_factory.mktemp("faceless") / "black.mp4", black, clip.sound, clip.rate
+    )
     return path.read_bytes()
 
 
@@ -138,8 +139,8 @@ def test_recordings_become_a_served_character_and_a_bad_take_loses_nothing(
 
     assert characters(served)["grid-me"] == ["dam", "viseme-lerp"]
     for engine in ("dam", "viseme-lerp"):
-        body = {"engine": engine, "character": "grid-me", "fps": 30, "text": "hello there"}
-        answer = httpx.post(f"{served.http}/v1/synthesize", json=body, timeout=60)
+        request = {"engine": engine, "character": "grid-me", "fps": 30, "text": "hello there"}
+        answer = httpx.post(f"{served.http}/v1/synthesize", json=request, timeout=60)
         assert answer.status_code == 200, answer.text
         result = answer.json()
         frames = np.asarray(result["data"], dtype=float)
