@@ -390,7 +390,7 @@ async function refresh() {
   const status = await api("GET", sessionPath());
   log.polls += 1;
   const before = JSON.stringify([[...state.takes.values()], state.job]);
-  for (const take of status.takes) state.takes.set(take.index, take);
+  state.takes = new Map(status.takes.map((take) => [take.index, take])); // what the server holds
   state.job = status.job ?? null;
   if (state.job !== null && !FINISHED.includes(state.job.state)) state.lastStep = state.job.state;
   render();
