@@ -9,6 +9,7 @@ the real ``websockets`` client speaking through ``lipstream_client.codec``.
 from __future__ import annotations
 
 import asyncio
+import tempfile
 import threading
 from collections import deque
 from collections.abc import Coroutine, Iterator
@@ -81,10 +82,16 @@ def serving(
     """Serve ``models`` (or ``app``, built from them) on a free loopback port until the
     block ends. Its catalog is calibrated by ``fixed_calibration`` (a loaded machine's
     measurement could refuse a model as too costly, or choose other rungs) unless
-    ``measured_calibration``, for the tests of calibration itself."""
+    ``measured_calibration``, for the tests of calibration itself. Settings that name no
+    recordings directory get a scratch one, so no test serves characters recorded under the
+    user's ``$LIPSTREAM_HOME``."""
     with ExitStack() as stack:
         if not measured_calibration:
             stack.enter_context(fixed_calibration())
+        settings = settings or ServerSettings()
+        if settings.recordings_dir is None:
+            scratch = stack.enter_context(tempfile.TemporaryDirectory(prefix="recordings-"))
+            settings = settings.with_changes(recordings_dir=Path(scratch))
         yield stack.enter_context(_serving(models, settings, app))
 
 
