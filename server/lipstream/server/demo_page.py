@@ -1,5 +1,6 @@
-"""``GET /``: the demo page, a face that speaks what you type, and ``GET /studio``, the
-phoneme-Isomap editor of ``expressive-dp``, served from package data.
+"""``GET /``: the demo page, a face that speaks what you type, ``GET /studio``, the
+phoneme-Isomap editor of ``expressive-dp``, and ``GET /record``, where a visitor records
+their face and voice to make a character, served from package data.
 
 Sketch: plain HTML, CSS and JavaScript modules in ``static/`` (no build step,
 nothing loaded from elsewhere, so it works without internet). ``/`` is
@@ -9,7 +10,9 @@ among the files the package ships, so no other path can be reached, and
 talks to the server only through the public protocol: ``GET /v1/engines`` and
 ``/v1/characters`` for its controls and the WebSocket ``/v1/stream`` (JSON
 subprotocol, ``text`` and ``phonemes`` requests) for frames and speech. The studio
-uses the phoneme-map routes (``phoneme_maps``) and ``POST /v1/synthesize``.
+uses the phoneme-map routes (``phoneme_maps``) and ``POST /v1/synthesize``; the recording
+page the recording routes (``/v1/recordings``), and links to ``/?character=<name>``, which
+the demo page opens with that character chosen.
 """
 
 from __future__ import annotations
@@ -22,7 +25,8 @@ from fastapi.responses import FileResponse
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 PAGE_URL = "/"
 STUDIO_URL = "/studio"
-PAGES = ("index.html", "studio.html")
+RECORD_URL = "/record"
+PAGES = ("index.html", "studio.html", "record.html")
 ASSETS_URL = "/demo"
 MEDIA_TYPES = {
     ".js": "text/javascript",
@@ -39,7 +43,8 @@ ASSETS = {
 
 
 def install(app: FastAPI) -> None:
-    """Add the demo page ``/`` and its files under ``/demo/`` to ``app``."""
+    """Add the demo page ``/``, the studio ``/studio``, the recording page ``/record`` and
+    their files under ``/demo/`` to ``app``."""
 
     @app.get(PAGE_URL, include_in_schema=False)
     async def page() -> FileResponse:
@@ -48,6 +53,10 @@ def install(app: FastAPI) -> None:
     @app.get(STUDIO_URL, include_in_schema=False)
     async def studio() -> FileResponse:
         return FileResponse(STATIC_DIR / "studio.html", media_type="text/html")
+
+    @app.get(RECORD_URL, include_in_schema=False)
+    async def record() -> FileResponse:
+        return FileResponse(STATIC_DIR / "record.html", media_type="text/html")
 
     @app.get("/favicon.ico", include_in_schema=False)
     async def icon() -> FileResponse:

@@ -122,8 +122,11 @@ export async function getJson(path) {
 }
 
 // Fill the #engine and #character selects from the server, then the page's own controls
-// (`more`), then mark the body ready.
+// (`more`), then mark the body ready. `?character=<name>` chooses that character, and an
+// engine it has (the default engine when it has it); the characters are listed again when
+// the page is shown again, so one trained meanwhile appears.
 export async function loadControls(defaultEngine, more = async () => {}) {
+  keepToken();
   let engines;
   let characters;
   try {
@@ -139,10 +142,15 @@ export async function loadControls(defaultEngine, more = async () => {}) {
     select.add(option);
   }
   const loaded = engines.engines.filter((e) => e.loaded).map((e) => e.name);
-  select.value = loaded.includes(defaultEngine) ? defaultEngine : (loaded[0] ?? "");
+  const wanted = new URLSearchParams(location.search).get("character");
+  const found = characters.characters.find((c) => c.name === wanted);
+  const usable = (found?.engines ?? []).filter((name) => loaded.includes(name));
+  const offered = usable.length ? usable : loaded;
+  select.value = offered.includes(defaultEngine) ? defaultEngine : (offered[0] ?? "");
+  if (wanted !== null && !usable.length) showError(`the server has no character "${wanted}" to speak with`);
   const fillCharacters = () => {
     const chosen = $("character");
-    const previous = chosen.value;
+    const previous = chosen.value || (usable.length ? wanted : "");
     chosen.replaceChildren();
     for (const character of characters.characters) {
       if (character.engines.includes(select.value)) chosen.add(new Option(character.name));
@@ -150,7 +158,27 @@ export async function loadControls(defaultEngine, more = async () => {}) {
     if ([...chosen.options].some((o) => o.value === previous)) chosen.value = previous;
   };
   select.addEventListener("change", fillCharacters);
+  document.addEventListener("visibilitychange", async () => {
+    if (document.visibilityState !== "visible") return;
+    try {
+      characters = await getJson("/v1/characters");
+      fillCharacters();
+    } catch (_) {
+      // the next request shows what is wrong
+    }
+  });
   fillCharacters();
   await more();
   document.body.dataset.ready = "true";
+}
+
+// Links marked `keeps-token` carry the page's `?access_token=` to the page they open.
+export function keepToken() {
+  const token = new URLSearchParams(location.search).get("access_token");
+  if (token === null) return;
+  for (const link of document.querySelectorAll("a.keeps-token")) {
+    const target = new URL(link.getAttribute("href"), location.href);
+    target.searchParams.set("access_token", token);
+    link.href = target.pathname + target.search;
+  }
 }
