@@ -1,6 +1,6 @@
 """The event loop the server runs on: asyncio's, taking a bounded number of new connections
-per turn, more while the kernel's queue fills, and refusing a flooding address's
-connections before any protocol is built.
+per turn, more while the kernel's queue fills, and answering the connections the server
+refuses outright before any protocol is built.
 
 Sketch: when the listening socket is readable, asyncio accepts connections in a loop, up to
 the listen backlog (2048) in one callback, and schedules every one's ``connection_made`` at
@@ -11,9 +11,9 @@ wait in the kernel's queue, and the selector reports the socket readable again o
 turn, after the sessions' own I/O. A queue left to fill drops the SYNs of every newcomer,
 health probes included (they are retried only after 1 s, then 3 s), so while the queue
 holds more than half its capacity (Linux reports both for a listening socket in
-``TCP_INFO``) a turn also takes the excess. A connection from an address the server already
-refuses outright (``AcceptGate``: per-client limits, where its connections beyond the probe
-lane get HTTP 503 before anything is read) is answered and closed here, on the bare socket:
+``TCP_INFO``) a turn also takes the excess. A connection the server would refuse outright
+(``AcceptGate``, ``accept_gate.ServerGate``: an address over its limits, a WebSocket upgrade
+while the load verdict refuses sessions) is answered and closed here, on the bare socket:
 no transport, no protocol, no task. Those cost a few microseconds each, so up to
 ``REFUSALS_PER_TURN`` of them are taken in a turn beside the bound. uvicorn builds the loop
 from the import string ``LOOP`` (its ``loop`` setting), in every worker; the server installs
@@ -37,8 +37,9 @@ READ_BEFORE_CLOSE = 65536
 class AcceptGate(Protocol):
     """Which accepted connections get an answer at once, without a protocol."""
 
-    def refusal(self, address: str) -> bytes | None:
-        """The whole HTTP answer for a connection from ``address``, or None to serve it."""
+    def refusal(self, connection: socket.socket, address: str) -> bytes | None:
+        """The whole HTTP answer for the fresh ``connection`` from ``address`` (it may peek
+        at what the client sent), or None to serve it."""
         ...
 
 
@@ -102,7 +103,7 @@ class BoundedAcceptLoop(asyncio.SelectorEventLoop):
             gate = self.accept_gate
             answer = None
             if gate is not None and isinstance(address, tuple):
-                answer = gate.refusal(address[0])
+                answer = gate.refusal(connection, address[0])
             if answer is not None:
                 answer_and_close(connection, answer)
                 refused += 1

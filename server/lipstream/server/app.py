@@ -41,9 +41,9 @@ from ..frontends.espeak_languages import espeak_languages, espeak_variants
 from ..models import ModelRegistry
 from ..status import Heartbeat, Report, phase
 from . import demo_page, docs_page, openapi, phoneme_maps, recordings, vrm_page
+from .accept_gate import install_server_gate
 from .catalog import Catalog
 from .client_limits import ClientLimits
-from .flood_gate import install_flood_gate
 from .handshake import head_limits
 from .held_input import InputLedger, input_budget_bytes
 from .lanes import FairLane
@@ -184,7 +184,7 @@ def create_app(
             _log_limits(server)
             server.overload.monitor.start()
             running.append(server.overload.monitor.stop)
-            running.append(install_flood_gate(server))
+            running.append(install_server_gate(server))
             liveness = _liveness(settings, server.overload.monitor.last_tick)
             if liveness is not None:
                 running.append(liveness.stop)

@@ -176,10 +176,7 @@ class OverloadPolicy:
         """A refusal for a new session ``key`` with ``sessions`` open, or None after counting
         it as admitted and pending at ``now``."""
         with self.lock:
-            self._learn(load, now)
-            refusal = self.request_refusal(load) or self._lag_refusal(load, sessions)
-            if refusal is None:
-                refusal = self._busy_refusal(load, now, self.session_cost, "another session")
+            refusal = self._verdict(load, sessions, now)
             if refusal is None:
                 if isinstance(key, Upgrade):
                     self.upgrades.pop(key, None)
@@ -187,6 +184,20 @@ class OverloadPolicy:
                 else:
                     self.pending[key] = now
             return refusal
+
+    def verdict(self, load: LoadSample, sessions: int, now: float) -> Refusal | None:
+        """The refusal ``session_refusal`` would give a new session now, counting nothing:
+        for the accept loop, which answers a refused upgrade before any protocol exists and
+        leaves an admitted one to the HTTP protocol's ``session_refusal``."""
+        with self.lock:
+            return self._verdict(load, sessions, now)
+
+    def _verdict(self, load: LoadSample, sessions: int, now: float) -> Refusal | None:
+        self._learn(load, now)
+        refusal = self.request_refusal(load) or self._lag_refusal(load, sessions)
+        if refusal is None:
+            refusal = self._busy_refusal(load, now, self.session_cost, "another session")
+        return refusal
 
     def start_refusal(
         self, load: LoadSample, key: Hashable, engine: str, now: float
@@ -314,6 +325,10 @@ class Overload:
 
     def session_refusal(self, sessions: int, key: Hashable) -> Refusal | None:
         return self.policy.session_refusal(self.monitor.sample(), sessions, time.monotonic(), key)
+
+    def verdict(self, sessions: int) -> Refusal | None:
+        """What a new session would be told now, counting nothing (``OverloadPolicy.verdict``)."""
+        return self.policy.verdict(self.monitor.sample(), sessions, time.monotonic())
 
     def upgrade_refusal(self, sessions: int, upgrade: Upgrade) -> Refusal | None:
         """For a WebSocket upgrade, from the HTTP protocol: admitted, it is pending as

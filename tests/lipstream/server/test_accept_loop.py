@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import json
 import socket
+import threading
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
@@ -18,6 +19,7 @@ import httpx
 import pytest
 
 from lipstream.config import ServerSettings
+from lipstream.server.accept_gate import ServerGate, is_stream_upgrade
 from lipstream.server.accept_loop import (
     ACCEPTS_PER_TURN,
     LOOP,
@@ -25,7 +27,6 @@ from lipstream.server.accept_loop import (
     AcceptGate,
     BoundedAcceptLoop,
 )
-from lipstream.server.flood_gate import ClientFloodGate
 from lipstream.server.handshake import CLIENT_PROBE_LANE
 from lipstream.server.runner import uvicorn_options
 from lipstream_client.errors import TOO_MANY_CLIENT_CONNECTIONS
@@ -83,7 +84,7 @@ class EveryOther:
 
     asked: int = 0
 
-    def refusal(self, address: str) -> bytes | None:
+    def refusal(self, connection: socket.socket, address: str) -> bytes | None:
         self.asked += 1
         return ANSWER if self.asked % 2 == 0 else None
 
@@ -138,7 +139,7 @@ def test_refusals_too_have_a_bound_per_turn() -> None:
     loop = BoundedAcceptLoop()
 
     class RefuseAll:
-        def refusal(self, address: str) -> bytes | None:
+        def refusal(self, connection: socket.socket, address: str) -> bytes | None:
             return ANSWER
 
     loop.accept_gate = RefuseAll()
@@ -166,8 +167,8 @@ class Recording:
     gate: AcceptGate
     answers: list[tuple[str, bytes | None]] = field(default_factory=list)
 
-    def refusal(self, address: str) -> bytes | None:
-        answer = self.gate.refusal(address)
+    def refusal(self, connection: socket.socket, address: str) -> bytes | None:
+        answer = self.gate.refusal(connection, address)
         self.answers.append((address, answer))
         return answer
 
@@ -193,7 +194,7 @@ def test_a_live_server_refuses_a_saturated_address_at_accept(capped_gate: Served
     its probe lane full is answered by the gate (no protocol) with the coded 503, while
     another address is served."""
     loop = capped_gate.loop
-    assert isinstance(loop, BoundedAcceptLoop) and isinstance(loop.accept_gate, ClientFloodGate)
+    assert isinstance(loop, BoundedAcceptLoop) and isinstance(loop.accept_gate, ServerGate)
     recording = Recording(loop.accept_gate)
     loop.accept_gate = recording
     host = "127.0.0.3"
@@ -217,4 +218,82 @@ def test_a_live_server_refuses_a_saturated_address_at_accept(capped_gate: Served
         assert recording.answers[-1] == ("127.0.0.1", None)
     finally:
         capped_gate.call_soon(saturate(capped_gate, host, -1)).result(timeout=10)
+        loop.accept_gate = recording.gate
+
+
+UPGRADE_HEAD = (
+    b"GET /v1/stream?token=x HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\n"
+    b"Connection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
+    b"Sec-WebSocket-Version: 13\r\n\r\n"
+)
+
+
+def test_a_stream_upgrade_is_told_from_a_whole_head() -> None:
+    assert is_stream_upgrade(UPGRADE_HEAD)
+    assert is_stream_upgrade(
+        UPGRADE_HEAD.replace(b"?token=x", b"").replace(b"websocket", b"WebSocket")
+    )
+    assert not is_stream_upgrade(UPGRADE_HEAD[:-2])  # the head is not complete yet
+    assert not is_stream_upgrade(UPGRADE_HEAD.replace(b"/v1/stream", b"/healthz"))
+    assert not is_stream_upgrade(UPGRADE_HEAD.replace(b"/v1/stream", b"/v1/streams"))
+    assert not is_stream_upgrade(UPGRADE_HEAD.replace(b"GET ", b"POST "))
+    assert not is_stream_upgrade(UPGRADE_HEAD.replace(b"Upgrade: websocket\r\n", b""))
+    assert not is_stream_upgrade(b"GET /healthz HTTP/1.1\r\nHost: x\r\n\r\n")
+
+
+@pytest.fixture(scope="module")
+def always_busy(lerp_dir: Path) -> Iterator[Served]:
+    # Any measured busy time at all exceeds this limit: every new session is refused.
+    with serving(lerp_dir, ServerSettings(max_loop_busy=1e-9)) as served:
+        yield served
+
+
+def sent_while_the_loop_waits(served: Served, request: bytes) -> bytes:
+    """Connect and send ``request`` while the server's loop is held, so that the whole head
+    is there when the loop accepts the connection; the server's whole answer."""
+    release = threading.Event()
+
+    async def hold() -> None:
+        release.wait(timeout=30)
+
+    held = served.call_soon(hold())
+    port = int(served.http.rsplit(":", 1)[1])
+    try:
+        connection = socket.create_connection(("127.0.0.1", port))
+        connection.sendall(request)
+    finally:
+        release.set()
+    held.result(timeout=30)
+    with connection:
+        connection.settimeout(10.0)
+        received = b""
+        while chunk := connection.recv(4096):
+            received += chunk
+    return received
+
+
+def test_a_busy_server_refuses_an_upgrade_at_accept_and_still_answers_a_probe(
+    always_busy: Served,
+) -> None:
+    loop = always_busy.loop
+    assert isinstance(loop, BoundedAcceptLoop)
+    recording = Recording(loop.accept_gate)  # type: ignore[arg-type]
+    loop.accept_gate = recording
+    try:
+        answer = sent_while_the_loop_waits(always_busy, UPGRADE_HEAD)
+        head, _, body = answer.partition(b"\r\n\r\n")
+        assert head.startswith(b"HTTP/1.1 503 ") and b"retry-after: " in head.lower()
+        error = json.loads(body)["error"]
+        assert (error["code"], error["details"]["reason"]) == ("server_busy", "loop_busy")
+        assert [(address, answer is not None) for address, answer in recording.answers] == [
+            ("127.0.0.1", True)
+        ]
+        probe = sent_while_the_loop_waits(
+            always_busy, b"GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
+        )
+        assert probe.startswith(b"HTTP/1.1 200 ") and recording.answers[-1][1] is None
+        metrics = httpx.get(f"{always_busy.http}/metrics").text
+        assert 'lipstream_busy_refusals_total{reason="loop_busy"} 1.0' in metrics
+        assert always_busy.state.overload.policy.upgrades == {}  # nothing counted as admitted
+    finally:
         loop.accept_gate = recording.gate
