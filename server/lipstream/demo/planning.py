@@ -39,11 +39,11 @@ INTERPOLATED = (Articulator.JAW, Articulator.LIPS, Articulator.TUCK)
 ANTICIPATED = (Articulator.ROUND, Articulator.SPREAD)
 CONTACT_ARTICULATORS = (Articulator.LIPS, Articulator.TUCK)
 
-GESTURE_LEAD_S = np.array([0.035, 0.040, 0.060, 0.045, 0.040])
+GESTURE_LEAD_S = np.array([0.035, 0.040, 0.0, 0.045, 0.040])
 """How long before a segment's acoustic start each articulator heads for it (s)."""
-CONTACT_LEAD_S = 0.075
+CONTACT_LEAD_S = 0.1
 """Lips head for a contact earlier: closing must finish by the acoustic start."""
-CONTACT_HOLD = 0.8
+CONTACT_HOLD = 0.4
 """Fraction of a contact segment the lips stay on target before releasing."""
 REQUIRED_SHARE = 0.5
 """Fraction of a segment an articulator it constrains keeps before moving on."""
