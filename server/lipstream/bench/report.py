@@ -1243,11 +1243,91 @@ def sentences_curve_summary(bench: Bench) -> str:
     )
 
 
+REAL_FACES_BEFORE = "real_faces_before.json"
+DEMO_CALIBRATION = "demo_calibration.json"
+
+
+def _mean_sd(summary: dict[str, Any], digits: int = 0, signed: bool = True) -> str:
+    if summary["mean"] is None:
+        return "–"
+    mean = f"{summary['mean']:+.{digits}f}" if signed else f"{summary['mean']:.{digits}f}"
+    spread = "" if summary["sd"] is None else f" ± {summary['sd']:.{digits}f}"
+    return f"{mean}{spread} (n {summary['count']})"
+
+
+def demo_calibration(bench: Bench) -> str:
+    """The demo character's motion against the real faces, corpus by corpus, on the three
+    measures it is calibrated to (``lipstream.bench.demo_calibration``)."""
+    if not bench.exists(DEMO_CALIBRATION):
+        return f"Not measured yet: no `bench/{DEMO_CALIBRATION}`.\n"
+    doc = bench.load(DEMO_CALIBRATION)
+    corpora = doc["corpora"]
+    names = list(corpora)
+    text = bench.source(DEMO_CALIBRATION, doc)
+    text += f"All read on a {doc['measure_fps']:g} fps grid; mean ± sd (count) or median.\n\n"
+    header = [
+        "measure",
+        *(
+            f"{name} (`{corpora[name]['name']}`, {corpora[name]['utterances']} utt.)"
+            for name in names
+        ),
+    ]
+    rows = [
+        ["/p b m/ closure centre less the acoustic onset, ms"]
+        + [_mean_sd(corpora[n]["measures"]["closure_from_onset_ms"]) for n in names],
+        ["the same, as a share of the /p b m/ span"]
+        + [_mean_sd(corpora[n]["measures"]["closure_share"], 2) for n in names],
+        ["peak opening speed, aperture ranges per s (median)"]
+        + [_median(corpora[n]["measures"]["opening_speed_median"]) for n in names],
+        ["peak closing speed, aperture ranges per s (median)"]
+        + [_median(corpora[n]["measures"]["closing_speed_median"]) for n in names],
+        ["rounding halfway up, less the rounded vowel's onset, ms"]
+        + [_mean_sd(corpora[n]["measures"]["rounding_half_rise_ms"]) for n in names],
+    ]
+    return text + table(header, rows)
+
+
+def _median(value: float | None) -> str:
+    return "–" if value is None else number(value, 2)
+
+
+def real_faces_before_after(bench: Bench) -> str:
+    """``lipstream bench --real`` on the models of the demo character before its
+    calibration and after, engine by engine."""
+    if not (bench.exists(REAL_FACES_BEFORE) and bench.exists(REAL_FACES)):
+        return f"Not measured yet: needs `bench/{REAL_FACES_BEFORE}` and `bench/{REAL_FACES}`.\n"
+    before_doc, after_doc = bench.load(REAL_FACES_BEFORE), bench.load(REAL_FACES)
+    text = bench.source(REAL_FACES_BEFORE, before_doc) + bench.source(REAL_FACES, after_doc)
+    before = {row["engine"]: row for row in before_doc["engines"]}
+    rows = []
+    for row in _by_engine(after_doc["engines"]):
+        old = before.get(row["engine"])
+        rows.append(
+            [
+                f"`{row['engine']}`",
+                "–" if old is None or old["aperture_r"] is None else number(old["aperture_r"], 3),
+                "–" if row["aperture_r"] is None else number(row["aperture_r"], 3),
+                "–" if old is None else _signed(old["closure_lag_ms"], 1),
+                _signed(row["closure_lag_ms"], 1),
+            ]
+        )
+    header = [
+        "engine",
+        "aperture r before",
+        "aperture r after",
+        "closure lag ms before",
+        "closure lag ms after",
+    ]
+    return text + table(header, rows)
+
+
 BLOCKS: dict[str, Callable[[Bench], str]] = {
     "sentences-curve": sentences_curve,
     "sentences-curve-summary": sentences_curve_summary,
     "real-faces-summary": real_faces_summary,
     "real-faces": real_faces,
+    "real-faces-before-after": real_faces_before_after,
+    "demo-calibration": demo_calibration,
     "languages": languages,
     "language-phonemes": language_phonemes,
     "capture": capture,

@@ -58,11 +58,11 @@ DEMO_CHANNELS: tuple[str, ...] = names("""
 ARTICULATOR_MAX_SPEED = np.array([4.5, 11.0, 3.5, 3.5, 20.0])
 """Fastest motion of (jaw, lips, round, spread, tuck) in units per second."""
 JAW_MAX_SPEED = float(ARTICULATOR_MAX_SPEED[Articulator.JAW])
-BASE_STIFFNESS = np.array([38.0, 48.0, 26.0, 30.0, 80.0])
+BASE_STIFFNESS = np.array([43.7, 55.2, 29.9, 34.5, 92.0])
 """Spring stiffness w (rad/s) per articulator towards a tolerant target."""
 REQUIRED_STIFFNESS_GAIN = 1.25
 """Requirements (narrow windows) are approached more briskly."""
-CONTACT_STIFFNESS_GAIN = 1.6
+CONTACT_STIFFNESS_GAIN = 2.0
 """Lip closures and lip-on-teeth are ballistic: faster still."""
 MOTOR_NOISE_SHAPE = np.array([1.0, 0.8, 0.6, 0.5, 0.3])
 MOTOR_NOISE_HZ = 4.0

@@ -13,8 +13,9 @@ Sketch:
    consonants before it; beyond the horizon the lips relax to neutral.
 3. Each articulator switches to a segment's target a little before its
    acoustic start (gestures lead their sound, closures most), but keeps a
-   requirement for the first part of its segment, and a contact (lips
-   together, lip on teeth) for most of it, before moving on.
+   requirement for the first half of its segment, and a contact (lips
+   together, lip on teeth) for its first 40%, before moving on. The leads and
+   the hold are calibrated to real faces (``lipstream.bench.demo_calibration``).
 """
 
 from __future__ import annotations
@@ -39,11 +40,12 @@ INTERPOLATED = (Articulator.JAW, Articulator.LIPS, Articulator.TUCK)
 ANTICIPATED = (Articulator.ROUND, Articulator.SPREAD)
 CONTACT_ARTICULATORS = (Articulator.LIPS, Articulator.TUCK)
 
-GESTURE_LEAD_S = np.array([0.035, 0.040, 0.060, 0.045, 0.040])
-"""How long before a segment's acoustic start each articulator heads for it (s)."""
-CONTACT_LEAD_S = 0.075
-"""Lips head for a contact earlier: closing must finish by the acoustic start."""
-CONTACT_HOLD = 0.8
+GESTURE_LEAD_S = np.array([0.035, 0.040, 0.0, 0.045, 0.040])
+"""How long before a segment's acoustic start each articulator heads for it (s); rounding
+heads for it at the start itself, as real lips are halfway round at a rounded vowel's onset."""
+CONTACT_LEAD_S = 0.1
+"""Lips head for a contact earlier: real lips are shut by the acoustic start of /p b m/."""
+CONTACT_HOLD = 0.4
 """Fraction of a contact segment the lips stay on target before releasing."""
 REQUIRED_SHARE = 0.5
 """Fraction of a segment an articulator it constrains keeps before moving on."""

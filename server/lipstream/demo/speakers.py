@@ -62,7 +62,7 @@ class Speaker:
     asymmetry: float = 0.0
     noise_level: float = 0.01
     stiffness_scale: float = 1.0
-    lookahead_s: float = 0.3
+    lookahead_s: float = 0.08
     blinks_per_minute: float = 17.0
 
     def __post_init__(self) -> None:
@@ -114,7 +114,7 @@ class Speaker:
             asymmetry=draw(-0.08, 0.08),
             noise_level=draw(0.006, 0.014),
             stiffness_scale=draw(0.9, 1.1),
-            lookahead_s=draw(0.25, 0.4),
+            lookahead_s=draw(0.06, 0.1),
             blinks_per_minute=draw(15.0, 20.0),
         )
 

@@ -7,6 +7,7 @@ import json
 import re
 import shutil
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -417,3 +418,62 @@ def test_the_aligner_against_grid_renders_each_clip_and_all(tmp_path: Path) -> N
     ]
     assert "2 clip(s) with GRID's word times, 4 words" in rendered
     assert "Not measured yet" in BLOCKS["aligner-real"](Bench(tmp_path / "empty"))
+
+
+def test_real_faces_before_and_after_side_by_side(tmp_path: Path) -> None:
+    def doc(rows: list[dict[str, object]]) -> dict[str, object]:
+        return {
+            "date": "2030-01-02T03:04:05+00:00",
+            "command": "lipstream bench --real",
+            "engines": rows,
+        }
+
+    before = doc([_real_row("dam", 0.566, 0.714, 15.7), _real_row("viseme-lerp", 0.496, 0.9, 17.1)])
+    after = doc([_real_row("dam", 0.6, 0.8, -4.0), _real_row("viseme-lerp", 0.51, 0.9, -2.5)])
+    (tmp_path / "real_faces_before.json").write_text(json.dumps(before))
+    bench = Bench(tmp_path)
+    assert "Not measured yet" in BLOCKS["real-faces-before-after"](bench)
+    (tmp_path / "real_faces.json").write_text(json.dumps(after))
+    rendered = BLOCKS["real-faces-before-after"](bench)
+    rows = [line for line in rendered.splitlines() if line.startswith("| `")]
+    assert rows == [
+        "| `viseme-lerp` | 0.496 | 0.510 | +17.1 | -2.5 |",
+        "| `dam` | 0.566 | 0.600 | +15.7 | -4.0 |",
+    ]
+    assert "`bench/real_faces_before.json`" in rendered and "`bench/real_faces.json`" in rendered
+
+
+def test_demo_calibration_renders_each_corpus_beside_the_real_one(tmp_path: Path) -> None:
+    def measures(closure: float, opening: float, rounding: float) -> dict[str, Any]:
+        def summary(mean: float, sd: float, count: int) -> dict[str, Any]:
+            return {"mean": mean, "sd": sd, "count": count}
+
+        return {
+            "closure_from_onset_ms": summary(closure, 30.0, 14),
+            "closure_share": summary(0.05, 0.3, 14),
+            "opening_speed": summary(opening, 2.0, 11),
+            "closing_speed": summary(14.0, 2.0, 11),
+            "opening_speed_median": opening,
+            "closing_speed_median": 14.25,
+            "rounding_half_rise_ms": summary(rounding, 90.0, 10),
+        }
+
+    corpora = {
+        "real": {"name": "grid", "utterances": 11, "measures": measures(3.6, 13.8, 0.2)},
+        "after": {"name": "demo", "utterances": 332, "measures": measures(11.6, 13.1, 3.8)},
+    }
+    doc = {"date": "2030-01-02T03:04:05+00:00", "measure_fps": 25.0, "corpora": corpora}
+    (tmp_path / "demo_calibration.json").write_text(json.dumps(doc))
+    rendered = BLOCKS["demo-calibration"](Bench(tmp_path))
+    assert "| measure | real (`grid`, 11 utt.) | after (`demo`, 332 utt.) |" in rendered
+    assert "| +3.6 ± 30.0 (n 14)" not in rendered  # ms are shown whole
+    assert (
+        "| /p b m/ closure centre less the acoustic onset, ms | +4 ± 30 (n 14) | +12 ± 30 (n 14) |"
+        in rendered
+    )
+    assert "| peak opening speed, aperture ranges per s (median) | 13.80 | 13.10 |" in rendered
+    assert (
+        "| rounding halfway up, less the rounded vowel's onset, ms | +0 ± 90 (n 10) | +4 ± 90 (n 10) |"
+        in rendered
+    )
+    assert "Not measured yet" in BLOCKS["demo-calibration"](Bench(tmp_path / "empty"))

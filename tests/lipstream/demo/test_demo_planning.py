@@ -96,20 +96,21 @@ def test_rounding_beyond_the_horizon_relaxes_to_neutral() -> None:
 
 
 def test_onsets_lead_the_sound_but_keep_requirements_and_hold_contacts() -> None:
-    # sil 0-0.2, AE 0.2-0.3, P 0.3-0.38, AE 0.38-0.48, sil 0.48-0.68.
-    segments, plan = _plan(("sil", 0.2), ("AE", 0.1), ("P", 0.08), ("AE", 0.1), ("sil", 0.2))
+    # sil 0-0.2, AE 0.2-0.3, P 0.3-0.35, AE 0.35-0.45, sil 0.45-0.65.
+    segments, plan = _plan(("sil", 0.2), ("AE", 0.1), ("P", 0.05), ("AE", 0.1), ("sil", 0.2))
     assert [segment.phoneme for segment in segments] == ["sil", "AE", "P", "AE", "sil"]
     assert plan.contact.tolist() == [False, False, True, False, False]
-    assert CONTACT_LEAD_S == 0.075 and CONTACT_HOLD == 0.8 and REQUIRED_SHARE == 0.5
+    assert CONTACT_LEAD_S == 0.1 and CONTACT_HOLD == 0.4 and REQUIRED_SHARE == 0.5
     lips, jaw = plan.onsets[:, Articulator.LIPS], plan.onsets[:, Articulator.JAW]
-    # Lips head for the closure 75 ms early, but not before AE's first half: 0.25.
+    # Lips head for the closure 100 ms early (0.2), but not before AE's first half: 0.25.
     assert lips[2] == pytest.approx(0.25)
     # Jaw: 35 ms lead, 0.265 (AE's first half ended at 0.25).
     assert jaw[2] == pytest.approx(0.3 - GESTURE_LEAD_S[Articulator.JAW])
-    # Lips leave the closure only after 80% of it: 0.3 + 0.8 * 0.08 = 0.364,
-    # later than the usual 40 ms lead (0.34); the jaw keeps its lead (0.345).
-    assert lips[3] == pytest.approx(0.364)
-    assert jaw[3] == pytest.approx(0.345)
+    # Lips leave the closure only after 40% of it: 0.3 + 0.4 * 0.05 = 0.32, later than
+    # the usual 40 ms lead (0.31); the jaw keeps P's narrow window for half of it: 0.325,
+    # later than its 35 ms lead (0.315).
+    assert lips[3] == pytest.approx(0.32)
+    assert jaw[3] == pytest.approx(0.325)
     assert np.all(np.diff(plan.onsets[1:], axis=0) >= 0)
     assert plan.values[2, Articulator.LIPS] == pytest.approx(-0.12)
 
