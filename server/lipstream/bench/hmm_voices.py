@@ -4,8 +4,8 @@ Sketch: each configuration of the ``hmm`` engine (raw or speaker-normalized spee
 features; the demo lines as the demo speaks them, or spoken again in
 ``demo.voices.TRAINING_VOICES`` too) is trained on the demo corpus's train split, with
 ``viseme-lerp`` trained on the same lines as the baseline. Each is driven by audio alone
-(the ``full`` rung) and scored by RMS against the recorded curves, as a ratio to
-``viseme-lerp``'s RMS fed the true phones, on:
+(on the ``full``, ``causal_lead`` and ``causal`` rungs) and scored by RMS against the recorded
+curves, as a ratio to ``viseme-lerp``'s RMS fed the true phones, on:
 
 - **demo**: the demo corpus's held-out lines;
 - **second character**: ``SECOND_LINES`` lines of a generated character with its own
@@ -18,7 +18,7 @@ features; the demo lines as the demo speaks them, or spoken again in
   aperture r (``bench.real_faces``) of the audio-driven face against the tracked lips,
   beside ``viseme-lerp`` fed the clip's force-aligned phones.
 
-Phoneme-driven ``hmm`` is reported beside the voice-driven one: a gap between them is the
+Phoneme-driven ``hmm`` (``full`` and ``causal``) is reported beside the voice-driven one: a gap between them is the
 audio side's. Vocal-tract-length warping is measured on the last configuration: each
 line analysed at every warp of ``features.WARPS`` (``features.warped``), the warp its
 whole audio makes most likely under the model's vocal Gaussians (an equal mixture,
@@ -90,6 +90,10 @@ SECOND_CHARACTER = Speaker(
 """Neither its voice (``+m7``, low pitch, fast) nor its articulation is the demo's."""
 SECOND_LINES = 120
 GRID_DIR = Path("tests/data/grid")
+CAUSAL_LEAD = {"lag_ms": 100.0, "window_ms": 0.0}
+CAUSAL = {"lag_ms": 0.0, "window_ms": 0.0}
+"""The ``causal_lead`` and ``causal`` rungs' options: frame at a time, decoded 100 ms late
+or at once (greedy)."""
 CONFIGURATIONS: dict[str, tuple[bool, bool]] = {  # name: (speaker normalization, more voices)
     "raw features, demo voices": (False, False),
     "normalized, demo voices": (True, False),
@@ -124,6 +128,13 @@ def rms_figures(hmm: Model, lerp: Model, lines: list[Utterance]) -> dict[str, fl
     the voice-driven ratio to ``lerp``."""
     drives: dict[str, Callable[[Utterance], np.ndarray]] = {
         "audio": lambda u: hmm.synthesize([], u.fps, u.audio, u.emotion).frames,
+        "audio_causal_lead": lambda u: (
+            hmm.synthesize([], u.fps, u.audio, u.emotion, **CAUSAL_LEAD).frames
+        ),
+        "audio_causal": lambda u: hmm.synthesize([], u.fps, u.audio, u.emotion, **CAUSAL).frames,
+        "phonemes_causal": lambda u: (
+            hmm.synthesize(u.phones, u.fps, None, u.emotion, **CAUSAL).frames
+        ),
         "phonemes": lambda u: hmm.synthesize(u.phones, u.fps, None, u.emotion).frames,
         "viseme_lerp": lambda u: lerp.synthesize(u.phones, u.fps, None, u.emotion).frames,
     }
@@ -136,6 +147,8 @@ def rms_figures(hmm: Model, lerp: Model, lines: list[Utterance]) -> dict[str, fl
             errors.append(float(np.sqrt(np.mean((frames[:n] - utterance.frames[:n]) ** 2))))
         found[f"rms_{name}"] = float(np.mean(errors))
     found["audio_ratio"] = found["rms_audio"] / found["rms_viseme_lerp"]
+    for rung_drive in ("audio_causal_lead", "audio_causal", "phonemes_causal"):
+        found[f"{rung_drive}_ratio"] = found[f"rms_{rung_drive}"] / found["rms_viseme_lerp"]
     found["phonemes_ratio"] = found["rms_phonemes"] / found["rms_viseme_lerp"]
     return found
 

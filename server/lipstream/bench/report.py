@@ -1097,6 +1097,16 @@ def _ratio(sets: dict[str, Any], key: str) -> str:
     return f"{figures['audio_ratio']:.3f} ({figures['phonemes_ratio']:.3f})"
 
 
+def _causal(sets: dict[str, Any], key: str) -> str:
+    figures = sets.get(key)
+    if figures is None or "audio_causal_ratio" not in figures:
+        return "–"
+    return (
+        f"{figures['audio_causal_lead_ratio']:.3f} / {figures['audio_causal_ratio']:.3f} "
+        f"({figures['phonemes_causal_ratio']:.3f})"
+    )
+
+
 def _r(value: float | None) -> str:
     return "–" if value is None else f"{value:+.3f}"
 
@@ -1118,7 +1128,8 @@ def hmm_voices(bench: Bench) -> str:
         f"`+{held['variant']}`, pitch {held['pitch_shift']:+d}, on the demo's held-out lines. "
         f"GRID clips with sound: {', '.join(doc['grid']['clips_with_sound']) or 'none'} "
         f"of {doc['grid']['clips']}.\n\n"
-        "Voice-driven RMS over `viseme-lerp`'s (phoneme-driven `hmm` in brackets):\n\n"
+        "Voice-driven RMS over `viseme-lerp`'s, `full` rung (phoneme-driven `hmm` in "
+        "brackets):\n\n"
     )
     rows = []
     for name, configuration in doc["configurations"].items():
@@ -1130,6 +1141,15 @@ def hmm_voices(bench: Bench) -> str:
     text += table(
         ["configuration", "training lines"] + [label for _, label in HMM_VOICE_SETS], rows
     )
+    text += (
+        "\nThe same on the frame-at-a-time rungs: voice-driven on `causal_lead` / on "
+        "`causal` (phoneme-driven on `causal` in brackets):\n\n"
+    )
+    rows = [
+        [name] + [_causal(configuration["sets"], key) for key, _ in HMM_VOICE_SETS]
+        for name, configuration in doc["configurations"].items()
+    ]
+    text += table(["configuration"] + [label for _, label in HMM_VOICE_SETS], rows)
     text += (
         "\nGRID aperture r (`hmm` by audio alone, `hmm` by phonemes, `viseme-lerp` fed the "
         "aligned phones):\n\n"
