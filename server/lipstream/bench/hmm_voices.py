@@ -18,13 +18,13 @@ curves, as a ratio to ``viseme-lerp``'s RMS fed the true phones, on:
   aperture r (``bench.real_faces``) of the audio-driven face against the tracked lips,
   beside ``viseme-lerp`` fed the clip's force-aligned phones.
 
-Phoneme-driven ``hmm`` (``full`` and ``causal``) is reported beside the voice-driven one: a gap between them is the
-audio side's. Vocal-tract-length warping is measured on the last configuration: each
-line analysed at every warp of ``features.WARPS`` (``features.warped``), the warp its
-whole audio makes most likely under the model's vocal Gaussians (an equal mixture,
-``features.most_likely_warp``) chosen per line, which a stream could only choose once
-it has heard the line (an upper bound of a causal choice), and each fixed warp for all
-lines. One BLAS thread.
+Phoneme-driven ``hmm`` (``full`` and ``causal``) is reported beside the voice-driven
+one: a gap between them is the audio side's. Vocal-tract-length warping is measured on
+the last configuration: each line analysed at every warp of ``features.WARPS``
+(``features.warped``), the warp its whole audio makes most likely under the model's
+vocal Gaussians (an equal mixture, ``features.most_likely_warp``) chosen per line, which
+a stream could only choose once it has heard the line (more than a causal choice
+knows), and each fixed warp for all lines. One BLAS thread.
 
     python -m lipstream.bench.hmm_voices [--corpus DIR] [--grid DIR] [--results FILE]
 """
