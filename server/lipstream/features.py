@@ -316,6 +316,8 @@ def speaker_prior(
 ) -> SpeakerPrior:
     """The prior of ``streams`` (each (n, width), one per recording): the pooled mean and
     variance of their speech frames, each stream gated as ``StreamingNormalizer`` gates it."""
+    if not prior_frames > 0.0:
+        raise ValueError(f"prior_frames must be positive, got {prior_frames!r}")
     chosen = []
     for rows in streams:
         values = np.asarray(rows, dtype=np.float64)

@@ -6,8 +6,11 @@ Gaussian over [pose, velocity] (``means`` (N, 2D), ``covariances`` (N, 2D, 2D));
 its phoneme and emotion categoricals (``phoneme_log_probs`` (N, phonemes),
 ``emotion_log_probs`` (N, emotions)); and, when the
 corpus had audio, its Gaussian over speech features (``vocal_means`` (N, F),
-``vocal_covariances`` (N, F, F); F = 0 without audio). The manifest's extra holds
-``hmm_fps``, ``has_audio`` and the feature analysis (``mfcc``).
+``vocal_covariances`` (N, F, F); F = 0 without audio), with the speaker
+normalization's prior (``vocal_prior_mean``, ``vocal_prior_variance`` (F,)) when it
+was trained normalized. The manifest's extra holds ``hmm_fps``, ``has_audio``, the
+feature analysis (``mfcc``) and the normalization's scalars (``normalization``; null,
+or absent in a model saved before it: the model hears raw features).
 
 Options: ``lag_ms`` (the Viterbi lag limit; null: unlimited), ``window_ms``
 (the trajectory block; 0: a frame at a time; null: one solve at the end) and
@@ -337,8 +340,8 @@ def _check_normalization(fields: FieldReader, normalization: Mapping[str, Any], 
             fields.integer(value, where, 0, width - 1)
         elif name == "silence_energy":
             fields.number(value, where, -1000.0, 1000.0)
-        else:
-            fields.number(value, where, 0.0, 100000.0)
+        else:  # a prior of no weight would leave the first frames' mean 0 / 0
+            fields.number(value, where, 0.0, 100000.0, above=name == "prior_frames")
 
 
 def mfcc_fields(config: MfccConfig = DEFAULT_MFCC) -> dict[str, Any]:

@@ -85,6 +85,7 @@ def test_a_model_saved_before_normalization_hears_raw_features_as_it_was_trained
     [
         ("energy_column", 28, "extra.normalization.energy_column"),
         ("prior_frames", -1.0, "extra.normalization.prior_frames"),
+        ("prior_frames", 0.0, "extra.normalization.prior_frames"),
         ("gate_nats", "wide", "extra.normalization.gate_nats"),
     ],
 )
