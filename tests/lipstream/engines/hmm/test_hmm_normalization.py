@@ -98,7 +98,7 @@ def test_a_bad_normalization_field_is_a_coded_error_naming_it(
     (tmp_path / MANIFEST_NAME).write_text(json.dumps(manifest))
     with pytest.raises(LipstreamError, match=message.replace(".", r"\.")) as caught:
         load_model(tmp_path)
-    assert caught.value.code
+    assert caught.value.code == "model_invalid"
 
 
 def test_a_missing_prior_array_is_a_coded_error(
@@ -110,4 +110,4 @@ def test_a_missing_prior_array_is_a_coded_error(
     save_model_dir(tmp_path, model.manifest, arrays)
     with pytest.raises(LipstreamError, match="vocal_prior_variance") as caught:
         load_model(tmp_path)
-    assert caught.value.code
+    assert caught.value.code == "model_invalid"
