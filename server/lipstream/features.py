@@ -20,7 +20,8 @@ their windows (``frames_covered``).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -269,3 +270,133 @@ def _power(spectrum: np.ndarray, low: int, high: int) -> np.ndarray:
             imaginary = np.float64(spectrum[row, bin].imag)
             power[row, bin - low] = real * real + imaginary * imaginary
     return power
+
+
+@dataclass(frozen=True)
+class SpeakerPrior:
+    """What a stream's normalization assumes before it has heard anyone: the speech frames'
+    ``mean`` and ``variance`` (float64 (width,)) over a training corpus, worth
+    ``prior_frames`` frames of the stream's own. A frame counts as speech when its log
+    energy (column ``energy_column``) is above ``silence_energy`` and within ``gate_nats``
+    of the loudest frame heard so far."""
+
+    mean: np.ndarray
+    variance: np.ndarray
+    prior_frames: float
+    gate_nats: float
+    silence_energy: float
+    energy_column: int
+
+
+SPEECH_GATE_NATS = 6.9
+"""About 30 dB of power below the loudest frame so far."""
+SILENCE_ENERGY = math.log(1e-8)
+"""Log energy under which a frame is taken for digital silence (zeros give the log floor)."""
+PRIOR_FRAMES = 40.0
+VARIANCE_FLOOR = 0.01
+"""A stream's variance is kept above this share of the prior's."""
+
+
+def speech_frames(
+    energy: np.ndarray, loudest_before: float, gate_nats: float, silence_energy: float
+) -> tuple[np.ndarray, float]:
+    """Which frames count as speech (bool (n,)), each judged against the loudest frame up to
+    and including it, and the loudest after them."""
+    loudest = np.maximum.accumulate(np.concatenate([[loudest_before], energy]))[1:]
+    counted = (energy >= loudest - gate_nats) & (energy > silence_energy)
+    return counted, float(loudest[-1]) if len(loudest) else loudest_before
+
+
+def speaker_prior(
+    streams: list[np.ndarray],
+    energy_column: int,
+    prior_frames: float = PRIOR_FRAMES,
+    gate_nats: float = SPEECH_GATE_NATS,
+    silence_energy: float = SILENCE_ENERGY,
+) -> SpeakerPrior:
+    """The prior of ``streams`` (each (n, width), one per recording): the pooled mean and
+    variance of their speech frames, each stream gated as ``StreamingNormalizer`` gates it."""
+    if not prior_frames > 0.0:
+        raise ValueError(f"prior_frames must be positive, got {prior_frames!r}")
+    chosen = []
+    for rows in streams:
+        values = np.asarray(rows, dtype=np.float64)
+        counted, _ = speech_frames(values[:, energy_column], -math.inf, gate_nats, silence_energy)
+        chosen.append(values[counted])
+    pooled = np.concatenate(chosen)
+    if len(pooled) < 2:
+        raise ValueError("a speaker prior needs at least two speech frames")
+    return SpeakerPrior(
+        pooled.mean(axis=0),
+        pooled.var(axis=0),
+        float(prior_frames),
+        float(gate_nats),
+        float(silence_energy),
+        int(energy_column),
+    )
+
+
+class StreamingNormalizer:
+    """Per-stream mean and variance normalization, causal: frame t becomes
+    (x_t − m_t) / s_t, m_t and s_t² the mean and variance of the speech frames up to and
+    including t pooled with the prior's ``prior_frames`` frames. ``apply`` takes the frames
+    in order, in any chunking; the sums run through one ``np.cumsum`` carried from chunk
+    to chunk, so every chunking gives the same numbers bit for bit."""
+
+    def __init__(self, prior: SpeakerPrior) -> None:
+        self.prior = prior
+        weight = prior.prior_frames
+        self.sums = weight * prior.mean
+        self.squares = weight * (prior.variance + prior.mean**2)
+        self.count = weight
+        self.loudest = -math.inf
+        self.floor = VARIANCE_FLOOR * prior.variance
+
+    def apply(self, rows: np.ndarray) -> np.ndarray:
+        """The next frames (n, width), normalized: float32 (n, width)."""
+        values = np.asarray(rows, dtype=np.float64)
+        if len(values) == 0:
+            return np.zeros(values.shape, dtype=np.float32)
+        prior = self.prior
+        counted, self.loudest = speech_frames(
+            values[:, prior.energy_column], self.loudest, prior.gate_nats, prior.silence_energy
+        )
+        weight = counted.astype(np.float64)
+        kept = values * weight[:, None]
+        sums = np.cumsum(np.concatenate([self.sums[None], kept]), axis=0)[1:]
+        squares = np.cumsum(np.concatenate([self.squares[None], kept * values]), axis=0)[1:]
+        count = np.cumsum(np.concatenate([[self.count], weight]))[1:, None]
+        mean = sums / count
+        variance = np.maximum(squares / count - mean**2, self.floor)
+        self.sums, self.squares, self.count = sums[-1], squares[-1], float(count[-1, 0])
+        return np.asarray((values - mean) / np.sqrt(variance), dtype=np.float32)
+
+
+WARPS: tuple[float, ...] = (0.88, 0.94, 1.0, 1.06, 1.12)
+"""Vocal-tract-length warps tried by ``most_likely_warp``: formants about 12% lower to 12%
+higher than the model's voices."""
+
+
+def warped(config: MfccConfig, warp: float) -> MfccConfig:
+    """``config`` with its filterbank's band [f_min, f_max] moved by the factor ``warp``
+    (its filters stay mel-spaced inside it): a voice whose formants sit ``warp`` times
+    higher than another's gives, analysed so, about the other's features."""
+    return replace(config, f_min=config.f_min * warp, f_max=config.f_max * warp)
+
+
+def most_likely_warp(
+    samples: np.ndarray,
+    sample_rate: int,
+    config: MfccConfig,
+    log_likelihood: Callable[[np.ndarray], np.ndarray],
+    warps: Sequence[float] = WARPS,
+    analyse: Callable[..., np.ndarray] = mfcc,
+) -> float:
+    """The warp in ``warps`` whose frames of ``samples`` (``analyse``: ``mfcc`` or
+    ``speech_features``) score highest in total under ``log_likelihood`` (frames (n, width)
+    -> (n,)); ties go to the first."""
+    totals = [
+        float(np.sum(log_likelihood(analyse(samples, sample_rate, config=warped(config, warp)))))
+        for warp in warps
+    ]
+    return float(warps[int(np.argmax(totals))])

@@ -1321,9 +1321,125 @@ def real_faces_before_after(bench: Bench) -> str:
     return text + table(header, rows)
 
 
+HMM_VOICES = "hmm_voices.json"
+HMM_VOICE_SETS = (
+    ("demo", "demo held-out"),
+    ("second_character", "second character"),
+    ("second_character_self_trained", "second character, self-trained"),
+    ("heldout_voice", "held-out voice"),
+)
+
+
+def _ratio(sets: dict[str, Any], key: str) -> str:
+    figures = sets.get(key)
+    if figures is None:
+        return "–"
+    return f"{figures['audio_ratio']:.3f} ({figures['phonemes_ratio']:.3f})"
+
+
+def _causal(sets: dict[str, Any], key: str) -> str:
+    figures = sets.get(key)
+    if figures is None or "audio_causal_ratio" not in figures:
+        return "–"
+    return (
+        f"{figures['audio_causal_lead_ratio']:.3f} / {figures['audio_causal_ratio']:.3f} "
+        f"({figures['phonemes_causal_ratio']:.3f})"
+    )
+
+
+def _r(value: float | None) -> str:
+    return "–" if value is None else f"{value:+.3f}"
+
+
+def hmm_voices(bench: Bench) -> str:
+    """``python -m lipstream.bench.hmm_voices``: voice-driven ``hmm`` on unseen voices and
+    characters, and on the GRID clip that has sound."""
+    if not bench.exists(HMM_VOICES):
+        return f"Not measured yet: no `bench/{HMM_VOICES}`.\n"
+    doc = bench.load(HMM_VOICES)
+    second, held = doc["second_character"], doc["heldout_voice"]
+    text = bench.source(HMM_VOICES, doc)
+    text += (
+        f"Demo corpus `{doc['corpus']['digest'][:12]}` ({doc['corpus']['lines']} lines). "
+        f"Second character: voice `{second['voice']}`, pitch {second['pitch']}, rate "
+        f"×{second['rate_factor']:g}, jaw ×{second['jaw_scale']:g}, lips "
+        f"×{second['lips_scale']:g}, rounding ×{second['rounding_scale']:g}, stiffness "
+        f"×{second['stiffness_scale']:g}; {second['lines']} lines. Held-out voice: "
+        f"`+{held['variant']}`, pitch {held['pitch_shift']:+d}, on the demo's held-out lines. "
+        f"GRID clips with sound: {', '.join(doc['grid']['clips_with_sound']) or 'none'} "
+        f"of {doc['grid']['clips']}.\n\n"
+        "Voice-driven RMS over `viseme-lerp`'s, `full` rung (phoneme-driven `hmm` in "
+        "brackets):\n\n"
+    )
+    rows = []
+    for name, configuration in doc["configurations"].items():
+        sets = configuration["sets"]
+        rows.append(
+            [name, str(configuration["training_lines"])]
+            + [_ratio(sets, key) for key, _ in HMM_VOICE_SETS]
+        )
+    text += table(
+        ["configuration", "training lines"] + [label for _, label in HMM_VOICE_SETS], rows
+    )
+    text += (
+        "\nThe same on the frame-at-a-time rungs: voice-driven on `causal_lead` / on "
+        "`causal` (phoneme-driven on `causal` in brackets):\n\n"
+    )
+    rows = [
+        [name] + [_causal(configuration["sets"], key) for key, _ in HMM_VOICE_SETS]
+        for name, configuration in doc["configurations"].items()
+    ]
+    text += table(["configuration"] + [label for _, label in HMM_VOICE_SETS], rows)
+    text += (
+        "\nGRID aperture r (`hmm` by audio alone, `hmm` by phonemes, `viseme-lerp` fed the "
+        "aligned phones):\n\n"
+    )
+    rows = []
+    for name, configuration in doc["configurations"].items():
+        for stem, figures in configuration["grid"].items():
+            rows.append(
+                [
+                    name,
+                    f"`{stem}`",
+                    _r(figures["hmm_audio_r"]),
+                    _r(figures["hmm_phonemes_r"]),
+                    _r(figures["viseme_lerp_r"]),
+                ]
+            )
+    text += table(["configuration", "clip", "hmm by audio", "hmm by phonemes", "viseme-lerp"], rows)
+    warps = doc.get("warps")
+    if warps:
+        last = list(doc["configurations"])[-1]
+        text += (
+            f"\nVocal-tract-length warp, `{last}`: voice-driven ratio at each fixed warp and "
+            "with each line at its most likely warp (chosen from the whole line):\n\n"
+        )
+        header = ["set"] + [f"warp {w:g}" for w in warps["warps"]] + ["most likely (warps chosen)"]
+        rows = []
+        for key, label in HMM_VOICE_SETS:
+            if key not in warps["fixed"]:
+                continue
+            chosen = warps["most_likely"][key]
+            picks = ", ".join(f"{w}: {n}" for w, n in chosen["warps_chosen"].items())
+            rows.append(
+                [label]
+                + [f"{warps['fixed'][key][f'{w:g}']:.3f}" for w in warps["warps"]]
+                + [f"{chosen['audio_ratio']:.3f} ({picks})"]
+            )
+        text += table(header, rows)
+        for name, chosen in warps["most_likely"].items():
+            if name.startswith("grid "):
+                text += (
+                    f"\nGRID `{name[5:]}` at its most likely warp {chosen['warp']:g}: "
+                    f"audio-driven aperture r {_r(chosen['hmm_audio_r'])}.\n"
+                )
+    return text
+
+
 BLOCKS: dict[str, Callable[[Bench], str]] = {
     "sentences-curve": sentences_curve,
     "sentences-curve-summary": sentences_curve_summary,
+    "hmm-voices": hmm_voices,
     "real-faces-summary": real_faces_summary,
     "real-faces": real_faces,
     "real-faces-before-after": real_faces_before_after,

@@ -12,6 +12,8 @@ sample before. Frames computed piecewise equal those of the whole signal
 audio's end, whose windows the end zero-pads, are computed only when asked
 (``through``), once the input is finished. An engine reads the frames final so far
 (``covered``), or asks whether those describing [0, t] are (``ready``, ``describing``).
+A ``normalizer`` (``features.StreamingNormalizer``) takes each frame once, in order, as
+it is computed, so the normalized frames do not depend on the chunking either.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ import numpy as np
 
 from ..audio import Audio
 from ..errors import InvalidRequestError
-from ..features import MfccConfig, first_sample_read, frames_covered
+from ..features import MfccConfig, StreamingNormalizer, first_sample_read, frames_covered
 from .growable import Growable
 
 
@@ -32,7 +34,8 @@ class StreamedFeatures:
     rate. ``analyse(samples, sample_rate, first, stop, config, offset)`` computes frames
     first .. stop − 1 of a signal held from sample ``offset`` on (``features.mfcc``,
     ``features.speech_features``); ``lookback`` is how many frames before frame k it reads
-    (1 for the deltas of ``speech_features``)."""
+    (1 for the deltas of ``speech_features``); ``normalizer``, if any, normalizes the frames
+    as they are computed."""
 
     def __init__(
         self,
@@ -40,10 +43,12 @@ class StreamedFeatures:
         width: int,
         analyse: Callable[..., np.ndarray],
         lookback: int = 0,
+        normalizer: StreamingNormalizer | None = None,
     ) -> None:
         self.config = config
         self.analyse = analyse
         self.lookback = lookback
+        self.normalizer = normalizer
         self.sample_rate: int | None = None
         self.length = 0
         self.covered = 0
@@ -110,6 +115,8 @@ class StreamedFeatures:
             fresh = self.analyse(
                 samples.view(), self.sample_rate, have, stop, self.config, samples.first
             )
+            if self.normalizer is not None:
+                fresh = self.normalizer.apply(fresh)
             self.features.extend(fresh)
             next_frame = max(0, self.features.count - self.lookback)
             samples.drop_before(first_sample_read(next_frame, self.sample_rate, self.config))

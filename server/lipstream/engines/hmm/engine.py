@@ -6,9 +6,11 @@ backward difference per HMM frame) -> the facial HMM trained from a large
 fully connected model (``em``: entropic with extinction, or Baum-Welch as the
 comparison) on the inner training split -> γ on every training line ->
 remapping (``remap``): phoneme and emotion categoricals, and speech-feature
-Gaussians when every line has audio -> metrics: perplexity, held-out entropy rate (bits per
-frame of the facial state posterior on the inner held-out lines), states
-surviving.
+Gaussians when every line has audio (each line's features normalized as a served stream
+normalizes them, ``features.StreamingNormalizer``, from a prior pooled over the training
+lines' speech frames, when ``speaker_normalization``) -> metrics: perplexity,
+held-out entropy rate (bits per frame of the facial state posterior on the inner
+held-out lines), states surviving.
 """
 
 from __future__ import annotations
@@ -21,7 +23,13 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from ...corpus import Corpus, Utterance
-from ...features import speech_features
+from ...features import (
+    PRIOR_FRAMES,
+    SpeakerPrior,
+    StreamingNormalizer,
+    speaker_prior,
+    speech_features,
+)
 from ...numerics.basis import MotionBasis, fit_basis
 from ...numerics.resample import interp_columns
 from ...numerics.trellis import forward_backward
@@ -29,7 +37,7 @@ from ...phonemes import PHONEME_INDEX, PHONEMES
 from ...timeline import EMOTIONS
 from ..base import Engine, frame_count
 from . import em, remap
-from .model import HmmModel, mfcc_fields
+from .model import HmmModel, mfcc_fields, normalization_fields
 
 VOCAL_FLOOR = 1e-3
 
@@ -81,6 +89,8 @@ class HmmEngine(Engine):
         seed: int = 0,
         lag_ms: float = 500.0,
         window_ms: float = 250.0,
+        speaker_normalization: bool = True,
+        prior_frames: float = PRIOR_FRAMES,
     ) -> None:
         self.n_states = n_states
         self.hmm_fps = hmm_fps
@@ -96,6 +106,8 @@ class HmmEngine(Engine):
         self.seed = seed
         self.lag_ms = lag_ms
         self.window_ms = window_ms
+        self.speaker_normalization = speaker_normalization
+        self.prior_frames = prior_frames
 
     def settings(self) -> em.Settings:
         if self.estimator not in em.ESTIMATORS:
@@ -125,7 +137,7 @@ class HmmEngine(Engine):
             everything = [observations(u, basis, self.hmm_fps) for u in corpus.utterances]
             gammas = _gammas(parameters, everything)
             metrics = self._metrics(fitted, heldout, basis)
-            arrays = self._remap(corpus, gammas)
+            arrays, prior = self._remap(corpus, gammas)
         metrics["training_s"] = round(time.perf_counter() - began, 3)
         manifest = self.new_manifest(
             corpus,
@@ -134,6 +146,7 @@ class HmmEngine(Engine):
                 "hmm_fps": float(self.hmm_fps),
                 "has_audio": arrays["vocal_means"].shape[1] > 0,
                 "mfcc": mfcc_fields(),
+                "normalization": normalization_fields(prior),
             },
         )
         arrays.update(
@@ -173,7 +186,9 @@ class HmmEngine(Engine):
             )
         return metrics
 
-    def _remap(self, corpus: Corpus, gammas: list[np.ndarray]) -> dict[str, np.ndarray]:
+    def _remap(
+        self, corpus: Corpus, gammas: list[np.ndarray]
+    ) -> tuple[dict[str, np.ndarray], SpeakerPrior | None]:
         utterances = corpus.utterances
         labels = [phoneme_labels(u, self.hmm_fps) for u in utterances]
         emotions = [
@@ -189,6 +204,7 @@ class HmmEngine(Engine):
             ),
         }
         n = gammas[0].shape[1]
+        prior = None
         if all(u.audio is not None for u in utterances):
             config = HmmModel.feature_config(self.hmm_fps)
             features = []
@@ -197,12 +213,17 @@ class HmmEngine(Engine):
                 assert audio is not None
                 rows = speech_features(audio.samples, audio.sample_rate, 0, len(gamma), config)
                 features.append(rows)
+            if self.speaker_normalization:
+                prior = speaker_prior(features, config.n_coefficients, self.prior_frames)
+                features = [StreamingNormalizer(prior).apply(rows) for rows in features]
+                arrays["vocal_prior_mean"] = prior.mean
+                arrays["vocal_prior_variance"] = prior.variance
             means, covariances = remap.vocal_gaussians(gammas, features, VOCAL_FLOOR)
         else:
             means, covariances = np.zeros((n, 0)), np.zeros((n, 0, 0))
         arrays["vocal_means"] = means
         arrays["vocal_covariances"] = covariances
-        return arrays
+        return arrays, prior
 
 
 def _evenly(sequences: list[np.ndarray], max_frames: int) -> list[np.ndarray]:

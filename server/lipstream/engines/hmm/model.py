@@ -6,8 +6,11 @@ Gaussian over [pose, velocity] (``means`` (N, 2D), ``covariances`` (N, 2D, 2D));
 its phoneme and emotion categoricals (``phoneme_log_probs`` (N, phonemes),
 ``emotion_log_probs`` (N, emotions)); and, when the
 corpus had audio, its Gaussian over speech features (``vocal_means`` (N, F),
-``vocal_covariances`` (N, F, F); F = 0 without audio). The manifest's extra holds
-``hmm_fps``, ``has_audio`` and the feature analysis (``mfcc``).
+``vocal_covariances`` (N, F, F); F = 0 without audio), with the speaker
+normalization's prior (``vocal_prior_mean``, ``vocal_prior_variance`` (F,)) when it
+was trained normalized. The manifest's extra holds ``hmm_fps``, ``has_audio``, the
+feature analysis (``mfcc``) and the normalization's scalars (``normalization``; null,
+or absent in a model saved before it: the model hears raw features).
 
 Options: ``lag_ms`` (the Viterbi lag limit; null: unlimited), ``window_ms``
 (the trajectory block; 0: a frame at a time; null: one solve at the end) and
@@ -31,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import InvalidRequestError
-from ...features import DEFAULT_MFCC, MfccConfig
+from ...features import DEFAULT_MFCC, MfccConfig, SpeakerPrior, StreamingNormalizer
 from ...model_checks import ArrayReader, FieldReader
 from ...numerics.basis import MotionBasis, read_components
 from ...numerics.direct_call import DirectCall
@@ -97,6 +100,7 @@ class HmmModel(Model):
         if bool(extra["has_audio"]):
             self.vocal = Gaussians(self.stored["vocal_means"], self.stored["vocal_covariances"])
         self.uses_audio = self.vocal is not None
+        self.speaker_prior = _speaker_prior(extra.get("normalization"), self.stored)
         self._dynamics: dict[tuple[float, bool], trajectory.Dynamics] = {}
         self.dynamics = self.dynamics_at(self.synthesis_fps)
         # Every request's streamed calls share one DirectCall per kernel: the argument types
@@ -131,6 +135,11 @@ class HmmModel(Model):
                 self._dynamics.clear()
             self._dynamics[key] = found
         return found
+
+    def normalizer(self) -> StreamingNormalizer | None:
+        """A new stream's speaker normalization (None: the model hears raw features)."""
+        prior = self.speaker_prior
+        return None if prior is None else StreamingNormalizer(prior)
 
     @property
     def accepts_audio_only(self) -> bool:
@@ -271,6 +280,15 @@ class HmmModel(Model):
                 fields.number(value, f"extra.mfcc.{name}", 0.0, 100000.0)
         reader = ArrayReader(arrays, str(path / ARRAYS_NAME))
         checked = check_arrays(reader, len(manifest.channels), has_audio)
+        normalization = extra.get("normalization")
+        if normalization is not None:
+            if not has_audio:
+                raise fields.error("extra.normalization", "must be null without audio")
+            width = checked["vocal_means"].shape[1]
+            mapping = fields.mapping(normalization, "extra.normalization")
+            _check_normalization(fields, mapping, width)
+            checked["vocal_prior_mean"] = reader.floats("vocal_prior_mean", (width,))
+            checked["vocal_prior_variance"] = reader.floats("vocal_prior_variance", (width,), 1e-12)
         return cls(manifest, checked)
 
 
@@ -283,6 +301,47 @@ def _blocks(window_s: float, rate: float, synthesis_fps: float) -> tuple[int, in
     frames = math.floor(budget * rate + 1e-9)  # block − 1 + future may not exceed this
     block = max(1, min(round(window_s * rate), frames + 1))
     return block, max(0, min(block // 2, frames - (block - 1)))
+
+
+NORMALIZATION_FIELDS = ("prior_frames", "gate_nats", "silence_energy", "energy_column")
+
+
+def normalization_fields(prior: SpeakerPrior | None) -> dict[str, Any] | None:
+    """The speaker normalization's scalars as stored in ``extra.normalization`` (its mean
+    and variance are the arrays ``vocal_prior_mean`` and ``vocal_prior_variance``); None
+    for a model that hears raw features."""
+    if prior is None:
+        return None
+    return {name: getattr(prior, name) for name in NORMALIZATION_FIELDS}
+
+
+def _speaker_prior(
+    normalization: Mapping[str, Any] | None, arrays: Mapping[str, np.ndarray]
+) -> SpeakerPrior | None:
+    """The stored prior; a model saved before speaker normalization (no
+    ``extra.normalization``) hears raw features, as it was trained to."""
+    if normalization is None:
+        return None
+    return SpeakerPrior(
+        np.asarray(arrays["vocal_prior_mean"], dtype=np.float64),
+        np.asarray(arrays["vocal_prior_variance"], dtype=np.float64),
+        float(normalization["prior_frames"]),
+        float(normalization["gate_nats"]),
+        float(normalization["silence_energy"]),
+        int(normalization["energy_column"]),
+    )
+
+
+def _check_normalization(fields: FieldReader, normalization: Mapping[str, Any], width: int) -> None:
+    for name in NORMALIZATION_FIELDS:
+        where = f"extra.normalization.{name}"
+        value = fields.member(normalization, name, where)
+        if name == "energy_column":
+            fields.integer(value, where, 0, width - 1)
+        elif name == "silence_energy":
+            fields.number(value, where, -1000.0, 1000.0)
+        else:  # a prior of no weight would leave the first frames' mean 0 / 0
+            fields.number(value, where, 0.0, 100000.0, above=name == "prior_frames")
 
 
 def mfcc_fields(config: MfccConfig = DEFAULT_MFCC) -> dict[str, Any]:

@@ -12,7 +12,7 @@ from typing import Protocol
 
 import numpy as np
 
-from ...features import MfccConfig
+from ...features import MfccConfig, StreamingNormalizer
 from ...numerics.basis import MotionBasis
 from ...numerics.direct_call import DirectCall
 from .gaussian import Gaussians
@@ -50,4 +50,5 @@ class HmmServing(Protocol):
     def solve_step(self) -> DirectCall: ...
 
     def emotion_row(self, emotion: str) -> int: ...
+    def normalizer(self) -> StreamingNormalizer | None: ...
     def dynamics_at(self, rate: float, coupled: bool = True) -> Dynamics: ...

@@ -126,7 +126,9 @@ class HmmSynthesizer(Synthesizer):
         self.end = 0.0
         self.span_rows = Growable(np.float64, (3,))  # start, phoneme row, emotion row
         width = model.vocal.dim if model.vocal else 0
-        self.audio = StreamedFeatures(model.mfcc, width, speech_features, lookback=1)
+        self.audio = StreamedFeatures(
+            model.mfcc, width, speech_features, lookback=1, normalizer=model.normalizer()
+        )
         self.heard = False
         self._drive(None if plan.drive == AUTO else plan.drive)
         self.decoder = FixedLagViterbi(
