@@ -97,12 +97,9 @@ class ResolvedProfile:
         ValueError if the engine's frames are not finite (a server fault).
         """
         if self.identity and frames.shape[1] == len(self.columns):
-            # One dot product, no temporary: a NaN or infinity makes the sum of squares
-            # non-finite (a finite value past 1.8e19 overflows it, numpy warns once, and the
-            # frames are looked at further). numpy's reduction to float64 costs several
-            # times as much set-up per streamed block of a few rows.
-            flat = frames.reshape(-1)
-            total = float(flat.dot(flat))
+            # One reduction, no temporary: a NaN or infinity makes the sum non-finite (float32
+            # values cannot overflow a float64 sum; a float64 one that does looks further).
+            total = float(np.add.reduce(frames, axis=None, dtype=np.float64))
             if not math.isfinite(total) and not np.isfinite(frames).all():
                 raise ValueError("the engine produced non-finite values")
             return np.asarray(frames, dtype=np.float32)
