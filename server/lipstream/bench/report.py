@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import re
+import statistics
 import sys
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
@@ -579,8 +580,7 @@ def _against_target(fidelity: str, ratio: float | None) -> str:
     return f"≤ {target:g}: missed by {number(ratio / target, 2)}×"
 
 
-def cpu_per_session(bench: Bench) -> str:
-    name = "cpu_per_session.json"
+def cpu_per_session(bench: Bench, name: str = "cpu_per_session.json") -> str:
     doc = bench.load(name)
     rows = []
     for run in _by_engine(doc["runs"]):
@@ -626,6 +626,48 @@ def cpu_per_session(bench: Bench) -> str:
         + "\nEach run's command:\n\n"
         + "".join(f"- `{command}`\n" for command in commands)
     )
+
+
+def message_cost(bench: Bench) -> str:
+    name = "message_cost_cuts.json"
+    doc = bench.load(name)
+    rows = []
+    for engine in [run["engine"] for run in _by_engine(doc["summary"])]:
+        legs = [run for run in doc["runs"] if run["engine"] == engine]
+        for tree in ("before", "after"):
+            mine = [run for run in legs if run["tree"] == tree]
+            if not mine:
+                continue
+            server = statistics.median(run["server_median_us"] for run in mine)
+            reference = statistics.median(run["reference_median_us"] for run in mine)
+            ratios = ", ".join(number(run["ratio"], 2) for run in mine)
+            rows.append(
+                [
+                    f"`{engine}`",
+                    f"`{mine[0]['fidelity']}`",
+                    f"{tree} (`{mine[0]['revision']}`)",
+                    f"{len(mine)} × {mine[0]['rounds']}",
+                    number(server),
+                    number(reference),
+                    f"**{number(server / reference, 2)}** ({ratios})",
+                ]
+            )
+    header = [
+        "engine",
+        "rung",
+        "code",
+        "runs × rounds",
+        "server µs per phonemes message",
+        "reference",
+        "ratio (per run)",
+    ]
+    text = bench.source(name, doc) + (
+        "Each run is one process (`python -m lipstream.bench.message_cost`, the code before "
+        "and after the cuts in alternate runs) that streams the same requests to the "
+        "server's app and to the reference app in alternate legs, with no sockets; a run's "
+        "figure is its legs' median, the table's the median over its runs.\n\n"
+    )
+    return text + table(header, rows)
 
 
 def server_profile(bench: Bench) -> str:
@@ -1466,7 +1508,12 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "capacity-best-two-workers": _capacity("capacity_best_two_workers.json"),
     "capacity-workers": capacity_workers,
     "cpu-per-session": cpu_per_session,
+    "cpu-per-session-cuts": lambda bench: cpu_per_session(bench, "cpu_per_session_cuts.json"),
+    "cpu-per-session-cuts-before": lambda bench: cpu_per_session(
+        bench, "cpu_per_session_cuts_before.json"
+    ),
     "server-profile": server_profile,
+    "message-cost-cuts": message_cost,
     "capacity-earlier": _capacity("capacity.json"),
     "loadtest": loadtest,
     "scale-out": scale_out,

@@ -41,6 +41,7 @@ from prometheus_client.metrics import MetricWrapperBase
 from prometheus_client.multiprocess import MultiProcessCollector, mark_process_dead
 
 from .load import MIB, LoadSample
+from .tally import StreamTally
 
 LATENCY_BUCKETS_S = (0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0)
 JOBS_AHEAD_BUCKETS = (0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 16.0, 32.0, 64.0)
@@ -201,6 +202,9 @@ class Metrics:
             buckets=LATENCY_BUCKETS_S,
             registry=registry,
         )
+        self.tally = StreamTally(LATENCY_BUCKETS_S)
+        """The per-message metrics above (messages, frames, lag, receive lag) as the
+        streaming path gathers them, folded into them by ``fold_tally``."""
         self.lane_jobs_ahead = Histogram(
             "lipstream_lane_jobs_ahead",
             "Per job of a fair lane (heavy, speech): the jobs that started in that lane "
@@ -217,8 +221,21 @@ class Metrics:
             registry=registry,
         )
 
+    def fold_tally(self) -> None:
+        """Add what the streaming path gathered in ``tally`` to the metrics (on the event
+        loop's thread, as the tally is kept)."""
+        labelled = self.labelled
+        self.tally.fold(
+            lambda kind: labelled(self.messages, kind),
+            lambda engine: labelled(self.frames, engine),
+            lambda engine: labelled(self.lag, engine),
+            self.receive_lag,
+        )
+
     def observe_load(self, load: LoadSample) -> None:
-        """Publish a load sample (the load monitor calls this on every tick)."""
+        """Publish a load sample and fold the tally (the load monitor calls this on every
+        tick)."""
+        self.fold_tally()
         self.loop_lag.set(load.lag_ms / 1000.0)
         self.loop_busy.set(load.loop_busy)
         self.resident_memory.set(load.rss_mb * MIB)
@@ -238,7 +255,9 @@ class Metrics:
 
     def render(self) -> tuple[bytes, str]:
         """The exposition text and its content type: with a multiprocess directory, the sum
-        over every worker's files; else this process's registry."""
+        over every worker's files; else this process's registry (either with this process's
+        tally folded in first)."""
+        self.fold_tally()
         directory = multiprocess_dir()
         if directory is None:
             return generate_latest(self.registry), CONTENT_TYPE_LATEST

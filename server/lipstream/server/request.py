@@ -217,18 +217,16 @@ class ActiveRequest:
         self.tail = SentTail(max(1, limits.tail_values // width), width)
         self.rows_per_message = max(1, limits.values_per_message // width)
         self.last_input = spec.clock.started_at
+        self.output_values = 0
+        """The values this request's input so far commits it to send (frames up to the
+        end of its phonemes × channels; an interrupt's return comes on top): kept as the
+        phonemes arrive, since the session reads it twice per message."""
 
     @property
     def id(self) -> str:
         return self.spec.id
 
     # ---- input ----------------------------------------------------------------------------
-
-    @property
-    def output_values(self) -> int:
-        """The values this request's input so far commits it to send (frames up to the
-        end of its phonemes × channels; an interrupt's return comes on top)."""
-        return self.output_values_until(self.phonemes_end) if self.n_phonemes else 0
 
     def output_values_until(self, end_s: float) -> int:
         return frame_count(end_s, self.spec.fps) * self.spec.profile.n_channels
@@ -296,6 +294,7 @@ class ActiveRequest:
         self.n_phonemes += len(spans)
         self.ends.extend(span.end for span in spans)
         self.phonemes_end = spans[-1].end
+        self.output_values = self.output_values_until(self.phonemes_end)
         self.coverage.advance(self._covered_until(), now)
         return self._emit(self.synthesizer.frames(), now)
 

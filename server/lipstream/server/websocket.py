@@ -78,6 +78,7 @@ from lipstream_client.messages import JsonValue
 
 from .admission import TokenBucket, bearer_token, origin_allowed, token_accepted
 from .deadline import LaterDeadline, SendDeadline
+from .frames_wire import MessageEncoder
 from .outgoing import Outgoing, Stamped
 from .overload import Upgrade
 from .read_ahead import DISCONNECT, ReadAhead, Received
@@ -219,6 +220,8 @@ class Connection:
         self.state = state
         self.settings = state.settings
         self.metrics = state.metrics
+        self.tally = state.metrics.tally
+        self.encode = MessageEncoder(encoding)
         self.session = Session(
             state.catalog,
             state.session_limits,
@@ -241,8 +244,7 @@ class Connection:
         self.read_ahead = ReadAhead(self.settings.max_message_bytes)
         self._receive_task: asyncio.Task[Received] | None = None
         self._peer_gone = False
-        self._engine_metrics: dict[str, tuple[Any, Any, Any]] = {}
-        self._message_counts: dict[str, Any] = {}
+        self._first_frame: dict[str, Any] = {}
 
     # ---- lifecycle hooks (Drainable) ------------------------------------------------------
 
@@ -281,6 +283,7 @@ class Connection:
                 self._receive_task.cancel()
             self.session.close()
             self._track_active()
+            self.metrics.fold_tally()
 
     async def _serve(self) -> None:
         settings = self.settings
@@ -307,7 +310,8 @@ class Connection:
             assert isinstance(received, Received)
             if received.event["type"] == "websocket.disconnect":
                 return
-            if not await self._send_all(self._expired(received.at)):
+            expired = self._expired(received.at)
+            if expired and not await self._send_all(expired):
                 return
             if not self.bucket.take(received.at):
                 await self._close(
@@ -331,13 +335,7 @@ class Connection:
                 return
 
     def _count(self, decoded: InputMessage) -> None:
-        kind = "invalid" if isinstance(decoded, ProtocolError) else decoded.type
-        counter = self._message_counts.get(kind)
-        if counter is None:
-            counter = self._message_counts[kind] = self.metrics.labelled(
-                self.metrics.messages, kind
-            )
-        counter.inc()
+        self.tally.message("invalid" if isinstance(decoded, ProtocolError) else decoded.type)
 
     def _decode(self, event: Mapping[str, Any]) -> InputMessage:
         payload = event["bytes"] if event.get("bytes") is not None else event.get("text", "")
@@ -403,7 +401,7 @@ class Connection:
         if not isinstance(arrived, float) or arrived > now:
             return Received(event, now)
         self.state.overload.monitor.observe_receive(now - arrived)
-        self.metrics.receive_lag.observe(now - arrived)
+        self.tally.receive_lag.observe(now - arrived)
         return Received(event, arrived)
 
     async def _handle(self, decoded: InputMessage, now: float) -> Answers:
@@ -438,11 +436,7 @@ class Connection:
         for item in outgoing:
             if self._peer_gone or self.aborted:
                 return [], []
-            payloads.append(
-                encode(item.message, self.encoding, validate=False)
-                if isinstance(item.message, Frames)
-                else None
-            )
+            payloads.append(self.encode(item.message) if isinstance(item.message, Frames) else None)
         return outgoing, payloads
 
     async def _in_pool(self, job: Callable[[], T], pool: Executor) -> T:
@@ -500,7 +494,7 @@ class Connection:
             stamped_at = time.monotonic()
             stamped = item.stamp(stamped_at)
             encoded = payloads[index] if index < len(payloads) else None
-            payload = encoded or encode(stamped.message, self.encoding, validate=False)
+            payload = encoded or self.encode(stamped.message)
             try:
                 await self._send_payload(payload)
             except TimeoutError:
@@ -554,27 +548,24 @@ class Connection:
         """Count a sent frames block; its lag runs until its send returned (``sending_s``
         after it was stamped): from socket to socket, as far as the process sees."""
         message: ServerMessage = stamped.message
-        if not isinstance(message, Frames) or stamped.engine is None:
+        engine = stamped.engine
+        if not isinstance(message, Frames) or engine is None:
             return
-        frames, lag, first_frame = self._frame_metrics(stamped.engine)
-        frames.inc(message.n_frames)
-        if stamped.lag_s is not None:
-            lag.observe(stamped.lag_s + sending_s)
+        lag_s = stamped.lag_s
+        self.tally.frames_sent(
+            engine, message.n_frames, None if lag_s is None else lag_s + sending_s
+        )
         if stamped.first_frame_latency_s is not None:
-            first_frame.observe(stamped.first_frame_latency_s)
+            self._first_frame_histogram(engine).observe(stamped.first_frame_latency_s)
 
-    def _frame_metrics(self, engine: str) -> tuple[Any, Any, Any]:
-        """The frames counter and the lag and first-frame histograms of ``engine``, kept
-        per connection: a frames block is recorded without a label lookup."""
-        children = self._engine_metrics.get(engine)
-        if children is None:
+    def _first_frame_histogram(self, engine: str) -> Any:
+        """The first-frame histogram of ``engine`` (once per request: not tallied), kept
+        per connection."""
+        histogram = self._first_frame.get(engine)
+        if histogram is None:
             metrics = self.metrics
-            children = self._engine_metrics[engine] = (
-                metrics.labelled(metrics.frames, engine),
-                metrics.labelled(metrics.lag, engine),
-                metrics.labelled(metrics.first_frame, engine),
-            )
-        return children
+            histogram = self._first_frame[engine] = metrics.labelled(metrics.first_frame, engine)
+        return histogram
 
     async def _close_now(self, code: int, reason: str) -> None:
         try:
