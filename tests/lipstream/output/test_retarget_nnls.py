@@ -25,7 +25,10 @@ if TYPE_CHECKING:
     from lipstream.engines.base import Model
     from lipstream.output.retarget import RetargetMap
 
-CONTROL_ATOL = 1e-7
+# The blend is checked for optimality to RESIDUAL_ATOL; the controls less tightly, since two
+# nearly dependent closure keys (dam, cohen-massaro) leave the minimizer ill-conditioned:
+# scipy and the warm-started solver then part by a few 1e-7 in a control.
+CONTROL_ATOL = 1e-6
 RESIDUAL_ATOL = 1e-8
 FPS = 60.0
 ENGINES = ("viseme-lerp", "dam", "cohen-massaro", "expressive-dp", "hmm")
