@@ -55,6 +55,7 @@ class ServerSettings:
     max_input_mb: float = 0.0
     max_loop_lag_ms: float = 50.0
     max_loop_busy: float = 0.9
+    max_session_rate: float = 150.0
     max_requests_per_session: int = 64
     max_message_bytes: int = 1 << 20
     max_body_bytes: int = 16 << 20
@@ -269,6 +270,15 @@ ENV_SETTINGS: tuple[EnvSetting, ...] = (
         _number(0.0, 1.0, above=True),
         "fraction of one core the event loop may be busy, counting the sessions admitted in "
         "the last second at their estimated cost, before new sessions are refused",
+    ),
+    EnvSetting(
+        "LIPSTREAM_MAX_SESSION_RATE",
+        "max_session_rate",
+        _number(0.0, 1e6),
+        "new sessions (WebSocket upgrades) admitted per second per worker, over every 100 ms "
+        "(a WebSocket's handshake and close cost the loop more than a millisecond of CPU, so a "
+        "storm admitted faster stalls every session for its handshakes: "
+        "reports/hostile-clients.md); beyond: `server_busy` (`admission_rate`); 0 = no limit",
     ),
     EnvSetting(
         "LIPSTREAM_MAX_REQUESTS_PER_SESSION",

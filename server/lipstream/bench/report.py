@@ -289,6 +289,32 @@ def retarget_cost(bench: Bench) -> str:
     )
 
 
+CONNECTION_COST = "connection_cost.json"
+
+
+def connection_cost(bench: Bench) -> str:
+    """``python -m lipstream.bench.connection_cost``: server CPU per WebSocket opened and
+    closed and per ``/healthz`` connection, each round and the median."""
+    if not bench.exists(CONNECTION_COST):
+        return (
+            f"Not measured yet: no `bench/{CONNECTION_COST}` "
+            "(`python -m lipstream.bench.connection_cost`).\n"
+        )
+    doc = bench.load(CONNECTION_COST)
+    names = {"websocket": "WebSocket opened and closed", "healthz": "HTTP `GET /healthz`"}
+    return bench.source(CONNECTION_COST, doc) + table(
+        ["connection", "server CPU ms per connection, each round", "median"],
+        (
+            [
+                names.get(leg, leg),
+                ", ".join(number(value, 2) for value in figures["cpu_ms_per_connection"]),
+                number(figures["median_ms"], 2),
+            ]
+            for leg, figures in doc["legs"].items()
+        ),
+    )
+
+
 def _call_pairs(bench: Bench, name: str) -> str:
     doc = bench.load(name)
     header = (
@@ -1520,6 +1546,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "soak": soak,
     "soak-before": lambda bench: soak(bench, "soak_before.json"),
     "storm": storm,
+    "connection-cost": connection_cost,
 }
 
 

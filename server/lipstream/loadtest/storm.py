@@ -7,7 +7,9 @@ head and stop, or ``sessions``: WebSockets that each start a request and stream 
 every ``PHONEME_S`` (real time) for ``duration_s``, then end it (the baseline sessions
 stream on through the storm). The storm's connections are shared among ``processes`` client
 processes (this one and ``processes - 1`` spawned ones, released together once all have
-started), so that beyond a few hundred sessions the client is not what limits the figures.
+started; with baseline sessions, ``processes`` spawned ones, so that this one's loop, which
+stamps the baseline sessions' frames, is not stalled by the storm's own connections), so
+that beyond a few hundred sessions the client is not what limits the figures.
 Meanwhile a probe process of its own asks each ``/healthz``
 given (the serving port's, and the liveness port's) every ``PROBE_EVERY_S`` with a
 ``PROBE_TIMEOUT_S`` timeout, and samples the server's resident memory every
@@ -237,8 +239,9 @@ async def storm(
         answers.recv()  # probing from now on
     plan = _Plan(url, kind, duration_s, engine, character, latency_budget_ms)
     counts = [connections // processes + (i < connections % processes) for i in range(processes)]
+    own = [] if baseline else counts[:1]  # the baseline sessions have this process to themselves
     go = context.Event()
-    helpers = [_start_share(context, plan, count, go) for count in counts[1:]]
+    helpers = [_start_share(context, plan, count, go) for count in counts[len(own) :]]
     for _, pipe in helpers:  # each has imported its modules and waits for go
         if not await asyncio.to_thread(pipe.poll, PROBE_START_S):
             raise RuntimeError("a storm client process did not start")
@@ -255,7 +258,7 @@ async def storm(
     ]
     await asyncio.sleep(lead)
     go.set()
-    shares = [await _share(plan, counts[0], tick=False)]
+    shares = [await _share(plan, count, tick=False) for count in own]
     for process, pipe in helpers:
         if await asyncio.to_thread(pipe.poll, duration_s + SHARE_GRACE_S):
             shares.append(pipe.recv())

@@ -1,13 +1,14 @@
 """The accept loop's gate: connections the server refuses outright, answered on the bare
 socket before any protocol is built.
 
-Sketch: two kinds of connection get an HTTP 503 from the HTTP protocol before it reads
+Sketch: three kinds of connection get an HTTP 503 from the HTTP protocol before it reads
 anything more than their head (``handshake``): one from an address at its connection cap
-with its probe lane full (``too_many_client_connections``), and a WebSocket upgrade to
-``/v1/stream`` while the load verdict refuses new sessions or the loop sheds
-(``server_busy``). Building the protocol, parsing the head with h11 and tearing the
-connection down cost the loop most of a millisecond each, so a storm's refusals alone
-keep it saturated for as long as the storm lasts. ``ServerGate`` gives the same answers a
+with its probe lane full, a WebSocket upgrade to ``/v1/stream`` from an address out of
+upgrade tokens (both ``too_many_client_connections``), and such an upgrade while the load
+verdict refuses new sessions or the loop sheds (``server_busy``). Building the protocol,
+parsing the head with h11 and tearing the connection down cost the loop most of a
+millisecond each, so a storm's refusals alone keep it saturated for as long as the storm
+lasts. ``ServerGate`` gives the same answers a
 step earlier, in the accept loop (``accept_loop.AcceptGate``): the address's count is a
 lookup, and an upgrade is told from its head read with ``MSG_PEEK`` (a head not yet
 complete, or any other request, such as a health probe, goes on to the protocol). The
@@ -21,13 +22,14 @@ from __future__ import annotations
 import asyncio
 import re
 import socket
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
 from lipstream_client.errors import SERVER_BUSY, TOO_MANY_CLIENT_CONNECTIONS
 
 from .accept_loop import BoundedAcceptLoop
-from .client_limits import CONNECTIONS, refusal_response
+from .client_limits import CONNECTIONS, UPGRADE_RATE, refusal_response
 from .handshake import (
     BUSY_RESPONSE,
     CLIENT_PROBE_LANE,
@@ -63,6 +65,19 @@ def peeked_head(connection: socket.socket) -> bytes:
         return b""
 
 
+class Head:
+    """A fresh connection's head, peeked at most once, when first asked about."""
+
+    def __init__(self, connection: socket.socket) -> None:
+        self.connection = connection
+        self.upgrade: bool | None = None
+
+    def is_upgrade(self) -> bool:
+        if self.upgrade is None:
+            self.upgrade = is_stream_upgrade(peeked_head(self.connection))
+        return self.upgrade
+
+
 @dataclass
 class ServerGate:
     """The refusals the HTTP protocol would make before reading further, made at accept."""
@@ -78,14 +93,19 @@ class ServerGate:
             return refusal_response(server.clients, address, CONNECTIONS)
         if server.lifecycle.draining:
             return None
+        head = Head(connection)
+        if server.clients.out_of_upgrades(address, time.monotonic()) and head.is_upgrade():
+            metrics.labelled(metrics.refused, TOO_MANY_CLIENT_CONNECTIONS).inc()
+            metrics.labelled(metrics.client_refusals, UPGRADE_RATE).inc()
+            return refusal_response(server.clients, address, UPGRADE_RATE)
         sessions = len(server.lifecycle.connections)
         if server.overload.shedding(sessions):
-            if not is_stream_upgrade(peeked_head(connection)):
+            if not head.is_upgrade():
                 return None
             metrics.labelled(metrics.refused, SHEDDING).inc()
             return BUSY_RESPONSE
         busy = server.overload.verdict(sessions)
-        if busy is None or not is_stream_upgrade(peeked_head(connection)):
+        if busy is None or not head.is_upgrade():
             return None
         metrics.labelled(metrics.refused, SERVER_BUSY).inc()
         metrics.labelled(metrics.busy_refusals, busy.reason).inc()

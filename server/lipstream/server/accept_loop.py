@@ -10,8 +10,9 @@ the loop turns back to the sessions it serves, one stall of hundreds of millisec
 wait in the kernel's queue, and the selector reports the socket readable again on the next
 turn, after the sessions' own I/O. A queue left to fill drops the SYNs of every newcomer,
 health probes included (they are retried only after 1 s, then 3 s), so while the queue
-holds more than half its capacity (Linux reports both for a listening socket in
-``TCP_INFO``) a turn also takes the excess. A connection the server would refuse outright
+leaves less than ``QUEUE_HEADROOM`` places free (Linux reports its length and capacity for
+a listening socket in ``TCP_INFO``) a turn also takes the excess: taken sooner, a storm's
+excess would be one long turn of handshakes. A connection the server would refuse outright
 (``AcceptGate``, ``accept_gate.ServerGate``: an address over its limits, a WebSocket upgrade
 while the load verdict refuses sessions) is answered and closed here, on the bare socket:
 no transport, no protocol, no task. Those cost a few microseconds each, so up to
@@ -28,7 +29,8 @@ import struct
 from typing import Any, Protocol
 
 ACCEPTS_PER_TURN = 16
-REFUSALS_PER_TURN = 512
+REFUSALS_PER_TURN = 128
+QUEUE_HEADROOM = 256
 LOOP = "lipstream.server.accept_loop:BoundedAcceptLoop"
 TCP_INFO_QUEUE = struct.Struct("8x16xII")  # tcpi_unacked, tcpi_sacked: queued, capacity
 READ_BEFORE_CLOSE = 65536
@@ -44,14 +46,14 @@ class AcceptGate(Protocol):
 
 
 def queue_excess(sock: socket.socket) -> int:
-    """How many connections the listening ``sock``'s queue holds beyond half its capacity;
-    0 where the kernel does not say."""
+    """How many connections the listening ``sock``'s queue holds beyond its capacity less
+    ``QUEUE_HEADROOM`` (at most half of it); 0 where the kernel does not say."""
     try:
         info = sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_INFO, TCP_INFO_QUEUE.size)
         queued, capacity = TCP_INFO_QUEUE.unpack(info)
     except (AttributeError, OSError, struct.error):
         return 0
-    return max(0, int(queued) - int(capacity) // 2)
+    return max(0, int(queued) - max(int(capacity) - QUEUE_HEADROOM, int(capacity) // 2))
 
 
 def answer_and_close(connection: socket.socket, answer: bytes) -> None:

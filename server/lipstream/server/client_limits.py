@@ -80,6 +80,14 @@ class ClientLimits:
         client.tokens -= 1.0
         return True
 
+    def out_of_upgrades(self, address: str, now: float) -> bool:
+        """Whether an upgrade from ``address`` at ``now`` would find no token, taking none."""
+        client = self.clients.get(address)
+        if not self.upgrade_rate or client is None:
+            return False
+        elapsed = max(0.0, now - client.stamp)
+        return client.tokens + elapsed * self.upgrade_rate < 1.0
+
     def retry_after_s(self, reason: str) -> int:
         """Whole seconds until a refused client may try again: one token's refill for the
         rate, else a second (connections close at their own pace)."""

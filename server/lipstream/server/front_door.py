@@ -29,7 +29,11 @@ STARTING_PHASE = "starting"
 POLL_S = 0.05
 READ_DEADLINE_S = 1.0
 MAX_HEAD_BYTES = 8192
-BACKLOG = 2048
+# The kernel caps it at net.core.somaxconn (4096 by default since Linux 5.4). A deep queue
+# lets a connection flood's burst wait there (the accept loop takes a bounded number per
+# turn) instead of filling it, where every newcomer's SYN, a probe's too, is dropped and
+# retried only after 1 s.
+BACKLOG = 8192
 RETRY_AFTER_S = 2
 
 

@@ -77,6 +77,8 @@ from .catalog import Catalog
 from .load import LoadMonitor, LoadSample, machine_memory_mb
 
 RECENT_S = 1.0
+RATE_WINDOW_S = 0.1
+RATE_RETRY_AFTER_MS = 500
 RETRY_AFTER_MS = 1000
 MEMORY_RETRY_AFTER_MS = 5000
 LEARN_FROM_SESSIONS = 16
@@ -122,6 +124,7 @@ class LoadLimits:
     max_busy: float
     session_cost: float
     engine_costs: Mapping[str, float] = field(default_factory=dict)
+    max_session_rate: float = 0.0
 
 
 def calibrated_session_cost(ladders: Iterable[Sequence[RungEstimate]]) -> float:
@@ -145,6 +148,7 @@ class OverloadPolicy:
     priced: set[Hashable] = field(default_factory=set)
     streaming: set[Hashable] = field(default_factory=set)
     recent: deque[tuple[float, float]] = field(default_factory=deque)
+    admitted: deque[float] = field(default_factory=deque)
     lock: threading.Lock = field(default_factory=threading.Lock)
 
     @property
@@ -178,6 +182,7 @@ class OverloadPolicy:
         with self.lock:
             refusal = self._verdict(load, sessions, now)
             if refusal is None:
+                self.admitted.append(now)
                 if isinstance(key, Upgrade):
                     self.upgrades.pop(key, None)
                     self.upgrades[key] = now
@@ -195,6 +200,7 @@ class OverloadPolicy:
     def _verdict(self, load: LoadSample, sessions: int, now: float) -> Refusal | None:
         self._learn(load, now)
         refusal = self.request_refusal(load) or self._lag_refusal(load, sessions)
+        refusal = refusal or self._rate_refusal(now)
         if refusal is None:
             refusal = self._busy_refusal(load, now, self.session_cost, "another session")
         return refusal
@@ -275,6 +281,17 @@ class OverloadPolicy:
             del self.upgrades[oldest]
         started = sum(cost * (1.0 - (now - at) / RECENT_S) for at, cost in self.recent)
         return started + (len(self.pending) + len(self.upgrades)) * self.session_cost
+
+    def _rate_refusal(self, now: float) -> Refusal | None:
+        """Past ``max_session_rate`` sessions a second, counted over the last
+        ``RATE_WINDOW_S``."""
+        rate = self.limits.max_session_rate
+        while self.admitted and now - self.admitted[0] >= RATE_WINDOW_S:
+            self.admitted.popleft()
+        if not rate or len(self.admitted) < max(1.0, rate * RATE_WINDOW_S):
+            return None
+        what = f"new sessions arrive faster than {rate:g} a second"
+        return self._refusal("admission_rate", what, RATE_RETRY_AFTER_MS)
 
     def _lag_refusal(self, load: LoadSample, sessions: int) -> Refusal | None:
         limit = self.limits.max_lag_ms
@@ -386,5 +403,6 @@ def overload_for(
         settings.max_loop_busy,
         min(costs.values(), default=calibrated_session_cost([])),
         costs,
+        settings.max_session_rate,
     )
     return Overload(OverloadPolicy(limits), LoadMonitor(on_sample=on_sample))

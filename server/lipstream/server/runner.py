@@ -60,6 +60,7 @@ from ..status import Report
 from .accept_loop import LOOP as ACCEPT_LOOP
 from .app import create_app
 from .closing import BoundedCloseProtocol
+from .front_door import BACKLOG
 from .handshake import GuardedHTTPProtocol
 from .lifecycle import DRAIN_SIGNALS
 from .open_files import raise_open_file_limit
@@ -162,6 +163,7 @@ def uvicorn_options(server: ServerSettings) -> dict[str, Any]:
         "timeout_worker_healthcheck": WORKER_HEALTHCHECK_S,
         "lifespan": "on",
         "loop": ACCEPT_LOOP,
+        "backlog": BACKLOG,
     }
 
 

@@ -477,3 +477,21 @@ def test_demo_calibration_renders_each_corpus_beside_the_real_one(tmp_path: Path
         in rendered
     )
     assert "Not measured yet" in BLOCKS["demo-calibration"](Bench(tmp_path / "empty"))
+
+
+def test_the_connection_cost_renders_each_round_and_the_median(tmp_path: Path) -> None:
+    legs = {
+        "websocket": {"cpu_ms_per_connection": [1.575, 1.775], "median_ms": 1.675},
+        "healthz": {"cpu_ms_per_connection": [0.65, 0.675], "median_ms": 0.6625},
+    }
+    doc = {
+        "date": "2030-01-02T03:04:05+00:00",
+        "machine": {"python": "3.11.7"},
+        "command": "python -m lipstream.bench.connection_cost",
+        "legs": legs,
+    }
+    (tmp_path / "connection_cost.json").write_text(json.dumps(doc))
+    rendered = BLOCKS["connection-cost"](Bench(tmp_path))
+    assert "| WebSocket opened and closed | 1.57, 1.77 | 1.68 |" in rendered
+    assert "| HTTP `GET /healthz` | 0.65, 0.68 | 0.66 |" in rendered
+    assert "Not measured yet" in BLOCKS["connection-cost"](Bench(tmp_path / "empty"))

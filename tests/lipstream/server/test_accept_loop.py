@@ -30,7 +30,7 @@ from lipstream.server.accept_loop import (
 from lipstream.server.handshake import CLIENT_PROBE_LANE
 from lipstream.server.runner import uvicorn_options
 from lipstream_client.errors import TOO_MANY_CLIENT_CONNECTIONS
-from tests.lipstream.server.harness import Served, serving
+from tests.lipstream.server.harness import Served, client, serving
 
 PENDING = 40
 ANSWER = b"HTTP/1.1 503 Service Unavailable\r\ncontent-length: 0\r\n\r\n"
@@ -297,3 +297,28 @@ def test_a_busy_server_refuses_an_upgrade_at_accept_and_still_answers_a_probe(
         assert always_busy.state.overload.policy.upgrades == {}  # nothing counted as admitted
     finally:
         loop.accept_gate = recording.gate
+
+
+def test_an_upgrade_past_its_addresss_rate_is_refused_at_accept(lerp_dir: Path) -> None:
+    settings = ServerSettings(client_upgrade_rate=0.001, client_upgrade_burst=1)
+    with serving(lerp_dir, settings) as served:
+        loop = served.loop
+        assert isinstance(loop, BoundedAcceptLoop)
+        recording = Recording(loop.accept_gate)  # type: ignore[arg-type]
+        loop.accept_gate = recording
+        with client(served.ws):  # takes the address's one token
+            pass
+        assert recording.answers == [("127.0.0.1", None)]
+        answer = sent_while_the_loop_waits(served, UPGRADE_HEAD)
+        head, _, body = answer.partition(b"\r\n\r\n")
+        assert head.startswith(b"HTTP/1.1 503 ")
+        error = json.loads(body)["error"]
+        assert (error["code"], error["details"]["reason"]) == (
+            TOO_MANY_CLIENT_CONNECTIONS,
+            "upgrade_rate",
+        )
+        assert recording.answers[-1][1] is not None  # answered by the gate
+        probe = sent_while_the_loop_waits(
+            served, b"GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
+        )
+        assert probe.startswith(b"HTTP/1.1 200 ")

@@ -158,3 +158,13 @@ def test_upgrades_past_a_clients_rate_are_refused(lerp_dir: Path) -> None:
         assert httpx.get(f"{served.http}/v1/engines").status_code == 200  # HTTP is not upgrades
         name = 'lipstream_client_refusals_total{reason="upgrade_rate"}'
         assert metric(served, name) == 1.0
+
+
+def test_whether_an_address_is_out_of_upgrades_is_told_without_taking_a_token() -> None:
+    limits = ClientLimits(max_connections=0, upgrade_rate=2.0, upgrade_burst=1)
+    assert not limits.out_of_upgrades(HOST, 0.0)  # an address not seen has a full bucket
+    assert limits.upgrade(HOST, 0.0)
+    assert limits.out_of_upgrades(HOST, 0.0) and limits.out_of_upgrades(HOST, 0.25)
+    assert not limits.out_of_upgrades(HOST, 0.5)  # at 2 a second, one token is back
+    assert limits.upgrade(HOST, 0.5) and not limits.upgrade(HOST, 0.5)  # the checks took none
+    assert not ClientLimits(0, 0.0, 1).out_of_upgrades(HOST, 0.0)  # no rate, never out

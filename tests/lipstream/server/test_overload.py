@@ -26,6 +26,7 @@ from lipstream.server.overload import (
     LAG_FROM_SESSIONS,
     LEARN_FROM_SESSIONS,
     MEMORY_RETRY_AFTER_MS,
+    RATE_RETRY_AFTER_MS,
     RECENT_S,
     RETRY_AFTER_MS,
     UPGRADE_TTL_S,
@@ -372,7 +373,8 @@ def test_a_loop_held_far_behind_sheds_upgrades_with_http_503(lerp_dir: Path) -> 
         held.set()
         time.sleep(0.5)
 
-    with serving(lerp_dir, ServerSettings(max_loop_lag_ms=10.0)) as served, ExitStack() as stack:
+    settings = ServerSettings(max_loop_lag_ms=10.0, max_session_rate=0.0)  # 17 at once
+    with serving(lerp_dir, settings) as served, ExitStack() as stack:
         for _ in range(LAG_FROM_SESSIONS):
             ws = stack.enter_context(client(served.ws))
             ws.send(Start("a", "viseme-lerp", "demo"))
@@ -421,3 +423,23 @@ def test_an_engine_priced_out_refuses_its_start_and_not_the_session(lerp_dir: Pa
             lambda: not (policy.priced or policy.streaming or policy.pending),
             "the closed session's admission released",
         )
+
+
+def test_new_sessions_past_the_rate_are_refused_for_the_rest_of_the_window() -> None:
+    """At 50 sessions a second, five fit in any 100 ms (the cost bound is out of the way):
+    the sixth within the window is refused with ``admission_rate``, a verdict counts
+    nothing, and once the first five are 100 ms old five more fit."""
+    cheap = replace(LIMITS, session_cost=0.001, max_session_rate=50.0)
+    overload = policy(cheap)
+    for index in range(5):
+        assert overload.verdict(QUIET, 0, 0.01 * index) is None
+        assert overload.session_refusal(QUIET, 0, 0.01 * index, f"s{index}") is None
+    refusal = overload.session_refusal(QUIET, 0, 0.09, "s5")
+    assert refusal is not None and refusal.reason == "admission_rate"
+    assert overload.verdict(QUIET, 0, 0.099) is not None and "s5" not in overload.pending
+    assert RATE_RETRY_AFTER_MS <= refusal.retry_after_ms < 2 * RATE_RETRY_AFTER_MS
+    # The first is 100 ms old at 0.1: one place; at 0.2 every one is, and five fit again.
+    assert overload.session_refusal(QUIET, 0, 0.1, "s6") is None
+    assert overload.session_refusal(QUIET, 0, 0.1, "s7") is not None
+    assert admitted_in_a_burst(overload, QUIET, now=0.2) == 5
+    assert admitted_in_a_burst(policy(replace(cheap, max_session_rate=0.0)), QUIET, 0.0) > 5
