@@ -33,12 +33,10 @@ from __future__ import annotations
 
 import argparse
 import copy
-import platform
 import sys
 import time
 from collections.abc import Callable
 from dataclasses import replace
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -46,7 +44,6 @@ import numpy as np
 from scipy.special import logsumexp
 from threadpoolctl import threadpool_limits
 
-from .._version import __version__
 from ..audio import Audio
 from ..capture.decode import media_audio
 from ..config import load_settings
@@ -69,7 +66,7 @@ from ..engines.hmm import HmmEngine, HmmModel
 from ..engines.viseme_lerp import VisemeLerpEngine
 from ..evaluation import lip_aperture
 from ..features import WARPS, most_likely_warp, speech_features, warped
-from ..results_file import write_results
+from ..results_file import recorded, write_results
 from ..training import DEMO_CORPUS_DIR
 from .real_faces import Clip, pearson_r, real_clips
 
@@ -297,14 +294,7 @@ def run_hmm_voices(corpus: Corpus, grid_dir: Path, command: list[str]) -> dict[s
             grid.fps,
         )
     return {
-        "lipstream_version": __version__,
-        "date": datetime.now(UTC).isoformat(timespec="seconds"),
-        "command": " ".join(command),
-        "machine": {
-            "python": platform.python_version(),
-            "processor": platform.machine(),
-            "system": platform.system(),
-        },
+        **recorded(" ".join(command)),
         "corpus": {"name": corpus.name, "digest": corpus.digest(), "lines": len(corpus.utterances)},
         "second_character": _speaker_fields(SECOND_CHARACTER, len(second_train.utterances)),
         "heldout_voice": {

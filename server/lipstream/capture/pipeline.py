@@ -34,7 +34,7 @@ from .decode import read_audio, read_frames, video_start
 from .gaps import bridge_gaps, check_faces
 from .jobs import CaptureJob
 from .pose import face_frame
-from .track import track_faces
+from .track import Track, track_faces
 
 
 @dataclass(frozen=True)
@@ -57,12 +57,12 @@ class CaptureResult:
     failures: list[LipstreamError] = field(default_factory=list)
 
 
-def track_clip(job: CaptureJob) -> TrackedClip:
-    """Decode, track, check and align one video; coded errors name the video."""
-    where = str(job.video)
-    origin = video_start(job.video)
-    audio = read_audio(job.video, origin)
-    track = track_faces(read_frames(job.video))
+def tracked_video(video: Path, where: str) -> tuple[Audio, Track]:
+    """Decode one video's sound and track its face, checked and with short gaps bridged;
+    coded errors name ``where``."""
+    origin = video_start(video)
+    audio = read_audio(video, origin)
+    track = track_faces(read_frames(video))
     if len(track.times) < 2:
         raise LipstreamError(
             f"the video holds {len(track.times)} frame(s); capture needs at least two",
@@ -70,7 +70,13 @@ def track_clip(job: CaptureJob) -> TrackedClip:
             code="corrupt_video",
         )
     check_faces(track, where)
-    track = bridge_gaps(track, where)
+    return audio, bridge_gaps(track, where)
+
+
+def track_clip(job: CaptureJob) -> TrackedClip:
+    """Decode, track, check and align one video; coded errors name the video."""
+    where = str(job.video)
+    audio, track = tracked_video(job.video, where)
     alignment = align(audio, job.transcript, where=where)
     return TrackedClip(job, track.times, face_frame(track.landmarks), audio, alignment)
 

@@ -118,26 +118,15 @@ def run(session: Session, models_dir: Path, min_takes: int, job: Job) -> None:
 
 
 def _track(jobs: dict[int, Any], job: Job) -> dict[int, tuple[Any, Any, Any]]:
-    from ..capture.decode import read_audio, read_frames, video_start
-    from ..capture.gaps import bridge_gaps, check_faces
-    from ..capture.track import track_faces
+    from ..capture.pipeline import tracked_video
 
     tracked = {}
     for number, (index, capture_job) in enumerate(jobs.items()):
         job.write(CAPTURING, f"tracking the face in take {index}", number / len(jobs))
         where = f"takes[{index}]"
         try:
-            origin = video_start(capture_job.video)
-            audio = read_audio(capture_job.video, origin)
-            track = track_faces(read_frames(capture_job.video))
-            if len(track.times) < 2:
-                raise LipstreamError(
-                    f"the video holds {len(track.times)} frame(s); capture needs at least two",
-                    where=where,
-                    code="corrupt_video",
-                )
-            check_faces(track, where)
-            tracked[index] = (capture_job, audio, bridge_gaps(track, where))
+            audio, track = tracked_video(capture_job.video, where)
+            tracked[index] = (capture_job, audio, track)
         except Exception as error:  # noqa: BLE001 - every failure is the take's, named
             job.take(index, error)
     return tracked
