@@ -50,7 +50,7 @@ from ..frontends.words_to_spans import timings_to_spans
 from ..phonemes import PHONEME_INDEX, PHONEMES, SILENCE, normalize_phoneme
 from ..speech.text_frontend import speak_text
 from ..timeline import EMOTIONS, PhonemeSpan, coerce_spans
-from .rest import HttpError, authorize, error_response, rest_client
+from .rest import HttpError, authorize, error_response, read_json_object, rest_client
 from .startup import Startup
 from .state import ServerState
 
@@ -78,16 +78,7 @@ async def _answer(
         authorize(request, state)
         body: dict[str, Any] = {}
         if request.method == "POST":
-            raw = await request.body()
-            if len(raw) > MAX_BODY_BYTES:
-                raise HttpError("message_too_large", f"body over {MAX_BODY_BYTES} bytes")
-            try:
-                parsed = json.loads(raw or b"{}")
-            except (json.JSONDecodeError, UnicodeDecodeError) as error:
-                raise HttpError("malformed", f"the body is not JSON: {error}") from error
-            if not isinstance(parsed, dict):
-                raise HttpError("invalid_message", "the body must be an object")
-            body = parsed
+            body = await read_json_object(request, MAX_BODY_BYTES, "invalid_message")
         model = _model(state, request.path_params["character"])
         loop = asyncio.get_running_loop()
         lane = state.speech.client(rest_client(request))

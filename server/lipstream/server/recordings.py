@@ -51,7 +51,7 @@ from ..recording.sessions import (
 )
 from ..recording.watcher import ModelWatcher
 from .hot_load import load_character
-from .rest import HttpError, authorize, error_response
+from .rest import HttpError, authorize, error_response, read_json_object
 from .startup import Startup
 from .state import ServerState
 
@@ -219,18 +219,10 @@ def _failed(state: ServerState, error: HttpError) -> Response:
 
 
 async def _json_body(request: Request) -> dict[str, Any]:
-    raw = b""
-    async for chunk in request.stream():
-        raw += chunk
-        if len(raw) > MAX_JSON_BYTES:
-            raise _refused("message_too_large", f"body over {MAX_JSON_BYTES} bytes")
     try:
-        parsed = json.loads(raw or b"{}")
-    except (json.JSONDecodeError, UnicodeDecodeError) as error:
-        raise _refused("malformed", f"the body is not JSON: {error}") from error
-    if not isinstance(parsed, dict):
-        raise _refused("invalid_request", "the body must be an object")
-    return parsed
+        return await read_json_object(request, MAX_JSON_BYTES)
+    except HttpError as error:
+        raise _refused(error.code, error.message) from error
 
 
 def _check_free(state: ServerState, store: SessionStore, name: str) -> None:

@@ -195,7 +195,7 @@ async def synthesize(request: Request, state: ServerState) -> Response:
         response_encoding = _response_encoding(request, request_encoding)
         authorize(request, state)
         _admit(state)
-        body = await _read_body(request, state.settings.max_body_bytes)
+        body = await read_body(request, state.settings.max_body_bytes)
         messages = _messages(_parse(body, request_encoding), request_encoding)
         loop = asyncio.get_running_loop()
         lane = state.speech.client(rest_client(request))
@@ -280,7 +280,23 @@ def authorize(request: Request, state: ServerState) -> None:
         )
 
 
-async def _read_body(request: Request, limit: int) -> bytes:
+async def read_json_object(
+    request: Request, limit: int, not_object: str = "invalid_request"
+) -> dict[str, Any]:
+    """The request's body, at most ``limit`` bytes, as a JSON object (an empty body: ``{}``);
+    ``malformed`` when it is not JSON, ``not_object`` when it is not an object."""
+    raw = await read_body(request, limit)
+    try:
+        parsed = json.loads(raw or b"{}")
+    except (json.JSONDecodeError, UnicodeDecodeError) as error:
+        raise HttpError("malformed", f"the body is not JSON: {error}") from error
+    if not isinstance(parsed, dict):
+        raise HttpError(not_object, "the body must be an object")
+    return parsed
+
+
+async def read_body(request: Request, limit: int) -> bytes:
+    """The request's body; ``message_too_large`` past ``limit`` bytes, declared or read."""
     declared = request.headers.get("content-length")
     if declared is not None and declared.isdigit() and int(declared) > limit:
         raise _too_large(int(declared), limit)

@@ -46,12 +46,11 @@ class Recording:
         return document
 
     def finished_job(self) -> dict[str, Any]:
-        def finished() -> dict[str, Any] | None:
-            job = self.status()["job"]
-            return job if job is not None and job["state"] in ("done", "failed") else None
+        def finished() -> dict[str, Any]:
+            job: dict[str, Any] | None = self.status()["job"]
+            return job if job is not None and job["state"] in ("done", "failed") else {}
 
-        job: dict[str, Any] = eventually(finished, "the training job ends", JOB_POLLS, JOB_PAUSE_S)
-        return job
+        return eventually(finished, "the training job ends", JOB_POLLS, JOB_PAUSE_S)
 
 
 def settings(recordings: Path, **changes: Any) -> ServerSettings:
@@ -87,7 +86,8 @@ def faceless_clip(tmp_path_factory: pytest.TempPathFactory) -> bytes:
 
 
 def open_session(served: Served, body: dict[str, Any], **headers: str) -> httpx.Response:
-    return httpx.post(f"{served.http}/v1/recordings", json=body, headers=headers)
+    # The first session without sentences has espeak-ng speak the whole script: seconds.
+    return httpx.post(f"{served.http}/v1/recordings", json=body, headers=headers, timeout=120)
 
 
 def recording(served: Served, name: str, sentences: list[str]) -> Recording:
@@ -130,6 +130,14 @@ def test_recordings_become_a_served_character_and_a_bad_take_loses_nothing(
 
     started = httpx.post(take.url("/train"))
     assert started.status_code == 202, started.text
+    # The job is a process of its own (capture and training take seconds): meanwhile the
+    # session refuses changes, and the server serves.
+    again = httpx.post(take.url("/train"))
+    replaced = take.upload(0, good)
+    assert (again.status_code, error_of(again)) == (409, "job_running")
+    assert (replaced.status_code, error_of(replaced)) == (409, "job_running")
+    demo = {"engine": "viseme-lerp", "character": "demo", "fps": 30, "text": "hi"}
+    assert httpx.post(f"{served.http}/v1/synthesize", json=demo, timeout=60).status_code == 200
     job = take.finished_job()
     assert job["state"] == "done", job
     assert job["job"] == started.json()["job"] and job["character"] == "grid-me"
@@ -141,8 +149,8 @@ def test_recordings_become_a_served_character_and_a_bad_take_loses_nothing(
 
     assert characters(served)["grid-me"] == sorted(ENGINES)
     for engine in ENGINES:
-        body = {"engine": engine, "character": "grid-me", "fps": 30, "text": "hello there"}
-        answer = httpx.post(f"{served.http}/v1/synthesize", json=body, timeout=60)
+        request = {"engine": engine, "character": "grid-me", "fps": 30, "text": "hello there"}
+        answer = httpx.post(f"{served.http}/v1/synthesize", json=request, timeout=60)
         assert answer.status_code == 200, answer.text
         result = answer.json()
         frames = np.asarray(result["data"], dtype=float)
@@ -161,15 +169,20 @@ def test_recordings_become_a_served_character_and_a_bad_take_loses_nothing(
 def test_too_few_good_takes_fail_the_job_naming_each_bad_take(
     served: Served, faceless_clip: bytes
 ) -> None:
-    take = recording(served, "too-few", [GRID_SENTENCE, GRID_SENTENCE])
+    take = recording(served, "too-few", [GRID_SENTENCE] * 3)
     assert take.upload(0, faceless_clip).status_code == 200
     assert take.upload(1, CLIP.read_bytes()).status_code == 200
+    assert take.upload(2, b"not a video at all").status_code == 200
     assert httpx.post(take.url("/train")).status_code == 202
     job = take.finished_job()
     assert job["state"] == "failed" and job["character"] is None
     assert job["error"]["code"] == "too_few_takes"
-    assert [(item["take"], item["code"]) for item in job["error"]["takes"]] == [(0, "no_face")]
+    failed = [(item["take"], item["code"]) for item in job["error"]["takes"]]
+    assert failed == [(0, "no_face"), (2, "corrupt_video")]
+    assert "1 good recording(s), at least 2 needed" in job["error"]["message"]
     assert "take 0: no_face" in job["error"]["message"]
+    statuses = [(item["index"], item["status"]) for item in take.status()["takes"]]
+    assert statuses == [(0, "failed"), (1, "captured"), (2, "failed")]
     assert "too-few" not in characters(served)
 
 

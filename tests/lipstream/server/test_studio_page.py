@@ -102,7 +102,8 @@ def test_marking_a_node_removes_it_and_pinning_a_node_makes_the_search_choose_it
     chosen = first[index]
     assert int(model.nodes.phoneme[chosen]) == PHONEMES.index(studio(page, "state.phoneme"))
 
-    point = studio(page, f"locate({chosen})")
+    page.evaluate("document.getElementById('map').scrollIntoView({block: 'center'})")
+    point = studio(page, f"locate({chosen})")  # in the viewport's coordinates: after scrolling
     page.mouse.click(point["x"], point["y"])
     page.wait_for_function("window.lipstreamStudio.log.clips > 0", timeout=WAIT_MS)
     if studio(page, "state.selectedNode") != chosen:  # another trajectory crosses it there
@@ -125,6 +126,7 @@ def test_marking_a_node_removes_it_and_pinning_a_node_makes_the_search_choose_it
         if node != chosen
     ]
     target = members[len(members) // 2]
+    page.evaluate("document.getElementById('map').scrollIntoView({block: 'center'})")
     point = studio(page, f"locate({target})")
     page.mouse.click(point["x"], point["y"])
     page.wait_for_function("window.lipstreamStudio.log.clips > 1", timeout=WAIT_MS)
