@@ -25,6 +25,7 @@ import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 
 from lipstream_client.errors import SERVER_BUSY, TOO_MANY_CLIENT_CONNECTIONS
 
@@ -70,12 +71,10 @@ class Head:
 
     def __init__(self, connection: socket.socket) -> None:
         self.connection = connection
-        self.upgrade: bool | None = None
 
+    @cached_property
     def is_upgrade(self) -> bool:
-        if self.upgrade is None:
-            self.upgrade = is_stream_upgrade(peeked_head(self.connection))
-        return self.upgrade
+        return is_stream_upgrade(peeked_head(self.connection))
 
 
 @dataclass
@@ -94,18 +93,18 @@ class ServerGate:
         if server.lifecycle.draining:
             return None
         head = Head(connection)
-        if server.clients.out_of_upgrades(address, time.monotonic()) and head.is_upgrade():
+        if server.clients.out_of_upgrades(address, time.monotonic()) and head.is_upgrade:
             metrics.labelled(metrics.refused, TOO_MANY_CLIENT_CONNECTIONS).inc()
             metrics.labelled(metrics.client_refusals, UPGRADE_RATE).inc()
             return refusal_response(server.clients, address, UPGRADE_RATE)
         sessions = len(server.lifecycle.connections)
         if server.overload.shedding(sessions):
-            if not head.is_upgrade():
+            if not head.is_upgrade:
                 return None
             metrics.labelled(metrics.refused, SHEDDING).inc()
             return BUSY_RESPONSE
         busy = server.overload.verdict(sessions)
-        if busy is None or not head.is_upgrade():
+        if busy is None or not head.is_upgrade:
             return None
         metrics.labelled(metrics.refused, SERVER_BUSY).inc()
         metrics.labelled(metrics.busy_refusals, busy.reason).inc()

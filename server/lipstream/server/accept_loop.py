@@ -3,7 +3,7 @@ per turn, more while the kernel's queue fills, and answering the connections the
 refuses outright before any protocol is built.
 
 Sketch: when the listening socket is readable, asyncio accepts connections in a loop, up to
-the listen backlog (2048) in one callback, and schedules every one's ``connection_made`` at
+the listen backlog in one callback, and schedules every one's ``connection_made`` at
 once; in a storm of connections the heads, upgrades and refusals of hundreds then run before
 the loop turns back to the sessions it serves, one stall of hundreds of milliseconds.
 ``BoundedAcceptLoop`` takes at most ``ACCEPTS_PER_TURN`` per readiness callback; the rest

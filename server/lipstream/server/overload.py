@@ -180,6 +180,7 @@ class OverloadPolicy:
         """A refusal for a new session ``key`` with ``sessions`` open, or None after counting
         it as admitted and pending at ``now``."""
         with self.lock:
+            self._learn(load, now)
             refusal = self._verdict(load, sessions, now)
             if refusal is None:
                 self.admitted.append(now)
@@ -191,14 +192,15 @@ class OverloadPolicy:
             return refusal
 
     def verdict(self, load: LoadSample, sessions: int, now: float) -> Refusal | None:
-        """The refusal ``session_refusal`` would give a new session now, counting nothing:
-        for the accept loop, which answers a refused upgrade before any protocol exists and
-        leaves an admitted one to the HTTP protocol's ``session_refusal``."""
+        """The refusal ``session_refusal`` would give a new session now, counting and
+        learning nothing (the learned cost moves once per session asked about, not per
+        connection accepted): for the accept loop, which answers a refused upgrade before
+        any protocol exists and leaves an admitted one to the HTTP protocol's
+        ``session_refusal``."""
         with self.lock:
             return self._verdict(load, sessions, now)
 
     def _verdict(self, load: LoadSample, sessions: int, now: float) -> Refusal | None:
-        self._learn(load, now)
         refusal = self.request_refusal(load) or self._lag_refusal(load, sessions)
         refusal = refusal or self._rate_refusal(now)
         if refusal is None:

@@ -443,3 +443,14 @@ def test_new_sessions_past_the_rate_are_refused_for_the_rest_of_the_window() -> 
     assert overload.session_refusal(QUIET, 0, 0.1, "s7") is not None
     assert admitted_in_a_burst(overload, QUIET, now=0.2) == 5
     assert admitted_in_a_burst(policy(replace(cheap, max_session_rate=0.0)), QUIET, 0.0) > 5
+
+
+def test_a_verdict_learns_nothing_and_a_session_asked_about_does() -> None:
+    overload = policy()
+    for index in range(LEARN_FROM_SESSIONS):
+        overload.set_streaming(f"s{index}", True)
+    busy = LoadSample(lag_ms=1.0, loop_busy=0.32, rss_mb=100.0)
+    overload.verdict(busy, 0, 5.0)
+    assert overload.learned_cost == 0.0
+    overload.session_refusal(busy, 0, 5.0, "new")
+    assert overload.learned_cost == 0.32 / LEARN_FROM_SESSIONS
