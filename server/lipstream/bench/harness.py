@@ -23,18 +23,16 @@ from __future__ import annotations
 import importlib
 import time
 from dataclasses import asdict, dataclass, field
-from datetime import UTC, datetime
 from typing import Any
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from .._version import __version__
 from ..corpus import Corpus
 from ..engines import engine_names
 from ..engines.base import Model
 from ..evaluation import rms_error
-from ..results_file import machine
+from ..results_file import recorded
 from ..training import train_engine
 from .closure import closure_lag_ms, closure_rate, learned_threshold
 from .rungs import RungRow, rung_rows
@@ -157,9 +155,14 @@ def format_engine_benches(results: dict[str, Any]) -> str:
 
 
 def run_bench(
-    corpus: Corpus, engines: list[str] | None = None, *, engine_benches: bool = True
+    corpus: Corpus,
+    engines: list[str] | None = None,
+    *,
+    engine_benches: bool = True,
+    command: str = "lipstream bench",
 ) -> dict[str, Any]:
-    """Benchmark ``engines`` (default: all registered) on ``corpus``'s held-out split."""
+    """Benchmark ``engines`` (default: all registered) on ``corpus``'s held-out split;
+    ``command`` is the command line recorded in the results."""
     train, heldout = corpus.split()
     threshold = learned_threshold(train)
     names = engines or engine_names()
@@ -173,9 +176,7 @@ def run_bench(
             rungs.extend(rung_rows(model, heldout, threshold))
     extra = run_engine_benches(corpus, names) if engine_benches else {}
     return {
-        "lipstream_version": __version__,
-        "date": datetime.now(UTC).isoformat(timespec="seconds"),
-        "machine": machine(),
+        **recorded(command),
         "corpus": {
             "name": corpus.name,
             "digest": corpus.digest(),
@@ -208,6 +209,6 @@ def format_table(results: dict[str, Any]) -> str:
             f"{row['speed_ratio']:>12.3f}{_fmt(row['closure_ratio'], '.3f'):>12}"
             f"{_fmt(row.get('closure_lag_ms'), '.1f'):>12}"
         )
-    recorded = results["recorded"]
-    lines.append(f"{'recorded':<16}{'':>45}{_fmt(recorded['closure_rate'], '.1%'):>9}")
+    reference = results["recorded"]
+    lines.append(f"{'recorded':<16}{'':>45}{_fmt(reference['closure_rate'], '.1%'):>9}")
     return "\n".join(lines)

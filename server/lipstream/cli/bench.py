@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -45,7 +46,9 @@ def _bench(args: argparse.Namespace, settings: Settings) -> None:
         build_demo(settings.demo_dir, progress=True)
     path = settings.results_file(args.results, "results.json")
     results = run_bench(
-        load_corpus(corpus_dir, progress=True), engine_benches=not args.no_engine_benches
+        load_corpus(corpus_dir, progress=True),
+        engine_benches=not args.no_engine_benches,
+        command=shlex.join(args.command_line),
     )
     write_results(results, path)
     print(f"wrote {path}", file=sys.stderr)
