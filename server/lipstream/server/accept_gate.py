@@ -1,7 +1,10 @@
-"""The accept loop's gate: connections the server refuses outright, answered on the bare
-socket before any protocol is built.
+"""The accept loop's gate: connections answered whole on the bare socket before any protocol
+is built, health probes and the connections the server refuses outright.
 
-Sketch: three kinds of connection get an HTTP 503 from the HTTP protocol before it reads
+Sketch: a ``GET /healthz`` whose whole head has arrived (read with ``MSG_PEEK``) gets its
+``200 {"status":"ok"}`` and is closed, from any address and at any load, as the protocol
+would answer it: a probe then never waits behind a flood's connections for a protocol of
+its own. Three kinds of connection get an HTTP 503 from the HTTP protocol before it reads
 anything more than their head (``handshake``): one from an address at its connection cap
 with its probe lane full, a WebSocket upgrade to ``/v1/stream`` from an address out of
 upgrade tokens (both ``too_many_client_connections``), and such an upgrade while the load
@@ -11,7 +14,7 @@ millisecond each, so a storm's refusals alone keep it saturated for as long as t
 lasts. ``ServerGate`` gives the same answers a
 step earlier, in the accept loop (``accept_loop.AcceptGate``): the address's count is a
 lookup, and an upgrade is told from its head read with ``MSG_PEEK`` (a head not yet
-complete, or any other request, such as a health probe, goes on to the protocol). The
+complete, or any other request, goes on to the protocol). The
 load verdict is taken without counting anything (``Overload.verdict``); an upgrade it
 would admit is admitted, and counted, by the protocol as before. Answers are counted in
 the same metrics as the protocol's.
@@ -34,6 +37,8 @@ from .client_limits import CONNECTIONS, UPGRADE_RATE, refusal_response
 from .handshake import (
     BUSY_RESPONSE,
     CLIENT_PROBE_LANE,
+    HEALTHZ_BODY,
+    HEALTHZ_PATH,
     MAX_HEAD_BYTES,
     SHEDDING,
     STREAM_PATH,
@@ -43,6 +48,13 @@ from .state import ServerState
 
 UPGRADE_FIELD = re.compile(rb"^upgrade:[ \t]*websocket[ \t]*\r?$", re.IGNORECASE | re.MULTILINE)
 STREAM_TARGET = STREAM_PATH.encode()
+HEALTHZ_TARGET = HEALTHZ_PATH.encode()
+BODY_FIELD = re.compile(rb"^(content-length|transfer-encoding):", re.IGNORECASE | re.MULTILINE)
+HEALTHZ_RESPONSE = (
+    b"HTTP/1.1 200 OK\r\ncontent-type: application/json\r\n"
+    b"content-length: " + str(len(HEALTHZ_BODY)).encode() + b"\r\nconnection: close\r\n\r\n"
+    + HEALTHZ_BODY
+)
 
 
 def is_stream_upgrade(head: bytes) -> bool:
@@ -56,6 +68,23 @@ def is_stream_upgrade(head: bytes) -> bool:
     if len(parts) != 3 or parts[0] != b"GET":
         return False
     return parts[1].split(b"?", 1)[0] == STREAM_TARGET and bool(UPGRADE_FIELD.search(fields))
+
+
+def is_health_probe(head: bytes) -> bool:
+    """Whether ``head``, the bytes a client has sent so far, are exactly one whole
+    ``GET /healthz`` request without a body."""
+    whole, complete, rest = head.partition(b"\r\n\r\n")
+    if not complete or rest:
+        return False
+    line, _, fields = whole.partition(b"\r\n")
+    parts = line.split(b" ")
+    return (
+        len(parts) == 3
+        and parts[0] == b"GET"
+        and parts[1].split(b"?", 1)[0] == HEALTHZ_TARGET
+        and parts[2] in (b"HTTP/1.0", b"HTTP/1.1")
+        and not BODY_FIELD.search(fields)
+    )
 
 
 def peeked_head(connection: socket.socket) -> bytes:
@@ -73,26 +102,36 @@ class Head:
         self.connection = connection
 
     @cached_property
+    def sent(self) -> bytes:
+        return peeked_head(self.connection)
+
+    @property
     def is_upgrade(self) -> bool:
-        return is_stream_upgrade(peeked_head(self.connection))
+        return is_stream_upgrade(self.sent)
+
+    @property
+    def is_health_probe(self) -> bool:
+        return is_health_probe(self.sent)
 
 
 @dataclass
 class ServerGate:
-    """The refusals the HTTP protocol would make before reading further, made at accept."""
+    """The answers the HTTP protocol would give before reading further, given at accept."""
 
     server: ServerState
 
-    def refusal(self, connection: socket.socket, address: str) -> bytes | None:
+    def answer(self, connection: socket.socket, address: str) -> bytes | None:
         server = self.server
         metrics = server.metrics
+        head = Head(connection)
+        if head.is_health_probe:
+            return HEALTHZ_RESPONSE
         if server.clients.saturated(address, CLIENT_PROBE_LANE):
             metrics.labelled(metrics.refused, TOO_MANY_CLIENT_CONNECTIONS).inc()
             metrics.labelled(metrics.client_refusals, CONNECTIONS).inc()
             return refusal_response(server.clients, address, CONNECTIONS)
         if server.lifecycle.draining:
             return None
-        head = Head(connection)
         if server.clients.out_of_upgrades(address, time.monotonic()) and head.is_upgrade:
             metrics.labelled(metrics.refused, TOO_MANY_CLIENT_CONNECTIONS).inc()
             metrics.labelled(metrics.client_refusals, UPGRADE_RATE).inc()

@@ -1,24 +1,27 @@
-"""The event loop the server runs on: asyncio's, taking a bounded number of new connections
-per turn, more while the kernel's queue fills, and answering the connections the server
-refuses outright before any protocol is built.
+"""The event loop the server runs on: asyncio's, draining the kernel's queue of new
+connections into a queue of its own, answering at once the connections that need no
+protocol, and starting a bounded number of protocols per turn.
 
 Sketch: when the listening socket is readable, asyncio accepts connections in a loop, up to
 the listen backlog in one callback, and schedules every one's ``connection_made`` at
 once; in a storm of connections the heads, upgrades and refusals of hundreds then run before
 the loop turns back to the sessions it serves, one stall of hundreds of milliseconds.
-``BoundedAcceptLoop`` takes at most ``ACCEPTS_PER_TURN`` per readiness callback; the rest
-wait in the kernel's queue, and the selector reports the socket readable again on the next
-turn, after the sessions' own I/O. A queue left to fill drops the SYNs of every newcomer,
-health probes included (they are retried only after 1 s, then 3 s), so while the queue
-leaves less than ``QUEUE_HEADROOM`` places free (Linux reports its length and capacity for
-a listening socket in ``TCP_INFO``) a turn also takes the excess: taken sooner, a storm's
-excess would be one long turn of handshakes. A connection the server would refuse outright
-(``AcceptGate``, ``accept_gate.ServerGate``: an address over its limits, a WebSocket upgrade
-while the load verdict refuses sessions) is answered and closed here, on the bare socket:
-no transport, no protocol, no task. Those cost a few microseconds each, so up to
-``REFUSALS_PER_TURN`` of them are taken in a turn beside the bound. uvicorn builds the loop
-from the import string ``LOOP`` (its ``loop`` setting), in every worker; the server installs
-its gate when it goes live.
+Leaving them in the kernel's queue instead (a bound per turn) keeps the turns short, but
+that queue is first in, first out: a health probe that arrives behind a client's flood of
+connections waits for all of them. ``BoundedAcceptLoop`` takes up to ``SCAN_PER_TURN``
+connections from the kernel's queue per readiness callback and asks its ``AcceptGate``
+(``accept_gate.ServerGate``) about each: one that can be answered whole without a protocol
+(a health probe whose head has arrived; a connection the server refuses outright, such as
+an address over its limits or a WebSocket upgrade while the load verdict refuses sessions)
+is answered and closed there, on the bare socket, in a few microseconds; the others join
+the loop's own *waiting* queue, of at most ``MAX_WAITING``. Once per turn, after the
+sessions' own I/O, at most ``ACCEPTS_PER_TURN`` waiting connections get their protocols,
+each asked about again first (an address's count or the load verdict may have moved since).
+A kernel queue left to fill drops the SYNs of every newcomer, probes included (they are
+retried only after 1 s, then 3 s), so while it leaves less than ``QUEUE_HEADROOM`` places
+free (Linux reports its length and capacity for a listening socket in ``TCP_INFO``) a turn
+also takes the excess. uvicorn builds the loop from the import string ``LOOP`` (its ``loop``
+setting), in every worker; the server installs its gate when it goes live.
 """
 
 from __future__ import annotations
@@ -26,10 +29,12 @@ from __future__ import annotations
 import asyncio
 import socket
 import struct
-from typing import Any, Protocol
+from collections import deque
+from typing import Any, NamedTuple, Protocol
 
 ACCEPTS_PER_TURN = 16
-REFUSALS_PER_TURN = 128
+SCAN_PER_TURN = 256
+MAX_WAITING = 1024
 QUEUE_HEADROOM = 256
 LOOP = "lipstream.server.accept_loop:BoundedAcceptLoop"
 TCP_INFO_QUEUE = struct.Struct("8x16xII")  # tcpi_unacked, tcpi_sacked: queued, capacity
@@ -37,12 +42,24 @@ READ_BEFORE_CLOSE = 65536
 
 
 class AcceptGate(Protocol):
-    """Which accepted connections get an answer at once, without a protocol."""
+    """Which accepted connections get their whole answer at once, without a protocol."""
 
-    def refusal(self, connection: socket.socket, address: str) -> bytes | None:
+    def answer(self, connection: socket.socket, address: str) -> bytes | None:
         """The whole HTTP answer for the fresh ``connection`` from ``address`` (it may peek
         at what the client sent), or None to serve it."""
         ...
+
+
+class Waiting(NamedTuple):
+    """An accepted connection waiting for its protocol, with what asyncio needs to build it."""
+
+    connection: socket.socket
+    address: Any
+    listener: socket.socket
+    protocol_factory: Any
+    sslcontext: Any
+    server: Any
+    options: tuple[Any, ...]
 
 
 def queue_excess(sock: socket.socket) -> int:
@@ -72,10 +89,17 @@ def answer_and_close(connection: socket.socket, answer: bytes) -> None:
 
 
 class BoundedAcceptLoop(asyncio.SelectorEventLoop):
-    """asyncio's selector loop, accepting at most ``ACCEPTS_PER_TURN`` connections per turn
-    (plus a filling queue's excess), and answering the ``accept_gate``'s refusals itself."""
+    """asyncio's selector loop, answering the ``accept_gate``'s connections itself and
+    starting at most ``ACCEPTS_PER_TURN`` protocols per turn (plus a filling queue's
+    excess)."""
 
     accept_gate: AcceptGate | None = None
+
+    def __init__(self, selector: Any = None) -> None:
+        super().__init__(selector)
+        self.waiting: deque[Waiting] = deque()
+        self.extra_accepts = 0
+        self.start_scheduled = False
 
     def _accept_connection(
         self,
@@ -84,36 +108,79 @@ class BoundedAcceptLoop(asyncio.SelectorEventLoop):
         sslcontext: Any = None,
         server: Any = None,
         backlog: int = 100,
-        *args: Any,
-        **kwargs: Any,
+        *options: Any,
     ) -> None:
-        budget = min(backlog, ACCEPTS_PER_TURN + queue_excess(sock))
-        accepted = refused = 0
-        while accepted < budget and refused < REFUSALS_PER_TURN:
+        excess = queue_excess(sock)
+        self.extra_accepts = max(self.extra_accepts, excess)
+        for _ in range(SCAN_PER_TURN + excess):
+            if len(self.waiting) >= MAX_WAITING + excess:
+                break
             try:
                 connection, address = sock.accept()
                 connection.setblocking(False)
             except (BlockingIOError, InterruptedError, ConnectionAbortedError):
-                return
+                break
             except OSError:
                 # Out of descriptors or memory: asyncio's own accept meets the same error
                 # and pauses accepting for a while.
                 super()._accept_connection(  # type: ignore[misc]
-                    protocol_factory, sock, sslcontext, server, 1, *args, **kwargs
+                    protocol_factory, sock, sslcontext, server, 1, *options
                 )
-                return
-            gate = self.accept_gate
-            answer = None
-            if gate is not None and isinstance(address, tuple):
-                answer = gate.refusal(connection, address[0])
-            if answer is not None:
-                answer_and_close(connection, answer)
-                refused += 1
+                break
+            if not self._answered(connection, address):
+                self.waiting.append(
+                    Waiting(connection, address, sock, protocol_factory, sslcontext, server, options)
+                )
+        self._schedule_starts()
+
+    def _answered(self, connection: socket.socket, address: Any) -> bool:
+        gate = self.accept_gate
+        if gate is None or not isinstance(address, tuple):
+            return False
+        answer = gate.answer(connection, address[0])
+        if answer is None:
+            return False
+        answer_and_close(connection, answer)
+        return True
+
+    def _schedule_starts(self) -> None:
+        if self.waiting and not self.start_scheduled:
+            self.start_scheduled = True
+            self.call_soon(self._start_protocols)
+
+    def _start_protocols(self) -> None:
+        self.start_scheduled = False
+        budget = ACCEPTS_PER_TURN + self.extra_accepts
+        self.extra_accepts = 0
+        started = 0
+        while self.waiting and started < budget:
+            waiting = self.waiting.popleft()
+            if self._answered(waiting.connection, waiting.address):
                 continue
-            accepted += 1
-            extra = {"peername": address}
+            started += 1
             self.create_task(
                 self._accept_connection2(  # type: ignore[attr-defined]
-                    protocol_factory, connection, extra, sslcontext, server, *args, **kwargs
+                    waiting.protocol_factory,
+                    waiting.connection,
+                    {"peername": waiting.address},
+                    waiting.sslcontext,
+                    waiting.server,
+                    *waiting.options,
                 )
             )
+        self._schedule_starts()
+
+    def close(self) -> None:
+        while self.waiting:
+            self.waiting.popleft().connection.close()
+        super().close()
+
+    def _stop_serving(self, sock: socket.socket) -> None:
+        """A listener closing: its connections still waiting are closed with it, as the
+        kernel resets those still in its queue."""
+        kept = deque(waiting for waiting in self.waiting if waiting.listener is not sock)
+        for waiting in self.waiting:
+            if waiting.listener is sock:
+                waiting.connection.close()
+        self.waiting = kept
+        super()._stop_serving(sock)  # type: ignore[misc]

@@ -15,7 +15,14 @@ from lipstream.engines.viseme_lerp import VisemeLerpEngine
 
 @pytest.fixture(scope="module")
 def results(small_demo_corpus: Corpus) -> dict[str, Any]:
-    return run_bench(small_demo_corpus, [BASELINE], engine_benches=False)
+    return run_bench(
+        small_demo_corpus, [BASELINE], engine_benches=False, command="lipstream bench --x"
+    )
+
+
+def test_the_results_say_how_they_were_made(results: dict[str, Any]) -> None:
+    assert results["command"] == "lipstream bench --x"
+    assert {"date", "machine", "lipstream_version"} <= results.keys()
 
 
 def test_baseline_rms_matches_a_direct_computation(

@@ -1,8 +1,8 @@
-"""BoundedAcceptLoop takes at most ACCEPTS_PER_TURN connections per readiness callback and
-leaves the rest in the kernel's queue (asyncio's own loop takes them all), takes a filling
-queue's excess over half its capacity, and answers its gate's refusals on the bare socket
-without building a protocol. Counted on a real listening socket: what is still queued after
-the callback is what a plain accept() finds."""
+"""BoundedAcceptLoop drains the kernel's queue of new connections (up to SCAN_PER_TURN a
+turn) into a waiting queue of its own, answers the ones its gate answers on the bare socket
+at once, and starts at most ACCEPTS_PER_TURN protocols a turn (plus a filling queue's
+excess), where asyncio's own loop starts a protocol for every queued connection at once.
+Counted on a real listening socket, one loop iteration at a time."""
 
 from __future__ import annotations
 
@@ -18,12 +18,18 @@ from pathlib import Path
 import httpx
 import pytest
 
+import lipstream.server.accept_loop as accept_loop
 from lipstream.config import ServerSettings
-from lipstream.server.accept_gate import ServerGate, is_stream_upgrade
+from lipstream.server.accept_gate import (
+    HEALTHZ_RESPONSE,
+    ServerGate,
+    is_health_probe,
+    is_stream_upgrade,
+)
 from lipstream.server.accept_loop import (
     ACCEPTS_PER_TURN,
     LOOP,
-    REFUSALS_PER_TURN,
+    SCAN_PER_TURN,
     AcceptGate,
     BoundedAcceptLoop,
 )
@@ -34,22 +40,26 @@ from tests.lipstream.server.harness import Served, client, serving
 
 PENDING = 40
 ANSWER = b"HTTP/1.1 503 Service Unavailable\r\ncontent-length: 0\r\n\r\n"
+REFUSE_ME = b"refuse"
+PROBE = b"GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
 
 
 @contextmanager
 def pending_connections(
-    count: int, backlog: int = 2048
+    said: list[bytes], backlog: int = 4096
 ) -> Iterator[tuple[socket.socket, list[socket.socket]]]:
-    """A listening loopback socket with ``count`` connections waiting to be accepted, and
-    their client ends."""
+    """A listening loopback socket with one connection waiting to be accepted for each of
+    ``said``, each having sent those bytes, and their client ends."""
     with ExitStack() as stack:
         listener = stack.enter_context(socket.socket())
         listener.bind(("127.0.0.1", 0))
         listener.listen(backlog)
         clients = []
-        for _ in range(count):
+        for data in said:
             client = stack.enter_context(socket.socket())
             client.connect(listener.getsockname())
+            if data:
+                client.sendall(data)
             clients.append(client)
         listener.setblocking(False)
         yield listener, clients
@@ -79,75 +89,196 @@ class Built:
 
 
 @dataclass
-class EveryOther:
-    """A gate refusing every other connection it is asked about."""
+class ByWhatTheySaid:
+    """A gate answering the connections that sent ``REFUSE_ME`` with ``ANSWER``, and health
+    probes with ``HEALTHZ_RESPONSE``."""
 
     asked: int = 0
 
-    def refusal(self, connection: socket.socket, address: str) -> bytes | None:
+    def answer(self, connection: socket.socket, address: str) -> bytes | None:
         self.asked += 1
-        return ANSWER if self.asked % 2 == 0 else None
+        try:
+            sent = connection.recv(1024, socket.MSG_PEEK)
+        except BlockingIOError:
+            return None
+        if sent == REFUSE_ME:
+            return ANSWER
+        return HEALTHZ_RESPONSE if sent == PROBE else None
 
 
-def one_turn(
-    loop: asyncio.AbstractEventLoop, listener: socket.socket, built: Built | None = None
-) -> None:
-    factory = built if built is not None else asyncio.Protocol
-    try:
-        loop._accept_connection(factory, listener, None, None, 2048)  # type: ignore[attr-defined]
-    finally:
-        loop.run_until_complete(asyncio.sleep(0.01))
-        loop.close()
+def readiness(loop: BoundedAcceptLoop, listener: socket.socket, factory: object) -> None:
+    """The listening socket's readiness callback, as the selector would run it."""
+    loop._accept_connection(factory, listener, None, None, 4096)
 
 
-def accepted_in_one_turn(loop: asyncio.AbstractEventLoop, pending: int, backlog: int) -> int:
-    with pending_connections(pending, backlog) as (listener, _):
-        one_turn(loop, listener)
-        return pending - still_queued(listener)
+def turns(loop: BoundedAcceptLoop, built: Built, count: int) -> list[int]:
+    """Run ``count`` iterations of the loop; the protocols built after each."""
+    after = []
+    for _ in range(count):
+        loop.stop()
+        loop.run_forever()  # one iteration: the selector polled once, the ready callbacks
+        after.append(len(built.protocols))
+    return after
 
 
-def test_one_turn_accepts_at_most_the_bound_and_leaves_the_rest_queued() -> None:
-    assert accepted_in_one_turn(BoundedAcceptLoop(), PENDING, 2048) == ACCEPTS_PER_TURN < PENDING
-    assert accepted_in_one_turn(asyncio.SelectorEventLoop(), PENDING, 2048) == PENDING
+def close(loop: BoundedAcceptLoop) -> None:
+    """Let every waiting connection's protocol start, then close the loop."""
+    for _ in range(100):
+        loop.stop()
+        loop.run_forever()
+        if not loop.waiting and not loop._ready:  # type: ignore[attr-defined]
+            break
+    loop.close()
 
 
-def test_a_queue_over_half_full_is_taken_down_to_half() -> None:
-    # 60 queued of 64: the bound and the 28 beyond half the queue.
-    assert accepted_in_one_turn(BoundedAcceptLoop(), 60, 64) == ACCEPTS_PER_TURN + 60 - 32
-    assert accepted_in_one_turn(BoundedAcceptLoop(), 30, 64) == ACCEPTS_PER_TURN
+def received(client: socket.socket) -> bytes:
+    client.settimeout(5.0)
+    data = b""
+    while chunk := client.recv(4096):
+        data += chunk
+    return data
 
 
-def test_the_gates_refusals_are_answered_without_a_protocol_and_beside_the_bound() -> None:
+def test_the_kernels_queue_is_drained_and_protocols_started_sixteen_a_turn() -> None:
     loop = BoundedAcceptLoop()
-    gate = EveryOther()
+    built = Built()
+    try:
+        with pending_connections([b""] * PENDING) as (listener, _):
+            readiness(loop, listener, built)
+            assert still_queued(listener) == 0
+            after = turns(loop, built, 8)
+        steps = [later - earlier for earlier, later in zip([0, *after], after, strict=False)]
+        assert max(steps) == ACCEPTS_PER_TURN and after[-1] == PENDING
+        assert steps.count(ACCEPTS_PER_TURN) == PENDING // ACCEPTS_PER_TURN
+        # asyncio's own loop starts every one in the same callback.
+        plain = asyncio.SelectorEventLoop()
+        plain_built = Built()
+        with pending_connections([b""] * PENDING) as (listener, _):
+            plain._accept_connection(plain_built, listener, None, None, 4096)  # type: ignore[attr-defined]
+            plain.stop()
+            plain.run_forever()
+            assert len(plain_built.protocols) == PENDING
+        plain.close()
+    finally:
+        close(loop)
+
+
+def test_one_turn_scans_at_most_its_bound_and_the_waiting_queue_is_bounded(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    loop = BoundedAcceptLoop()
+    try:
+        with pending_connections([b""] * (SCAN_PER_TURN + 8)) as (listener, _):
+            readiness(loop, listener, Built())
+            assert len(loop.waiting) == SCAN_PER_TURN and still_queued(listener) == 8
+    finally:
+        close(loop)
+    monkeypatch.setattr(accept_loop, "MAX_WAITING", 20)
+    loop = BoundedAcceptLoop()
+    try:
+        with pending_connections([b""] * PENDING) as (listener, _):
+            readiness(loop, listener, Built())
+            assert len(loop.waiting) == 20 and still_queued(listener) == PENDING - 20
+    finally:
+        close(loop)
+
+
+def test_a_queue_over_half_full_has_its_excess_started_in_the_next_turn() -> None:
+    # 60 queued of 64: the bound and the 28 beyond half the queue.
+    for pending, first_turn in ((60, ACCEPTS_PER_TURN + 60 - 32), (30, ACCEPTS_PER_TURN)):
+        loop = BoundedAcceptLoop()
+        built = Built()
+        try:
+            with pending_connections([b""] * pending, backlog=64) as (listener, _):
+                readiness(loop, listener, built)
+                assert turns(loop, built, 2)[-1] == first_turn
+        finally:
+            close(loop)
+
+
+def test_the_gates_answers_are_given_at_once_without_a_protocol() -> None:
+    loop = BoundedAcceptLoop()
+    gate = ByWhatTheySaid()
     loop.accept_gate = gate
     built = Built()
-    with pending_connections(PENDING) as (listener, clients):
-        one_turn(loop, listener, built)
-        left = still_queued(listener)
-        # Sixteen served, and the fifteen refused between them: the bound counts only the
-        # connections that get a protocol.
-        assert len(built.protocols) == ACCEPTS_PER_TURN
-        assert gate.asked == 2 * ACCEPTS_PER_TURN - 1 == PENDING - left
-        for index, client in enumerate(clients[: gate.asked]):
-            client.settimeout(5.0)
-            if index % 2 == 1:
-                assert client.recv(1024) == ANSWER and client.recv(1024) == b""  # then closed
+    said = [REFUSE_ME if index % 2 else b"" for index in range(PENDING)]
+    try:
+        with pending_connections(said) as (listener, clients):
+            readiness(loop, listener, built)
+            assert built.protocols == [] and gate.asked == PENDING
+            for client in clients[1::2]:
+                assert received(client) == ANSWER  # then closed
+            assert turns(loop, built, 4)[-1] == PENDING // 2
+    finally:
+        close(loop)
 
 
-def test_refusals_too_have_a_bound_per_turn() -> None:
+def test_a_probe_behind_a_flood_is_answered_in_the_first_turn() -> None:
+    """The regression the waiting queue exists for: a probe queued behind hundreds of
+    connections that will get protocols is answered in the readiness callback that accepts
+    it, while those connections are still waiting for theirs."""
     loop = BoundedAcceptLoop()
-
-    class RefuseAll:
-        def refusal(self, connection: socket.socket, address: str) -> bytes | None:
-            return ANSWER
-
-    loop.accept_gate = RefuseAll()
+    loop.accept_gate = ByWhatTheySaid()
     built = Built()
-    pending = REFUSALS_PER_TURN + 8
-    with pending_connections(pending) as (listener, _):
-        one_turn(loop, listener, built)
-        assert still_queued(listener) == 8 and built.protocols == []
+    flood = 200
+    try:
+        with pending_connections([b""] * flood + [PROBE]) as (listener, clients):
+            readiness(loop, listener, built)
+            assert received(clients[-1]) == HEALTHZ_RESPONSE
+            assert built.protocols == [] and len(loop.waiting) == flood
+    finally:
+        close(loop)
+
+
+def test_a_connection_is_asked_about_again_when_its_turn_comes() -> None:
+    loop = BoundedAcceptLoop()
+    gate = ByWhatTheySaid()
+    loop.accept_gate = gate
+    built = Built()
+    try:
+        with pending_connections([b""] * 3) as (listener, clients):
+            readiness(loop, listener, built)
+            clients[1].sendall(REFUSE_ME)  # said after it was accepted, before its protocol
+            assert gate.asked == 3
+            turns(loop, built, 2)
+            assert len(built.protocols) == 2 and gate.asked == 6
+            assert received(clients[1]) == ANSWER
+    finally:
+        close(loop)
+
+
+def test_a_closing_listener_closes_its_waiting_connections() -> None:
+    loop = BoundedAcceptLoop()
+    try:
+        with pending_connections([b""] * 3) as (listener, clients):
+            readiness(loop, listener, Built())
+            assert len(loop.waiting) == 3
+            loop._stop_serving(listener)
+            assert not loop.waiting and listener.fileno() == -1
+            for client in clients:
+                client.settimeout(5.0)
+                try:
+                    assert client.recv(16) == b""
+                except ConnectionResetError:
+                    pass
+    finally:
+        close(loop)
+
+
+def test_a_health_probe_is_told_from_a_whole_head() -> None:
+    assert is_health_probe(PROBE)
+    assert is_health_probe(b"GET /healthz?verbose=1 HTTP/1.0\r\n\r\n")
+    assert not is_health_probe(PROBE[:-2])  # the head is not complete yet
+    assert not is_health_probe(PROBE + b"GET /healthz HTTP/1.1\r\n\r\n")  # pipelined
+    assert not is_health_probe(PROBE.replace(b"/healthz", b"/healthzz"))
+    assert not is_health_probe(PROBE.replace(b"/healthz", b"/readyz"))
+    assert not is_health_probe(PROBE.replace(b"GET ", b"POST "))
+    assert not is_health_probe(PROBE.replace(b"HTTP/1.1", b"HTTP/2"))
+    assert not is_health_probe(PROBE.replace(b"Host: x", b"Content-Length: 3"))
+    assert HEALTHZ_RESPONSE.startswith(b"HTTP/1.1 200 OK\r\n")
+    head, _, payload = HEALTHZ_RESPONSE.partition(b"\r\n\r\n")
+    assert json.loads(payload) == {"status": "ok"}
+    assert f"content-length: {len(payload)}".encode() in head
 
 
 def test_the_server_runs_on_it() -> None:
@@ -167,8 +298,8 @@ class Recording:
     gate: AcceptGate
     answers: list[tuple[str, bytes | None]] = field(default_factory=list)
 
-    def refusal(self, connection: socket.socket, address: str) -> bytes | None:
-        answer = self.gate.refusal(connection, address)
+    def answer(self, connection: socket.socket, address: str) -> bytes | None:
+        answer = self.gate.answer(connection, address)
         self.answers.append((address, answer))
         return answer
 
@@ -215,7 +346,8 @@ def test_a_live_server_refuses_a_saturated_address_at_accept(capped_gate: Served
             (host, True)
         ]
         assert httpx.get(f"{capped_gate.http}/healthz").json() == {"status": "ok"}
-        assert recording.answers[-1] == ("127.0.0.1", None)
+        assert recording.answers[-1][0] == "127.0.0.1"
+        assert recording.answers[-1][1] in (None, HEALTHZ_RESPONSE)
     finally:
         capped_gate.call_soon(saturate(capped_gate, host, -1)).result(timeout=10)
         loop.accept_gate = recording.gate
@@ -291,7 +423,7 @@ def test_a_busy_server_refuses_an_upgrade_at_accept_and_still_answers_a_probe(
         probe = sent_while_the_loop_waits(
             always_busy, b"GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
         )
-        assert probe.startswith(b"HTTP/1.1 200 ") and recording.answers[-1][1] is None
+        assert probe == HEALTHZ_RESPONSE == recording.answers[-1][1]  # answered at accept
         metrics = httpx.get(f"{always_busy.http}/metrics").text
         assert 'lipstream_busy_refusals_total{reason="loop_busy"} 1.0' in metrics
         assert always_busy.state.overload.policy.upgrades == {}  # nothing counted as admitted
@@ -308,7 +440,7 @@ def test_an_upgrade_past_its_addresss_rate_is_refused_at_accept(lerp_dir: Path) 
         loop.accept_gate = recording
         with client(served.ws):  # takes the address's one token
             pass
-        assert recording.answers == [("127.0.0.1", None)]
+        assert recording.answers and set(recording.answers) == {("127.0.0.1", None)}
         answer = sent_while_the_loop_waits(served, UPGRADE_HEAD)
         head, _, body = answer.partition(b"\r\n\r\n")
         assert head.startswith(b"HTTP/1.1 503 ")
