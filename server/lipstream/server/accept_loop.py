@@ -129,7 +129,9 @@ class BoundedAcceptLoop(asyncio.SelectorEventLoop):
                 break
             if not self._answered(connection, address):
                 self.waiting.append(
-                    Waiting(connection, address, sock, protocol_factory, sslcontext, server, options)
+                    Waiting(
+                        connection, address, sock, protocol_factory, sslcontext, server, options
+                    )
                 )
         self._schedule_starts()
 
