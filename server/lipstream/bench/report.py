@@ -1710,6 +1710,97 @@ def expressive_dp_table_v(bench: Bench) -> str:
     return text
 
 
+def hmm_benches(bench: Bench) -> str:
+    """``lipstream.bench.hmm`` within ``lipstream bench``: the two estimators, Brand's Err
+    and RMS by what drives the model, and voice-driven speed and first frame per rung."""
+    results = bench.load(RESULTS)
+    figures = results["engine_benches"]["hmm"]
+    text = bench.source(RESULTS, results) + "Estimators, trained from the same start:\n\n"
+    text += table(
+        ["estimator", "states (of)", "transitions", "perplexity", "held-out entropy rate, bits"]
+        + ["fit s"],
+        (
+            [
+                f"`{name}`",
+                f"{fit['states']} ({fit['states_initial']})",
+                str(fit["transitions"]),
+                number(fit["perplexity"], 3),
+                number(fit["heldout_entropy_rate_bits"], 4),
+                number(fit["fit_s"]),
+            ]
+            for name, fit in figures["estimators"].items()
+        ),
+    )
+    errors = figures["errors"]
+    drivers = list(errors["heldout"])
+    text += "\nBrand's Err / RMS against the recorded curves, by what drives the model:\n\n"
+    text += table(
+        ["lines", *drivers],
+        (
+            [split] + [f"{by[name]['err']:.3f} / {by[name]['rms']:.4f}" for name in drivers]
+            for split, by in errors.items()
+        ),
+    )
+    speeds, first = figures["real_time_factor"], figures["first_frame"]
+    text += (
+        "\nVoice-driven synthesis at 60 fps, audio seconds per CPU second (real-time factor), "
+        "and a request fed audio alone: the audio heard before its first frame, and that "
+        "call's time:\n\n"
+    )
+    return text + table(
+        ["rung", "real-time factor", "audio before the first frame ms", "first call ms"],
+        (
+            [
+                f"`{name}`",
+                f"{factor:,.0f}",
+                f"{first[name]['audio_needed_ms']:.0f}" if name in first else "–",
+                f"{first[name]['call_ms']:.3f}" if name in first else "–",
+            ]
+            for name, factor in speeds.items()
+        ),
+    )
+
+
+def expressive_dp_benches(bench: Bench) -> str:
+    """``lipstream.bench.expressive_dp``'s other figures: the weights' cross-validated
+    error, fixed lag against the full search, and RMS per emotion by modifiers."""
+    results = bench.load(RESULTS)
+    figures = results["engine_benches"]["expressive-dp"]
+    text = bench.source(RESULTS, results)
+    text += (
+        f"Cross-validated error with the searched weights {figures['cv_error']:.4f}, with the "
+        f"defaults {figures['cv_error_defaults']:.4f}; a phoneme-map pick "
+        f"{figures['pick_ms']:.3f} ms.\n\nFixed lag against the full search on the held-out "
+        "lines:\n\n"
+    )
+    text += table(
+        ["lag", "lines differing", "nodes differing", "cost above the optimum, mean / largest"]
+        + ["wait ms (lag + 2 median phonemes)", "ms / phoneme"],
+        (
+            [
+                str(row["lag"]),
+                percent(row["lines_differing"]),
+                percent(row["nodes_differing"]),
+                f"{100 * row['mean_cost_gap']:.2f}% / {100 * row['max_cost_gap']:.2f}%",
+                f"{row['lookahead_ms']:.0f}",
+                f"{row['ms_per_phoneme']:.3f}",
+            ]
+            for row in figures["lags"]
+        ),
+    )
+    by_emotion = figures["rms_by_emotion"]
+    emotions = sorted(next(iter(by_emotion.values())))
+    labels = {"correct_modifiers": "correct modifiers", "neutral_modifiers": "all neutral"}
+    text += "\nHeld-out RMS per emotion:\n\n"
+    return text + table(
+        ["synthesis", *emotions],
+        (
+            [labels.get(name, f"`{name}`")] + [f"{rms[emotion]:.4f}" for emotion in emotions]
+            for name, rms in by_emotion.items()
+        ),
+    )
+
+
 HMM_VOICES = "hmm_voices.json"
 HMM_VOICE_SETS = (
     ("demo", "demo held-out"),
@@ -1844,10 +1935,14 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "dam-rungs": engine_rungs(("dam", "cohen-massaro"), ("anime-graph", "viseme-lerp")),
     "dam-fit": dam_fit,
     "anime-graph-rungs": engine_rungs(("anime-graph",)),
+    "hmm-rungs": engine_rungs(("hmm",), ("viseme-lerp",)),
+    "expressive-dp-rungs": engine_rungs(("expressive-dp",), ("viseme-lerp",)),
     "anime-graph-table": anime_graph_table,
     "anime-graph-scaling": anime_graph_scaling,
     "anime-graph-quality": anime_graph_quality,
     "expressive-dp-table-v": expressive_dp_table_v,
+    "expressive-dp-benches": expressive_dp_benches,
+    "hmm-benches": hmm_benches,
     "stream-calls": stream_calls,
     "retarget-cost": retarget_cost,
     "call-pairs": call_pairs("call_pairs.json"),

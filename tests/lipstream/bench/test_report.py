@@ -758,3 +758,60 @@ def test_table_v_says_whether_the_target_is_met(tmp_path: Path) -> None:
     assert slow.endswith("20.5 ms median for 63 phonemes on 10,527 nodes, not met.\n")
     small = BLOCKS["expressive-dp-table-v"](_results(tmp_path, engine_benches=_table_v(4.7, 4000)))
     assert small.endswith("on 4,000 nodes, not met.\n")
+
+
+def test_the_hmm_bench_block(tmp_path: Path) -> None:
+    estimators = {
+        "entropic": {
+            "fit_s": 2.86,
+            "states": 38,
+            "states_initial": 40,
+            "transitions": 336,
+            "perplexity": 2.13768,
+            "heldout_entropy_rate_bits": 0.029595,
+        }
+    }
+    errors = {"heldout": {"phonemes": {"err": 0.08228, "rms": 0.06448}}}
+    hmm = {
+        "estimators": estimators,
+        "errors": errors,
+        "real_time_factor": {"offline": 1943.5, "causal": 2833.9},
+        "first_frame": {"causal": {"audio_needed_ms": 9.977, "call_ms": 0.036614}},
+    }
+    rendered = BLOCKS["hmm-benches"](_results(tmp_path, engine_benches={"hmm": hmm}))
+    assert "| `entropic` | 38 (40) | 336 | 2.138 | 0.0296 | 2.9 |" in rendered
+    assert "| lines | phonemes |" in rendered and "| heldout | 0.082 / 0.0645 |" in rendered
+    assert "| `offline` | 1,944 | – | – |" in rendered
+    assert "| `causal` | 2,834 | 10 | 0.037 |" in rendered
+
+
+def test_the_expressive_dp_bench_block(tmp_path: Path) -> None:
+    lag = {
+        "lag": 4,
+        "lines_differing": 0.42424,
+        "nodes_differing": 0.041935,
+        "mean_cost_gap": 0.0029979,
+        "max_cost_gap": 0.022141,
+        "lookahead_ms": 485.92,
+        "ms_per_phoneme": 0.22211,
+    }
+    figures = {
+        "cv_error": 0.049409,
+        "cv_error_defaults": 0.050851,
+        "pick_ms": 0.047947,
+        "lags": [lag],
+        "rms_by_emotion": {
+            "correct_modifiers": {"sad": 0.058169, "angry": 0.082834},
+            "viseme-lerp": {"sad": 0.099755, "angry": 0.157178},
+        },
+    }
+    rendered = BLOCKS["expressive-dp-benches"](
+        _results(tmp_path, engine_benches={"expressive-dp": figures})
+    )
+    assert (
+        "searched weights 0.0494, with the defaults 0.0509; a phoneme-map pick 0.048 ms" in rendered
+    )
+    assert "| 4 | 42.4% | 4.2% | 0.30% / 2.21% | 486 | 0.222 |" in rendered
+    assert "| synthesis | angry | sad |" in rendered
+    assert "| correct modifiers | 0.0828 | 0.0582 |" in rendered
+    assert "| `viseme-lerp` | 0.1572 | 0.0998 |" in rendered
