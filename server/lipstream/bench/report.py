@@ -1389,6 +1389,418 @@ def real_faces_before_after(bench: Bench) -> str:
     return text + table(header, rows)
 
 
+RESULTS = "results.json"
+BASELINE = "viseme-lerp"
+
+
+def _results_rows(results: dict[str, Any], names: Sequence[str]) -> list[dict[str, Any]]:
+    rows = {row["engine"]: row for row in results["engines"]}
+    return [rows[name] for name in names]
+
+
+def _against(first: dict[str, Any], other: dict[str, Any]) -> str:
+    """``first``'s RMS against ``other``'s, overall and emotion by emotion."""
+    mine, theirs = first.get("rms_by_emotion", {}), other.get("rms_by_emotion", {})
+    emotions = sorted(set(mine) & set(theirs))
+    lower = [name for name in emotions if mine[name] < theirs[name]]
+    overall = "lower" if first["rms_error"] < other["rms_error"] else "not lower"
+    if len(lower) == len(emotions):
+        by_emotion = "lower in every emotion"
+    elif not lower:
+        by_emotion = "lower in no emotion"
+    else:
+        others = ", ".join(name for name in emotions if name not in lower)
+        by_emotion = f"lower in {len(lower)} of {len(emotions)} emotions (not {others})"
+    return (
+        f"`{first['engine']}` against `{other['engine']}`: RMS {first['rms_error']:.4f} "
+        f"against {other['rms_error']:.4f} ({overall}), {by_emotion}"
+    )
+
+
+def _lookahead(ms: float) -> str:
+    """Whole milliseconds, but a lead rung's few milliseconds to a tenth."""
+    return f"{ms:.1f}" if 0 < ms < 100 else f"{ms:.0f}"
+
+
+def engine_quality(names: Sequence[str]) -> Callable[[Bench], str]:
+    """An engine page's quality table: held-out RMS (overall and per emotion), /p b m/
+    closure and lip lag of ``names`` from ``lipstream bench``, and how the first
+    compares with each of the others."""
+
+    def render(bench: Bench) -> str:
+        results = bench.load(RESULTS)
+        rows = _results_rows(results, names)
+        emotions = sorted(rows[0].get("rms_by_emotion", {}))
+        header = ["engine", f"RMS (÷ `{BASELINE}`)", *(f"RMS {name}" for name in emotions)]
+        header += ["/p b m/ closed", "lip lag ms"]
+        body = [
+            [
+                f"`{row['engine']}`",
+                f"{row['rms_error']:.4f} ({row['rms_ratio']:.2f})",
+                *(f"{row['rms_by_emotion'][name]:.4f}" for name in emotions),
+                percent(row["closure_rate"]),
+                f"{row['closure_lag_ms']:.0f}" if "closure_lag_ms" in row else "–",
+            ]
+            for row in rows
+        ]
+        comparisons = "".join(f"- {_against(rows[0], other)}.\n" for other in rows[1:])
+        return (
+            bench.source(RESULTS, results)
+            + f"Held-out lines of corpus `{results['corpus']['name']}` "
+            + f"(`{results['corpus']['digest'][:12]}`), recorded lips closed on "
+            + f"{percent(results['recorded']['closure_rate'])} of /p b m/:\n\n"
+            + table(header, body)
+            + (f"\n{comparisons}" if comparisons else "")
+        )
+
+    render.__name__ = "engine_quality"
+    return render
+
+
+def _causal_rms(rungs: list[dict[str, Any]], engine: str) -> dict[str, Any] | None:
+    return next((r for r in rungs if r["engine"] == engine and r["rung"] == "causal"), None)
+
+
+def engine_rungs(names: Sequence[str], rivals: Sequence[str] = ()) -> Callable[[Bench], str]:
+    """An engine page's rung table from ``lipstream bench``: each rung of ``names`` with
+    its lookahead, RMS, closure and RMS to the best rung; what the ``causal`` rung gives
+    up against the best, and the ``causal`` rungs of ``names`` and ``rivals`` by RMS."""
+
+    def render(bench: Bench) -> str:
+        results = bench.load(RESULTS)
+        rungs = [rung for rung in results["rungs"] if rung["engine"] in names]
+        text = bench.source(RESULTS, results) + table(
+            ["engine", "rung", "lookahead ms", "RMS", "/p b m/ closed", "RMS to the best rung"],
+            (
+                [
+                    f"`{rung['engine']}`",
+                    f"`{rung['rung']}`",
+                    _lookahead(rung["lookahead_ms"]),
+                    f"{rung['rms_error']:.4f}",
+                    percent(rung["closure_rate"]),
+                    f"{rung['rms_vs_best']:.4f}",
+                ]
+                for rung in rungs
+            ),
+        )
+        for name in names:
+            own = [rung for rung in rungs if rung["engine"] == name]
+            best, causal = own[0], _causal_rms(own, name)
+            if causal is None:
+                continue
+            change = causal["rms_error"] / best["rms_error"] - 1
+            text += (
+                f"\n`{name}` on `causal`: RMS {causal['rms_error']:.4f} against "
+                f"{best['rms_error']:.4f} on `{best['rung']}` ({100 * change:+.1f}%), "
+                f"/p b m/ closed {percent(causal['closure_rate'])} against "
+                f"{percent(best['closure_rate'])}.\n"
+            )
+        causal_rows = [
+            row
+            for name in (*names, *rivals)
+            if (row := _causal_rms(results["rungs"], name)) is not None
+        ]
+        if len(causal_rows) > 1:
+            ranked = sorted(causal_rows, key=lambda row: row["rms_error"])
+            text += "\nThe `causal` rungs by RMS, lowest first: " + ", ".join(
+                f"`{row['engine']}` {row['rms_error']:.4f}" for row in ranked
+            )
+            text += ".\n"
+        return text
+
+    render.__name__ = "engine_rungs"
+    return render
+
+
+def dam_fit(bench: Bench) -> str:
+    """``lipstream.bench.dam`` within ``lipstream bench``: each engine's fit, its tails'
+    truncation error, offline synthesis and streamed-call CPU."""
+    results = bench.load(RESULTS)
+    figures = results["engine_benches"]["dam"]
+    rows = []
+    for name, fit in figures.items():
+        cut = fit["cut_tail_errors"]
+        calls = {call["rung"]: call["cpu_ms_median"] for call in fit.get("causal_calls", [])}
+        search = [rung for rung in fit["rungs"] if rung["truncation_error"] is not None]
+        rows.append(
+            [
+                f"`{name}`",
+                str(fit["modes"]),
+                str(fit["basis_components"]),
+                number(fit["fit_s"]),
+                f"{fit['fit_rms']:.4f}",
+                f"{fit['tail']} ({percent(fit['rungs'][0]['truncation_error'])})",
+                ", ".join(str(rung["lookahead_phonemes"]) for rung in search),
+                f"{percent(cut['tail_ahead=1'])}, {percent(cut['tail_ahead=0'])}",
+                f"{fit['synthesis']['cpu_ms_per_phoneme']:.4f}",
+                " / ".join(
+                    f"{calls[rung]:.4f}" for rung in ("causal_lead", "causal") if rung in calls
+                )
+                or "–",
+            ]
+        )
+    header = ["engine", "modes", "components", "fit s", "fit RMS", "tail, phonemes (error)"]
+    header += ["search rungs' lookahead, phonemes", "tail cut to 1, 0 ahead"]
+    header += ["synthesis CPU ms / phoneme", "streamed call CPU ms, `causal_lead` / `causal`"]
+    synthesis = next(iter(figures.values()))["synthesis"]
+    return (
+        bench.source(RESULTS, results)
+        + table(header, rows)
+        + f"\nSynthesis: a {synthesis['phonemes']}-phoneme sentence at {synthesis['fps']:g} fps, "
+        + f"{synthesis['repeats']} repeats (the paper: {synthesis['paper_ms_per_phoneme']:g} ms "
+        + "per phoneme). Errors are shares of a channel's recorded range.\n"
+    )
+
+
+def _pq_cell(cell: dict[str, Any]) -> str:
+    if cell.get("timed_out"):
+        return "timed out"
+    return f"{cell['search_ms']:,.0f} / {cell['jumps']}"
+
+
+def _span(values: Sequence[float], digits: int = 0) -> str:
+    low, high = min(values), max(values)
+    return f"{low:,.{digits}f}–{high:,.{digits}f}"
+
+
+def anime_graph_table(bench: Bench) -> str:
+    """Cao et al.'s Tables 1–2 on the demo model (``lipstream.bench.anime_graph``): greedy
+    against PQ-Matching on both graphs, and what the figures say."""
+    results = bench.load(RESULTS)
+    figures = results["engine_benches"]["anime-graph"]
+    metrics, found = figures["model"]["metrics"], figures["table"]
+    rows = [
+        [
+            str(row["phonemes"]),
+            row["graph"],
+            f"{row['greedy']['search_ms']:.3f} ({row['greedy']['search_ms_in_synthesis']:.3f})",
+            str(row["greedy"]["jumps"]),
+            *(_pq_cell(row["pq"][h]) for h in ("3", "4", "5")),
+            f"{row['pq']['4']['speedup']:,.0f}×",
+            f"{row['pq']['4']['speedup_over_unclustered_greedy']:,.0f}×",
+        ]
+        for row in found["rows"]
+    ]
+    header = ["phonemes", "graph", "greedy ms", "greedy jumps", "PQ(3) ms / jumps"]
+    header += ["PQ(4) ms / jumps", "PQ(5) ms / jumps", "PQ(4) ÷ greedy, same graph"]
+    header += ["PQ(4) ÷ unclustered greedy"]
+    clustered = [row for row in found["rows"] if row["graph"] == "clustered"]
+    text = bench.source(RESULTS, results)
+    text += (
+        f"Model: {metrics['animes']:,} animes, {metrics['pca_components']} PCA components, "
+        f"fit {figures['model']['fit_s']:.1f} s; clustered graph k = {metrics['clusters']}, "
+        f"mean out-degree {metrics['cluster_degree_mean']:.1f} (at most "
+        f"{metrics['cluster_degree_max']}). PQ with h_q = {found['pq_advance']}, "
+        f"at most {found['pq_budget_s']:g} s a search.\n\n"
+    )
+    text += table(header, rows)
+    jumps = "never uses" if found["greedy_never_more_jumps"] else "sometimes uses"
+    text += (
+        f"\nGreedy {jumps} more jumps than a PQ(h). Greedy on the unclustered graph is at "
+        f"least {found['min_speedup_over_pq4']:,.0f}× faster than PQ(4) on either graph, "
+        f"or {found['min_speedup_over_pq4_in_synthesis']:,.0f}× timed inside a synthesis."
+    )
+    if clustered:
+        text += (
+            f" On the clustered graph PQ(4) takes "
+            f"{_span([row['pq']['4']['search_ms'] for row in clustered], 1)} ms, greedy on "
+            f"that graph is {_span([row['pq']['4']['speedup'] for row in clustered])}× faster "
+            f"than it, and greedy takes "
+            f"{_span([row['greedy']['jumps'] for row in clustered])} jumps per sentence there."
+        )
+    return text + "\n"
+
+
+def anime_graph_scaling(bench: Bench) -> str:
+    """Greedy search time against database size (``lipstream.bench.anime_graph``)."""
+    results = bench.load(RESULTS)
+    figures = results["engine_benches"]["anime-graph"]
+    return bench.source(RESULTS, results) + table(
+        ["copies", "animes", "fit s", "search ms / sentence"]
+        + ["inside a synthesis: ms / sentence", "µs / phoneme"],
+        (
+            [
+                str(row["factor"]),
+                f"{row['animes']:,}",
+                number(row["fit_s"]),
+                f"{row['warm_search_ms_per_sentence']:.3f}",
+                f"{row['search_ms_per_sentence']:.3f}",
+                number(row["search_us_per_phoneme"], 2),
+            ]
+            for row in figures["scaling"]
+        ),
+    )
+
+
+def anime_graph_quality(bench: Bench) -> str:
+    """Speed and held-out quality of both graphs (``lipstream.bench.anime_graph``)."""
+    results = bench.load(RESULTS)
+    figures = results["engine_benches"]["anime-graph"]
+    speed, quality = figures["speed"], figures["quality"]
+    text = bench.source(RESULTS, results)
+    text += (
+        f"Speed (served defaults, 60 fps): greedy search for a {speed['phonemes']}-phoneme "
+        f"sentence {speed['greedy_search_ms']:.3f} ms "
+        f"({speed['greedy_search_ms_with_audio']:.3f} ms ranking by audio), timed inside a "
+        f"synthesis; whole synthesis per held-out sentence "
+        f"({speed['mean_phonemes_per_sentence']:.1f} phonemes on average) "
+        f"{speed['synthesis_ms_per_sentence']:.1f} ms without audio and "
+        f"{speed['synthesis_ms_per_sentence_with_audio']:.1f} ms with audio.\n\n"
+        "Quality on the held-out split (each utterance's own emotion and audio):\n\n"
+    )
+    rows = [
+        [f"`{name}`" if " " not in name else f"`{name.split()[0]}`, {name.split()[1]}"]
+        + [f"{value['rms']:.4f}", percent(value["closure_rate"])]
+        for name, value in quality.items()
+        if isinstance(value, dict)
+    ]
+    rows.append(["recorded", "—", percent(quality["recorded_closure_rate"])])
+    return text + table(["engine", "RMS", "/p b m/ closure"], rows)
+
+
+TARGET_PHONEMES, TARGET_MS, TARGET_NODES = 60, 20.0, 5000
+
+
+def expressive_dp_table_v(bench: Bench) -> str:
+    """Deng & Neumann's Table V lengths (``lipstream.bench.expressive_dp``): the paper's
+    CPU time, exact DP's and the fast search's, and the issue's target."""
+    results = bench.load(RESULTS)
+    figures = results["engine_benches"]["expressive-dp"]
+    found = figures["table_v"]
+    text = bench.source(RESULTS, results)
+    text += (
+        f"Database: {figures['nodes']:,} motion nodes, {figures['basis_components']} basis "
+        f"components, fit {figures['fit_s']:.1f} s. Exact DP (every pair priced) is timed "
+        f"over a few layers, {found['exact_dp_cpu_s_per_transition']:.1f} CPU s per "
+        "transition, and scaled to each length; it and the fast search reach "
+        + (
+            "the same optimum there"
+            if found["same_optimum_on_exact_layers"]
+            else "different optima there (!)"
+        )
+        + ".\n\n"
+    )
+    text += table(
+        ["phonemes", "paper CPU s", "exact DP CPU s", "fast search CPU ms, median / least"]
+        + ["nodes priced"],
+        (
+            [
+                str(row["phonemes"]),
+                number(row["paper_cpu_s"]),
+                number(row["exact_dp_cpu_s"]),
+                f"{number(row['fast_cpu_ms'], 2)} / {number(row['fast_cpu_ms_least'], 2)}",
+                f"{row['fast_priced_nodes']:,}",
+            ]
+            for row in found["rows"]
+        ),
+    )
+    longest = max(found["rows"], key=lambda row: row["phonemes"])
+    met = (
+        longest["phonemes"] >= TARGET_PHONEMES
+        and figures["nodes"] >= TARGET_NODES
+        and longest["fast_cpu_ms"] <= TARGET_MS
+    )
+    text += (
+        f"\nThe issue's target, {TARGET_MS:g} ms of CPU for a {TARGET_PHONEMES}-phoneme "
+        f"sentence on at least {TARGET_NODES:,} nodes: {longest['fast_cpu_ms']:.1f} ms median "
+        f"for {longest['phonemes']} phonemes on {figures['nodes']:,} nodes, "
+        + ("met" if met else "not met")
+        + ".\n"
+    )
+    return text
+
+
+def hmm_benches(bench: Bench) -> str:
+    """``lipstream.bench.hmm`` within ``lipstream bench``: the two estimators, Brand's Err
+    and RMS by what drives the model, and voice-driven speed and first frame per rung."""
+    results = bench.load(RESULTS)
+    figures = results["engine_benches"]["hmm"]
+    text = bench.source(RESULTS, results) + "Estimators, trained from the same start:\n\n"
+    text += table(
+        ["estimator", "states (of)", "transitions", "perplexity", "held-out entropy rate, bits"]
+        + ["fit s"],
+        (
+            [
+                f"`{name}`",
+                f"{fit['states']} ({fit['states_initial']})",
+                str(fit["transitions"]),
+                number(fit["perplexity"], 3),
+                number(fit["heldout_entropy_rate_bits"], 4),
+                number(fit["fit_s"]),
+            ]
+            for name, fit in figures["estimators"].items()
+        ),
+    )
+    errors = figures["errors"]
+    drivers = list(errors["heldout"])
+    text += "\nBrand's Err / RMS against the recorded curves, by what drives the model:\n\n"
+    text += table(
+        ["lines", *drivers],
+        (
+            [split] + [f"{by[name]['err']:.3f} / {by[name]['rms']:.4f}" for name in drivers]
+            for split, by in errors.items()
+        ),
+    )
+    speeds, first = figures["real_time_factor"], figures["first_frame"]
+    text += (
+        "\nVoice-driven synthesis at 60 fps, audio seconds per CPU second (real-time factor), "
+        "and a request fed audio alone: the audio heard before its first frame, and that "
+        "call's time:\n\n"
+    )
+    return text + table(
+        ["rung", "real-time factor", "audio before the first frame ms", "first call ms"],
+        (
+            [
+                f"`{name}`",
+                f"{factor:,.0f}",
+                f"{first[name]['audio_needed_ms']:.0f}" if name in first else "–",
+                f"{first[name]['call_ms']:.3f}" if name in first else "–",
+            ]
+            for name, factor in speeds.items()
+        ),
+    )
+
+
+def expressive_dp_benches(bench: Bench) -> str:
+    """``lipstream.bench.expressive_dp``'s other figures: the weights' cross-validated
+    error, fixed lag against the full search, and RMS per emotion by modifiers."""
+    results = bench.load(RESULTS)
+    figures = results["engine_benches"]["expressive-dp"]
+    text = bench.source(RESULTS, results)
+    text += (
+        f"Cross-validated error with the searched weights {figures['cv_error']:.4f}, with the "
+        f"defaults {figures['cv_error_defaults']:.4f}; a phoneme-map pick "
+        f"{figures['pick_ms']:.3f} ms.\n\nFixed lag against the full search on the held-out "
+        "lines:\n\n"
+    )
+    text += table(
+        ["lag", "lines differing", "nodes differing", "cost above the optimum, mean / largest"]
+        + ["wait ms (lag + 2 median phonemes)", "ms / phoneme"],
+        (
+            [
+                str(row["lag"]),
+                percent(row["lines_differing"]),
+                percent(row["nodes_differing"]),
+                f"{100 * row['mean_cost_gap']:.2f}% / {100 * row['max_cost_gap']:.2f}%",
+                f"{row['lookahead_ms']:.0f}",
+                f"{row['ms_per_phoneme']:.3f}",
+            ]
+            for row in figures["lags"]
+        ),
+    )
+    by_emotion = figures["rms_by_emotion"]
+    emotions = sorted(next(iter(by_emotion.values())))
+    labels = {"correct_modifiers": "correct modifiers", "neutral_modifiers": "all neutral"}
+    text += "\nHeld-out RMS per emotion:\n\n"
+    return text + table(
+        ["synthesis", *emotions],
+        (
+            [labels.get(name, f"`{name}`")] + [f"{rms[emotion]:.4f}" for emotion in emotions]
+            for name, rms in by_emotion.items()
+        ),
+    )
+
+
 HMM_VOICES = "hmm_voices.json"
 HMM_VOICE_SETS = (
     ("demo", "demo held-out"),
@@ -1519,6 +1931,18 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "first-start": first_start,
     "engines-summary": engines_summary,
     "engines": engines,
+    "dam-quality": engine_quality(("dam", "cohen-massaro", "anime-graph", "viseme-lerp")),
+    "dam-rungs": engine_rungs(("dam", "cohen-massaro"), ("anime-graph", "viseme-lerp")),
+    "dam-fit": dam_fit,
+    "anime-graph-rungs": engine_rungs(("anime-graph",)),
+    "hmm-rungs": engine_rungs(("hmm",), ("viseme-lerp",)),
+    "expressive-dp-rungs": engine_rungs(("expressive-dp",), ("viseme-lerp",)),
+    "anime-graph-table": anime_graph_table,
+    "anime-graph-scaling": anime_graph_scaling,
+    "anime-graph-quality": anime_graph_quality,
+    "expressive-dp-table-v": expressive_dp_table_v,
+    "expressive-dp-benches": expressive_dp_benches,
+    "hmm-benches": hmm_benches,
     "stream-calls": stream_calls,
     "retarget-cost": retarget_cost,
     "call-pairs": call_pairs("call_pairs.json"),

@@ -16,6 +16,7 @@ from lipstream.bench.report import (
     NOT_RECORDED,
     Bench,
     UnknownBlock,
+    UnreadableResults,
     main,
     render_text,
     report_files,
@@ -495,3 +496,322 @@ def test_the_connection_cost_renders_each_round_and_the_median(tmp_path: Path) -
     assert "| WebSocket opened and closed | 1.57, 1.77 | 1.68 |" in rendered
     assert "| HTTP `GET /healthz` | 0.65, 0.68 | 0.66 |" in rendered
     assert "Not measured yet" in BLOCKS["connection-cost"](Bench(tmp_path / "empty"))
+
+
+def _with_emotions(engine: str, rms: float, emotions: dict[str, float]) -> dict[str, object]:
+    return {**engine_row(engine, rms, 0.01, 0.9), "rms_by_emotion": emotions}
+
+
+def _rung(engine: str, rung: str, lookahead: float, rms: float, closed: float) -> dict[str, object]:
+    return {
+        "engine": engine,
+        "rung": rung,
+        "lookahead_ms": lookahead,
+        "rms_error": rms,
+        "closure_rate": closed,
+        "rms_vs_best": 0.01,
+    }
+
+
+def _results(tmp_path: Path, **fields: object) -> Bench:
+    doc = {
+        "date": "2030-01-02T03:04:05+00:00",
+        "command": "lipstream bench --results bench/results.json",
+        "corpus": {"name": "toy", "digest": "0123456789abcdef"},
+        "recorded": {"closure_rate": 1.0},
+        "engines": [],
+        "rungs": [],
+        **fields,
+    }
+    (tmp_path / "results.json").write_text(json.dumps(doc))
+    return Bench(tmp_path)
+
+
+def test_an_engine_page_quality_block_compares_emotion_by_emotion(tmp_path: Path) -> None:
+    bench = _results(
+        tmp_path,
+        engines=[
+            _with_emotions("viseme-lerp", 0.2, {"happy": 0.25, "sad": 0.15}),
+            _with_emotions("cohen-massaro", 0.06, {"happy": 0.07, "sad": 0.04}),
+            _with_emotions("dam", 0.05, {"happy": 0.06, "sad": 0.045}),
+            _with_emotions("anime-graph", 0.04, {"happy": 0.07, "sad": 0.05}),
+        ],
+    )
+    rendered = BLOCKS["dam-quality"](bench)
+    assert rendered.startswith("Source: `bench/results.json`;")
+    rows = [line for line in rendered.splitlines() if line.startswith("| `")]
+    # the page's order, not the file's
+    assert [row.split(" | ")[0] for row in rows] == [
+        "| `dam`",
+        "| `cohen-massaro`",
+        "| `anime-graph`",
+        "| `viseme-lerp`",
+    ]
+    assert rows[0] == "| `dam` | 0.0500 (0.25) | 0.0600 | 0.0450 | 90.0% | – |"
+    assert (
+        "- `dam` against `cohen-massaro`: RMS 0.0500 against 0.0600 (lower), "
+        "lower in 1 of 2 emotions (not sad).\n" in rendered
+    )
+    assert (
+        "- `dam` against `anime-graph`: RMS 0.0500 against 0.0400 (not lower), "
+        "lower in every emotion.\n" in rendered
+    )
+    assert "`viseme-lerp`: RMS 0.0500 against 0.2000 (lower), lower in every emotion." in rendered
+
+
+def test_quality_blocks_name_what_the_results_lack(tmp_path: Path) -> None:
+    bench = _results(tmp_path, engines=[_with_emotions("dam", 0.05, {"sad": 0.04})])
+    with pytest.raises(UnreadableResults, match="dam-quality"):
+        render_text("<!-- report: dam-quality -->\n<!-- /report -->\n", bench, "dam.md")
+
+
+def test_the_rung_block_says_what_the_causal_rung_gives_up(tmp_path: Path) -> None:
+    bench = _results(
+        tmp_path,
+        rungs=[
+            _rung("viseme-lerp", "causal", 0.0, 0.125, 1.0),
+            _rung("dam", "full", 1600.0, 0.05, 0.8),
+            _rung("dam", "causal_lead", 6.749, 0.052, 0.95),
+            _rung("dam", "causal", 0.0, 0.055, 0.95),
+            _rung("cohen-massaro", "full", 1400.0, 0.06, 0.7),
+            _rung("cohen-massaro", "causal", 0.0, 0.045, 0.75),
+            _rung("anime-graph", "causal", 0.0, 0.07, 0.8),
+        ],
+    )
+    rendered = BLOCKS["dam-rungs"](bench)
+    assert "| `dam` | `full` | 1600 | 0.0500 | 80.0% | 0.0100 |" in rendered
+    assert "| `dam` | `causal_lead` | 6.7 | 0.0520 | 95.0% | 0.0100 |" in rendered
+    assert "viseme-lerp` | `causal`" not in rendered  # a rival is ranked, not tabled
+    assert (
+        "`dam` on `causal`: RMS 0.0550 against 0.0500 on `full` (+10.0%), "
+        "/p b m/ closed 95.0% against 80.0%." in rendered
+    )
+    assert "`cohen-massaro` on `causal`: RMS 0.0450 against 0.0600 on `full` (-25.0%)" in rendered
+    assert rendered.endswith(
+        "lowest first: `cohen-massaro` 0.0450, `dam` 0.0550, `anime-graph` 0.0700, "
+        "`viseme-lerp` 0.1250.\n"
+    )
+
+
+def _dam_fit(modes: int, tail: int) -> dict[str, object]:
+    search = [
+        {"name": f"s{n}", "lookahead_phonemes": tail + n, "truncation_error": 0.0066}
+        for n in (2, 1, 0)
+    ]
+    return {
+        "fit_s": 7.85,
+        "modes": modes,
+        "basis_components": 17,
+        "fit_rms": 0.03959,
+        "tail": tail,
+        "rungs": [*search, {"name": "causal", "lookahead_phonemes": 0, "truncation_error": None}],
+        "cut_tail_errors": {"tail_ahead=0": 1.0047, "tail_ahead=1": 0.4748},
+        "synthesis": {
+            "phonemes": 40,
+            "fps": 60.0,
+            "repeats": 200,
+            "cpu_ms_per_phoneme": 0.00612,
+            "paper_ms_per_phoneme": 0.8,
+        },
+        "causal_calls": [
+            {"rung": "causal_lead", "cpu_ms_median": 0.01057},
+            {"rung": "causal", "cpu_ms_median": 0.01079},
+        ],
+    }
+
+
+def test_the_dam_fit_block(tmp_path: Path) -> None:
+    bench = _results(tmp_path, engine_benches={"dam": {"dam": _dam_fit(428, 6)}})
+    rendered = BLOCKS["dam-fit"](bench)
+    assert (
+        "| `dam` | 428 | 17 | 7.8 | 0.0396 | 6 (0.7%) | 8, 7, 6 | 47.5%, 100.5% | 0.0061 "
+        "| 0.0106 / 0.0108 |" in rendered
+    )
+    assert (
+        "a 40-phoneme sentence at 60 fps, 200 repeats (the paper: 0.8 ms per phoneme)" in rendered
+    )
+
+
+def _pq(ms: float, jumps: int, speedup: float, over_unclustered: float) -> dict[str, object]:
+    return {
+        "search_ms": ms,
+        "jumps": jumps,
+        "timed_out": False,
+        "speedup": speedup,
+        "speedup_over_unclustered_greedy": over_unclustered,
+    }
+
+
+def _anime_graph_benches() -> dict[str, object]:
+    def row(graph: str, greedy_ms: float, jumps: int, pq4: dict[str, object]) -> dict[str, Any]:
+        greedy = {"search_ms": greedy_ms, "jumps": jumps, "search_ms_in_synthesis": 0.122}
+        return {
+            "phonemes": 27,
+            "graph": graph,
+            "greedy": greedy,
+            "pq": {"3": _pq(8.45, 0, 1.0, 1.0), "4": pq4, "5": {"timed_out": True}},
+        }
+
+    return {
+        "model": {
+            "fit_s": 6.23,
+            "metrics": {
+                "animes": 11245,
+                "pca_components": 13,
+                "clusters": 1000,
+                "cluster_degree_mean": 6.913,
+                "cluster_degree_max": 30,
+            },
+        },
+        "table": {
+            "rows": [
+                row("unclustered", 0.0117, 9, _pq(254.3, 11, 21805.4, 21805.4)),
+                row("clustered", 0.0682, 0, _pq(12.69, 0, 186.0, 1088.4)),
+                row("clustered", 0.0727, 2, _pq(20.68, 2, 284.6, 1255.5)),
+            ],
+            "pq_advance": 1,
+            "pq_budget_s": 60.0,
+            "greedy_never_more_jumps": True,
+            "min_speedup_over_pq4": 1088.4,
+            "min_speedup_over_pq4_in_synthesis": 340.8,
+        },
+        "scaling": [
+            {
+                "factor": 4,
+                "animes": 44980,
+                "fit_s": 4.16,
+                "search_ms_per_sentence": 0.01639,
+                "search_us_per_phoneme": 0.4362,
+                "warm_search_ms_per_sentence": 0.01318,
+            }
+        ],
+        "speed": {
+            "phonemes": 40,
+            "greedy_search_ms": 0.01304,
+            "greedy_search_ms_with_audio": 0.05489,
+            "synthesis_ms_per_sentence": 0.5317,
+            "synthesis_ms_per_sentence_with_audio": 2.82,
+            "mean_phonemes_per_sentence": 37.576,
+        },
+        "quality": {
+            "viseme-lerp": {"rms": 0.12212, "closure_rate": 1.0},
+            "anime-graph clustered": {"rms": 0.06037, "closure_rate": 0.92222},
+            "recorded_closure_rate": 1.0,
+        },
+    }
+
+
+def test_the_anime_graph_blocks(tmp_path: Path) -> None:
+    bench = _results(tmp_path, engine_benches={"anime-graph": _anime_graph_benches()})
+    found = BLOCKS["anime-graph-table"](bench)
+    assert "mean out-degree 6.9 (at most 30). PQ with h_q = 1, at most 60 s a search." in found
+    assert (
+        "| 27 | unclustered | 0.012 (0.122) | 9 | 8 / 0 | 254 / 11 | timed out | 21,805× "
+        "| 21,805× |" in found
+    )
+    assert "at least 1,088× faster than PQ(4) on either graph, or 341× timed inside" in found
+    assert (
+        "On the clustered graph PQ(4) takes 12.7–20.7 ms, greedy on that graph is 186–285× "
+        "faster than it, and greedy takes 0–2 jumps per sentence there." in found
+    )
+    scaling = BLOCKS["anime-graph-scaling"](bench)
+    assert "| 4 | 44,980 | 4.2 | 0.013 | 0.016 | 0.44 |" in scaling
+    quality = BLOCKS["anime-graph-quality"](bench)
+    assert "40-phoneme sentence 0.013 ms (0.055 ms ranking by audio)" in quality
+    assert "(37.6 phonemes on average) 0.5 ms without audio and 2.8 ms with audio" in quality
+    assert "| `anime-graph`, clustered | 0.0604 | 92.2% |" in quality
+    assert "| recorded | — | 100.0% |" in quality
+
+
+def _table_v(fast_ms: float, nodes: int) -> dict[str, object]:
+    row = {
+        "phonemes": 63,
+        "paper_cpu_s": 942.609,
+        "exact_dp_cpu_s": 894.81,
+        "fast_cpu_ms": fast_ms,
+        "fast_cpu_ms_least": 4.2104,
+        "fast_priced_nodes": 5705,
+    }
+    table_v = {
+        "rows": [row],
+        "exact_dp_cpu_s_per_transition": 14.43,
+        "same_optimum_on_exact_layers": True,
+    }
+    return {
+        "expressive-dp": {
+            "fit_s": 5.06,
+            "nodes": nodes,
+            "basis_components": 14,
+            "table_v": table_v,
+        }
+    }
+
+
+def test_table_v_says_whether_the_target_is_met(tmp_path: Path) -> None:
+    rendered = BLOCKS["expressive-dp-table-v"](
+        _results(tmp_path, engine_benches=_table_v(4.6972, 10527))
+    )
+    assert "| 63 | 942.6 | 894.8 | 4.70 / 4.21 | 5,705 |" in rendered
+    assert "14.4 CPU s per transition" in rendered and "the same optimum there" in rendered
+    assert rendered.endswith("4.7 ms median for 63 phonemes on 10,527 nodes, met.\n")
+    slow = BLOCKS["expressive-dp-table-v"](_results(tmp_path, engine_benches=_table_v(20.5, 10527)))
+    assert slow.endswith("20.5 ms median for 63 phonemes on 10,527 nodes, not met.\n")
+    small = BLOCKS["expressive-dp-table-v"](_results(tmp_path, engine_benches=_table_v(4.7, 4000)))
+    assert small.endswith("on 4,000 nodes, not met.\n")
+
+
+def test_the_hmm_bench_block(tmp_path: Path) -> None:
+    estimators = {
+        "entropic": {
+            "fit_s": 2.86,
+            "states": 38,
+            "states_initial": 40,
+            "transitions": 336,
+            "perplexity": 2.13768,
+            "heldout_entropy_rate_bits": 0.029595,
+        }
+    }
+    errors = {"heldout": {"phonemes": {"err": 0.08228, "rms": 0.06448}}}
+    hmm = {
+        "estimators": estimators,
+        "errors": errors,
+        "real_time_factor": {"offline": 1943.5, "causal": 2833.9},
+        "first_frame": {"causal": {"audio_needed_ms": 9.977, "call_ms": 0.036614}},
+    }
+    rendered = BLOCKS["hmm-benches"](_results(tmp_path, engine_benches={"hmm": hmm}))
+    assert "| `entropic` | 38 (40) | 336 | 2.138 | 0.0296 | 2.9 |" in rendered
+    assert "| lines | phonemes |" in rendered and "| heldout | 0.082 / 0.0645 |" in rendered
+    assert "| `offline` | 1,944 | – | – |" in rendered
+    assert "| `causal` | 2,834 | 10 | 0.037 |" in rendered
+
+
+def test_the_expressive_dp_bench_block(tmp_path: Path) -> None:
+    lag = {
+        "lag": 4,
+        "lines_differing": 0.42424,
+        "nodes_differing": 0.041935,
+        "mean_cost_gap": 0.0029979,
+        "max_cost_gap": 0.022141,
+        "lookahead_ms": 485.92,
+        "ms_per_phoneme": 0.22211,
+    }
+    figures = {
+        "cv_error": 0.049409,
+        "cv_error_defaults": 0.050851,
+        "pick_ms": 0.047947,
+        "lags": [lag],
+        "rms_by_emotion": {
+            "correct_modifiers": {"sad": 0.058169, "angry": 0.082834},
+            "viseme-lerp": {"sad": 0.099755, "angry": 0.157178},
+        },
+    }
+    rendered = BLOCKS["expressive-dp-benches"](
+        _results(tmp_path, engine_benches={"expressive-dp": figures})
+    )
+    assert (
+        "searched weights 0.0494, with the defaults 0.0509; a phoneme-map pick 0.048 ms" in rendered
+    )
+    assert "| 4 | 42.4% | 4.2% | 0.30% / 2.21% | 486 | 0.222 |" in rendered
+    assert "| synthesis | angry | sad |" in rendered
+    assert "| correct modifiers | 0.0828 | 0.0582 |" in rendered
+    assert "| `viseme-lerp` | 0.1572 | 0.0998 |" in rendered
