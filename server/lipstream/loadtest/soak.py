@@ -28,6 +28,7 @@ import asyncio
 import json
 import math
 import multiprocessing
+import os
 import random
 import resource
 import time
@@ -60,6 +61,7 @@ MAX_HOSTILE_PER_KIND = 100
 HEALTH_TIMEOUT_S = 10.0
 RSS_INTERVAL_S = 0.5
 HOSTILE_JOIN_S = 30.0
+HOSTILE_NICENESS = 10  # the measuring clients first, when they share a core with the attack
 DEFAULT_PORTS = {"ws": 80, "wss": 443}
 _MS = 1000.0
 
@@ -327,6 +329,7 @@ def _hostile_process(config: SoakConfig, target: Target, deadline: float, pipe: 
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     if soft != hard:  # the client flood holds thousands of sockets
         resource.setrlimit(resource.RLIMIT_NOFILE, (hard, hard))
+    os.nice(HOSTILE_NICENESS)
     tallies = run_coroutine(_run_hostile(config, target, deadline))
     pipe.send_bytes(json.dumps({kind: t.as_dict() for kind, t in tallies.items()}).encode())
     pipe.close()

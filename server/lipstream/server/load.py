@@ -60,6 +60,15 @@ class _Tick:
     receive_lag_s: float = 0.0
 
 
+@dataclass(frozen=True)
+class _Window:
+    ticks: deque[_Tick]
+    last: _Tick
+    busy: float
+    lag_s: float
+    receive_lag_s: float
+
+
 class LoadMonitor:
     """Samples the event loop it is started on, every ``interval_s``."""
 
@@ -80,6 +89,7 @@ class LoadMonitor:
         self._timer: asyncio.TimerHandle | None = None
         self._due = 0.0
         self._receive_lag_s = 0.0
+        self._window: _Window | None = None
         self.last_tick_s = time.monotonic()
 
     def start(self) -> None:
@@ -112,19 +122,36 @@ class LoadMonitor:
         CPU clock is a system call, where ``py-spy`` found a quarter of the loop's time in a
         storm of handshakes on a loaded machine (a system call is also where a preempted
         process is caught, so that share is an upper bound; docs/reports/hostile-clients.md)."""
-        ticks = list(self.ticks)
+        ticks = self.ticks
         overdue_s = 0.0
         if self._loop is not None and threading.get_ident() == self._thread:
             overdue_s = max(0.0, self._loop.time() - self._due)
         if len(ticks) < 2:
             return LoadSample(lag_ms=1000.0 * overdue_s, rss_mb=self.rss_mb)
-        first, last = ticks[0], ticks[-1]
+        window = self._window_of(ticks)
+        lag_s = max(window.lag_s, overdue_s)
+        return LoadSample(1000.0 * lag_s, window.busy, self.rss_mb, 1000.0 * window.receive_lag_s)
+
+    def _window_of(self, ticks: deque[_Tick]) -> _Window:
+        """The window's figures, computed once per tick: admission asks for a sample per
+        connection, hundreds of them between two ticks in a flood."""
+        cached = self._window
+        if cached is not None and cached.last is ticks[-1] and cached.ticks is ticks:
+            return cached
+        snapshot = list(ticks)  # the loop's thread may append while a pool thread reads
+        first, last = snapshot[0], snapshot[-1]
         # Over at least a whole window: a few milliseconds after start the handshake under
         # way would otherwise count as a loop busy all the time.
         busy = (last.cpu - first.cpu) / max(last.wall - first.wall, self.window_s)
-        lag_s = max(statistics.median(tick.lag_s for tick in ticks[1:]), overdue_s)
-        receive_lag_s = statistics.median(tick.receive_lag_s for tick in ticks[1:])
-        return LoadSample(1000.0 * lag_s, min(busy, 1.0), self.rss_mb, 1000.0 * receive_lag_s)
+        later = snapshot[1:]
+        self._window = _Window(
+            ticks,
+            last,
+            min(busy, 1.0),
+            statistics.median(tick.lag_s for tick in later),
+            statistics.median(tick.receive_lag_s for tick in later),
+        )
+        return self._window
 
     def _schedule(self, now: float) -> None:
         assert self._loop is not None

@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import asyncio
 import os
+import statistics
 from collections import deque
+from collections.abc import Iterable
 
 import pytest
 
+import lipstream.server.load as load_module
 from lipstream.server.load import LoadMonitor, LoadSample, _Tick, machine_memory_mb, resident_mb
 from tests.helpers import VirtualClock, run_on_virtual_time
 
@@ -31,6 +34,30 @@ def test_the_sample_is_the_median_lag_and_the_busy_fraction_of_the_window() -> N
     assert abs(sample.loop_busy - 0.75) < 1e-9
     assert abs(sample.lag_ms - 3.0) < 1e-9  # median of 2, 500, 4, 1 ms: one stall is ignored
     assert sample.rss_mb == 321.0
+
+
+def test_the_windows_figures_are_computed_once_per_tick(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Admission samples once per connection; the medians change only with a tick."""
+    medians: list[list[float]] = []
+    median = statistics.median
+
+    def counted_median(values: Iterable[float]) -> float:
+        listed = list(values)
+        medians.append(listed)
+        return median(listed)
+
+    monkeypatch.setattr(load_module.statistics, "median", counted_median)
+    monitor = LoadMonitor(interval_s=0.1, window_s=0.2)
+    monitor.ticks = deque([_Tick(10.0, 5.0, 0.0), _Tick(10.1, 5.05, 0.002)], maxlen=3)
+    first = [monitor.sample() for _ in range(5)]
+    assert len(medians) == 2 and first[0] == first[-1]
+    assert first[0].lag_ms == pytest.approx(2.0)
+    monitor.ticks.append(_Tick(10.2, 5.1, 0.010))  # what the loop's tick does
+    later = monitor.sample()
+    assert len(medians) == 4 and medians[-2] == [0.002, 0.010]
+    assert later.lag_ms == pytest.approx(6.0) and later.loop_busy == pytest.approx(0.5)
+    monitor.rss_mb = 99.0  # the memory figure is read fresh each time
+    assert monitor.sample().rss_mb == 99.0 and len(medians) == 4
 
 
 def test_the_window_keeps_its_length_of_ticks() -> None:
