@@ -5,16 +5,19 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import multiprocessing
 import os
 from pathlib import Path
 
 import pytest
 
 from lipstream.errors import LipstreamError
-from lipstream.loadtest.hostile import HOSTILE_KINDS, KindTally
+from lipstream.loadtest.hostile import HOSTILE_KINDS, KindTally, Target
 from lipstream.loadtest.sessions import ClipShare, RequestRecord
 from lipstream.loadtest.soak import (
+    HOSTILE_NICENESS,
     SoakConfig,
+    _hostile_process,
     _undocumented,
     check_soak,
     format_report,
@@ -165,3 +168,31 @@ def test_only_codes_outside_the_documented_tables_are_undocumented() -> None:
         "closed_4999": 1,
         "weird_code": 2,
     }
+
+
+def test_the_hostile_process_yields_the_core_to_the_measuring_one(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Run in this process with no kinds: it lowers its priority before any attack, and
+    reports its (empty) tallies through the pipe."""
+    niced: list[int] = []
+    monkeypatch.setattr(os, "nice", lambda increment: niced.append(increment) or increment)
+    receiving, sending = multiprocessing.Pipe(duplex=False)
+    target = Target(
+        "ws://127.0.0.1:9/v1/stream",
+        "127.0.0.1",
+        9,
+        "viseme-lerp",
+        "demo",
+        "msgpack",
+        None,
+        None,
+        None,
+        10,
+        1.0,
+        60.0,
+        0,
+    )
+    _hostile_process(SoakConfig(kinds=()), target, 0.0, sending)
+    assert niced == [HOSTILE_NICENESS] and HOSTILE_NICENESS > 0
+    assert json.loads(receiving.recv_bytes()) == {}
