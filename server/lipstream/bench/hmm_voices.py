@@ -14,9 +14,11 @@ curves, as a ratio to ``viseme-lerp``'s RMS fed the true phones, on:
   character's own train split (``self-trained``), beside a ``viseme-lerp`` trained there;
 - **held-out voice**: the demo's held-out lines spoken in ``HELDOUT_VOICE``, which no
   training line is spoken in;
-- **real speech**: the GRID clips that ship their sound (``swwp2s.mp4`` only), the
-  aperture r (``bench.real_faces``) of the audio-driven face against the tracked lips,
-  beside ``viseme-lerp`` fed the clip's force-aligned phones.
+- **real speech**: the GRID clips that ship their sound (``swwp2s.mp4``, the others'
+  ``clips/<stem>.ogg``; ``bench.aligner_real.grid_sound``), the aperture r
+  (``bench.real_faces``) of the audio-driven face against the tracked lips, beside
+  ``viseme-lerp`` fed the clip's force-aligned phones, clip by clip and as the mean over
+  the clips.
 
 Phoneme-driven ``hmm`` (``full`` and ``causal``) is reported beside the voice-driven
 one: a gap between them is the audio side's. Vocal-tract-length warping is measured on
@@ -35,7 +37,7 @@ import argparse
 import copy
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -45,7 +47,6 @@ from scipy.special import logsumexp
 from threadpoolctl import threadpool_limits
 
 from ..audio import Audio
-from ..capture.decode import media_audio
 from ..config import load_settings
 from ..corpus import EMOTIONS, Corpus, Utterance, load_corpus
 from ..demo.face import DEMO_CHANNELS
@@ -68,6 +69,7 @@ from ..evaluation import lip_aperture
 from ..features import WARPS, most_likely_warp, speech_features, warped
 from ..results_file import recorded, write_results
 from ..training import DEMO_CORPUS_DIR
+from .aligner_real import grid_sound, read_sound
 from .real_faces import Clip, pearson_r, real_clips
 
 SECOND_CHARACTER = Speaker(
@@ -206,7 +208,7 @@ def warp_figures(
             audio.samples, audio.sample_rate, model.mfcc, score, WARPS, speech_features
         )
 
-    found: dict[str, Any] = {"warps": list(WARPS), "fixed": {}, "most_likely": {}}
+    found: dict[str, Any] = {"warps": list(WARPS), "fixed": {}, "most_likely": {}, "grid": {}}
     for name, lines in sets.items():
         picks = [chosen(u.audio) for u in lines if u.audio is not None]
         errors = []
@@ -225,10 +227,23 @@ def warp_figures(
         }
     for clip, audio in sounded:
         warp = chosen(audio)
-        found["most_likely"][f"grid {clip.stem}"] = {
+        found["grid"][clip.stem] = {
             "warp": warp,
             "hmm_audio_r": grid_figures(twins[warp], lerp, clip, audio, grid_fps)["hmm_audio_r"],
         }
+    found["grid_mean"] = mean_figures(found["grid"].values())
+    return found
+
+
+def mean_figures(clips: Iterable[dict[str, Any]]) -> dict[str, Any]:
+    """Per figure of ``clips`` (each a dict of r values, None where r is undefined) the
+    mean over the clips where it is defined, with how many clips that is."""
+    rows = list(clips)
+    names = sorted({name for row in rows for name in row if name.endswith("_r")})
+    found: dict[str, Any] = {"clips": len(rows)}
+    for name in names:
+        known = [row[name] for row in rows if row.get(name) is not None]
+        found[name] = float(np.mean(known)) if known else None
     return found
 
 
@@ -236,9 +251,9 @@ def _grid_with_sound(grid_dir: Path) -> tuple[Corpus, list[tuple[Clip, Audio]]]:
     corpus = load_corpus(grid_dir / "corpus")
     found = []
     for clip in real_clips(corpus):
-        video = grid_dir / f"{clip.stem}.mp4"
-        if video.is_file():
-            found.append((clip, media_audio(video)))
+        sound = grid_sound(grid_dir, clip.stem)
+        if sound is not None:
+            found.append((clip, read_sound(sound)))
     return corpus, found
 
 
@@ -280,6 +295,7 @@ def run_hmm_voices(corpus: Corpus, grid_dir: Path, command: list[str]) -> dict[s
                 "fit_s": round(fit_s, 1),
                 "sets": sets,
                 "grid": real,
+                "grid_mean": mean_figures(real.values()),
             }
             print(f"{name}: {_summary(results['configurations'][name])}", file=sys.stderr)
         results["warps"] = warp_figures(

@@ -13,7 +13,8 @@ set) is synthesized from its own force-aligned phones, and the predicted lip ape
   squares on the speaker's speech frames: on the speaker's other clips where there are
   any (leave one clip out), else on the clip itself, and the results count each kind;
 - **closure timing**: ``evaluation.closure_lags`` (the predicted plateau centre less the
-  real one), mean and standard deviation in ms.
+  real one), mean, standard deviation and the mean's standard error (sd / sqrt(n), the
+  closures taken as independent) in ms.
 
 Engines that use audio are driven by the phones alone: the shipped set holds no sound.
 """
@@ -146,6 +147,7 @@ class RealFaceRow:
     closure_rate: float | None
     closure_lag_ms: float | None
     closure_lag_sd_ms: float | None
+    closure_lag_se_ms: float | None
     closures_timed: int
     clips_mapped_on_themselves: int
     aperture_r_by_clip: dict[str, float | None]
@@ -192,12 +194,14 @@ def score_apertures(
         closed, total = closed + got, total + count
         lags.extend(closure_lags(clip.aperture, prediction, clip.phones, fps))
     lags_ms = 1000.0 * np.asarray(lags)
+    sd = float(lags_ms.std(ddof=1)) if len(lags) > 1 else None
     return RealFaceRow(
         engine=engine,
         aperture_r=float(np.mean(known)) if known else None,
         closure_rate=closed / total if total else None,
         closure_lag_ms=float(lags_ms.mean()) if len(lags) else None,
-        closure_lag_sd_ms=float(lags_ms.std(ddof=1)) if len(lags) > 1 else None,
+        closure_lag_sd_ms=sd,
+        closure_lag_se_ms=None if sd is None else sd / float(np.sqrt(len(lags))),
         closures_timed=len(lags),
         clips_mapped_on_themselves=own,
         aperture_r_by_clip=by_clip,
@@ -276,13 +280,14 @@ def _fmt(value: float | None, pattern: str) -> str:
 
 
 def format_real_table(results: dict[str, Any]) -> str:
-    header = f"{'engine':<16}{'aperture r':>11}{'closure':>9}{'lag ms':>9}{'lag sd ms':>11}"
+    header = f"{'engine':<16}{'aperture r':>11}{'closure':>9}{'lag ms':>9}{'± se':>7}{'sd':>7}"
     lines = [header, "-" * len(header)]
     for row in results["engines"]:
         lines.append(
             f"{row['engine']:<16}{_fmt(row['aperture_r'], '.3f'):>11}"
             f"{_fmt(row['closure_rate'], '.1%'):>9}{_fmt(row['closure_lag_ms'], '+.1f'):>9}"
-            f"{_fmt(row['closure_lag_sd_ms'], '.1f'):>11}"
+            f"{_fmt(row.get('closure_lag_se_ms'), '.1f'):>7}"
+            f"{_fmt(row['closure_lag_sd_ms'], '.1f'):>7}"
         )
     recorded = results["recorded"]
     lines.append(f"{'real lips':<16}{'':>11}{_fmt(recorded['closure_rate'], '.1%'):>9}")

@@ -458,6 +458,15 @@ def word_timings(bench: Bench) -> str:
 
 
 ALIGNER_REAL = "aligner_real.json"
+ALIGNER_CLIPS_LISTED = 6
+GRID_POSITIONS = ("command", "colour", "preposition", "letter", "digit", "adverb")
+
+
+def _position(index: int, count: int) -> str:
+    """Word ``index`` (from 0) of ``count``, named by GRID's grammar when six."""
+    return (
+        f"{index + 1} ({GRID_POSITIONS[index]})" if count == len(GRID_POSITIONS) else str(index + 1)
+    )
 
 
 def _errors(summary: dict[str, Any]) -> str:
@@ -468,20 +477,31 @@ def _errors(summary: dict[str, Any]) -> str:
 
 
 def aligner_real(bench: Bench) -> str:
-    """The forced aligner's word times against GRID's (``lipstream.bench.aligner_real``)."""
+    """The forced aligner's word times against GRID's (``lipstream.bench.aligner_real``):
+    each clip's row when there are a few, else the pooled row and the clips' spread."""
     if not bench.exists(ALIGNER_REAL):
         return (
             f"Not measured yet: no `bench/{ALIGNER_REAL}` "
             "(`python -m lipstream.bench.aligner_real`).\n"
         )
     doc = bench.load(ALIGNER_REAL)
-    every = doc["all"]
+    every, clips = doc["all"], doc["clips"]
+    refused = doc.get("refused", [])
     text = bench.source(ALIGNER_REAL, doc)
     text += (
-        f"{every['clips']} clip(s) with GRID's word times, {every['words']} words. Errors are "
-        "|aligned − GRID's| in ms, median / p90 / max, with the mean signed error (aligned "
-        "minus GRID's) in brackets:\n\n"
+        f"{every['clips']} clip(s) with GRID's word times, {every['words']} words"
+        + "".join(f"; `{row['clip']}` refused by the aligner (`{row['code']}`)" for row in refused)
+        + ". Errors are |aligned − GRID's| in ms, median / p90 / max, with the mean signed "
+        "error (aligned minus GRID's) in brackets"
+        + (
+            "; the pooled row's confidence is the clips' median (range), its real-time "
+            "factor their median"
+            if len(clips) > 1
+            else ""
+        )
+        + ":\n\n"
     )
+    shown = clips if len(clips) <= ALIGNER_CLIPS_LISTED else []
     rows = [
         [
             f"`{clip['clip']}` ({clip['audio_s']:.2f} s)",
@@ -491,13 +511,35 @@ def aligner_real(bench: Bench) -> str:
             number(clip["confidence"], 2),
             number(clip["real_time_factor"], 2),
         ]
-        for clip in doc["clips"]
+        for clip in shown
     ]
-    if len(doc["clips"]) > 1:
-        rows.append(["all", str(every["words"]), _errors(every["onset"]), _errors(every["offset"])])
-        rows[-1] += ["", ""]
+    if len(clips) > 1:
+        confidences = sorted(clip["confidence"] for clip in clips)
+        factors = sorted(clip["real_time_factor"] for clip in clips)
+        rows.append(
+            [
+                f"all {len(clips)} clips",
+                str(every["words"]),
+                _errors(every["onset"]),
+                _errors(every["offset"]),
+                f"{number(confidences[len(clips) // 2], 2)} "
+                f"({number(confidences[0], 2)}–{number(confidences[-1], 2)})",
+                number(factors[len(clips) // 2], 2),
+            ]
+        )
     header = ["clip", "words", "word onsets", "word offsets", "confidence", "real-time factor"]
-    return text + table(header, rows)
+    text += table(header, rows)
+    positions = every.get("onset_by_position") or []
+    if len(clips) > 1 and positions:
+        text += "\nWord onsets by position in the sentence, over the clips:\n\n"
+        text += table(
+            ["word", "onset error ms"],
+            [
+                [_position(index, len(positions)), _errors(summary)]
+                for index, summary in enumerate(positions)
+            ],
+        )
+    return text
 
 
 def _pair(stats: dict[str, Any] | None, key: str, digits: int = 0) -> str:
@@ -1138,7 +1180,7 @@ def real_faces_summary(bench: Bench) -> str:
     return (
         "Real lips (GRID): aperture r up to "
         f"{best['aperture_r']:.2f} (`{best['engine']}`; `viseme-lerp` {base['aperture_r']:.2f}), "
-        f"/p b m/ closure lag {_signed(min(lags, default=None))} to "
+        f"closure lag {_signed(min(lags, default=None))} to "
         f"{_signed(max(lags, default=None))} ms "
         f"(`viseme-lerp` {_signed(base['closure_lag_ms'])}; "
         f"[more](docs/reports/engines.md#real-faces)).\n"
@@ -1174,7 +1216,12 @@ def real_faces(bench: Bench) -> str:
                 f"`{row['engine']}`",
                 "–" if row["aperture_r"] is None else number(row["aperture_r"], 3),
                 "–" if rate is None else percent(rate),
-                _signed(row["closure_lag_ms"], 1),
+                _signed(row["closure_lag_ms"], 1)
+                + (
+                    ""
+                    if row.get("closure_lag_se_ms") is None
+                    else f" ± {row['closure_lag_se_ms']:.1f}"
+                ),
                 "–" if row["closure_lag_sd_ms"] is None else number(row["closure_lag_sd_ms"], 1),
                 str(row["closures_timed"]),
                 str(row["clips_mapped_on_themselves"]),
@@ -1184,7 +1231,7 @@ def real_faces(bench: Bench) -> str:
         "engine",
         "aperture r",
         "/p b m/ closed",
-        "closure lag ms (mean)",
+        "closure lag ms (mean ± se)",
         "lag sd ms",
         "closures timed",
         "clips mapped on themselves",
@@ -1846,8 +1893,8 @@ def hmm_voices(bench: Bench) -> str:
         f"×{second['lips_scale']:g}, rounding ×{second['rounding_scale']:g}, stiffness "
         f"×{second['stiffness_scale']:g}; {second['lines']} lines. Held-out voice: "
         f"`+{held['variant']}`, pitch {held['pitch_shift']:+d}, on the demo's held-out lines. "
-        f"GRID clips with sound: {', '.join(doc['grid']['clips_with_sound']) or 'none'} "
-        f"of {doc['grid']['clips']}.\n\n"
+        f"GRID clips with sound: {len(doc['grid']['clips_with_sound'])} of "
+        f"{doc['grid']['clips']}.\n\n"
         "Voice-driven RMS over `viseme-lerp`'s, `full` rung (phoneme-driven `hmm` in "
         "brackets):\n\n"
     )
@@ -1871,22 +1918,24 @@ def hmm_voices(bench: Bench) -> str:
     ]
     text += table(["configuration"] + [label for _, label in HMM_VOICE_SETS], rows)
     text += (
-        "\nGRID aperture r (`hmm` by audio alone, `hmm` by phonemes, `viseme-lerp` fed the "
-        "aligned phones):\n\n"
+        "\nGRID aperture r, the mean over the clips with sound (`hmm` by audio alone, `hmm` "
+        "by phonemes, `viseme-lerp` fed the aligned phones; each clip's in the JSON):\n\n"
     )
     rows = []
     for name, configuration in doc["configurations"].items():
-        for stem, figures in configuration["grid"].items():
-            rows.append(
-                [
-                    name,
-                    f"`{stem}`",
-                    _r(figures["hmm_audio_r"]),
-                    _r(figures["hmm_phonemes_r"]),
-                    _r(figures["viseme_lerp_r"]),
-                ]
-            )
-    text += table(["configuration", "clip", "hmm by audio", "hmm by phonemes", "viseme-lerp"], rows)
+        figures = configuration["grid_mean"]
+        rows.append(
+            [
+                name,
+                str(figures["clips"]),
+                _r(figures.get("hmm_audio_r")),
+                _r(figures.get("hmm_phonemes_r")),
+                _r(figures.get("viseme_lerp_r")),
+            ]
+        )
+    text += table(
+        ["configuration", "clips", "hmm by audio", "hmm by phonemes", "viseme-lerp"], rows
+    )
     warps = doc.get("warps")
     if warps:
         last = list(doc["configurations"])[-1]
@@ -1907,12 +1956,12 @@ def hmm_voices(bench: Bench) -> str:
                 + [f"{chosen['audio_ratio']:.3f} ({picks})"]
             )
         text += table(header, rows)
-        for name, chosen in warps["most_likely"].items():
-            if name.startswith("grid "):
-                text += (
-                    f"\nGRID `{name[5:]}` at its most likely warp {chosen['warp']:g}: "
-                    f"audio-driven aperture r {_r(chosen['hmm_audio_r'])}.\n"
-                )
+        if warps.get("grid_mean"):
+            mean = warps["grid_mean"]
+            text += (
+                f"\nGRID, each of the {mean['clips']} clips with sound at its most likely warp: "
+                f"audio-driven aperture r {_r(mean.get('hmm_audio_r'))} (mean).\n"
+            )
     return text
 
 

@@ -116,7 +116,7 @@ def test_command_measures_the_real_set_and_a_named_corpus(tmp_path: Path) -> Non
     main(["--corpus", f"tiny={tmp_path / 'tiny'}", "--json", str(out)])
     doc = json.loads(out.read_text())
     assert set(doc["corpora"]) == {"real", "tiny"}
-    assert doc["corpora"]["real"]["utterances"] == 11
+    assert doc["corpora"]["real"]["utterances"] == 59
     tiny = doc["corpora"]["tiny"]["measures"]
     # on the 25 fps grid the lips are shut on frames 10..12 (0.40, 0.44, 0.48 s): centre 0.44 s
     assert tiny["closure_from_onset_ms"]["mean"] == pytest.approx(40.0)

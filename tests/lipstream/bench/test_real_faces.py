@@ -89,6 +89,25 @@ def test_a_scaled_copy_shifted_by_two_frames_closes_80_ms_late() -> None:
     assert row.clips_mapped_on_themselves == 0
 
 
+def test_the_lags_standard_error_is_their_sd_over_root_n() -> None:
+    """Three clips closing 0, 1 and 2 frames late: lags 0, 40 and 80 ms, whose mean is
+    40, sample sd 40 and standard error 40 / sqrt(3)."""
+    clips = [_clip("a", "one", 12, 0.1), _clip("b", "one", 15, 0.05), _clip("c", "one", 13, 0.08)]
+    predicted = [np.roll((clip.aperture + 0.1) / 2, shift) for clip, shift in zip(clips, (0, 1, 2))]
+    row = score_apertures("spread", clips, predicted, FPS, threshold=0.01)
+    assert row.closures_timed == 3
+    assert row.closure_lag_ms == pytest.approx(40.0)
+    assert row.closure_lag_sd_ms == pytest.approx(40.0)
+    assert row.closure_lag_se_ms == pytest.approx(40.0 / np.sqrt(3))
+
+
+def test_one_closure_has_no_spread() -> None:
+    clips = [_clip("a", "one", 12, 0.1)]
+    row = score_apertures("one", clips, [np.roll(clips[0].aperture, 1)], FPS, threshold=0.01)
+    assert row.closure_lag_ms == pytest.approx(40.0)
+    assert row.closure_lag_sd_ms is None and row.closure_lag_se_ms is None
+
+
 @pytest.mark.parametrize(("speakers", "on_themselves"), [(("one", "one"), 0), (("one", "two"), 2)])
 def test_an_unshifted_copy_has_r_one_no_lag_and_closes(
     speakers: tuple[str, str], on_themselves: int

@@ -343,6 +343,7 @@ def _real_row(engine: str, r: float, closed: float, lag: float) -> dict[str, obj
         "closure_rate": closed,
         "closure_lag_ms": lag,
         "closure_lag_sd_ms": 40.0,
+        "closure_lag_se_ms": 40.0 / 14**0.5,
         "closures_timed": 14,
         "clips_mapped_on_themselves": 11,
         "aperture_r_by_clip": {},
@@ -372,8 +373,9 @@ def test_real_faces_render_every_engine_and_the_readme_line(tmp_path: Path) -> N
     bench = Bench(tmp_path)
     rendered = BLOCKS["real-faces"](bench)
     rows = [line for line in rendered.splitlines() if line.startswith("| `")]
-    assert rows[0] == "| `viseme-lerp` | 0.496 | 92.9% | +17.1 | 40.0 | 14 | 11 |"
-    assert rows[1] == "| `dam` | 0.566 | 71.4% | +15.7 | 40.0 | 14 | 11 |"
+    # the standard error 40 / sqrt(14) = 10.69
+    assert rows[0] == "| `viseme-lerp` | 0.496 | 92.9% | +17.1 ± 10.7 | 40.0 | 14 | 11 |"
+    assert rows[1] == "| `dam` | 0.566 | 71.4% | +15.7 ± 10.7 | 40.0 | 14 | 11 |"
     assert "close on 100.0% of their 14 /p b m/ (threshold 0.044)" in rendered
     summary = BLOCKS["real-faces-summary"](bench)
     assert "aperture r up to 0.57 (`dam`; `viseme-lerp` 0.50)" in summary
@@ -415,10 +417,58 @@ def test_the_aligner_against_grid_renders_each_clip_and_all(tmp_path: Path) -> N
         "| 0.57 | 0.84 |",
         "| `other` (3.00 s) | 2 | 25.0 / 40.0 / 50.0 (+15.0) | 25.0 / 35.0 / 40.0 (-3.3) "
         "| 0.57 | 0.84 |",
-        "| all | 4 | 20.0 / 30.0 / 50.0 (+5.0) | 10.0 / 20.0 / 40.0 (+0.0) |  |  |",
+        "| all 2 clips | 4 | 20.0 / 30.0 / 50.0 (+5.0) | 10.0 / 20.0 / 40.0 (+0.0) "
+        "| 0.57 (0.57–0.57) | 0.84 |",
     ]
     assert "2 clip(s) with GRID's word times, 4 words" in rendered
     assert "Not measured yet" in BLOCKS["aligner-real"](Bench(tmp_path / "empty"))
+
+
+def test_many_aligned_clips_render_pooled_with_grids_word_positions(tmp_path: Path) -> None:
+    """Past six clips only the pooled row is a table row; the confidence column gives the
+    clips' median and range, the positions are named by GRID's grammar, and a refused
+    clip is named with its code."""
+    clips = [
+        {
+            "clip": f"c{index}",
+            "audio_s": 3.0,
+            "confidence": confidence,
+            "real_time_factor": factor,
+            "words": [{"word": "w"}] * 6,
+            "onset": _aligner_summary(10.0, 20.0, 30.0, 1.0),
+            "offset": _aligner_summary(10.0, 20.0, 30.0, 1.0),
+        }
+        for index, (confidence, factor) in enumerate(
+            zip([0.5, 0.3, 0.7, 0.4, 0.6, 0.35, 0.45], [0.2, 0.1, 0.3, 0.25, 0.15, 0.22, 0.18])
+        )
+    ]
+    positions = [_aligner_summary(10.0 * i, 20.0, 30.0, 0.0) for i in range(1, 7)]
+    doc = {
+        "date": "2030-01-02T03:04:05+00:00",
+        "machine": {"python": "3.11.7"},
+        "command": "python -m lipstream.bench.aligner_real",
+        "clips": clips,
+        "refused": [{"clip": "lriyzn", "code": "transcript_mismatch", "error": "no path"}],
+        "all": {
+            "clips": 7,
+            "refused": 1,
+            "words": 42,
+            "onset": _aligner_summary(20.0, 30.0, 50.0, 5.0),
+            "offset": _aligner_summary(10.0, 20.0, 40.0, 0.0),
+            "onset_by_position": positions,
+        },
+    }
+    (tmp_path / "aligner_real.json").write_text(json.dumps(doc))
+    rendered = BLOCKS["aligner-real"](Bench(tmp_path))
+    assert not [line for line in rendered.splitlines() if line.startswith("| `c")]
+    # confidences sorted: 0.3 0.35 0.4 0.45 0.5 0.6 0.7, the median the fourth
+    assert (
+        "| all 7 clips | 42 | 20.0 / 30.0 / 50.0 (+5.0) | 10.0 / 20.0 / 40.0 (+0.0) "
+        "| 0.45 (0.30–0.70) | 0.20 |"
+    ) in rendered
+    assert "| 1 (command) | 10.0 / 20.0 / 30.0 (+0.0) |" in rendered
+    assert "| 6 (adverb) | 60.0 / 20.0 / 30.0 (+0.0) |" in rendered
+    assert "`lriyzn` refused by the aligner (`transcript_mismatch`)" in rendered
 
 
 def test_real_faces_before_and_after_side_by_side(tmp_path: Path) -> None:

@@ -70,14 +70,18 @@ def test_summaries_group_by_engine_and_size_and_count_failures() -> None:
     assert rows[("viseme-lerp", 3)]["draws"] == 1
 
 
-def test_every_grid_clip_is_its_own_speaker() -> None:
+def test_the_grid_speakers_are_counted_from_the_clips_files() -> None:
+    """49 clips of GRID's talker s1, ten others each their own: a curve can be drawn
+    from s1 at sizes below 49, not at 49 or more."""
     clips = [path for path in GRID.glob("*.json") if path.name != "corpus.json"]
     speakers = [json.loads(path.read_text())["speaker"] for path in clips]
     found = real_speakers(GRID, smallest=3)
     assert found is not None
-    assert found["clips"] == len(speakers)
-    assert found["speakers"] == len(set(speakers))
-    assert found["curve_possible"] is False
+    assert found["clips"] == len(speakers) == 59
+    assert found["speakers"] == len(set(speakers)) == 11
+    assert found["most_clips_of_one_speaker"] == speakers.count("s1") == 49
+    assert found["curve_possible"] is True
+    assert real_speakers(GRID, smallest=49)["curve_possible"] is False  # type: ignore[index]
 
 
 def test_a_tiny_run_writes_the_curve(tmp_path: Path) -> None:

@@ -109,11 +109,13 @@ def test_train_takes_the_captured_corpus_as_it_is(captured: Path, tmp_path: Path
 
 def test_the_shipped_real_face_set_loads_and_trains(tmp_path: Path) -> None:
     corpus = load_corpus(DATA / "corpus")
-    assert len(corpus) == 11 and corpus.channels == CHANNELS and corpus.fps == 25.0
+    assert len(corpus) == 59 and corpus.channels == CHANNELS and corpus.fps == 25.0
     for utterance in corpus.utterances:
         assert utterance.text == " ".join(grid_words(utterance.stem))
-        assert utterance.speaker == utterance.stem  # ten speakers, each on their own range
+        # GRID's talker s1, on one range, and ten LipNet samples, each on its own
+        assert utterance.speaker in ("s1", utterance.stem)
         assert utterance.alignment_confidence is not None
+    assert sum(utterance.speaker == "s1" for utterance in corpus.utterances) == 49
     assert (
         main(
             [
@@ -165,5 +167,6 @@ def test_the_shipped_lips_close_at_every_aligned_bilabial() -> None:
                 near = (times >= span.start - 0.04) & (times < span.end + 0.04)
                 peaks.append(close[near].max())
                 above.append(close[near].max() > vowel_median)
-    # 15 bilabials in the set; one (sbwe5n's "blue") is a weak closure on this speaker.
-    assert len(peaks) >= 10 and np.median(peaks) >= 0.9 and np.mean(above) >= 0.9
+    # 79 bilabials in the set, 96% of them above their clip's vowel median; a median peak
+    # of 0.64, as s1's 49 clips share one range, whose top one clip's closure need not reach.
+    assert len(peaks) >= 70 and np.median(peaks) >= 0.55 and np.mean(above) >= 0.9

@@ -18,8 +18,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lipstream.audio import Audio
+from lipstream.audio import Audio, write_wav
 from lipstream.bench.aligner_real import main as bench_main
+from lipstream.bench.aligner_real import read_grid_align
 from lipstream.frontends.align import align
 from tests.lipstream.capture.clips import CLIP, DATA, read_clip
 
@@ -76,3 +77,49 @@ def test_the_bench_reports_errors_against_grids_times(tmp_path: Path) -> None:
     assert clip["onset"]["max_ms"] == pytest.approx(sizes.max(), abs=0.6)
     assert clip["onset"]["median_ms"] == pytest.approx(np.median(sizes), abs=0.6)
     assert results["all"]["words"] == len(truth)
+
+
+def test_grids_pauses_are_not_words(tmp_path: Path) -> None:
+    path = tmp_path / "lbaq5s.align"
+    path.write_text("0 4000 sil\n4000 20500 lay\n20500 28750 sp\n28750 31250 at\n", "utf-8")
+    assert [(w.word, w.start, w.end) for w in read_grid_align(path)] == [
+        ("lay", 0.16, 0.82),
+        ("at", 1.15, 1.25),
+    ]
+
+
+# three clips of talker s1 with GRID's times and their sound (Opus) in clips/; each
+# bound is one 10 ms frame over what was measured on them (bench/aligner_real.json)
+CLIPS_ALIGNED = ("bgbu5a", "pgij9s", "srbb5s")
+CLIPS_MAX_ONSET_MS, CLIPS_MEDIAN_ONSET_MS = 50.0, 20.0
+
+
+def test_the_bench_finds_clips_below_the_folder_and_lists_refusals(tmp_path: Path) -> None:
+    """Clips in a subfolder are measured against GRID's times read here; a clip whose
+    sound is silent is listed as refused with its code, and the others go on."""
+    clips = tmp_path / "clips"
+    clips.mkdir()
+    for stem in CLIPS_ALIGNED:
+        for suffix in (".ogg", ".align"):
+            shutil.copyfile(DATA / "clips" / f"{stem}{suffix}", clips / f"{stem}{suffix}")
+    shutil.copyfile(DATA / "clips" / "bgbu5a.align", tmp_path / "quiet.align")
+    write_wav(tmp_path / "quiet.wav", Audio(np.zeros(16000 * 3), 16000))
+    out = tmp_path / "out.json"
+    assert bench_main([str(tmp_path), "--json", str(out)]) == 0
+    results = json.loads(out.read_text(encoding="utf-8"))
+    assert [clip["clip"] for clip in results["clips"]] == list(CLIPS_ALIGNED)
+    [refused] = results["refused"]
+    assert refused["clip"] == "quiet" and refused["code"] == "not_speech"
+    errors = []
+    for clip in results["clips"]:
+        rows = [line.split() for line in (clips / f"{clip['clip']}.align").read_text().split("\n")]
+        truth = [(w, int(a) / GRID_UNITS_PER_S) for a, _, w in filter(None, rows) if w != "sil"]
+        truth = [(w, t) for w, t in truth if w != "sp"]
+        assert [row["word"] for row in clip["words"]] == [word for word, _ in truth]
+        errors += [1000 * abs(row["aligned_s"][0] - t) for row, (_, t) in zip(clip["words"], truth)]
+    assert max(errors) <= CLIPS_MAX_ONSET_MS and np.median(errors) <= CLIPS_MEDIAN_ONSET_MS
+    assert results["all"]["words"] == 18 and results["all"]["refused"] == 1
+    positions = results["all"]["onset_by_position"]
+    assert len(positions) == 6
+    first = [abs(clip["onset_errors_ms"][0]) for clip in results["clips"]]
+    assert positions[0]["max_ms"] == pytest.approx(max(first), abs=0.06)
