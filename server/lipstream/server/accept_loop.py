@@ -1,4 +1,5 @@
-"""The event loop the server runs on: asyncio's, draining the kernel's queue of new
+"""The event loop the server runs on: asyncio's, polling for I/O at least every
+``SLICE_S`` of callbacks with new connections first, draining the kernel's queue of new
 connections into a queue of its own, answering at once the connections that need no
 protocol, and starting a bounded number of protocols per turn.
 
@@ -22,16 +23,29 @@ retried only after 1 s, then 3 s), so while it leaves less than ``QUEUE_HEADROOM
 free (Linux reports its length and capacity for a listening socket in ``TCP_INFO``) a turn
 also takes the excess. uvicorn builds the loop from the import string ``LOOP`` (its ``loop``
 setting), in every worker; the server installs its gate when it goes live.
+
+A turn of asyncio's loop polls once and then runs every callback that was ready: under
+load, a hundred or more sessions' messages, 100–300 ms of the core when a pool thread
+shares it, and a connection that arrives meanwhile waits for the whole turn and then for
+its place behind the next one's. So the loop's ready queue (``SlicedReady``) hands out
+callbacks only until ``SLICE_S`` has passed since the poll; the rest stay queued, in order,
+and run after the next poll (asyncio polls without waiting while callbacks are ready), and
+a listening socket's readiness goes to the front of the queue. A health probe is then
+answered within about one slice however long the queued work is, and the order in which
+the loop runs everything else is asyncio's own.
 """
 
 from __future__ import annotations
 
 import asyncio
+import selectors
 import socket
 import struct
+import time
 from collections import deque
 from typing import Any, NamedTuple, Protocol
 
+SLICE_S = 0.005
 ACCEPTS_PER_TURN = 16
 SCAN_PER_TURN = 256
 MAX_WAITING = 1024
@@ -60,6 +74,27 @@ class Waiting(NamedTuple):
     sslcontext: Any
     server: Any
     options: tuple[Any, ...]
+
+
+def _skipped() -> None:
+    pass
+
+
+class SlicedReady(deque[asyncio.Handle]):
+    """An event loop's ready queue that hands out callbacks until ``slice_ends``
+    (``time.perf_counter``), and after it a cancelled handle, which the loop skips, leaving
+    the queue as it is: asyncio's turn runs as many callbacks as were ready at its start,
+    taking each from the left, and skips cancelled ones."""
+
+    def __init__(self, skip: asyncio.Handle) -> None:
+        super().__init__()
+        self.skip = skip
+        self.slice_ends = float("inf")
+
+    def popleft(self) -> asyncio.Handle:
+        if time.perf_counter() > self.slice_ends and self:
+            return self.skip
+        return super().popleft()
 
 
 def queue_excess(sock: socket.socket) -> int:
@@ -97,9 +132,30 @@ class BoundedAcceptLoop(asyncio.SelectorEventLoop):
 
     def __init__(self, selector: Any = None) -> None:
         super().__init__(selector)
+        skip = asyncio.Handle(_skipped, (), self)
+        skip.cancel()
+        self._ready: SlicedReady = SlicedReady(skip)
+        self.listening: set[int] = set()
         self.waiting: deque[Waiting] = deque()
         self.extra_accepts = 0
         self.start_scheduled = False
+
+    def _process_events(self, event_list: list[tuple[selectors.SelectorKey, int]]) -> None:
+        """After each poll: a new slice, and a listening socket's readiness first."""
+        self._ready.slice_ends = time.perf_counter() + SLICE_S
+        listeners = [event for event in event_list if event[0].fd in self.listening]
+        if listeners:
+            others = [event for event in event_list if event[0].fd not in self.listening]
+            queued = len(self._ready)
+            super()._process_events(listeners)  # type: ignore[misc]
+            for _ in range(len(self._ready) - queued):
+                self._ready.appendleft(self._ready.pop())
+            event_list = others
+        super()._process_events(event_list)  # type: ignore[misc]
+
+    def _start_serving(self, protocol_factory: Any, sock: socket.socket, *args: Any) -> None:
+        self.listening.add(sock.fileno())
+        super()._start_serving(protocol_factory, sock, *args)  # type: ignore[misc]
 
     def _accept_connection(
         self,
@@ -185,4 +241,5 @@ class BoundedAcceptLoop(asyncio.SelectorEventLoop):
             if waiting.listener is sock:
                 waiting.connection.close()
         self.waiting = kept
+        self.listening.discard(sock.fileno())
         super()._stop_serving(sock)  # type: ignore[misc]

@@ -30,8 +30,10 @@ from lipstream.server.accept_loop import (
     ACCEPTS_PER_TURN,
     LOOP,
     SCAN_PER_TURN,
+    SLICE_S,
     AcceptGate,
     BoundedAcceptLoop,
+    SlicedReady,
 )
 from lipstream.server.handshake import CLIENT_PROBE_LANE
 from lipstream.server.runner import uvicorn_options
@@ -111,6 +113,13 @@ def readiness(loop: BoundedAcceptLoop, listener: socket.socket, factory: object)
     loop._accept_connection(factory, listener, None, None, 4096)
 
 
+@pytest.fixture
+def unsliced(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Turns that run every ready callback, as asyncio's do: counting protocols per turn
+    must not depend on how fast the machine builds them."""
+    monkeypatch.setattr(accept_loop, "SLICE_S", float("inf"))
+
+
 def turns(loop: BoundedAcceptLoop, built: Built, count: int) -> list[int]:
     """Run ``count`` iterations of the loop; the protocols built after each."""
     after = []
@@ -139,6 +148,7 @@ def received(client: socket.socket) -> bytes:
     return data
 
 
+@pytest.mark.usefixtures("unsliced")
 def test_the_kernels_queue_is_drained_and_protocols_started_sixteen_a_turn() -> None:
     loop = BoundedAcceptLoop()
     built = Built()
@@ -183,6 +193,7 @@ def test_one_turn_scans_at_most_its_bound_and_the_waiting_queue_is_bounded(
         close(loop)
 
 
+@pytest.mark.usefixtures("unsliced")
 def test_a_queue_over_half_full_has_its_excess_started_in_the_next_turn() -> None:
     # 60 queued of 64: the bound and the 28 beyond half the queue.
     for pending, first_turn in ((60, ACCEPTS_PER_TURN + 60 - 32), (30, ACCEPTS_PER_TURN)):
@@ -196,6 +207,7 @@ def test_a_queue_over_half_full_has_its_excess_started_in_the_next_turn() -> Non
             close(loop)
 
 
+@pytest.mark.usefixtures("unsliced")
 def test_the_gates_answers_are_given_at_once_without_a_protocol() -> None:
     loop = BoundedAcceptLoop()
     gate = ByWhatTheySaid()
@@ -230,6 +242,7 @@ def test_a_probe_behind_a_flood_is_answered_in_the_first_turn() -> None:
         close(loop)
 
 
+@pytest.mark.usefixtures("unsliced")
 def test_a_connection_is_asked_about_again_when_its_turn_comes() -> None:
     loop = BoundedAcceptLoop()
     gate = ByWhatTheySaid()
@@ -261,6 +274,83 @@ def test_a_closing_listener_closes_its_waiting_connections() -> None:
                     assert client.recv(16) == b""
                 except ConnectionResetError:
                     pass
+    finally:
+        close(loop)
+
+
+@dataclass
+class FakeClock:
+    now: float = 100.0
+
+    def perf_counter(self) -> float:
+        return self.now
+
+
+def test_the_ready_queue_hands_out_callbacks_only_within_the_slice() -> None:
+    loop = BoundedAcceptLoop()
+    try:
+        ready = SlicedReady(loop._ready.skip)
+        ready.extend([1, 2, 3])  # type: ignore[list-item]
+        assert ready.popleft() == 1  # no poll yet: no slice
+        ready.slice_ends = 0.0  # long past
+        assert ready.popleft() is ready.skip and ready.skip.cancelled()
+        assert list(ready) == [2, 3]
+        ready.slice_ends = float("inf")
+        assert [ready.popleft(), ready.popleft()] == [2, 3]
+        with pytest.raises(IndexError):
+            ready.popleft()  # empty, as a deque
+    finally:
+        loop.close()
+
+
+def test_a_turn_runs_callbacks_for_one_slice_then_polls_and_keeps_their_order(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    clock = FakeClock()
+    monkeypatch.setattr(accept_loop.time, "perf_counter", clock.perf_counter)
+    loop = BoundedAcceptLoop()
+    ran: list[int] = []
+    step = 0.4 * SLICE_S  # each callback takes 40% of a slice on the fake clock
+
+    def work(index: int) -> None:
+        ran.append(index)
+        clock.now += step
+
+    try:
+        for index in range(7):
+            loop.call_soon(work, index)
+        per_turn = []
+        for _ in range(4):
+            loop.stop()
+            loop.run_forever()
+            per_turn.append(len(ran))
+        # Three fit in a slice (at 0, 0.4 and 0.8 of it); the fourth waits for the next poll.
+        assert per_turn == [3, 6, 7, 7] and ran == list(range(7))
+    finally:
+        loop.close()
+
+
+def test_a_listening_sockets_readiness_runs_before_the_queued_callbacks() -> None:
+    loop = BoundedAcceptLoop()
+    order: list[str] = []
+
+    class Recorder:
+        def answer(self, connection: socket.socket, address: str) -> bytes | None:
+            order.append("accept")
+            return ANSWER
+
+    loop.accept_gate = Recorder()
+    try:
+        with pending_connections([b""]) as (listener, clients):
+            loop._start_serving(Built(), listener)  # type: ignore[attr-defined]
+            for name in "abc":
+                loop.call_soon(order.append, name)
+            loop.stop()
+            loop.run_forever()
+            assert order == ["accept", "a", "b", "c"]
+            assert received(clients[0]) == ANSWER
+            loop._stop_serving(listener)
+            assert listener.fileno() == -1 and not loop.listening
     finally:
         close(loop)
 
@@ -383,12 +473,14 @@ def always_busy(lerp_dir: Path) -> Iterator[Served]:
 def sent_while_the_loop_waits(served: Served, request: bytes) -> bytes:
     """Connect and send ``request`` while the server's loop is held, so that the whole head
     is there when the loop accepts the connection; the server's whole answer."""
-    release = threading.Event()
+    holding, release = threading.Event(), threading.Event()
 
     async def hold() -> None:
+        holding.set()
         release.wait(timeout=30)
 
     held = served.call_soon(hold())
+    assert holding.wait(timeout=30)  # the loop is held before the client connects
     port = int(served.http.rsplit(":", 1)[1])
     try:
         connection = socket.create_connection(("127.0.0.1", port))
