@@ -511,7 +511,7 @@ class Connection:
             except _PEER_GONE:
                 self.finished = True
                 return False
-            if engine is not None and type(message) is Frames:
+            if engine is not None and isinstance(message, Frames):
                 self._record(message, engine, lag_s, first_s, time.monotonic() - stamped_at)
         return True
 
