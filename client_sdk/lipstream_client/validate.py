@@ -13,10 +13,11 @@ integer limits of free-form maps.
 
 from __future__ import annotations
 
+import math
 import re
 import struct
 from collections.abc import Callable, Mapping
-from typing import Any, cast
+from typing import Any, TypeGuard, cast
 
 from ._fields import (
     ERROR_CODE,
@@ -122,6 +123,10 @@ def message_from_wire(payload: object, encoding: Encoding, sender: Sender | None
 
     ``sender`` restricts the accepted types to what that side may send.
     """
+    if type(payload) is dict and payload.get("type") == "phonemes" and sender != "server":
+        plain = plain_phonemes(payload)
+        if plain is not None:  # every message a streaming client sends but a few
+            return plain
     if not isinstance(payload, dict):
         raise InvalidField(
             INVALID_MESSAGE, None, "a message must be an object (a msgpack map or JSON object)"
@@ -305,6 +310,54 @@ def _phonemes(payload: Mapping[str, Any], encoding: Encoding) -> Phonemes:
             )
         items.append(item)
     return Phonemes(identifier, tuple(items))
+
+
+def plain_phonemes(payload: dict[str, Any]) -> Phonemes | None:
+    """A ``phonemes`` payload in its plainest valid shape as its message, without the
+    field readers; None for anything else (the readers then accept it or name its fault).
+
+    Plain: exactly the fields ``v`` (the integer version), ``type``, ``id`` and ``items``;
+    the id and every label and emotion a printable ASCII string of an allowed length;
+    every time a float, each item ending after it starts, in order. The readers accept
+    all of it and return the same values, so the message is the one they would build."""
+    if len(payload) != 4 or type(payload.get("v")) is not int or payload["v"] != PROTOCOL_VERSION:
+        return None
+    identifier = payload.get("id")
+    raw_items = payload.get("items")
+    if not _plain_text(identifier, MAX_ID_LENGTH) or type(raw_items) is not list or not raw_items:
+        return None
+    items: list[PhonemeItem] = []
+    previous_end = -math.inf
+    for raw in raw_items:
+        if type(raw) is not dict:
+            return None
+        size = len(raw)
+        phoneme = raw.get("phoneme")
+        start = raw.get("start")
+        end = raw.get("end")
+        emotion = raw.get("emotion")
+        if type(start) is not float or type(end) is not float:
+            return None
+        if not (0.0 <= start < end <= MAX_TIME_S and start >= previous_end - TIME_TOLERANCE_S):
+            return None
+        if size != (3 if emotion is None else 4) or not _plain_text(phoneme, MAX_PHONEME_LENGTH):
+            return None
+        if emotion is not None and not _plain_text(emotion, MAX_EMOTION_LENGTH):
+            return None
+        items.append(PhonemeItem(phoneme, start, end, emotion))
+        previous_end = end
+    return Phonemes(identifier, tuple(items))
+
+
+def _plain_text(value: object, max_length: int) -> TypeGuard[str]:
+    """``value`` is printable ASCII of 1 to ``max_length`` characters: no control
+    characters, valid UTF-8, so ``read_text`` takes it as it is."""
+    return (
+        type(value) is str
+        and 0 < len(value) <= max_length
+        and value.isascii()
+        and value.isprintable()
+    )
 
 
 def _phoneme_item(value: object, where: str) -> PhonemeItem:

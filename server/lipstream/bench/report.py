@@ -696,8 +696,7 @@ def cpu_per_session(bench: Bench, name: str = "cpu_per_session.json") -> str:
     )
 
 
-def message_cost(bench: Bench) -> str:
-    name = "message_cost_cuts.json"
+def message_cost(bench: Bench, name: str = "message_cost_cuts.json") -> str:
     doc = bench.load(name)
     rows = []
     for engine in [run["engine"] for run in _by_engine(doc["summary"])]:
@@ -2013,6 +2012,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     ),
     "server-profile": server_profile,
     "message-cost-cuts": message_cost,
+    "message-cost-cuts2": lambda bench: message_cost(bench, "message_cost_cuts2.json"),
     "capacity-earlier": _capacity("capacity.json"),
     "loadtest": loadtest,
     "scale-out": scale_out,

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -68,6 +69,11 @@ class DurationModel:
 
     def pooled_median_s(self) -> float:
         """The median duration (s) of every span seen, pooled over the phonemes."""
+        return self._pooled_median_s
+
+    @cached_property
+    def _pooled_median_s(self) -> float:
+        """Once per model: a request's start reads it for every rung of its ladder."""
         weights = self.count.astype(np.float64)
         if weights.sum() == 0:
             return float(np.exp(self.log_mean.mean()))

@@ -71,6 +71,7 @@ TIME_TOLERANCE_S = 1e-9
 VALUES_PER_MESSAGE = 16_384
 SENT_TAIL_VALUES = 65_536
 _MAX_KEY = 128
+_LITTLE_FLOAT32 = np.dtype("<f4")
 _MAX_ENTRIES = 256
 
 
@@ -241,10 +242,13 @@ class ActiveRequest:
         """Take the next phonemes; the connection may send ``session_max_values`` values
         (None: no limit), of which its other requests hold ``others``."""
         self._check_count(len(items), "items")
-        spans = [
-            self._span(item, f"items[{index}]", self.phonemes_end if index == 0 else None)
-            for index, item in enumerate(items)
-        ]
+        if len(items) == 1:  # as a TTS streams them, one per message
+            spans: Sequence[PhonemeSpan] = (self._span(items[0], 0, self.phonemes_end),)
+        else:
+            spans = [
+                self._span(item, index, self.phonemes_end if index == 0 else None)
+                for index, item in enumerate(items)
+            ]
         self._check_output(spans[-1].end, session_max_values, others)
         # Normalized here, at the edge (``_span``): the engine takes them as they are.
         self._feed(NormalizedSpans(spans), None, INVALID_REQUEST)
@@ -292,7 +296,8 @@ class ActiveRequest:
     def _took(self, spans: Sequence[PhonemeSpan], now: float) -> list[Outgoing]:
         """The frames the engine released after taking ``spans``."""
         self.n_phonemes += len(spans)
-        self.ends.extend(span.end for span in spans)
+        for span in spans:
+            self.ends.append(span.end)
         self.phonemes_end = spans[-1].end
         self.output_values = self.output_values_until(self.phonemes_end)
         self.coverage.advance(self._covered_until(), now)
@@ -308,28 +313,41 @@ class ActiveRequest:
                 details={"max_phonemes": self.limits.max_phonemes},
             )
 
-    def _span(self, item: PhonemeItem, where: str, previous_end: float | None) -> PhonemeSpan:
+    def _span(self, item: PhonemeItem, index: int, previous_end: float | None) -> PhonemeSpan:
+        """Item ``index`` of a ``phonemes`` message as a canonical span (its ``where`` is
+        spelled only for an error)."""
         if previous_end is not None and item.start < previous_end - TIME_TOLERANCE_S:
             raise RequestError(
                 f"starts at {item.start} s, before the previous phoneme of this "
                 f"request ends at {previous_end} s",
                 code=NON_MONOTONIC_TIMES,
-                where=f"{where}.start",
+                where=f"items[{index}].start",
             )
-        try:
-            phoneme = normalize_phoneme(item.phoneme, self.spec.phoneme_source, f"{where}.phoneme")
-        except LipstreamError as error:
-            raise RequestError(
-                error.message, code=protocol_code(error, UNKNOWN_PHONEME), where=error.where
-            ) from None
+        phoneme = self._normalized(item.phoneme, index)
         if item.emotion is not None and item.emotion not in EMOTIONS:
             raise RequestError(
                 f"unknown emotion {item.emotion!r}; known: {', '.join(EMOTIONS)}",
                 code=UNKNOWN_EMOTION,
-                where=f"{where}.emotion",
+                where=f"items[{index}].emotion",
             )
-        self._check_end(item.end, f"{where}.end")
+        if not self._ends_within(item.end):
+            self._check_end(item.end, f"items[{index}].end")
         return PhonemeSpan(phoneme, item.start, item.end, item.emotion)
+
+    def _normalized(self, label: str, index: int) -> str:
+        try:
+            return normalize_phoneme(label, self.spec.phoneme_source, f"items[{index}].phoneme")
+        except LipstreamError as error:
+            raise RequestError(
+                error.message, code=protocol_code(error, UNKNOWN_PHONEME), where=error.where
+            ) from None
+
+    def _ends_within(self, end: float) -> bool:
+        """Input ending at ``end`` stays within the server's frames and seconds per request."""
+        longest = self.limits.max_seconds
+        return frame_count(end, self.spec.fps) <= self.limits.max_frames and (
+            longest is None or end <= longest + TIME_TOLERANCE_S
+        )
 
     def _check_end(self, end: float, where: str) -> None:
         """INVALID_TIMES for input ending beyond the server's frames or seconds per request."""
@@ -536,7 +554,10 @@ class ActiveRequest:
                     where="seq",
                     details={"max_seq": MAX_SEQ},
                 )
-            data = np.ascontiguousarray(chunk, dtype="<f4").tobytes()
+            if chunk.dtype is _LITTLE_FLOAT32:  # as the profile leaves them: bytes in C order
+                data = chunk.tobytes()
+            else:
+                data = np.ascontiguousarray(chunk, dtype="<f4").tobytes()
             frames = Frames(spec.id, self.seq, index, spec.fps, spec.profile.n_channels, data)
             self.seq += 1
             blocks.append(Outgoing(frames, spec.clock, received if received is not None else now))

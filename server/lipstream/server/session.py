@@ -198,6 +198,15 @@ class Session:
         """How long ``handle(received)`` may keep the engine busy, in milliseconds: the engine's
         call cost for the request's options (``Model.call_cost``) for the phonemes the message
         decides and the frames it may release (``math.inf`` when the engine knows no bound)."""
+        if type(received) is Phonemes:  # the common message, first
+            state = self.requests.get(received.id)
+            if state is None:
+                return 0.0
+            items = received.items
+            until = state.active.phonemes_end
+            if items and items[-1].end > until:
+                until = items[-1].end
+            return self._cost(state, len(items), until, 0)
         if not isinstance(received, (Phonemes, AudioChunk, Text, Words, End, Interrupt)):
             return 0.0
         state = self.requests.get(received.id)
@@ -223,7 +232,13 @@ class Session:
                 extra_frames = settle_frames(return_ms, fps) + 1
             else:  # the return to rest after the last frame
                 extra_frames = max(1, settle_frames(default_ms, fps))
-        released = min(frame_count(until, fps), self.limits.request.max_frames)
+        return self._cost(state, phonemes, until, extra_frames)
+
+    def _cost(self, state: RequestState, phonemes: int, until: float, extra_frames: int) -> float:
+        """The call cost of deciding ``phonemes`` and releasing the frames up to ``until``
+        (s) and ``extra_frames`` more."""
+        request = state.active
+        released = min(frame_count(until, request.spec.fps), self.limits.request.max_frames)
         frames = max(0, released - request.next_frame) + extra_frames
         return state.cost.ms(phonemes, frames)
 
@@ -299,6 +314,10 @@ class Session:
         the engine's time is counted against the request's CPU budget on ``meter_clock``
         (by default the calling thread's CPU time)."""
         try:
+            if type(received) is Phonemes:  # the common message: straight to its request
+                state = self.requests.get(received.id)
+                if state is not None:
+                    return self._to_request(state, received, now, meter_clock)
             if isinstance(received, ProtocolError):
                 return self._rejected(received)
             return self._dispatch(received, now, meter_clock)
@@ -342,9 +361,21 @@ class Session:
         state = self.requests.get(received.id)
         if state is None:
             return self._orphan(received)
+        return self._to_request(state, received, now, meter_clock)
+
+    def _to_request(
+        self,
+        state: RequestState,
+        received: RequestInput,
+        now: float,
+        meter_clock: Callable[[], float] | None,
+    ) -> list[Outgoing]:
+        """``received`` handled by its active request ``state``."""
         request = state.active
         request.last_input = now
-        self.requests[request.id] = self.requests.pop(request.id)
+        requests = self.requests
+        if len(requests) > 1:  # kept in the order of their last message (``next_expiry``)
+            requests[request.id] = requests.pop(request.id)
         if state.too_large is not None and not isinstance(received, Cancel):
             return self._end_with(request, state.too_large)
         try:
@@ -414,18 +445,25 @@ class Session:
         if isinstance(received, Cancel):
             return self._apply(state, received, now)
         with state.guard.metering(meter_clock):
+            if type(received) is Phonemes:
+                return self._add_phonemes(state.active, received, now)
             return self._apply(state, received, now)
+
+    def _add_phonemes(
+        self, request: ActiveRequest, received: Phonemes, now: float
+    ) -> list[Outgoing]:
+        before = request.output_values
+        try:
+            return request.add_phonemes(
+                received.items, now, self.limits.max_values, self.output_values - before
+            )
+        finally:
+            self.output_values += request.output_values - before
 
     def _apply(self, state: RequestState, received: RequestInput, now: float) -> list[Outgoing]:
         request = state.active
         if isinstance(received, Phonemes):
-            before = request.output_values
-            try:
-                return request.add_phonemes(
-                    received.items, now, self.limits.max_values, self.output_values - before
-                )
-            finally:
-                self.output_values += request.output_values - before
+            return self._add_phonemes(request, received, now)
         if isinstance(received, AudioChunk):
             _check_audio_start(request, received)
             self._admit_input(state, received.n_samples, received.sample_rate)

@@ -58,7 +58,6 @@ from lipstream_client import (
     Frames,
     Phonemes,
     ProtocolError,
-    ServerMessage,
     Text,
     decode,
     encode,
@@ -79,7 +78,7 @@ from lipstream_client.messages import JsonValue
 from .admission import TokenBucket, bearer_token, origin_allowed, token_accepted
 from .deadline import LaterDeadline, SendDeadline
 from .frames_wire import MessageEncoder
-from .outgoing import Outgoing, Stamped
+from .outgoing import Outgoing
 from .overload import Upgrade
 from .read_ahead import DISCONNECT, ReadAhead, Received
 from .read_window import ARRIVED_AT
@@ -490,11 +489,20 @@ class Connection:
         False once the connection is over (the client is gone, or missed a send deadline and
         was closed as a slow consumer)."""
         for index, item in enumerate(items):
-            self._observe(item)
             stamped_at = time.monotonic()
-            stamped = item.stamp(stamped_at)
+            message, clock = item.message, item.clock
+            lag_s: float | None
+            if type(message) is Frames and clock is not None:  # ``Outgoing.stamp``'s frames
+                covered_at = stamped_at if item.covered_at is None else item.covered_at
+                lag_s, first_s = clock.frames_sent(covered_at, stamped_at)
+                engine: str | None = clock.engine
+            else:
+                self._observe(item)
+                stamped = item.stamp(stamped_at)
+                message, engine = stamped.message, stamped.engine
+                lag_s, first_s = stamped.lag_s, stamped.first_frame_latency_s
             encoded = payloads[index] if index < len(payloads) else None
-            payload = encoded or self.encode(stamped.message)
+            payload = encoded or self.encode(message)
             try:
                 await self._send_payload(payload)
             except TimeoutError:
@@ -503,7 +511,8 @@ class Connection:
             except _PEER_GONE:
                 self.finished = True
                 return False
-            self._record(stamped, time.monotonic() - stamped_at)
+            if engine is not None and isinstance(message, Frames):
+                self._record(message, engine, lag_s, first_s, time.monotonic() - stamped_at)
         return True
 
     async def _send_payload(self, payload: bytes | str) -> None:
@@ -544,19 +553,23 @@ class Connection:
         self.metrics.errors.labels(SLOW_CONSUMER).inc()
         await self._close_now(CloseCode.POLICY_VIOLATION, SLOW_CONSUMER)
 
-    def _record(self, stamped: Stamped, sending_s: float) -> None:
-        """Count a sent frames block; its lag runs until its send returned (``sending_s``
-        after it was stamped): from socket to socket, as far as the process sees."""
-        message: ServerMessage = stamped.message
-        engine = stamped.engine
-        if not isinstance(message, Frames) or engine is None:
-            return
-        lag_s = stamped.lag_s
+    def _record(
+        self,
+        frames: Frames,
+        engine: str,
+        lag_s: float | None,
+        first_frame_latency_s: float | None,
+        sending_s: float,
+    ) -> None:
+        """Count a sent frames block of ``engine``, stamped with ``lag_s`` (and the request's
+        ``first_frame_latency_s`` on its first block); its lag runs until its send returned
+        (``sending_s`` after it was stamped): from socket to socket, as far as the process
+        sees."""
         self.tally.frames_sent(
-            engine, message.n_frames, None if lag_s is None else lag_s + sending_s
+            engine, frames.n_frames, None if lag_s is None else lag_s + sending_s
         )
-        if stamped.first_frame_latency_s is not None:
-            self._first_frame_histogram(engine).observe(stamped.first_frame_latency_s)
+        if first_frame_latency_s is not None:
+            self._first_frame_histogram(engine).observe(first_frame_latency_s)
 
     def _first_frame_histogram(self, engine: str) -> Any:
         """The first-frame histogram of ``engine`` (once per request: not tallied), kept
