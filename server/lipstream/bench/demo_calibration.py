@@ -20,7 +20,10 @@ aperture (``jawOpen - mouthClose``) and the rounding (``mouthFunnel + mouthPucke
 
 ``python -m lipstream.bench.demo_calibration --corpus before=DIR --corpus after=DIR``
 measures the shipped GRID set and each named corpus in one run and writes
-``bench/demo_calibration.json``.
+``bench/demo_calibration.json``. The real set is also measured talker by talker: each
+talker with at least ``TALKER_MIN_CLIPS`` clips on its own (``real: NAME``), the others
+pooled (``real: other talkers``), so one talker who holds most of the set does not pass
+for all of them.
 """
 
 from __future__ import annotations
@@ -52,6 +55,8 @@ ROUNDED_VOWELS = frozenset({"UW", "UH", "OW", "AO"})
 ROUND_LOOKBACK_S = 0.3
 MIN_ROUND_RISE = 0.05
 RANGE_PERCENTILES = (2.0, 98.0)
+TALKER_MIN_CLIPS = 5
+OTHER_TALKERS = "other talkers"
 
 
 @dataclass(frozen=True)
@@ -229,9 +234,32 @@ def corpus_entry(corpus: Corpus, path: Path) -> dict[str, Any]:
     }
 
 
+def talker_groups(corpus: Corpus, min_clips: int = TALKER_MIN_CLIPS) -> list[tuple[str, Corpus]]:
+    """``corpus`` split by talker: each with at least ``min_clips`` utterances alone, in
+    order of first appearance, then the rest pooled as ``OTHER_TALKERS``; empty when that
+    leaves one group."""
+    by_talker: dict[str, list[Utterance]] = {}
+    for utterance in corpus.utterances:
+        by_talker.setdefault(str(utterance.speaker or utterance.stem), []).append(utterance)
+    groups = [(name, kept) for name, kept in by_talker.items() if len(kept) >= min_clips]
+    others = [u for kept in by_talker.values() if len(kept) < min_clips for u in kept]
+    if others:
+        groups.append((OTHER_TALKERS, others))
+    if len(groups) < 2:
+        return []
+    return [
+        (name, Corpus(corpus.name, corpus.fps, corpus.channels, utterances))
+        for name, utterances in groups
+    ]
+
+
 def run(real: Path, named: Sequence[tuple[str, Path]], command: str) -> dict[str, Any]:
-    """The real set and each (name, corpus directory) measured in one run."""
-    corpora = {"real": corpus_entry(load_corpus(real), real)}
+    """The real set (whole, then talker by talker) and each (name, corpus directory)
+    measured in one run."""
+    real_set = load_corpus(real)
+    corpora = {"real": corpus_entry(real_set, real)}
+    for talker, group in talker_groups(real_set):
+        corpora[f"real: {talker}"] = corpus_entry(group, real)
     for name, path in named:
         corpora[name] = corpus_entry(load_corpus(path), path)
     return {

@@ -1401,6 +1401,79 @@ def demo_calibration(bench: Bench) -> str:
     return text + table(header, rows)
 
 
+CLOSURE_SOURCES = "closure_sources.json"
+CLOSURE_CONTEXTS = ("all", "after_silence", "after_speech")
+
+
+def _lag_cell(summary: dict[str, Any]) -> str:
+    if summary["mean_ms"] is None:
+        return "–"
+    se = "" if summary["se_ms"] is None else f" ± {summary['se_ms']:.1f}"
+    return f"{summary['mean_ms']:+.1f}{se} (n {summary['count']})"
+
+
+def closure_sources(bench: Bench) -> str:
+    """Each engine's closure lag on the real lips split into its lag behind the demo
+    character on the same phones and the character's behind the real lips
+    (``lipstream.bench.closure_sources``)."""
+    if not bench.exists(CLOSURE_SOURCES):
+        return f"Not measured yet: no `bench/{CLOSURE_SOURCES}`.\n"
+    doc = bench.load(CLOSURE_SOURCES)
+    text = bench.source(CLOSURE_SOURCES, doc)
+    text += (
+        f"{doc['clips']} clips of `{doc['corpus']['name']}`, {doc['corpus']['fps']:g} fps; "
+        "closure lag in ms, mean ± standard error (count).\n\n"
+    )
+    header = ["lag", "all /p b m/", "after silence", "after speech"]
+    rows = [
+        ["the character behind the real lips"]
+        + [_lag_cell(doc["character_behind_real"][c]) for c in CLOSURE_CONTEXTS]
+    ]
+    order = _by_engine({"engine": name} for name in doc["engines"])
+    for engine in (row["engine"] for row in order):
+        parts = doc["engines"][engine]
+        rows.append(
+            [f"`{engine}` behind the character"]
+            + [_lag_cell(parts["behind_character"][c]) for c in CLOSURE_CONTEXTS]
+        )
+        rows.append(
+            [f"`{engine}` behind the real lips"]
+            + [_lag_cell(parts["behind_real"][c]) for c in CLOSURE_CONTEXTS]
+        )
+    return text + table(header, rows)
+
+
+GRID_BILABIAL_WORDS = ("bin", "place", "blue", "by", "please")
+"""GRID's words that open with /b/ or /p/ (none opens with /m/: its letter m is "em"); bin
+and place open the sentence, blue, by and please follow speech."""
+
+
+def aligner_bilabial_onsets(bench: Bench) -> str:
+    """The forced aligner's onsets of GRID's /b p/-initial words less GRID's, word by word
+    (from ``bench/aligner_real.json``)."""
+    if not bench.exists(ALIGNER_REAL):
+        return f"Not measured yet: no `bench/{ALIGNER_REAL}`.\n"
+    doc = bench.load(ALIGNER_REAL)
+    errors: dict[str, list[float]] = {word: [] for word in GRID_BILABIAL_WORDS}
+    for clip in doc["clips"]:
+        for word in clip["words"]:
+            if word["word"] in errors:
+                errors[word["word"]].append(1000.0 * (word["aligned_s"][0] - word["grid_s"][0]))
+    text = bench.source(ALIGNER_REAL, doc)
+    text += "The aligner's word onset less GRID's, ms (positive: the aligner's is later).\n\n"
+    rows = [
+        [
+            f"`{word}`",
+            str(len(values)),
+            f"{statistics.mean(values):+.1f}",
+            f"{statistics.median(values):+.1f}",
+        ]
+        for word, values in errors.items()
+        if values
+    ]
+    return text + table(["word", "count", "mean", "median"], rows)
+
+
 def _median(value: float | None) -> str:
     return "–" if value is None else number(value, 2)
 
@@ -1972,6 +2045,8 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "real-faces": real_faces,
     "real-faces-before-after": real_faces_before_after,
     "demo-calibration": demo_calibration,
+    "closure-sources": closure_sources,
+    "aligner-bilabial-onsets": aligner_bilabial_onsets,
     "languages": languages,
     "language-phonemes": language_phonemes,
     "capture": capture,

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from lipstream.bench.demo_calibration import (
+    OTHER_TALKERS,
     Track,
     closure_timings,
     main,
@@ -17,6 +18,7 @@ from lipstream.bench.demo_calibration import (
     resample,
     rounding_half_rises,
     summarize,
+    talker_groups,
 )
 from lipstream.corpus import Corpus, Utterance, write_corpus
 from lipstream.timeline import PhonemeSpan
@@ -115,10 +117,41 @@ def test_command_measures_the_real_set_and_a_named_corpus(tmp_path: Path) -> Non
     out = tmp_path / "calibration.json"
     main(["--corpus", f"tiny={tmp_path / 'tiny'}", "--json", str(out)])
     doc = json.loads(out.read_text())
-    assert set(doc["corpora"]) == {"real", "tiny"}
+    assert set(doc["corpora"]) == {"real", "real: s1", "real: other talkers", "tiny"}
     assert doc["corpora"]["real"]["utterances"] == 59
+    # the shipped set: 49 clips of GRID's talker s1 and one of each of ten others
+    assert doc["corpora"]["real: s1"]["utterances"] == 49
+    assert doc["corpora"]["real: other talkers"]["utterances"] == 10
     tiny = doc["corpora"]["tiny"]["measures"]
     # on the 25 fps grid the lips are shut on frames 10..12 (0.40, 0.44, 0.48 s): centre 0.44 s
     assert tiny["closure_from_onset_ms"]["mean"] == pytest.approx(40.0)
     assert tiny["closure_from_onset_ms"]["count"] == 1
     assert tiny["rounding_half_rise_ms"]["count"] == 1
+
+
+def _talker(stem: str, speaker: str | None) -> Utterance:
+    frames = np.zeros((3, 2), dtype=np.float32)
+    phones = [PhonemeSpan("sil", 0.0, 0.02)]
+    return Utterance(stem=stem, frames=frames, phones=phones, fps=100.0, speaker=speaker)
+
+
+def test_talkers_with_enough_clips_are_measured_alone_and_the_rest_pooled() -> None:
+    utterances = [
+        _talker("a1", "ann"),
+        _talker("b1", "bob"),
+        _talker("a2", "ann"),
+        _talker("c1", None),
+        _talker("a3", "ann"),
+        _talker("b2", "bob"),
+        _talker("d1", "dee"),
+    ]
+    corpus = Corpus("set", 100.0, ("jawOpen", "mouthClose"), utterances)
+    groups = talker_groups(corpus, min_clips=2)
+    assert [(name, group.stems) for name, group in groups] == [
+        ("ann", ("a1", "a2", "a3")),
+        ("bob", ("b1", "b2")),
+        (OTHER_TALKERS, ("c1", "d1")),
+    ]
+    assert talker_groups(corpus, min_clips=4) == []  # none has four: one pooled group
+    one = Corpus("one", 100.0, ("jawOpen", "mouthClose"), utterances[:1])
+    assert talker_groups(one, min_clips=1) == []

@@ -21,6 +21,8 @@ from lipstream.bench.real_faces import (
     speech_mask,
 )
 from lipstream.corpus import Corpus, read_textgrid_phones
+from lipstream.engines.base import Model
+from lipstream.evaluation import lip_aperture
 from lipstream.timeline import PhonemeSpan
 
 GRID = Path(__file__).resolve().parents[2] / "data" / "grid" / "corpus"
@@ -229,3 +231,33 @@ def test_options_that_do_not_go_together_are_refused(
     assert cli.main(["bench", *extra, "--results", str(tmp_path / "x.json")]) == 2
     assert "[invalid_request]" in capsys.readouterr().err
     assert not (tmp_path / "x.json").exists()
+
+
+HALF_FRAME_S = 0.5 / FPS
+
+
+def _misfit(coarse: np.ndarray, dense: np.ndarray, fine_fps: float, shift_s: float) -> float:
+    """RMS of ``coarse`` (at ``FPS``, ends left out) less ``dense`` (at ``fine_fps``) read by
+    np.interp at the coarse frames' times plus ``shift_s``."""
+    times = np.arange(len(coarse))[2:-2] / FPS
+    read = np.interp(times + shift_s, np.arange(len(dense)) / fine_fps, dense)
+    return float(np.sqrt(np.mean((read - coarse[2:-2]) ** 2)))
+
+
+def test_every_engine_times_its_25_fps_frames_as_its_fine_frames_with_no_half_frame_offset(
+    trained_models: dict[str, Model],
+) -> None:
+    """bench --real synthesizes each prediction on the real clip's 25 fps frames, frame i at
+    i / 25 s. Each engine's 25 fps aperture must be its 200 fps aperture read at those
+    times: it is much nearer that than the 200 fps aperture read half a frame (20 ms)
+    earlier or later, so neither frame rate is timed at frame centres and the other at
+    frame starts."""
+    phones = read_textgrid_phones(GRID / "bbaf2n.TextGrid")
+    fine = 200.0
+    for engine, model in trained_models.items():
+        coarse = lip_aperture(model.synthesize(phones, fps=FPS, audio=None).frames, model.channels)
+        dense = lip_aperture(model.synthesize(phones, fps=fine, audio=None).frames, model.channels)
+        assert coarse is not None and dense is not None
+        aligned = _misfit(coarse, dense, fine, 0.0)
+        assert aligned < 0.5 * _misfit(coarse, dense, fine, -HALF_FRAME_S), engine
+        assert aligned < 0.5 * _misfit(coarse, dense, fine, HALF_FRAME_S), engine

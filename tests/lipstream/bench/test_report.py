@@ -865,3 +865,62 @@ def test_the_expressive_dp_bench_block(tmp_path: Path) -> None:
     assert "| synthesis | angry | sad |" in rendered
     assert "| correct modifiers | 0.0828 | 0.0582 |" in rendered
     assert "| `viseme-lerp` | 0.1572 | 0.0998 |" in rendered
+
+
+def test_closure_sources_renders_the_character_and_each_engine_by_context(tmp_path: Path) -> None:
+    def summary(mean: float | None, se: float | None, count: int) -> dict[str, Any]:
+        return {"mean_ms": mean, "se_ms": se, "count": count}
+
+    def contexts(all_: float, quiet: float | None, speech: float) -> dict[str, Any]:
+        return {
+            "all": summary(all_, 2.5, 9),
+            "after_silence": summary(quiet, None, 1 if quiet is not None else 0),
+            "after_speech": summary(speech, 3.0, 8),
+        }
+
+    doc = {
+        "date": "2030-01-02T03:04:05+00:00",
+        "corpus": {"name": "grid", "fps": 25.0},
+        "clips": 4,
+        "character_behind_real": contexts(4.75, -20.0, 8.0),
+        "engines": {
+            "hmm": {
+                "behind_character": contexts(30.0, None, 24.25),
+                "behind_real": contexts(34.0, 18.0, 43.0),
+            },
+            "viseme-lerp": {
+                "behind_character": contexts(2.0, -19.0, 14.0),
+                "behind_real": contexts(7.0, -40.0, 33.0),
+            },
+        },
+    }
+    (tmp_path / "closure_sources.json").write_text(json.dumps(doc))
+    rendered = BLOCKS["closure-sources"](Bench(tmp_path))
+    assert "4 clips of `grid`, 25 fps" in rendered
+    assert "| lag | all /p b m/ | after silence | after speech |" in rendered
+    assert (
+        "| the character behind the real lips | +4.8 ± 2.5 (n 9) | -20.0 (n 1) | +8.0 ± 3.0 (n 8) |"
+        in rendered
+    )
+    assert "| `hmm` behind the character | +30.0 ± 2.5 (n 9) | – | +24.2 ± 3.0 (n 8) |" in rendered
+    # the engines in the report's usual order: viseme-lerp before hmm
+    assert rendered.index("`viseme-lerp` behind") < rendered.index("`hmm` behind")
+    assert "Not measured yet" in BLOCKS["closure-sources"](Bench(tmp_path / "empty"))
+
+
+def test_aligner_bilabial_onsets_takes_each_b_p_word_of_grid(tmp_path: Path) -> None:
+    def word(name: str, grid: float, aligned: float) -> dict[str, Any]:
+        return {"word": name, "grid_s": [grid, grid + 0.2], "aligned_s": [aligned, grid + 0.2]}
+
+    clips = [
+        {"words": [word("bin", 0.5, 0.52), word("blue", 0.8, 0.77), word("at", 1.0, 1.1)]},
+        {"words": [word("bin", 0.4, 0.44), word("by", 1.2, 1.2)]},
+    ]
+    doc = {"date": "2030-01-02T03:04:05+00:00", "clips": clips}
+    (tmp_path / "aligner_real.json").write_text(json.dumps(doc))
+    rendered = BLOCKS["aligner-bilabial-onsets"](Bench(tmp_path))
+    assert "| `bin` | 2 | +30.0 | +30.0 |" in rendered
+    assert "| `blue` | 1 | -30.0 | -30.0 |" in rendered
+    assert "| `by` | 1 | +0.0 | +0.0 |" in rendered
+    assert "`at`" not in rendered and "`place`" not in rendered  # not /b p/-initial, or absent
+    assert "Not measured yet" in BLOCKS["aligner-bilabial-onsets"](Bench(tmp_path / "empty"))

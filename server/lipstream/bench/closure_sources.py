@@ -1,0 +1,187 @@
+"""Where the demo models' closure lag on real lips comes from: the character or the engines.
+
+Sketch: every clip of the real-face set is also rendered by the demo character's own
+generator (``demo.face.generate_face``, neutral, once per demo speaker, at the generator's
+120 fps, read on the clip's frames by ``np.interp``, the speakers' apertures averaged) from
+the clip's own force-aligned phones. Every /p b m/ closure is then timed three times, as
+``evaluation.closure_lags`` times it (plateau centres within the span widened by
+``LAG_WINDOW_S``): on the real lips, on the character and on each engine's prediction.
+An engine's lag on the real lips splits exactly into
+
+- **the engine behind the character**: how late the engine closes against the very
+  character it was trained on, driven by the same phones; and
+- **the character behind the real lips**: how late the character closes against the real
+  face, on the same phones (one figure for every engine).
+
+Each part is reported pooled and by context: a /p b m/ *after silence* (it opens the
+utterance or follows a pause, where its acoustic onset ends a silent stretch) or *after
+speech*. Means in ms with their standard error (sd / sqrt(n)).
+
+``python -m lipstream.bench.closure_sources --models DIR --json bench/closure_sources.json``
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from ..corpus import load_corpus
+from ..demo.face import DEMO_CHANNELS, generate_face
+from ..demo.speakers import DEMO_SPEAKERS
+from ..evaluation import BILABIALS, closure_lags
+from ..phonemes import SILENCE
+from ..results_file import recorded, script_command, write_results
+from ..timeline import PhonemeSpan
+from .demo_calibration import REAL_SET
+from .real_faces import Clip, demo_models, predicted_apertures, real_clips
+
+MODULE = "lipstream.bench.closure_sources"
+GENERATOR_FPS = 120.0
+CONTEXTS = ("after_silence", "after_speech")
+
+
+def bilabial_contexts(phones: Sequence[PhonemeSpan]) -> list[tuple[PhonemeSpan, str]]:
+    """Each /p b m/ span with its context: ``after_silence`` when it opens the utterance or
+    follows a silence, else ``after_speech``."""
+    out = []
+    for index, span in enumerate(phones):
+        if span.phoneme not in BILABIALS:
+            continue
+        quiet = index == 0 or phones[index - 1].phoneme == SILENCE
+        out.append((span, CONTEXTS[0] if quiet else CONTEXTS[1]))
+    return out
+
+
+def character_aperture(
+    phones: Sequence[PhonemeSpan], n_frames: int, fps: float, seed: int
+) -> np.ndarray:
+    """The demo character's lip aperture (n_frames,) for ``phones`` on a grid of ``fps``:
+    each demo speaker, neutral, rendered at ``GENERATOR_FPS`` (``seed``) and read by
+    ``np.interp``, averaged over the speakers."""
+    times = np.arange(n_frames) / fps
+    duration = max(float(times[-1]), 1.0 / GENERATOR_FPS)
+    jaw, close = DEMO_CHANNELS.index("jawOpen"), DEMO_CHANNELS.index("mouthClose")
+    curves = []
+    for speaker in DEMO_SPEAKERS:
+        frames = generate_face(
+            phones, duration, emotion="neutral", speaker=speaker, fps=GENERATOR_FPS, seed=seed
+        )
+        aperture = frames[:, jaw].astype(np.float64) - frames[:, close]
+        curves.append(np.interp(times, np.arange(len(aperture)) / GENERATOR_FPS, aperture))
+    return np.asarray(np.mean(curves, axis=0))
+
+
+@dataclass(frozen=True)
+class LagSummary:
+    """Mean and standard error (ms) of closure lags, and their count."""
+
+    mean_ms: float | None
+    se_ms: float | None
+    count: int
+
+
+def summarize_lags(lags_s: Sequence[float]) -> LagSummary:
+    values = 1000.0 * np.asarray(lags_s, dtype=np.float64)
+    se = float(values.std(ddof=1) / np.sqrt(len(values))) if len(values) > 1 else None
+    return LagSummary(float(values.mean()) if len(values) else None, se, len(values))
+
+
+def lags_by_context(
+    clips: Sequence[Clip], reference: Sequence[np.ndarray], timed: Sequence[np.ndarray], fps: float
+) -> dict[str, list[float]]:
+    """Per context (and ``all``), the closure lags (s) of ``timed`` behind ``reference``
+    (one aperture per clip each) at the clips' /p b m/ spans."""
+    out: dict[str, list[float]] = {"all": [], **{context: [] for context in CONTEXTS}}
+    for clip, base, curve in zip(clips, reference, timed, strict=True):
+        for span, context in bilabial_contexts(clip.phones):
+            lags = closure_lags(base, curve, [span], fps)
+            out["all"].extend(lags)
+            out[context].extend(lags)
+    return out
+
+
+def summarize_contexts(lags: dict[str, list[float]]) -> dict[str, dict[str, Any]]:
+    return {context: asdict(summarize_lags(values)) for context, values in lags.items()}
+
+
+def split_lags(
+    clips: Sequence[Clip],
+    character: Sequence[np.ndarray],
+    predicted: Mapping[str, Sequence[np.ndarray]],
+    fps: float,
+) -> dict[str, Any]:
+    """The character behind the real lips and, per engine of ``predicted`` (engine ->
+    apertures), the engine behind the character and behind the real lips."""
+    real = [clip.aperture for clip in clips]
+    return {
+        "character_behind_real": summarize_contexts(lags_by_context(clips, real, character, fps)),
+        "engines": {
+            engine: {
+                "behind_character": summarize_contexts(
+                    lags_by_context(clips, character, curves, fps)
+                ),
+                "behind_real": summarize_contexts(lags_by_context(clips, real, curves, fps)),
+            }
+            for engine, curves in predicted.items()
+        },
+    }
+
+
+def run(real_set: Path, models_dir: Path, command: str) -> dict[str, Any]:
+    corpus = load_corpus(real_set)
+    clips = real_clips(corpus)
+    character = [
+        character_aperture(clip.phones, len(clip.aperture), corpus.fps, seed)
+        for seed, clip in enumerate(clips)
+    ]
+    with threadpool_limits(limits=1):
+        predicted = {
+            model.manifest.engine: predicted_apertures(model, clips, corpus.fps)
+            for model in demo_models(models_dir)
+        }
+    return {
+        **recorded(command),
+        "corpus": {"name": corpus.name, "digest": corpus.digest(), "fps": corpus.fps},
+        "clips": len(clips),
+        **split_lags(clips, character, predicted, corpus.fps),
+    }
+
+
+def format_split(results: dict[str, Any]) -> str:
+    def cell(summary: dict[str, Any]) -> str:
+        if summary["mean_ms"] is None:
+            return f"{'n/a':>14}"
+        se = "" if summary["se_ms"] is None else f"±{summary['se_ms']:.1f}"
+        return f"{summary['mean_ms']:+7.1f}{se:>7}"
+
+    lines = [f"{'':<34}{'all':>14}{'after silence':>14}{'after speech':>14}"]
+    rows = [("character behind real", results["character_behind_real"])]
+    for engine, parts in results["engines"].items():
+        rows += [(f"{engine} behind character", parts["behind_character"])]
+        rows += [(f"{engine} behind real", parts["behind_real"])]
+    for name, by in rows:
+        lines.append(f"{name:<34}" + "".join(cell(by[c]) for c in ("all", *CONTEXTS)))
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(
+        prog=f"python -m {MODULE}", description=__doc__.splitlines()[0]
+    )
+    parser.add_argument("--real", type=Path, default=REAL_SET, help="real-face corpus")
+    parser.add_argument("--models", type=Path, required=True, help="the demo models' directory")
+    parser.add_argument("--json", type=Path, required=True, help="results file to write")
+    args = parser.parse_args(argv)
+    results = run(args.real, args.models, script_command(MODULE, argv))
+    write_results(results, args.json)
+    print(format_split(results))
+
+
+if __name__ == "__main__":
+    main()
