@@ -52,7 +52,9 @@ HEALTHZ_TARGET = HEALTHZ_PATH.encode()
 BODY_FIELD = re.compile(rb"^(content-length|transfer-encoding):", re.IGNORECASE | re.MULTILINE)
 HEALTHZ_RESPONSE = (
     b"HTTP/1.1 200 OK\r\ncontent-type: application/json\r\n"
-    b"content-length: " + str(len(HEALTHZ_BODY)).encode() + b"\r\nconnection: close\r\n\r\n"
+    b"content-length: "
+    + str(len(HEALTHZ_BODY)).encode()
+    + b"\r\nconnection: close\r\n\r\n"
     + HEALTHZ_BODY
 )
 

@@ -88,6 +88,7 @@ from ..corpus.frames_csv import frames_csv_text
 from ..errors import LipstreamError
 from ..frontends.align_codes import EMPTY_TRANSCRIPT
 from .admission import bearer_token, token_accepted
+from .frames_wire import json_rows
 from .load import MIB
 from .session import Session
 from .state import ServerState
@@ -516,8 +517,7 @@ async def _json_pieces(result: Synthesis, state: ServerState) -> AsyncIterator[b
 def _json_rows(frames: np.ndarray) -> bytes:
     """``frames`` as JSON rows of shortest float32 decimals, without the enclosing list's
     brackets."""
-    rows = [[float(value) for value in row] for row in frames.astype(str)]
-    return json.dumps(rows, allow_nan=False, separators=JSON_SEPARATORS)[1:-1].encode()
+    return json_rows(frames).encode()
 
 
 def _speech(result: Synthesis, encoding: Encoding) -> dict[str, Any] | None:

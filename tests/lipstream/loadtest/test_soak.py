@@ -176,7 +176,12 @@ def test_the_hostile_process_yields_the_core_to_the_measuring_one(
     """Run in this process with no kinds: it lowers its priority before any attack, and
     reports its (empty) tallies through the pipe."""
     niced: list[int] = []
-    monkeypatch.setattr(os, "nice", lambda increment: niced.append(increment) or increment)
+
+    def nice(increment: int) -> int:
+        niced.append(increment)
+        return increment
+
+    monkeypatch.setattr(os, "nice", nice)
     receiving, sending = multiprocessing.Pipe(duplex=False)
     target = Target(
         "ws://127.0.0.1:9/v1/stream",

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lipstream.server.frames_wire import MessageEncoder
+from lipstream.server.frames_wire import MessageEncoder, json_rows
 from lipstream_client import (
     Done,
     DoneStats,
@@ -58,3 +58,36 @@ def test_other_messages_go_through_the_codec(encoding: Encoding) -> None:
     ]
     for message in messages:
         assert encoder(message) == encode(message, encoding, validate=False)
+
+
+def test_json_rows_write_the_codecs_decimals_for_every_magnitude() -> None:
+    """numpy writes an exponent from 1e6 up, Python's repr only from 1e16: the encoder must
+    give the codec's text for both, and for the subnormal, tiny and signed-zero values."""
+    rng = np.random.default_rng(7)
+    bits = rng.integers(0, 2**32, 3000, dtype=np.uint64).astype(np.uint32).view(np.float32)
+    special = np.array(
+        [
+            0.0,
+            -0.0,
+            1.0,
+            0.1,
+            999999.94,
+            1e6,
+            2.7811605e6,
+            1e8,
+            1e15,
+            1e16,
+            3.4e38,
+            1e-4,
+            1e-5,
+            1.4e-45,
+            -123456.79,
+            16777216.0,
+        ],
+        dtype=np.float32,
+    )
+    values = np.concatenate([bits[np.isfinite(bits)][:2990], special])
+    values = values[: len(values) // 6 * 6].reshape(-1, 6).astype("<f4")
+    block = Frames("r", 1, 0, 60.0, 6, values.tobytes())
+    assert MessageEncoder("json")(block) == encode(block, "json", validate=False)
+    assert json_rows(values) == encode(block, "json", validate=False).split('"data":[', 1)[1][:-2]

@@ -10,7 +10,6 @@ from collections.abc import Iterable
 
 import pytest
 
-import lipstream.server.load as load_module
 from lipstream.server.load import LoadMonitor, LoadSample, _Tick, machine_memory_mb, resident_mb
 from tests.helpers import VirtualClock, run_on_virtual_time
 
@@ -46,7 +45,7 @@ def test_the_windows_figures_are_computed_once_per_tick(monkeypatch: pytest.Monk
         medians.append(listed)
         return median(listed)
 
-    monkeypatch.setattr(load_module.statistics, "median", counted_median)
+    monkeypatch.setattr(statistics, "median", counted_median)
     monitor = LoadMonitor(interval_s=0.1, window_s=0.2)
     monitor.ticks = deque([_Tick(10.0, 5.0, 0.0), _Tick(10.1, 5.05, 0.002)], maxlen=3)
     first = [monitor.sample() for _ in range(5)]
