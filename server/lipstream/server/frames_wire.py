@@ -11,9 +11,9 @@ in Python, a few microseconds a value: a 1000 fps stream spent most of its serve
 there. ``json_rows`` writes the same text from numpy's shortest float32 repr
 (``astype(str)``, in C), which equals Python's repr of that decimal except where numpy
 writes an exponent Python would not (magnitudes from 1e6 up to 1e16); those few values take
-Python's repr. Every other message goes through ``codec.encode``. A connection's messages are encoded by one
-thread at a time (its event loop, or the pool job the connection is waiting for), so
-each connection holds its own encoder and no lock is needed.
+Python's repr. Every other message goes through ``codec.encode``. A connection's messages
+are encoded by one thread at a time (its event loop, or the pool job the connection is
+waiting for), so each connection holds its own encoder and no lock is needed.
 """
 
 from __future__ import annotations

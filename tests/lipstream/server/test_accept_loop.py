@@ -10,6 +10,7 @@ import asyncio
 import json
 import socket
 import threading
+import time
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
@@ -135,7 +136,7 @@ def close(loop: BoundedAcceptLoop) -> None:
     for _ in range(100):
         loop.stop()
         loop.run_forever()
-        if not loop.waiting and not loop._ready:  # type: ignore[attr-defined]
+        if not loop.waiting and not loop._ready:
             break
     loop.close()
 
@@ -290,13 +291,14 @@ def test_the_ready_queue_hands_out_callbacks_only_within_the_slice() -> None:
     loop = BoundedAcceptLoop()
     try:
         ready = SlicedReady(loop._ready.skip)
-        ready.extend([1, 2, 3])  # type: ignore[list-item]
-        assert ready.popleft() == 1  # no poll yet: no slice
+        first, second, third = (asyncio.Handle(print, (), loop) for _ in range(3))
+        ready.extend([first, second, third])
+        assert ready.popleft() is first  # no poll yet: no slice
         ready.slice_ends = 0.0  # long past
         assert ready.popleft() is ready.skip and ready.skip.cancelled()
-        assert list(ready) == [2, 3]
+        assert list(ready) == [second, third]
         ready.slice_ends = float("inf")
-        assert [ready.popleft(), ready.popleft()] == [2, 3]
+        assert [ready.popleft(), ready.popleft()] == [second, third]
         with pytest.raises(IndexError):
             ready.popleft()  # empty, as a deque
     finally:
@@ -307,7 +309,7 @@ def test_a_turn_runs_callbacks_for_one_slice_then_polls_and_keeps_their_order(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     clock = FakeClock()
-    monkeypatch.setattr(accept_loop.time, "perf_counter", clock.perf_counter)
+    monkeypatch.setattr(time, "perf_counter", clock.perf_counter)
     loop = BoundedAcceptLoop()
     ran: list[int] = []
     step = 0.4 * SLICE_S  # each callback takes 40% of a slice on the fake clock
@@ -342,7 +344,7 @@ def test_a_listening_sockets_readiness_runs_before_the_queued_callbacks() -> Non
     loop.accept_gate = Recorder()
     try:
         with pending_connections([b""]) as (listener, clients):
-            loop._start_serving(Built(), listener)  # type: ignore[attr-defined]
+            loop._start_serving(Built(), listener)
             for name in "abc":
                 loop.call_soon(order.append, name)
             loop.stop()
