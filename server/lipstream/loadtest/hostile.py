@@ -54,7 +54,7 @@ from websockets.exceptions import ConnectionClosed as WebSocketClosed
 from websockets.exceptions import InvalidHandshake
 from websockets.typing import Subprotocol
 
-from lipstream_client.client import AsyncClient
+from lipstream_client.client import ABNORMAL_CLOSURE, AsyncClient
 from lipstream_client.codec import encode, subprotocol_for
 from lipstream_client.exceptions import (
     ConnectionClosed,
@@ -305,7 +305,14 @@ async def stops_reading(target: Target, tally: KindTally) -> None:
         for message in request:
             await connection.send(encode(message, "json"))
         await connection.wait_closed()
-        tally.closes[str(connection.close_code)] += 1
+        tally.closes[stopped_reader_close(connection.close_code)] += 1
+
+
+def stopped_reader_close(code: int | None) -> str:
+    """How a client that never reads was let go: a close code, or ``reset`` for the TCP
+    reset the server sends once its close frame cannot be delivered either (docs/reference/
+    server.md), which the client library reports as 1006, a close it never received."""
+    return "reset" if code == ABNORMAL_CLOSURE else str(code)
 
 
 async def malformed(target: Target, tally: KindTally) -> None:

@@ -7,6 +7,7 @@ import dataclasses
 import json
 import multiprocessing
 import os
+from collections import Counter
 from pathlib import Path
 
 import pytest
@@ -201,3 +202,14 @@ def test_the_hostile_process_yields_the_core_to_the_measuring_one(
     _hostile_process(SoakConfig(kinds=()), target, 0.0, sending)
     assert niced == [HOSTILE_NICENESS] and HOSTILE_NICENESS > 0
     assert json.loads(receiving.recv_bytes()) == {}
+
+
+def test_a_reader_let_go_by_a_reset_is_counted_as_the_documented_reset() -> None:
+    from lipstream.loadtest.hostile import stopped_reader_close
+
+    assert stopped_reader_close(1006) == "reset"
+    assert stopped_reader_close(1008) == "1008"
+    hostile = {"stops_reading": KindTally(closes=Counter({"reset": 2})).as_dict()}
+    assert _undocumented(ClipShare(), hostile) == {}
+    hostile = {"stops_reading": KindTally(closes=Counter({"1006": 2})).as_dict()}
+    assert _undocumented(ClipShare(), hostile) == {"closed_1006": 2}
