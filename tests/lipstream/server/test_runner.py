@@ -28,11 +28,17 @@ def _run_lifespan(app: FastAPI) -> None:
 
 @pytest.fixture
 def freezes(monkeypatch: pytest.MonkeyPatch) -> list[int]:
-    """Counts ``gc.freeze`` calls, as if this process had never frozen."""
+    """Counts ``gc.freeze`` calls, as if this process had never frozen; the young
+    generation's threshold the process sets goes to ``thresholds``."""
     calls: list[int] = []
     monkeypatch.setattr(app_module, "_frozen", False)
     monkeypatch.setattr(gc, "freeze", lambda: calls.append(1))
+    thresholds.clear()
+    monkeypatch.setattr(gc, "set_threshold", lambda young, *older: thresholds.append(young))
     return calls
+
+
+thresholds: list[int] = []
 
 
 def test_an_app_built_outside_serve_leaves_gc_and_the_environment_alone(
@@ -41,7 +47,7 @@ def test_an_app_built_outside_serve_leaves_gc_and_the_environment_alone(
     environment = dict(os.environ)
     for _ in range(2):
         _run_lifespan(create_app(lerp_dir, ServerSettings()))
-    assert freezes == []
+    assert freezes == [] and thresholds == []
     assert dict(os.environ) == environment
 
 
@@ -52,6 +58,7 @@ def test_the_serving_process_freezes_once_after_its_models_load(
     _run_lifespan(app)
     _run_lifespan(create_app(lerp_dir, ServerSettings(), serving_process=True))
     assert freezes == [1]
+    assert thresholds == [20_000] and gc.get_threshold()[0] < 20_000  # this one untouched
 
 
 def test_workers_get_the_settings_and_the_environment_is_restored(
