@@ -57,6 +57,7 @@ from .overload import overload_for
 from .rest import synthesize
 from .startup import BUILDING, CALIBRATING, LOADING, READY, NotReady, Startup, run_in_background
 from .state import ServerState
+from .thread_priority import lower_this_thread
 from .websocket import stream_endpoint
 
 __all__ = ["LifespanState", "ServerState", "create_app"]
@@ -96,8 +97,9 @@ def freeze_long_lived_objects() -> None:
     minute in a soak, each one a stall of every session and probe; the collector runs a
     full collection after every hundred young ones, so young collections every
     ``GC_YOUNG_OBJECTS`` tracked allocations instead of CPython's 700 make full ones about
-    thirty times rarer, and a young one still takes about a millisecond. A pool thread running Python code (a PQ search, JSON encoding)
-    hands the GIL to a waiting thread only every switch interval, and the event loop waits
+    thirty times rarer, and a young one still takes about a millisecond. A pool thread
+    running Python code (a PQ search, JSON encoding) hands the GIL to a waiting thread only
+    every switch interval, and the event loop waits
     for it after every poll: at CPython's 5 ms that convoy lagged every session by seconds
     beside one large request; at 0.5 ms the loop gets the GIL back ten times sooner. An app
     built elsewhere (tests, embedding) leaves both alone."""
@@ -156,13 +158,21 @@ def create_app(
             startup.enter(CALIBRATING)
             catalog = Catalog.build(registry, settings, report)
             executor = ThreadPoolExecutor(
-                settings.synth_threads, thread_name_prefix="lipstream-synth"
+                settings.synth_threads,
+                thread_name_prefix="lipstream-synth",
+                initializer=lower_this_thread,
             )
             heavy = FairLane(
-                settings.heavy_threads, "lipstream-heavy", _lane_waits(metrics, "heavy")
+                settings.heavy_threads,
+                "lipstream-heavy",
+                _lane_waits(metrics, "heavy"),
+                lower_this_thread,
             )
             speech = FairLane(
-                settings.speech_threads, "lipstream-speech", _lane_waits(metrics, "speech")
+                settings.speech_threads,
+                "lipstream-speech",
+                _lane_waits(metrics, "speech"),
+                lower_this_thread,
             )
             overload = overload_for(settings, catalog, metrics.observe_load)
             metrics.memory_ceiling.set(overload.policy.limits.max_memory_mb * MIB)

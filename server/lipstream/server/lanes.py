@@ -92,14 +92,20 @@ _Job = tuple[Future[Any], Callable[[], Any], int, Hashable]
 class FairLane(Executor):
     """Up to ``threads`` daemon threads named ``name-N``, started as work arrives, taking
     jobs from a ``FairQueue``; ``on_wait`` gets, as each job starts, its key and how many
-    jobs started while it waited."""
+    jobs started while it waited; each thread calls ``initializer`` first, as a
+    ``ThreadPoolExecutor``'s do."""
 
     def __init__(
-        self, threads: int, name: str, on_wait: Callable[[Hashable, int], None] | None = None
+        self,
+        threads: int,
+        name: str,
+        on_wait: Callable[[Hashable, int], None] | None = None,
+        initializer: Callable[[], None] | None = None,
     ) -> None:
         self.max_threads = threads
         self.name = name
         self.on_wait = on_wait
+        self.initializer = initializer
         self.started = 0
         self._queue: FairQueue[Hashable, _Job] = FairQueue()
         self._changed = threading.Condition()
@@ -151,6 +157,8 @@ class FairLane(Executor):
                     thread.join()
 
     def _work(self) -> None:
+        if self.initializer is not None:
+            self.initializer()
         while True:
             with self._changed:
                 job = self._queue.pop()
