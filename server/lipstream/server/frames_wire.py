@@ -19,6 +19,7 @@ waiting for), so each connection holds its own encoder and no lock is needed.
 from __future__ import annotations
 
 import json
+from typing import Any
 
 import msgpack
 import numpy as np
@@ -49,31 +50,11 @@ class MessageEncoder:
     def __call__(self, message: ServerMessage) -> bytes | str:
         packer = self._packer
         if packer is not None and type(message) is Frames:
-            packed: bytes = packer.pack(
-                {
-                    "v": message.v,
-                    "type": message.type,
-                    "id": message.id,
-                    "seq": message.seq,
-                    "first_frame": message.first_frame,
-                    "fps": message.fps,
-                    "n_channels": message.n_channels,
-                    "data": message.data,
-                }
-            )
+            packed: bytes = packer.pack(frames_map(message, message.data))
             return packed
         if packer is None and type(message) is Frames and message.n_channels > 0:
             head = json.dumps(
-                {
-                    "v": message.v,
-                    "type": message.type,
-                    "id": message.id,
-                    "seq": message.seq,
-                    "first_frame": message.first_frame,
-                    "fps": message.fps,
-                    "n_channels": message.n_channels,
-                    "data": [],
-                },
+                frames_map(message, []),
                 ensure_ascii=False,
                 allow_nan=False,
                 separators=JSON_SEPARATORS,
@@ -81,3 +62,17 @@ class MessageEncoder:
             values = np.frombuffer(message.data, "<f4").reshape(-1, message.n_channels)
             return head[: -len("]}")] + json_rows(values) + "]}"
         return encode(message, self.encoding, validate=False)
+
+
+def frames_map(message: Frames, data: bytes | list[Any]) -> dict[str, Any]:
+    """A ``frames`` block's wire map with ``data`` as given, in the wire layer's key order."""
+    return {
+        "v": message.v,
+        "type": message.type,
+        "id": message.id,
+        "seq": message.seq,
+        "first_frame": message.first_frame,
+        "fps": message.fps,
+        "n_channels": message.n_channels,
+        "data": data,
+    }
