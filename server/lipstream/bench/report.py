@@ -1412,6 +1412,73 @@ def _lag_cell(summary: dict[str, Any]) -> str:
     return f"{summary['mean_ms']:+.1f}{se} (n {summary['count']})"
 
 
+HMM_CLOSURE_LAG = "hmm_closure_lag.json"
+HMM_CONVENTIONS = {
+    "floor": "⌊k R / f⌋, held after its instant (the engine's)",
+    "nearest": "⌊k R / f + ½⌋, the nearest instant",
+    "ceil": "⌈k R / f⌉, the first backward difference covering the frame's",
+}
+
+
+def hmm_closure_lag(bench: Bench) -> str:
+    """Phoneme-driven `hmm`'s closure lag with each convention for the state of a
+    trajectory frame, on the demo's held-out lines and the real-face set, and on each served
+    rung (``lipstream.bench.hmm_closure_lag``)."""
+    if not bench.exists(HMM_CLOSURE_LAG):
+        return f"Not measured yet: no `bench/{HMM_CLOSURE_LAG}`.\n"
+    doc = bench.load(HMM_CLOSURE_LAG)
+    demo, real = doc["demo"], doc["real"]
+    text = bench.source(HMM_CLOSURE_LAG, doc)
+    text += (
+        f"`hmm` {doc['model']} of `{doc['corpus']['name']}`, driven by phonemes, offline rung; "
+        f"{demo['lines']} held-out lines at {doc['corpus']['fps']:g} fps and {real['clips']} "
+        f"real clips at {real['fps']:g} fps. Closure lag in ms, mean ± standard error (count); "
+        f"the `floor` rows reproduce the engine's frames to {demo['floor_max_abs_diff']:.0e}.\n\n"
+    )
+    header = [
+        "state of trajectory frame k",
+        "demo held-out, behind the recordings",
+        "shift from `floor` (paired)",
+        "demo RMS",
+        "real clips, behind the character",
+        "real clips, behind the real lips",
+    ]
+    rows = []
+    for name, meaning in HMM_CONVENTIONS.items():
+        row, grid = demo["conventions"][name], real["conventions"][name]
+        rows.append(
+            [
+                f"`{name}`: {meaning}",
+                _lag_cell(row["lag"]),
+                _lag_cell(row["shift_from_floor"]),
+                f"{row['rms']:.5f}",
+                _lag_cell(grid["behind_character"]["all"]),
+                _lag_cell(grid["behind_real"]["all"]),
+            ]
+        )
+    text += table(header, rows)
+    text += (
+        "\nBy context: the demo's held-out lines behind the recordings, the real clips "
+        "behind the character:\n\n"
+    )
+    contexts = [
+        [f"`{name}`", where] + [_lag_cell(by[c]) for c in CLOSURE_CONTEXTS]
+        for name in HMM_CONVENTIONS
+        for where, by in (
+            ("demo held-out", demo["conventions"][name]["by_context"]),
+            ("real clips", real["conventions"][name]["behind_character"]),
+        )
+    ]
+    header = ["state of frame k", "lines", "all /p b m/", "after silence", "after speech"]
+    text += table(header, contexts)
+    text += "\nThe served rungs (`floor`), driven by phonemes, on the demo's held-out lines:\n\n"
+    rungs = [
+        [f"`{rung}`", _lag_cell(row["lag"]), f"{row['rms']:.5f}"]
+        for rung, row in demo["rungs"].items()
+    ]
+    return text + table(["rung", "closure lag behind the recordings", "RMS"], rungs)
+
+
 def closure_sources(bench: Bench) -> str:
     """Each engine's closure lag on the real lips split into its lag behind the demo
     character on the same phones and the character's behind the real lips
@@ -2046,6 +2113,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "real-faces-before-after": real_faces_before_after,
     "demo-calibration": demo_calibration,
     "closure-sources": closure_sources,
+    "hmm-closure-lag": hmm_closure_lag,
     "aligner-bilabial-onsets": aligner_bilabial_onsets,
     "languages": languages,
     "language-phonemes": language_phonemes,
