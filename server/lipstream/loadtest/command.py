@@ -303,6 +303,7 @@ def _soak(args: argparse.Namespace, settings: Settings) -> None:
         flood_fps=args.flood_fps,
         seed=args.seed,
         token=args.token,
+        hostile_niceness=args.hostile_niceness,
     )
     path = settings.results_file(args.results, "soak.json")
     results = soak(config, command="lipstream " + shlex.join(sys.argv[1:]))
@@ -312,7 +313,7 @@ def _soak(args: argparse.Namespace, settings: Settings) -> None:
 
 
 def _add_soak_parser(runs: Commands) -> None:
-    from .hostile import HOSTILE_KINDS
+    from .hostile import HOSTILE_KINDS, HOSTILE_NICENESS
 
     soak = runs.add_parser(
         "soak",
@@ -348,6 +349,13 @@ def _add_soak_parser(runs: Commands) -> None:
         "--flood-seconds", type=float, default=99.0, help="speech seconds of each JSON flood"
     )
     soak.add_argument("--flood-fps", type=float, default=1000.0, help="fps of each JSON flood")
+    soak.add_argument(
+        "--hostile-niceness",
+        type=int,
+        default=HOSTILE_NICENESS,
+        help="how much lower the hostile clients' CPU priority is than the measuring clients' "
+        "(0: the same)",
+    )
     soak.add_argument("--json", action="store_true", help="print JSON instead of a summary")
     soak.add_argument(
         "--results",

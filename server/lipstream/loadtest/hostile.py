@@ -107,6 +107,7 @@ HOLD_REQUESTS_S = 2.0
 MANY_REQUESTS = 80  # above the default per-session limit (64)
 STOPS_READING_S = 60.0  # of speech at the flood's fps: megabytes of frames
 REPLY_TIMEOUT_S = 5.0
+HOSTILE_NICENESS = 10  # the measuring clients first, when they share a core with the attack
 RETRY_PAUSE_S = 0.05
 MALFORMED: tuple[str | bytes, ...] = (
     "not json",

@@ -49,7 +49,7 @@ from .._version import __version__
 from ..errors import InvalidRequestError
 from ..results_file import machine
 from .clips import synthetic_clip
-from .hostile import HOSTILE_KINDS, KindTally, Target, run_kind
+from .hostile import HOSTILE_KINDS, HOSTILE_NICENESS, KindTally, Target, run_kind
 from .load import HTTP_TIMEOUT_S, MAX_JITTER_S, check_loopback, http_base
 from .sessions import ClipPlan, ClipShare, event_loop_name, run_coroutine, run_share
 from .stats import LAG_STATISTICS, summarize
@@ -61,7 +61,6 @@ MAX_HOSTILE_PER_KIND = 100
 HEALTH_TIMEOUT_S = 10.0
 RSS_INTERVAL_S = 0.5
 HOSTILE_JOIN_S = 30.0
-HOSTILE_NICENESS = 10  # the measuring clients first, when they share a core with the attack
 DEFAULT_PORTS = {"ws": 80, "wss": 443}
 _MS = 1000.0
 
@@ -89,6 +88,7 @@ class SoakConfig:
     flood_fps: float = 1000.0
     seed: int = 0
     token: str | None = None
+    hostile_niceness: int = HOSTILE_NICENESS
 
 
 def check_soak(config: SoakConfig) -> None:
@@ -115,6 +115,7 @@ def check_soak(config: SoakConfig) -> None:
         ("--pq-phonemes", 1 <= config.pq_phonemes <= 10_000, "1..10000"),
         ("--flood-seconds", 1.0 <= config.flood_seconds <= 600.0, "[1, 600] s"),
         ("--flood-fps", 0 < config.flood_fps <= 1000, "(0, 1000]"),
+        ("--hostile-niceness", 0 <= config.hostile_niceness <= 19, "0..19"),
         (
             "--server-pid",
             config.server_pid is None or Path(f"/proc/{config.server_pid}").is_dir(),
@@ -329,7 +330,8 @@ def _hostile_process(config: SoakConfig, target: Target, deadline: float, pipe: 
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     if soft != hard:  # the client flood holds thousands of sockets
         resource.setrlimit(resource.RLIMIT_NOFILE, (hard, hard))
-    os.nice(HOSTILE_NICENESS)
+    if config.hostile_niceness:
+        os.nice(config.hostile_niceness)
     tallies = run_coroutine(_run_hostile(config, target, deadline))
     pipe.send_bytes(json.dumps({kind: t.as_dict() for kind, t in tallies.items()}).encode())
     pipe.close()

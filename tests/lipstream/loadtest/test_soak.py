@@ -13,10 +13,9 @@ from pathlib import Path
 import pytest
 
 from lipstream.errors import LipstreamError
-from lipstream.loadtest.hostile import HOSTILE_KINDS, KindTally, Target
+from lipstream.loadtest.hostile import HOSTILE_KINDS, HOSTILE_NICENESS, KindTally, Target
 from lipstream.loadtest.sessions import ClipShare, RequestRecord
 from lipstream.loadtest.soak import (
-    HOSTILE_NICENESS,
     SoakConfig,
     _hostile_process,
     _undocumented,
@@ -61,6 +60,7 @@ def test_a_short_soak_reports_every_part_and_the_valid_sessions_complete(
             pq_phonemes=40,
             flood_seconds=2.0,
             flood_fps=100.0,
+            hostile_niceness=0,  # on a machine busy with other tests a 3 s attack must run
         )
         results = soak(config, command="lipstream loadtest soak --duration 3")
     valid = results["valid"]
@@ -114,6 +114,7 @@ def test_a_short_soak_reports_every_part_and_the_valid_sessions_complete(
         ({"kinds": ("silent_tcp", "nonsense")}, "--kinds"),
         ({"hostile_per_kind": 101}, "--hostile"),
         ({"flood_fps": 2000.0}, "--flood-fps"),
+        ({"hostile_niceness": 20}, "--hostile-niceness"),
         ({"server_pid": 2**31 - 1}, "--server-pid"),
     ],
 )
@@ -201,6 +202,10 @@ def test_the_hostile_process_yields_the_core_to_the_measuring_one(
     )
     _hostile_process(SoakConfig(kinds=()), target, 0.0, sending)
     assert niced == [HOSTILE_NICENESS] and HOSTILE_NICENESS > 0
+    assert json.loads(receiving.recv_bytes()) == {}
+    receiving, sending = multiprocessing.Pipe(duplex=False)
+    _hostile_process(SoakConfig(kinds=(), hostile_niceness=0), target, 0.0, sending)
+    assert niced == [HOSTILE_NICENESS]  # 0: the attack keeps the measuring clients' priority
     assert json.loads(receiving.recv_bytes()) == {}
 
 
