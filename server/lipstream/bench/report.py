@@ -1510,6 +1510,94 @@ def closure_sources(bench: Bench) -> str:
     return text + table(header, rows)
 
 
+CLOSURE_TIMING = "closure_timing.json"
+CLOSURE_TIMING_PARTS = {
+    "train": "training lines, synthesized",
+    "fit": "training lines, EM fit with each occurrence's own mode",
+    "heldout": "held-out lines, synthesized",
+}
+
+
+def closure_timing(bench: Bench) -> str:
+    """Where the demo models' /p b m/ closures sit against their own recordings: lag of the
+    plateau's centre, closing and release, on the training lines, the EM fit and the
+    held-out lines, and by the recording's closure centre (``lipstream.bench.closure_timing``)."""
+    if not bench.exists(CLOSURE_TIMING):
+        return f"Not measured yet: no `bench/{CLOSURE_TIMING}`.\n"
+    doc = bench.load(CLOSURE_TIMING)
+    text = bench.source(CLOSURE_TIMING, doc)
+    engines = doc["engines"]
+    train = next(iter(engines.values()))["train"]
+    text += (
+        f"The `{doc['corpus']['name']}` corpus at {doc['corpus']['fps']:g} fps; "
+        f"{train['closures']} /p b m/ closures on the training lines. The recorded plateau "
+        f"runs from {_signed(train['recorded_closing_ms'])} to "
+        f"{_signed(train['recorded_release_ms'])} ms of the acoustic onset (means). "
+        "Lags in ms, mean over closures; the centre's lag is the mean of the closing's "
+        "and the release's.\n\n"
+    )
+    header = ["engine", "lines", "closures", "centre lag", "closing lag", "release lag", "RMS"]
+    rows = []
+    for engine, parts in engines.items():
+        for part, label in CLOSURE_TIMING_PARTS.items():
+            if part not in parts:
+                continue
+            timed = parts[part]
+            rows.append(
+                [
+                    f"`{engine}`",
+                    label,
+                    str(timed["closures"]),
+                    _signed(timed["lag_ms"], 1),
+                    _signed(timed["closing_lag_ms"], 1),
+                    _signed(timed["release_lag_ms"], 1),
+                    number(timed["rms"], 4),
+                ]
+            )
+    text += table(header, rows) + "\n"
+    columns = [
+        (engine, part)
+        for engine, parts in engines.items()
+        for part in ("fit", "train")
+        if part in parts
+    ]
+    groups = [
+        [row["group"], str(row["count"]), _signed(row["recorded_ms"], 1)] for row in train["groups"]
+    ]
+    for engine, part in columns:
+        for cells, row in zip(groups, engines[engine][part]["groups"], strict=True):
+            cells.append("–" if row["lag_ms"] is None else _signed(row["lag_ms"], 1))
+    text += (
+        "By the recorded closure centre less the acoustic onset (training lines): the lag of "
+        "each group.\n\n"
+    )
+    header = ["recorded centre, ms", "closures", "recorded mean"] + [
+        f"`{engine}`" + (" fit" if part == "fit" else "") for engine, part in columns
+    ]
+    text += table(header, groups)
+    leads = [
+        [
+            f"`{engine}`",
+            f"{row['lead_ms']:g}",
+            _signed(row["lag_ms"], 1),
+            _signed(row["closing_lag_ms"], 1),
+            _signed(row["release_lag_ms"], 1),
+            number(row["rms"], 4),
+        ]
+        for engine, parts in engines.items()
+        for row in parts.get("leads", [])
+    ]
+    if not leads:
+        return text
+    text += (
+        "\nTrained and run with every bilabial's span started earlier than its acoustic "
+        "one (the preceding span shortened, by at most half), held-out lines timed "
+        "against the recordings on the acoustic spans:\n\n"
+    )
+    header = ["engine", "lead, ms", "centre lag", "closing lag", "release lag", "RMS"]
+    return text + table(header, leads)
+
+
 GRID_BILABIAL_WORDS = ("bin", "place", "blue", "by", "please")
 """GRID's words that open with /b/ or /p/ (none opens with /m/: its letter m is "em"); bin
 and place open the sentence, blue, by and please follow speech."""
@@ -2114,6 +2202,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "demo-calibration": demo_calibration,
     "closure-sources": closure_sources,
     "hmm-closure-lag": hmm_closure_lag,
+    "closure-timing": closure_timing,
     "aligner-bilabial-onsets": aligner_bilabial_onsets,
     "languages": languages,
     "language-phonemes": language_phonemes,

@@ -924,3 +924,77 @@ def test_aligner_bilabial_onsets_takes_each_b_p_word_of_grid(tmp_path: Path) -> 
     assert "| `by` | 1 | +0.0 | +0.0 |" in rendered
     assert "`at`" not in rendered and "`place`" not in rendered  # not /b p/-initial, or absent
     assert "Not measured yet" in BLOCKS["aligner-bilabial-onsets"](Bench(tmp_path / "empty"))
+
+
+def test_closure_timing_renders_each_engine_part_and_group(tmp_path: Path) -> None:
+    def group(label: str, count: int, recorded: float | None, lag: float | None) -> dict[str, Any]:
+        return {
+            "group": label,
+            "count": count,
+            "recorded_ms": recorded,
+            "predicted_ms": None if lag is None or recorded is None else recorded + lag,
+            "lag_ms": lag,
+        }
+
+    def timed(
+        lag: float, closing: float, release: float, lags: list[float | None]
+    ) -> dict[str, Any]:
+        return {
+            "closures": 5,
+            "lag_ms": lag,
+            "closing_lag_ms": closing,
+            "release_lag_ms": release,
+            "recorded_closing_ms": -47.25,
+            "recorded_release_ms": 68.0,
+            "rms": 0.05,
+            "groups": [
+                group("< -20", 2, -28.0, lags[0]),
+                group("-20 .. 0", 3, -10.0, lags[1]),
+                group("0 .. 20", 0, None, None),
+            ],
+        }
+
+    doc = {
+        "date": "2030-01-02T03:04:05+00:00",
+        "corpus": {"name": "demo", "fps": 120.0},
+        "engines": {
+            "dam": {
+                "train": timed(14.25, 62.0, -33.5, [27.5, 18.9]),
+                "heldout": timed(11.0, 52.0, -30.0, [24.0, 22.0]),
+                "fit": timed(4.5, 53.75, -44.75, [20.25, 11.0]),
+                "leads": [
+                    {
+                        "lead_ms": 0.0,
+                        "lag_ms": 11.0,
+                        "closing_lag_ms": 52.0,
+                        "release_lag_ms": -30.0,
+                        "rms": 0.0558,
+                    },
+                    {
+                        "lead_ms": 20.0,
+                        "lag_ms": 2.875,
+                        "closing_lag_ms": 39.0,
+                        "release_lag_ms": -33.25,
+                        "rms": 0.05561,
+                    },
+                ],
+            }
+        },
+    }
+    (tmp_path / "closure_timing.json").write_text(json.dumps(doc))
+    rendered = BLOCKS["closure-timing"](Bench(tmp_path))
+    assert "The `demo` corpus at 120 fps; 5 /p b m/ closures" in rendered
+    assert "runs from -47 to +68 ms" in rendered
+    fit_row = (
+        "| `dam` | training lines, EM fit with each occurrence's own mode | 5 | +4.5 | +53.8 "
+        "| -44.8 | 0.0500 |"
+    )
+    assert fit_row in rendered
+    # the fit's row comes between the synthesized training lines and the held-out lines
+    assert rendered.index("training lines, synthesized") < rendered.index(fit_row)
+    assert rendered.index(fit_row) < rendered.index("held-out lines, synthesized")
+    assert "| < -20 | 2 | -28.0 | +20.2 | +27.5 |" in rendered
+    assert "| 0 .. 20 | 0 | – | – | – |" in rendered
+    assert "| `dam` | 20 | +2.9 | +39.0 | -33.2 | 0.0556 |" in rendered
+    assert rendered.index("| `dam` | 0 | +11.0 |") < rendered.index("| `dam` | 20 |")
+    assert "Not measured yet" in BLOCKS["closure-timing"](Bench(tmp_path / "empty"))

@@ -1,0 +1,81 @@
+"""The closure timing bench on hand-made apertures with known closures."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lipstream.bench.closure_timing import (
+    closure_offsets,
+    closure_plateaus,
+    grouped,
+    lead_bilabials,
+)
+from lipstream.timeline import PhonemeSpan
+
+FPS = 100.0
+
+
+def _aperture_closed(between_s: tuple[float, float], n_frames: int) -> np.ndarray:
+    """Open (1.0) everywhere but shut (0.0) on the frames within ``between_s``."""
+    times = np.arange(n_frames) / FPS
+    return np.where((times >= between_s[0]) & (times <= between_s[1]), 0.0, 1.0)
+
+
+def test_offsets_time_each_bilabial_at_its_plateau_centre() -> None:
+    spans = [
+        PhonemeSpan("AA", 0.0, 0.30),
+        PhonemeSpan("B", 0.30, 0.40),
+        PhonemeSpan("AA", 0.40, 0.80),
+        PhonemeSpan("M", 0.80, 0.90),
+        PhonemeSpan("AA", 0.90, 1.20),
+    ]
+    aperture = _aperture_closed((0.26, 0.30), 120) * _aperture_closed((0.84, 0.90), 120)
+    # shut 0.26..0.30 (centre 0.28, 20 ms before B) and 0.84..0.90 (centre 0.87, 70 ms in M)
+    assert closure_offsets(aperture, spans, FPS) == pytest.approx([-0.02, 0.07], abs=1e-9)
+
+
+def test_offsets_skip_a_bilabial_past_the_frames() -> None:
+    spans = [PhonemeSpan("AA", 0.0, 0.5), PhonemeSpan("P", 2.0, 2.1)]
+    assert closure_offsets(np.ones(50), spans, FPS) == []
+
+
+def test_grouped_means_per_recorded_offset() -> None:
+    recorded = [-0.030, -0.025, -0.010, 0.050]
+    predicted = [0.000, -0.005, 0.000, 0.060]
+    rows = {row["group"]: row for row in grouped(recorded, predicted)}
+    assert rows["< -20"]["count"] == 2
+    assert rows["< -20"]["recorded_ms"] == pytest.approx(-27.5)
+    assert rows["< -20"]["predicted_ms"] == pytest.approx(-2.5)
+    assert rows["< -20"]["lag_ms"] == pytest.approx(25.0)
+    assert rows["-20 .. 0"]["lag_ms"] == pytest.approx(10.0)
+    assert rows["0 .. 20"]["count"] == 0 and rows["0 .. 20"]["lag_ms"] is None
+    assert rows[">= 40"]["lag_ms"] == pytest.approx(10.0)
+
+
+def test_plateaus_give_each_closure_its_closing_and_release() -> None:
+    spans = [
+        PhonemeSpan("AA", 0.0, 0.30),
+        PhonemeSpan("P", 0.30, 0.40),
+        PhonemeSpan("AA", 0.40, 1.00),
+    ]
+    # shut from 0.25 to 0.42: closes 50 ms before the P, releases 20 ms after it ends
+    aperture = _aperture_closed((0.25, 0.42), 100)
+    assert closure_plateaus(aperture, spans, FPS) == [pytest.approx((-0.05, 0.12), abs=1e-9)]
+
+
+def test_lead_bilabials_moves_each_bilabial_onset_into_the_span_before() -> None:
+    spans = [
+        PhonemeSpan("M", 0.0, 0.08),
+        PhonemeSpan("AA", 0.08, 0.20),
+        PhonemeSpan("B", 0.20, 0.28),
+        PhonemeSpan("S", 0.28, 0.31),
+        PhonemeSpan("P", 0.31, 0.40),
+    ]
+    moved = lead_bilabials(spans, 0.04)
+    # the first M has nothing before it; the B takes 40 ms of the AA; the S is 30 ms long,
+    # so the P takes only half of it
+    expected = [(0.0, 0.08), (0.08, 0.16), (0.16, 0.28), (0.28, 0.295), (0.295, 0.40)]
+    assert [(s.start, s.end) for s in moved] == [pytest.approx(pair) for pair in expected]
+    assert [s.phoneme for s in moved] == ["M", "AA", "B", "S", "P"]
+    assert lead_bilabials(spans, 0.0) == spans
