@@ -2242,6 +2242,12 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "cpu-per-session-cuts-before": lambda bench: cpu_per_session(
         bench, "cpu_per_session_cuts_before.json"
     ),
+    "cpu-per-session-session14": lambda bench: cpu_per_session(
+        bench, "cpu_per_session_session14.json"
+    ),
+    "cpu-per-session-session14-before": lambda bench: cpu_per_session(
+        bench, "cpu_per_session_session14_before.json"
+    ),
     "server-profile": server_profile,
     "message-cost-cuts": message_cost,
     "message-cost-cuts2": lambda bench: message_cost(bench, "message_cost_cuts2.json"),
