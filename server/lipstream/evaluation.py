@@ -85,10 +85,10 @@ prediction dips once, so both are timed at their plateau's centre, never at its 
 frame."""
 
 
-def closure_centre(window: np.ndarray) -> float:
-    """The centre (in frames from the window's start) of the plateau around the window's
-    minimum (the first minimum on ties): the run of consecutive frames within
-    ``PLATEAU_FRACTION`` of the window's range above the minimum."""
+def closure_plateau(window: np.ndarray) -> tuple[int, int]:
+    """The first and last frame of the plateau around the window's minimum (the first
+    minimum on ties): the run of consecutive frames within ``PLATEAU_FRACTION`` of the
+    window's range above the minimum."""
     lowest = int(np.argmin(window))
     level = window[lowest] + PLATEAU_FRACTION * (float(np.max(window)) - window[lowest])
     first = last = lowest
@@ -96,6 +96,12 @@ def closure_centre(window: np.ndarray) -> float:
         first -= 1
     while last < len(window) - 1 and window[last + 1] <= level:
         last += 1
+    return first, last
+
+
+def closure_centre(window: np.ndarray) -> float:
+    """The centre (in frames from the window's start) of ``closure_plateau``."""
+    first, last = closure_plateau(window)
     return (first + last) / 2.0
 
 

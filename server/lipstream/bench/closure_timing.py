@@ -34,15 +34,13 @@ from ..corpus import Corpus, load_corpus
 from ..engines import get_engine_class, load_model
 from ..engines.dam import em
 from ..engines.dam.engine import DamEngine
-from ..engines.dam.modes import assign_modes, collect_occurrences, resample
 from ..evaluation import (
     BILABIALS,
     LAG_WINDOW_S,
-    PLATEAU_FRACTION,
+    closure_plateau,
     lip_aperture,
     rms_error,
 )
-from ..numerics.basis import fit_basis
 from ..results_file import recorded, script_command, write_results
 from ..timeline import PhonemeSpan
 
@@ -68,22 +66,9 @@ def closure_plateaus(
         stop = min(int(np.ceil((span.end + LAG_WINDOW_S) * fps)), len(aperture))
         if stop <= first:
             continue
-        low, high = plateau(aperture[first:stop])
+        low, high = closure_plateau(aperture[first:stop])
         plateaus.append(((first + low) / fps - span.start, (first + high) / fps - span.start))
     return plateaus
-
-
-def plateau(window: np.ndarray) -> tuple[int, int]:
-    """The first and last frame of the run around the window's minimum within
-    ``PLATEAU_FRACTION`` of its range above it (``evaluation.closure_centre``'s run)."""
-    lowest = int(np.argmin(window))
-    level = window[lowest] + PLATEAU_FRACTION * (float(np.max(window)) - window[lowest])
-    low = high = lowest
-    while low > 0 and window[low - 1] <= level:
-        low -= 1
-    while high < len(window) - 1 and window[high + 1] <= level:
-        high += 1
-    return low, high
 
 
 def closure_offsets(aperture: np.ndarray, spans: Sequence[PhonemeSpan], fps: float) -> list[float]:
@@ -164,25 +149,7 @@ def synthesized(model: Any, corpus: Corpus) -> list[np.ndarray]:
 def fit_frames(engine: DamEngine, train: Corpus) -> list[np.ndarray]:
     """The EM fit of ``engine`` on ``train``, as ``DamEngine.fit`` runs it, evaluated on
     ``train`` with every occurrence's own mode (Eq. 2 over the design matrix): per line."""
-    occurrences, recorded_frames = collect_occurrences(train)
-    basis, _ = fit_basis(recorded_frames, engine.variance)
-    frames = basis.project(recorded_frames)
-    modes, mode_of = assign_modes(
-        occurrences, resample(occurrences, frames, engine.points), engine.min_occurrences
-    )
-    settings = em.Settings(
-        engine.polynomial_degree(), engine.eps, engine.tol, engine.ridge, engine.sigma_max
-    )
-    fitted = em.fit(
-        occurrences,
-        mode_of,
-        modes.count,
-        frames,
-        settings,
-        engine.n_iter,
-        engine.em_tol,
-        engine.sigma_init,
-    )
+    occurrences, _, basis, frames, _, mode_of, settings, fitted = engine.fit_em(train)
     matrix = em.design(occurrences, mode_of, fitted.sigma, len(frames), settings)
     fitted_frames = basis.reconstruct(matrix @ fitted.coefficients.reshape(-1, frames.shape[1]))
     bounds = np.cumsum([0] + [len(u.frames) for u in train.utterances])

@@ -11,7 +11,7 @@ phoneme durations and the causal rungs' filter speed κ (``causal``).
 from __future__ import annotations
 
 import inspect
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -26,6 +26,19 @@ from .causal import fit_causal_kappa
 from .model import CohenMassaroModel, DamModel
 from .modes import assign_modes, collect_occurrences, resample
 from .tails import choose_tail, truncation_errors
+
+
+class EmFit(NamedTuple):
+    """What ``DamEngine.fit_em`` fitted; ``frames`` are the recorded frames in the basis."""
+
+    occurrences: Any
+    recorded: np.ndarray
+    basis: Any
+    frames: np.ndarray
+    modes: Any
+    mode_of: np.ndarray
+    settings: em.Settings
+    fitted: Any
 
 
 class DamEngine(Engine):
@@ -79,7 +92,9 @@ class DamEngine(Engine):
     def polynomial_degree(self) -> int:
         return self.degree
 
-    def fit(self, corpus: Any, *, progress: bool = False) -> DamModel:
+    def fit_em(self, corpus: Any) -> EmFit:
+        """The EM fit of ``corpus`` that ``fit`` starts from: occurrences, motion basis,
+        modes and the fitted dominance widths and coefficients (one BLAS thread)."""
         occurrences, recorded = collect_occurrences(corpus)
         basis, _ = fit_basis(recorded, self.variance)
         frames = basis.project(recorded)
@@ -100,6 +115,11 @@ class DamEngine(Engine):
                 self.em_tol,
                 self.sigma_init,
             )
+        return EmFit(occurrences, recorded, basis, frames, modes, mode_of, settings, fitted)
+
+    def fit(self, corpus: Any, *, progress: bool = False) -> DamModel:
+        occurrences, recorded, basis, _, modes, mode_of, settings, fitted = self.fit_em(corpus)
+        with threadpool_limits(limits=1):
             args = (
                 occurrences,
                 mode_of,
