@@ -13,6 +13,9 @@ An engine's lag on the real lips splits exactly into
 - **the character behind the real lips**: how late the character closes against the real
   face, on the same phones (one figure for every engine).
 
+The character's lip aperture is also set against the real one as ``bench --real`` scores
+an engine (Pearson r over each clip's speech frames, averaged over the clips).
+
 Each part is reported pooled and by context: a /p b m/ *after silence* (it opens the
 utterance or follows a pause, where its acoustic onset ends a silent stretch) or *after
 speech*. Means in ms with their standard error (sd / sqrt(n)).
@@ -39,7 +42,7 @@ from ..phonemes import SILENCE
 from ..results_file import recorded, script_command, write_results
 from ..timeline import PhonemeSpan
 from .demo_calibration import REAL_SET
-from .real_faces import Clip, demo_models, predicted_apertures, real_clips
+from .real_faces import Clip, demo_models, pearson_r, predicted_apertures, real_clips
 
 MODULE = "lipstream.bench.closure_sources"
 GENERATOR_FPS = 120.0
@@ -133,6 +136,16 @@ def split_lags(
     }
 
 
+def character_aperture_r(clips: Sequence[Clip], character: Sequence[np.ndarray]) -> float:
+    """Pearson r of the character's aperture and the real one over each clip's speech
+    frames, averaged over the clips where both move."""
+    values = [
+        pearson_r(curve[clip.speech], clip.aperture[clip.speech])
+        for clip, curve in zip(clips, character, strict=True)
+    ]
+    return float(np.mean([r for r in values if r is not None]))
+
+
 def run(real_set: Path, models_dir: Path, command: str) -> dict[str, Any]:
     corpus = load_corpus(real_set)
     clips = real_clips(corpus)
@@ -149,6 +162,7 @@ def run(real_set: Path, models_dir: Path, command: str) -> dict[str, Any]:
         **recorded(command),
         "corpus": {"name": corpus.name, "digest": corpus.digest(), "fps": corpus.fps},
         "clips": len(clips),
+        "character_aperture_r": character_aperture_r(clips, character),
         **split_lags(clips, character, predicted, corpus.fps),
     }
 

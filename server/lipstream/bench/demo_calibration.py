@@ -1,4 +1,4 @@
-"""The demo character's motion against real faces, on the three measures it is calibrated to.
+"""The demo character's motion against real faces, on the four measures it is calibrated to.
 
 Sketch: every corpus is first resampled onto the real set's frame grid (25 fps, each channel
 by ``np.interp``), so speeds and timings are read at one resolution. Then, from the lip
@@ -16,7 +16,10 @@ aperture (``jawOpen - mouthClose``) and the rounding (``mouthFunnel + mouthPucke
    time the rounding first rises halfway from its lowest in the ``ROUND_LOOKBACK_S`` before
    the vowel to its highest inside the vowel, less the vowel's acoustic start (negative:
    the lips round before the vowel sounds), in ms. Vowels whose rounding rises by less than
-   ``MIN_ROUND_RISE`` are not timed.
+   ``MIN_ROUND_RISE`` are not timed;
+4. **lip aperture by phoneme**: per phone span, the mean aperture over the span's frames as
+   a share of the utterance's range over its speech frames (0 at its 2nd percentile, 1 at
+   its 98th), so a face's own scale drops out; mean and sd per phoneme.
 
 ``python -m lipstream.bench.demo_calibration --corpus before=DIR --corpus after=DIR``
 measures the shipped GRID set and each named corpus in one run and writes
@@ -88,7 +91,7 @@ def summarize(values: Sequence[float]) -> Summary:
 
 @dataclass(frozen=True)
 class MotionMeasures:
-    """The three measures of one corpus (see the module sketch)."""
+    """The four measures of one corpus (see the module sketch)."""
 
     closure_from_onset_ms: Summary
     closure_share: Summary
@@ -97,6 +100,7 @@ class MotionMeasures:
     opening_speed_median: float | None
     closing_speed_median: float | None
     rounding_half_rise_ms: Summary
+    phone_apertures: dict[str, Summary]
 
 
 def _channel(utterance: Utterance, channels: Sequence[str], name: str) -> np.ndarray:
@@ -195,16 +199,38 @@ def rounding_half_rises(track: Track, fps: float) -> list[float]:
     return out
 
 
+def phone_apertures(track: Track, fps: float) -> list[tuple[str, float]]:
+    """Per non-silence phone span holding a frame: (phoneme, mean aperture over its frames
+    as a share of the utterance's speech range)."""
+    speech = speech_mask(track.phones, fps, len(track.aperture))
+    if not speech.any():
+        return []
+    low, high = np.percentile(track.aperture[speech], RANGE_PERCENTILES)
+    if high <= low:
+        return []
+    times = np.arange(len(track.aperture)) / fps
+    out = []
+    for span in track.phones:
+        inside = (times >= span.start) & (times < span.end)
+        if span.phoneme != SILENCE and inside.any():
+            share = (float(track.aperture[inside].mean()) - low) / (high - low)
+            out.append((span.phoneme, share))
+    return out
+
+
 def _median(values: Sequence[float]) -> float | None:
     return float(np.median(values)) if len(values) else None
 
 
 def measure_motion(corpus: Corpus, fps: float = MEASURE_FPS) -> MotionMeasures:
-    """The three measures of ``corpus``, read on a grid of ``fps``."""
+    """The four measures of ``corpus``, read on a grid of ``fps``."""
     closures: list[tuple[float, float]] = []
     speeds: list[tuple[float, float]] = []
     rises: list[float] = []
+    by_phoneme: dict[str, list[float]] = {}
     for track in tracks(corpus, fps):
+        for phoneme, share in phone_apertures(track, fps):
+            by_phoneme.setdefault(phoneme, []).append(share)
         closures.extend(closure_timings(track, fps))
         peak = peak_speeds(track, fps)
         if peak is not None:
@@ -220,6 +246,7 @@ def measure_motion(corpus: Corpus, fps: float = MEASURE_FPS) -> MotionMeasures:
         opening_speed_median=_median(opening),
         closing_speed_median=_median(closing),
         rounding_half_rise_ms=summarize([1000.0 * value for value in rises]),
+        phone_apertures={p: summarize(values) for p, values in sorted(by_phoneme.items())},
     )
 
 

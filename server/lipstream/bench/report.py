@@ -1398,7 +1398,33 @@ def demo_calibration(bench: Bench) -> str:
         ["rounding halfway up, less the rounded vowel's onset, ms"]
         + [_mean_sd(corpora[n]["measures"]["rounding_half_rise_ms"]) for n in names],
     ]
-    return text + table(header, rows)
+    return text + table(header, rows) + _phone_aperture_table(corpora, names)
+
+
+PHONE_APERTURE_MIN_REAL = 10
+
+
+def _phone_aperture_table(corpora: dict[str, Any], names: Sequence[str]) -> str:
+    """Mean lip aperture over each phoneme's spans, as a share of its utterance's speech
+    range, for the phonemes the real set holds at least ``PHONE_APERTURE_MIN_REAL`` times;
+    empty for results measured before the measure existed."""
+    measures = [corpora[n]["measures"].get("phone_apertures") for n in names]
+    if any(m is None for m in measures):
+        return ""
+    real = measures[0]
+    phonemes = sorted(
+        (p for p, s in real.items() if s["count"] >= PHONE_APERTURE_MIN_REAL),
+        key=lambda p: -real[p]["count"],
+    )
+    rows = [
+        [f"`{p}`"] + [_mean_sd(m[p], 2, signed=False) if p in m else "–" for m in measures]
+        for p in phonemes
+    ]
+    header = ["lip aperture over the phoneme, share of the speech range", *names]
+    return (
+        "\nLip aperture by phoneme (mean ± sd (count); the phonemes the first corpus holds "
+        f"at least {PHONE_APERTURE_MIN_REAL} times):\n\n" + table(header, rows)
+    )
 
 
 CLOSURE_SOURCES = "closure_sources.json"
@@ -1489,8 +1515,14 @@ def closure_sources(bench: Bench) -> str:
     text = bench.source(CLOSURE_SOURCES, doc)
     text += (
         f"{doc['clips']} clips of `{doc['corpus']['name']}`, {doc['corpus']['fps']:g} fps; "
-        "closure lag in ms, mean ± standard error (count).\n\n"
+        "closure lag in ms, mean ± standard error (count)."
     )
+    if "character_aperture_r" in doc:
+        text += (
+            " The character's lip aperture against the real lips, on the speech frames: "
+            f"r {doc['character_aperture_r']:.3f} (mean over the clips)."
+        )
+    text += "\n\n"
     header = ["lag", "all /p b m/", "after silence", "after speech"]
     rows = [
         ["the character behind the real lips"]

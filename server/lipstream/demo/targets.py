@@ -8,6 +8,10 @@ phoneme gives every articulator a *window* [lo, hi] of acceptable values
 closure, labiodental tuck, rounded vowels), a wide one leaves the articulator
 free to coarticulate with its neighbours. Diphthongs are two targets in a row.
 
+The lip windows of L, S/Z, IY, EY, R and TH/DH are calibrated to the real-face set's
+mean aperture per phoneme (docs/explanation/demo-character.md, "Calibration to real
+faces").
+
 Units are the output's: jaw and lip aperture in jawOpen units (0 closed, 1
 fully open); a negative lip aperture is a *virtual target* past contact, which
 the lips press towards while held together. Rounding, spread and tuck are 0..1.
@@ -85,12 +89,12 @@ _ROUND_HIGH = _target(0.19, 0.12, 0.65, 0.0)
 _POSTALVEOLAR = _target(0.07, (0.06, 0.16), (0.35, 0.7), (0.0, 0.1))
 _ALVEOLAR = _target((0.04, 0.14), (0.04, 0.35), FREE, FREE)
 _VELAR = _target((0.05, 0.35), (0.04, 0.45), FREE, FREE)
-_DENTAL = _target(0.1, (0.06, 0.2), FREE, FREE)
-_SIBILANT = _target(0.05, (0.03, 0.2), FREE, FREE)
+_DENTAL = _target(0.1, (0.0, 0.09), FREE, FREE)
+_SIBILANT = _target(0.12, (0.10, 0.27), FREE, FREE)
 
 PHONEME_TARGETS: dict[str, tuple[GestureTarget, ...]] = {
     "sil": (_target(0.02, 0.0, FREE, FREE),),
-    "IY": (_target(0.12, 0.12, 0.0, 0.55),),
+    "IY": (_target(0.17, 0.17, 0.0, 0.55),),
     "IH": (_target(0.18, 0.16, 0.0, 0.35),),
     "EH": (_target(0.30, 0.26, 0.0, 0.30),),
     "AE": (_target(0.48, 0.42, 0.0, 0.35),),
@@ -102,7 +106,7 @@ PHONEME_TARGETS: dict[str, tuple[GestureTarget, ...]] = {
     "UW": (_target(0.12, 0.08, 0.90, 0.0),),
     "AY": (_OPEN_A, _HIGH_FRONT),
     "AW": (_OPEN_A, _ROUND_HIGH),
-    "EY": (_target(0.28, 0.24, 0.0, 0.35), _target(0.15, 0.14, 0.0, 0.5)),
+    "EY": (_target(0.33, 0.29, 0.0, 0.35), _target(0.20, 0.19, 0.0, 0.5)),
     "OW": (_target(0.34, 0.24, 0.55, 0.0), _target(0.18, 0.12, 0.80, 0.0)),
     "OY": (_target(0.40, 0.28, 0.55, 0.0), _HIGH_FRONT),
     "P": (_target(0.08, -0.12, FREE, FREE, contact=True),),
@@ -115,7 +119,7 @@ PHONEME_TARGETS: dict[str, tuple[GestureTarget, ...]] = {
     "T": (_ALVEOLAR,),
     "D": (_ALVEOLAR,),
     "N": (_ALVEOLAR,),
-    "L": (_target((0.05, 0.2), (0.05, 0.4), FREE, FREE),),
+    "L": (_target((0.19, 0.34), (0.19, 0.54), FREE, FREE),),
     "S": (_SIBILANT,),
     "Z": (_SIBILANT,),
     "SH": (_POSTALVEOLAR,),
@@ -126,7 +130,7 @@ PHONEME_TARGETS: dict[str, tuple[GestureTarget, ...]] = {
     "G": (_VELAR,),
     "NG": (_target((0.05, 0.3), (0.04, 0.4), FREE, FREE),),
     "HH": (_target((0.0, 0.7), (0.02, 0.6), FREE, FREE),),
-    "R": (_target((0.08, 0.2), (0.1, 0.2), (0.35, 0.55), 0.0),),
+    "R": (_target((0.08, 0.2), (0.0, 0.04), (0.35, 0.55), 0.0),),
     "W": (_target(0.09, 0.05, 0.90, 0.0),),
     "Y": (_target(0.1, (0.08, 0.18), (0.0, 0.1), (0.3, 0.5)),),
 }

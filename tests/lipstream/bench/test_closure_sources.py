@@ -4,6 +4,7 @@ import pytest
 from lipstream.bench.closure_sources import (
     bilabial_contexts,
     character_aperture,
+    character_aperture_r,
     format_split,
     split_lags,
 )
@@ -64,6 +65,21 @@ def test_each_engines_lag_on_real_lips_splits_into_its_lag_behind_the_character_
     assert dam["behind_real"]["all"]["count"] == 2
     table = format_split(split)
     assert "character behind real" in table and "dam behind character" in table
+
+
+def test_character_aperture_r_is_pearson_on_the_speech_frames_averaged_over_clips() -> None:
+    times = np.arange(100) / FPS
+    same = _clip("a", [PhonemeSpan("M", 0.38, 0.46)], 0.42)
+    # a character shut where the real lips are open, and the reverse: r = -1 on clip b
+    mirrored = _clip("b", [PhonemeSpan("M", 0.38, 0.46)], 0.42)
+    character = [2.0 * _dip(times, 0.42) + 0.1, 1.0 - _dip(times, 0.42)]
+    assert character_aperture_r([same, mirrored], character) == pytest.approx(0.0)
+    assert character_aperture_r([same], character[:1]) == pytest.approx(1.0)
+    # only the speech frames count: outside them the character may do anything
+    masked = Clip("c", "s", same.aperture, times < 0.6, same.phones)
+    noisy = character[0].copy()
+    noisy[times >= 0.6] = np.linspace(5.0, -5.0, int(np.sum(times >= 0.6)))
+    assert character_aperture_r([masked], [noisy]) == pytest.approx(1.0)
 
 
 def test_a_context_without_bilabials_has_no_mean() -> None:

@@ -15,6 +15,7 @@ from lipstream.bench.demo_calibration import (
     closure_timings,
     main,
     peak_speeds,
+    phone_apertures,
     resample,
     rounding_half_rises,
     summarize,
@@ -63,6 +64,26 @@ def test_peak_speeds_are_relative_to_the_aperture_range() -> None:
     assert closing == pytest.approx(0.25 * FPS / (high - low))
     flat = Track(np.full(20, 0.3), np.zeros(20), [PhonemeSpan("AA", 0.0, 0.8)])
     assert peak_speeds(flat, FPS) is None
+
+
+def test_phone_aperture_is_its_mean_as_a_share_of_the_speech_range() -> None:
+    # 2 s at 25 fps: AA open at 1.0 (frames 0..24), M shut at 0.0 (25..29), IY at 0.5
+    # (30..39), then silence at 9.0 (40..49), which is not speech and sets no range
+    aperture = np.concatenate([np.ones(25), np.zeros(5), np.full(10, 0.5), np.full(10, 9.0)])
+    phones = [
+        PhonemeSpan("AA", 0.0, 1.0),
+        PhonemeSpan("M", 1.0, 1.2),
+        PhonemeSpan("IY", 1.2, 1.6),
+        PhonemeSpan("sil", 1.6, 2.0),
+    ]
+    shares = phone_apertures(Track(aperture, np.zeros(50), phones), FPS)
+    low, high = np.percentile(aperture[:40], [2.0, 98.0])
+    assert [p for p, _ in shares] == ["AA", "M", "IY"]
+    expected = [(value - low) / (high - low) for value in (1.0, 0.0, 0.5)]
+    np.testing.assert_allclose([share for _, share in shares], expected)
+    assert low == pytest.approx(0.0) and high == pytest.approx(1.0)
+    still = Track(np.full(20, 0.3), np.zeros(20), [PhonemeSpan("AA", 0.0, 0.8)])
+    assert phone_apertures(still, FPS) == []
 
 
 def test_rounding_half_rise_is_timed_against_the_vowel_onset() -> None:

@@ -48,11 +48,11 @@ def test_free_consonant_takes_the_interpolated_path_clipped_to_its_window() -> N
 
 
 def test_hh_interpolates_between_its_neighbours() -> None:
-    # AA centre 0.15, IY centre 0.35, HH centre 0.25: jaw halfway, (0.55 + 0.12) / 2.
+    # AA centre 0.15, IY centre 0.35, HH centre 0.25: jaw halfway, (0.55 + 0.17) / 2.
     segments, plan = _plan(("sil", 0.1), ("AA", 0.1), ("HH", 0.1), ("IY", 0.1), ("sil", 0.1))
     hh = [segment.phoneme for segment in segments].index("HH")
-    assert plan.values[hh, Articulator.JAW] == pytest.approx(0.335)
-    assert plan.values[hh, Articulator.LIPS] == pytest.approx((0.48 + 0.12) / 2)
+    assert plan.values[hh, Articulator.JAW] == pytest.approx(0.36)
+    assert plan.values[hh, Articulator.LIPS] == pytest.approx((0.48 + 0.17) / 2)
 
 
 def test_rounding_is_anticipated_within_the_horizon_only() -> None:
