@@ -14,7 +14,8 @@ An engine's lag on the real lips splits exactly into
   face, on the same phones (one figure for every engine).
 
 The character's lip aperture is also set against the real one as ``bench --real`` scores
-an engine (Pearson r over each clip's speech frames, averaged over the clips).
+an engine (Pearson r over each clip's speech frames, averaged over the clips), beside a
+context-free predictor for scale: each phoneme's mean real aperture over the other clips.
 
 Each part is reported pooled and by context: a /p b m/ *after silence* (it opens the
 utterance or follows a pause, where its acoustic onset ends a silent stretch) or *after
@@ -32,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.ndimage import gaussian_filter1d
 from threadpoolctl import threadpool_limits
 
 from ..corpus import load_corpus
@@ -146,6 +148,45 @@ def character_aperture_r(clips: Sequence[Clip], character: Sequence[np.ndarray])
     return float(np.mean([r for r in values if r is not None]))
 
 
+PHONEME_MEAN_SMOOTHING_S = 0.04
+
+
+def _phone_labels(clip: Clip, fps: float) -> list[str]:
+    times = np.arange(len(clip.aperture)) / fps
+    labels = [SILENCE] * len(times)
+    for span in clip.phones:
+        for index in np.flatnonzero((times >= span.start) & (times < span.end)):
+            labels[index] = span.phoneme
+    return labels
+
+
+def phoneme_mean_aperture_r(clips: Sequence[Clip], fps: float) -> float:
+    """Aperture r of a context-free predictor, for scale: each frame gets its phoneme's
+    mean real aperture over the *other* clips (each clip's aperture as a share of its
+    speech range, 2nd to 98th percentile), smoothed by a Gaussian of
+    ``PHONEME_MEAN_SMOOTHING_S``; Pearson r over the speech frames, averaged over clips."""
+    labels = [_phone_labels(clip, fps) for clip in clips]
+    shares = []
+    for clip in clips:
+        low, high = np.percentile(clip.aperture[clip.speech], (2.0, 98.0))
+        shares.append((clip.aperture - low) / max(high - low, 1e-9))
+    values = []
+    for index, clip in enumerate(clips):
+        sums: dict[str, list[float]] = {}
+        for other, (names, share) in enumerate(zip(labels, shares, strict=True)):
+            if other != index:
+                for name, value in zip(names, share, strict=True):
+                    sums.setdefault(name, []).append(float(value))
+        means = {name: float(np.mean(found)) for name, found in sums.items()}
+        overall = float(np.mean([v for found in sums.values() for v in found]))
+        steps = np.array([means.get(name, overall) for name in labels[index]])
+        curve = gaussian_filter1d(steps, PHONEME_MEAN_SMOOTHING_S * fps)
+        r = pearson_r(curve[clip.speech], clip.aperture[clip.speech])
+        if r is not None:
+            values.append(r)
+    return float(np.mean(values))
+
+
 def run(real_set: Path, models_dir: Path, command: str) -> dict[str, Any]:
     corpus = load_corpus(real_set)
     clips = real_clips(corpus)
@@ -163,6 +204,7 @@ def run(real_set: Path, models_dir: Path, command: str) -> dict[str, Any]:
         "corpus": {"name": corpus.name, "digest": corpus.digest(), "fps": corpus.fps},
         "clips": len(clips),
         "character_aperture_r": character_aperture_r(clips, character),
+        "phoneme_mean_aperture_r": phoneme_mean_aperture_r(clips, corpus.fps),
         **split_lags(clips, character, predicted, corpus.fps),
     }
 

@@ -1520,8 +1520,14 @@ def closure_sources(bench: Bench) -> str:
     if "character_aperture_r" in doc:
         text += (
             " The character's lip aperture against the real lips, on the speech frames: "
-            f"r {doc['character_aperture_r']:.3f} (mean over the clips)."
+            f"r {doc['character_aperture_r']:.3f} (mean over the clips)"
         )
+        if "phoneme_mean_aperture_r" in doc:
+            text += (
+                "; a context-free predictor (each phoneme's mean real aperture over the "
+                f"other clips, smoothed over 40 ms): r {doc['phoneme_mean_aperture_r']:.3f}"
+            )
+        text += "."
     text += "\n\n"
     header = ["lag", "all /p b m/", "after silence", "after speech"]
     rows = [

@@ -5,6 +5,7 @@ from lipstream.bench.closure_sources import (
     bilabial_contexts,
     character_aperture,
     character_aperture_r,
+    phoneme_mean_aperture_r,
     format_split,
     split_lags,
 )
@@ -80,6 +81,27 @@ def test_character_aperture_r_is_pearson_on_the_speech_frames_averaged_over_clip
     noisy = character[0].copy()
     noisy[times >= 0.6] = np.linspace(5.0, -5.0, int(np.sum(times >= 0.6)))
     assert character_aperture_r([masked], [noisy]) == pytest.approx(1.0)
+
+
+def test_phoneme_means_from_the_other_clips_predict_a_clip_whose_phonemes_keep_their_apertures() -> (
+    None
+):
+    # 25 fps; AA open (1.0) and M shut (0.0) in every clip, in different orders, so each
+    # clip's predictor (the other clips' means, smoothed) tracks it: r near 1
+    fps = 25.0
+
+    def clip(stem: str, order: list[str]) -> Clip:
+        phones = [PhonemeSpan(p, 0.4 * i, 0.4 * (i + 1)) for i, p in enumerate(order)]
+        aperture = np.repeat([1.0 if p == "AA" else 0.0 for p in order], 10)
+        return Clip(stem, "s", aperture, np.ones(len(aperture), dtype=bool), phones)
+
+    clips = [clip("a", ["AA", "M", "AA", "M"]), clip("b", ["M", "AA", "M", "AA"])]
+    clips.append(clip("c", ["AA", "AA", "M", "M"]))
+    r = phoneme_mean_aperture_r(clips, fps)
+    assert 0.9 < r < 1.0
+    # a clip whose AA is shut and M open is predicted backwards
+    backwards = Clip("d", "s", 1.0 - clips[0].aperture, clips[0].speech, clips[0].phones)
+    assert phoneme_mean_aperture_r([*clips[1:], backwards], fps) < 0.5
 
 
 def test_a_context_without_bilabials_has_no_mean() -> None:
