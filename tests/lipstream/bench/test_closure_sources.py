@@ -5,8 +5,8 @@ from lipstream.bench.closure_sources import (
     bilabial_contexts,
     character_aperture,
     character_aperture_r,
-    phoneme_mean_aperture_r,
     format_split,
+    phoneme_mean_aperture_r,
     split_lags,
 )
 from lipstream.bench.real_faces import Clip
