@@ -9,12 +9,18 @@ closures are also grouped by the recording's centre (``OFFSET_EDGES_MS``): a mod
 comes from a timing convention lags every group alike, one that cannot move a closure off
 the span lags the anticipated closures (those the recording centres before the onset)
 most. The training lines (what the model was fitted to) and the held-out lines are timed,
-and for ``dam`` and ``cohen-massaro`` also their EM fit as it was trained: Eq. 2 over the
+``dam`` and ``cohen-massaro`` trained here without their bilabial lead (the diagnosis is of
+the engines as they were before it), and for both also their EM fit: Eq. 2 over the
 training lines with every occurrence's own mode (``fit_frames``), which the mode search
-does not enter, so the lag splits into fitting and mode selection. Last, both engines are
-trained and run with every bilabial's span started ``LEADS_MS`` earlier than its acoustic
-one (``lead_bilabials``: the preceding span ends there, shortened by at most half), and
-their held-out closures timed against the recordings on the acoustic spans.
+does not enter, so the lag splits into fitting and mode selection. The recorded closures
+after silence (or at a line's start) and after a phoneme are timed apart
+(``after_silence``): whether the character leads a bilabial out of a pause as it does
+inside a phrase. Last, the sweep that chose the engines' ``bilabial_lead_s``: both engines
+are trained and run with each lead of ``LEADS_MS`` (``bilabial_lead.lead_bilabials``: every
+bilabial's span started that much earlier than its acoustic one, the preceding span
+shortened by at most half), their held-out closures timed against the recordings on the
+acoustic spans, on the search rungs (offline) and on the ``causal`` rung, which keeps the
+acoustic spans.
 
 ``python -m lipstream.bench.closure_timing --home DIR --json bench/closure_timing.json``
 """
@@ -23,7 +29,6 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -41,13 +46,14 @@ from ..evaluation import (
     lip_aperture,
     rms_error,
 )
+from ..phonemes import SILENCE
 from ..results_file import recorded, script_command, write_results
 from ..timeline import PhonemeSpan
 
 MODULE = "lipstream.bench.closure_timing"
 ENGINES = ("viseme-lerp", "dam", "cohen-massaro")
 FITTED = ("dam", "cohen-massaro")
-LEADS_MS = (0.0, 20.0, 40.0)
+LEADS_MS = (0.0, 10.0, 20.0, 30.0, 40.0, 50.0)
 OFFSET_EDGES_MS = (-20.0, 0.0, 20.0, 40.0)
 """Group bounds of the recorded closure centre less the acoustic onset: before -20 ms,
 -20..0, 0..20, 20..40, from 40 ms."""
@@ -137,11 +143,11 @@ def time_frames(predicted: Sequence[np.ndarray], corpus: Corpus) -> dict[str, An
     }
 
 
-def synthesized(model: Any, corpus: Corpus) -> list[np.ndarray]:
+def synthesized(model: Any, corpus: Corpus, **options: Any) -> list[np.ndarray]:
     """``model``'s frames for every line of ``corpus`` (on its spans), each with its line's
-    emotion."""
+    emotion, with engine ``options``."""
     return [
-        model.synthesize(u.phones, fps=corpus.fps, audio=None, emotion=u.emotion).frames
+        model.synthesize(u.phones, fps=corpus.fps, audio=None, emotion=u.emotion, **options).frames
         for u in corpus.utterances
     ]
 
@@ -156,37 +162,75 @@ def fit_frames(engine: DamEngine, train: Corpus) -> list[np.ndarray]:
     return [fitted_frames[low:high] for low, high in zip(bounds[:-1], bounds[1:])]
 
 
-def lead_bilabials(spans: Sequence[PhonemeSpan], lead_s: float) -> list[PhonemeSpan]:
-    """``spans`` with every /p b m/ after another span started ``lead_s`` earlier and that
-    span ended there, each moved by at most half the preceding span's duration."""
-    moved = list(spans)
-    for index in range(1, len(moved)):
-        span, before = moved[index], moved[index - 1]
+def fitted_at_leads(name: str, hyperparameters: dict[str, Any], train: Corpus) -> dict[float, Any]:
+    """Engine ``name`` with ``hyperparameters`` trained on ``train`` at each bilabial lead of
+    ``LEADS_MS`` (by lead, ms)."""
+    return {
+        lead_ms: get_engine_class(name)(
+            **{**hyperparameters, "bilabial_lead_s": lead_ms / 1000.0}
+        ).fit(train)
+        for lead_ms in LEADS_MS
+    }
+
+
+def time_leads(models: dict[float, Any], heldout: Corpus) -> list[dict[str, Any]]:
+    """The models of ``fitted_at_leads`` run on ``heldout`` (offline, and on the ``causal``
+    rung), their closures timed against the recordings."""
+    rows = []
+    for lead_ms, model in models.items():
+        timed = time_frames(synthesized(model, heldout), heldout)
+        causal = time_frames(synthesized(model, heldout, causal=True), heldout)
+        rows.append(
+            {
+                "lead_ms": lead_ms,
+                **{k: v for k, v in timed.items() if k != "groups"},
+                "causal": {"lag_ms": causal["lag_ms"], "rms": causal["rms"]},
+            }
+        )
+    return rows
+
+
+def plateaus_by_pause(
+    aperture: np.ndarray, spans: Sequence[PhonemeSpan], fps: float
+) -> dict[str, list[tuple[float, float]]]:
+    """``closure_plateaus`` of the /p b m/ after silence (or first in the line) and of those
+    after a phoneme."""
+    groups: dict[str, list[tuple[float, float]]] = {"silence": [], "phoneme": []}
+    for index, span in enumerate(spans):
         if span.phoneme not in BILABIALS:
             continue
-        shift = min(lead_s, 0.5 * (before.end - before.start))
-        moved[index - 1] = replace(before, end=before.end - shift)
-        moved[index] = replace(span, start=span.start - shift)
-    return moved
+        paused = index == 0 or spans[index - 1].phoneme == SILENCE
+        groups["silence" if paused else "phoneme"].extend(closure_plateaus(aperture, [span], fps))
+    return groups
 
 
-def led(corpus: Corpus, lead_s: float) -> Corpus:
-    """``corpus`` with its bilabials led by ``lead_s`` (``lead_bilabials``)."""
-    return replace(
-        corpus,
-        utterances=[replace(u, phones=lead_bilabials(u.phones, lead_s)) for u in corpus.utterances],
-    )
+def best_lead_ms(rows: Sequence[dict[str, Any]]) -> float:
+    """The lead of the sweep ``rows`` (``time_leads``) whose held-out closure centre lag is
+    nearest 0 among those whose held-out RMS is not above the RMS without a lead."""
+    unled = next(row for row in rows if row["lead_ms"] == 0.0)
+    kept = [row for row in rows if row["rms"] <= unled["rms"]]
+    return float(min(kept, key=lambda row: abs(row["lag_ms"]))["lead_ms"])
 
 
-def time_leads(name: str, train: Corpus, heldout: Corpus) -> list[dict[str, Any]]:
-    """Engine ``name`` trained on ``train`` and run on ``heldout`` with the bilabials led by
-    each of ``LEADS_MS``, its closures timed against the recordings."""
-    rows = []
-    for lead_ms in LEADS_MS:
-        model = get_engine_class(name)().fit(led(train, lead_ms / 1000.0))
-        timed = time_frames(synthesized(model, led(heldout, lead_ms / 1000.0)), heldout)
-        rows.append({"lead_ms": lead_ms, **{k: v for k, v in timed.items() if k != "groups"}})
-    return rows
+def after_silence(corpus: Corpus) -> dict[str, dict[str, Any]]:
+    """The recorded closures of ``corpus`` after silence (or first in a line) and after a
+    phoneme: per group the count and mean closing, release and centre (ms) of the onset."""
+    groups: dict[str, list[tuple[float, float]]] = {"silence": [], "phoneme": []}
+    for utterance in corpus.utterances:
+        aperture = lip_aperture(utterance.frames, corpus.channels)
+        assert aperture is not None, "the demo character has a lip aperture"
+        for group, plateaus in plateaus_by_pause(aperture, utterance.phones, corpus.fps).items():
+            groups[group].extend(plateaus)
+    summary = {}
+    for group, plateaus in groups.items():
+        edges = 1000.0 * np.asarray(plateaus).reshape(-1, 2)
+        summary[group] = {
+            "closures": len(edges),
+            "closing_ms": float(edges[:, 0].mean()) if len(edges) else None,
+            "release_ms": float(edges[:, 1].mean()) if len(edges) else None,
+            "centre_ms": float(edges.mean()) if len(edges) else None,
+        }
+    return summary
 
 
 def run(home: Path, engines: Sequence[str], command: str) -> dict[str, Any]:
@@ -196,32 +240,48 @@ def run(home: Path, engines: Sequence[str], command: str) -> dict[str, Any]:
     with threadpool_limits(limits=1):
         for name in engines:
             model = load_model(home / "demo" / "models" / name)
+            built_lead_ms = 1000.0 * float(model.manifest.hyperparameters.get("bilabial_lead_s", 0))
+            hyperparameters = {**model.manifest.hyperparameters, "bilabial_lead_s": 0.0}
+            models = fitted_at_leads(name, hyperparameters, train) if name in FITTED else {}
+            # the diagnosis is of the engine as it was before its bilabial lead
+            unled = models.get(0.0, model)
             timed[name] = {
-                part: time_frames(synthesized(model, lines), lines)
+                part: time_frames(synthesized(unled, lines), lines)
                 for part, lines in (("train", train), ("heldout", heldout))
             }
             if name in FITTED:
-                engine = get_engine_class(name)(**model.manifest.hyperparameters)
+                engine = get_engine_class(name)(**hyperparameters)
                 assert isinstance(engine, DamEngine)
                 timed[name]["fit"] = time_frames(fit_frames(engine, train), train)
-                timed[name]["leads"] = time_leads(name, train, heldout)
+                timed[name]["leads"] = time_leads(models, heldout)
+                timed[name]["best_lead_ms"] = best_lead_ms(timed[name]["leads"])
+                chosen = get_engine_class(name)().hyperparameters()["bilabial_lead_s"]
+                timed[name]["chosen_lead_ms"] = round(1000.0 * chosen, 6)
+                timed[name]["built_lead_ms"] = round(built_lead_ms, 6)
     return {
         **recorded(command),
         "corpus": {"name": corpus.name, "digest": corpus.digest(), "fps": corpus.fps},
+        "after_silence": after_silence(train),
         "engines": timed,
     }
 
 
 def format_timing(results: dict[str, Any]) -> str:
-    lines = []
+    lines = [
+        f"recorded after {group}: closing {row['closing_ms']:+.1f}, release"
+        f" {row['release_ms']:+.1f}, centre {row['centre_ms']:+.1f} ms over {row['closures']}"
+        for group, row in results["after_silence"].items()
+        if row["closures"]
+    ]
     for engine, parts in results["engines"].items():
         for row in parts.get("leads", []):
             lines.append(
                 f"{engine} held-out, bilabials led {row['lead_ms']:g} ms: lag"
-                f" {row['lag_ms']:+.1f} ms, RMS {row['rms']:.4f}"
+                f" {row['lag_ms']:+.1f} ms, RMS {row['rms']:.4f}; causal rung lag"
+                f" {row['causal']['lag_ms']:+.1f} ms, RMS {row['causal']['rms']:.4f}"
             )
         for part, timed in parts.items():
-            if part == "leads":
+            if part not in ("train", "heldout", "fit"):
                 continue
             lines.append(
                 f"{engine} {part}: lag {timed['lag_ms']:+.1f} ms (closing"

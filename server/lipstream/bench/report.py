@@ -1572,8 +1572,14 @@ def closure_timing(bench: Bench) -> str:
         f"runs from {_signed(train['recorded_closing_ms'])} to "
         f"{_signed(train['recorded_release_ms'])} ms of the acoustic onset (means). "
         "Lags in ms, mean over closures; the centre's lag is the mean of the closing's "
-        "and the release's.\n\n"
+        "and the release's."
     )
+    if any("leads" in parts for parts in engines.values()):
+        text += (
+            " The engines with a bilabial lead are trained here without it "
+            "(`bilabial_lead_s` = 0), as they were before it; the last table sweeps it."
+        )
+    text += "\n\n"
     header = ["engine", "lines", "closures", "centre lag", "closing lag", "release lag", "RMS"]
     rows = []
     for engine, parts in engines.items():
@@ -1613,27 +1619,71 @@ def closure_timing(bench: Bench) -> str:
         f"`{engine}`" + (" fit" if part == "fit" else "") for engine, part in columns
     ]
     text += table(header, groups)
+    text += _after_silence(doc.get("after_silence"))
     leads = [
-        [
-            f"`{engine}`",
-            f"{row['lead_ms']:g}",
-            _signed(row["lag_ms"], 1),
-            _signed(row["closing_lag_ms"], 1),
-            _signed(row["release_lag_ms"], 1),
-            number(row["rms"], 4),
-        ]
+        _lead_row(engine, row, parts.get("chosen_lead_ms"))
         for engine, parts in engines.items()
         for row in parts.get("leads", [])
     ]
     if not leads:
         return text
     text += (
-        "\nTrained and run with every bilabial's span started earlier than its acoustic "
-        "one (the preceding span shortened, by at most half), held-out lines timed "
-        "against the recordings on the acoustic spans:\n\n"
+        "\nThe sweep of `bilabial_lead_s`: trained and run with every bilabial's span started "
+        "the lead earlier than its acoustic one (the preceding span shortened, by at most "
+        "half), held-out lines timed against the recordings on the acoustic spans, offline "
+        "(the search rungs) and on the `causal` rung (which keeps the acoustic spans); "
+        "**bold**: the engine's default.\n\n"
     )
-    header = ["engine", "lead, ms", "centre lag", "closing lag", "release lag", "RMS"]
-    return text + table(header, leads)
+    header = [
+        "engine",
+        "lead, ms",
+        "centre lag",
+        "closing lag",
+        "release lag",
+        "RMS",
+        "`causal` centre lag",
+        "`causal` RMS",
+    ]
+    text += table(header, leads)
+    picks = [
+        f"`{engine}` {parts['best_lead_ms']:g} ms (default {parts['chosen_lead_ms']:g} ms)"
+        for engine, parts in engines.items()
+        if "best_lead_ms" in parts and "chosen_lead_ms" in parts
+    ]
+    if picks:
+        text += (
+            "\nThe sweep's pick, the held-out centre lag nearest 0 without the held-out RMS "
+            "rising above the unled one: " + ", ".join(picks) + ".\n"
+        )
+    return text
+
+
+def _after_silence(groups: dict[str, Any] | None) -> str:
+    if not groups or not all(groups[g]["closures"] for g in ("silence", "phoneme")):
+        return ""
+    paused, spoken = groups["silence"], groups["phoneme"]
+    return (
+        f"\nThe recording after silence (or first in a line, {paused['closures']} closures) "
+        f"closes at {_signed(paused['closing_ms'], 1)} ms and centres at "
+        f"{_signed(paused['centre_ms'], 1)} ms of the onset; after a phoneme "
+        f"({spoken['closures']}) at {_signed(spoken['closing_ms'], 1)} and "
+        f"{_signed(spoken['centre_ms'], 1)} ms (training lines).\n"
+    )
+
+
+def _lead_row(engine: str, row: dict[str, Any], chosen_ms: float | None) -> list[str]:
+    lead = f"{row['lead_ms']:g}"
+    causal = row.get("causal")
+    return [
+        f"`{engine}`",
+        f"**{lead}**" if chosen_ms is not None and row["lead_ms"] == chosen_ms else lead,
+        _signed(row["lag_ms"], 1),
+        _signed(row["closing_lag_ms"], 1),
+        _signed(row["release_lag_ms"], 1),
+        number(row["rms"], 4),
+        _signed(causal["lag_ms"], 1) if causal else "–",
+        number(causal["rms"], 4) if causal else "–",
+    ]
 
 
 GRID_BILABIAL_WORDS = ("bin", "place", "blue", "by", "please")

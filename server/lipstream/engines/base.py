@@ -691,13 +691,19 @@ class RenderingSynthesizer(LookaheadSynthesizer):
     def __init__(self, model: RenderingModel, request: SynthesisRequest) -> None:
         super().__init__(model, request)
 
+    def rendered_spans(self) -> Sequence[PhonemeSpan]:
+        """The spans ``render`` is given: those fed, unless the model renders others made from
+        them (dam's articulatory spans)."""
+        return self.spans
+
     def _emit(self, stop: int) -> np.ndarray:
         if stop <= self.emitted:
             return np.zeros((0, len(self.model.channels)), dtype=np.float32)
         self.request.guard.check()
         times = np.arange(self.emitted, stop, dtype=np.float64) / self.request.fps
         frames = np.asarray(
-            self.model.render(self.spans, times, self.request, self.audio), dtype=np.float32
+            self.model.render(self.rendered_spans(), times, self.request, self.audio),
+            dtype=np.float32,
         )
         self.emitted = stop
         self.stats["frames"] = stop

@@ -6,10 +6,11 @@ import numpy as np
 import pytest
 
 from lipstream.bench.closure_timing import (
+    best_lead_ms,
     closure_offsets,
     closure_plateaus,
     grouped,
-    lead_bilabials,
+    plateaus_by_pause,
 )
 from lipstream.timeline import PhonemeSpan
 
@@ -64,18 +65,33 @@ def test_plateaus_give_each_closure_its_closing_and_release() -> None:
     assert closure_plateaus(aperture, spans, FPS) == [pytest.approx((-0.05, 0.12), abs=1e-9)]
 
 
-def test_lead_bilabials_moves_each_bilabial_onset_into_the_span_before() -> None:
+def test_plateaus_by_pause_tell_a_bilabial_after_silence_from_one_after_a_phoneme() -> None:
     spans = [
-        PhonemeSpan("M", 0.0, 0.08),
-        PhonemeSpan("AA", 0.08, 0.20),
-        PhonemeSpan("B", 0.20, 0.28),
-        PhonemeSpan("S", 0.28, 0.31),
-        PhonemeSpan("P", 0.31, 0.40),
+        PhonemeSpan("M", 0.0, 0.10),
+        PhonemeSpan("AA", 0.10, 0.30),
+        PhonemeSpan("sil", 0.30, 0.50),
+        PhonemeSpan("B", 0.50, 0.60),
+        PhonemeSpan("AA", 0.60, 0.80),
+        PhonemeSpan("P", 0.80, 0.90),
+        PhonemeSpan("AA", 0.90, 1.20),
     ]
-    moved = lead_bilabials(spans, 0.04)
-    # the first M has nothing before it; the B takes 40 ms of the AA; the S is 30 ms long,
-    # so the P takes only half of it
-    expected = [(0.0, 0.08), (0.08, 0.16), (0.16, 0.28), (0.28, 0.295), (0.295, 0.40)]
-    assert [(s.start, s.end) for s in moved] == [pytest.approx(pair) for pair in expected]
-    assert [s.phoneme for s in moved] == ["M", "AA", "B", "S", "P"]
-    assert lead_bilabials(spans, 0.0) == spans
+    shut = [(0.0, 0.05), (0.42, 0.55), (0.83, 0.88)]
+    aperture = np.prod([_aperture_closed(edges, 120) for edges in shut], axis=0)
+    groups = plateaus_by_pause(aperture, spans, FPS)
+    # the line's first M and the B after the pause; the P follows a vowel
+    assert groups["silence"] == [
+        pytest.approx((0.0, 0.05), abs=1e-9),
+        pytest.approx((-0.08, 0.05), abs=1e-9),
+    ]
+    assert groups["phoneme"] == [pytest.approx((0.03, 0.08), abs=1e-9)]
+
+
+def test_best_lead_is_the_lag_nearest_zero_without_the_rms_rising() -> None:
+    rows = [
+        {"lead_ms": 0.0, "lag_ms": 11.0, "rms": 0.0558},
+        {"lead_ms": 10.0, "lag_ms": 0.5, "rms": 0.0561},  # nearest 0, but the RMS rose
+        {"lead_ms": 20.0, "lag_ms": 2.9, "rms": 0.0556},
+        {"lead_ms": 30.0, "lag_ms": -3.3, "rms": 0.0554},
+    ]
+    assert best_lead_ms(rows) == 20.0
+    assert best_lead_ms(rows[:2]) == 0.0

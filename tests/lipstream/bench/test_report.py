@@ -976,15 +976,23 @@ def test_closure_timing_renders_each_engine_part_and_group(tmp_path: Path) -> No
                         "closing_lag_ms": 39.0,
                         "release_lag_ms": -33.25,
                         "rms": 0.05561,
+                        "causal": {"lag_ms": 9.25, "rms": 0.0601},
                     },
                 ],
+                "chosen_lead_ms": 20.0,
+                "best_lead_ms": 20.0,
             }
+        },
+        "after_silence": {
+            "silence": {"closures": 4, "closing_ms": -94.0, "release_ms": 57.0, "centre_ms": -18.5},
+            "phoneme": {"closures": 9, "closing_ms": -42.0, "release_ms": 68.0, "centre_ms": 13.0},
         },
     }
     (tmp_path / "closure_timing.json").write_text(json.dumps(doc))
     rendered = BLOCKS["closure-timing"](Bench(tmp_path))
     assert "The `demo` corpus at 120 fps; 5 /p b m/ closures" in rendered
     assert "runs from -47 to +68 ms" in rendered
+    assert "trained here without it (`bilabial_lead_s` = 0)" in rendered
     fit_row = (
         "| `dam` | training lines, EM fit with each occurrence's own mode | 5 | +4.5 | +53.8 "
         "| -44.8 | 0.0500 |"
@@ -995,6 +1003,12 @@ def test_closure_timing_renders_each_engine_part_and_group(tmp_path: Path) -> No
     assert rendered.index(fit_row) < rendered.index("held-out lines, synthesized")
     assert "| < -20 | 2 | -28.0 | +20.2 | +27.5 |" in rendered
     assert "| 0 .. 20 | 0 | – | – | – |" in rendered
-    assert "| `dam` | 20 | +2.9 | +39.0 | -33.2 | 0.0556 |" in rendered
-    assert rendered.index("| `dam` | 0 | +11.0 |") < rendered.index("| `dam` | 20 |")
+    assert "| `dam` | **20** | +2.9 | +39.0 | -33.2 | 0.0556 | +9.2 | 0.0601 |" in rendered
+    assert "| `dam` | 0 | +11.0 | +52.0 | -30.0 | 0.0558 | – | – |" in rendered
+    assert rendered.index("| `dam` | 0 | +11.0 |") < rendered.index("| `dam` | **20** |")
+    assert "after silence (or first in a line, 4 closures) closes at -94.0" in rendered
+    assert "rising above the unled one: `dam` 20 ms (default 20 ms)." in rendered
+    assert (
+        "centres at -18.5 ms" in rendered and "after a phoneme (9) at -42.0 and +13.0" in rendered
+    )
     assert "Not measured yet" in BLOCKS["closure-timing"](Bench(tmp_path / "empty"))

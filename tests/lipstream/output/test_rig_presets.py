@@ -4,6 +4,7 @@ published counterparts, emotions follow the requested emotion, and unknown names
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -64,6 +65,15 @@ def timeline() -> list[tuple[str, float, float]]:
     return spans
 
 
+def span_frames(*phonemes: str) -> list[slice]:
+    """The frames of each span of ``phonemes`` in ``SPOKEN``."""
+    return [
+        slice(math.ceil(start * FPS), math.ceil(end * FPS))
+        for p, start, end in timeline()
+        if p in phonemes
+    ]
+
+
 def centres(*phonemes: str) -> list[int]:
     """Frame index at the centre of each span of ``phonemes`` in ``SPOKEN``."""
     return [round((start + end) / 2 * FPS) for p, start, end in timeline() if p in phonemes]
@@ -95,8 +105,11 @@ def test_a_vowel_rig_closes_the_mouth_on_bilabials_and_rounds_on_uw(
     shapes, rounded = VOWEL_RIGS[preset]
     columns = [retarget.controls.index(name) for name in shapes]
     mouth = retarget.apply(frames)[:, columns]
-    for frame in centres("P", "B", "M"):
-        assert mouth[frame].max() <= CLOSED_AT_MOST, (frame, mouth[frame])
+    # closed within each bilabial, wherever the engine times its closure (dam's and
+    # cohen-massaro's start before the acoustic span)
+    for frames_of in span_frames("P", "B", "M"):
+        closest = mouth[frames_of].max(axis=1).min()
+        assert closest <= CLOSED_AT_MOST, (frames_of, mouth[frames_of])
     for frame in centres("UW"):
         assert shapes[int(mouth[frame].argmax())] == rounded, (frame, mouth[frame])
         assert mouth[frame, shapes.index(rounded)] >= ROUNDED_AT_LEAST
@@ -245,7 +258,12 @@ def test_the_demo_rounds_and_presses_through_the_blendshape_rigs(
         rounding = controls[:, names.index(pucker)]
         pressing = controls[:, names.index(press)]
         assert rounding[centres("UW")].min() > 2 * rounding[centres("AA")].max(), preset
-        assert pressing[centres("P", "B", "M")].min() > 2 * pressing[centres("AA")].max(), preset
+        # each bilabial presses (at its peak) more than any /aa/ at its centre, and twice as
+        # much on average: the /aa/ before a led /b/ already anticipates its closure
+        peaks = np.array([pressing[frames_of].max() for frames_of in span_frames("P", "B", "M")])
+        open_vowels = pressing[centres("AA")]
+        assert peaks.min() > open_vowels.max(), preset
+        assert peaks.mean() > 2 * open_vowels.mean(), preset
 
 
 def emotional_controls(model: Model, retarget: RetargetMap, emotion: str | None) -> np.ndarray:

@@ -178,10 +178,14 @@ def test_catalog_ladder_follows_each_models_declared_rungs(catalog: Catalog) -> 
         engine = model.manifest.engine
         waits = {e.rung.name: e.lookahead_ms for e in rungs}
         if engine in ("dam", "cohen-massaro"):
-            # the mode search looks 2, 1, 0 phonemes ahead, beside the fitted tail
+            # the mode search looks 2, 1, 0 phonemes ahead, beside the fitted tail; the
+            # bilabial lead waits one phoneme and the lead more
             tail = model.manifest.extra["tail"]
-            expected = {"full": (tail + 2) * 200.0, "search-1": (tail + 1) * 200.0}
-            expected["search-0"] = tail * 200.0
+            lead_s = model.manifest.hyperparameters["bilabial_lead_s"]
+            assert lead_s > 0.0
+            led = 200.0 + 1000.0 * lead_s
+            expected = {"full": (tail + 2) * 200.0 + led, "search-1": (tail + 1) * 200.0 + led}
+            expected["search-0"] = tail * 200.0 + led
             expected["causal"] = 0.0
         else:
             expected = DEMO_LOOKAHEAD_MS[engine]

@@ -1,21 +1,26 @@
 """The ``dam`` and ``cohen-massaro`` engines: ``fit`` is the paper's training loop.
 
-the motion basis (PCA keeping ``variance`` of every channel's variance, see
+the bilabials' articulatory spans (``bilabial_lead.lead_bilabials``: /p b m/ started up to
+``bilabial_lead_s`` before their acoustic onset, as synthesis starts them) -> the motion
+basis (PCA keeping ``variance`` of every channel's variance, see
 docs/explanation/engines/dam.md for why components rather than channels) -> modes
 (resample + affinity propagation + contexts) -> EM (E-step, then M-step
 and E-step until converged) -> the tail that bounds streaming's truncation error ->
-phoneme durations and the causal rungs' filter speed κ (``causal``).
+phoneme durations and the causal rungs' filter speed κ (``causal``; both on the acoustic
+spans, which the causal rungs keep).
 ``cohen-massaro`` is the same code with constant animemes (M = 0).
 """
 
 from __future__ import annotations
 
 import inspect
+from dataclasses import replace
 from typing import Any, NamedTuple
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from ...bilabial_lead import lead_bilabials
 from ...numerics.basis import fit_basis
 from ...store import ModelManifest
 from ..base import Engine
@@ -26,6 +31,21 @@ from .causal import fit_causal_kappa
 from .model import CohenMassaroModel, DamModel
 from .modes import assign_modes, collect_occurrences, resample
 from .tails import choose_tail, truncation_errors
+
+DAM_BILABIAL_LEAD_S = 0.02
+COHEN_MASSARO_BILABIAL_LEAD_S = 0.04
+"""The leads of /p b m/ by the sweep of ``bench.closure_timing`` on the demo corpus: the
+held-out closure centre nearest the recording's without the held-out RMS rising."""
+
+
+def led_corpus(corpus: Any, lead_s: float) -> Any:
+    """``corpus`` with every line's bilabials led by ``lead_s`` (``lead_bilabials``)."""
+    if lead_s <= 0.0:
+        return corpus
+    return replace(
+        corpus,
+        utterances=[replace(u, phones=lead_bilabials(u.phones, lead_s)) for u in corpus.utterances],
+    )
 
 
 class EmFit(NamedTuple):
@@ -70,6 +90,7 @@ class DamEngine(Engine):
         w_smooth: float = 1.0,
         search_behind: int = 2,
         search_ahead: int = 2,
+        bilabial_lead_s: float = DAM_BILABIAL_LEAD_S,
     ) -> None:
         self.degree = degree
         self.variance = variance
@@ -88,14 +109,16 @@ class DamEngine(Engine):
         self.w_smooth = w_smooth
         self.search_behind = search_behind
         self.search_ahead = search_ahead
+        self.bilabial_lead_s = bilabial_lead_s
 
     def polynomial_degree(self) -> int:
         return self.degree
 
     def fit_em(self, corpus: Any) -> EmFit:
         """The EM fit of ``corpus`` that ``fit`` starts from: occurrences, motion basis,
-        modes and the fitted dominance widths and coefficients (one BLAS thread)."""
-        occurrences, recorded = collect_occurrences(corpus)
+        modes and the fitted dominance widths and coefficients (one BLAS thread), on the
+        bilabials' articulatory spans."""
+        occurrences, recorded = collect_occurrences(led_corpus(corpus, self.bilabial_lead_s))
         basis, _ = fit_basis(recorded, self.variance)
         frames = basis.project(recorded)
         modes, mode_of = assign_modes(
@@ -176,8 +199,10 @@ class CohenMassaroEngine(DamEngine):
     model_class = CohenMassaroModel
 
     def __init__(self, **hyperparameters: Any) -> None:
-        """DAM's hyperparameters but ``degree``, which is 0 here (constant targets); the
-        signature below names them, read from ``DamEngine``'s."""
+        """DAM's hyperparameters but ``degree``, which is 0 here (constant targets), and
+        ``bilabial_lead_s`` defaults to its own; the signature below names them, read from
+        ``DamEngine``'s."""
+        hyperparameters.setdefault("bilabial_lead_s", COHEN_MASSARO_BILABIAL_LEAD_S)
         super().__init__(degree=0, **hyperparameters)
         del self.degree  # M is no hyperparameter here: it is 0
 
@@ -188,14 +213,19 @@ class CohenMassaroEngine(DamEngine):
         return CohenMassaroModel(manifest, arrays)
 
 
-def _without_degree(signature: inspect.Signature) -> inspect.Signature:
+def _cohen_massaro_signature(signature: inspect.Signature) -> inspect.Signature:
+    """DAM's signature without ``degree``, with Cohen-Massaro's own bilabial lead."""
     return signature.replace(
-        parameters=[p for p in signature.parameters.values() if p.name != "degree"]
+        parameters=[
+            p.replace(default=COHEN_MASSARO_BILABIAL_LEAD_S) if p.name == "bilabial_lead_s" else p
+            for p in signature.parameters.values()
+            if p.name != "degree"
+        ]
     )
 
 
 # Engine.hyperparameter_names reads a signature, as scikit-learn's get_params does: give the
-# derived constructor DAM's, less degree, instead of listing sixteen parameters again.
-CohenMassaroEngine.__init__.__signature__ = _without_degree(  # type: ignore[attr-defined]
+# derived constructor DAM's, less degree, instead of listing seventeen parameters again.
+CohenMassaroEngine.__init__.__signature__ = _cohen_massaro_signature(  # type: ignore[attr-defined]
     inspect.signature(DamEngine.__init__)
 )

@@ -15,12 +15,19 @@ Below these search rungs, ``causal: true`` selects the causal rungs
 (``causal``: modes committed as spans arrive, Eq. 2 over the spans begun, a
 critically damped filter), which wait for ``lead_ms`` at most.
 
+Bilabial lead: with ``bilabial_lead_s`` > 0 the search rungs render the spans with every
+/p b m/ started that much earlier (``bilabial_lead``), as the model was trained; a span's
+articulatory end waits for the phoneme after it, so these rungs wait one phoneme and the
+lead more (``search_lookahead``), and the synthesizer hands each span to the render once its
+successor has come. The causal rungs keep the acoustic spans.
+
 Emotion: a span's emotion (its own, else the request's, else neutral) limits the
 candidates to modes seen with that emotion, falling back to all the phoneme's
 modes when that emotion never said it. A phoneme never trained stands in for
 another (``modes.stand_ins``).
 
-Stored ranges (checked at load, ``check_arrays``): σ in [``SIGMA_MIN``, 100];
+Stored ranges (checked at load, ``check_arrays``; ``bilabial_lead_s`` in [0, ``MAX_LEAD_S``],
+0 when absent): σ in [``SIGMA_MIN``, 100];
 context counts in [0, 2^31 − 1]; κ in [0.1, 100] (``damped_fit.KAPPA_RANGE``);
 durations as in ``durations``; every other float (animeme coefficients, basis
 mean) within ``MAX_MAGNITUDE``, the basis orthonormal.
@@ -35,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from ...audio import Audio
+from ...bilabial_lead import BilabialLead, lead_bilabials
 from ...errors import InvalidRequestError
 from ...model_checks import ArrayReader, FieldReader
 from ...numerics.basis import MotionBasis, read_components
@@ -66,6 +74,8 @@ from .selection import Costs, Layer, end_derivatives
 from .spans import DamSpans
 
 OPTION_LIMIT = 16
+MAX_LEAD_S = 0.2
+"""The largest bilabial lead (s) a model may store."""
 NUMBER_FIELDS = (  # name, low, high, low excluded
     ("eps", 0.0, 1.0, False),
     ("tol", 0.0, 0.5, True),
@@ -100,6 +110,9 @@ class DamModel(RenderingModel):
         self.tail = int(manifest.extra["tail"])
         self.search_behind = int(hyper["search_behind"])
         self.search_ahead = int(hyper["search_ahead"])
+        self.bilabial_lead_s = float(hyper.get("bilabial_lead_s", 0.0))
+        """How far (s) /p b m/ start before their acoustic spans on the search rungs (0 in a
+        model saved before the lead existed)."""
         self.durations = DurationModel(
             self.stored["duration_count"],
             self.stored["duration_log_mean"],
@@ -166,16 +179,23 @@ class DamModel(RenderingModel):
         lag at the pooled median duration, at most the lead."""
         return causal_shift_s(lead_ms, self.durations.pooled_median_s(), self.causal_kappa)
 
+    def search_lookahead(self, search: int, tail: int) -> Lookahead:
+        """The wait of a search rung: ``search`` + ``tail`` phonemes. With a bilabial lead one
+        more, and the lead: a span's articulatory end moves with the phoneme after it, and
+        the frames up to the lead before a bilabial's onset are the bilabial's."""
+        if self.bilabial_lead_s <= 0.0:
+            return Lookahead(phonemes=search + tail)
+        return Lookahead(seconds=self.bilabial_lead_s, phonemes=search + tail + 1)
+
     @property
     def lookahead(self) -> Lookahead:
-        return Lookahead(phonemes=self.search_ahead + self.tail)
+        return self.search_lookahead(self.search_ahead, self.tail)
 
     def lookahead_for(self, options: Mapping[str, Any]) -> Lookahead | None:
         resolved = self.resolve(options)
         if isinstance(resolved, float):
             return Lookahead(seconds=self.shift_s(resolved))
-        search, tail = resolved
-        return Lookahead(phonemes=search + tail)
+        return self.search_lookahead(*resolved)
 
     def fidelity_ladder(self) -> tuple[Rung, ...]:
         """Mode searches looking ``search_ahead`` phonemes ahead, then fewer, then none; the
@@ -186,7 +206,7 @@ class DamModel(RenderingModel):
         for search in range(self.search_ahead, -1, -1):
             name = "full" if search == self.search_ahead else f"search-{search}"
             options = {"search_ahead": search, "tail_ahead": self.tail}
-            rungs.append(Rung(name, Lookahead(phonemes=search + self.tail), options))
+            rungs.append(Rung(name, self.search_lookahead(search, self.tail), options))
         return (*rungs, *causal_rungs(self.shift_s))
 
     def rung_for(self, options: Mapping[str, Any]) -> Rung | None:
@@ -261,13 +281,16 @@ class DamModel(RenderingModel):
         request: SynthesisRequest,
         audio: Audio | None,
     ) -> np.ndarray:
-        """One compiled call (``kernels.render_run``); a streaming request's spans are its
-        ``DamSpans``, which keep their arrays and chosen modes between calls."""
+        """One compiled call (``kernels.render_run``) on the bilabials' articulatory spans
+        (``bilabial_lead``); a streaming request's spans are its ``DamSpans``, led already,
+        which keep their arrays and chosen modes between calls."""
         if isinstance(spans, DamSpans) and spans.request is request:
             tracked = spans
         else:
             resolved = self.resolve(request.options)
             assert not isinstance(resolved, float), "causal rungs stream with CausalSynthesizer"
+            if self.bilabial_lead_s > 0.0:
+                spans = lead_bilabials(spans, self.bilabial_lead_s)
             tracked = DamSpans(request, resolved, spans)
         search, ahead = tracked.resolved
         request.guard.check()
@@ -309,6 +332,10 @@ class DamModel(RenderingModel):
             fields.integer(*member(hyper, "hyperparameters", name), 0, OPTION_LIMIT)
         fields.integer(*member(extra, "extra", "tail"), 0, OPTION_LIMIT)
         fields.number(*member(extra, "extra", "reference_duration"), 0.0, 60.0, above=True)
+        if "bilabial_lead_s" in hyper:  # absent from models saved before it: no lead
+            fields.number(
+                hyper["bilabial_lead_s"], "hyperparameters.bilabial_lead_s", 0.0, MAX_LEAD_S
+            )
         reader = ArrayReader(arrays, str(path / ARRAYS_NAME))
         return cls(manifest, check_arrays(reader, degree, len(manifest.channels)))
 
@@ -364,17 +391,36 @@ def check_arrays(reader: ArrayReader, degree: int, n_channels: int) -> dict[str,
 
 class DamSynthesizer(RenderingSynthesizer):
     """The generic rendering synthesizer, waiting for the lookahead of the request's options
-    (resolved once); its spans are ``DamSpans``."""
+    (resolved once); it renders ``DamSpans``. Without a bilabial lead those are the spans
+    fed; with one, their articulatory spans (``bilabial_lead.BilabialLead``), each handed
+    on once the span after it has come, the last at ``finish``."""
 
     def __init__(self, model: DamModel, request: SynthesisRequest) -> None:
         super().__init__(model, request)
         resolved = model.resolve(request.options)
         assert not isinstance(resolved, float), "causal rungs stream with CausalSynthesizer"
-        self.spans = DamSpans(request, resolved)
-        self._lookahead = Lookahead(phonemes=resolved[0] + resolved[1])
+        self.led = DamSpans(request, resolved)
+        self.leader: BilabialLead | None = None
+        if model.bilabial_lead_s > 0.0:
+            self.leader = BilabialLead(model.bilabial_lead_s)
+        else:
+            self.spans = self.led
+        self._lookahead = model.search_lookahead(*resolved)
+
+    def _accepted(self, span: PhonemeSpan, sent: int | None) -> None:
+        if self.leader is not None and (final := self.leader.push(span)) is not None:
+            self.led.append(final)
+
+    def rendered_spans(self) -> Sequence[PhonemeSpan]:
+        return self.led
 
     def final_until(self) -> float:
         return final_until(self.spans, self._lookahead)
+
+    def finish(self) -> np.ndarray:
+        if self.leader is not None and (last := self.leader.close()) is not None:
+            self.led.append(last)
+        return super().finish()
 
 
 class CohenMassaroModel(DamModel):

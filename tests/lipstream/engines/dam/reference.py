@@ -11,6 +11,7 @@ by term, for enumerating every path.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 
 import numpy as np
@@ -140,3 +141,16 @@ def path_cost(costs: Costs, layers: Sequence[Layer], path: Sequence[int]) -> flo
             joins = smooth_cost(costs, layers[index - 1], layer)
             total += costs.w_smooth * float(joins[path[index - 1], path[index]])
     return total
+
+
+def led_by_hand(spans: list[PhonemeSpan], lead: float) -> list[PhonemeSpan]:
+    """Each /p b m/ after another span started ``lead`` earlier and that span ended there, by
+    at most half that span (as moved already): the articulatory spans a model with
+    ``bilabial_lead_s`` = ``lead`` renders, written out loop by loop."""
+    led = list(spans)
+    for k in range(1, len(led)):
+        if led[k].phoneme in ("P", "B", "M") and lead > 0:
+            shift = min(lead, (led[k - 1].end - led[k - 1].start) / 2)
+            led[k - 1] = dataclasses.replace(led[k - 1], end=led[k - 1].end - shift)
+            led[k] = dataclasses.replace(led[k], start=led[k].start - shift)
+    return led

@@ -21,7 +21,7 @@ from lipstream.errors import InvalidRequestError, ModelStoreError
 from lipstream.phonemes import PHONEMES as PHONEMES_BY_INDEX
 from lipstream.store import read_manifest, save_model_dir
 from lipstream.timeline import PhonemeSpan
-from tests.lipstream.engines.dam.reference import path_cost, select_mode
+from tests.lipstream.engines.dam.reference import led_by_hand, path_cost, select_mode
 
 
 def _spans(corpus: Corpus) -> list[PhonemeSpan]:
@@ -61,14 +61,88 @@ def test_cohen_massaro_is_the_dam_with_m_zero(
     cohen = _dam(trained_models, "cohen-massaro")
     assert cohen.coefficients.shape[1] == 1
     train = small_demo_corpus.split()[0]
-    zero = DamEngine(degree=0).fit(train)
+    lead = cohen.bilabial_lead_s
+    assert lead == CohenMassaroEngine().bilabial_lead_s > 0.0
+    zero = DamEngine(degree=0, bilabial_lead_s=lead).fit(train)
     for name, array in cohen.arrays().items():
         np.testing.assert_array_equal(zero.arrays()[name], array, err_msg=name)
     spans = _spans(small_demo_corpus)
     frames = cohen.synthesize(spans, fps=60).frames
     np.testing.assert_array_equal(zero.synthesize(spans, fps=60).frames, frames)
-    np.testing.assert_allclose(frames, _by_loops(cohen, spans, 60.0), atol=1e-5)
+    # the loops run on the bilabials' articulatory spans, led by hand here
+    np.testing.assert_allclose(frames, _by_loops(cohen, led_by_hand(spans, lead), 60.0), atol=1e-5)
     assert CohenMassaroEngine().hyperparameters()["sigma_init"] == DamEngine().sigma_init
+
+
+def _without_lead(model: DamModel) -> DamModel:
+    """``model`` as an artifact saved before the lead existed would load it: no
+    ``bilabial_lead_s``."""
+    hyper = {k: v for k, v in model.manifest.hyperparameters.items() if k != "bilabial_lead_s"}
+    manifest = dataclasses.replace(model.manifest, hyperparameters=hyper)
+    return type(model)(manifest, model.arrays())
+
+
+@pytest.mark.parametrize("name", ["dam", "cohen-massaro"])
+def test_the_lead_is_the_same_in_training_and_synthesis(
+    name: str, trained_models: dict[str, Model], small_demo_corpus: Corpus
+) -> None:
+    model = _dam(trained_models, name)
+    lead = model.bilabial_lead_s
+    assert lead > 0.0
+    train = small_demo_corpus.split()[0]
+    led_lines = dataclasses.replace(
+        train,
+        utterances=[
+            dataclasses.replace(u, phones=led_by_hand(u.phones, lead)) for u in train.utterances
+        ],
+    )
+    engine = {"dam": DamEngine, "cohen-massaro": CohenMassaroEngine}[name]
+    on_led = engine(bilabial_lead_s=0.0).fit(led_lines)
+    # what the EM fitted is what a model without a lead fits on spans led by hand; the
+    # durations and κ (the causal rungs', which keep the acoustic spans) are not
+    for array in ("sigma", "coefficients", "mode_phoneme", "count_previous", "count_emotion"):
+        np.testing.assert_array_equal(on_led.arrays()[array], model.arrays()[array], err_msg=array)
+    # synthesis: the model's frames are those of the same model without the lead on the
+    # spans led by hand
+    spans = _spans(small_demo_corpus)
+    np.testing.assert_array_equal(
+        model.synthesize(spans, fps=60).frames,
+        _without_lead(model).synthesize(led_by_hand(spans, lead), fps=60).frames,
+    )
+    # and a bilabial's closure moves earlier than without the lead
+    assert not np.array_equal(
+        model.synthesize(spans, fps=60).frames,
+        _without_lead(model).synthesize(spans, fps=60).frames,
+    )
+
+
+@pytest.mark.parametrize("name", ["dam", "cohen-massaro"])
+def test_an_artifact_without_the_lead_loads_as_no_lead_with_the_frames_of_before(
+    name: str, small_demo_corpus: Corpus, tmp_path: Path
+) -> None:
+    train = small_demo_corpus.split()[0]
+    engine = {"dam": DamEngine, "cohen-massaro": CohenMassaroEngine}[name]
+    model = engine(bilabial_lead_s=0.0).fit(train)
+    assert isinstance(model, DamModel)
+    model.save(tmp_path / name)
+    path = tmp_path / name / "model.json"
+    manifest = json.loads(path.read_text())
+    del manifest["hyperparameters"]["bilabial_lead_s"]
+    path.write_text(json.dumps(manifest))
+    old = load_model(tmp_path / name)
+    assert isinstance(old, DamModel) and old.bilabial_lead_s == 0.0
+    spans = _spans(small_demo_corpus)
+    for rung in old.fidelity_ladder():
+        assert rung.lookahead == model.rung_for(rung.options).lookahead  # type: ignore[union-attr]
+        if "causal" not in rung.options:
+            assert rung.lookahead.seconds == 0.0
+        np.testing.assert_array_equal(
+            old.synthesize(spans, fps=60, **rung.options).frames,
+            model.synthesize(spans, fps=60, **rung.options).frames,
+        )
+    if name == "cohen-massaro":  # the frames of before: Eq. 2 on the acoustic spans
+        frames = old.synthesize(spans, fps=60).frames
+        np.testing.assert_allclose(frames, _by_loops(old, spans, 60.0), atol=1e-5)
 
 
 def test_dam_fits_better_than_cohen_massaro_on_its_training_data(
@@ -93,7 +167,10 @@ def test_every_rung_streams_its_offline_frames_as_soon_as_its_lookahead_allows(
     )
     assert ladder[0].lookahead == model.lookahead
     searches = [rung for rung in ladder if "causal" not in rung.options]
-    assert searches[-1].lookahead.phonemes == model.tail
+    # a bilabial lead waits one phoneme more and the lead on every search rung
+    assert model.bilabial_lead_s > 0.0
+    assert searches[-1].lookahead.phonemes == model.tail + 1
+    assert all(rung.lookahead.seconds == model.bilabial_lead_s for rung in searches)
     assert [rung.name for rung in ladder[len(searches) :]] == ["causal_lead", "causal"]
     for rung in ladder:
         assert model.rung_for(rung.options) == rung
@@ -179,7 +256,9 @@ def test_bad_option_values_are_coded_errors(
             model.start(SynthesisRequest(fps=60, options={name: value}))
         assert caught.value.where == f"options.{name}"
     searching = model.lookahead_for({"search_ahead": 0, "tail_ahead": 1})
-    assert searching is not None and searching.phonemes == 1
+    # one phoneme more than the options ask for, and the lead: the bilabial lead's wait
+    assert searching is not None and searching.phonemes == 2
+    assert searching.seconds == model.bilabial_lead_s > 0.0
 
 
 def _damped_by_hand(raw: np.ndarray, omegas: np.ndarray, dt: float) -> np.ndarray:
@@ -320,6 +399,8 @@ def test_corrupt_arrays_are_refused_naming_the_array(
         ("hyperparameters", "degree", -1),
         ("hyperparameters", "tol", 0.0),
         ("hyperparameters", "search_behind", "two"),
+        ("hyperparameters", "bilabial_lead_s", -0.01),
+        ("hyperparameters", "bilabial_lead_s", "20 ms"),
         ("extra", "tail", 99),
         ("extra", "reference_duration", None),
     ],
