@@ -67,7 +67,7 @@ def brand_error(recorded: np.ndarray, synthesized: np.ndarray, mean: np.ndarray)
 
 def reconstruction(model: HmmModel, utterance: Utterance) -> np.ndarray:
     """The line rebuilt from the Viterbi states of its own recorded curves."""
-    seen = observations(utterance, model.basis, model.hmm_fps)
+    seen = observations(utterance, model.basis, model.hmm_fps, model.sample_offset)
     path, _ = viterbi(model.log_start, model.log_transition, model.facial.log_density(seen))
     frames = np.arange(utterance.n_frames)
     ratio = model.hmm_fps / model.synthesis_fps

@@ -1,23 +1,29 @@
-"""Why phoneme-driven `hmm` closes the lips late: which trajectory frame takes which state.
+"""Why phoneme-driven `hmm` closes the lips late: where a state's pose is sampled in training,
+and which trajectory frame takes which state.
 
-Sketch: the facial HMM is trained on the curves sampled at the instants j / R (R =
-``hmm_fps``, ``engine.observations``), so state j of a decoded sequence stands for the pose
-at j / R and for the backward difference over ((j − 1) / R, j / R]. The synthesizer solves
-the trajectory at a rate f above R and gives trajectory frame k (at k / f) the state of HMM
-frame ⌊k R / f⌋ (``synthesizer.hmm_frame``): every state is held over [j / R, (j + 1) / R),
-after the instant it stands for, so the targets arrive on average (1 / R − 1 / f) / 2 late
-(8.3 ms at R = 40 Hz, f = 120 Hz) and the velocity targets another as much.
+Sketch: the synthesizer solves the trajectory at a rate f above R (``hmm_fps``) and gives
+trajectory frame k (at k / f) the state of HMM frame ⌊k R / f⌋ (``synthesizer.hmm_frame``):
+every state is held over [j / R, (j + 1) / R). Trained on the curves at the instants j / R
+(``sample_offset`` 0, every model before issue 24's fix), state j stands for the pose at
+j / R, so its targets arrive on average (1 / R − 1 / f) / 2 late (8.3 ms at R = 40 Hz,
+f = 120 Hz). The engine now trains on the curves at (j + ½) / R, the hold interval's centre
+(``engine.HOLD_CENTRE``).
 
-Each line is decoded once, driven by phonemes alone on the offline rung (Viterbi over the
-whole line, one solve; ``floor_max_abs_diff`` checks that the ``floor`` convention
-reproduces the engine's frames), and its trajectory solved at the engine's rate with the
-state of frame k taken three ways (``CONVENTIONS``): ``floor`` (the engine's), ``nearest``
-(the HMM frame whose instant is nearest, ⌊k R / f + ½⌋) and ``ceil`` (⌈k R / f⌉, the first
-HMM frame whose backward difference covers the frame's). Closure lags are timed as
-``evaluation.closure_lags`` times them: on the demo corpus's held-out lines against their
-recordings (with the RMS error), and on the real-face set behind the demo character
-(``closure_sources.character_aperture``) and behind the real lips. The served rungs'
-closure lag on the held-out lines shows whether the decoder's lag adds to it.
+Two models are compared in one run (``SAMPLINGS``): one trained on the train split with
+``sample_offset`` 0 (``instant``), and the engine as built (``engine``: ``--model``, or
+trained on the train split with the defaults). Each line is decoded once per model, driven
+by phonemes alone on the offline rung (Viterbi over the whole line, one solve;
+``floor_max_abs_diff`` checks that the ``floor`` convention reproduces the engine's frames),
+and its trajectory solved at the engine's rate with the state of frame k taken three ways
+(``CONVENTIONS``): ``floor`` (the engine's), ``nearest`` (⌊k R / f + ½⌋) and ``ceil``
+(⌈k R / f⌉). Closure lags are timed as ``evaluation.closure_lags`` times them: on the demo
+corpus's held-out lines against their recordings (with the RMS error), and on the real-face
+set behind the demo character (``closure_sources.character_aperture``) and behind the real
+lips; the engine's shift from ``instant`` is paired span by span. The served rungs' closure
+lag on the held-out lines shows whether the decoder's lag adds to it. EM finds a different
+model from each seed, which moves the closures too: ``--seeds`` (default ``SWEEP_SEEDS``)
+trains both samplings again from each further seed and keeps the engine's own lags
+(``seed_sweep``).
 
 ``python -m lipstream.bench.hmm_closure_lag --corpus DIR --json bench/hmm_closure_lag.json``
 """
@@ -37,7 +43,8 @@ from threadpoolctl import threadpool_limits
 from ..corpus import Corpus, load_corpus
 from ..engines import load_model
 from ..engines.base import SynthesisRequest, frame_count
-from ..engines.hmm.model import HmmModel
+from ..engines.hmm.engine import HOLD_CENTRE, HmmEngine
+from ..engines.hmm.model import INSTANT_SAMPLING, HmmModel
 from ..engines.hmm.synthesizer import HmmSynthesizer
 from ..engines.hmm.trajectory import solve
 from ..errors import LipstreamError
@@ -58,6 +65,10 @@ from .real_faces import real_clips
 
 MODULE = "lipstream.bench.hmm_closure_lag"
 CONVENTIONS = ("floor", "nearest", "ceil")
+SAMPLINGS = ("instant", "engine")
+SWEEP_SEEDS = (1, 2, 3)
+OWN = "floor"
+"""The engine's convention: the lags its own frames show."""
 OFFLINE: dict[str, Any] = {"drive": "phonemes", "lag_ms": None, "window_ms": None}
 _EPS = 1e-9
 
@@ -117,9 +128,10 @@ def resynthesized(
     return model.basis.reconstruct(curve[rows])
 
 
-def demo_lags(model: HmmModel, heldout: Corpus) -> dict[str, Any]:
+def demo_lags(model: HmmModel, heldout: Corpus) -> tuple[dict[str, Any], dict[str, list[float]]]:
     """Per convention, the closure lags and RMS error on the held-out lines; the served
-    rungs' (phoneme-driven) beside them."""
+    rungs' (phoneme-driven) beside them. With them, span by span, the lags (s) of the engine's
+    own frames offline (``offline``) and on each rung, for pairing with another model's."""
     fps, channels = heldout.fps, heldout.channels
     lags: dict[str, dict[str, list[float]]] = {
         name: {"all": [], **{c: [] for c in CONTEXTS}} for name in CONVENTIONS
@@ -146,6 +158,7 @@ def demo_lags(model: HmmModel, heldout: Corpus) -> dict[str, Any]:
             paired[name].extend(np.subtract(own, base).tolist())
             errors[name].append(rms_error(frames, utterance.frames))
     rungs = {}
+    spans = {"offline": lags[OWN]["all"]}
     for rung in model.fidelity_ladder():
         rung_lags, rung_errors = [], []
         for utterance in heldout.utterances:
@@ -161,6 +174,7 @@ def demo_lags(model: HmmModel, heldout: Corpus) -> dict[str, Any]:
             "lag": asdict(summarize_lags(rung_lags)),
             "rms": float(np.mean(rung_errors)),
         }
+        spans[rung.name] = rung_lags
     return {
         "lines": len(heldout.utterances),
         "floor_max_abs_diff": worst,
@@ -174,11 +188,12 @@ def demo_lags(model: HmmModel, heldout: Corpus) -> dict[str, Any]:
             for name in CONVENTIONS
         },
         "rungs": rungs,
-    }
+    }, spans
 
 
-def real_lags(model: HmmModel, real_set: Path) -> dict[str, Any]:
-    """Per convention, the lags on the real-face set behind the character and the real lips."""
+def real_lags(model: HmmModel, real_set: Path) -> tuple[dict[str, Any], list[float]]:
+    """Per convention, the lags on the real-face set behind the character and the real lips;
+    with them, span by span, the lags (s) of the engine's own frames behind the character."""
     corpus = load_corpus(real_set)
     clips, fps = real_clips(corpus), corpus.fps
     character = [
@@ -196,36 +211,132 @@ def real_lags(model: HmmModel, real_set: Path) -> dict[str, Any]:
             padded[: min(n, len(aperture))] = aperture[:n]
             curves[name].append(padded)
     real = [clip.aperture for clip in clips]
+    behind = {name: lags_by_context(clips, character, curves[name], fps) for name in CONVENTIONS}
     return {
         "clips": len(clips),
         "fps": fps,
         "conventions": {
             name: {
-                "behind_character": summarize_contexts(
-                    lags_by_context(clips, character, curves[name], fps)
-                ),
+                "behind_character": summarize_contexts(behind[name]),
                 "behind_real": summarize_contexts(lags_by_context(clips, real, curves[name], fps)),
             }
             for name in CONVENTIONS
         },
+    }, behind[OWN]["all"]
+
+
+def paired_shift(lags: Sequence[float], base: Sequence[float]) -> dict[str, Any]:
+    """The summary of ``lags`` less ``base``, span by span (the same spans, in order)."""
+    if len(lags) != len(base):
+        raise LipstreamError(
+            f"{len(lags)} closures against {len(base)}: not the same spans",
+            where="hmm_closure_lag",
+            code="invalid_model",
+        )
+    return asdict(summarize_lags(np.subtract(lags, base).tolist()))
+
+
+def measured(
+    model: HmmModel, heldout: Corpus, real_set: Path
+) -> tuple[dict[str, Any], tuple[dict[str, list[float]], list[float]]]:
+    """One model's lags (``demo_lags``, ``real_lags``), and its per-span lags for pairing."""
+    demo, demo_spans = demo_lags(model, heldout)
+    real, real_spans = real_lags(model, real_set)
+    return {"sample_offset": model.sample_offset, "demo": demo, "real": real}, (
+        demo_spans,
+        real_spans,
+    )
+
+
+def own_lags(found: dict[str, Any]) -> dict[str, Any]:
+    """The lags of a model's own frames (``floor``) of a ``measured`` result."""
+    demo, real = found["demo"], found["real"]
+    return {
+        "offline": demo["conventions"][OWN]["lag"],
+        "rms": demo["conventions"][OWN]["rms"],
+        "rungs": {rung: row["lag"] for rung, row in demo["rungs"].items()},
+        "real_behind_character": real["conventions"][OWN]["behind_character"]["all"],
     }
 
 
-def run(corpus_dir: Path, real_set: Path, model_dir: Path | None, command: str) -> dict[str, Any]:
+def seed_sweep(
+    train: Corpus,
+    heldout: Corpus,
+    real_set: Path,
+    seeds: Sequence[int],
+    settings: dict[str, Any],
+) -> list[dict[str, Any]]:
+    """Per seed, both samplings trained from it with the other hyperparameters of
+    ``settings``: their own lags and the paired shift."""
+    rows = []
+    for seed in seeds:
+        found = {}
+        for name, offset in (("instant", INSTANT_SAMPLING), ("engine", HOLD_CENTRE)):
+            model = HmmEngine(**(settings | {"seed": seed, "sample_offset": offset})).fit(train)
+            found[name] = measured(model, heldout, real_set)
+        (_, (before_demo, before_real)), (_, (after_demo, after_real)) = (
+            found["instant"],
+            found["engine"],
+        )
+        rows.append(
+            {
+                "seed": seed,
+                **{name: own_lags(result) for name, (result, _) in found.items()},
+                "shift": {
+                    **{k: paired_shift(after_demo[k], before_demo[k]) for k in after_demo},
+                    "real_behind_character": paired_shift(after_real, before_real),
+                },
+            }
+        )
+    return rows
+
+
+def seed_mean_shift(shifts: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Per measure, the mean over seeds of the paired shift's mean (ms), its standard error
+    across the seeds and the number of seeds."""
+    out = {}
+    for name in shifts[0]:
+        means = [shift[name]["mean_ms"] for shift in shifts if shift[name]["mean_ms"] is not None]
+        se = float(np.std(means, ddof=1) / np.sqrt(len(means))) if len(means) > 1 else None
+        out[name] = {
+            "mean_ms": float(np.mean(means)) if means else None,
+            "se_ms": se,
+            "count": len(means),
+        }
+    return out
+
+
+def run(
+    corpus_dir: Path,
+    real_set: Path,
+    model_dir: Path | None,
+    command: str,
+    seeds: Sequence[int] = SWEEP_SEEDS,
+) -> dict[str, Any]:
     corpus = load_corpus(corpus_dir)
     train, heldout = corpus.split()
     with threadpool_limits(limits=1):
         model = load_model(model_dir) if model_dir else train_engine(train, "hmm")
         if not isinstance(model, HmmModel):
             raise LipstreamError("not an hmm model", where=str(model_dir), code="invalid_model")
-        return {
-            **recorded(command),
-            "corpus": {"name": corpus.name, "digest": corpus.digest(), "fps": corpus.fps},
-            "model": "trained on the train split" if model_dir is None else str(model_dir),
-            "hmm_fps": model.hmm_fps,
-            "demo": demo_lags(model, heldout),
-            "real": real_lags(model, real_set),
-        }
+        settings = dict(model.manifest.hyperparameters)
+        instant = HmmEngine(**(settings | {"sample_offset": INSTANT_SAMPLING})).fit(train)
+        before, (before_demo, before_real) = measured(instant, heldout, real_set)
+        after, (after_demo, after_real) = measured(model, heldout, real_set)
+        sweep = seed_sweep(train, heldout, real_set, seeds, settings)
+    shift = {name: paired_shift(after_demo[name], before_demo[name]) for name in after_demo}
+    shift["real_behind_character"] = paired_shift(after_real, before_real)
+    after["shift_from_instant"] = shift
+    return {
+        **recorded(command),
+        "corpus": {"name": corpus.name, "digest": corpus.digest(), "fps": corpus.fps},
+        "model": "trained on the train split" if model_dir is None else str(model_dir),
+        "hmm_fps": model.hmm_fps,
+        "samplings": {"instant": before, "engine": after},
+        "seeds": sweep,
+        "seed": settings.get("seed"),
+        "seed_mean_shift": seed_mean_shift([shift] + [row["shift"] for row in sweep]),
+    }
 
 
 def format_lags(results: dict[str, Any]) -> str:
@@ -233,17 +344,37 @@ def format_lags(results: dict[str, Any]) -> str:
         se = "" if summary["se_ms"] is None else f" ± {summary['se_ms']:.1f}"
         return "n/a" if summary["mean_ms"] is None else f"{summary['mean_ms']:+.1f}{se}"
 
-    demo, real = results["demo"], results["real"]
-    lines = [f"floor reproduces the engine to {demo['floor_max_abs_diff']:.1e}"]
-    for name in CONVENTIONS:
-        row, grid = demo["conventions"][name], real["conventions"][name]
+    lines = []
+    for sampling in SAMPLINGS:
+        found = results["samplings"][sampling]
+        demo, real = found["demo"], found["real"]
         lines.append(
-            f"{name:<8} demo {ms(row['lag'])} (shift {ms(row['shift_from_floor'])}) "
-            f"RMS {row['rms']:.5f}; real: behind character {ms(grid['behind_character']['all'])}"
-            f", behind real {ms(grid['behind_real']['all'])}"
+            f"{sampling} (sample_offset {found['sample_offset']:g}): floor reproduces the "
+            f"engine to {demo['floor_max_abs_diff']:.1e}"
         )
-    for rung, row in demo["rungs"].items():
-        lines.append(f"rung {rung:<12} demo {ms(row['lag'])} RMS {row['rms']:.5f}")
+        for name in CONVENTIONS:
+            row, grid = demo["conventions"][name], real["conventions"][name]
+            lines.append(
+                f"  {name:<8} demo {ms(row['lag'])} (shift {ms(row['shift_from_floor'])}) "
+                f"RMS {row['rms']:.5f}; real: behind character "
+                f"{ms(grid['behind_character']['all'])}, behind real "
+                f"{ms(grid['behind_real']['all'])}"
+            )
+        for rung, row in demo["rungs"].items():
+            lines.append(f"  rung {rung:<12} demo {ms(row['lag'])} RMS {row['rms']:.5f}")
+    for label, shift in (
+        ("engine less instant, paired", results["samplings"]["engine"]["shift_from_instant"]),
+        ("mean over seeds", results["seed_mean_shift"]),
+    ):
+        lines.append(f"{label}: " + ", ".join(f"{k} {ms(v)}" for k, v in shift.items()))
+    for row in results["seeds"]:
+        lines.append(
+            f"seed {row['seed']}: offline {ms(row['instant']['offline'])} -> "
+            f"{ms(row['engine']['offline'])} (paired {ms(row['shift']['offline'])}); real behind "
+            f"character {ms(row['instant']['real_behind_character'])} -> "
+            f"{ms(row['engine']['real_behind_character'])} "
+            f"(paired {ms(row['shift']['real_behind_character'])})"
+        )
     return "\n".join(lines)
 
 
@@ -255,8 +386,16 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--real", type=Path, default=REAL_SET, help="real-face corpus")
     parser.add_argument("--model", type=Path, help="an hmm model (default: train one)")
     parser.add_argument("--json", type=Path, required=True, help="results file to write")
+    parser.add_argument(
+        "--seeds",
+        type=int,
+        nargs="*",
+        default=list(SWEEP_SEEDS),
+        help="further EM seeds to train both samplings from",
+    )
     args = parser.parse_args(argv)
-    results = run(args.corpus, args.real, args.model, script_command(MODULE, argv))
+    command = script_command(MODULE, argv)
+    results = run(args.corpus, args.real, args.model, command, args.seeds)
     write_results(results, args.json)
     print(format_lags(results))
 

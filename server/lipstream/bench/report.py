@@ -1440,28 +1440,43 @@ def _lag_cell(summary: dict[str, Any]) -> str:
 
 HMM_CLOSURE_LAG = "hmm_closure_lag.json"
 HMM_CONVENTIONS = {
-    "floor": "⌊k R / f⌋, held after its instant (the engine's)",
+    "floor": "⌊k R / f⌋, held over [j / R, (j + 1) / R) (the engine's)",
     "nearest": "⌊k R / f + ½⌋, the nearest instant",
     "ceil": "⌈k R / f⌉, the first backward difference covering the frame's",
+}
+HMM_SAMPLINGS = {
+    "instant": "at j / R (before)",
+    "engine": "at (j + ½) / R (the engine's)",
+}
+HMM_SHIFTS = {  # the others are the rungs, by name
+    "offline": "demo held-out, offline",
+    "real_behind_character": "real clips, behind the character (offline)",
 }
 
 
 def hmm_closure_lag(bench: Bench) -> str:
-    """Phoneme-driven `hmm`'s closure lag with each convention for the state of a
-    trajectory frame, on the demo's held-out lines and the real-face set, and on each served
-    rung (``lipstream.bench.hmm_closure_lag``)."""
+    """Phoneme-driven `hmm`'s closure lag trained on the face at each HMM frame's instant
+    and at the centre of its hold interval, with each convention for the state of a
+    trajectory frame, on the demo's held-out lines and the real-face set, on each served
+    rung, and over EM seeds (``lipstream.bench.hmm_closure_lag``)."""
     if not bench.exists(HMM_CLOSURE_LAG):
         return f"Not measured yet: no `bench/{HMM_CLOSURE_LAG}`.\n"
     doc = bench.load(HMM_CLOSURE_LAG)
-    demo, real = doc["demo"], doc["real"]
+    samplings = doc["samplings"]
+    first = samplings["engine"]
+    demo, real = first["demo"], first["real"]
+    worst = max(samplings[name]["demo"]["floor_max_abs_diff"] for name in HMM_SAMPLINGS)
     text = bench.source(HMM_CLOSURE_LAG, doc)
     text += (
-        f"`hmm` {doc['model']} of `{doc['corpus']['name']}`, driven by phonemes, offline rung; "
+        f"`hmm` {doc['model']} of `{doc['corpus']['name']}` (seed {doc['seed']}), and beside it "
+        f"the same trained on the face at the instants j / R (`sample_offset` "
+        f"{samplings['instant']['sample_offset']:g}), driven by phonemes, offline rung; "
         f"{demo['lines']} held-out lines at {doc['corpus']['fps']:g} fps and {real['clips']} "
         f"real clips at {real['fps']:g} fps. Closure lag in ms, mean ± standard error (count); "
-        f"the `floor` rows reproduce the engine's frames to {demo['floor_max_abs_diff']:.0e}.\n\n"
+        f"the `floor` rows reproduce the engines' frames to {worst:.0e}.\n\n"
     )
     header = [
+        "face sampled",
         "state of trajectory frame k",
         "demo held-out, behind the recordings",
         "shift from `floor` (paired)",
@@ -1470,39 +1485,93 @@ def hmm_closure_lag(bench: Bench) -> str:
         "real clips, behind the real lips",
     ]
     rows = []
-    for name, meaning in HMM_CONVENTIONS.items():
-        row, grid = demo["conventions"][name], real["conventions"][name]
-        rows.append(
-            [
-                f"`{name}`: {meaning}",
-                _lag_cell(row["lag"]),
-                _lag_cell(row["shift_from_floor"]),
-                f"{row['rms']:.5f}",
-                _lag_cell(grid["behind_character"]["all"]),
-                _lag_cell(grid["behind_real"]["all"]),
-            ]
-        )
+    for sampling, said in HMM_SAMPLINGS.items():
+        found = samplings[sampling]
+        for name, meaning in HMM_CONVENTIONS.items():
+            row, grid = found["demo"]["conventions"][name], found["real"]["conventions"][name]
+            rows.append(
+                [
+                    f"{said}: `sample_offset` {found['sample_offset']:g}",
+                    f"`{name}`: {meaning}",
+                    _lag_cell(row["lag"]),
+                    _lag_cell(row["shift_from_floor"]),
+                    f"{row['rms']:.5f}",
+                    _lag_cell(grid["behind_character"]["all"]),
+                    _lag_cell(grid["behind_real"]["all"]),
+                ]
+            )
     text += table(header, rows)
     text += (
-        "\nBy context: the demo's held-out lines behind the recordings, the real clips "
-        "behind the character:\n\n"
+        "\nThe engines' own frames (`floor`) by context: the demo's held-out lines behind the "
+        "recordings, the real clips behind the character:\n\n"
     )
     contexts = [
-        [f"`{name}`", where] + [_lag_cell(by[c]) for c in CLOSURE_CONTEXTS]
-        for name in HMM_CONVENTIONS
+        [said, where] + [_lag_cell(by[c]) for c in CLOSURE_CONTEXTS]
+        for name, said in HMM_SAMPLINGS.items()
         for where, by in (
-            ("demo held-out", demo["conventions"][name]["by_context"]),
-            ("real clips", real["conventions"][name]["behind_character"]),
+            ("demo held-out", samplings[name]["demo"]["conventions"]["floor"]["by_context"]),
+            ("real clips", samplings[name]["real"]["conventions"]["floor"]["behind_character"]),
         )
     ]
-    header = ["state of frame k", "lines", "all /p b m/", "after silence", "after speech"]
+    header = ["face sampled", "lines", "all /p b m/", "after silence", "after speech"]
     text += table(header, contexts)
-    text += "\nThe served rungs (`floor`), driven by phonemes, on the demo's held-out lines:\n\n"
+    text += (
+        "\nThe served rungs (`floor`), driven by phonemes, on the demo's held-out lines, and "
+        "the engine's shift from the instant-sampled model, span by span:\n\n"
+    )
+    before, after = samplings["instant"]["demo"]["rungs"], demo["rungs"]
+    shifts = first["shift_from_instant"]
     rungs = [
-        [f"`{rung}`", _lag_cell(row["lag"]), f"{row['rms']:.5f}"]
-        for rung, row in demo["rungs"].items()
+        [
+            f"`{rung}`",
+            _lag_cell(before[rung]["lag"]),
+            f"{before[rung]['rms']:.5f}",
+            _lag_cell(after[rung]["lag"]),
+            f"{after[rung]['rms']:.5f}",
+            _lag_cell(shifts[rung]),
+        ]
+        for rung in after
     ]
-    return text + table(["rung", "closure lag behind the recordings", "RMS"], rungs)
+    header = [
+        "rung",
+        "lag, instants",
+        "RMS, instants",
+        "lag, hold centres",
+        "RMS, hold centres",
+        "shift (paired)",
+    ]
+    text += table(header, rungs)
+    seeds = [doc["seed"]] + [row["seed"] for row in doc["seeds"]]
+    text += (
+        "\nEM from other seeds (both samplings trained again from each): the engine's shift "
+        "from the instant-sampled model, paired span by span, per seed, and its mean over "
+        f"the {len(seeds)} seeds ± the standard error across them:\n\n"
+    )
+    per_seed = [shifts] + [row["shift"] for row in doc["seeds"]]
+    header = ["shift of the closures", *(f"seed {seed}" for seed in seeds), "mean over seeds"]
+    sweep = [
+        [
+            said,
+            *(_lag_cell(shift[name]) for shift in per_seed),
+            _lag_cell(doc["seed_mean_shift"][name]),
+        ]
+        for name, said in (
+            (name, HMM_SHIFTS.get(name, f"demo held-out, `{name}`"))
+            for name in doc["seed_mean_shift"]
+        )
+    ]
+    text += table(header, sweep)
+    own = [
+        (
+            doc["seed"],
+            samplings["instant"]["demo"]["conventions"]["floor"]["rms"],
+            demo["conventions"]["floor"]["rms"],
+        )
+    ]
+    own += [(row["seed"], row["instant"]["rms"], row["engine"]["rms"]) for row in doc["seeds"]]
+    rms = [[f"seed {seed}", f"{before:.5f}", f"{after:.5f}"] for seed, before, after in own]
+    text += "\nThe demo held-out RMS (offline rung, the engines' frames) per seed:\n\n"
+    return text + table(["seed", "instants", "hold centres"], rms)
 
 
 def closure_sources(bench: Bench) -> str:

@@ -60,30 +60,33 @@ def _lag(mean: float, count: int = 9) -> dict[str, Any]:
     return {"mean_ms": mean, "se_ms": 1.5, "count": count}
 
 
-def test_the_block_renders_each_convention_and_rung(tmp_path: Path) -> None:
-    contexts = {"all": _lag(20.0), "after_silence": _lag(30.0, 3), "after_speech": _lag(15.0, 6)}
-    doc = {
-        "date": "2030-01-02T03:04:05+00:00",
-        "corpus": {"name": "demo", "fps": 120.0},
-        "model": "trained on the train split",
-        "hmm_fps": 40.0,
+def _measured(offset: float, lag: float) -> dict[str, Any]:
+    """One model's lags as ``hmm_closure_lag.measured`` stores them, its own (``floor``)
+    closures ``lag`` ms late on the demo lines and 10 ms later on the real clips."""
+    contexts = {
+        "all": _lag(lag + 10.0),
+        "after_silence": _lag(30.0, 3),
+        "after_speech": _lag(15.0, 6),
+    }
+    return {
+        "sample_offset": offset,
         "demo": {
             "lines": 3,
             "floor_max_abs_diff": 2e-8,
             "conventions": {
                 name: {
-                    "lag": _lag(8.0 - 7.0 * i),
-                    "shift_from_floor": _lag(-7.0 * i),
+                    "lag": _lag(lag - 7.0 * i),
+                    "shift_from_floor": _lag(0.0 - 7.0 * i),
                     "rms": 0.06,
                     "by_context": {
-                        "all": _lag(8.0 - 7.0 * i),
+                        "all": _lag(lag - 7.0 * i),
                         "after_silence": _lag(-4.0, 4),
                         "after_speech": _lag(1.0, 5),
                     },
                 }
                 for i, name in enumerate(CONVENTIONS)
             },
-            "rungs": {"full": {"lag": _lag(8.0), "rms": 0.0645}},
+            "rungs": {"full": {"lag": _lag(lag), "rms": 0.0645}},
         },
         "real": {
             "clips": 2,
@@ -94,22 +97,58 @@ def test_the_block_renders_each_convention_and_rung(tmp_path: Path) -> None:
             },
         },
     }
+
+
+def test_the_block_renders_both_samplings_each_convention_rung_and_seed(tmp_path: Path) -> None:
+    shift = {"offline": _lag(-12.0), "full": _lag(-11.0), "real_behind_character": _lag(-9.0)}
+    engine = _measured(0.5, -4.0) | {"shift_from_instant": shift}
+    doc = {
+        "date": "2030-01-02T03:04:05+00:00",
+        "corpus": {"name": "demo", "fps": 120.0},
+        "model": "trained on the train split",
+        "hmm_fps": 40.0,
+        "seed": 0,
+        "samplings": {"instant": _measured(0.0, 8.0), "engine": engine},
+        "seeds": [
+            {
+                "seed": 1,
+                "instant": {"rms": 0.061},
+                "engine": {"rms": 0.062},
+                "shift": {name: _lag(-2.0) for name in shift},
+            }
+        ],
+        "seed_mean_shift": {name: _lag(-7.0, 2) for name in shift},
+    }
     (tmp_path / "hmm_closure_lag.json").write_text(json.dumps(doc))
     rendered = BLOCKS["hmm-closure-lag"](Bench(tmp_path))
     assert "3 held-out lines at 120 fps and 2 real clips at 25 fps" in rendered
     assert (
-        "| `nearest`: ⌊k R / f + ½⌋, the nearest instant | +1.0 ± 1.5 (n 9) | -7.0 ± 1.5 (n 9)"
+        "| at j / R (before): `sample_offset` 0 | `nearest`: ⌊k R / f + ½⌋, the nearest instant "
+        "| +1.0 ± 1.5 (n 9) | -7.0 ± 1.5 (n 9)" in rendered
+    )
+    assert (
+        "| at (j + ½) / R (the engine's): `sample_offset` 0.5 | `floor`: ⌊k R / f⌋, held over "
+        "[j / R, (j + 1) / R) (the engine's) | -4.0 ± 1.5 (n 9) | +0.0 ± 1.5 (n 9) | 0.06000 "
+        "| +6.0 ± 1.5 (n 9) |" in rendered
+    )
+    assert (
+        "| at (j + ½) / R (the engine's) | real clips | +6.0 ± 1.5 (n 9) | +30.0 ± 1.5 (n 3) "
+        "| +15.0 ± 1.5 (n 6) |" in rendered
+    )
+    assert (
+        "| `full` | +8.0 ± 1.5 (n 9) | 0.06450 | -4.0 ± 1.5 (n 9) | 0.06450 | -11.0 ± 1.5 (n 9) |"
         in rendered
     )
     assert (
-        "| `ceil` | real clips | +20.0 ± 1.5 (n 9) | +30.0 ± 1.5 (n 3) | +15.0 ± 1.5 (n 6) |"
+        "| demo held-out, `full` | -11.0 ± 1.5 (n 9) | -2.0 ± 1.5 (n 9) | -7.0 ± 1.5 (n 2) |"
         in rendered
     )
     assert (
-        "| `ceil` | demo held-out | -6.0 ± 1.5 (n 9) | -4.0 ± 1.5 (n 4) | +1.0 ± 1.5 (n 5) |"
-        in rendered
+        "| real clips, behind the character (offline) | -9.0 ± 1.5 (n 9) | -2.0 ± 1.5 (n 9) "
+        "| -7.0 ± 1.5 (n 2) |" in rendered
     )
-    assert "| `full` | +8.0 ± 1.5 (n 9) | 0.06450 |" in rendered
+    assert "| seed 0 | 0.06000 | 0.06000 |" in rendered
+    assert "| seed 1 | 0.06100 | 0.06200 |" in rendered
     assert "Not measured yet" in BLOCKS["hmm-closure-lag"](Bench(tmp_path / "empty"))
 
 

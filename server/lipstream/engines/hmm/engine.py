@@ -1,8 +1,10 @@
 """The ``hmm`` engine: voice puppetry (Brand 1999), trained by ``fit``.
 
 the motion basis (PCA keeping ``variance`` of every channel's variance) ->
-observations [pose, velocity] at ``hmm_fps`` (curves resampled, velocity the
-backward difference per HMM frame) -> the facial HMM trained from a large
+observations [pose, velocity] at ``hmm_fps`` (HMM frame j the curves at
+(j + ``sample_offset``) / ``hmm_fps``, by default the centre of the interval the
+synthesizer holds frame j's state over; velocity the backward difference per HMM
+frame) -> the facial HMM trained from a large
 fully connected model (``em``: entropic with extinction, or Baum-Welch as the
 comparison) on the inner training split -> γ on every training line ->
 remapping (``remap``): phoneme and emotion categoricals, and speech-feature
@@ -40,6 +42,11 @@ from . import em, remap
 from .model import HmmModel, mfcc_fields, normalization_fields
 
 VOCAL_FLOOR = 1e-3
+HOLD_CENTRE = 0.5
+"""Where HMM frame j samples the face, in HMM frames after j / R: the synthesizer holds
+state j over [j / R, (j + 1) / R) (``synthesizer.hmm_frame``), so its pose is trained on the
+face at that interval's centre. Its phoneme label and speech features stay at j / R, where
+the synthesizer reads them."""
 
 
 def hmm_times(utterance: Utterance, hmm_fps: float) -> np.ndarray:
@@ -47,9 +54,13 @@ def hmm_times(utterance: Utterance, hmm_fps: float) -> np.ndarray:
     return np.arange(frame_count(utterance.duration, hmm_fps)) / hmm_fps
 
 
-def observations(utterance: Utterance, basis: MotionBasis, hmm_fps: float) -> np.ndarray:
-    """[pose, velocity] (T, 2D) at the HMM rate; frame 0's velocity is frame 1's."""
-    times = hmm_times(utterance, hmm_fps)
+def observations(
+    utterance: Utterance, basis: MotionBasis, hmm_fps: float, sample_offset: float = HOLD_CENTRE
+) -> np.ndarray:
+    """[pose, velocity] (T, 2D) at the HMM rate, frame j the curves at (j + ``sample_offset``)
+    / ``hmm_fps`` (linear interpolation; past the last frame, the last frame); frame 0's
+    velocity is frame 1's."""
+    times = hmm_times(utterance, hmm_fps) + sample_offset / hmm_fps
     pose = basis.project(utterance.frames)
     sampled = interp_columns(times, utterance.times(), pose)
     velocity = np.diff(sampled, axis=0, prepend=sampled[:1])
@@ -91,6 +102,7 @@ class HmmEngine(Engine):
         window_ms: float = 250.0,
         speaker_normalization: bool = True,
         prior_frames: float = PRIOR_FRAMES,
+        sample_offset: float = HOLD_CENTRE,
     ) -> None:
         self.n_states = n_states
         self.hmm_fps = hmm_fps
@@ -108,10 +120,13 @@ class HmmEngine(Engine):
         self.window_ms = window_ms
         self.speaker_normalization = speaker_normalization
         self.prior_frames = prior_frames
+        self.sample_offset = sample_offset
 
     def settings(self) -> em.Settings:
         if self.estimator not in em.ESTIMATORS:
             raise ValueError(f"estimator must be one of {em.ESTIMATORS}, got {self.estimator!r}")
+        if not 0.0 <= self.sample_offset < 1.0:
+            raise ValueError(f"sample_offset must be in [0, 1), got {self.sample_offset!r}")
         return em.Settings(
             n_states=self.n_states,
             estimator=self.estimator,
@@ -124,17 +139,23 @@ class HmmEngine(Engine):
 
     def fit(self, corpus: Any, *, progress: bool = False) -> HmmModel:
         began = time.perf_counter()
+        settings = self.settings()
         recorded = np.concatenate([utterance.frames for utterance in corpus.utterances])
         basis, _ = fit_basis(recorded, self.variance)
         inner, heldout = corpus.split() if len(corpus.utterances) >= 10 else (corpus, None)
         with threadpool_limits(limits=1):
             sequences = _evenly(
-                [observations(u, basis, self.hmm_fps) for u in inner.utterances],
+                [
+                    observations(u, basis, self.hmm_fps, self.sample_offset)
+                    for u in inner.utterances
+                ],
                 self.max_training_frames,
             )
-            fitted = em.fit(sequences, self.settings())
+            fitted = em.fit(sequences, settings)
             parameters = fitted.parameters
-            everything = [observations(u, basis, self.hmm_fps) for u in corpus.utterances]
+            everything = [
+                observations(u, basis, self.hmm_fps, self.sample_offset) for u in corpus.utterances
+            ]
             gammas = _gammas(parameters, everything)
             metrics = self._metrics(fitted, heldout, basis)
             arrays, prior = self._remap(corpus, gammas)
@@ -176,7 +197,9 @@ class HmmEngine(Engine):
             "heldout_entropy_rate_bits": None,
         }
         if heldout is not None and heldout.utterances:
-            held = [observations(u, basis, self.hmm_fps) for u in heldout.utterances]
+            held = [
+                observations(u, basis, self.hmm_fps, self.sample_offset) for u in heldout.utterances
+            ]
             stats = em.e_step(parameters, held)
             metrics["heldout_entropy_rate_bits"] = round(
                 stats.entropy / stats.frames / math.log(2.0), 6

@@ -10,7 +10,10 @@ corpus had audio, its Gaussian over speech features (``vocal_means`` (N, F),
 normalization's prior (``vocal_prior_mean``, ``vocal_prior_variance`` (F,)) when it
 was trained normalized. The manifest's extra holds ``hmm_fps``, ``has_audio``, the
 feature analysis (``mfcc``) and the normalization's scalars (``normalization``; null,
-or absent in a model saved before it: the model hears raw features).
+or absent in a model saved before it: the model hears raw features). The
+hyperparameter ``sample_offset`` says where in its HMM frame training sampled the face
+(``engine.observations``); a model saved before it has none and was sampled at the
+frame's instant, ``INSTANT_SAMPLING``.
 
 Options: ``lag_ms`` (the Viterbi lag limit; null: unlimited), ``window_ms``
 (the trajectory block; 0: a frame at a time; null: one solve at the end) and
@@ -66,6 +69,9 @@ NO_WAIT_BELOW_MS = 100.0
 """Rungs with a lag up to this hear audio late instead of waiting for a feature window."""
 CACHED_RATES = 8
 """Trajectory terms kept for this many (rate, coupled) pairs; a request fps is any number."""
+INSTANT_SAMPLING = 0.0
+"""The ``sample_offset`` of a model whose manifest has none: trained before issue 24 moved
+the face samples to the centre of each state's hold interval, on the face at j / R."""
 EMOTION_INDEX = {emotion: index for index, emotion in enumerate(EMOTIONS)}
 MFCC_FIELDS = ("window_s", "n_mels", "n_coefficients", "f_min", "f_max", "pre_emphasis")
 
@@ -111,6 +117,7 @@ class HmmModel(Model):
         self.audio_weight = float(manifest.hyperparameters["audio_weight"])
         self.default_lag_ms = float(manifest.hyperparameters["lag_ms"])
         self.default_window_ms = float(manifest.hyperparameters["window_ms"])
+        self.sample_offset = float(manifest.hyperparameters.get("sample_offset", INSTANT_SAMPLING))
 
     def emotion_row(self, emotion: str) -> int:
         """The row of ``emotion``'s log-probabilities in ``categories``."""
@@ -265,6 +272,8 @@ class HmmModel(Model):
                 0.0,
                 MAX_OPTION_MS,
             )
+        if "sample_offset" in hyper:
+            fields.number(hyper["sample_offset"], "hyperparameters.sample_offset", 0.0, 1.0)
         fields.number(
             fields.member(extra, "hmm_fps", "extra.hmm_fps"), "extra.hmm_fps", 1.0, 1000.0
         )
