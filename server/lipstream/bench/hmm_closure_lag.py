@@ -4,14 +4,14 @@ and which trajectory frame takes which state.
 Sketch: the synthesizer solves the trajectory at a rate f above R (``hmm_fps``) and gives
 trajectory frame k (at k / f) the state of HMM frame ⌊k R / f⌋ (``synthesizer.hmm_frame``):
 every state is held over [j / R, (j + 1) / R). Trained on the curves at the instants j / R
-(``sample_offset`` 0, every model before issue 24's fix), state j stands for the pose at
-j / R, so its targets arrive on average (1 / R − 1 / f) / 2 late (8.3 ms at R = 40 Hz,
-f = 120 Hz). The engine now trains on the curves at (j + ½) / R, the hold interval's centre
-(``engine.HOLD_CENTRE``).
+(``sample_offset`` 0, the engine's default), state j stands for the pose at j / R, so its
+targets arrive on average (1 / R − 1 / f) / 2 late (8.3 ms at R = 40 Hz, f = 120 Hz).
+``sample_offset`` ``engine.HOLD_CENTRE`` (½) trains on the curves at (j + ½) / R, the hold
+interval's centre.
 
 Two models are compared in one run (``SAMPLINGS``): one trained on the train split with
-``sample_offset`` 0 (``instant``), and the engine as built (``engine``: ``--model``, or
-trained on the train split with the defaults). Each line is decoded once per model, driven
+``sample_offset`` 0 (``instant``) and one with ``HOLD_CENTRE`` (``centre``); ``--model``
+(else the defaults trained on the train split) stands for the one its offset names. Each line is decoded once per model, driven
 by phonemes alone on the offline rung (Viterbi over the whole line, one solve;
 ``floor_max_abs_diff`` checks that the ``floor`` convention reproduces the engine's frames),
 and its trajectory solved at the engine's rate with the state of frame k taken three ways
@@ -19,10 +19,10 @@ and its trajectory solved at the engine's rate with the state of frame k taken t
 (⌈k R / f⌉). Closure lags are timed as ``evaluation.closure_lags`` times them: on the demo
 corpus's held-out lines against their recordings (with the RMS error), and on the real-face
 set behind the demo character (``closure_sources.character_aperture``) and behind the real
-lips; the engine's shift from ``instant`` is paired span by span. The served rungs' closure
+lips; ``centre``'s shift from ``instant`` is paired span by span. The served rungs' closure
 lag on the held-out lines shows whether the decoder's lag adds to it. EM finds a different
 model from each seed, which moves the closures too: ``--seeds`` (default ``SWEEP_SEEDS``)
-trains both samplings again from each further seed and keeps the engine's own lags
+trains both samplings again from each further seed and keeps their own lags
 (``seed_sweep``).
 
 ``python -m lipstream.bench.hmm_closure_lag --corpus DIR --json bench/hmm_closure_lag.json``
@@ -65,7 +65,7 @@ from .real_faces import real_clips
 
 MODULE = "lipstream.bench.hmm_closure_lag"
 CONVENTIONS = ("floor", "nearest", "ceil")
-SAMPLINGS = ("instant", "engine")
+SAMPLINGS = ("instant", "centre")
 SWEEP_SEEDS = (1, 2, 3)
 OWN = "floor"
 """The engine's convention: the lags its own frames show."""
@@ -271,12 +271,12 @@ def seed_sweep(
     rows = []
     for seed in seeds:
         found = {}
-        for name, offset in (("instant", INSTANT_SAMPLING), ("engine", HOLD_CENTRE)):
+        for name, offset in (("instant", INSTANT_SAMPLING), ("centre", HOLD_CENTRE)):
             model = HmmEngine(**(settings | {"seed": seed, "sample_offset": offset})).fit(train)
             found[name] = measured(model, heldout, real_set)
         (_, (before_demo, before_real)), (_, (after_demo, after_real)) = (
             found["instant"],
-            found["engine"],
+            found["centre"],
         )
         rows.append(
             {
@@ -320,9 +320,14 @@ def run(
         if not isinstance(model, HmmModel):
             raise LipstreamError("not an hmm model", where=str(model_dir), code="invalid_model")
         settings = dict(model.manifest.hyperparameters)
-        instant = HmmEngine(**(settings | {"sample_offset": INSTANT_SAMPLING})).fit(train)
+        instant, centre = (
+            model
+            if model.sample_offset == offset
+            else HmmEngine(**(settings | {"sample_offset": offset})).fit(train)
+            for offset in (INSTANT_SAMPLING, HOLD_CENTRE)
+        )
         before, (before_demo, before_real) = measured(instant, heldout, real_set)
-        after, (after_demo, after_real) = measured(model, heldout, real_set)
+        after, (after_demo, after_real) = measured(centre, heldout, real_set)
         sweep = seed_sweep(train, heldout, real_set, seeds, settings)
     shift = {name: paired_shift(after_demo[name], before_demo[name]) for name in after_demo}
     shift["real_behind_character"] = paired_shift(after_real, before_real)
@@ -332,7 +337,7 @@ def run(
         "corpus": {"name": corpus.name, "digest": corpus.digest(), "fps": corpus.fps},
         "model": "trained on the train split" if model_dir is None else str(model_dir),
         "hmm_fps": model.hmm_fps,
-        "samplings": {"instant": before, "engine": after},
+        "samplings": {"instant": before, "centre": after},
         "seeds": sweep,
         "seed": settings.get("seed"),
         "seed_mean_shift": seed_mean_shift([shift] + [row["shift"] for row in sweep]),
@@ -363,16 +368,16 @@ def format_lags(results: dict[str, Any]) -> str:
         for rung, row in demo["rungs"].items():
             lines.append(f"  rung {rung:<12} demo {ms(row['lag'])} RMS {row['rms']:.5f}")
     for label, shift in (
-        ("engine less instant, paired", results["samplings"]["engine"]["shift_from_instant"]),
+        ("centre less instant, paired", results["samplings"]["centre"]["shift_from_instant"]),
         ("mean over seeds", results["seed_mean_shift"]),
     ):
         lines.append(f"{label}: " + ", ".join(f"{k} {ms(v)}" for k, v in shift.items()))
     for row in results["seeds"]:
         lines.append(
             f"seed {row['seed']}: offline {ms(row['instant']['offline'])} -> "
-            f"{ms(row['engine']['offline'])} (paired {ms(row['shift']['offline'])}); real behind "
+            f"{ms(row['centre']['offline'])} (paired {ms(row['shift']['offline'])}); real behind "
             f"character {ms(row['instant']['real_behind_character'])} -> "
-            f"{ms(row['engine']['real_behind_character'])} "
+            f"{ms(row['centre']['real_behind_character'])} "
             f"(paired {ms(row['shift']['real_behind_character'])})"
         )
     return "\n".join(lines)

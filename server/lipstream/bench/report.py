@@ -1445,8 +1445,8 @@ HMM_CONVENTIONS = {
     "ceil": "⌈k R / f⌉, the first backward difference covering the frame's",
 }
 HMM_SAMPLINGS = {
-    "instant": "at j / R (before)",
-    "engine": "at (j + ½) / R (the engine's)",
+    "instant": "at j / R (the engine's default)",
+    "centre": "at (j + ½) / R",
 }
 HMM_SHIFTS = {  # the others are the rungs, by name
     "offline": "demo held-out, offline",
@@ -1463,14 +1463,15 @@ def hmm_closure_lag(bench: Bench) -> str:
         return f"Not measured yet: no `bench/{HMM_CLOSURE_LAG}`.\n"
     doc = bench.load(HMM_CLOSURE_LAG)
     samplings = doc["samplings"]
-    first = samplings["engine"]
+    first = samplings["centre"]
     demo, real = first["demo"], first["real"]
     worst = max(samplings[name]["demo"]["floor_max_abs_diff"] for name in HMM_SAMPLINGS)
     text = bench.source(HMM_CLOSURE_LAG, doc)
     text += (
-        f"`hmm` {doc['model']} of `{doc['corpus']['name']}` (seed {doc['seed']}), and beside it "
-        f"the same trained on the face at the instants j / R (`sample_offset` "
-        f"{samplings['instant']['sample_offset']:g}), driven by phonemes, offline rung; "
+        f"`hmm` {doc['model']} of `{doc['corpus']['name']}` (seed {doc['seed']}), trained on the "
+        f"face at the instants j / R (`sample_offset` {samplings['instant']['sample_offset']:g}) "
+        f"and at the hold intervals' centres (`sample_offset` {first['sample_offset']:g}), "
+        "driven by phonemes, offline rung; "
         f"{demo['lines']} held-out lines at {doc['corpus']['fps']:g} fps and {real['clips']} "
         f"real clips at {real['fps']:g} fps. Closure lag in ms, mean ± standard error (count); "
         f"the `floor` rows reproduce the engines' frames to {worst:.0e}.\n\n"
@@ -1517,7 +1518,7 @@ def hmm_closure_lag(bench: Bench) -> str:
     text += table(header, contexts)
     text += (
         "\nThe served rungs (`floor`), driven by phonemes, on the demo's held-out lines, and "
-        "the engine's shift from the instant-sampled model, span by span:\n\n"
+        "the hold-centre model's shift from the instant-sampled one, span by span:\n\n"
     )
     before, after = samplings["instant"]["demo"]["rungs"], demo["rungs"]
     shifts = first["shift_from_instant"]
@@ -1543,7 +1544,7 @@ def hmm_closure_lag(bench: Bench) -> str:
     text += table(header, rungs)
     seeds = [doc["seed"]] + [row["seed"] for row in doc["seeds"]]
     text += (
-        "\nEM from other seeds (both samplings trained again from each): the engine's shift "
+        "\nEM from other seeds (both samplings trained again from each): the hold-centre shift "
         "from the instant-sampled model, paired span by span, per seed, and its mean over "
         f"the {len(seeds)} seeds ± the standard error across them:\n\n"
     )
@@ -1568,7 +1569,7 @@ def hmm_closure_lag(bench: Bench) -> str:
             demo["conventions"]["floor"]["rms"],
         )
     ]
-    own += [(row["seed"], row["instant"]["rms"], row["engine"]["rms"]) for row in doc["seeds"]]
+    own += [(row["seed"], row["instant"]["rms"], row["centre"]["rms"]) for row in doc["seeds"]]
     rms = [[f"seed {seed}", f"{before:.5f}", f"{after:.5f}"] for seed, before, after in own]
     text += "\nThe demo held-out RMS (offline rung, the engines' frames) per seed:\n\n"
     return text + table(["seed", "instants", "hold centres"], rms)

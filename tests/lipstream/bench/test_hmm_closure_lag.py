@@ -101,19 +101,19 @@ def _measured(offset: float, lag: float) -> dict[str, Any]:
 
 def test_the_block_renders_both_samplings_each_convention_rung_and_seed(tmp_path: Path) -> None:
     shift = {"offline": _lag(-12.0), "full": _lag(-11.0), "real_behind_character": _lag(-9.0)}
-    engine = _measured(0.5, -4.0) | {"shift_from_instant": shift}
+    centre = _measured(0.5, -4.0) | {"shift_from_instant": shift}
     doc = {
         "date": "2030-01-02T03:04:05+00:00",
         "corpus": {"name": "demo", "fps": 120.0},
         "model": "trained on the train split",
         "hmm_fps": 40.0,
         "seed": 0,
-        "samplings": {"instant": _measured(0.0, 8.0), "engine": engine},
+        "samplings": {"instant": _measured(0.0, 8.0), "centre": centre},
         "seeds": [
             {
                 "seed": 1,
                 "instant": {"rms": 0.061},
-                "engine": {"rms": 0.062},
+                "centre": {"rms": 0.062},
                 "shift": {name: _lag(-2.0) for name in shift},
             }
         ],
@@ -123,16 +123,16 @@ def test_the_block_renders_both_samplings_each_convention_rung_and_seed(tmp_path
     rendered = BLOCKS["hmm-closure-lag"](Bench(tmp_path))
     assert "3 held-out lines at 120 fps and 2 real clips at 25 fps" in rendered
     assert (
-        "| at j / R (before): `sample_offset` 0 | `nearest`: ⌊k R / f + ½⌋, the nearest instant "
+        "| at j / R (the engine's default): `sample_offset` 0 | `nearest`: ⌊k R / f + ½⌋, the nearest instant "
         "| +1.0 ± 1.5 (n 9) | -7.0 ± 1.5 (n 9)" in rendered
     )
     assert (
-        "| at (j + ½) / R (the engine's): `sample_offset` 0.5 | `floor`: ⌊k R / f⌋, held over "
+        "| at (j + ½) / R: `sample_offset` 0.5 | `floor`: ⌊k R / f⌋, held over "
         "[j / R, (j + 1) / R) (the engine's) | -4.0 ± 1.5 (n 9) | +0.0 ± 1.5 (n 9) | 0.06000 "
         "| +6.0 ± 1.5 (n 9) |" in rendered
     )
     assert (
-        "| at (j + ½) / R (the engine's) | real clips | +6.0 ± 1.5 (n 9) | +30.0 ± 1.5 (n 3) "
+        "| at (j + ½) / R | real clips | +6.0 ± 1.5 (n 9) | +30.0 ± 1.5 (n 3) "
         "| +15.0 ± 1.5 (n 6) |" in rendered
     )
     assert (

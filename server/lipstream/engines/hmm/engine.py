@@ -2,9 +2,8 @@
 
 the motion basis (PCA keeping ``variance`` of every channel's variance) ->
 observations [pose, velocity] at ``hmm_fps`` (HMM frame j the curves at
-(j + ``sample_offset``) / ``hmm_fps``, by default the centre of the interval the
-synthesizer holds frame j's state over; velocity the backward difference per HMM
-frame) -> the facial HMM trained from a large
+(j + ``sample_offset``) / ``hmm_fps``, by default its instant j / ``hmm_fps``;
+velocity the backward difference per HMM frame) -> the facial HMM trained from a large
 fully connected model (``em``: entropic with extinction, or Baum-Welch as the
 comparison) on the inner training split -> γ on every training line ->
 remapping (``remap``): phoneme and emotion categoricals, and speech-feature
@@ -43,10 +42,11 @@ from .model import HmmModel, mfcc_fields, normalization_fields
 
 VOCAL_FLOOR = 1e-3
 HOLD_CENTRE = 0.5
-"""Where HMM frame j samples the face, in HMM frames after j / R: the synthesizer holds
-state j over [j / R, (j + 1) / R) (``synthesizer.hmm_frame``), so its pose is trained on the
-face at that interval's centre. Its phoneme label and speech features stay at j / R, where
-the synthesizer reads them."""
+"""``sample_offset`` for a pose trained on the face at the centre of the interval the
+synthesizer holds state j over, [j / R, (j + 1) / R) (``synthesizer.hmm_frame``); its phoneme
+label and speech features stay at j / R, where the synthesizer reads them. Not the default:
+over four EM seeds it did not move the demo's closures beyond the seeds' spread and made the
+voice-driven ``causal`` rung worse (docs/explanation/engines/hmm.md)."""
 
 
 def hmm_times(utterance: Utterance, hmm_fps: float) -> np.ndarray:
@@ -102,7 +102,7 @@ class HmmEngine(Engine):
         window_ms: float = 250.0,
         speaker_normalization: bool = True,
         prior_frames: float = PRIOR_FRAMES,
-        sample_offset: float = HOLD_CENTRE,
+        sample_offset: float = 0.0,
     ) -> None:
         self.n_states = n_states
         self.hmm_fps = hmm_fps

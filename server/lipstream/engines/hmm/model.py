@@ -70,8 +70,8 @@ NO_WAIT_BELOW_MS = 100.0
 CACHED_RATES = 8
 """Trajectory terms kept for this many (rate, coupled) pairs; a request fps is any number."""
 INSTANT_SAMPLING = 0.0
-"""The ``sample_offset`` of a model whose manifest has none: trained before issue 24 moved
-the face samples to the centre of each state's hold interval, on the face at j / R."""
+"""The default ``sample_offset``, and that of a model whose manifest has none (saved before
+the hyperparameter existed): trained on the face at the instants j / R."""
 EMOTION_INDEX = {emotion: index for index, emotion in enumerate(EMOTIONS)}
 MFCC_FIELDS = ("window_s", "n_mels", "n_coefficients", "f_min", "f_max", "pre_emphasis")
 

@@ -1,10 +1,11 @@
-"""Where training samples the face: at the centre of the interval each state is held over.
+"""Where training samples the face: ``sample_offset``, at the instants (the default) or at
+the centre of the interval each state is held over.
 
 The synthesizer holds HMM frame j's state over [j / R, (j + 1) / R); a model trained on the
 face at the instants j / R closes the lips about half an HMM frame late, one trained at the
 hold centres (j + ½) / R on time. A synthetic character whose lips are shut exactly over
 each /M/ span (known closure times, the spans' centres) shows it, and stored models from
-before the fix, with no ``sample_offset`` in their manifest, still load.
+before the hyperparameter, with no ``sample_offset`` in their manifest, still load.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import pytest
 from lipstream.corpus import Corpus, Utterance
 from lipstream.engines import load_model
 from lipstream.engines.hmm import HmmEngine, HmmModel
-from lipstream.engines.hmm.engine import observations
+from lipstream.engines.hmm.engine import HOLD_CENTRE, observations
 from lipstream.errors import ModelStoreError
 from lipstream.evaluation import closure_centre
 from lipstream.numerics.basis import fit_basis
@@ -100,13 +101,13 @@ def test_a_closure_lands_on_its_known_time_when_trained_at_the_hold_centres(
     model trained at the instants j / R closes later than that."""
     corpus, tests = lines
     quarter_frame_ms = 250.0 / HMM_FPS
-    centred = HmmEngine().fit(corpus)
+    centred = HmmEngine(sample_offset=HOLD_CENTRE).fit(corpus)
     assert isinstance(centred, HmmModel) and centred.sample_offset == 0.5
     on_time = _closure_lags_ms(centred, tests)
     assert len(on_time) == 60
     assert abs(on_time.mean()) < quarter_frame_ms, on_time.mean()
-    instant = HmmEngine(sample_offset=0.0).fit(corpus)
-    assert isinstance(instant, HmmModel)
+    instant = HmmEngine().fit(corpus)
+    assert isinstance(instant, HmmModel) and instant.sample_offset == 0.0
     assert _closure_lags_ms(instant, tests).mean() > quarter_frame_ms
 
 
@@ -122,7 +123,7 @@ def test_a_model_stored_before_the_offset_loads_as_sampled_at_the_instants(
     lines: tuple[Corpus, list[tuple[Utterance, list[float]]]], tmp_path: Path
 ) -> None:
     corpus, tests = lines
-    model = HmmEngine(n_states=8, n_iter=3).fit(corpus)
+    model = HmmEngine(n_states=8, n_iter=3, sample_offset=HOLD_CENTRE).fit(corpus)
     model.save(tmp_path / "hmm")
     manifest_path = tmp_path / "hmm" / MANIFEST_NAME
     manifest = json.loads(manifest_path.read_text())
