@@ -78,8 +78,8 @@ from .fast_step import (
     entry_costs,
     entry_table,
     fast_step,
-    lag_step,
 )
+from .lag_window import lag_window
 from .nodes import SILENCE_INDEX, NodeDatabase, NodeFeatures
 
 INF = np.inf
@@ -107,7 +107,7 @@ class SpaceCalls(NamedTuple):
     best_entry: DirectCall
     entry_costs: DirectCall
     fast_step: DirectCall
-    lag_step: DirectCall
+    lag_window: DirectCall
 
 
 @dataclass(frozen=True)
@@ -149,7 +149,7 @@ class SearchSpace:
             DirectCall(best_entry),
             DirectCall(entry_costs),
             DirectCall(fast_step),
-            DirectCall(lag_step),
+            DirectCall(lag_window),
         )
 
     @cached_property
