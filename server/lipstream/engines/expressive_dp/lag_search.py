@@ -72,8 +72,11 @@ class LagMemory:
             _candidates(space, layers, excluded, index, index > 0 or before >= 0, True, 0)
             for index in range(len(layers))
         ]
-        offsets = np.zeros(len(parts) + 1, dtype=np.int64)
-        np.cumsum([len(part.nodes) for part in parts], out=offsets[1:])
+        total, ends = 0, [0]
+        for part in parts:
+            total += len(part.nodes)
+            ends.append(total)
+        offsets = np.array(ends, dtype=np.int64)
         stacked = Stacked(
             np.concatenate([part.nodes for part in parts]),
             np.concatenate([part.costs for part in parts]),

@@ -108,6 +108,7 @@ class SpaceCalls(NamedTuple):
     entry_costs: DirectCall
     fast_step: DirectCall
     lag_window: DirectCall
+    transition_cost: DirectCall
 
 
 @dataclass(frozen=True)
@@ -150,6 +151,7 @@ class SearchSpace:
             DirectCall(entry_costs),
             DirectCall(fast_step),
             DirectCall(lag_window),
+            DirectCall(transition_cost),
         )
 
     @cached_property
@@ -204,7 +206,7 @@ class SearchSpace:
         return float(self.observation(layer)[node])
 
     def tc(self, a: int, b: int) -> float:
-        return float(transition_cost(a, b, self.table_one))
+        return float(self.calls.transition_cost(a, b, self.table_one))
 
 
 @dataclass(frozen=True)
