@@ -31,6 +31,10 @@ has nothing to reuse and goes to ``search``; a window that is not its predecesso
 moved on by one layer (the first of a segment, one after a one-layer commit) is
 searched afresh by the same step. The nodes priced (``SearchResult.candidates``) are
 those of the first layer and those scanned.
+
+Here a window's candidates are gathered (``search._candidates``, cached per layer) and
+stacked; the entry, every step and the walk back run in one compiled call
+(``lag_window``), which also keeps the window for the next call.
 """
 
 from __future__ import annotations
@@ -45,7 +49,8 @@ from .search import LayerSpec, SearchResult, SearchSpace, _candidates
 
 
 class LagMemory:
-    """A stream's last fixed-lag window: its first layer's index and its layers."""
+    """A stream's last fixed-lag window: its first layer's index and its layers
+    (``lag_window.Window``)."""
 
     def __init__(self, size: int) -> None:
         self.size = size
