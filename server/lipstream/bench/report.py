@@ -2387,6 +2387,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "call-pairs-expressive-dp": call_pairs("call_pairs_expressive_dp.json"),
     "call-pairs-search": call_pairs("call_pairs_search.json"),
     "call-pairs-numerics": call_pairs("call_pairs_numerics.json"),
+    "call-pairs-lag-window": call_pairs("call_pairs_lag_window.json"),
     "lead0": lead0,
     "hmm-first-frame": hmm_first_frame,
     "word-timings": word_timings,

@@ -31,35 +31,31 @@ has nothing to reuse and goes to ``search``; a window that is not its predecesso
 moved on by one layer (the first of a segment, one after a one-layer commit) is
 searched afresh by the same step. The nodes priced (``SearchResult.candidates``) are
 those of the first layer and those scanned.
+
+Here a window's candidates are gathered (``search._candidates``, cached per layer) and
+stacked; the entry, every step and the walk back run in one compiled call
+(``lag_window``), which also keeps the window for the next call.
 """
 
 from __future__ import annotations
 
 import threading
 from collections.abc import Sequence
-from typing import NamedTuple
 
 import numpy as np
 
-from .fast_step import Ranked
+from .lag_window import Scratch, Stacked, Window
 from .search import LayerSpec, SearchResult, SearchSpace, _candidates
 
 
-class PassLayer(NamedTuple):
-    """One layer of a window's search: its ``candidates`` (node order, as
-    ``search._candidates`` gives them) and the layer ``ranked`` (``fast_step.Ranked``)."""
-
-    candidates: np.ndarray
-    ranked: Ranked
-
-
 class LagMemory:
-    """A stream's last fixed-lag window: its first layer's index and its layers."""
+    """A stream's last fixed-lag window: its first layer's index and its layers
+    (``lag_window.Window``)."""
 
     def __init__(self, size: int) -> None:
         self.size = size
         self.start = -1
-        self.layers: list[PassLayer] = []
+        self.window = _NO_WINDOW
 
     def search(
         self,
@@ -72,76 +68,62 @@ class LagMemory:
     ) -> SearchResult:
         """``search.search(space, layers, excluded, before=before)`` for ``layers`` (two or
         more, none silent), the spans from index ``start`` on: the same path; the nodes
-        priced are those whose way in was searched."""
-        old = self.layers if self.start == start - 1 and before >= 0 else []
-        position, old_position = _scratch(self.size)
-        calls, joins = space.calls, space.joins
-        candidates = _candidates(space, layers, excluded, 0, before >= 0, True, 0)
-        f = candidates.costs
-        if before >= 0:
-            f = calls.entry_costs(before, candidates, joins)
-        order = np.argsort(f, kind="stable")
-        first = candidates.nodes[order]
-        empty = _EMPTY  # the first layer's nodes have no predecessor in the window
-        ranked = Ranked(first, f[order], empty.back, empty.sure, empty.kind, empty.terms, first)
-        passed = [PassLayer(candidates.nodes, ranked)]
-        priced = len(first)
-        aligned = True
-        for index in range(1, len(layers)):
-            if guard is not None:
-                guard.check()  # type: ignore[attr-defined]
-            previous = passed[-1]
-            candidates = _candidates(space, layers, excluded, index, True, True, 0)
-            # the bound φ' ≥ φ − φ(c') holds when every layer before held the same nodes
-            aligned = (
-                aligned and index < len(old) and _same(old[index].candidates, previous.candidates)
-            )
-            known, then = (
-                (old[index + 1].ranked, old[index].ranked)
-                if aligned and index + 1 < len(old)
-                else (_EMPTY, _EMPTY)
-            )
-            ranked, scanned = calls.lag_step(
-                previous.ranked, candidates, joins, known, then, before, position, old_position
-            )
-            passed.append(PassLayer(candidates.nodes, ranked))
-            priced += scanned
-        self.start, self.layers = start, passed
-        last = passed[-1].ranked
-        position_in_layer = int(np.argmin(last.costs))
-        cost = float(last.costs[position_in_layer])
-        path = np.empty(len(layers), dtype=np.int64)
-        for index in range(len(layers) - 1, 0, -1):
-            path[index] = passed[index].ranked.nodes[position_in_layer]
-            position_in_layer = int(passed[index].ranked.back[position_in_layer])
-        path[0] = first[position_in_layer]
-        return SearchResult(path, cost, priced)
+        priced are those whose way in was searched. ``guard`` is checked once, before the
+        window's one compiled call."""
+        if guard is not None:
+            guard.check()  # type: ignore[attr-defined]
+        old = self.window if self.start == start - 1 and before >= 0 else _NO_WINDOW
+        parts = [
+            _candidates(space, layers, excluded, index, index > 0 or before >= 0, True, 0)
+            for index in range(len(layers))
+        ]
+        total, ends = 0, [0]
+        for part in parts:
+            total += len(part.nodes)
+            ends.append(total)
+        offsets = np.array(ends, dtype=np.int64)
+        stacked = Stacked(
+            np.concatenate([part.nodes for part in parts]),
+            np.concatenate([part.costs for part in parts]),
+            offsets,
+        )
+        scratch = _scratch(self.size)
+        window, path, cost, priced = space.calls.lag_window(
+            stacked, old, space.joins, before, scratch
+        )
+        self.start, self.window = start, window
+        return SearchResult(path, float(cost), int(priced))
 
 
-def _empty_layer() -> Ranked:
+def _no_window() -> Window:
     none = np.zeros(0, dtype=np.int64)
-    no_terms = np.zeros((0, 4))
-    return Ranked(
-        none, np.zeros(0), none, np.zeros(0, dtype=bool), np.zeros(0, dtype=np.int8), no_terms, none
+    return Window(
+        np.zeros(1, dtype=np.int64),
+        none,
+        none,
+        np.zeros(0),
+        none,
+        np.zeros(0, dtype=bool),
+        np.zeros(0, dtype=np.int8),
+        np.zeros((0, 4)),
+        none,
     )
 
 
-_EMPTY = _empty_layer()
-"""No layer: the last window's, when it has none to give."""
+_NO_WINDOW = _no_window()
+"""No window: a stream's first, or one whose last window is not the one before."""
 
 
 _local = threading.local()
 
 
-def _scratch(size: int) -> tuple[np.ndarray, np.ndarray]:
-    """Two (``size``,) position arrays, all −1, of this thread: ``lag_step`` leaves them so,
-    and a thread runs one step at a time, so its streams share them."""
-    kept: dict[int, tuple[np.ndarray, np.ndarray]] = _local.__dict__.setdefault("scratch", {})
+def _scratch(size: int) -> Scratch:
+    """The scratch of this thread for ``size`` nodes: ``lag_step`` leaves it all −1, and a
+    thread runs one step at a time, so its streams share it."""
+    kept: dict[int, Scratch] = _local.__dict__.setdefault("scratch", {})
     pair = kept.get(size)
     if pair is None:
-        pair = kept[size] = (np.full(size, -1, dtype=np.int64), np.full(size, -1, dtype=np.int64))
+        pair = kept[size] = Scratch(
+            np.full(size, -1, dtype=np.int64), np.full(size, -1, dtype=np.int64)
+        )
     return pair
-
-
-def _same(a: np.ndarray, b: np.ndarray) -> bool:
-    return a is b or (len(a) == len(b) and bool(np.array_equal(a, b)))

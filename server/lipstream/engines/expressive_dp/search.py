@@ -78,8 +78,8 @@ from .fast_step import (
     entry_costs,
     entry_table,
     fast_step,
-    lag_step,
 )
+from .lag_window import lag_window
 from .nodes import SILENCE_INDEX, NodeDatabase, NodeFeatures
 
 INF = np.inf
@@ -107,7 +107,8 @@ class SpaceCalls(NamedTuple):
     best_entry: DirectCall
     entry_costs: DirectCall
     fast_step: DirectCall
-    lag_step: DirectCall
+    lag_window: DirectCall
+    transition_cost: DirectCall
 
 
 @dataclass(frozen=True)
@@ -149,7 +150,8 @@ class SearchSpace:
             DirectCall(best_entry),
             DirectCall(entry_costs),
             DirectCall(fast_step),
-            DirectCall(lag_step),
+            DirectCall(lag_window),
+            DirectCall(transition_cost),
         )
 
     @cached_property
@@ -204,7 +206,7 @@ class SearchSpace:
         return float(self.observation(layer)[node])
 
     def tc(self, a: int, b: int) -> float:
-        return float(transition_cost(a, b, self.table_one))
+        return float(self.calls.transition_cost(a, b, self.table_one))
 
 
 @dataclass(frozen=True)

@@ -136,6 +136,34 @@ def test_every_window_is_the_full_searchs_window(frames: str) -> None:
     assert reused > 100
 
 
+@pytest.mark.parametrize("frames", ["normal", "coarse", "copies"])
+def test_windows_of_other_lengths_skips_and_restarts_are_the_full_searchs(frames: str) -> None:
+    """A stream's windows (its layers fixed, with constraints and contamination) of three to
+    six layers, so that a layer that was last is a middle one next time and back, that skip a
+    layer or restart without a node before, each against ``search`` of the same window: the
+    same path and cost to the last bit, never more nodes priced than the full search."""
+    for seed in range(8):
+        rng = np.random.default_rng(100 + seed)
+        n = 70
+        space = _space(rng, n, 3, frames)
+        excluded = np.zeros(n, dtype=bool)
+        if seed % 2:
+            excluded[rng.choice(n, size=n // 6, replace=False)] = True
+        layers = _layers(rng, 40, excluded, seed % 4 > 1, silences=False)
+        memory = LagMemory(n)
+        before, start = -1, 0
+        while start + 3 <= len(layers):
+            window = layers[start : start + int(rng.integers(3, 7))]
+            full = search(space, window, excluded, before=before)
+            found = memory.search(space, window, excluded, start, before)
+            assert found.path.tolist() == full.path.tolist(), (seed, start)
+            assert found.cost == full.cost, (seed, start)
+            assert found.candidates <= full.candidates
+            jump = int(rng.choice([1, 1, 1, 2, 0]))
+            before = int(found.path[0]) if jump == 1 else -1
+            start += max(jump, 1)
+
+
 @pytest.fixture(scope="module")
 def model(trained_models: dict[str, Model]) -> ExpressiveDpModel:
     found = trained_models["expressive-dp"]
