@@ -13,8 +13,8 @@ Two models are compared in one run (``SAMPLINGS``), both trained on the train sp
 with ``sample_offset`` 0 (``instant``) and one with ``HOLD_CENTRE`` (``centre``); ``--model``
 (else the defaults trained on the train split) stands for the one its offset names.
 Each line is decoded once per model, driven by phonemes alone on the offline rung
-(Viterbi over the whole line, one solve; ``floor_max_abs_diff`` checks that the ``floor`` convention reproduces the engine's frames),
-and its trajectory solved at the engine's rate with the state of frame k taken three ways
+(Viterbi over the whole line, one solve; ``floor_max_abs_diff`` checks that the ``floor``
+convention reproduces the engine's frames), and its trajectory solved at the engine's rate with the state of frame k taken three ways
 (``CONVENTIONS``): ``floor`` (the engine's), ``nearest`` (⌊k R / f + ½⌋) and ``ceil``
 (⌈k R / f⌉). Closure lags are timed as ``evaluation.closure_lags`` times them: on the demo
 corpus's held-out lines against their recordings (with the RMS error), and on the real-face
