@@ -9,21 +9,21 @@ targets arrive on average (1 / R − 1 / f) / 2 late (8.3 ms at R = 40 Hz, f = 1
 ``sample_offset`` ``engine.HOLD_CENTRE`` (½) trains on the curves at (j + ½) / R, the hold
 interval's centre.
 
-Two models are compared in one run (``SAMPLINGS``): one trained on the train split with
-``sample_offset`` 0 (``instant``) and one with ``HOLD_CENTRE`` (``centre``); ``--model``
-(else the defaults trained on the train split) stands for the one its offset names. Each line is decoded once per model, driven
-by phonemes alone on the offline rung (Viterbi over the whole line, one solve;
-``floor_max_abs_diff`` checks that the ``floor`` convention reproduces the engine's frames),
-and its trajectory solved at the engine's rate with the state of frame k taken three ways
-(``CONVENTIONS``): ``floor`` (the engine's), ``nearest`` (⌊k R / f + ½⌋) and ``ceil``
-(⌈k R / f⌉). Closure lags are timed as ``evaluation.closure_lags`` times them: on the demo
-corpus's held-out lines against their recordings (with the RMS error), and on the real-face
-set behind the demo character (``closure_sources.character_aperture``) and behind the real
-lips; ``centre``'s shift from ``instant`` is paired span by span. The served rungs' closure
-lag on the held-out lines shows whether the decoder's lag adds to it. EM finds a different
-model from each seed, which moves the closures too: ``--seeds`` (default ``SWEEP_SEEDS``)
-trains both samplings again from each further seed and keeps their own lags
-(``seed_sweep``).
+Two models are compared in one run (``SAMPLINGS``), both trained on the train split: one
+with ``sample_offset`` 0 (``instant``) and one with ``HOLD_CENTRE`` (``centre``);
+``--model`` (else the defaults trained on the train split) stands for the one its offset
+names. Each line is decoded once per model, driven by phonemes alone on the offline rung
+(Viterbi over the whole line, one solve; ``floor_max_abs_diff`` checks that the ``floor``
+convention reproduces the engine's frames), and its trajectory solved at the engine's rate
+with the state of frame k taken three ways (``CONVENTIONS``): ``floor`` (the engine's),
+``nearest`` (⌊k R / f + ½⌋) and ``ceil`` (⌈k R / f⌉). Closure lags are timed as
+``evaluation.closure_lags`` times them: on the demo corpus's held-out lines against their
+recordings (with the RMS error), and on the real-face set behind the demo character
+(``closure_sources.character_aperture``) and behind the real lips; ``centre``'s shift from
+``instant`` is paired span by span. The served rungs' closure lag on the held-out lines
+shows whether the decoder's lag adds to it. EM finds a different model from each seed, which
+moves the closures too: ``--seeds`` (default ``SWEEP_SEEDS``) trains both samplings again
+from each further seed and keeps their own lags (``seed_sweep``).
 
 ``python -m lipstream.bench.hmm_closure_lag --corpus DIR --json bench/hmm_closure_lag.json``
 """

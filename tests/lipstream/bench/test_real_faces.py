@@ -249,15 +249,19 @@ def test_every_engine_times_its_25_fps_frames_as_its_fine_frames_with_no_half_fr
 ) -> None:
     """bench --real synthesizes each prediction on the real clip's 25 fps frames, frame i at
     i / 25 s. Each engine's 25 fps aperture must be its 200 fps aperture read at those
-    times: it is much nearer that than the 200 fps aperture read half a frame (20 ms)
-    earlier or later, so neither frame rate is timed at frame centres and the other at
-    frame starts."""
+    times: of the 200 fps aperture read at every shift from half a frame (20 ms) earlier
+    to half a frame later, in 1 ms steps, the one nearest the 25 fps aperture is within a
+    quarter of a frame of no shift, so neither frame rate is timed at frame centres and
+    the other at frame starts. (An engine may smooth differently at 25 fps, ``hmm``'s
+    trajectory is solved at the request's rate, so the misfit itself need not vanish.)"""
     phones = read_textgrid_phones(GRID / "bbaf2n.TextGrid")
     fine = 200.0
+    shifts = np.linspace(-HALF_FRAME_S, HALF_FRAME_S, 41)
     for engine, model in trained_models.items():
         coarse = lip_aperture(model.synthesize(phones, fps=FPS, audio=None).frames, model.channels)
         dense = lip_aperture(model.synthesize(phones, fps=fine, audio=None).frames, model.channels)
         assert coarse is not None and dense is not None
-        aligned = _misfit(coarse, dense, fine, 0.0)
-        assert aligned < 0.5 * _misfit(coarse, dense, fine, -HALF_FRAME_S), engine
-        assert aligned < 0.5 * _misfit(coarse, dense, fine, HALF_FRAME_S), engine
+        misfits = [_misfit(coarse, dense, fine, shift) for shift in shifts]
+        best = float(shifts[int(np.argmin(misfits))])
+        assert abs(best) <= 0.5 * HALF_FRAME_S, (engine, best)
+        assert min(misfits) < 0.5 * max(misfits[0], misfits[-1]), engine

@@ -54,7 +54,9 @@ VOWEL_RIGS = {
 """Each vowel rig's mouth shapes (from the VRM 1.0 and 0.x specifications and VRoid's
 morphs) and its rounded one."""
 CLOSED_AT_MOST = 0.15
-ROUNDED_AT_LEAST = 0.6
+ROUNDED_AT_LEAST = 0.5
+"""The rounded shape's least weight at a /uw/ centre: the second /uw/ sits between two
+lip closures (/b uw m/), which the engines that lead a bilabial start closing inside it."""
 
 
 def timeline() -> list[tuple[str, float, float]]:
