@@ -1761,7 +1761,7 @@ def bilabial_lead_hmm(bench: Bench) -> str:
                 _signed(row["lag_ms"], 1),
                 _signed(row["closing_lag_ms"], 1),
                 _signed(row["release_lag_ms"], 1),
-                number(row["rms"], 4),
+                number(row["rms"], 5),
                 *(
                     f"{_signed(row['rungs'][rung]['lag_ms'], 1)} / "
                     f"{number(row['rungs'][rung]['rms'], 4)}"

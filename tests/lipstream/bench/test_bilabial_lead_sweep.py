@@ -82,8 +82,8 @@ def test_the_blocks_render_the_hmm_sweep_and_each_evaluated_engine(tmp_path: Pat
     (tmp_path / "bilabial_lead_sweep.json").write_text(json.dumps(doc))
     hmm = BLOCKS["bilabial-lead-hmm"](Bench(tmp_path))
     assert "Source: `bench/bilabial_lead_sweep.json`" in hmm
-    assert "| **60** | +0.8 | +40.8 | -39.2 | 0.0639 | +1.8 / 1.0639 |" in hmm
-    assert "| 0 | +10.0 | +50.0 | -30.0 | 0.0650 |" in hmm
+    assert "| **60** | +0.8 | +40.8 | -39.2 | 0.06390 | +1.8 / 1.0639 |" in hmm
+    assert "| 0 | +10.0 | +50.0 | -30.0 | 0.06500 |" in hmm
     assert "+37.0 |" in hmm and "59 clips of `grid`" in hmm
     assert "nearest 0 without the RMS rising above the unled one: 60 ms (default 60 ms)" in hmm
     for engine in ("anime-graph", "expressive-dp"):
