@@ -24,6 +24,9 @@ from dataclasses import replace
 from .evaluation import BILABIALS
 from .timeline import PhonemeSpan
 
+MAX_LEAD_S = 0.2
+"""The largest bilabial lead (s) a model may store."""
+
 
 def led_pair(
     before: PhonemeSpan, span: PhonemeSpan, lead_s: float

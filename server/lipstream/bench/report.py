@@ -1728,6 +1728,97 @@ def closure_timing(bench: Bench) -> str:
     return text
 
 
+BILABIAL_LEAD_SWEEP = "bilabial_lead_sweep.json"
+
+
+def bilabial_lead_hmm(bench: Bench) -> str:
+    """``hmm`` trained and run at each bilabial lead: held-out closure lag and RMS per rung,
+    averaged over the EM seeds, and the lag behind the real lips
+    (``lipstream.bench.bilabial_lead_sweep``)."""
+    if not bench.exists(BILABIAL_LEAD_SWEEP):
+        return f"Not measured yet: no `bench/{BILABIAL_LEAD_SWEEP}`.\n"
+    doc = bench.load(BILABIAL_LEAD_SWEEP)
+    found = doc["engines"]["hmm"]
+    rungs = doc["rungs"]
+    chosen = found.get("chosen_lead_ms")
+    text = bench.source(BILABIAL_LEAD_SWEEP, doc) + (
+        f"`hmm` trained on the `{doc['corpus']['name']}` train split with each lead, from EM "
+        f"seeds {', '.join(str(seed) for seed in found['seeds'])}, driven by phonemes; the "
+        f"held-out lines' closures timed against the recordings (centre lag, ms, and RMS, "
+        f"means over the seeds), on `{rungs[0]}` (centre, closing and release) and every "
+        f"other rung; the real lag is `{rungs[0]}`'s behind the real lips of the "
+        f"{doc['real_set']['clips']} clips of `{doc['real_set']['name']}` (for information). "
+        "**Bold**: the engine's default.\n\n"
+    )
+    header = ["lead, ms", "centre lag", "closing lag", "release lag", "RMS"]
+    header += [f"`{rung}` lag / RMS" for rung in rungs[1:]] + ["real lag"]
+    rows = []
+    for row in found["leads"]:
+        lead = f"{row['lead_ms']:g}"
+        rows.append(
+            [
+                f"**{lead}**" if row["lead_ms"] == chosen else lead,
+                _signed(row["lag_ms"], 1),
+                _signed(row["closing_lag_ms"], 1),
+                _signed(row["release_lag_ms"], 1),
+                number(row["rms"], 5),
+                *(
+                    f"{_signed(row['rungs'][rung]['lag_ms'], 1)} / "
+                    f"{number(row['rungs'][rung]['rms'], 4)}"
+                    for rung in rungs[1:]
+                ),
+                _signed(row["real_lag_ms"], 1),
+            ]
+        )
+    text += table(header, rows)
+    return text + (
+        f"\nThe sweep's pick, the `{rungs[0]}` centre lag nearest 0 without the RMS rising "
+        f"above the unled one: {found['best_lead_ms']:g} ms (default {chosen:g} ms).\n"
+    )
+
+
+def bilabial_lead_evaluated(engine: str) -> Callable[[Bench], str]:
+    """``engine`` trained and run on spans led by each lead (it has no lead of its own):
+    held-out closure lag and RMS, and the lag behind the real lips."""
+
+    def render(bench: Bench) -> str:
+        if not bench.exists(BILABIAL_LEAD_SWEEP):
+            return f"Not measured yet: no `bench/{BILABIAL_LEAD_SWEEP}`.\n"
+        doc = bench.load(BILABIAL_LEAD_SWEEP)
+        found = doc["engines"][engine]
+        text = bench.source(BILABIAL_LEAD_SWEEP, doc) + (
+            f"`{engine}` trained on the `{doc['corpus']['name']}` train split (the demo "
+            "model's hyperparameters) with every bilabial's span started the lead earlier, "
+            "and run on the held-out lines' spans so led (its default rung); closures timed "
+            "against the recordings (centre lag, ms; RMS), and behind the real lips of the "
+            f"{doc['real_set']['clips']} clips of `{doc['real_set']['name']}` (for "
+            "information).\n\n"
+        )
+        rows = [
+            [
+                f"{row['lead_ms']:g}",
+                _signed(row["lag_ms"], 1),
+                _signed(row["closing_lag_ms"], 1),
+                _signed(row["release_lag_ms"], 1),
+                number(row["rms"], 5),
+                _signed(row["real"]["mean_ms"], 1),
+            ]
+            for row in found["leads"]
+        ]
+        header = ["lead, ms", "centre lag", "closing lag", "release lag", "RMS", "real lag"]
+        return (
+            text
+            + table(header, rows)
+            + (
+                "\nThe pick by `dam`'s criterion (centre lag nearest 0 without the RMS rising "
+                f"above the unled one): {found['best_lead_ms']:g} ms.\n"
+            )
+        )
+
+    render.__name__ = f"bilabial_lead_{engine.replace('-', '_')}"
+    return render
+
+
 def _after_silence(groups: dict[str, Any] | None) -> str:
     if not groups or not all(groups[g]["closures"] for g in ("silence", "phoneme")):
         return ""
@@ -2361,6 +2452,9 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "closure-sources": closure_sources,
     "hmm-closure-lag": hmm_closure_lag,
     "closure-timing": closure_timing,
+    "bilabial-lead-hmm": bilabial_lead_hmm,
+    "bilabial-lead-anime-graph": bilabial_lead_evaluated("anime-graph"),
+    "bilabial-lead-expressive-dp": bilabial_lead_evaluated("expressive-dp"),
     "aligner-bilabial-onsets": aligner_bilabial_onsets,
     "languages": languages,
     "language-phonemes": language_phonemes,

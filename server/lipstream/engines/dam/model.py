@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from ...audio import Audio
-from ...bilabial_lead import BilabialLead, lead_bilabials
+from ...bilabial_lead import MAX_LEAD_S, BilabialLead, lead_bilabials
 from ...errors import InvalidRequestError
 from ...model_checks import ArrayReader, FieldReader
 from ...numerics.basis import MotionBasis, read_components
@@ -74,8 +74,6 @@ from .selection import Costs, Layer, end_derivatives
 from .spans import DamSpans
 
 OPTION_LIMIT = 16
-MAX_LEAD_S = 0.2
-"""The largest bilabial lead (s) a model may store."""
 NUMBER_FIELDS = (  # name, low, high, low excluded
     ("eps", 0.0, 1.0, False),
     ("tol", 0.0, 0.5, True),

@@ -6,7 +6,9 @@ observations [pose, velocity] at ``hmm_fps`` (HMM frame j the curves at
 velocity the backward difference per HMM frame) -> the facial HMM trained from a large
 fully connected model (``em``: entropic with extinction, or Baum-Welch as the
 comparison) on the inner training split -> γ on every training line ->
-remapping (``remap``): phoneme and emotion categoricals, and speech-feature
+remapping (``remap``): phoneme and emotion categoricals (each HMM frame's phoneme read from
+the spans with every /p b m/ started ``bilabial_lead_s`` earlier, ``bilabial_lead``, as the
+rungs that lead read them), and speech-feature
 Gaussians when every line has audio (each line's features normalized as a served stream
 normalizes them, ``features.StreamingNormalizer``, from a prior pooled over the training
 lines' speech frames, when ``speaker_normalization``) -> metrics: perplexity,
@@ -23,6 +25,7 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from ...bilabial_lead import MAX_LEAD_S, lead_bilabials
 from ...corpus import Corpus, Utterance
 from ...features import (
     PRIOR_FRAMES,
@@ -47,6 +50,10 @@ synthesizer holds state j over, [j / R, (j + 1) / R) (``synthesizer.hmm_frame``)
 label and speech features stay at j / R, where the synthesizer reads them. Not the default:
 over four EM seeds it did not move the demo's closures beyond the seeds' spread and made the
 voice-driven ``causal`` rung worse (docs/explanation/engines/hmm.md)."""
+HMM_BILABIAL_LEAD_S = 0.06
+"""The default ``bilabial_lead_s``: of the leads ``bench.bilabial_lead_sweep`` swept, the one
+whose held-out closure centre (``full`` rung, four EM seeds) is nearest the recording's without
+the held-out RMS rising."""
 
 
 def hmm_times(utterance: Utterance, hmm_fps: float) -> np.ndarray:
@@ -69,12 +76,14 @@ def observations(
     return np.concatenate([sampled, velocity], axis=1)
 
 
-def phoneme_labels(utterance: Utterance, hmm_fps: float) -> np.ndarray:
-    """Phoneme index of each HMM frame: the span with start < t ≤ end (frame 0: the first)."""
+def phoneme_labels(utterance: Utterance, hmm_fps: float, lead_s: float = 0.0) -> np.ndarray:
+    """Phoneme index of each HMM frame: the span with start < t ≤ end (frame 0: the first),
+    the spans' bilabials led by ``lead_s`` (``bilabial_lead.lead_bilabials``)."""
     times = hmm_times(utterance, hmm_fps)
-    starts = np.array([span.start for span in utterance.phones])
+    phones = lead_bilabials(utterance.phones, lead_s) if lead_s > 0.0 else utterance.phones
+    starts = np.array([span.start for span in phones])
     index = np.clip(np.searchsorted(starts, times - 1e-9, side="left") - 1, 0, None)
-    return np.array([PHONEME_INDEX[utterance.phones[k].phoneme] for k in index], dtype=np.int64)
+    return np.array([PHONEME_INDEX[phones[k].phoneme] for k in index], dtype=np.int64)
 
 
 class HmmEngine(Engine):
@@ -103,6 +112,7 @@ class HmmEngine(Engine):
         speaker_normalization: bool = True,
         prior_frames: float = PRIOR_FRAMES,
         sample_offset: float = 0.0,
+        bilabial_lead_s: float = HMM_BILABIAL_LEAD_S,
     ) -> None:
         self.n_states = n_states
         self.hmm_fps = hmm_fps
@@ -121,12 +131,17 @@ class HmmEngine(Engine):
         self.speaker_normalization = speaker_normalization
         self.prior_frames = prior_frames
         self.sample_offset = sample_offset
+        self.bilabial_lead_s = bilabial_lead_s
 
     def settings(self) -> em.Settings:
         if self.estimator not in em.ESTIMATORS:
             raise ValueError(f"estimator must be one of {em.ESTIMATORS}, got {self.estimator!r}")
         if not 0.0 <= self.sample_offset < 1.0:
             raise ValueError(f"sample_offset must be in [0, 1), got {self.sample_offset!r}")
+        if not 0.0 <= self.bilabial_lead_s <= MAX_LEAD_S:
+            raise ValueError(
+                f"bilabial_lead_s must be in [0, {MAX_LEAD_S:g}], got {self.bilabial_lead_s!r}"
+            )
         return em.Settings(
             n_states=self.n_states,
             estimator=self.estimator,
@@ -213,7 +228,7 @@ class HmmEngine(Engine):
         self, corpus: Corpus, gammas: list[np.ndarray]
     ) -> tuple[dict[str, np.ndarray], SpeakerPrior | None]:
         utterances = corpus.utterances
-        labels = [phoneme_labels(u, self.hmm_fps) for u in utterances]
+        labels = [phoneme_labels(u, self.hmm_fps, self.bilabial_lead_s) for u in utterances]
         emotions = [
             np.full(len(gamma), EMOTIONS.index(u.emotion), dtype=np.int64)
             for u, gamma in zip(utterances, gammas, strict=True)

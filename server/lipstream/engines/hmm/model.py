@@ -13,7 +13,10 @@ feature analysis (``mfcc``) and the normalization's scalars (``normalization``; 
 or absent in a model saved before it: the model hears raw features). The
 hyperparameter ``sample_offset`` says where in its HMM frame training sampled the face
 (``engine.observations``); a model saved before it has none and was sampled at the
-frame's instant, ``INSTANT_SAMPLING``.
+frame's instant, ``INSTANT_SAMPLING``. The hyperparameter ``bilabial_lead_s`` says how far
+(s) every /p b m/ span started before its acoustic onset when the phoneme categoricals were
+trained (``bilabial_lead``); a model saved before it has none and trained on the acoustic
+spans (0).
 
 Options: ``lag_ms`` (the Viterbi lag limit; null: unlimited), ``window_ms``
 (the trajectory block; 0: a frame at a time; null: one solve at the end) and
@@ -22,7 +25,15 @@ ladder (``RUNGS``) runs from a half-second lag with quarter-second blocks down
 to the causal rung (lag 0, a frame at a time), which also hears audio a few
 frames late rather than wait for a feature window (``synthesizer``).
 
-Stored ranges (checked at load, ``check_arrays``): probabilities non-negative and
+Bilabial lead: with ``bilabial_lead_s`` > 0 the rungs that wait for a feature window (lag
+above ``NO_WAIT_BELOW_MS``, or unlimited) read each HMM frame's phoneme from the spans with
+every /p b m/ started that much earlier, as the model was trained. The phoneme at t is then
+final once the spans cover t + lead (a bilabial starting within the lead after t takes t),
+so these rungs wait the lead more (``Plan.lead_s``); the ``causal_lead`` and ``causal``
+rungs keep the acoustic spans, as does a request driven by audio alone.
+
+Stored ranges (checked at load, ``check_arrays``; ``bilabial_lead_s`` in [0,
+``MAX_LEAD_S``], 0 when absent): probabilities non-negative and
 summing to 1, log-probabilities summing to 1, covariances symmetric positive
 definite, and every float within ``MAX_MAGNITUDE``.
 """
@@ -36,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from ...bilabial_lead import MAX_LEAD_S
 from ...errors import InvalidRequestError
 from ...features import DEFAULT_MFCC, MfccConfig, SpeakerPrior, StreamingNormalizer
 from ...model_checks import ArrayReader, FieldReader
@@ -118,6 +130,9 @@ class HmmModel(Model):
         self.default_lag_ms = float(manifest.hyperparameters["lag_ms"])
         self.default_window_ms = float(manifest.hyperparameters["window_ms"])
         self.sample_offset = float(manifest.hyperparameters.get("sample_offset", INSTANT_SAMPLING))
+        self.bilabial_lead_s = float(manifest.hyperparameters.get("bilabial_lead_s", 0.0))
+        """How far (s) /p b m/ start before their acoustic spans on the rungs that lead them
+        (``leads``); 0 in a model saved before the lead existed."""
 
     def emotion_row(self, emotion: str) -> int:
         """The row of ``emotion``'s log-probabilities in ``categories``."""
@@ -183,6 +198,13 @@ class HmmModel(Model):
             values.append(float(value))
         return values[0], values[1]
 
+    def leads(self, lag_ms: float | None, drive: object) -> float:
+        """The bilabial lead (s) of a request with Viterbi lag ``lag_ms`` and ``drive``: the
+        model's on the rungs that wait for a feature window anyway (lag above
+        ``NO_WAIT_BELOW_MS`` or unlimited) when it may read phonemes, else 0."""
+        waits = lag_ms is None or lag_ms > NO_WAIT_BELOW_MS
+        return self.bilabial_lead_s if waits and drive != AUDIO else 0.0
+
     def plan(self, options: Mapping[str, Any], fps: float | None = None) -> Plan:
         """The schedule of a request at ``fps`` (None: at the synthesis rate, the one the
         lookahead is stated for). Blocks are solved at ``solve_fps(fps)``, ``window_ms`` long
@@ -215,17 +237,17 @@ class HmmModel(Model):
         delay = 0
         if lag_ms is not None and lag_ms <= NO_WAIT_BELOW_MS and window_ms == 0.0:
             delay = math.ceil((self.mfcc.window_s / 2.0 + 1e-3) * self.hmm_fps)
-        return Plan(lag, block, future, delay, rate, str(drive))
+        return Plan(lag, block, future, delay, rate, str(drive), self.leads(lag_ms, drive))
 
     def lookahead_for(self, options: Mapping[str, Any]) -> Lookahead | None:
         """The lookahead at the synthesis rate, which bounds the wait at every fps
-        (``plan``)."""
+        (``plan``): the spans past t the frame at t waits for, with the bilabial lead."""
         plan = self.plan(options)
         wait = plan.wait_s(self.hmm_fps)
         if wait is None:
             return None
         audio = 0.0 if plan.delay or self.vocal is None else self.mfcc.window_s / 2.0
-        return Lookahead(seconds=wait, audio_seconds=audio)
+        return Lookahead(seconds=wait + plan.lead_s, audio_seconds=audio)
 
     @property
     def lookahead(self) -> Lookahead:
@@ -274,6 +296,10 @@ class HmmModel(Model):
             )
         if "sample_offset" in hyper:
             fields.number(hyper["sample_offset"], "hyperparameters.sample_offset", 0.0, 1.0)
+        if "bilabial_lead_s" in hyper:  # absent from models saved before it: no lead
+            fields.number(
+                hyper["bilabial_lead_s"], "hyperparameters.bilabial_lead_s", 0.0, MAX_LEAD_S
+            )
         fields.number(
             fields.member(extra, "hmm_fps", "extra.hmm_fps"), "extra.hmm_fps", 1.0, 1000.0
         )

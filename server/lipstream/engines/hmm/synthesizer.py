@@ -15,7 +15,10 @@ discretisation only.
 
 Observations of HMM frame j: the phoneme and emotion of the span with
 start < j / R ≤ end (frame 0: the first span), known once the spans cover j / R
-(audio alone: the request's emotion); and/or the
+(audio alone: the request's emotion); on a plan with a bilabial lead (``Plan.lead_s``)
+the spans are the articulatory ones (``bilabial_lead``: each /p b m/ starts up to the lead
+earlier, its start final when it comes), so the phoneme is known once the spans cover
+j / R + lead; and/or the
 speech features of feature frame j (feature rate R), known once the audio
 covers its window. On the rungs that may not wait for audio (``delay``) frame
 j hears feature frame j − d instead, d frames being enough for its window to
@@ -58,6 +61,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...audio import Audio
+from ...bilabial_lead import led_pair
 from ...errors import InvalidRequestError
 from ...features import speech_features
 from ...numerics.banded import check_block_tridiagonal
@@ -87,7 +91,8 @@ _EPS = kernels.EPS
 class Plan:
     """A rung's schedule: Viterbi lag (HMM frames, None: unlimited), block and future
     context (trajectory frames at ``rate``; block None: one solve at the end), feature delay
-    (frames), and the rate the trajectory is solved at (Hz)."""
+    (frames), the rate the trajectory is solved at (Hz), the drive, and the bilabial lead
+    (s) of the phonemes read (``HmmModel.leads``)."""
 
     lag: int | None
     block: int | None
@@ -95,6 +100,7 @@ class Plan:
     delay: int
     rate: float
     drive: str = AUTO
+    lead_s: float = 0.0
 
     def wait_s(self, hmm_fps: float) -> float | None:
         """Seconds of input past t that the frame at t waits for (None: the end)."""
@@ -125,6 +131,7 @@ class HmmSynthesizer(Synthesizer):
         self.spans: list[PhonemeSpan] = []
         self.end = 0.0
         self.span_rows = Growable(np.float64, (3,))  # start, phoneme row, emotion row
+        self.led: PhonemeSpan | None = None  # the last span with its articulatory start
         width = model.vocal.dim if model.vocal else 0
         self.audio = StreamedFeatures(
             model.mfcc, width, speech_features, lookback=1, normalizer=model.normalizer()
@@ -180,12 +187,22 @@ class HmmSynthesizer(Synthesizer):
                 self.spans.append(span)
                 mood = span.emotion or emotion
                 mood_row = model.emotion_row(mood) if mood else self.mood
-                rows.append((span.start, PHONEME_INDEX[span.phoneme], mood_row))
+                rows.append((self._start(span), PHONEME_INDEX[span.phoneme], mood_row))
             self.end = self.spans[-1].end
         if audio is not None:
             self.heard = True
             if hearing and self.mode != PHONEMES:
                 self.audio.add(audio)
+
+    def _start(self, span: PhonemeSpan) -> float:
+        """``span``'s start as the phonemes are read: with a bilabial lead its articulatory
+        start (``bilabial_lead.led_pair``), which needs only the span before it."""
+        if self.plan.lead_s <= 0.0:
+            return span.start
+        if self.led is not None:
+            _, span = led_pair(self.led, span, self.plan.lead_s)
+        self.led = span
+        return span.start
 
     def _duration(self) -> float:
         if self.reading:
@@ -199,8 +216,8 @@ class HmmSynthesizer(Synthesizer):
             duration = self._duration()
             return frame_count(duration, hmm_fps) if duration > 0 else 0
         limit = None
-        if self.reading:
-            limit = frame_count(self.end, hmm_fps) if self.spans else 0
+        if self.reading:  # a bilabial starting within the lead after j / R takes frame j
+            limit = max(0, frame_count(self.end - self.plan.lead_s, hmm_fps)) if self.spans else 0
         if self.listening:
             heard = self.audio.covered + self.plan.delay
             limit = heard if limit is None else min(limit, heard)
@@ -210,7 +227,7 @@ class HmmSynthesizer(Synthesizer):
         """The time up to which the input is final."""
         covered = math.inf if self.reading or self.listening else -math.inf
         if self.reading:
-            covered = self.end if self.spans else -math.inf
+            covered = self.end - self.plan.lead_s if self.spans else -math.inf
         if self.listening:
             heard = (self.audio.covered + self.plan.delay - 1) / self.model.hmm_fps
             covered = min(covered, heard)
