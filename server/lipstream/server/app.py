@@ -30,8 +30,9 @@ from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any, TypedDict
 
-from fastapi import FastAPI, Request, WebSocket
+from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse, Response
+from starlette.routing import WebSocketRoute
 
 from .._version import __version__
 from ..config import ServerSettings, load_server_settings
@@ -58,7 +59,7 @@ from .rest import synthesize
 from .startup import BUILDING, CALIBRATING, LOADING, READY, NotReady, Startup, run_in_background
 from .state import ServerState
 from .thread_priority import lower_this_thread
-from .websocket import stream_endpoint
+from .websocket import StreamApp
 
 __all__ = ["LifespanState", "ServerState", "create_app"]
 
@@ -337,9 +338,7 @@ def create_app(
         body, content_type = metrics.render()
         return Response(body, media_type=content_type)
 
-    @app.websocket("/v1/stream")
-    async def stream(websocket: WebSocket) -> None:
-        await stream_endpoint(websocket)
+    app.router.routes.append(WebSocketRoute("/v1/stream", StreamApp(), name="stream"))
 
     phoneme_maps.install(app)
     recordings.install(app)
