@@ -30,9 +30,8 @@ from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any, TypedDict
 
-from fastapi import FastAPI, Request
+from fastapi import FastAPI, Request, WebSocket
 from fastapi.responses import JSONResponse, Response
-from starlette.routing import WebSocketRoute
 
 from .._version import __version__
 from ..config import ServerSettings, load_server_settings
@@ -59,7 +58,7 @@ from .rest import synthesize
 from .startup import BUILDING, CALIBRATING, LOADING, READY, NotReady, Startup, run_in_background
 from .state import ServerState
 from .thread_priority import lower_this_thread
-from .websocket import StreamApp
+from .websocket import stream_endpoint
 
 __all__ = ["LifespanState", "ServerState", "create_app"]
 
@@ -338,7 +337,9 @@ def create_app(
         body, content_type = metrics.render()
         return Response(body, media_type=content_type)
 
-    app.router.routes.append(WebSocketRoute("/v1/stream", StreamApp(), name="stream"))
+    @app.websocket("/v1/stream")
+    async def stream(websocket: WebSocket) -> None:
+        await stream_endpoint(websocket)
 
     phoneme_maps.install(app)
     recordings.install(app)

@@ -46,6 +46,8 @@ from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Executor
 from typing import Any, TypeAlias, TypeVar
 
+from starlette.websockets import WebSocket, WebSocketDisconnect
+
 from lipstream_client import (
     ERROR_CODES,
     Cancel,
@@ -74,7 +76,6 @@ from lipstream_client.errors import (
 from lipstream_client.messages import JsonValue
 
 from .admission import TokenBucket, bearer_token, origin_allowed, token_accepted
-from .asgi_websocket import AsgiWebSocket, Receive, Scope, Send
 from .deadline import LaterDeadline, SendDeadline
 from .frames_wire import MessageEncoder
 from .outgoing import Outgoing
@@ -92,7 +93,7 @@ CLOSE_DEADLINE_S = 1.0
 STARTING_SEND_S = 10.0
 _IDLE = object()
 _WAKE = object()
-_PEER_GONE = (RuntimeError, OSError)  # uvicorn's ClientDisconnected is an OSError
+_PEER_GONE = (WebSocketDisconnect, RuntimeError, OSError)
 JSON_INLINE_VALUES = 512  # about 4 ms of JSON encoding: more goes to the pool
 JSON_HEAVY_VALUES = 65_536  # about 0.5 s of JSON encoding: the heavy lane's
 Payload: TypeAlias = bytes | str
@@ -100,18 +101,10 @@ Answers: TypeAlias = tuple[list[Outgoing], list[Payload | None]]
 T = TypeVar("T")
 
 
-class StreamApp:
-    """The ASGI app of ``/v1/stream`` (an instance rather than a function, so a Starlette
-    route calls it with the ASGI scope, receive and send rather than a ``WebSocket``)."""
-
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        await stream_endpoint(AsgiWebSocket(scope, receive, send))
-
-
-async def stream_endpoint(websocket: AsgiWebSocket) -> None:
+async def stream_endpoint(websocket: WebSocket) -> None:
     """Serve one WebSocket connection of the lipstream protocol."""
-    startup: Startup = websocket.state["startup"]
-    offered = websocket.subprotocols
+    startup: Startup = websocket.state.startup
+    offered: list[str] = list(websocket.scope.get("subprotocols") or [])
     subprotocol = select_subprotocol(offered)
     encoding = encoding_for_subprotocol(subprotocol)
     state = startup.server
@@ -136,8 +129,7 @@ async def stream_endpoint(websocket: AsgiWebSocket) -> None:
             state.metrics.busy_refusals.labels(busy.reason).inc()
             refusal, details = (busy.code, busy.message), busy.details
     try:
-        if not await websocket.accept(subprotocol):
-            return
+        await websocket.accept(subprotocol=subprotocol)
         if refusal is not None:
             state.metrics.refused.labels(refusal[0]).inc()
             await _refuse(websocket, encoding, refusal[0], refusal[1], state, details)
@@ -152,7 +144,7 @@ async def stream_endpoint(websocket: AsgiWebSocket) -> None:
         state.overload.policy.closed(connection)
 
 
-def _adopt_upgrade(websocket: AsgiWebSocket, state: ServerState, connection: Connection) -> bool:
+def _adopt_upgrade(websocket: WebSocket, state: ServerState, connection: Connection) -> bool:
     """Whether the HTTP protocol admitted this connection's upgrade for load (``handshake``);
     it is then pending under ``connection``."""
     client = websocket.scope.get("client")
@@ -161,11 +153,11 @@ def _adopt_upgrade(websocket: AsgiWebSocket, state: ServerState, connection: Con
     return state.overload.adopt(Upgrade((client[0], client[1])), connection)
 
 
-def _refusal(websocket: AsgiWebSocket, state: ServerState) -> tuple[str, str] | None:
+def _refusal(websocket: WebSocket, state: ServerState) -> tuple[str, str] | None:
     settings = state.settings
-    if not origin_allowed(websocket.header(b"origin"), settings.allowed_origins):
+    if not origin_allowed(websocket.headers.get("origin"), settings.allowed_origins):
         return ORIGIN_NOT_ALLOWED, "this Origin may not use the server"
-    token = bearer_token(websocket.header(b"authorization"), websocket.scope["query_string"])
+    token = bearer_token(websocket.headers.get("authorization"), websocket.scope["query_string"])
     if not token_accepted(token, settings.auth_tokens):
         return UNAUTHORIZED, (
             "a valid bearer token is required (Authorization: Bearer <token>, "
@@ -177,7 +169,7 @@ def _refusal(websocket: AsgiWebSocket, state: ServerState) -> tuple[str, str] | 
 
 
 async def _refuse_while_starting(
-    websocket: AsgiWebSocket, encoding: Encoding | None, subprotocol: str | None, startup: Startup
+    websocket: WebSocket, encoding: Encoding | None, subprotocol: str | None, startup: Startup
 ) -> None:
     """Accept, send ``starting`` (naming the phase) and close with 1013; a connection that
     offered no protocol this server speaks is closed with 1008 as when ready."""
@@ -185,14 +177,13 @@ async def _refuse_while_starting(
         await websocket.close(code=CloseCode.POLICY_VIOLATION)
         return
     error = startup.not_ready()
-    if not await websocket.accept(subprotocol):
-        return
+    await websocket.accept(subprotocol=subprotocol)
     details: dict[str, JsonValue] = {"phase": error.where}
     await _refuse(websocket, encoding, STARTING, error.message, STARTING_SEND_S, details)
 
 
 async def _refuse(
-    websocket: AsgiWebSocket,
+    websocket: WebSocket,
     encoding: Encoding,
     code: str,
     message: str,
@@ -206,16 +197,23 @@ async def _refuse(
     timeout_s = state if isinstance(state, float) else state.settings.send_timeout_s
     try:
         async with asyncio.timeout(timeout_s):
-            await websocket.send(payload)
+            await _send(websocket, payload)
             await websocket.close(code=close_code, reason=code)
     except (TimeoutError, *_PEER_GONE):
         return
 
 
+async def _send(websocket: WebSocket, payload: bytes | str) -> None:
+    if isinstance(payload, bytes):
+        await websocket.send_bytes(payload)
+    else:
+        await websocket.send_text(payload)
+
+
 class Connection:
     """One admitted WebSocket: a task that reads, handles and sends, and the session state."""
 
-    def __init__(self, websocket: AsgiWebSocket, encoding: Encoding, state: ServerState) -> None:
+    def __init__(self, websocket: WebSocket, encoding: Encoding, state: ServerState) -> None:
         self.websocket = websocket
         self.encoding = encoding
         self.state = state
@@ -523,7 +521,7 @@ class Connection:
         assert task is not None
         self.deadline.started(task)
         try:
-            await self.websocket.send(payload)
+            await _send(self.websocket, payload)
         except asyncio.CancelledError:
             if not self.deadline.expired or task.uncancel():
                 raise

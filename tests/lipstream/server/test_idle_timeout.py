@@ -16,10 +16,10 @@ from pathlib import Path
 from typing import Any, cast
 
 import pytest
+from starlette.websockets import WebSocket
 
 from lipstream.config import ServerSettings
 from lipstream.models import ModelRegistry
-from lipstream.server.asgi_websocket import AsgiWebSocket
 from lipstream.server.catalog import Catalog
 from lipstream.server.client_limits import ClientLimits
 from lipstream.server.lanes import FairLane
@@ -56,8 +56,8 @@ class Closed:
 
 
 class ScriptedClient:
-    """The ASGI server's side of a WebSocket a ``Connection`` serves: ``script`` messages
-    arrive at their loop times; what the server sends and when it closes are recorded."""
+    """The ASGI WebSocket a ``Connection`` serves: ``script`` messages arrive at their loop
+    times; what the server sends and when it closes are recorded."""
 
     def __init__(self, loop: asyncio.AbstractEventLoop, script: list[tuple[float, Message]]):
         self.loop = loop
@@ -71,14 +71,16 @@ class ScriptedClient:
     async def receive(self) -> Mapping[str, Any]:
         return await self.inbox.get()
 
-    async def send(self, event: Mapping[str, Any]) -> None:
-        if event["type"] == "websocket.close":
-            self.closed = Closed(self.loop.time(), event["code"], event["reason"])
-            return
-        assert event["type"] == "websocket.send" and "bytes" not in event, event
-        message = decode(event["text"], "json", sender="server")
+    async def send_text(self, text: str) -> None:
+        message = decode(text, "json", sender="server")
         assert not isinstance(message, ProtocolError), message
         self.received.append((self.loop.time(), cast(ServerMessage, message)))
+
+    async def send_bytes(self, payload: bytes) -> None:
+        raise AssertionError("a JSON connection sends text")
+
+    async def close(self, code: int = 1000, reason: str | None = None) -> None:
+        self.closed = Closed(self.loop.time(), code, reason or "")
 
 
 @pytest.fixture(scope="module")
@@ -125,8 +127,7 @@ def serve_script(
 
         for at in probes:
             loop.call_at(at, probe, at)
-        scope = {"type": "websocket", "subprotocols": ["lipstream.v1.json"]}
-        connection = Connection(AsgiWebSocket(scope, socket.receive, socket.send), "json", state)
+        connection = Connection(cast(WebSocket, socket), "json", state)
         await connection.run()
         await asyncio.sleep(max(0.0, max(probes) - loop.time()) + JUST)  # the probes after
         return socket, open_at
