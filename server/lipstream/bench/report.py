@@ -696,7 +696,9 @@ def cpu_per_session(bench: Bench, name: str = "cpu_per_session.json") -> str:
     )
 
 
-def message_cost(bench: Bench, name: str = "message_cost_cuts.json") -> str:
+def message_cost(
+    bench: Bench, name: str = "message_cost_cuts.json", change: str = "the cuts"
+) -> str:
     doc = bench.load(name)
     rows = []
     for engine in [run["engine"] for run in _by_engine(doc["summary"])]:
@@ -730,10 +732,40 @@ def message_cost(bench: Bench, name: str = "message_cost_cuts.json") -> str:
     ]
     text = bench.source(name, doc) + (
         "Each run is one process (`python -m lipstream.bench.message_cost`, the code before "
-        "and after the cuts in alternate runs) that streams the same requests to the "
+        f"and after {change} in alternate runs) that streams the same requests to the "
         "server's app and to the reference app in alternate legs, with no sockets; a run's "
         "figure is its legs' median, the table's the median over its runs.\n\n"
     )
+    return text + table(header, rows)
+
+
+def websocket_layers(bench: Bench) -> str:
+    name = "websocket_layers.json"
+    doc = bench.load(name)
+    text = bench.source(name, doc) + (
+        f"Each layer carried {doc['messages']} binary messages of {doc['payload']} bytes "
+        f"per round, {doc['rounds']} rounds, the layers in turn "
+        "(`python -m lipstream.bench.websocket_layers`); the figure is the median round's "
+        "process CPU per message, and the saving beside `starlette` (Starlette's "
+        "`WebSocket`, what the endpoint uses) what it would save by speaking to that "
+        "layer instead.\n\n"
+    )
+    rows = []
+    above: dict[str, float] = {}
+    for row in doc["layers"]:
+        direction, median = row["direction"], row["median_us"]
+        saved = "–" if direction not in above else number(above[direction] - median, 2)
+        above.setdefault(direction, median)
+        rows.append(
+            [
+                direction,
+                f"`{row['layer']}`",
+                number(median, 2),
+                saved,
+                ", ".join(number(value, 2) for value in row["us"]),
+            ]
+        )
+    header = ["message", "layer", "µs per message", "saved beside `starlette`", "per round"]
     return text + table(header, rows)
 
 
@@ -2504,6 +2536,10 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "server-profile": server_profile,
     "message-cost-cuts": message_cost,
     "message-cost-cuts2": lambda bench: message_cost(bench, "message_cost_cuts2.json"),
+    "message-cost-asgi": lambda bench: message_cost(
+        bench, "message_cost_asgi.json", "taking Starlette's WebSocket out"
+    ),
+    "websocket-layers": websocket_layers,
     "capacity-earlier": _capacity("capacity.json"),
     "loadtest": loadtest,
     "scale-out": scale_out,
