@@ -2533,6 +2533,9 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "cpu-per-session-session14-before": lambda bench: cpu_per_session(
         bench, "cpu_per_session_session14_before.json"
     ),
+    "cpu-per-session-session15": lambda bench: cpu_per_session(
+        bench, "cpu_per_session_session15.json"
+    ),
     "server-profile": server_profile,
     "message-cost-cuts": message_cost,
     "message-cost-cuts2": lambda bench: message_cost(bench, "message_cost_cuts2.json"),
