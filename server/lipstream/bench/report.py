@@ -2473,6 +2473,61 @@ def hmm_voices(bench: Bench) -> str:
     return text
 
 
+def _ms_cell(figures: dict[str, Any], keys: Sequence[str]) -> str:
+    return " / ".join("–" if figures[key] is None else number(figures[key], 0) for key in keys)
+
+
+def first_frame_priority(bench: Bench, name: str = "first_frame_priority.json") -> str:
+    """``python -m lipstream.bench.first_frame_priority``: a whole request's first frame beside
+    causal sessions, on two servers side by side (the served code, ``before``, and a variant,
+    ``after``), run by run, and for each side whether the target holds in its worst round."""
+    doc = bench.load(name)
+    target = doc["target_p99_ms"]
+    rows = []
+    verdicts = []
+    for engine in dict.fromkeys(row["engine"] for row in _by_engine(doc["rows"])):
+        runs = [row for row in doc["rows"] if row["engine"] == engine]
+        for row in sorted(runs, key=lambda row: (row["side"] != "before", row["round"])):
+            rows.append(
+                [
+                    f"`{engine}`",
+                    row["side"],
+                    str(row["round"] + 1),
+                    f"{_ms_cell(row['first_frame_ms'], ('p50', 'p99', 'max'))} "
+                    f"({row['probe_requests']})",
+                    _ms_cell(row["frame_lag_ms"], ("p50", "p99")),
+                    f"{row['peak_sessions']} of {row['requests']}",
+                    ", ".join(f"{code} {count}" for code, count in sorted(row["errors"].items()))
+                    or "none",
+                ]
+            )
+        parts = []
+        for side in ("before", "after"):
+            p99 = [row["first_frame_ms"]["p99"] for row in runs if row["side"] == side]
+            worst = max(p99)
+            verdict = "met" if worst < target else f"missed by {number(worst - target, 0)} ms"
+            listed = ", ".join(number(value, 0) for value in p99)
+            parts.append(f"{side} {listed} ms ({verdict})")
+        verdicts.append(f"`{engine}`: first frame p99 by round, " + "; ".join(parts))
+    header = [
+        "engine",
+        "server",
+        "round",
+        "first frame p50 / p99 / max ms (probe requests)",
+        "frame lag p50 / p99 ms",
+        "sessions held at once",
+        "errors",
+    ]
+    text = bench.source(name, doc) + (
+        f"{doc['streams']} causal sessions (lead {doc['lead_ms']:g} ms, latency budget "
+        f"{doc['latency_budget_ms']:g} ms), one {doc['clip_s']:g} s clip each, beside one "
+        f"connection sending {doc['probe_phonemes']}-phoneme requests whole; the two servers "
+        "alternate within each round. Target: first frame p99 under "
+        f"{target:g} ms in every round.\n\n"
+    )
+    return text + table(header, rows) + "\n" + "".join(f"- {line}\n" for line in verdicts)
+
+
 BLOCKS: dict[str, Callable[[Bench], str]] = {
     "sentences-curve": sentences_curve,
     "sentences-curve-summary": sentences_curve_summary,
@@ -2536,6 +2591,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "cpu-per-session-session15": lambda bench: cpu_per_session(
         bench, "cpu_per_session_session15.json"
     ),
+    "first-frame-priority": first_frame_priority,
     "server-profile": server_profile,
     "message-cost-cuts": message_cost,
     "message-cost-cuts2": lambda bench: message_cost(bench, "message_cost_cuts2.json"),
