@@ -37,13 +37,14 @@ import urllib.error
 import urllib.request
 from collections.abc import Awaitable, Callable, Iterator, MutableMapping
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 from lipstream_client import Done, DoneStats, Frames, Phonemes, Ready, Start
 from lipstream_client.client import AsyncClient
 from lipstream_client.codec import decode, encode, encoding_for_subprotocol, select_subprotocol
+from lipstream_client.exceptions import LipstreamClientError, retry_delay_s
 from lipstream_client.messages import Encoding, End
 
 from ..config import ServerSettings
@@ -54,11 +55,15 @@ REFERENCE_ENV = "LIPSTREAM_REFERENCE_TRAFFIC"
 APP_FACTORY = "lipstream.loadtest.reference:app_from_environment"
 STREAM_PATH = "/v1/stream"
 READY_TIMEOUT_S = 60.0
+READY_ATTEMPTS = 30
+"""Tries at learning an engine's traffic: right after a probe past its capacity the server
+may still be busy draining it, and refuse the connection (``server_busy``) for a while."""
 MAX_MESSAGE_BYTES = 1 << 20
 
 Scope = MutableMapping[str, Any]
 Receive = Callable[[], Awaitable[MutableMapping[str, Any]]]
 Send = Callable[[MutableMapping[str, Any]], Awaitable[None]]
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -192,13 +197,34 @@ async def _answer_ok(send: Send) -> None:
     await send({"type": "http.response.body", "body": body})
 
 
-async def _ready_of(url: str, start: Start, token: str | None, encoding: Encoding) -> Ready:
+async def _ready_once(url: str, start: Start, token: str | None, encoding: Encoding) -> Ready:
     async with AsyncClient(url, encoding, token) as client:
         stream = await client.start_request(start)
         ready = await asyncio.wait_for(stream.ready(), READY_TIMEOUT_S)
         await stream.cancel()
         await asyncio.wait_for(stream.done(), READY_TIMEOUT_S)
         return ready
+
+
+async def with_retries(
+    attempt: Callable[[], Awaitable[T]],
+    attempts: int = READY_ATTEMPTS,
+    sleep: Callable[[float], Awaitable[None]] = asyncio.sleep,
+) -> T:
+    """``attempt()``, tried again while it fails with a retryable error (a busy server), up
+    to ``attempts`` tries, each after the wait the server asked for (``retry_delay_s``)."""
+    for tried in range(attempts):
+        try:
+            return await attempt()
+        except LipstreamClientError as error:
+            if not error.retryable or tried + 1 == attempts:
+                raise
+            await sleep(retry_delay_s(error, tried))
+    raise ValueError(f"attempts must be at least 1, got {attempts}")
+
+
+async def _ready_of(url: str, start: Start, token: str | None, encoding: Encoding) -> Ready:
+    return await with_retries(lambda: _ready_once(url, start, token, encoding))
 
 
 def engine_traffic(

@@ -11,8 +11,14 @@ import pytest
 from lipstream.config import ServerSettings
 from lipstream.engines.base import Model, frame_count
 from lipstream.loadtest.load import LoadTestConfig, loadtest
-from lipstream.loadtest.reference import ReferenceTraffic, engine_traffic, reference_server
+from lipstream.loadtest.reference import (
+    ReferenceTraffic,
+    engine_traffic,
+    reference_server,
+    with_retries,
+)
 from lipstream_client.client import AsyncClient
+from lipstream_client.exceptions import HandshakeRejected
 from tests.lipstream.server.harness import Served, serving
 
 FPS = 60.0
@@ -102,3 +108,51 @@ def test_a_load_test_of_the_reference_gets_every_frame_of_every_request() -> Non
     assert clip["frames"] == 2 * (frame_count(1.0, FPS) + RETURN_FRAMES)
     # The reference's processes are found by their port: a supervisor and two workers.
     assert results["summary"]["server_processes"] == 3
+
+
+BUSY_BODY = (
+    '{"error":{"code":"server_busy","message":"busy","details":{"retry_after_ms":1129,'
+    '"reason":"loop_busy"}}}'
+)
+
+
+def test_learning_the_traffic_waits_out_a_busy_server_as_it_asks() -> None:
+    failures = [HandshakeRejected(503, BUSY_BODY), HandshakeRejected(503, "", retry_after="2")]
+    waits: list[float] = []
+
+    async def attempt() -> str:
+        if failures:
+            raise failures.pop(0)
+        return "ready"
+
+    async def sleep(seconds: float) -> None:
+        waits.append(seconds)
+
+    assert asyncio.run(with_retries(attempt, attempts=3, sleep=sleep)) == "ready"
+    assert waits == [1.129, 2.0]  # details.retry_after_ms, then the Retry-After header
+
+
+def test_learning_the_traffic_gives_up_after_its_attempts_and_on_a_lasting_refusal() -> None:
+    tries = 0
+
+    async def busy() -> str:
+        nonlocal tries
+        tries += 1
+        raise HandshakeRejected(503, BUSY_BODY)
+
+    async def sleep(seconds: float) -> None:
+        pass
+
+    with pytest.raises(HandshakeRejected):
+        asyncio.run(with_retries(busy, attempts=4, sleep=sleep))
+    assert tries == 4
+    tries = 0
+
+    async def forbidden() -> str:
+        nonlocal tries
+        tries += 1
+        raise HandshakeRejected(403, "")
+
+    with pytest.raises(HandshakeRejected):
+        asyncio.run(with_retries(forbidden, attempts=4, sleep=sleep))
+    assert tries == 1
