@@ -10,10 +10,12 @@ moves the closures too). Every model is run driven by phonemes on the held-out l
 each rung (``hmm.model.RUNGS``; ``full`` and ``short`` read the led spans, ``causal_lead``
 and ``causal`` the acoustic ones) and its closures timed against the recordings as
 ``closure_timing.time_frames`` times them (plateau centre less the acoustic onset; RMS).
-``best_lead_ms`` picks, on the ``full`` rung averaged over the seeds, the lead whose
-centre lag is nearest 0 without the RMS rising. For information, not for choosing: the
-``full`` rung's lag behind the real lips on the real-face set
-(``closure_sources.lags_by_context``, plateau centres as ``evaluation.closure_lags``).
+Each model's ``full`` rung is also timed on the real-face set's force-aligned phones,
+behind the character rendered on them (``closure_sources.RealPhones``) and, for
+information, behind the real lips (plateau centres as ``evaluation.closure_lags``).
+``best_lead_ms`` (``closure_timing``) picks, averaged over the seeds, the lead whose
+closures sit nearest the character's on both the held-out lines and the real phones
+without the RMS rising.
 
 ``anime-graph`` and ``expressive-dp`` (``EVALUATED``), which do not lead, are evaluated as
 leading them would make them: trained on the train split with the demo models'
@@ -41,12 +43,10 @@ from ..engines.base import Model
 from ..engines.dam.engine import led_corpus
 from ..engines.hmm.engine import HmmEngine
 from ..engines.hmm.model import RUNGS, HmmModel
-from ..evaluation import lip_aperture
 from ..results_file import recorded, script_command, write_results
-from .closure_sources import lags_by_context, summarize_lags
+from .closure_sources import RealPhones
 from .closure_timing import LEADS_MS, best_lead_ms, time_frames
 from .demo_calibration import REAL_SET
-from .real_faces import Clip, real_clips
 
 MODULE = "lipstream.bench.bilabial_lead_sweep"
 EVALUATED = ("anime-graph", "expressive-dp")
@@ -75,29 +75,6 @@ def frames_on(
     ]
 
 
-def real_lag(
-    model: Model, clips: Sequence[Clip], fps: float, lead_s: float = 0.0, **options: Any
-) -> dict[str, Any]:
-    """The closure lag (ms, mean and standard error) of ``model`` behind the real lips of
-    ``clips``, run on their phones with the bilabials led by ``lead_s`` first."""
-    predicted = []
-    for clip in clips:
-        frames = model.synthesize(lead_bilabials(clip.phones, lead_s), fps=fps, **options).frames
-        aperture = _aperture(frames, model.channels)
-        padded = np.full(len(clip.aperture), aperture[-1])
-        padded[: min(len(padded), len(aperture))] = aperture[: len(padded)]
-        predicted.append(padded)
-    lags = lags_by_context(clips, [clip.aperture for clip in clips], predicted, fps)["all"]
-    summary = summarize_lags(lags)
-    return {"mean_ms": summary.mean_ms, "se_ms": summary.se_ms, "count": summary.count}
-
-
-def _aperture(frames: np.ndarray, channels: Sequence[str]) -> np.ndarray:
-    aperture = lip_aperture(frames, channels)
-    assert aperture is not None, "the demo character has a lip aperture"
-    return aperture
-
-
 def timed(frames: list[np.ndarray], heldout: Corpus) -> dict[str, Any]:
     """``closure_timing.time_frames`` without the groups."""
     found = time_frames(frames, heldout)
@@ -108,11 +85,12 @@ def hmm_sweep(
     settings: dict[str, Any],
     train: Corpus,
     heldout: Corpus,
-    clips: tuple[Sequence[Clip], float],
+    real: RealPhones,
     seeds: Sequence[int],
 ) -> list[dict[str, Any]]:
     """Per lead of ``HMM_LEADS_MS`` and seed: ``hmm`` trained on ``train`` with ``settings``,
-    timed on ``heldout`` on every rung, and its ``full`` rung's lag on the real ``clips``."""
+    timed on ``heldout`` on every rung, and its ``full`` rung's lag on the ``real`` phones
+    behind the character and behind the real lips."""
     rows = []
     for lead_ms in HMM_LEADS_MS:
         for seed in seeds:
@@ -128,7 +106,8 @@ def hmm_sweep(
                     "lead_ms": lead_ms,
                     "seed": seed,
                     "rungs": rungs,
-                    "real": real_lag(model, clips[0], clips[1], **rung_options(FULL)),
+                    "real_phones_lag_ms": real.behind_character(model)["mean_ms"],
+                    "real": real.behind_real(model),
                 }
             )
     return rows
@@ -156,6 +135,7 @@ def seed_means(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
                     }
                     for name, _, _ in RUNGS
                 },
+                "real_phones_lag_ms": float(np.mean([row["real_phones_lag_ms"] for row in chosen])),
                 "real_lag_ms": float(np.mean([row["real"]["mean_ms"] for row in chosen])),
             }
         )
@@ -166,11 +146,11 @@ def evaluated(
     name: str,
     settings: dict[str, Any],
     corpora: tuple[Corpus, Corpus],
-    clips: tuple[Sequence[Clip], float],
+    real: RealPhones,
 ) -> list[dict[str, Any]]:
     """Per lead of ``LEADS_MS``, engine ``name`` with ``settings`` trained on the train
     split of ``corpora`` led by hand and run on led spans: timed on the held-out split and
-    behind the real lips of ``clips``."""
+    on the ``real`` phones, behind the character and behind the real lips."""
     train, heldout = corpora
     rows = []
     for lead_ms in LEADS_MS:
@@ -180,7 +160,8 @@ def evaluated(
             {
                 "lead_ms": lead_ms,
                 **timed(frames_on(model, heldout, lead_s), heldout),
-                "real": real_lag(model, clips[0], clips[1], lead_s),
+                "real_phones_lag_ms": real.behind_character(model, lead_s)["mean_ms"],
+                "real": real.behind_real(model, lead_s),
             }
         )
     return rows
@@ -189,8 +170,7 @@ def evaluated(
 def run(home: Path, real_set: Path, seeds: Sequence[int], command: str) -> dict[str, Any]:
     corpus = load_corpus(home / "demo" / "corpus")
     train, heldout = corpus.split()
-    real = load_corpus(real_set)
-    clips = (real_clips(real), real.fps)
+    real = RealPhones.load(real_set)
     with threadpool_limits(limits=1):
         built = load_model(home / "demo" / "models" / "hmm")
         settings = {
@@ -198,7 +178,7 @@ def run(home: Path, real_set: Path, seeds: Sequence[int], command: str) -> dict[
             for key, value in built.manifest.hyperparameters.items()
             if key != "bilabial_lead_s"
         }
-        rows = hmm_sweep(settings, train, heldout, clips, seeds)
+        rows = hmm_sweep(settings, train, heldout, real, seeds)
         means = seed_means(rows)
         chosen = HmmEngine().hyperparameters()["bilabial_lead_s"]
         engines: dict[str, Any] = {
@@ -212,12 +192,12 @@ def run(home: Path, real_set: Path, seeds: Sequence[int], command: str) -> dict[
         }
         for name in EVALUATED:
             hyper = dict(load_model(home / "demo" / "models" / name).manifest.hyperparameters)
-            leads = evaluated(name, hyper, (train, heldout), clips)
+            leads = evaluated(name, hyper, (train, heldout), real)
             engines[name] = {"leads": leads, "best_lead_ms": best_lead_ms(leads)}
     return {
         **recorded(command),
         "corpus": {"name": corpus.name, "digest": corpus.digest(), "fps": corpus.fps},
-        "real_set": {"name": real.name, "clips": len(clips[0]), "fps": real.fps},
+        "real_set": {"name": real.name, "clips": len(real.clips), "fps": real.fps},
         "rungs": [name for name, _, _ in RUNGS],
         "engines": engines,
     }
@@ -230,7 +210,8 @@ def format_sweep(results: dict[str, Any]) -> str:
             real = row["real_lag_ms"] if "real_lag_ms" in row else row["real"]["mean_ms"]
             line = (
                 f"{engine} lead {row['lead_ms']:g} ms: held-out lag {row['lag_ms']:+.1f} ms,"
-                f" RMS {row['rms']:.5f}; real lag {real:+.1f} ms"
+                f" RMS {row['rms']:.5f}; behind the character on the real phones"
+                f" {row['real_phones_lag_ms']:+.1f} ms; real lag {real:+.1f} ms"
             )
             if "rungs" in row:
                 line += "; rungs " + ", ".join(

@@ -39,6 +39,7 @@ from threadpoolctl import threadpool_limits
 from ..corpus import load_corpus
 from ..demo.face import DEMO_CHANNELS, generate_face
 from ..demo.speakers import DEMO_SPEAKERS
+from ..engines.base import Model
 from ..evaluation import BILABIALS, closure_lags
 from ..phonemes import SILENCE
 from ..results_file import recorded, script_command, write_results
@@ -138,6 +139,48 @@ def split_lags(
     }
 
 
+def character_apertures(clips: Sequence[Clip], fps: float) -> list[np.ndarray]:
+    """``character_aperture`` on each clip's frames from its phones (clip i with seed i)."""
+    return [
+        character_aperture(clip.phones, len(clip.aperture), fps, seed)
+        for seed, clip in enumerate(clips)
+    ]
+
+
+@dataclass(frozen=True)
+class RealPhones:
+    """The real-face set's clips with the character rendered on their force-aligned phones:
+    what an engine's closures are timed against on real speech's phone sequences, with the
+    real lips (``behind_real``) or without them (``behind_character``)."""
+
+    name: str
+    clips: Sequence[Clip]
+    character: Sequence[np.ndarray]
+    fps: float
+
+    @classmethod
+    def load(cls, real_set: Path) -> RealPhones:
+        corpus = load_corpus(real_set)
+        clips = real_clips(corpus)
+        return cls(corpus.name, clips, character_apertures(clips, corpus.fps), corpus.fps)
+
+    def behind_character(self, model: Model, lead_s: float = 0.0) -> dict[str, Any]:
+        """The closure lag (ms: mean, standard error, count) of ``model`` behind the
+        character at every /p b m/, run on the clips' phones led by ``lead_s``."""
+        return self._behind(self.character, model, lead_s)
+
+    def behind_real(self, model: Model, lead_s: float = 0.0) -> dict[str, Any]:
+        """As ``behind_character``, behind the real lips."""
+        return self._behind([clip.aperture for clip in self.clips], model, lead_s)
+
+    def _behind(
+        self, reference: Sequence[np.ndarray], model: Model, lead_s: float
+    ) -> dict[str, Any]:
+        predicted = predicted_apertures(model, self.clips, self.fps, lead_s)
+        lags = lags_by_context(self.clips, reference, predicted, self.fps)["all"]
+        return asdict(summarize_lags(lags))
+
+
 def character_aperture_r(clips: Sequence[Clip], character: Sequence[np.ndarray]) -> float:
     """Pearson r of the character's aperture and the real one over each clip's speech
     frames, averaged over the clips where both move."""
@@ -190,10 +233,7 @@ def phoneme_mean_aperture_r(clips: Sequence[Clip], fps: float) -> float:
 def run(real_set: Path, models_dir: Path, command: str) -> dict[str, Any]:
     corpus = load_corpus(real_set)
     clips = real_clips(corpus)
-    character = [
-        character_aperture(clip.phones, len(clip.aperture), corpus.fps, seed)
-        for seed, clip in enumerate(clips)
-    ]
+    character = character_apertures(clips, corpus.fps)
     with threadpool_limits(limits=1):
         predicted = {
             model.manifest.engine: predicted_apertures(model, clips, corpus.fps)

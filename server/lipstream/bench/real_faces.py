@@ -32,6 +32,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .._version import __version__
+from ..bilabial_lead import lead_bilabials
 from ..corpus import Corpus, Utterance
 from ..engines import load_model
 from ..engines.base import Model
@@ -153,12 +154,16 @@ class RealFaceRow:
     aperture_r_by_clip: dict[str, float | None]
 
 
-def predicted_apertures(model: Model, clips: Sequence[Clip], fps: float) -> list[np.ndarray]:
-    """``model``'s lip aperture for each clip, from its phones, on the clip's frames (the
-    last frame held should the synthesis end early)."""
+def predicted_apertures(
+    model: Model, clips: Sequence[Clip], fps: float, lead_s: float = 0.0
+) -> list[np.ndarray]:
+    """``model``'s lip aperture for each clip, from its phones (their bilabials led by
+    ``lead_s``, ``bilabial_lead.lead_bilabials``), on the clip's frames (the last frame held
+    should the synthesis end early)."""
     predicted = []
     for clip in clips:
-        frames = model.synthesize(clip.phones, fps=fps, audio=None).frames
+        phones = lead_bilabials(clip.phones, lead_s) if lead_s > 0.0 else clip.phones
+        frames = model.synthesize(phones, fps=fps, audio=None).frames
         aperture = lip_aperture(frames, model.channels)
         if aperture is None or len(aperture) == 0:
             raise LipstreamError(

@@ -1733,8 +1733,10 @@ def closure_timing(bench: Bench) -> str:
         "\nThe sweep of `bilabial_lead_s`: trained and run with every bilabial's span started "
         "the lead earlier than its acoustic one (the preceding span shortened, by at most "
         "half), held-out lines timed against the recordings on the acoustic spans, offline "
-        "(the search rungs) and on the `causal` rung (which keeps the acoustic spans); "
-        "**bold**: the engine's default.\n\n"
+        "(the search rungs) and on the `causal` rung (which keeps the acoustic spans); then "
+        "offline on the real set's force-aligned phones, behind the character rendered on "
+        "them and, for information, behind the real lips; **bold**: the engine's default."
+        "\n\n"
     )
     header = [
         "engine",
@@ -1745,6 +1747,7 @@ def closure_timing(bench: Bench) -> str:
         "RMS",
         "`causal` centre lag",
         "`causal` RMS",
+        *REAL_PHONES_HEADER,
     ]
     text += table(header, leads)
     picks = [
@@ -1753,14 +1756,17 @@ def closure_timing(bench: Bench) -> str:
         if "best_lead_ms" in parts and "chosen_lead_ms" in parts
     ]
     if picks:
-        text += (
-            "\nThe sweep's pick, the held-out centre lag nearest 0 without the held-out RMS "
-            "rising above the unled one: " + ", ".join(picks) + ".\n"
-        )
+        text += f"\n{LEAD_CRITERION}: " + ", ".join(picks) + ".\n"
     return text
 
 
 BILABIAL_LEAD_SWEEP = "bilabial_lead_sweep.json"
+REAL_PHONES_HEADER = ("behind the character, real phones", "behind the real lips")
+LEAD_CRITERION = (
+    "The sweep's pick (`closure_timing.best_lead_ms`), among the leads whose held-out RMS is "
+    "not above the unled one, the least of the larger of the held-out centre lag and the lag "
+    "behind the character on the real phones"
+)
 
 
 def bilabial_lead_hmm(bench: Bench) -> str:
@@ -1778,12 +1784,13 @@ def bilabial_lead_hmm(bench: Bench) -> str:
         f"seeds {', '.join(str(seed) for seed in found['seeds'])}, driven by phonemes; the "
         f"held-out lines' closures timed against the recordings (centre lag, ms, and RMS, "
         f"means over the seeds), on `{rungs[0]}` (centre, closing and release) and every "
-        f"other rung; the real lag is `{rungs[0]}`'s behind the real lips of the "
-        f"{doc['real_set']['clips']} clips of `{doc['real_set']['name']}` (for information). "
+        f"other rung; then `{rungs[0]}` on the force-aligned phones of the "
+        f"{doc['real_set']['clips']} clips of `{doc['real_set']['name']}`, behind the "
+        "character rendered on them and, for information, behind the real lips. "
         "**Bold**: the engine's default.\n\n"
     )
     header = ["lead, ms", "centre lag", "closing lag", "release lag", "RMS"]
-    header += [f"`{rung}` lag / RMS" for rung in rungs[1:]] + ["real lag"]
+    header += [f"`{rung}` lag / RMS" for rung in rungs[1:]] + list(REAL_PHONES_HEADER)
     rows = []
     for row in found["leads"]:
         lead = f"{row['lead_ms']:g}"
@@ -1799,13 +1806,13 @@ def bilabial_lead_hmm(bench: Bench) -> str:
                     f"{number(row['rungs'][rung]['rms'], 4)}"
                     for rung in rungs[1:]
                 ),
-                _signed(row["real_lag_ms"], 1),
+                *_real_phones_cells(row),
             ]
         )
     text += table(header, rows)
     return text + (
-        f"\nThe sweep's pick, the `{rungs[0]}` centre lag nearest 0 without the RMS rising "
-        f"above the unled one: {found['best_lead_ms']:g} ms (default {chosen:g} ms).\n"
+        f"\n{LEAD_CRITERION} (`{rungs[0]}`, means over the seeds): "
+        f"{found['best_lead_ms']:g} ms (default {chosen:g} ms).\n"
     )
 
 
@@ -1822,9 +1829,9 @@ def bilabial_lead_evaluated(engine: str) -> Callable[[Bench], str]:
             f"`{engine}` trained on the `{doc['corpus']['name']}` train split (the demo "
             "model's hyperparameters) with every bilabial's span started the lead earlier, "
             "and run on the held-out lines' spans so led (its default rung); closures timed "
-            "against the recordings (centre lag, ms; RMS), and behind the real lips of the "
-            f"{doc['real_set']['clips']} clips of `{doc['real_set']['name']}` (for "
-            "information).\n\n"
+            "against the recordings (centre lag, ms; RMS), then on the force-aligned phones "
+            f"of the {doc['real_set']['clips']} clips of `{doc['real_set']['name']}`, behind "
+            "the character rendered on them and, for information, behind the real lips.\n\n"
         )
         rows = [
             [
@@ -1833,18 +1840,16 @@ def bilabial_lead_evaluated(engine: str) -> Callable[[Bench], str]:
                 _signed(row["closing_lag_ms"], 1),
                 _signed(row["release_lag_ms"], 1),
                 number(row["rms"], 5),
-                _signed(row["real"]["mean_ms"], 1),
+                *_real_phones_cells(row),
             ]
             for row in found["leads"]
         ]
-        header = ["lead, ms", "centre lag", "closing lag", "release lag", "RMS", "real lag"]
+        header = ["lead, ms", "centre lag", "closing lag", "release lag", "RMS"]
+        header += list(REAL_PHONES_HEADER)
         return (
             text
             + table(header, rows)
-            + (
-                "\nThe pick by `dam`'s criterion (centre lag nearest 0 without the RMS rising "
-                f"above the unled one): {found['best_lead_ms']:g} ms.\n"
-            )
+            + f"\n{LEAD_CRITERION}: {found['best_lead_ms']:g} ms.\n"
         )
 
     render.__name__ = f"bilabial_lead_{engine.replace('-', '_')}"
@@ -1876,6 +1881,18 @@ def _lead_row(engine: str, row: dict[str, Any], chosen_ms: float | None) -> list
         number(row["rms"], 4),
         _signed(causal["lag_ms"], 1) if causal else "–",
         number(causal["rms"], 4) if causal else "–",
+        *_real_phones_cells(row),
+    ]
+
+
+def _real_phones_cells(row: dict[str, Any]) -> list[str]:
+    """A sweep row's lag behind the character and behind the real lips, on the real set's
+    phones (``–`` for a row measured before them)."""
+    phones = row.get("real_phones_lag_ms")
+    real = row.get("real_lag_ms", (row.get("real") or {}).get("mean_ms"))
+    return [
+        "–" if phones is None else _signed(phones, 1),
+        "–" if real is None else _signed(real, 1),
     ]
 
 
@@ -2528,7 +2545,100 @@ def first_frame_priority(bench: Bench, name: str = "first_frame_priority.json") 
     return text + table(header, rows) + "\n" + "".join(f"- {line}\n" for line in verdicts)
 
 
+THROUGHPUT_CPU = "cpu_per_session_session15.json"
+THROUGHPUT_LAG_WINDOW = "call_pairs_lag_window.json"
+THROUGHPUT_FIRST_FRAME = "first_frame_priority.json"
+FLOOR_CAPACITY_TARGET = 0.8
+BEST_CAPACITY_TARGET = 0.6
+LAG4_CALL_TARGET_US = 150.0
+
+
+def _spread(values: Sequence[float], digits: int = 2) -> str:
+    low, high = min(values), max(values)
+    return number(low, digits) if low == high else f"{number(low, digits)}–{number(high, digits)}"
+
+
+def _engines(count: int) -> str:
+    return f"{count} engine" + ("" if count == 1 else "s")
+
+
+def _ratio_verdict(values: Sequence[float], target: float, at_most: bool) -> str:
+    """Met when every value is on the right side of ``target``; else how many miss it and
+    by what factors."""
+    factors = [value / target if at_most else target / value for value in values]
+    missed = [factor for factor in factors if factor > 1.0]
+    if not missed:
+        return f"met by all {len(values)}"
+    return f"missed by {len(missed)} of {len(values)}, by {_spread(missed)}×"
+
+
+def throughput_targets(bench: Bench) -> str:
+    """Issue 27's targets, each beside the figure that measures it and whether it is met,
+    read from the results files of the sections below."""
+    rows = []
+    cpu = bench.load(THROUGHPUT_CPU)
+    for label, target, causal in (
+        ("the causal rung", CAUSAL_CPU_RATIO_TARGET, True),
+        ("the best rung", BEST_CPU_RATIO_TARGET, False),
+    ):
+        ratios = [
+            run["cpu_ratio"]
+            for run in cpu["runs"]
+            if ("causal" in run["fidelity"]) == causal and run.get("cpu_ratio") is not None
+        ]
+        rows.append(
+            [
+                f"server CPU per session-second at {label}, over the reference's: at most "
+                f"{target:g}",
+                f"{_spread(ratios)} over {_engines(len(ratios))} (`bench/{THROUGHPUT_CPU}`)",
+                _ratio_verdict(ratios, target, at_most=True),
+            ]
+        )
+    calls = bench.load(THROUGHPUT_LAG_WINDOW)
+    lag4 = next(row for row in calls["rows"] if row["rung"] == "lag-4")
+    call_us = lag4["after_median_us"]
+    rows.append(
+        [
+            f"`expressive-dp` `lag-4` streamed call: at most {LAG4_CALL_TARGET_US:g} µs",
+            f"{number(call_us)} µs, median (`bench/{THROUGHPUT_LAG_WINDOW}`)",
+            "met"
+            if call_us <= LAG4_CALL_TARGET_US
+            else f"missed by {number(call_us - LAG4_CALL_TARGET_US, 0)} µs",
+        ]
+    )
+    first = bench.load(THROUGHPUT_FIRST_FRAME)
+    worst = max(row["first_frame_ms"]["p99"] for row in first["rows"] if row["side"] == "before")
+    rows.append(
+        [
+            f"first frame of a whole request beside {first['streams']} causal sessions: p99 "
+            f"under {first['target_p99_ms']:g} ms for every engine",
+            f"worst round of any engine {number(worst, 0)} ms (`bench/{THROUGHPUT_FIRST_FRAME}`)",
+            "met"
+            if worst < first["target_p99_ms"]
+            else f"missed by {number(worst - first['target_p99_ms'], 0)} ms",
+        ]
+    )
+    for label, name, target in (
+        ("at the latency floor", "capacity_floor.json", FLOOR_CAPACITY_TARGET),
+        ("at the best rungs", "capacity_best.json", BEST_CAPACITY_TARGET),
+    ):
+        ratios = [
+            search["capacity_ratio"]
+            for search in bench.load(name)["searches"]
+            if search.get("capacity_ratio") is not None
+        ]
+        rows.append(
+            [
+                f"sessions held {label}, over the reference's: at least {target:g}",
+                f"{_spread(ratios)} over {_engines(len(ratios))} (`bench/{name}`)",
+                _ratio_verdict(ratios, target, at_most=False),
+            ]
+        )
+    return table(["target", "measured", "verdict"], rows)
+
+
 BLOCKS: dict[str, Callable[[Bench], str]] = {
+    "throughput-targets": throughput_targets,
     "sentences-curve": sentences_curve,
     "sentences-curve-summary": sentences_curve_summary,
     "hmm-voices": hmm_voices,

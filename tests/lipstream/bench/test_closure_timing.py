@@ -95,3 +95,15 @@ def test_best_lead_is_the_lag_nearest_zero_without_the_rms_rising() -> None:
     ]
     assert best_lead_ms(rows) == 20.0
     assert best_lead_ms(rows[:2]) == 0.0
+
+
+def test_best_lead_also_keeps_the_closures_near_the_character_on_the_real_phones() -> None:
+    rows = [
+        {"lead_ms": 0.0, "lag_ms": 13.0, "rms": 0.0620, "real_phones_lag_ms": 17.0},
+        {"lead_ms": 20.0, "lag_ms": 8.5, "rms": 0.0618, "real_phones_lag_ms": -3.0},
+        {"lead_ms": 30.0, "lag_ms": 5.0, "rms": 0.0620, "real_phones_lag_ms": -9.0},
+        {"lead_ms": 40.0, "lag_ms": -1.0, "rms": 0.0619, "real_phones_lag_ms": -14.0},
+    ]
+    # the held-out lines alone pick 40 ms; the larger of the two magnitudes is least at 20
+    assert best_lead_ms([{k: v for k, v in r.items() if k != "real_phones_lag_ms"} for r in rows]) == 40.0
+    assert best_lead_ms(rows) == 20.0

@@ -977,6 +977,8 @@ def test_closure_timing_renders_each_engine_part_and_group(tmp_path: Path) -> No
                         "release_lag_ms": -33.25,
                         "rms": 0.05561,
                         "causal": {"lag_ms": 9.25, "rms": 0.0601},
+                        "real_phones_lag_ms": -3.25,
+                        "real": {"mean_ms": -2.75, "se_ms": 4.5, "count": 79},
                     },
                 ],
                 "chosen_lead_ms": 20.0,
@@ -1003,12 +1005,60 @@ def test_closure_timing_renders_each_engine_part_and_group(tmp_path: Path) -> No
     assert rendered.index(fit_row) < rendered.index("held-out lines, synthesized")
     assert "| < -20 | 2 | -28.0 | +20.2 | +27.5 |" in rendered
     assert "| 0 .. 20 | 0 | – | – | – |" in rendered
-    assert "| `dam` | **20** | +2.9 | +39.0 | -33.2 | 0.0556 | +9.2 | 0.0601 |" in rendered
-    assert "| `dam` | 0 | +11.0 | +52.0 | -30.0 | 0.0558 | – | – |" in rendered
+    assert (
+        "| `dam` | **20** | +2.9 | +39.0 | -33.2 | 0.0556 | +9.2 | 0.0601 | -3.2 | -2.8 |"
+        in rendered
+    )
+    assert "| `dam` | 0 | +11.0 | +52.0 | -30.0 | 0.0558 | – | – | – | – |" in rendered
     assert rendered.index("| `dam` | 0 | +11.0 |") < rendered.index("| `dam` | **20** |")
     assert "after silence (or first in a line, 4 closures) closes at -94.0" in rendered
-    assert "rising above the unled one: `dam` 20 ms (default 20 ms)." in rendered
+    assert "behind the character on the real phones: `dam` 20 ms (default 20 ms)." in rendered
     assert (
         "centres at -18.5 ms" in rendered and "after a phoneme (9) at -42.0 and +13.0" in rendered
     )
     assert "Not measured yet" in BLOCKS["closure-timing"](Bench(tmp_path / "empty"))
+
+
+def test_throughput_targets_put_each_figure_beside_its_target(tmp_path: Path) -> None:
+    def cpu_run(engine: str, fidelity: str, ratio: float) -> dict[str, Any]:
+        return {"engine": engine, "fidelity": fidelity, "cpu_ratio": ratio}
+
+    cpu = {
+        "runs": [
+            cpu_run("viseme-lerp", "causal", 1.2),
+            cpu_run("dam", "causal_lead", 1.5),
+            cpu_run("viseme-lerp", "lerp", 1.4),
+            cpu_run("dam", "full", 1.45),
+        ]
+    }
+    calls = {"rows": [{"engine": "expressive-dp", "rung": "lag-4", "after_median_us": 183.25}]}
+    first = {
+        "streams": 500,
+        "target_p99_ms": 50.0,
+        "rows": [
+            {"engine": "dam", "side": "before", "first_frame_ms": {"p99": 46.0}},
+            {"engine": "dam", "side": "after", "first_frame_ms": {"p99": 180.0}},
+        ],
+    }
+    floor = {"searches": [{"engine": "dam", "capacity_ratio": 0.5}, {"engine": "hmm"}]}
+    best = {"searches": [{"engine": "dam", "capacity_ratio": 0.75}]}
+    for name, doc in (
+        ("cpu_per_session_session15.json", cpu),
+        ("call_pairs_lag_window.json", calls),
+        ("first_frame_priority.json", first),
+        ("capacity_floor.json", floor),
+        ("capacity_best.json", best),
+    ):
+        (tmp_path / name).write_text(json.dumps(doc))
+    rendered = BLOCKS["throughput-targets"](Bench(tmp_path))
+    assert "at most 1.25 | 1.20–1.50 over 2 engines" in rendered
+    assert "missed by 1 of 2, by 1.20×" in rendered  # 1.5 / 1.25
+    assert "at most 1.5 | 1.40–1.45 over 2 engines" in rendered
+    assert "met by all 2" in rendered
+    assert "183.2 µs, median" in rendered and "missed by 33 µs" in rendered
+    # the served code's rounds only: the variant's 180 ms is not the server's
+    assert "worst round of any engine 46 ms" in rendered and "| met |" in rendered
+    # a search without a reference has no ratio and is left out
+    assert "at least 0.8 | 0.50 over 1 engine " in rendered
+    assert "missed by 1 of 1, by 1.60×" in rendered
+    assert "at least 0.6 | 0.75 over 1 engine (`bench/capacity_best.json`) | met by all 1 |" in rendered

@@ -33,9 +33,10 @@ from .modes import assign_modes, collect_occurrences, resample
 from .tails import choose_tail, truncation_errors
 
 DAM_BILABIAL_LEAD_S = 0.02
-COHEN_MASSARO_BILABIAL_LEAD_S = 0.04
-"""The leads of /p b m/ by the sweep of ``bench.closure_timing`` on the demo corpus: the
-held-out closure centre nearest the recording's without the held-out RMS rising."""
+COHEN_MASSARO_BILABIAL_LEAD_S = 0.02
+"""The leads of /p b m/ by the sweep of ``bench.closure_timing``: the closure centres
+nearest the character's, on the demo's held-out lines and on the real-face set's phones,
+without the held-out RMS rising (``closure_timing.best_lead_ms``)."""
 
 
 def led_corpus(corpus: Any, lead_s: float) -> Any:
