@@ -305,17 +305,27 @@ def read_results(path: Path) -> dict[str, Any]:
 
 
 def merge_results(path: Path, search: dict[str, Any]) -> dict[str, Any]:
-    """The results file with ``search`` added, replacing a search with the same key."""
+    """The results file with ``search`` added, replacing a search with the same key. The
+    file's ``date`` spans its searches' dates and its ``command`` is theirs when they share
+    one; its notes (keys holding ``note``) are kept."""
     document = read_results(path)
     key = tuple(search.get(name) for name in _SEARCH_KEY)
     kept = [
         old for old in document["searches"] if tuple(old.get(name) for name in _SEARCH_KEY) != key
     ]
-    return {
+    searches = [*kept, search]
+    merged: dict[str, Any] = {
         "tool": f"lipstream loadtest capacity {__version__}",
         "machine": {**machine(), "event_loop": event_loop_name()},
-        "searches": [*kept, search],
     }
+    dates = sorted(str(found["date"]) for found in searches if found.get("date"))
+    if dates:
+        merged["date"] = dates[0] if dates[0] == dates[-1] else f"{dates[0]} to {dates[-1]}"
+    commands = {found.get("command") for found in searches}
+    if len(commands) == 1 and None not in commands:
+        merged["command"] = commands.pop()
+    notes = {name: value for name, value in document.items() if "note" in name}
+    return {**merged, **notes, "searches": searches}
 
 
 def record_search(path: Path, search: dict[str, Any]) -> None:

@@ -20,6 +20,7 @@ import json
 import shlex
 import sys
 from dataclasses import replace
+from datetime import UTC, datetime
 from typing import TYPE_CHECKING, Any
 
 from lipstream_client.messages import ENCODINGS
@@ -152,6 +153,8 @@ def _capacity(args: argparse.Namespace, settings: Settings) -> None:
         )
         print(f"{engine}:")
         result = find_capacity(search, progress=print, references=references)
+        result["date"] = datetime.now(UTC).isoformat(timespec="seconds")
+        result["command"] = "lipstream " + shlex.join(sys.argv[1:])
         record_search(path, result)
         print(f"{_capacity_line(result, args)}; written to {path}")
 

@@ -191,6 +191,22 @@ def test_searches_accumulate_in_one_file_by_key(tmp_path: Path) -> None:
     assert [s["capacity_streams"] for s in budgeted["searches"]] == [200, 575, 90]
 
 
+def test_the_file_dates_itself_by_its_searches_and_keeps_its_notes(tmp_path: Path) -> None:
+    path = tmp_path / "capacity.json"
+    command = "lipstream loadtest capacity --engine all --character demo"
+    first = {"engine": "dam", "date": "2026-12-05T00:10:00+00:00", "command": command}
+    path.write_text(json.dumps({**merge_results(path, first), "note": "quiet machine"}))
+    second = {"engine": "hmm", "date": "2026-12-05T00:20:00+00:00", "command": command}
+    document = merge_results(path, second)
+    assert document["date"] == "2026-12-05T00:10:00+00:00 to 2026-12-05T00:20:00+00:00"
+    assert document["command"] == command and document["note"] == "quiet machine"
+    path.write_text(json.dumps(document))
+    other = {"engine": "dam", "date": "2026-12-05T00:30:00+00:00", "command": command + " -x"}
+    mixed = merge_results(path, other)  # replaces dam's search: hmm's date is now the first
+    assert mixed["date"] == "2026-12-05T00:20:00+00:00 to 2026-12-05T00:30:00+00:00"
+    assert "command" not in mixed  # each search keeps its own
+
+
 def test_a_results_file_of_another_shape_is_refused_not_overwritten(tmp_path: Path) -> None:
     path = tmp_path / "figures.json"
     original = json.dumps({"note": "hand-made figures", "two_workers": [{"streams": 150}]})
