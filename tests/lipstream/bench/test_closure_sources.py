@@ -1,7 +1,10 @@
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
 from lipstream.bench.closure_sources import (
+    RealPhones,
     bilabial_contexts,
     character_aperture,
     character_aperture_r,
@@ -131,3 +134,33 @@ def test_the_character_shuts_its_lips_in_the_m_and_opens_them_in_the_vowels() ->
     # the vowels' middles
     assert aperture[14] < 0.02
     assert aperture[10] > 0.1 and aperture[18] > 0.1
+
+
+class _DippingModel:
+    """A model whose lips close once, lowest ``shift_s`` after the start of its input's
+    first /B/ (jawOpen the aperture, mouthClose 0)."""
+
+    channels = ("jawOpen", "mouthClose")
+
+    def __init__(self, shift_s: float) -> None:
+        self.shift_s = shift_s
+        self.manifest = SimpleNamespace(engine="dipping")
+
+    def synthesize(self, phones: list[PhonemeSpan], fps: float, audio: None) -> SimpleNamespace:
+        onset = next(span.start for span in phones if span.phoneme == "B")
+        times = np.arange(100) / fps
+        frames = np.stack([_dip(times, onset + self.shift_s), np.zeros(len(times))], axis=1)
+        return SimpleNamespace(frames=frames)
+
+
+def test_real_phones_time_a_model_behind_the_character_and_behind_the_real_lips() -> None:
+    phones = [PhonemeSpan("AA", 0.0, 0.4), PhonemeSpan("B", 0.4, 0.5), PhonemeSpan("IY", 0.5, 1.0)]
+    times = np.arange(100) / FPS
+    clip = _clip("a", phones, real_at=0.42)
+    real = RealPhones("set", [clip], [_dip(times, 0.45)], FPS)  # the character at 0.45 s
+    model = _DippingModel(0.08)  # lowest at 0.48 s
+    assert real.behind_character(model)["mean_ms"] == pytest.approx(30.0)
+    assert real.behind_real(model)["mean_ms"] == pytest.approx(60.0)
+    assert real.behind_real(model)["count"] == 1
+    # led by 30 ms, the model's /B/ starts at 0.37 s: lowest at 0.45 s, with the character
+    assert real.behind_character(model, lead_s=0.03)["mean_ms"] == pytest.approx(0.0, abs=1e-6)
