@@ -25,7 +25,7 @@ character rendered on them (``closure_sources.RealPhones``; the real lips only f
 information). ``best_lead_ms`` picks the lead that puts the closures nearest the
 character's on both.
 
-``python -m lipstream.bench.closure_timing --home DIR [--real DIR] --json bench/closure_timing.json``
+``python -m lipstream.bench.closure_timing --home DIR [--real DIR] --json FILE``
 """
 
 from __future__ import annotations
@@ -178,9 +178,7 @@ def fitted_at_leads(name: str, hyperparameters: dict[str, Any], train: Corpus) -
     }
 
 
-def time_leads(
-    models: dict[float, Any], heldout: Corpus, real: RealPhones
-) -> list[dict[str, Any]]:
+def time_leads(models: dict[float, Any], heldout: Corpus, real: RealPhones) -> list[dict[str, Any]]:
     """The models of ``fitted_at_leads`` run on ``heldout`` (offline, and on the ``causal``
     rung), their closures timed against the recordings; and offline on the real set's
     phones, behind the character (``real_phones_lag_ms``) and, for information, behind the
@@ -226,7 +224,7 @@ def best_lead_ms(rows: Sequence[dict[str, Any]]) -> float:
     kept = [row for row in rows if row["rms"] <= unled["rms"]]
 
     def distance(row: dict[str, Any]) -> float:
-        return max(abs(row["lag_ms"]), abs(row.get("real_phones_lag_ms", 0.0)))
+        return float(max(abs(row["lag_ms"]), abs(row.get("real_phones_lag_ms", 0.0))))
 
     return float(min(kept, key=distance)["lead_ms"])
 

@@ -1846,11 +1846,7 @@ def bilabial_lead_evaluated(engine: str) -> Callable[[Bench], str]:
         ]
         header = ["lead, ms", "centre lag", "closing lag", "release lag", "RMS"]
         header += list(REAL_PHONES_HEADER)
-        return (
-            text
-            + table(header, rows)
-            + f"\n{LEAD_CRITERION}: {found['best_lead_ms']:g} ms.\n"
-        )
+        return text + table(header, rows) + f"\n{LEAD_CRITERION}: {found['best_lead_ms']:g} ms.\n"
 
     render.__name__ = f"bilabial_lead_{engine.replace('-', '_')}"
     return render

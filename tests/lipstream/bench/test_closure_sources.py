@@ -1,4 +1,5 @@
 from types import SimpleNamespace
+from typing import cast
 
 import numpy as np
 import pytest
@@ -13,6 +14,7 @@ from lipstream.bench.closure_sources import (
     split_lags,
 )
 from lipstream.bench.real_faces import Clip
+from lipstream.engines.base import Model
 from lipstream.timeline import PhonemeSpan
 
 FPS = 100.0
@@ -158,7 +160,7 @@ def test_real_phones_time_a_model_behind_the_character_and_behind_the_real_lips(
     times = np.arange(100) / FPS
     clip = _clip("a", phones, real_at=0.42)
     real = RealPhones("set", [clip], [_dip(times, 0.45)], FPS)  # the character at 0.45 s
-    model = _DippingModel(0.08)  # lowest at 0.48 s
+    model = cast(Model, _DippingModel(0.08))  # lowest at 0.48 s
     assert real.behind_character(model)["mean_ms"] == pytest.approx(30.0)
     assert real.behind_real(model)["mean_ms"] == pytest.approx(60.0)
     assert real.behind_real(model)["count"] == 1

@@ -105,5 +105,8 @@ def test_best_lead_also_keeps_the_closures_near_the_character_on_the_real_phones
         {"lead_ms": 40.0, "lag_ms": -1.0, "rms": 0.0619, "real_phones_lag_ms": -14.0},
     ]
     # the held-out lines alone pick 40 ms; the larger of the two magnitudes is least at 20
-    assert best_lead_ms([{k: v for k, v in r.items() if k != "real_phones_lag_ms"} for r in rows]) == 40.0
+    assert (
+        best_lead_ms([{k: v for k, v in r.items() if k != "real_phones_lag_ms"} for r in rows])
+        == 40.0
+    )
     assert best_lead_ms(rows) == 20.0

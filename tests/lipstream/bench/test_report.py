@@ -1061,4 +1061,7 @@ def test_throughput_targets_put_each_figure_beside_its_target(tmp_path: Path) ->
     # a search without a reference has no ratio and is left out
     assert "at least 0.8 | 0.50 over 1 engine " in rendered
     assert "missed by 1 of 1, by 1.60×" in rendered
-    assert "at least 0.6 | 0.75 over 1 engine (`bench/capacity_best.json`) | met by all 1 |" in rendered
+    assert (
+        "at least 0.6 | 0.75 over 1 engine (`bench/capacity_best.json`) | met by all 1 |"
+        in rendered
+    )
