@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import json
 import os
 import selectors
 import socket
@@ -207,3 +208,24 @@ def delayed_spans(spans: list[PhonemeSpan], delay: float) -> list[PhonemeSpan]:
     ]
     moved[0] = replace(moved[0], start=0.0)
     return [s for s in moved if s.end > s.start]
+
+
+REMOVED = object()
+"""``edit_hyperparameters``'s value for a hyperparameter to delete."""
+
+
+def edit_hyperparameters(model_dir: Path, **changes: Any) -> Path:
+    """Rewrite the manifest of the model saved in ``model_dir``: each named hyperparameter
+    set to its value, or deleted for ``REMOVED`` (a model written before it existed; a
+    KeyError if the manifest lacks it). Returns the manifest's path."""
+    from lipstream.store import MANIFEST_NAME
+
+    path = model_dir / MANIFEST_NAME
+    manifest = json.loads(path.read_text())
+    for name, value in changes.items():
+        if value is REMOVED:
+            del manifest["hyperparameters"][name]
+        else:
+            manifest["hyperparameters"][name] = value
+    path.write_text(json.dumps(manifest))
+    return path

@@ -21,6 +21,7 @@ from lipstream.errors import InvalidRequestError, ModelStoreError
 from lipstream.phonemes import PHONEMES as PHONEMES_BY_INDEX
 from lipstream.store import read_manifest, save_model_dir
 from lipstream.timeline import PhonemeSpan
+from tests.helpers import REMOVED, edit_hyperparameters
 from tests.lipstream.engines.dam.reference import led_by_hand, path_cost, select_mode
 
 
@@ -125,10 +126,7 @@ def test_an_artifact_without_the_lead_loads_as_no_lead_with_the_frames_of_before
     model = engine(bilabial_lead_s=0.0).fit(train)
     assert isinstance(model, DamModel)
     model.save(tmp_path / name)
-    path = tmp_path / name / "model.json"
-    manifest = json.loads(path.read_text())
-    del manifest["hyperparameters"]["bilabial_lead_s"]
-    path.write_text(json.dumps(manifest))
+    edit_hyperparameters(tmp_path / name, bilabial_lead_s=REMOVED)
     old = load_model(tmp_path / name)
     assert isinstance(old, DamModel) and old.bilabial_lead_s == 0.0
     spans = _spans(small_demo_corpus)

@@ -9,7 +9,6 @@ and still stream their offline frames; models stored before the lead load withou
 from __future__ import annotations
 
 import dataclasses
-import json
 from pathlib import Path
 from typing import Any
 
@@ -25,8 +24,8 @@ from lipstream.engines.hmm.model import RUNGS
 from lipstream.errors import ModelStoreError
 from lipstream.evaluation import closure_centre
 from lipstream.phonemes import PHONEME_INDEX
-from lipstream.store import MANIFEST_NAME
 from lipstream.timeline import PhonemeSpan
+from tests.helpers import REMOVED, edit_hyperparameters
 
 FPS = 120.0
 CHANNELS = ("jawOpen", "mouthClose")
@@ -123,10 +122,7 @@ def _led_by_hand(spans: list[PhonemeSpan], lead: float) -> list[PhonemeSpan]:
 def _without_lead(model: HmmModel, directory: Path) -> HmmModel:
     """``model`` as an artifact saved before the lead existed loads it: no lead anywhere."""
     model.save(directory)
-    manifest_path = directory / MANIFEST_NAME
-    manifest = json.loads(manifest_path.read_text())
-    del manifest["hyperparameters"]["bilabial_lead_s"]
-    manifest_path.write_text(json.dumps(manifest))
+    edit_hyperparameters(directory, bilabial_lead_s=REMOVED)
     acoustic = load_model(directory)
     assert isinstance(acoustic, HmmModel) and acoustic.bilabial_lead_s == 0.0
     return acoustic
@@ -255,11 +251,8 @@ def test_a_model_stored_before_the_lead_loads_without_it_with_the_frames_of_befo
     corpus, tests = lines
     model = HmmEngine(n_states=8, n_iter=3, bilabial_lead_s=0.0).fit(corpus)
     model.save(tmp_path / "hmm")
-    manifest_path = tmp_path / "hmm" / MANIFEST_NAME
-    manifest = json.loads(manifest_path.read_text())
-    assert manifest["hyperparameters"]["bilabial_lead_s"] == 0.0
-    del manifest["hyperparameters"]["bilabial_lead_s"]
-    manifest_path.write_text(json.dumps(manifest))
+    assert model.manifest.hyperparameters["bilabial_lead_s"] == 0.0
+    manifest_path = edit_hyperparameters(tmp_path / "hmm", bilabial_lead_s=REMOVED)
     old = load_model(tmp_path / "hmm")
     assert isinstance(old, HmmModel) and old.bilabial_lead_s == 0.0
     assert old.fidelity_ladder() == model.fidelity_ladder()
@@ -270,8 +263,7 @@ def test_a_model_stored_before_the_lead_loads_without_it_with_the_frames_of_befo
             model.synthesize(phones, fps=FPS, **rung.options).frames,
         )
     for bad in ("early", 0.5):
-        manifest["hyperparameters"]["bilabial_lead_s"] = bad
-        manifest_path.write_text(json.dumps(manifest))
+        edit_hyperparameters(tmp_path / "hmm", bilabial_lead_s=bad)
         with pytest.raises(ModelStoreError) as refused:
             load_model(tmp_path / "hmm")
         assert refused.value.code == "model_invalid"

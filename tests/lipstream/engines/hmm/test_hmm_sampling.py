@@ -10,7 +10,6 @@ before the hyperparameter, with no ``sample_offset`` in their manifest, still lo
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -23,8 +22,8 @@ from lipstream.engines.hmm.engine import HOLD_CENTRE, observations
 from lipstream.errors import ModelStoreError
 from lipstream.evaluation import closure_centre
 from lipstream.numerics.basis import fit_basis
-from lipstream.store import MANIFEST_NAME
 from lipstream.timeline import PhonemeSpan
+from tests.helpers import REMOVED, edit_hyperparameters
 
 FPS = 120.0
 HMM_FPS = 40.0
@@ -126,19 +125,15 @@ def test_a_model_stored_before_the_offset_loads_as_sampled_at_the_instants(
     corpus, tests = lines
     model = HmmEngine(n_states=8, n_iter=3, sample_offset=HOLD_CENTRE).fit(corpus)
     model.save(tmp_path / "hmm")
-    manifest_path = tmp_path / "hmm" / MANIFEST_NAME
-    manifest = json.loads(manifest_path.read_text())
-    assert manifest["hyperparameters"]["sample_offset"] == 0.5
-    del manifest["hyperparameters"]["sample_offset"]
-    manifest_path.write_text(json.dumps(manifest))
+    assert model.manifest.hyperparameters["sample_offset"] == 0.5
+    manifest_path = edit_hyperparameters(tmp_path / "hmm", sample_offset=REMOVED)
     old = load_model(tmp_path / "hmm")
     assert isinstance(old, HmmModel) and old.sample_offset == 0.0
     phones = tests[0][0].phones
     np.testing.assert_array_equal(
         old.synthesize(phones, fps=FPS).frames, model.synthesize(phones, fps=FPS).frames
     )
-    manifest["hyperparameters"]["sample_offset"] = "half"
-    manifest_path.write_text(json.dumps(manifest))
+    edit_hyperparameters(tmp_path / "hmm", sample_offset="half")
     with pytest.raises(ModelStoreError) as refused:
         load_model(tmp_path / "hmm")
     assert refused.value.code == "model_invalid"
