@@ -144,6 +144,35 @@ class Ranked(NamedTuple):
     root: np.ndarray
 
 
+@njit(cache=True, inline="always")
+def ranked_rows(ranked: Ranked, low: int, high: int) -> Ranked:
+    """Rows ``low`` .. ``high`` of every field of ``ranked`` (views)."""
+    return Ranked(
+        ranked.nodes[low:high],
+        ranked.costs[low:high],
+        ranked.back[low:high],
+        ranked.sure[low:high],
+        ranked.kind[low:high],
+        ranked.terms[low:high],
+        ranked.root[low:high],
+    )
+
+
+@njit(cache=True)
+def empty_ranked(size: int) -> Ranked:
+    """A ``Ranked`` of ``size`` rows, all zeros (``empty_ranked.py_func`` outside compiled
+    code)."""
+    return Ranked(
+        np.zeros(size, dtype=np.int64),
+        np.zeros(size),
+        np.zeros(size, dtype=np.int64),
+        np.zeros(size, dtype=np.bool_),
+        np.zeros(size, dtype=np.int8),
+        np.zeros((size, 4)),
+        np.zeros(size, dtype=np.int64),
+    )
+
+
 class Best(NamedTuple):
     """A scan's best so far: its ``cost``, its position ``arg`` in the layer before, and the
     least other cost seen (``second``)."""

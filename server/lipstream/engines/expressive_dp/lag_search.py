@@ -44,6 +44,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from .fast_step import empty_ranked
 from .lag_window import Scratch, Stacked, Window
 from .search import LayerSpec, SearchResult, SearchSpace, _candidates
 
@@ -96,18 +97,7 @@ class LagMemory:
 
 
 def _no_window() -> Window:
-    none = np.zeros(0, dtype=np.int64)
-    return Window(
-        np.zeros(1, dtype=np.int64),
-        none,
-        none,
-        np.zeros(0),
-        none,
-        np.zeros(0, dtype=bool),
-        np.zeros(0, dtype=np.int8),
-        np.zeros((0, 4)),
-        none,
-    )
+    return Window(np.zeros(1, dtype=np.int64), np.zeros(0, dtype=np.int64), empty_ranked.py_func(0))
 
 
 _NO_WINDOW = _no_window()

@@ -5,7 +5,8 @@ Method. ``lag_search`` keeps a stream's last window and hands the next one's can
 and ranked, each further layer stepped by ``lag_step`` with the last window's same layer
 (when every layer before held the same nodes), and the cheapest path followed back, all in
 one call. The layers travel stacked in flat arrays with row offsets (``Stacked``,
-``Window``), so a call unboxes a few arrays once instead of a ``Ranked`` per step, and the
+``Window``, whose ``ranked`` holds every layer's ``Ranked`` rows), so a call unboxes a few
+arrays once instead of a ``Ranked`` per step, and the
 window's Python bookkeeping (slicing, alignment checks, the walk back) runs compiled. Every
 sum, sort and tie is ``lag_search``'s former per-step loop's, so the path and its cost are
 the same to the last bit.
@@ -18,7 +19,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from .fast_step import Joins, Layer, Ranked, entry_costs, lag_step
+from .fast_step import Joins, Layer, Ranked, empty_ranked, entry_costs, lag_step, ranked_rows
 
 
 class Stacked(NamedTuple):
@@ -33,19 +34,13 @@ class Stacked(NamedTuple):
 
 class Window(NamedTuple):
     """A window's search, its layers stacked at the rows ``offsets`` gives (as ``Stacked``):
-    ``candidates`` (each layer's, node order) and each layer ranked (``fast_step.Ranked``'s
-    fields, ascending φ within a layer; the first layer's ``back``, ``sure``, ``kind`` and
-    ``terms`` are zeros, never read)."""
+    ``candidates`` (each layer's, node order) and ``ranked``, every layer ranked (ascending
+    φ within a layer; the first layer's ``back``, ``sure``, ``kind`` and ``terms`` are
+    zeros, never read)."""
 
     offsets: np.ndarray
     candidates: np.ndarray
-    nodes: np.ndarray
-    costs: np.ndarray
-    back: np.ndarray
-    sure: np.ndarray
-    kind: np.ndarray
-    terms: np.ndarray
-    root: np.ndarray
+    ranked: Ranked
 
 
 class Scratch(NamedTuple):
@@ -58,16 +53,7 @@ class Scratch(NamedTuple):
 @njit(cache=True, inline="always")
 def _ranked(window: Window, layer: int) -> Ranked:
     """Layer ``layer`` of ``window`` (views)."""
-    low, high = window.offsets[layer], window.offsets[layer + 1]
-    return Ranked(
-        window.nodes[low:high],
-        window.costs[low:high],
-        window.back[low:high],
-        window.sure[low:high],
-        window.kind[low:high],
-        window.terms[low:high],
-        window.root[low:high],
-    )
+    return ranked_rows(window.ranked, window.offsets[layer], window.offsets[layer + 1])
 
 
 @njit(cache=True, inline="always")
@@ -84,17 +70,17 @@ def _same_candidates(old: Window, old_layer: int, stacked: Stacked, layer: int) 
 
 @njit(cache=True, inline="always")
 def _keep(window: Window, layer: int, ranked: Ranked) -> None:
-    low = window.offsets[layer]
+    low, kept = window.offsets[layer], window.ranked
     for k in range(len(ranked.nodes)):
-        window.nodes[low + k] = ranked.nodes[k]
-        window.costs[low + k] = ranked.costs[k]
-        window.root[low + k] = ranked.root[k]
+        kept.nodes[low + k] = ranked.nodes[k]
+        kept.costs[low + k] = ranked.costs[k]
+        kept.root[low + k] = ranked.root[k]
         if layer > 0:
-            window.back[low + k] = ranked.back[k]
-            window.sure[low + k] = ranked.sure[k]
-            window.kind[low + k] = ranked.kind[k]
+            kept.back[low + k] = ranked.back[k]
+            kept.sure[low + k] = ranked.sure[k]
+            kept.kind[low + k] = ranked.kind[k]
             for t in range(4):
-                window.terms[low + k, t] = ranked.terms[k, t]
+                kept.terms[low + k, t] = ranked.terms[k, t]
 
 
 @njit(cache=True)
@@ -107,44 +93,18 @@ def lag_window(
     priced (the first layer's and those scanned)."""
     count = len(stacked.offsets) - 1
     total = stacked.offsets[count]
-    window = Window(
-        stacked.offsets,
-        stacked.nodes,
-        np.empty(total, dtype=np.int64),
-        np.empty(total),
-        np.zeros(total, dtype=np.int64),
-        np.zeros(total, dtype=np.bool_),
-        np.zeros(total, dtype=np.int8),
-        np.zeros((total, 4)),
-        np.empty(total, dtype=np.int64),
-    )
+    window = Window(stacked.offsets, stacked.nodes, empty_ranked(total))
     low, high = stacked.offsets[0], stacked.offsets[1]
     first = Layer(stacked.nodes[low:high], stacked.costs[low:high])
     f = entry_costs(before, first, joins) if before >= 0 else first.costs.copy()
     order = np.argsort(f, kind="mergesort")
     nodes = first.nodes[order]
-    previous = Ranked(
-        nodes,
-        f[order],
-        np.zeros(0, dtype=np.int64),
-        np.zeros(0, dtype=np.bool_),
-        np.zeros(0, dtype=np.int8),
-        np.zeros((0, 4)),
-        nodes,
-    )
+    empty = empty_ranked(0)
+    previous = Ranked(nodes, f[order], empty.back, empty.sure, empty.kind, empty.terms, nodes)
     _keep(window, 0, previous)
     priced = high - low
     old_count = len(old.offsets) - 1
-    none = _ranked(old, 0) if old_count > 0 else _ranked(window, 0)
-    none = Ranked(
-        none.nodes[:0],
-        none.costs[:0],
-        none.back[:0],
-        none.sure[:0],
-        none.kind[:0],
-        none.terms[:0],
-        none.root[:0],
-    )
+    none = ranked_rows(old.ranked if old_count > 0 else window.ranked, 0, 0)
     aligned = True
     for index in range(1, count):
         # the bound φ' ≥ φ − φ(c') holds when every layer before held the same nodes
@@ -164,6 +124,6 @@ def lag_window(
     path = np.empty(count, dtype=np.int64)
     for index in range(count - 1, -1, -1):
         row = stacked.offsets[index] + position
-        path[index] = window.nodes[row]
-        position = window.back[row]
+        path[index] = window.ranked.nodes[row]
+        position = window.ranked.back[row]
     return window, path, cost, priced
