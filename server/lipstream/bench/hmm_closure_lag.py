@@ -5,7 +5,7 @@ Sketch: the synthesizer solves the trajectory at a rate f above R (``hmm_fps``) 
 trajectory frame k (at k / f) the state of HMM frame ⌊k R / f⌋ (``synthesizer.hmm_frame``):
 every state is held over [j / R, (j + 1) / R). Trained on the curves at the instants j / R
 (``sample_offset`` 0, the engine's default), state j stands for the pose at j / R, so its
-targets arrive on average (1 / R − 1 / f) / 2 late (8.3 ms at R = 40 Hz, f = 120 Hz).
+targets arrive on average (1 / R − 1 / f) / 2 late (4.2 ms at R = 60 Hz, f = 120 Hz).
 ``sample_offset`` ``engine.HOLD_CENTRE`` (½) trains on the curves at (j + ½) / R, the hold
 interval's centre.
 

@@ -1816,6 +1816,56 @@ def bilabial_lead_hmm(bench: Bench) -> str:
     )
 
 
+HMM_RATE = "hmm_rate.json"
+
+
+def hmm_rate(bench: Bench) -> str:
+    """``hmm`` trained at each HMM frame rate: its closures on the real set's phones, its
+    quality on the demo and its cost (``lipstream.bench.hmm_rate``)."""
+    if not bench.exists(HMM_RATE):
+        return f"Not measured yet: no `bench/{HMM_RATE}`.\n"
+    doc = bench.load(HMM_RATE)
+    rungs, rates = doc["rungs"], doc["rates"]
+    first = rates[0]
+    text = bench.source(HMM_RATE, doc) + (
+        f"`hmm` trained on the `{doc['corpus']['name']}` train split at each HMM frame rate "
+        f"(`hmm_fps`), from EM seeds {', '.join(str(seed) for seed in doc['seeds'])}, the "
+        "training frames and the speaker prior scaled to the same seconds; means over the "
+        f"seeds. On the force-aligned phones of the {doc['real_set']['clips']} clips of "
+        f"`{doc['real_set']['name']}` (`{rungs[0]}` rung): the closure lag behind the real "
+        "lips (the seeds' least and most in brackets) and behind the character rendered on "
+        "them, and the lip-aperture r against the real lips. On the demo's held-out lines, "
+        "driven by phonemes: closure lag and RMS per rung; driven by their audio alone: RMS "
+        "as a share of `viseme-lerp`'s. CPU to fit, and to synthesize from audio, as a "
+        f"ratio to {first['hmm_fps']:g} Hz's in the same run. **Bold**: the engine's "
+        "default.\n\n"
+    )
+    header = ["HMM rate, Hz", "behind the real lips", "behind the character", "aperture r"]
+    header += [f"`{rung}` lag / RMS" for rung in rungs]
+    header += ["from audio, share of `viseme-lerp`", "fit CPU", "synthesis CPU"]
+    rows = []
+    for row in rates:
+        rate = f"{row['hmm_fps']:g}"
+        rows.append(
+            [
+                f"**{rate}**" if row["hmm_fps"] == doc["default_hmm_fps"] else rate,
+                f"{_signed(row['real_lag_ms'], 1)} ({_signed(row['real_lag_min_ms'], 1)} .. "
+                f"{_signed(row['real_lag_max_ms'], 1)})",
+                _signed(row["real_phones_lag_ms"], 1),
+                number(row["aperture_r"], 3),
+                *(
+                    f"{_signed(row['rungs'][rung]['lag_ms'], 1)} / "
+                    f"{number(row['rungs'][rung]['rms'], 4)}"
+                    for rung in rungs
+                ),
+                number(row["voice_rms_ratio"], 3),
+                f"×{row['fit_cpu_s'] / first['fit_cpu_s']:.2f}",
+                f"×{row['voice_cpu_per_speech_s'] / first['voice_cpu_per_speech_s']:.2f}",
+            ]
+        )
+    return text + table(header, rows)
+
+
 def bilabial_lead_evaluated(engine: str) -> Callable[[Bench], str]:
     """``engine`` trained and run on spans led by each lead (it has no lead of its own):
     held-out closure lag and RMS, and the lag behind the real lips."""
@@ -2646,6 +2696,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "hmm-closure-lag": hmm_closure_lag,
     "closure-timing": closure_timing,
     "bilabial-lead-hmm": bilabial_lead_hmm,
+    "hmm-rate": hmm_rate,
     "bilabial-lead-anime-graph": bilabial_lead_evaluated("anime-graph"),
     "bilabial-lead-expressive-dp": bilabial_lead_evaluated("expressive-dp"),
     "aligner-bilabial-onsets": aligner_bilabial_onsets,

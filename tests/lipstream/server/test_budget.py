@@ -146,11 +146,11 @@ DEMO_LOOKAHEAD_MS = {
         "lerp": 200.0,
         "causal": 0.0,
     },
-    # Viterbi lag + trajectory block and future context, + the 60 ms bilabial lead (the rungs
+    # Viterbi lag + trajectory block and future context, + the 80 ms bilabial lead (the rungs
     # with a lag above 100 ms), + half a feature window
     "hmm": {
-        "full": 500.0 + 1000.0 * 44 / 120 + 60.0 + 12.5,
-        "short": 200.0 + 1000.0 * 17 / 120 + 60.0 + 12.5,
+        "full": 500.0 + 1000.0 * 44 / 120 + 80.0 + 12.5,
+        "short": 200.0 + 1000.0 * 17 / 120 + 80.0 + 12.5,
         "causal": 0.0,
     },
     "anime-graph": {

@@ -22,8 +22,8 @@ the same motion (locally linear over a frame) it is ρ = R / f times the learned
 velocity: z_f = S z with S = diag(I, ρI). The statistics of z_f are then the mean
 S m (pose mean unchanged, velocity mean × ρ) and the covariance S K S: the
 pose block unchanged, the pose-velocity cross-covariance × ρ, the velocity block
-× ρ². ρ < 1 above the HMM rate (the synthesis rate R_s, 120 Hz with R = 40 Hz:
-ρ = 1/3), ρ = 2/3 at 60 fps; the pose marginal, and so Π, never changes.
+× ρ². ρ < 1 above the HMM rate (the synthesis rate R_s, 120 Hz with R = 60 Hz:
+ρ = 1/2), ρ = 1 at 60 fps; the pose marginal, and so Π, never changes.
 
 A frame at a time (the causal rungs) the solve is the recursion
 y_t = G_cur⁻¹ (r_cur − G_cross y_{t−1}), whose gain G_cur⁻¹ (C + E) can exceed 1

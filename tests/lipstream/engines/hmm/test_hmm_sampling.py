@@ -101,12 +101,12 @@ def test_a_closure_lands_on_its_known_time_when_trained_at_the_hold_centres(
     lips on the acoustic /M/ spans, so the models read them (no bilabial lead)."""
     corpus, tests = lines
     quarter_frame_ms = 250.0 / HMM_FPS
-    centred = HmmEngine(sample_offset=HOLD_CENTRE, bilabial_lead_s=0.0).fit(corpus)
+    centred = HmmEngine(hmm_fps=HMM_FPS, sample_offset=HOLD_CENTRE, bilabial_lead_s=0.0).fit(corpus)
     assert isinstance(centred, HmmModel) and centred.sample_offset == 0.5
     on_time = _closure_lags_ms(centred, tests)
     assert len(on_time) == 60
     assert abs(on_time.mean()) < quarter_frame_ms, on_time.mean()
-    instant = HmmEngine(bilabial_lead_s=0.0).fit(corpus)
+    instant = HmmEngine(hmm_fps=HMM_FPS, bilabial_lead_s=0.0).fit(corpus)
     assert isinstance(instant, HmmModel) and instant.sample_offset == 0.0
     assert _closure_lags_ms(instant, tests).mean() > quarter_frame_ms
 
