@@ -22,6 +22,8 @@ from .phonemes import kept_labels, normalize_phoneme
 
 SpanLike = Union["PhonemeSpan", Sequence[Any], Mapping[str, Any]]
 EMOTIONS = ("neutral", "happy", "angry", "sad")
+EMOTION_INDEX = {emotion: index for index, emotion in enumerate(EMOTIONS)}
+"""Each emotion's position in ``EMOTIONS``: the index the engines store and look up."""
 
 
 @dataclass(frozen=True, slots=True)

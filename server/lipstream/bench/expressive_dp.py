@@ -30,12 +30,11 @@ from threadpoolctl import threadpool_limits
 from ..corpus import Corpus
 from ..engines.base import fill_gaps
 from ..engines.expressive_dp import ExpressiveDpEngine, ExpressiveDpModel
-from ..engines.expressive_dp.nodes import EMOTION_INDEX
 from ..engines.expressive_dp.search import LayerSpec, search
 from ..engines.viseme_lerp import VisemeLerpEngine
 from ..evaluation import rms_error
 from ..phonemes import PHONEME_INDEX
-from ..timeline import PhonemeSpan
+from ..timeline import EMOTION_INDEX, PhonemeSpan
 
 TABLE_V = {14: 221.391, 24: 333.171, 53: 815.719, 63: 942.609}
 """The paper's CPU seconds per length (5,556 nodes)."""

@@ -29,12 +29,11 @@ from sklearn.exceptions import ConvergenceWarning
 
 from ...errors import CorpusError
 from ...phonemes import PHONEMES, SILENCE
-from ...timeline import EMOTIONS, PhonemeSpan
+from ...timeline import EMOTION_INDEX, EMOTIONS, PhonemeSpan
 from ...visemes import get_scheme
 from ..base import SynthesisRequest
 
 PHONEME_INDEX = {phoneme: index for index, phoneme in enumerate(PHONEMES)}
-EMOTION_INDEX = {emotion: index for index, emotion in enumerate(EMOTIONS)}
 SILENCE_INDEX = PHONEME_INDEX[SILENCE]
 NEUTRAL = EMOTION_INDEX["neutral"]
 

@@ -18,13 +18,14 @@ from threadpoolctl import threadpool_limits
 
 from ...numerics.basis import MotionBasis, fit_basis
 from ...phonemes import PHONEME_INDEX, SILENCE
+from ...timeline import EMOTION_INDEX
 from ..base import Engine, fill_gaps, frame_count
 from ..damped_fit import best_following_kappa, validation_utterances
 from ..durations import DurationModel
 from .costs import ALPHA_NAMES, NodeBounds, Weights, unit_penalty
 from .isomap import fit_maps
 from .model import ExpressiveDpModel
-from .nodes import EMOTION_INDEX, NodeFeatures, build_nodes
+from .nodes import NodeFeatures, build_nodes
 from .postprocess import Renderer
 from .search import LayerSpec, SearchSpace
 from .synthesizer import extend_path, training_raw_curve

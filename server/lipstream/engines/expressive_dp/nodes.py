@@ -29,12 +29,11 @@ from ...model_checks import ArrayReader
 from ...numerics.basis import MotionBasis
 from ...numerics.resample import sample_curves
 from ...phonemes import PHONEME_INDEX, PHONEMES, SILENCE
-from ...timeline import EMOTIONS
+from ...timeline import EMOTION_INDEX, EMOTIONS
 from ...visemes import DENG15
 
 SHAPE_POINTS = 6
 SILENCE_INDEX = PHONEME_INDEX[SILENCE]
-EMOTION_INDEX = {name: index for index, name in enumerate(EMOTIONS)}
 VISEME_OF_PHONEME = np.array([DENG15.index_of(phoneme) for phoneme in PHONEMES], dtype=np.int64)
 STORED = (
     "node_phoneme",

@@ -51,7 +51,7 @@ import numpy as np
 
 from ...errors import InvalidRequestError
 from ...phonemes import PHONEME_INDEX, SILENCE
-from ...timeline import PhonemeSpan
+from ...timeline import EMOTION_INDEX, PhonemeSpan
 from ..base import (
     Lookahead,
     LookaheadSynthesizer,
@@ -66,7 +66,6 @@ from ..growable import Growable
 from ..work import WorkGuard
 from .causal_curve import raw_rows
 from .lag_search import LagMemory
-from .nodes import EMOTION_INDEX
 from .postprocess import RenderCache
 from .search import NO_NODE, LayerSpec, SearchSpace, one_layer, search
 from .serving import ExpressiveDpServing

@@ -56,7 +56,7 @@ from ...numerics.direct_call import DirectCall
 from ...numerics.trellis import predecessors
 from ...phonemes import PHONEMES
 from ...store import ARRAYS_NAME, MANIFEST_NAME, ModelManifest
-from ...timeline import EMOTIONS
+from ...timeline import EMOTION_INDEX, EMOTIONS
 from ..base import (
     AUDIO_ONLY_UNSUPPORTED,
     Lookahead,
@@ -84,7 +84,6 @@ CACHED_RATES = 8
 INSTANT_SAMPLING = 0.0
 """The default ``sample_offset``, and that of a model whose manifest has none (saved before
 the hyperparameter existed): trained on the face at the instants j / R."""
-EMOTION_INDEX = {emotion: index for index, emotion in enumerate(EMOTIONS)}
 MFCC_FIELDS = ("window_s", "n_mels", "n_coefficients", "f_min", "f_max", "pre_emphasis")
 
 

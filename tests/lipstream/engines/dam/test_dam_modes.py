@@ -8,7 +8,6 @@ import pytest
 from lipstream.corpus import Corpus
 from lipstream.corpus.model import Utterance
 from lipstream.engines.dam.modes import (
-    EMOTION_INDEX,
     PHONEME_INDEX,
     assign_modes,
     cluster,
@@ -18,7 +17,7 @@ from lipstream.engines.dam.modes import (
 )
 from lipstream.errors import CorpusError
 from lipstream.phonemes import PHONEMES
-from lipstream.timeline import PhonemeSpan
+from lipstream.timeline import EMOTION_INDEX, PhonemeSpan
 
 
 def _corpus() -> Corpus:
