@@ -28,7 +28,6 @@ hyperparameters on lines whose spans were led by each lead of ``LEADS_MS``
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -46,7 +45,7 @@ from ..engines.hmm.model import RUNGS, HmmModel
 from ..results_file import recorded, script_command, write_results
 from .closure_sources import RealPhones
 from .closure_timing import LEADS_MS, best_lead_ms, time_frames
-from .demo_calibration import REAL_SET
+from .real_set import real_set_parser
 
 MODULE = "lipstream.bench.bilabial_lead_sweep"
 EVALUATED = ("anime-graph", "expressive-dp")
@@ -224,11 +223,7 @@ def format_sweep(results: dict[str, Any]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(
-        prog=f"python -m {MODULE}", description=__doc__.splitlines()[0]
-    )
-    parser.add_argument("--home", type=Path, required=True, help="LIPSTREAM_HOME with a demo")
-    parser.add_argument("--real", type=Path, default=REAL_SET, help="real-face corpus")
+    parser = real_set_parser(f"python -m {MODULE}", __doc__, home=True)
     parser.add_argument(
         "--seeds", type=int, nargs="+", default=list(SEEDS), help="EM seeds to train hmm from"
     )

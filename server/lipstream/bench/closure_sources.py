@@ -26,7 +26,6 @@ speech*. Means in ms with their standard error (sd / sqrt(n)).
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -44,8 +43,8 @@ from ..evaluation import BILABIALS, closure_lags
 from ..phonemes import SILENCE
 from ..results_file import recorded, script_command, write_results
 from ..timeline import PhonemeSpan
-from .demo_calibration import REAL_SET
 from .real_faces import Clip, demo_models, pearson_r, predicted_apertures, real_clips
+from .real_set import real_set_parser
 
 MODULE = "lipstream.bench.closure_sources"
 GENERATOR_FPS = 120.0
@@ -267,10 +266,7 @@ def format_split(results: dict[str, Any]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(
-        prog=f"python -m {MODULE}", description=__doc__.splitlines()[0]
-    )
-    parser.add_argument("--real", type=Path, default=REAL_SET, help="real-face corpus")
+    parser = real_set_parser(f"python -m {MODULE}", __doc__)
     parser.add_argument("--models", type=Path, required=True, help="the demo models' directory")
     parser.add_argument("--json", type=Path, required=True, help="results file to write")
     args = parser.parse_args(argv)

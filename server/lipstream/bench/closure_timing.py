@@ -30,7 +30,6 @@ character's on both.
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -53,7 +52,7 @@ from ..phonemes import SILENCE
 from ..results_file import recorded, script_command, write_results
 from ..timeline import PhonemeSpan
 from .closure_sources import RealPhones
-from .demo_calibration import REAL_SET
+from .real_set import real_set_parser
 
 MODULE = "lipstream.bench.closure_timing"
 ENGINES = ("viseme-lerp", "dam", "cohen-massaro")
@@ -319,11 +318,7 @@ def format_timing(results: dict[str, Any]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(
-        prog=f"python -m {MODULE}", description=__doc__.splitlines()[0]
-    )
-    parser.add_argument("--home", type=Path, required=True, help="LIPSTREAM_HOME with a demo")
-    parser.add_argument("--real", type=Path, default=REAL_SET, help="real-face corpus")
+    parser = real_set_parser(f"python -m {MODULE}", __doc__, home=True)
     parser.add_argument("--json", type=Path, required=True, help="results file to write")
     args = parser.parse_args(argv)
     results = run(args.home, ENGINES, args.real, script_command(MODULE, argv))

@@ -49,9 +49,9 @@ from ..phonemes import SILENCE
 from ..results_file import write_results
 from ..timeline import PhonemeSpan
 from .real_faces import speech_mask
+from .real_set import real_set_parser
 
 COMMAND = "python -m lipstream.bench.demo_calibration"
-REAL_SET = Path(__file__).resolve().parents[3] / "tests" / "data" / "grid" / "corpus"
 MEASURE_FPS = 25.0
 """The real set's frame rate: every corpus is measured on this grid."""
 ROUNDED_VOWELS = frozenset({"UW", "UH", "OW", "AO"})
@@ -311,8 +311,7 @@ def _named(text: str) -> tuple[str, Path]:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog=COMMAND, description=__doc__.splitlines()[0])
-    parser.add_argument("--real", type=Path, default=REAL_SET, help="real-face corpus")
+    parser = real_set_parser(COMMAND, __doc__)
     parser.add_argument(
         "--corpus", type=_named, action="append", default=[], help="NAME=DIR, repeatable"
     )

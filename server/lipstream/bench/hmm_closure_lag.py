@@ -30,7 +30,6 @@ from each further seed and keeps their own lags (``seed_sweep``).
 
 from __future__ import annotations
 
-import argparse
 import math
 from collections.abc import Sequence
 from dataclasses import asdict
@@ -60,8 +59,8 @@ from .closure_sources import (
     summarize_contexts,
     summarize_lags,
 )
-from .demo_calibration import REAL_SET
 from .real_faces import real_clips
+from .real_set import real_set_parser
 
 MODULE = "lipstream.bench.hmm_closure_lag"
 CONVENTIONS = ("floor", "nearest", "ceil")
@@ -384,11 +383,8 @@ def format_lags(results: dict[str, Any]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(
-        prog=f"python -m {MODULE}", description=__doc__.splitlines()[0]
-    )
+    parser = real_set_parser(f"python -m {MODULE}", __doc__)
     parser.add_argument("--corpus", type=Path, required=True, help="the demo corpus")
-    parser.add_argument("--real", type=Path, default=REAL_SET, help="real-face corpus")
     parser.add_argument("--model", type=Path, help="an hmm model (default: train one)")
     parser.add_argument("--json", type=Path, required=True, help="results file to write")
     parser.add_argument(

@@ -23,7 +23,6 @@ prior's ``prior_frames`` the same seconds of speech frames. Each model is then
 
 from __future__ import annotations
 
-import argparse
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -40,8 +39,8 @@ from ..evaluation import rms_error
 from ..results_file import recorded, script_command, write_results
 from .bilabial_lead_sweep import frames_on, rung_options, timed
 from .closure_sources import RealPhones, character_aperture_r
-from .demo_calibration import REAL_SET
 from .real_faces import predicted_apertures
+from .real_set import real_set_parser
 
 MODULE = "lipstream.bench.hmm_rate"
 RATES = (40.0, 60.0, 80.0, 100.0)
@@ -201,11 +200,7 @@ def format_rates(results: dict[str, Any]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(
-        prog=f"python -m {MODULE}", description=__doc__.splitlines()[0]
-    )
-    parser.add_argument("--home", type=Path, required=True, help="LIPSTREAM_HOME with a demo")
-    parser.add_argument("--real", type=Path, default=REAL_SET, help="real-face corpus")
+    parser = real_set_parser(f"python -m {MODULE}", __doc__, home=True)
     parser.add_argument(
         "--rates", type=float, nargs="+", default=list(RATES), help="HMM frame rates, Hz"
     )

@@ -10,9 +10,9 @@ from typing import Any
 import pytest
 
 from lipstream.bench.closure_sources import RealPhones, character_apertures
-from lipstream.bench.demo_calibration import REAL_SET
 from lipstream.bench.hmm_rate import measure, rate_means, settings_at
 from lipstream.bench.real_faces import real_clips
+from lipstream.bench.real_set import REAL_SET
 from lipstream.bench.report import BLOCKS, Bench
 from lipstream.corpus import Corpus, load_corpus
 
