@@ -44,8 +44,8 @@ from .model import HmmModel, mfcc_fields, normalization_fields
 
 VOCAL_FLOOR = 1e-3
 HMM_FPS = 60.0
-"""The default ``hmm_fps``. At 40 Hz the closures on the real-face set's phones came 6 to 27 ms
-behind the real lips over four EM seeds, at 60 Hz 4 to 11 ms, with the demo's held-out RMS
+"""The default ``hmm_fps``. At 40 Hz the closures on the real-face set's phones came 2 to 23 ms
+behind the real lips over four EM seeds, at 60 Hz -1 to +6 ms, with the demo's held-out RMS
 about as it was (``bench.hmm_rate``; docs/explanation/engines/hmm.md, "The HMM frame rate")."""
 HMM_PRIOR_FRAMES = HMM_FPS
 """The default ``prior_frames``: the speaker prior is worth one second of speech frames."""
