@@ -2748,6 +2748,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "cpu-per-session-session15": lambda bench: cpu_per_session(
         bench, "cpu_per_session_session15.json"
     ),
+    "cpu-per-session-hmm40": lambda bench: cpu_per_session(bench, "cpu_per_session_hmm40.json"),
     "first-frame-priority": first_frame_priority,
     "server-profile": server_profile,
     "message-cost-cuts": message_cost,
