@@ -100,13 +100,14 @@ def hmm_sweep(
                 name: timed(frames_on(model, heldout, **rung_options(name)), heldout)
                 for name, _, _ in RUNGS
             }
+            found = real.timed(model)
             rows.append(
                 {
                     "lead_ms": lead_ms,
                     "seed": seed,
                     "rungs": rungs,
-                    "real_phones_lag_ms": real.behind_character(model)["mean_ms"],
-                    "real": real.behind_real(model),
+                    "real_phones_lag_ms": found["behind_character"]["mean_ms"],
+                    "real": found["behind_real"],
                 }
             )
     return rows
@@ -155,12 +156,13 @@ def evaluated(
     for lead_ms in LEADS_MS:
         lead_s = lead_ms / 1000.0
         model = get_engine_class(name)(**settings).fit(led_corpus(train, lead_s))
+        found = real.timed(model, lead_s)
         rows.append(
             {
                 "lead_ms": lead_ms,
                 **timed(frames_on(model, heldout, lead_s), heldout),
-                "real_phones_lag_ms": real.behind_character(model, lead_s)["mean_ms"],
-                "real": real.behind_real(model, lead_s),
+                "real_phones_lag_ms": found["behind_character"]["mean_ms"],
+                "real": found["behind_real"],
             }
         )
     return rows

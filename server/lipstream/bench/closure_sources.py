@@ -150,7 +150,7 @@ def character_apertures(clips: Sequence[Clip], fps: float) -> list[np.ndarray]:
 class RealPhones:
     """The real-face set's clips with the character rendered on their force-aligned phones:
     what an engine's closures are timed against on real speech's phone sequences, with the
-    real lips (``behind_real``) or without them (``behind_character``)."""
+    real lips or without them (``timed``)."""
 
     name: str
     clips: Sequence[Clip]
@@ -163,29 +163,27 @@ class RealPhones:
         clips = real_clips(corpus)
         return cls(corpus.name, clips, character_apertures(clips, corpus.fps), corpus.fps)
 
-    def behind_character(self, model: Model, lead_s: float = 0.0) -> dict[str, Any]:
-        """The closure lag (ms: mean, standard error, count) of ``model`` behind the
-        character at every /p b m/, run on the clips' phones led by ``lead_s``."""
-        return self._behind(self.character, model, lead_s)
-
-    def behind_real(self, model: Model, lead_s: float = 0.0) -> dict[str, Any]:
-        """As ``behind_character``, behind the real lips."""
-        return self._behind([clip.aperture for clip in self.clips], model, lead_s)
-
-    def _behind(
-        self, reference: Sequence[np.ndarray], model: Model, lead_s: float
-    ) -> dict[str, Any]:
+    def timed(self, model: Model, lead_s: float = 0.0) -> dict[str, Any]:
+        """``model`` run once on the clips' phones led by ``lead_s``: its closure lag at
+        every /p b m/ (ms: mean, standard error, count) behind the character
+        (``behind_character``) and behind the real lips (``behind_real``), and its lip
+        aperture's r against the real lips (``aperture_r``)."""
         predicted = predicted_apertures(model, self.clips, self.fps, lead_s)
-        lags = lags_by_context(self.clips, reference, predicted, self.fps)["all"]
-        return asdict(summarize_lags(lags))
+        real = [clip.aperture for clip in self.clips]
+        return {
+            side: asdict(
+                summarize_lags(lags_by_context(self.clips, reference, predicted, self.fps)["all"])
+            )
+            for side, reference in (("behind_character", self.character), ("behind_real", real))
+        } | {"aperture_r": aperture_r(self.clips, predicted)}
 
 
-def character_aperture_r(clips: Sequence[Clip], character: Sequence[np.ndarray]) -> float:
-    """Pearson r of the character's aperture and the real one over each clip's speech
-    frames, averaged over the clips where both move."""
+def aperture_r(clips: Sequence[Clip], curves: Sequence[np.ndarray]) -> float:
+    """Pearson r of each curve (one per clip, on its frames) and the clip's real aperture
+    over its speech frames, averaged over the clips where both move."""
     values = [
         pearson_r(curve[clip.speech], clip.aperture[clip.speech])
-        for clip, curve in zip(clips, character, strict=True)
+        for clip, curve in zip(clips, curves, strict=True)
     ]
     return float(np.mean([r for r in values if r is not None]))
 
@@ -242,7 +240,7 @@ def run(real_set: Path, models_dir: Path, command: str) -> dict[str, Any]:
         **recorded(command),
         "corpus": {"name": corpus.name, "digest": corpus.digest(), "fps": corpus.fps},
         "clips": len(clips),
-        "character_aperture_r": character_aperture_r(clips, character),
+        "character_aperture_r": aperture_r(clips, character),
         "phoneme_mean_aperture_r": phoneme_mean_aperture_r(clips, corpus.fps),
         **split_lags(clips, character, predicted, corpus.fps),
     }

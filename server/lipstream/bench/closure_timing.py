@@ -186,13 +186,14 @@ def time_leads(models: dict[float, Any], heldout: Corpus, real: RealPhones) -> l
     for lead_ms, model in models.items():
         timed = time_frames(synthesized(model, heldout), heldout)
         causal = time_frames(synthesized(model, heldout, causal=True), heldout)
+        found = real.timed(model)
         rows.append(
             {
                 "lead_ms": lead_ms,
                 **{k: v for k, v in timed.items() if k != "groups"},
                 "causal": {"lag_ms": causal["lag_ms"], "rms": causal["rms"]},
-                "real_phones_lag_ms": real.behind_character(model)["mean_ms"],
-                "real": real.behind_real(model),
+                "real_phones_lag_ms": found["behind_character"]["mean_ms"],
+                "real": found["behind_real"],
             }
         )
     return rows

@@ -38,8 +38,7 @@ from ..engines.hmm.model import RUNGS, HmmModel
 from ..evaluation import rms_error
 from ..results_file import recorded, script_command, write_results
 from .bilabial_lead_sweep import frames_on, rung_options, timed
-from .closure_sources import RealPhones, character_aperture_r
-from .real_faces import predicted_apertures
+from .closure_sources import RealPhones
 from .real_set import real_set_parser
 
 MODULE = "lipstream.bench.hmm_rate"
@@ -99,16 +98,16 @@ def measure(
         for name, _, _ in RUNGS
     }
     voice, voice_cpu = voice_rms(model, heldout)
-    apertures = predicted_apertures(model, real.clips, real.fps)
+    found = real.timed(model)
     return {
-        "hmm_fps": settings["hmm_fps"],
+        "hmm_fps": model.hmm_fps,
         "seed": settings["seed"],
         "states": model.manifest.metrics.get("states"),
         "rungs": {name: {"lag_ms": r["lag_ms"], "rms": r["rms"]} for name, r in rungs.items()},
         "voice_rms_ratio": voice / reference_rms,
-        "real_phones_lag_ms": real.behind_character(model)["mean_ms"],
-        "real": real.behind_real(model),
-        "aperture_r": character_aperture_r(real.clips, apertures),
+        "real_phones_lag_ms": found["behind_character"]["mean_ms"],
+        "real": found["behind_real"],
+        "aperture_r": found["aperture_r"],
         "fit_cpu_s": fit_cpu_s,
         "voice_cpu_per_speech_s": voice_cpu,
     }

@@ -6,9 +6,9 @@ import pytest
 
 from lipstream.bench.closure_sources import (
     RealPhones,
+    aperture_r,
     bilabial_contexts,
     character_aperture,
-    character_aperture_r,
     format_split,
     phoneme_mean_aperture_r,
     split_lags,
@@ -73,19 +73,19 @@ def test_each_engines_lag_on_real_lips_splits_into_its_lag_behind_the_character_
     assert "character behind real" in table and "dam behind character" in table
 
 
-def test_character_aperture_r_is_pearson_on_the_speech_frames_averaged_over_clips() -> None:
+def test_aperture_r_is_pearson_on_the_speech_frames_averaged_over_clips() -> None:
     times = np.arange(100) / FPS
     same = _clip("a", [PhonemeSpan("M", 0.38, 0.46)], 0.42)
     # a character shut where the real lips are open, and the reverse: r = -1 on clip b
     mirrored = _clip("b", [PhonemeSpan("M", 0.38, 0.46)], 0.42)
     character = [2.0 * _dip(times, 0.42) + 0.1, 1.0 - _dip(times, 0.42)]
-    assert character_aperture_r([same, mirrored], character) == pytest.approx(0.0)
-    assert character_aperture_r([same], character[:1]) == pytest.approx(1.0)
+    assert aperture_r([same, mirrored], character) == pytest.approx(0.0)
+    assert aperture_r([same], character[:1]) == pytest.approx(1.0)
     # only the speech frames count: outside them the character may do anything
     masked = Clip("c", "s", same.aperture, times < 0.6, same.phones)
     noisy = character[0].copy()
     noisy[times >= 0.6] = np.linspace(5.0, -5.0, int(np.sum(times >= 0.6)))
-    assert character_aperture_r([masked], [noisy]) == pytest.approx(1.0)
+    assert aperture_r([masked], [noisy]) == pytest.approx(1.0)
 
 
 def test_phoneme_means_from_the_other_clips_predict_a_clip_whose_phonemes_keep_their_apertures() -> (
@@ -161,8 +161,14 @@ def test_real_phones_time_a_model_behind_the_character_and_behind_the_real_lips(
     clip = _clip("a", phones, real_at=0.42)
     real = RealPhones("set", [clip], [_dip(times, 0.45)], FPS)  # the character at 0.45 s
     model = cast(Model, _DippingModel(0.08))  # lowest at 0.48 s
-    assert real.behind_character(model)["mean_ms"] == pytest.approx(30.0)
-    assert real.behind_real(model)["mean_ms"] == pytest.approx(60.0)
-    assert real.behind_real(model)["count"] == 1
+    found = real.timed(model)
+    assert found["behind_character"]["mean_ms"] == pytest.approx(30.0)
+    assert found["behind_real"]["mean_ms"] == pytest.approx(60.0)
+    assert found["behind_real"]["count"] == 1
+    # the model's dip, 60 ms after the real one, against the real lips' own
+    predicted = _dip(times, 0.48)
+    expected_r = np.corrcoef(predicted[clip.speech], clip.aperture[clip.speech])[0, 1]
+    assert found["aperture_r"] == pytest.approx(expected_r)
     # led by 30 ms, the model's /B/ starts at 0.37 s: lowest at 0.45 s, with the character
-    assert real.behind_character(model, lead_s=0.03)["mean_ms"] == pytest.approx(0.0, abs=1e-6)
+    led = real.timed(model, lead_s=0.03)
+    assert led["behind_character"]["mean_ms"] == pytest.approx(0.0, abs=1e-6)
